@@ -1,0 +1,401 @@
+//! The box's UDP payload: a 24-byte header, then records or a status body. Version 1.
+//!
+//! | bytes | field |
+//! |---|---|
+//! | 0-1 | magic "SK" |
+//! | 2 | version 1 |
+//! | 3 | kind: 1 records, 2 status |
+//! | 4-5 | box id |
+//! | 6 | port count of the box |
+//! | 7 | flags: bit 0 = records datagram sent by flush timeout (not full) |
+//! | 8-11 | sequence number, +1 per datagram of either kind (u32, wraps) |
+//! | 12-19 | base tick (u64, 8 ns): first record's tick, or the status report's time |
+//! | 20-21 | entry count: records, or port counter blocks |
+//! | 22-23 | reserved, 0 |
+//!
+//! The payload length is exact: header plus entries, nothing after them. At most 55
+//! records (1454 bytes) or 44 port counter blocks fit the 1472-byte UDP payload of a
+//! 1500-byte IPv4 packet.
+
+use crate::record::{Record, RecordRepr, RECORD_LEN};
+use crate::status::{StatusRepr, PORT_COUNTERS_LEN, STATUS_FIXED_LEN};
+use crate::{check_len, get_u16, get_u32, get_u64, Error, Format, LayoutRow, Result};
+use core::fmt;
+
+mod field {
+    use crate::Field;
+    pub const MAGIC: Field = 0..2;
+    pub const VERSION: usize = 2;
+    pub const KIND: usize = 3;
+    pub const BOX_ID: Field = 4..6;
+    pub const PORT_COUNT: usize = 6;
+    pub const FLAGS: usize = 7;
+    pub const SEQUENCE: Field = 8..12;
+    pub const BASE_TICK: Field = 12..20;
+    pub const ENTRY_COUNT: Field = 20..22;
+    pub const RESERVED: Field = 22..24;
+}
+
+/// Datagram magic.
+pub const MAGIC: [u8; 2] = *b"SK";
+/// Version this crate reads and writes.
+pub const VERSION: u8 = 1;
+/// Length of the datagram header.
+pub const HEADER_LEN: usize = field::RESERVED.end;
+/// Largest UDP payload of a 1500-byte IPv4 packet.
+pub const MAX_PAYLOAD_LEN: usize = 1500 - 20 - 8;
+/// Most records in one datagram.
+pub const MAX_RECORDS: usize = (MAX_PAYLOAD_LEN - HEADER_LEN) / RECORD_LEN;
+/// Most port counter blocks in one status datagram.
+pub const MAX_STATUS_PORTS: usize =
+    (MAX_PAYLOAD_LEN - HEADER_LEN - STATUS_FIXED_LEN) / PORT_COUNTERS_LEN;
+/// Header flag: a records datagram sent because its oldest record waited the flush timeout.
+pub const FLAG_FLUSH_TIMEOUT: u8 = 0x01;
+
+/// Published layout of the datagram header.
+pub fn layout() -> Vec<LayoutRow> {
+    let one = |at: usize| at..at + 1;
+    vec![
+        LayoutRow {
+            name: "magic",
+            bytes: field::MAGIC,
+        },
+        LayoutRow {
+            name: "version",
+            bytes: one(field::VERSION),
+        },
+        LayoutRow {
+            name: "kind",
+            bytes: one(field::KIND),
+        },
+        LayoutRow {
+            name: "box_id",
+            bytes: field::BOX_ID,
+        },
+        LayoutRow {
+            name: "port_count",
+            bytes: one(field::PORT_COUNT),
+        },
+        LayoutRow {
+            name: "flags",
+            bytes: one(field::FLAGS),
+        },
+        LayoutRow {
+            name: "sequence",
+            bytes: field::SEQUENCE,
+        },
+        LayoutRow {
+            name: "base_tick",
+            bytes: field::BASE_TICK,
+        },
+        LayoutRow {
+            name: "entry_count",
+            bytes: field::ENTRY_COUNT,
+        },
+        LayoutRow {
+            name: "reserved",
+            bytes: field::RESERVED,
+        },
+    ]
+}
+
+/// What a datagram carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+#[repr(u8)]
+pub enum DatagramKind {
+    /// Cell packet records.
+    Records = 1,
+    /// A status report.
+    Status = 2,
+}
+
+impl DatagramKind {
+    fn from_byte(b: u8) -> Result<DatagramKind> {
+        match b {
+            1 => Ok(DatagramKind::Records),
+            2 => Ok(DatagramKind::Status),
+            found => Err(Error::UnknownKind { found }),
+        }
+    }
+
+    /// Most entries one datagram of this kind holds.
+    pub const fn max_entries(self) -> usize {
+        match self {
+            DatagramKind::Records => MAX_RECORDS,
+            DatagramKind::Status => MAX_STATUS_PORTS,
+        }
+    }
+
+    /// Payload length with `entries` entries.
+    pub const fn payload_len(self, entries: usize) -> usize {
+        HEADER_LEN
+            + match self {
+                DatagramKind::Records => entries * RECORD_LEN,
+                DatagramKind::Status => StatusRepr::body_len(entries),
+            }
+    }
+}
+
+/// A view over a box datagram.
+#[derive(Debug, Clone)]
+pub struct Datagram<T: AsRef<[u8]>> {
+    buffer: T,
+}
+
+impl<T: AsRef<[u8]>> Datagram<T> {
+    /// Wraps bytes without checking them.
+    pub fn new_unchecked(buffer: T) -> Self {
+        Datagram { buffer }
+    }
+
+    /// Wraps untrusted bytes: magic, version, kind, entry count, exact length, and every
+    /// port number against the port count.
+    pub fn new_checked(buffer: T) -> Result<Self> {
+        let d = Datagram { buffer };
+        let b = d.buffer.as_ref();
+        check_len(Format::Datagram, b, HEADER_LEN)?;
+        let magic = [b[0], b[1]];
+        if magic != MAGIC {
+            return Err(Error::BadMagic { found: magic });
+        }
+        if b[field::VERSION] != VERSION {
+            return Err(Error::UnsupportedVersion {
+                found: b[field::VERSION],
+                supported: VERSION,
+            });
+        }
+        let kind = DatagramKind::from_byte(b[field::KIND])?;
+        let format = match kind {
+            DatagramKind::Records => Format::Datagram,
+            DatagramKind::Status => Format::Status,
+        };
+        let count = d.entry_count();
+        if count > kind.max_entries() {
+            return Err(Error::TooManyEntries {
+                format,
+                count,
+                max: kind.max_entries(),
+            });
+        }
+        let required = kind.payload_len(count);
+        check_len(format, b, required)?;
+        if b.len() != required {
+            return Err(Error::LengthMismatch {
+                format,
+                required,
+                actual: b.len(),
+            });
+        }
+        let port_count = d.port_count();
+        let last_port = match kind {
+            DatagramKind::Records => d.records().map(|r| r.port()).max().map(usize::from),
+            DatagramKind::Status => {
+                let first = usize::from(b[HEADER_LEN + crate::status::field::FIRST_PORT]);
+                count.checked_sub(1).map(|c| first + c)
+            }
+        };
+        if let Some(port) = last_port.filter(|p| *p >= usize::from(port_count)) {
+            return Err(Error::BadPort {
+                format,
+                port,
+                port_count,
+            });
+        }
+        Ok(d)
+    }
+
+    /// Version byte.
+    pub fn version(&self) -> u8 {
+        self.buffer.as_ref()[field::VERSION]
+    }
+
+    /// Kind (valid after `new_checked`; records otherwise when unknown).
+    pub fn kind(&self) -> DatagramKind {
+        DatagramKind::from_byte(self.buffer.as_ref()[field::KIND]).unwrap_or(DatagramKind::Records)
+    }
+
+    /// Box id.
+    pub fn box_id(&self) -> u16 {
+        get_u16(self.buffer.as_ref(), field::BOX_ID)
+    }
+
+    /// Number of ports of the box.
+    pub fn port_count(&self) -> u8 {
+        self.buffer.as_ref()[field::PORT_COUNT]
+    }
+
+    /// Header flags.
+    pub fn flags(&self) -> u8 {
+        self.buffer.as_ref()[field::FLAGS]
+    }
+
+    /// Datagram sequence number.
+    pub fn sequence(&self) -> u32 {
+        get_u32(self.buffer.as_ref(), field::SEQUENCE)
+    }
+
+    /// Base tick.
+    pub fn base_tick(&self) -> u64 {
+        get_u64(self.buffer.as_ref(), field::BASE_TICK)
+    }
+
+    /// Number of records or port counter blocks.
+    pub fn entry_count(&self) -> usize {
+        usize::from(get_u16(self.buffer.as_ref(), field::ENTRY_COUNT))
+    }
+
+    /// The records of a records datagram (none for a status datagram), without copying.
+    pub fn records(&self) -> impl Iterator<Item = Record<&[u8]>> + '_ {
+        let n = match self.kind() {
+            DatagramKind::Records => self.entry_count(),
+            DatagramKind::Status => 0,
+        };
+        self.buffer.as_ref()[HEADER_LEN..]
+            .chunks_exact(RECORD_LEN)
+            .take(n)
+            .map(Record::new_unchecked)
+    }
+
+    /// The bytes after the header.
+    pub fn body(&self) -> &[u8] {
+        &self.buffer.as_ref()[HEADER_LEN..]
+    }
+}
+
+/// What follows the header.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+#[serde(tag = "kind", content = "entries", rename_all = "snake_case")]
+pub enum DatagramBody {
+    /// Cell packet records.
+    Records(Vec<RecordRepr>),
+    /// A status report.
+    Status(StatusRepr),
+}
+
+/// A parsed box datagram.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct DatagramRepr {
+    /// Box id.
+    pub box_id: u16,
+    /// Number of ports of the box.
+    pub port_count: u8,
+    /// Header flags ([`FLAG_FLUSH_TIMEOUT`]).
+    pub flags: u8,
+    /// Sequence number.
+    pub sequence: u32,
+    /// Base tick.
+    pub base_tick: u64,
+    /// Records or status.
+    pub body: DatagramBody,
+}
+
+impl DatagramRepr {
+    /// Parses an untrusted UDP payload.
+    pub fn parse(bytes: &[u8]) -> Result<DatagramRepr> {
+        let d = Datagram::new_checked(bytes)?;
+        let body = match d.kind() {
+            DatagramKind::Records => DatagramBody::Records(
+                d.records()
+                    .map(|r| RecordRepr::parse(r.into_inner()))
+                    .collect::<Result<_>>()?,
+            ),
+            DatagramKind::Status => {
+                DatagramBody::Status(StatusRepr::parse_body(d.body(), d.entry_count())?)
+            }
+        };
+        Ok(DatagramRepr {
+            box_id: d.box_id(),
+            port_count: d.port_count(),
+            flags: d.flags(),
+            sequence: d.sequence(),
+            base_tick: d.base_tick(),
+            body,
+        })
+    }
+
+    /// Kind of the body.
+    pub fn kind(&self) -> DatagramKind {
+        match self.body {
+            DatagramBody::Records(_) => DatagramKind::Records,
+            DatagramBody::Status(_) => DatagramKind::Status,
+        }
+    }
+
+    fn entries(&self) -> usize {
+        match &self.body {
+            DatagramBody::Records(r) => r.len(),
+            DatagramBody::Status(s) => s.ports.len(),
+        }
+    }
+
+    /// Bytes [`DatagramRepr::emit`] writes.
+    pub fn buffer_len(&self) -> usize {
+        self.kind().payload_len(self.entries())
+    }
+
+    /// Writes the datagram into `buffer[..buffer_len()]`. Entries past the most one
+    /// datagram holds are not written (and not counted), so the output always parses.
+    pub fn emit(&self, buffer: &mut [u8]) {
+        let kind = self.kind();
+        let entries = self.entries().min(kind.max_entries());
+        let b = &mut buffer[..kind.payload_len(entries)];
+        b[field::MAGIC].copy_from_slice(&MAGIC);
+        b[field::VERSION] = VERSION;
+        b[field::KIND] = kind as u8;
+        b[field::BOX_ID].copy_from_slice(&self.box_id.to_be_bytes());
+        b[field::PORT_COUNT] = self.port_count;
+        b[field::FLAGS] = self.flags;
+        b[field::SEQUENCE].copy_from_slice(&self.sequence.to_be_bytes());
+        b[field::BASE_TICK].copy_from_slice(&self.base_tick.to_be_bytes());
+        b[field::ENTRY_COUNT].copy_from_slice(&(entries as u16).to_be_bytes());
+        b[field::RESERVED].fill(0);
+        match &self.body {
+            DatagramBody::Records(records) => {
+                for (i, r) in records.iter().take(entries).enumerate() {
+                    r.emit(&mut b[HEADER_LEN + i * RECORD_LEN..]);
+                }
+            }
+            DatagramBody::Status(s) => {
+                let clipped = StatusRepr {
+                    ports: s.ports[..entries].to_vec(),
+                    ..s.clone()
+                };
+                clipped.emit_body(&mut b[HEADER_LEN..]);
+            }
+        }
+    }
+
+    /// The datagram as bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = vec![0u8; self.buffer_len()];
+        self.emit(&mut b);
+        b
+    }
+}
+
+impl fmt::Display for DatagramRepr {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "datagram box {} seq {} base tick {} ({:.6} s)",
+            self.box_id,
+            self.sequence,
+            self.base_tick,
+            self.base_tick as f64 / crate::TICKS_PER_SECOND as f64
+        )?;
+        if self.flags & FLAG_FLUSH_TIMEOUT != 0 {
+            f.write_str(", flushed by timeout")?;
+        }
+        match &self.body {
+            DatagramBody::Records(records) => {
+                write!(f, ", {} records", records.len())?;
+                for r in records {
+                    write!(f, "\n  {r}")?;
+                }
+                Ok(())
+            }
+            DatagramBody::Status(s) => write!(f, "\n{s}"),
+        }
+    }
+}

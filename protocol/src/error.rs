@@ -1,0 +1,118 @@
+use core::fmt;
+
+/// The formats this crate defines, named in every [`Error`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+pub enum Format {
+    /// A 20-byte cell packet whose kind is not known yet.
+    CellPacket,
+    /// The cell data packet (header 0xA1).
+    DataPacket,
+    /// The cell event packet (header 0xA2).
+    EventPacket,
+    /// The box datagram header.
+    Datagram,
+    /// One record of a records datagram.
+    Record,
+    /// The body of a status datagram.
+    Status,
+    /// One port's counters inside a status datagram.
+    PortCounters,
+}
+
+impl fmt::Display for Format {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Format::CellPacket => "cell packet",
+            Format::DataPacket => "data packet",
+            Format::EventPacket => "event packet",
+            Format::Datagram => "box datagram",
+            Format::Record => "record",
+            Format::Status => "status datagram",
+            Format::PortCounters => "port counters",
+        })
+    }
+}
+
+/// Why bytes were rejected, or why a value cannot be encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum Error {
+    /// Fewer bytes than the format needs.
+    #[error("{format}: truncated: needs {required} bytes, got {actual}")]
+    Truncated {
+        format: Format,
+        required: usize,
+        actual: usize,
+    },
+    /// The length announced by a header disagrees with the bytes present.
+    #[error("{format}: length mismatch: header announces {required} bytes, got {actual}")]
+    LengthMismatch {
+        format: Format,
+        required: usize,
+        actual: usize,
+    },
+    /// The first byte of a cell packet is neither the data nor the event header.
+    #[error("{format}: header byte 0x{found:02X} is not a known cell packet header (data 0x{data:02X}, event 0x{event:02X})")]
+    BadHeader {
+        format: Format,
+        found: u8,
+        data: u8,
+        event: u8,
+    },
+    /// The last byte of a cell packet is not the end-of-packet value.
+    #[error("{format}: end-of-packet byte 0x{found:02X}, expected 0x{expected:02X}")]
+    BadEndOfPacket {
+        format: Format,
+        found: u8,
+        expected: u8,
+    },
+    /// A cell id with one of the two reserved top bits set.
+    #[error("{format}: cell id field 0x{found:04X} sets reserved top bits (cell ids are 14 bits)")]
+    BadCellId { format: Format, found: u16 },
+    /// An event mask with reserved bits, no event, or more than six events.
+    #[error("event packet: mask 0x{mask:04X}: {reason}")]
+    BadEventMask { mask: u16, reason: &'static str },
+    /// The datagram does not start with "SK".
+    #[error("box datagram: magic {:?}, expected \"SK\"", Bytes(*.found))]
+    BadMagic { found: [u8; 2] },
+    /// A datagram version this crate does not read.
+    #[error("box datagram: version {found}, this decoder reads version {supported}")]
+    UnsupportedVersion { found: u8, supported: u8 },
+    /// A datagram kind that is neither records nor status.
+    #[error("box datagram: unknown kind {found} (1 records, 2 status)")]
+    UnknownKind { found: u8 },
+    /// More entries than fit one datagram.
+    #[error("{format}: {count} entries, at most {max} fit one datagram")]
+    TooManyEntries {
+        format: Format,
+        count: usize,
+        max: usize,
+    },
+    /// A record or counter block names a port the box does not have.
+    #[error("{format}: port {port} out of range, the box has {port_count} ports")]
+    BadPort {
+        format: Format,
+        port: usize,
+        port_count: u8,
+    },
+    /// A channel value that its wire field cannot hold.
+    #[error("{channel}: raw value {value} does not fit its {format} field")]
+    ValueOutOfRange {
+        format: Format,
+        channel: crate::Channel,
+        value: i32,
+    },
+    /// Events not in strictly increasing channel order, or too many for one packet.
+    #[error("event packet: {reason}")]
+    BadEvents { reason: &'static str },
+}
+
+/// Result with this crate's [`Error`].
+pub type Result<T> = core::result::Result<T, Error>;
+
+struct Bytes([u8; 2]);
+
+impl fmt::Debug for Bytes {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:02X} {:02X}", self.0[0], self.0[1])
+    }
+}
