@@ -1,0 +1,27 @@
+//! The skinbox interface box, described in rust-hdl.
+//!
+//! One 125 MHz clock domain with a synchronous, active-high `reset` input on every block.
+//! A cell packet travels through the blocks in this order, one file each:
+//!
+//! 1. [`uart_rx::UartRx`]: samples the asynchronous UART pin, one byte at a time, with the
+//!    tick of its start edge;
+//! 2. [`cell_deframer::CellDeframer`]: finds 20-byte cell packets in the byte stream and
+//!    rejects broken ones, counting each cause;
+//! 3. [`port_buffer::PortBuffer`]: holds whole packets until the arbiter takes them;
+//! 4. [`packet_arbiter::PacketArbiter`]: merges the ports, one whole record at a time.
+//!
+//! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
+//! over one interface, [`stream`].
+
+pub mod cell_deframer;
+pub mod stream;
+pub mod timestamp;
+pub mod uart_rx;
+
+#[cfg(test)]
+pub(crate) mod testbench;
+
+/// Clock of the box: the GMII transmit clock.
+pub const CLOCK_HZ: u64 = 125_000_000;
+/// UART rate of the skin cells.
+pub const CELL_BAUD: u64 = 4_000_000;
