@@ -14,6 +14,8 @@
 //! over one interface, [`stream`].
 
 pub mod cell_deframer;
+pub mod packet_arbiter;
+pub mod port_buffer;
 pub mod stream;
 pub mod timestamp;
 pub mod uart_rx;
