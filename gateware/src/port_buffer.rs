@@ -252,8 +252,8 @@ mod tests {
             if offer {
                 next += 1;
                 wait = spacing;
-            } else if wait > 0 {
-                wait -= 1;
+            } else {
+                wait = wait.saturating_sub(1);
             }
             bench.cycle();
         }
