@@ -14,6 +14,8 @@
 //! over one interface, [`stream`].
 
 pub mod cell_deframer;
+pub mod crc32;
+pub mod frame_transmitter;
 pub mod packet_arbiter;
 pub mod port_buffer;
 pub mod stream;

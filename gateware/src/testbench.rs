@@ -111,3 +111,95 @@ impl UartLine {
 pub fn bit_period(error_ppm: f64) -> f64 {
     crate::CLOCK_HZ as f64 / crate::CELL_BAUD as f64 / (1.0 + error_ppm * 1e-6)
 }
+
+/// Collects GMII bytes into frames: one frame per run of `tx_en`.
+#[derive(Debug, Default)]
+pub struct GmiiCapture {
+    /// Complete frames, preamble to FCS.
+    pub frames: Vec<Vec<u8>>,
+    /// Clock of the first byte of each frame.
+    pub starts: Vec<u64>,
+    current: Vec<u8>,
+    idle_run: u64,
+    /// Shortest idle run seen between two frames.
+    pub min_gap: Option<u64>,
+}
+
+impl GmiiCapture {
+    /// Takes one clock's GMII outputs.
+    pub fn clock(&mut self, clock: u64, tx_en: bool, txd: u8, tx_er: bool) {
+        assert!(!tx_er, "tx_er set at clock {clock}");
+        if tx_en {
+            if self.current.is_empty() {
+                self.starts.push(clock);
+                if !self.frames.is_empty() {
+                    self.min_gap =
+                        Some(self.min_gap.map_or(self.idle_run, |g| g.min(self.idle_run)));
+                }
+            }
+            self.current.push(txd);
+            self.idle_run = 0;
+        } else {
+            if !self.current.is_empty() {
+                self.frames.push(std::mem::take(&mut self.current));
+            }
+            self.idle_run += 1;
+        }
+    }
+}
+
+/// Checks one GMII frame with independent code and returns its UDP payload: preamble and
+/// SFD, FCS (crc crate), Ethernet II / IPv4 / UDP structure, lengths and both checksums
+/// (etherparse), minimum size.
+pub fn check_frame(frame: &[u8]) -> Result<Vec<u8>, String> {
+    use etherparse::{NetHeaders, PacketHeaders, TransportHeader};
+    if frame.len() < 8 + 64 {
+        return Err(format!(
+            "frame of {} bytes is shorter than preamble + 64",
+            frame.len()
+        ));
+    }
+    if frame[..7] != [0x55; 7] || frame[7] != 0xD5 {
+        return Err(format!("bad preamble/SFD {:02x?}", &frame[..8]));
+    }
+    let (body, fcs) = frame[8..].split_at(frame.len() - 12);
+    let expected = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(body);
+    if fcs != expected.to_le_bytes() {
+        return Err(format!(
+            "FCS {fcs:02x?}, expected {:02x?}",
+            expected.to_le_bytes()
+        ));
+    }
+    let headers = PacketHeaders::from_ethernet_slice(body).map_err(|e| e.to_string())?;
+    let Some(NetHeaders::Ipv4(ip, _)) = &headers.net else {
+        return Err("not IPv4".into());
+    };
+    if ip.header_checksum != ip.calc_header_checksum() {
+        return Err(format!(
+            "IPv4 checksum {:#06x}, expected {:#06x}",
+            ip.header_checksum,
+            ip.calc_header_checksum()
+        ));
+    }
+    let Some(TransportHeader::Udp(udp)) = &headers.transport else {
+        return Err("not UDP".into());
+    };
+    let payload = headers.payload.slice();
+    let udp_payload = &payload[..usize::from(udp.length) - 8];
+    let sum = udp
+        .calc_checksum_ipv4(ip, udp_payload)
+        .map_err(|e| e.to_string())?;
+    if udp.checksum != sum {
+        return Err(format!(
+            "UDP checksum {:#06x}, expected {sum:#06x}",
+            udp.checksum
+        ));
+    }
+    if usize::from(ip.total_len) != 20 + usize::from(udp.length) {
+        return Err("IPv4 and UDP lengths disagree".into());
+    }
+    if payload[udp_payload.len()..].iter().any(|b| *b != 0) {
+        return Err("padding is not zero".into());
+    }
+    Ok(udp_payload.to_vec())
+}

@@ -26,6 +26,7 @@ pub mod data;
 pub mod datagram;
 mod error;
 pub mod event;
+pub mod link;
 pub mod record;
 pub mod status;
 
@@ -35,6 +36,7 @@ pub use data::DataRepr;
 pub use datagram::{DatagramKind, DatagramRepr};
 pub use error::{Error, Format, Result};
 pub use event::EventRepr;
+pub use link::LinkConfig;
 pub use record::RecordRepr;
 pub use status::{PortCounter, PortCounters, StatusRepr};
 

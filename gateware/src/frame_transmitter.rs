@@ -1,0 +1,512 @@
+//! FrameTransmitter: sends one box datagram as a complete Ethernet frame on GMII.
+//!
+//! On `start` (while `idle`) it takes a datagram descriptor (kind, flags, entry count,
+//! base tick, body length and the ones'-complement sum of the body's 16-bit words) and
+//! emits, one byte per clock: preamble and SFD, Ethernet II header, IPv4 header with its
+//! checksum, UDP header with its checksum, the 24-byte datagram header with the next
+//! sequence number, the body read from the payload memory, padding to the 60-byte minimum
+//! frame, the FCS, and then at least 12 idle clocks.
+//!
+//! The checksums are finished while the preamble goes out: the UDP sum starts from the
+//! constant words (addresses, ports, magic, box id) plus the body sum, and adds one
+//! variable header word per clock. The body memory is read one clock ahead
+//! (`payload_address` for the next byte; `payload_data` must be that byte one clock later).
+//! Outputs are registered: `gmii_txd`/`gmii_tx_en` follow the byte counter by one clock.
+
+use crate::crc32::Crc32Byte;
+use rust_hdl::prelude::*;
+use skinbox_protocol::datagram::{self, HEADER_LEN};
+use skinbox_protocol::link::*;
+
+/// Frame byte where the datagram body starts (preamble, Ethernet, IPv4, UDP, box header).
+pub const BODY_START: usize =
+    PREAMBLE_LEN + ETHERNET_HEADER_LEN + IPV4_HEADER_LEN + UDP_HEADER_LEN + HEADER_LEN;
+
+const UDP_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN + IPV4_HEADER_LEN;
+const BOX_HEADER_AT: usize = UDP_AT + UDP_HEADER_LEN;
+
+/// The constant bytes of a frame up to the body; variable fields are 0 here.
+fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
+    let mut t = vec![0x55; 7];
+    t.push(0xD5);
+    t.extend(link.host_mac);
+    t.extend(link.box_mac);
+    t.extend([0x08, 0x00]);
+    // IPv4: version 4, IHL 5, no DSCP, total length, id 0, DF, TTL, UDP, checksum
+    t.extend([0x45, 0x00, 0, 0, 0, 0, 0x40, 0x00, IPV4_TTL, 17, 0, 0]);
+    t.extend(link.box_ip);
+    t.extend(link.host_ip);
+    t.extend(link.box_port.to_be_bytes());
+    t.extend(link.host_port.to_be_bytes());
+    t.extend([0, 0, 0, 0]); // UDP length and checksum
+    t.extend(datagram::MAGIC);
+    t.push(datagram::VERSION);
+    t.push(0); // kind
+    t.extend(box_id.to_be_bytes());
+    t.push(port_count);
+    t.extend([0; 15]); // flags, sequence, base tick, entry count
+    t.extend([0, 0]); // reserved
+    assert_eq!(t.len(), BODY_START);
+    t
+}
+
+fn word_sum(bytes: &[u8]) -> u64 {
+    bytes
+        .chunks(2)
+        .map(|w| u64::from(w[0]) << 8 | u64::from(*w.get(1).unwrap_or(&0)))
+        .sum()
+}
+
+/// Sends datagrams as Ethernet frames on GMII.
+#[derive(LogicBlock)]
+pub struct FrameTransmitter {
+    /// The box clock, also the GMII transmit clock.
+    pub clock: Signal<In, Clock>,
+    /// Synchronous reset: the sequence number restarts at 0.
+    pub reset: Signal<In, Bit>,
+    /// Take the descriptor and send (only while `idle`).
+    pub start: Signal<In, Bit>,
+    /// Ready for the next datagram (the inter-frame gap is over).
+    pub idle: Signal<Out, Bit>,
+    /// Datagram kind (1 records, 2 status).
+    pub kind: Signal<In, Bits<8>>,
+    /// Datagram header flags.
+    pub flags: Signal<In, Bits<8>>,
+    /// Records or port counter blocks in the body.
+    pub entry_count: Signal<In, Bits<16>>,
+    /// Base tick of the datagram.
+    pub base_tick: Signal<In, Bits<64>>,
+    /// Body length in bytes (after the 24-byte header).
+    pub body_len: Signal<In, Bits<11>>,
+    /// Sum of the body's big-endian 16-bit words, not folded.
+    pub body_sum: Signal<In, Bits<32>>,
+    /// Body byte to read; its data must arrive on `payload_data` one clock later.
+    pub payload_address: Signal<Out, Bits<11>>,
+    /// Body byte read.
+    pub payload_data: Signal<In, Bits<8>>,
+    /// GMII transmit data.
+    pub gmii_txd: Signal<Out, Bits<8>>,
+    /// GMII transmit enable.
+    pub gmii_tx_en: Signal<Out, Bit>,
+    /// GMII transmit error (never set).
+    pub gmii_tx_er: Signal<Out, Bit>,
+    /// Datagrams started since reset (the next sequence number).
+    pub sequence: Signal<Out, Bits<32>>,
+    template: ROM<Bits<8>, 7>,
+    udp_constant_sum: Constant<Bits<32>>,
+    ip_constant_sum: Constant<Bits<32>>,
+    crc: Crc32Byte,
+    sending: DFF<Bit>,
+    index: DFF<Bits<11>>,
+    gap: DFF<Bits<4>>,
+    kind_held: DFF<Bits<8>>,
+    fields: DFF<Bits<120>>,
+    length: DFF<Bits<11>>,
+    checksum: DFF<Bits<32>>,
+    crc_register: DFF<Bits<32>>,
+    next_sequence: DFF<Bits<32>>,
+    txd: DFF<Bits<8>>,
+    tx_en: DFF<Bit>,
+    byte: Signal<Local, Bits<8>>,
+    body_end: Signal<Local, Bits<11>>,
+    padded_end: Signal<Local, Bits<11>>,
+    total_len: Signal<Local, Bits<16>>,
+    udp_len: Signal<Local, Bits<16>>,
+    ip_sum: Signal<Local, Bits<32>>,
+    ip_fold: Signal<Local, Bits<32>>,
+    ip_checksum: Signal<Local, Bits<16>>,
+    udp_checksum: Signal<Local, Bits<16>>,
+    checksum_word: Signal<Local, Bits<32>>,
+}
+
+impl FrameTransmitter {
+    /// A transmitter for a box with these addresses, id and port count.
+    pub fn new(link: &LinkConfig, box_id: u16, port_count: u8) -> Self {
+        let t = template(link, box_id, port_count);
+        // Constant words of the UDP checksum: pseudo header (addresses, protocol), UDP
+        // ports, and the constant words of the datagram header (magic, version, box id,
+        // port count). Variable words are added while the preamble goes out.
+        let pseudo = word_sum(&link.box_ip) + word_sum(&link.host_ip) + 17;
+        let udp_constant = pseudo
+            + word_sum(&t[UDP_AT..UDP_AT + 4])
+            + word_sum(&t[BOX_HEADER_AT..BOX_HEADER_AT + 8]);
+        let ip_constant = word_sum(&t[PREAMBLE_LEN + ETHERNET_HEADER_LEN..UDP_AT]);
+        Self {
+            clock: Default::default(),
+            reset: Default::default(),
+            start: Default::default(),
+            idle: Default::default(),
+            kind: Default::default(),
+            flags: Default::default(),
+            entry_count: Default::default(),
+            base_tick: Default::default(),
+            body_len: Default::default(),
+            body_sum: Default::default(),
+            payload_address: Default::default(),
+            payload_data: Default::default(),
+            gmii_txd: Default::default(),
+            gmii_tx_en: Default::default(),
+            gmii_tx_er: Default::default(),
+            sequence: Default::default(),
+            template: t.into_iter().map(|b| u64::from(b).into()).into(),
+            udp_constant_sum: Constant::new(udp_constant.into()),
+            ip_constant_sum: Constant::new(ip_constant.into()),
+            crc: Default::default(),
+            sending: Default::default(),
+            index: Default::default(),
+            gap: Default::default(),
+            kind_held: Default::default(),
+            fields: Default::default(),
+            length: Default::default(),
+            checksum: Default::default(),
+            crc_register: Default::default(),
+            next_sequence: Default::default(),
+            txd: Default::default(),
+            tx_en: Default::default(),
+            byte: Default::default(),
+            body_end: Default::default(),
+            padded_end: Default::default(),
+            total_len: Default::default(),
+            udp_len: Default::default(),
+            ip_sum: Default::default(),
+            ip_fold: Default::default(),
+            ip_checksum: Default::default(),
+            udp_checksum: Default::default(),
+            checksum_word: Default::default(),
+        }
+    }
+}
+
+// The kernel below cannot name Rust constants, so it spells the frame positions as
+// literals: 7 SFD, 8 first CRC byte, 24 IPv4 total length, 32 IPv4 checksum, 46 UDP length,
+// 48 UDP checksum, 53 datagram kind, 57..72 flags/sequence/base tick/entry count,
+// 74 body, 68 = 8 + 60 minimum frame, 11 = inter-frame gap - 1.
+// `frame_positions_match_the_formats` checks them against the format constants.
+impl Logic for FrameTransmitter {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(
+            self,
+            clock,
+            sending,
+            index,
+            gap,
+            kind_held,
+            fields,
+            length,
+            checksum,
+            crc_register,
+            next_sequence,
+            txd,
+            tx_en
+        );
+        // Frame geometry from the body length.
+        self.body_end.next = self.length.q.val() + 74;
+        self.padded_end.next = self.body_end.val();
+        if self.body_end.val() < 68 {
+            self.padded_end.next = 68.into();
+        }
+        self.total_len.next = bit_cast::<16, 11>(self.length.q.val()) + 52;
+        self.udp_len.next = bit_cast::<16, 11>(self.length.q.val()) + 32;
+        self.ip_sum.next = self.ip_constant_sum.val() + bit_cast::<32, 16>(self.total_len.val());
+        self.ip_fold.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
+        self.ip_checksum.next =
+            !bit_cast::<16, 32>((self.ip_fold.val() & 0xFFFF) + (self.ip_fold.val() >> 16));
+        self.udp_checksum.next = !bit_cast::<16, 32>(self.checksum.q.val());
+        if self.checksum.q.val().get_bits::<16>(0) == 0xFFFF {
+            // a computed 0 is sent as 0xFFFF (RFC 768)
+            self.udp_checksum.next = 0xFFFF.into();
+        }
+
+        // One variable word of the UDP checksum per clock while the preamble goes out.
+        self.checksum_word.next = 0.into();
+        if self.index.q.val() == 0 {
+            self.checksum_word.next = bit_cast::<32, 16>(self.udp_len.val()) << 1;
+        } else if self.index.q.val() == 1 {
+            self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
+        } else if self.index.q.val() == 2 {
+            self.checksum_word.next = bit_cast::<32, 8>(self.fields.q.val().get_bits::<8>(112));
+        } else if self.index.q.val() == 3 {
+            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(96));
+        } else if self.index.q.val() == 4 {
+            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(80));
+        } else if self.index.q.val() == 5 {
+            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(64));
+        } else if self.index.q.val() == 6 {
+            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(48));
+        } else if self.index.q.val() == 7 {
+            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(32));
+        } else if self.index.q.val() == 8 {
+            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(16));
+        } else if self.index.q.val() == 9 {
+            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(0));
+        }
+
+        // The byte at `index`.
+        self.template.address.next = self.index.q.val().get_bits::<7>(0);
+        self.byte.next = self.template.data.val();
+        if self.index.q.val() == 24 {
+            self.byte.next = self.total_len.val().get_bits::<8>(8);
+        } else if self.index.q.val() == 25 {
+            self.byte.next = self.total_len.val().get_bits::<8>(0);
+        } else if self.index.q.val() == 32 {
+            self.byte.next = self.ip_checksum.val().get_bits::<8>(8);
+        } else if self.index.q.val() == 33 {
+            self.byte.next = self.ip_checksum.val().get_bits::<8>(0);
+        } else if self.index.q.val() == 46 {
+            self.byte.next = self.udp_len.val().get_bits::<8>(8);
+        } else if self.index.q.val() == 47 {
+            self.byte.next = self.udp_len.val().get_bits::<8>(0);
+        } else if self.index.q.val() == 48 {
+            self.byte.next = self.udp_checksum.val().get_bits::<8>(8);
+        } else if self.index.q.val() == 49 {
+            self.byte.next = self.udp_checksum.val().get_bits::<8>(0);
+        } else if self.index.q.val() == 53 {
+            self.byte.next = self.kind_held.q.val();
+        } else if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
+            self.byte.next = self.fields.q.val().get_bits::<8>(112);
+        } else if (self.index.q.val() >= 74) & (self.index.q.val() < self.body_end.val()) {
+            self.byte.next = self.payload_data.val();
+        } else if (self.index.q.val() >= self.body_end.val())
+            & (self.index.q.val() < self.padded_end.val())
+        {
+            self.byte.next = 0.into();
+        } else if self.index.q.val() >= self.padded_end.val() {
+            self.byte.next = !self.crc_register.q.val().get_bits::<8>(0);
+        }
+        self.payload_address.next = self.index.q.val() + 1 - 74;
+        self.crc.crc.next = self.crc_register.q.val();
+        self.crc.data.next = self.byte.val();
+
+        self.tx_en.d.next = false;
+        if self.sending.q.val() {
+            self.tx_en.d.next = true;
+            self.txd.d.next = self.byte.val();
+            self.index.d.next = self.index.q.val() + 1;
+            if self.index.q.val() < 10 {
+                self.checksum.d.next = self.checksum.q.val() + self.checksum_word.val();
+            } else if self.index.q.val() < 12 {
+                self.checksum.d.next =
+                    (self.checksum.q.val() & 0xFFFF) + (self.checksum.q.val() >> 16);
+            }
+            if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
+                self.fields.d.next = self.fields.q.val() << 8;
+            }
+            if self.index.q.val() == 7 {
+                self.crc_register.d.next = 0xFFFF_FFFF_u64.into();
+            } else if (self.index.q.val() >= 8) & (self.index.q.val() < self.padded_end.val()) {
+                self.crc_register.d.next = self.crc.updated.val();
+            } else if self.index.q.val() >= self.padded_end.val() {
+                self.crc_register.d.next = self.crc_register.q.val() >> 8;
+            }
+            if self.index.q.val() == self.padded_end.val() + 3 {
+                self.sending.d.next = false;
+                self.gap.d.next = 11.into();
+            }
+        } else if self.gap.q.val() != 0 {
+            self.gap.d.next = self.gap.q.val() - 1;
+        } else if self.start.val() {
+            self.sending.d.next = true;
+            self.index.d.next = 0.into();
+            self.kind_held.d.next = self.kind.val();
+            self.length.d.next = self.body_len.val();
+            self.checksum.d.next = self.udp_constant_sum.val() + self.body_sum.val();
+            self.fields.d.next = (bit_cast::<120, 8>(self.flags.val()) << 112)
+                | (bit_cast::<120, 32>(self.next_sequence.q.val()) << 80)
+                | (bit_cast::<120, 64>(self.base_tick.val()) << 16)
+                | bit_cast::<120, 16>(self.entry_count.val());
+            self.next_sequence.d.next = self.next_sequence.q.val() + 1;
+        }
+        if self.reset.val() {
+            self.sending.d.next = false;
+            self.gap.d.next = 0.into();
+            self.tx_en.d.next = false;
+            self.next_sequence.d.next = 0.into();
+        }
+        self.idle.next = !self.sending.q.val() & (self.gap.q.val() == 0);
+        self.gmii_txd.next = self.txd.q.val();
+        self.gmii_tx_en.next = self.tx_en.q.val();
+        self.gmii_tx_er.next = false;
+        self.sequence.next = self.next_sequence.q.val();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::{check_frame, Bench, GmiiCapture};
+    use skinbox_protocol::datagram::DatagramBody;
+    use skinbox_protocol::{DataRepr, DatagramRepr, PortCounters, RecordRepr, StatusRepr};
+
+    const IP_TOTAL_LEN_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN + 2;
+    const IP_CHECKSUM_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN + 10;
+    /// First of the 15 header bytes sent from the `fields` shift register: flags,
+    /// sequence, base tick, entry count.
+    const FIELDS_AT: usize = BOX_HEADER_AT + 7;
+
+    #[test]
+    fn frame_positions_match_the_formats() {
+        assert_eq!(BODY_START, 74);
+        assert_eq!((IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_AT), (24, 32, 42));
+        assert_eq!((BOX_HEADER_AT + 3, FIELDS_AT, FIELDS_AT + 15), (53, 57, 72));
+        assert_eq!(PREAMBLE_LEN + MIN_FRAME_LEN, 68);
+        assert_eq!(INTER_FRAME_GAP, 12);
+        let t = template(&LinkConfig::DEFAULT, 7, 8);
+        assert_eq!(
+            &t[FIELDS_AT + 15..BODY_START],
+            &[0, 0],
+            "reserved header bytes"
+        );
+    }
+
+    fn body_sum(body: &[u8]) -> u64 {
+        word_sum(body)
+    }
+
+    /// Sends the datagrams (their sequence numbers are ignored: the transmitter numbers
+    /// them) and returns the captured frames.
+    fn send(datagrams: &[DatagramRepr]) -> GmiiCapture {
+        let mut bench = Bench::new(
+            FrameTransmitter::new(&LinkConfig::DEFAULT, 0x0102, 8),
+            |b| &mut b.clock,
+        );
+        bench.uut.reset.next = true;
+        bench.cycles(2);
+        bench.uut.reset.next = false;
+        let mut capture = GmiiCapture::default();
+        let mut queue = datagrams.to_vec();
+        queue.reverse();
+        let mut memory: Vec<u8> = vec![];
+        let mut read: u64 = 0;
+        for clock in 0..20_000u64 {
+            let u = &mut bench.uut;
+            u.payload_data.next = u64::from(*memory.get(read as usize).unwrap_or(&0xEE)).into();
+            u.start.next = false;
+            bench.settle();
+            if bench.uut.idle.val() {
+                if let Some(d) = queue.pop() {
+                    let bytes = d.to_bytes();
+                    memory = bytes[HEADER_LEN..].to_vec();
+                    let u = &mut bench.uut;
+                    u.start.next = true;
+                    u.kind.next = (d.kind() as u64).into();
+                    u.flags.next = u64::from(d.flags).into();
+                    u.entry_count.next = (u64::from(bytes[20]) << 8 | u64::from(bytes[21])).into();
+                    u.base_tick.next = d.base_tick.into();
+                    u.body_len.next = (memory.len() as u64).into();
+                    u.body_sum.next = body_sum(&memory).into();
+                    bench.settle();
+                }
+            }
+            read = bench.uut.payload_address.val().to_u64();
+            let u = &bench.uut;
+            capture.clock(
+                clock,
+                u.gmii_tx_en.val(),
+                u.gmii_txd.val().to_u8(),
+                u.gmii_tx_er.val(),
+            );
+            bench.cycle();
+            if queue.is_empty() && capture.frames.len() == datagrams.len() {
+                break;
+            }
+        }
+        capture
+    }
+
+    fn records(n: usize, base_tick: u64) -> DatagramRepr {
+        DatagramRepr {
+            box_id: 0x0102,
+            port_count: 8,
+            flags: (n % 2) as u8,
+            sequence: 0,
+            base_tick,
+            body: DatagramBody::Records(
+                (0..n)
+                    .map(|i| RecordRepr {
+                        port: (i % 8) as u8,
+                        flags: (i % 3 == 0) as u8,
+                        tick_offset: i as i32 * 6250 - 3,
+                        cell_packet: DataRepr::from_raw(
+                            i as u16 + 1,
+                            [i as i32, -1, 256, 3, 0, 0, 400, 60, 0],
+                        )
+                        .unwrap()
+                        .to_bytes(),
+                    })
+                    .collect(),
+            ),
+        }
+    }
+
+    fn status(ports: usize) -> DatagramRepr {
+        DatagramRepr {
+            box_id: 0x0102,
+            port_count: 8,
+            flags: 0,
+            sequence: 0,
+            base_tick: 125_000_000,
+            body: DatagramBody::Status(StatusRepr {
+                boot_id: 0xB007,
+                datagrams_sent: 12,
+                records_sent: 345,
+                first_port: 0,
+                ports: (0..ports).map(|p| PortCounters([p as u32; 8])).collect(),
+            }),
+        }
+    }
+
+    #[test]
+    fn frames_carry_the_datagrams_with_valid_checksums_and_fcs() {
+        let sent = vec![
+            records(1, 0x0123_4567_89AB_CDEF),
+            records(3, 42),
+            records(55, u64::MAX - 5),
+            status(8),
+            status(0),
+        ];
+        let capture = send(&sent);
+        assert_eq!(capture.frames.len(), sent.len());
+        for (i, (frame, expected)) in capture.frames.iter().zip(&sent).enumerate() {
+            let payload = check_frame(frame).unwrap_or_else(|e| panic!("frame {i}: {e}"));
+            let got = DatagramRepr::parse(&payload).unwrap_or_else(|e| panic!("frame {i}: {e}"));
+            let expected = DatagramRepr {
+                sequence: i as u32,
+                ..expected.clone()
+            };
+            assert_eq!(got, expected, "frame {i}");
+            let on_wire = 8 + 42 + expected.buffer_len() + 4;
+            assert_eq!(frame.len(), on_wire.max(8 + 64), "frame {i} length");
+        }
+        assert!(
+            capture.min_gap.unwrap() >= 12,
+            "inter-frame gap {:?}",
+            capture.min_gap
+        );
+    }
+
+    #[test]
+    fn addresses_and_ports_are_the_configured_ones() {
+        let capture = send(&[records(2, 1)]);
+        let frame = &capture.frames[0][8..];
+        let link = LinkConfig::DEFAULT;
+        assert_eq!(&frame[0..6], &link.host_mac);
+        assert_eq!(&frame[6..12], &link.box_mac);
+        let h = etherparse::PacketHeaders::from_ethernet_slice(frame).unwrap();
+        let Some(etherparse::NetHeaders::Ipv4(ip, _)) = h.net else {
+            panic!("not IPv4")
+        };
+        assert_eq!(
+            (ip.source, ip.destination, ip.time_to_live),
+            (link.box_ip, link.host_ip, 64)
+        );
+        assert!(ip.dont_fragment);
+        let Some(etherparse::TransportHeader::Udp(udp)) = h.transport else {
+            panic!("not UDP")
+        };
+        assert_eq!(
+            (udp.source_port, udp.destination_port),
+            (link.box_port, link.host_port)
+        );
+    }
+}

@@ -1,0 +1,59 @@
+//! How the box's datagrams travel: Ethernet II, IPv4 without options, UDP.
+//!
+//! The defaults address documentation networks (RFC 5737) and the UDP port "SK"; a real
+//! installation sets its own through the box parameters.
+
+/// Ethernet, IPv4 and UDP addresses of the box and its host.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct LinkConfig {
+    /// Box MAC address (locally administered).
+    pub box_mac: [u8; 6],
+    /// Destination MAC address (broadcast by default, so no ARP is needed).
+    pub host_mac: [u8; 6],
+    /// Box IPv4 address.
+    pub box_ip: [u8; 4],
+    /// Host IPv4 address.
+    pub host_ip: [u8; 4],
+    /// Box UDP port.
+    pub box_port: u16,
+    /// Host UDP port.
+    pub host_port: u16,
+}
+
+/// UDP port "SK" (0x534B).
+pub const DEFAULT_PORT: u16 = 0x534B;
+
+impl LinkConfig {
+    /// Box 02:53:4b:00:00:01 at 192.0.2.10:21323 to broadcast, 192.0.2.1:21323.
+    pub const DEFAULT: LinkConfig = LinkConfig {
+        box_mac: [0x02, 0x53, 0x4B, 0x00, 0x00, 0x01],
+        host_mac: [0xFF; 6],
+        box_ip: [192, 0, 2, 10],
+        host_ip: [192, 0, 2, 1],
+        box_port: DEFAULT_PORT,
+        host_port: DEFAULT_PORT,
+    };
+}
+
+impl Default for LinkConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Ethernet II header length.
+pub const ETHERNET_HEADER_LEN: usize = 14;
+/// IPv4 header length (no options).
+pub const IPV4_HEADER_LEN: usize = 20;
+/// UDP header length.
+pub const UDP_HEADER_LEN: usize = 8;
+/// Preamble and start-of-frame delimiter on the wire.
+pub const PREAMBLE_LEN: usize = 8;
+/// Frame check sequence length.
+pub const FCS_LEN: usize = 4;
+/// Smallest Ethernet frame without FCS.
+pub const MIN_FRAME_LEN: usize = 60;
+/// Idle bytes the box leaves between frames (the IEEE 802.3 inter-packet gap).
+pub const INTER_FRAME_GAP: usize = 12;
+/// IPv4 time to live of the box's packets.
+pub const IPV4_TTL: u8 = 64;
