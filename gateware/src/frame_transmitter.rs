@@ -50,7 +50,8 @@ fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
     t
 }
 
-fn word_sum(bytes: &[u8]) -> u64 {
+/// Sum of the big-endian 16-bit words of `bytes` (odd length padded with 0), not folded.
+pub fn word_sum(bytes: &[u8]) -> u64 {
     bytes
         .chunks(2)
         .map(|w| u64::from(w[0]) << 8 | u64::from(*w.get(1).unwrap_or(&0)))
@@ -425,7 +426,7 @@ mod tests {
                 (0..n)
                     .map(|i| RecordRepr {
                         port: (i % 8) as u8,
-                        flags: (i % 3 == 0) as u8,
+                        flags: i.is_multiple_of(3) as u8,
                         tick_offset: i as i32 * 6250 - 3,
                         cell_packet: DataRepr::from_raw(
                             i as u16 + 1,

@@ -21,6 +21,7 @@ pub mod port_buffer;
 pub mod stream;
 pub mod timestamp;
 pub mod uart_rx;
+pub mod udp_framer;
 
 #[cfg(test)]
 pub(crate) mod testbench;
