@@ -14,6 +14,7 @@
 //! over one interface, [`stream`].
 
 pub mod cell_deframer;
+pub mod counter_file;
 pub mod crc32;
 pub mod frame_transmitter;
 pub mod packet_arbiter;

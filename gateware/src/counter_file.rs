@@ -1,0 +1,283 @@
+//! CounterFile: the eight 32-bit counters of every port, in block RAM.
+//!
+//! Each port raises counter events as a bit vector (bit i = `PortCounter` i). Events set
+//! sticky pending bits; a scanner visits one port per clock and, when that port has a
+//! pending bit, adds one to the lowest such counter with a read-modify-write in RAM and
+//! clears the bit. A second RAM receives the same writes and serves `read_address` for
+//! the status reporter, so reading never delays counting.
+//!
+//! Limit: a port is visited every N clocks, so an event is counted within 8 N clocks, and
+//! no event is lost while a port raises at most three events per N x 3 clocks. The
+//! deframer raises at most three per received byte (297 clocks at the fastest line the
+//! UART accepts), which holds for N <= 64. After reset the scanner first clears both RAMs
+//! (512 clocks) with `ready` low; the box holds its ports in reset until then.
+
+use rust_hdl::prelude::*;
+
+/// Counters per port (`skinbox_protocol::PortCounter`).
+pub const COUNTERS: usize = 8;
+
+/// Event-driven counter memory of N ports.
+#[derive(LogicBlock)]
+pub struct CounterFile {
+    /// The box clock.
+    pub clock: Signal<In, Clock>,
+    /// Synchronous reset: clears every counter.
+    pub reset: Signal<In, Bit>,
+    /// One event vector per port, high for one clock per event.
+    pub events: Vec<Signal<In, Bits<8>>>,
+    /// Counter to read: port * 8 + counter.
+    pub read_address: Signal<In, Bits<9>>,
+    /// The counter, one clock after its address.
+    pub read_data: Signal<Out, Bits<32>>,
+    /// Counting: the clearing after reset is over.
+    pub ready: Signal<Out, Bit>,
+    pending: Vec<DFF<Bits<8>>>,
+    last_port: Constant<Bits<6>>,
+    port: DFF<Bits<6>>,
+    clearing: DFF<Bit>,
+    clear_address: DFF<Bits<9>>,
+    update: DFF<Bit>,
+    update_address: DFF<Bits<9>>,
+    counting_memory: RAM<Bits<32>, 9>,
+    reading_memory: RAM<Bits<32>, 9>,
+    current: Signal<Local, Bits<8>>,
+    lowest: Signal<Local, Bits<3>>,
+    clear_mask: Signal<Local, Bits<8>>,
+    write_address: Signal<Local, Bits<9>>,
+    write_data: Signal<Local, Bits<32>>,
+    write_enable: Signal<Local, Bit>,
+}
+
+impl CounterFile {
+    /// Counters for `ports` ports (1 to 64).
+    pub fn new(ports: usize) -> Self {
+        assert!(
+            (1..=64).contains(&ports),
+            "CounterFile: {ports} ports, must be 1 to 64"
+        );
+        Self {
+            clock: Default::default(),
+            reset: Default::default(),
+            events: (0..ports).map(|_| Default::default()).collect(),
+            read_address: Default::default(),
+            read_data: Default::default(),
+            ready: Default::default(),
+            pending: (0..ports).map(|_| Default::default()).collect(),
+            last_port: Constant::new((ports as u64 - 1).into()),
+            port: Default::default(),
+            clearing: Default::default(),
+            clear_address: Default::default(),
+            update: Default::default(),
+            update_address: Default::default(),
+            counting_memory: Default::default(),
+            reading_memory: Default::default(),
+            current: Default::default(),
+            lowest: Default::default(),
+            clear_mask: Default::default(),
+            write_address: Default::default(),
+            write_data: Default::default(),
+            write_enable: Default::default(),
+        }
+    }
+}
+
+impl Logic for CounterFile {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(
+            self,
+            clock,
+            port,
+            clearing,
+            clear_address,
+            update,
+            update_address
+        );
+        self.counting_memory.read_clock.next = self.clock.val();
+        self.counting_memory.write_clock.next = self.clock.val();
+        self.reading_memory.read_clock.next = self.clock.val();
+        self.reading_memory.write_clock.next = self.clock.val();
+
+        // The visited port's pending bits and the lowest one set.
+        self.current.next = 0.into();
+        for i in 0..self.pending.len() {
+            self.pending[i].clock.next = self.clock.val();
+            if self.port.q.val().index() == i {
+                self.current.next = self.pending[i].q.val();
+            }
+        }
+        self.lowest.next = 0.into();
+        self.clear_mask.next = 0.into();
+        if self.current.val().get_bit(0) {
+            self.lowest.next = 0.into();
+            self.clear_mask.next = 1.into();
+        } else if self.current.val().get_bit(1) {
+            self.lowest.next = 1.into();
+            self.clear_mask.next = 2.into();
+        } else if self.current.val().get_bit(2) {
+            self.lowest.next = 2.into();
+            self.clear_mask.next = 4.into();
+        } else if self.current.val().get_bit(3) {
+            self.lowest.next = 3.into();
+            self.clear_mask.next = 8.into();
+        } else if self.current.val().get_bit(4) {
+            self.lowest.next = 4.into();
+            self.clear_mask.next = 16.into();
+        } else if self.current.val().get_bit(5) {
+            self.lowest.next = 5.into();
+            self.clear_mask.next = 32.into();
+        } else if self.current.val().get_bit(6) {
+            self.lowest.next = 6.into();
+            self.clear_mask.next = 64.into();
+        } else if self.current.val().get_bit(7) {
+            self.lowest.next = 7.into();
+            self.clear_mask.next = 128.into();
+        }
+        if self.clearing.q.val() {
+            self.clear_mask.next = 0.into();
+        }
+        for i in 0..self.pending.len() {
+            self.pending[i].d.next = self.pending[i].q.val() | self.events[i].val();
+            if self.port.q.val().index() == i {
+                self.pending[i].d.next =
+                    (self.pending[i].q.val() & !self.clear_mask.val()) | self.events[i].val();
+            }
+            if self.reset.val() {
+                self.pending[i].d.next = 0.into();
+            }
+        }
+
+        // Read now, write the incremented value next clock (never the same address twice
+        // in a row: the scanner moves on every clock).
+        self.counting_memory.read_address.next =
+            (bit_cast::<9, 6>(self.port.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
+        self.update.d.next = (self.clear_mask.val() != 0) & !self.clearing.q.val();
+        self.update_address.d.next = self.counting_memory.read_address.val();
+        self.write_enable.next = self.update.q.val();
+        self.write_address.next = self.update_address.q.val();
+        self.write_data.next = self.counting_memory.read_data.val() + 1;
+        if self.clearing.q.val() {
+            self.write_enable.next = true;
+            self.write_address.next = self.clear_address.q.val();
+            self.write_data.next = 0.into();
+            self.clear_address.d.next = self.clear_address.q.val() + 1;
+            if self.clear_address.q.val() == 511 {
+                self.clearing.d.next = false;
+            }
+        }
+        self.counting_memory.write_enable.next = self.write_enable.val();
+        self.counting_memory.write_address.next = self.write_address.val();
+        self.counting_memory.write_data.next = self.write_data.val();
+        self.reading_memory.write_enable.next = self.write_enable.val();
+        self.reading_memory.write_address.next = self.write_address.val();
+        self.reading_memory.write_data.next = self.write_data.val();
+        self.reading_memory.read_address.next = self.read_address.val();
+        self.read_data.next = self.reading_memory.read_data.val();
+        self.ready.next = !self.clearing.q.val();
+
+        if self.port.q.val() == self.last_port.val() {
+            self.port.d.next = 0.into();
+        } else {
+            self.port.d.next = self.port.q.val() + 1;
+        }
+        if self.reset.val() {
+            self.port.d.next = 0.into();
+            self.clearing.d.next = true;
+            self.clear_address.d.next = 0.into();
+            self.update.d.next = false;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::Bench;
+
+    /// Raises random events (at most three per port per 300 clocks) and checks every
+    /// counter against a count kept here.
+    fn random_events(ports: usize, clocks: u64, seed: u64) {
+        let mut bench = Bench::new(CounterFile::new(ports), |b| &mut b.clock);
+        bench.uut.reset.next = true;
+        bench.cycle();
+        bench.uut.reset.next = false;
+        let mut expected = vec![[0u32; COUNTERS]; ports];
+        let mut state = seed;
+        bench.cycles(1);
+        while !bench.uut.ready.val() {
+            bench.cycle();
+        }
+        assert_eq!(
+            bench.cycles,
+            1 + 512,
+            "clearing takes 512 clocks after the reset edge"
+        );
+        let mut next_event = vec![0; ports];
+        for clock in 0..clocks {
+            for p in 0..ports {
+                let mut bits = 0u64;
+                if clock >= next_event[p] {
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    // one to three distinct counters at once, like a deframer byte
+                    for k in 0..1 + (state >> 60) % 3 {
+                        bits |= 1 << ((state >> (8 * k + 8)) % 8);
+                    }
+                    next_event[p] = clock + 297 + (state >> 40) % 50;
+                    for (c, count) in expected[p].iter_mut().enumerate() {
+                        *count += (bits >> c & 1) as u32;
+                    }
+                }
+                bench.uut.events[p].next = bits.into();
+            }
+            bench.cycle();
+        }
+        for p in 0..ports {
+            bench.uut.events[p].next = 0.into();
+        }
+        bench.cycles(8 * ports as u64 + 10);
+        for (p, counts) in expected.iter().enumerate() {
+            for (c, count) in counts.iter().enumerate() {
+                bench.uut.read_address.next = ((p * COUNTERS + c) as u64).into();
+                bench.cycle();
+                let got = bench.uut.read_data.val().to_u32();
+                assert_eq!(got, *count, "port {p} counter {c}");
+            }
+        }
+    }
+
+    #[test]
+    fn counts_every_event_of_one_port() {
+        random_events(1, 20_000, 1);
+    }
+
+    #[test]
+    fn counts_every_event_of_64_ports() {
+        random_events(64, 3_000, 2);
+    }
+
+    #[test]
+    fn reset_clears_the_counters() {
+        let mut bench = Bench::new(CounterFile::new(2), |b| &mut b.clock);
+        bench.uut.reset.next = true;
+        bench.cycle();
+        bench.uut.reset.next = false;
+        bench.cycles(600);
+        bench.uut.events[1].next = 0b1000_0001u64.into();
+        bench.cycle();
+        bench.uut.events[1].next = 0.into();
+        bench.cycles(40);
+        bench.uut.read_address.next = 15u64.into();
+        bench.cycle();
+        assert_eq!(bench.uut.read_data.val().to_u32(), 1);
+        bench.uut.reset.next = true;
+        bench.cycle();
+        bench.uut.reset.next = false;
+        bench.cycles(600);
+        bench.uut.read_address.next = 15u64.into();
+        bench.cycle();
+        assert_eq!(bench.uut.read_data.val().to_u32(), 0);
+    }
+}
