@@ -19,6 +19,7 @@ pub mod crc32;
 pub mod frame_transmitter;
 pub mod packet_arbiter;
 pub mod port_buffer;
+pub mod status_reporter;
 pub mod stream;
 pub mod timestamp;
 pub mod uart_rx;

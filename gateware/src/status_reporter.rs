@@ -1,0 +1,409 @@
+//! StatusReporter: builds the status datagrams, so the host sees every drop and reset.
+//!
+//! Right after reset (once the counters are cleared) and then every `status_period_ticks`
+//! it writes a status body into its own 2 KB memory: boot id, records datagrams and
+//! records sent, first port, then the eight counters of up to 32 ports (one datagram per
+//! 32 ports). It sums the body's 16-bit words while writing, asks the framer to send it
+//! (`request`), and after the framer read the memory (`sending` fell) goes on with the
+//! next ports or waits for the next period. Building a page of 32 ports takes 1,300 clocks.
+//!
+//! The boot id is a seed parameter plus the number of resets since configuration, so
+//! each reset is visible; a power cycle restarts the count (the host also sees the
+//! sequence number restart at 0).
+
+use rust_hdl::prelude::*;
+
+/// Ports per status datagram.
+pub const PORTS_PER_STATUS: usize = 32;
+
+/// Periodic status datagram builder.
+#[derive(LogicBlock)]
+pub struct StatusReporter {
+    /// The box clock.
+    pub clock: Signal<In, Clock>,
+    /// Synchronous reset.
+    pub reset: Signal<In, Bit>,
+    /// Box time.
+    pub tick: Signal<In, Bits<64>>,
+    /// Records datagrams sent since reset.
+    pub datagrams_sent: Signal<In, Bits<32>>,
+    /// Records sent since reset.
+    pub records_sent: Signal<In, Bits<32>>,
+    /// The counter file finished clearing.
+    pub counters_ready: Signal<In, Bit>,
+    /// Counter to read: port * 8 + counter.
+    pub counter_address: Signal<Out, Bits<9>>,
+    /// The counter, one clock after its address.
+    pub counter_data: Signal<In, Bits<32>>,
+    /// A status body is ready.
+    pub request: Signal<Out, Bit>,
+    /// Port counter blocks in the body.
+    pub entry_count: Signal<Out, Bits<16>>,
+    /// Body length.
+    pub body_len: Signal<Out, Bits<11>>,
+    /// Sum of the body's 16-bit words.
+    pub body_sum: Signal<Out, Bits<32>>,
+    /// Time of the report.
+    pub report_tick: Signal<Out, Bits<64>>,
+    /// The framer took the request.
+    pub taken: Signal<In, Bit>,
+    /// The framer is reading the body.
+    pub sending: Signal<In, Bit>,
+    /// Body byte to read.
+    pub read_address: Signal<In, Bits<11>>,
+    /// The body byte, one clock after its address.
+    pub read_data: Signal<Out, Bits<8>>,
+    /// This boot's id.
+    pub boot_id: Signal<Out, Bits<32>>,
+    memory: RAM<Bits<8>, 11>,
+    period: Constant<Bits<32>>,
+    ports: Constant<Bits<7>>,
+    boot_seed: Constant<Bits<32>>,
+    timer: DFF<Bits<32>>,
+    due: DFF<Bit>,
+    state: DFF<ReportState>,
+    first_port: DFF<Bits<7>>,
+    page_ports: DFF<Bits<7>>,
+    word: DFF<Bits<9>>,
+    phase: DFF<Bits<3>>,
+    shift: DFF<Bits<32>>,
+    offset: DFF<Bits<11>>,
+    sum: DFF<Bits<32>>,
+    tick_held: DFF<Bits<64>>,
+    resets: DFF<Bits<32>>,
+    reset_seen: DFF<Bit>,
+    remaining: Signal<Local, Bits<7>>,
+    word_value: Signal<Local, Bits<32>>,
+    byte: Signal<Local, Bits<8>>,
+    write: Signal<Local, Bit>,
+}
+
+/// What the reporter is doing.
+#[derive(Copy, Clone, Debug, PartialEq, LogicState)]
+enum ReportState {
+    /// Waiting for the next period (the first variant is the reset state).
+    Wait,
+    /// Setting up a page of ports.
+    Start,
+    /// Writing the body.
+    Build,
+    /// Waiting for the framer to take it.
+    Request,
+    /// The framer reads the body.
+    Sending,
+}
+
+impl StatusReporter {
+    /// A reporter for `ports` ports (1 to 64), one report every `period_ticks`
+    /// (1 to 2^32 - 1), with boot ids counting from `boot_seed`.
+    pub fn new(ports: usize, period_ticks: u64, boot_seed: u32) -> Self {
+        assert!(
+            (1..=64).contains(&ports),
+            "StatusReporter: {ports} ports, must be 1 to 64"
+        );
+        assert!(
+            (1..1 << 32).contains(&period_ticks),
+            "StatusReporter: period of {period_ticks} ticks must be 1 to 2^32 - 1"
+        );
+        Self {
+            clock: Default::default(),
+            reset: Default::default(),
+            tick: Default::default(),
+            datagrams_sent: Default::default(),
+            records_sent: Default::default(),
+            counters_ready: Default::default(),
+            counter_address: Default::default(),
+            counter_data: Default::default(),
+            request: Default::default(),
+            entry_count: Default::default(),
+            body_len: Default::default(),
+            body_sum: Default::default(),
+            report_tick: Default::default(),
+            taken: Default::default(),
+            sending: Default::default(),
+            read_address: Default::default(),
+            read_data: Default::default(),
+            boot_id: Default::default(),
+            memory: Default::default(),
+            period: Constant::new(period_ticks.into()),
+            ports: Constant::new((ports as u64).into()),
+            boot_seed: Constant::new(u64::from(boot_seed).into()),
+            timer: Default::default(),
+            due: Default::default(),
+            state: Default::default(),
+            first_port: Default::default(),
+            page_ports: Default::default(),
+            word: Default::default(),
+            phase: Default::default(),
+            shift: Default::default(),
+            offset: Default::default(),
+            sum: Default::default(),
+            tick_held: Default::default(),
+            resets: Default::default(),
+            reset_seen: Default::default(),
+            remaining: Default::default(),
+            word_value: Default::default(),
+            byte: Default::default(),
+            write: Default::default(),
+        }
+    }
+}
+
+// Words of a page: 0 boot id, 1 datagrams sent, 2 records sent, 3 first port and reserved,
+// 4.. the counters (port-major). Each word takes five clocks: address, then four bytes.
+impl Logic for StatusReporter {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(
+            self, clock, timer, due, state, first_port, page_ports, word, phase, shift, offset,
+            sum, tick_held, resets, reset_seen
+        );
+        self.memory.write_clock.next = self.clock.val();
+        self.memory.read_clock.next = self.clock.val();
+        self.memory.read_address.next = self.read_address.val();
+        self.read_data.next = self.memory.read_data.val();
+        self.boot_id.next = self.boot_seed.val() + self.resets.q.val();
+
+        // A report is due every period, counted from report start to report start; one
+        // that comes due while the previous is still going starts right after it.
+        if self.timer.q.val() == 0 {
+            self.timer.d.next = self.period.val() - 1;
+            self.due.d.next = true;
+        } else {
+            self.timer.d.next = self.timer.q.val() - 1;
+        }
+        self.remaining.next = self.ports.val() - self.first_port.q.val();
+        self.write.next = false;
+        self.counter_address.next =
+            (bit_cast::<9, 7>(self.first_port.q.val()) << 3) + (self.word.q.val() - 4);
+        self.word_value.next = self.counter_data.val();
+        if self.word.q.val() == 0 {
+            self.word_value.next = self.boot_seed.val() + self.resets.q.val();
+        } else if self.word.q.val() == 1 {
+            self.word_value.next = self.datagrams_sent.val();
+        } else if self.word.q.val() == 2 {
+            self.word_value.next = self.records_sent.val();
+        } else if self.word.q.val() == 3 {
+            self.word_value.next = bit_cast::<32, 7>(self.first_port.q.val()) << 24;
+        }
+        self.byte.next = self.shift.q.val().get_bits::<8>(24);
+
+        match self.state.q.val() {
+            ReportState::Wait => {
+                if self.due.q.val() & self.counters_ready.val() {
+                    self.due.d.next = false;
+                    self.first_port.d.next = 0.into();
+                    self.state.d.next = ReportState::Start;
+                }
+            }
+            ReportState::Start => {
+                self.state.d.next = ReportState::Build;
+                self.word.d.next = 0.into();
+                self.phase.d.next = 0.into();
+                self.offset.d.next = 0.into();
+                self.sum.d.next = 0.into();
+                self.tick_held.d.next = self.tick.val();
+                self.page_ports.d.next = 32.into();
+                if self.remaining.val() < 32 {
+                    self.page_ports.d.next = self.remaining.val();
+                }
+            }
+            ReportState::Build => {
+                self.phase.d.next = self.phase.q.val() + 1;
+                if self.phase.q.val() == 1 {
+                    self.write.next = true;
+                    self.byte.next = self.word_value.val().get_bits::<8>(24);
+                    self.shift.d.next = self.word_value.val() << 8;
+                } else if self.phase.q.val() >= 2 {
+                    self.write.next = true;
+                    self.shift.d.next = self.shift.q.val() << 8;
+                }
+                if self.phase.q.val() == 4 {
+                    self.phase.d.next = 0.into();
+                    self.word.d.next = self.word.q.val() + 1;
+                    if self.word.q.val() == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + 3 {
+                        self.state.d.next = ReportState::Request;
+                    }
+                }
+            }
+            ReportState::Request => {
+                if self.taken.val() {
+                    self.state.d.next = ReportState::Sending;
+                }
+            }
+            ReportState::Sending => {
+                // the framer read the page: next ports, or wait for the next period
+                if !self.sending.val() {
+                    self.first_port.d.next = self.first_port.q.val() + self.page_ports.q.val();
+                    if self.first_port.q.val() + self.page_ports.q.val() == self.ports.val() {
+                        self.state.d.next = ReportState::Wait;
+                    } else {
+                        self.state.d.next = ReportState::Start;
+                    }
+                }
+            }
+        }
+
+        self.memory.write_enable.next = self.write.val();
+        self.memory.write_address.next = self.offset.q.val();
+        self.memory.write_data.next = self.byte.val();
+        if self.write.val() {
+            self.offset.d.next = self.offset.q.val() + 1;
+            if self.offset.q.val().get_bit(0) {
+                self.sum.d.next = self.sum.q.val() + bit_cast::<32, 8>(self.byte.val());
+            } else {
+                self.sum.d.next = self.sum.q.val() + (bit_cast::<32, 8>(self.byte.val()) << 8);
+            }
+        }
+
+        self.request.next = self.state.q.val() == ReportState::Request;
+        self.entry_count.next = bit_cast::<16, 7>(self.page_ports.q.val());
+        self.body_len.next = self.offset.q.val();
+        self.body_sum.next = self.sum.q.val();
+        self.report_tick.next = self.tick_held.q.val();
+
+        self.reset_seen.d.next = self.reset.val();
+        if self.reset.val() {
+            self.state.d.next = ReportState::Wait;
+            self.timer.d.next = 0.into();
+            self.due.d.next = false;
+            if !self.reset_seen.q.val() {
+                self.resets.d.next = self.resets.q.val() + 1;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame_transmitter::word_sum;
+    use crate::testbench::Bench;
+    use skinbox_protocol::datagram::DatagramBody;
+    use skinbox_protocol::{DatagramRepr, PortCounters, StatusRepr};
+
+    fn counter(port: usize, c: usize) -> u32 {
+        (port as u32) << 16 | (c as u32) << 8 | 0x5A
+    }
+
+    /// A page as the framer would send it: (clock of the request, entries, body, sum).
+    type Page = (u64, u16, Vec<u8>, u64);
+
+    fn run(ports: usize, period: u64, clocks: u64) -> Vec<Page> {
+        let mut bench = Bench::new(StatusReporter::new(ports, period, 0x1000), |b| &mut b.clock);
+        bench.uut.reset.next = true;
+        bench.cycles(3);
+        bench.uut.reset.next = false;
+        let mut pages = vec![];
+        let (mut counter_read, mut body_read) = (0usize, 0u64);
+        let mut reading: Option<(u64, u16, u64, u64, Vec<u8>)> = None;
+        for clock in 0..clocks {
+            let u = &mut bench.uut;
+            u.tick.next = clock.into();
+            u.datagrams_sent.next = 77.into();
+            u.records_sent.next = 4242.into();
+            u.counters_ready.next = true;
+            u.counter_data.next = u64::from(counter(counter_read / 8, counter_read % 8)).into();
+            u.taken.next = false;
+            u.sending.next = reading.is_some();
+            u.read_address.next = body_read.into();
+            bench.settle();
+            let u = &bench.uut;
+            counter_read = u.counter_address.val().index();
+            if let Some((_, _, len, _, body)) = &mut reading {
+                if body_read >= 1 {
+                    body.push(u.read_data.val().to_u8());
+                }
+                if body.len() as u64 == *len {
+                    let (at, n, _, sum, body) = reading.take().unwrap();
+                    pages.push((at, n, body, sum));
+                    body_read = 0;
+                } else {
+                    body_read += 1;
+                }
+            } else if u.request.val() {
+                reading = Some((
+                    clock,
+                    u.entry_count.val().to_u16(),
+                    u.body_len.val().to_u64(),
+                    u.body_sum.val().to_u64(),
+                    vec![],
+                ));
+                body_read = 0;
+                bench.uut.taken.next = true;
+                bench.uut.sending.next = true;
+            }
+            bench.cycle();
+        }
+        pages
+    }
+
+    fn parse(ports: usize, page: &Page) -> StatusRepr {
+        let mut header = DatagramRepr {
+            box_id: 1,
+            port_count: ports as u8,
+            flags: 0,
+            sequence: 0,
+            base_tick: 0,
+            body: DatagramBody::Status(StatusRepr {
+                ports: vec![PortCounters::default(); usize::from(page.1)],
+                ..Default::default()
+            }),
+        }
+        .to_bytes();
+        header.truncate(24);
+        header.extend(&page.2);
+        match DatagramRepr::parse(&header).unwrap().body {
+            DatagramBody::Status(s) => s,
+            DatagramBody::Records(_) => unreachable!(),
+        }
+    }
+
+    #[test]
+    fn reports_every_counter_of_40_ports_in_two_pages_every_period() {
+        let period = 8_000;
+        let pages = run(40, period, 2 * period + 6_000);
+        assert_eq!(
+            pages.len(),
+            6,
+            "two pages at reset, after one and two periods"
+        );
+        for (i, page) in pages.iter().enumerate() {
+            let status = parse(40, page);
+            let first = if i % 2 == 0 { 0 } else { 32 };
+            assert_eq!(usize::from(status.first_port), first, "page {i}");
+            assert_eq!(status.ports.len(), if i % 2 == 0 { 32 } else { 8 });
+            assert_eq!(status.boot_id, 0x1001, "seed + one reset");
+            assert_eq!((status.datagrams_sent, status.records_sent), (77, 4242));
+            for (k, p) in status.ports.iter().enumerate() {
+                let expected: Vec<u32> = (0..8).map(|c| counter(first + k, c)).collect();
+                assert_eq!(p.0.to_vec(), expected, "page {i} port {}", first + k);
+            }
+            assert_eq!(page.3, word_sum(&page.2), "body sum of page {i}");
+        }
+        // one report per period
+        assert!(
+            pages[2].0 >= period && pages[2].0 < period + 2_000,
+            "{}",
+            pages[2].0
+        );
+        assert_eq!(
+            pages[4].0 - pages[2].0,
+            period,
+            "reports start one period apart"
+        );
+    }
+
+    #[test]
+    fn a_single_port_box_reports_one_block() {
+        let pages = run(1, 100_000, 3_000);
+        assert_eq!(pages.len(), 1);
+        let status = parse(1, &pages[0]);
+        assert_eq!(
+            status.ports,
+            vec![PortCounters(
+                [0, 1, 2, 3, 4, 5, 6, 7].map(|c| counter(0, c))
+            )]
+        );
+    }
+}
