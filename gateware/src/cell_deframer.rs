@@ -13,10 +13,12 @@
 //! each beat within one byte time (the [`crate::port_buffer::PortBuffer`] always does);
 //! the deframer has no room for more.
 //!
-//! Counter pulses (one clock each), in the order of the status counters
-//! (`skinbox_protocol::PortCounter`): `good`, `rejected_end_byte`, `rejected_framing`,
-//! `rejected_truncated`, `garbage_byte`, `framing_error`, `resync`. `resync` counts every
-//! loss of alignment: each rejected packet, and the first garbage byte after a good packet.
+//! Counter events (`events`, one clock each, bits in `skinbox_protocol::PortCounter`
+//! order): good, rejected end byte, rejected framing, rejected truncated, garbage byte,
+//! framing error, resync. Resync counts every loss of alignment: each rejected packet, and
+//! the first garbage byte after a good packet. Counts are events, not cell packets: after a
+//! framing error a header value inside the rest of the broken packet can start a false
+//! packet that is rejected too.
 
 use crate::stream::ByteStreamSource;
 use rust_hdl::prelude::*;
@@ -33,7 +35,7 @@ pub struct CellDeframer {
     /// Synchronous reset.
     pub reset: Signal<In, Bit>,
     /// Byte from the UART receiver.
-    pub byte: Signal<In, Bits<8>>,
+    pub byte_data: Signal<In, Bits<8>>,
     /// A byte arrived (one clock).
     pub byte_strobe: Signal<In, Bit>,
     /// With `byte_strobe`: its stop bit was low.
@@ -44,20 +46,10 @@ pub struct CellDeframer {
     pub uart_busy: Signal<In, Bit>,
     /// Packets: 4 tick bytes and 20 cell bytes, `error` on `last` when rejected.
     pub packets: ByteStreamSource,
-    /// Counter pulse: a good packet.
-    pub good: Signal<Out, Bit>,
-    /// Counter pulse: packet rejected, wrong 20th byte.
-    pub rejected_end_byte: Signal<Out, Bit>,
-    /// Counter pulse: packet rejected, framing error inside.
-    pub rejected_framing: Signal<Out, Bit>,
-    /// Counter pulse: packet rejected, line idle before the 20th byte.
-    pub rejected_truncated: Signal<Out, Bit>,
-    /// Counter pulse: a byte discarded while hunting.
-    pub garbage_byte: Signal<Out, Bit>,
-    /// Counter pulse: a byte with a framing error, wherever it fell.
-    pub framing_error: Signal<Out, Bit>,
-    /// Counter pulse: alignment lost, hunting again.
-    pub resync: Signal<Out, Bit>,
+    /// Counter events this clock, bit i = `skinbox_protocol::PortCounter` i: good (0),
+    /// rejected end byte (2), rejected framing (3), rejected truncated (4), garbage byte
+    /// (5), framing error (6), resync (7).
+    pub events: Signal<Out, Bits<8>>,
     data_header: Constant<Bits<8>>,
     event_header: Constant<Bits<8>>,
     end_of_packet: Constant<Bits<8>>,
@@ -98,19 +90,13 @@ impl CellDeframer {
         Self {
             clock: Default::default(),
             reset: Default::default(),
-            byte: Default::default(),
+            byte_data: Default::default(),
             byte_strobe: Default::default(),
             byte_framing_error: Default::default(),
             byte_start_tick: Default::default(),
             uart_busy: Default::default(),
             packets: Default::default(),
-            good: Default::default(),
-            rejected_end_byte: Default::default(),
-            rejected_framing: Default::default(),
-            rejected_truncated: Default::default(),
-            garbage_byte: Default::default(),
-            framing_error: Default::default(),
-            resync: Default::default(),
+            events: Default::default(),
             data_header: Constant::new(u64::from(framing.data_header).into()),
             event_header: Constant::new(u64::from(framing.event_header).into()),
             end_of_packet: Constant::new(u64::from(framing.end_of_packet).into()),
@@ -170,8 +156,8 @@ impl Logic for CellDeframer {
         self.pulse_framing_error.d.next = false;
         self.pulse_resync.d.next = false;
         self.is_header.next = !self.byte_framing_error.val()
-            & ((self.byte.val() == self.data_header.val())
-                | (self.byte.val() == self.event_header.val()));
+            & ((self.byte_data.val() == self.data_header.val())
+                | (self.byte_data.val() == self.event_header.val()));
 
         // Output: the tick bytes first, then the pending cell byte.
         self.packets.valid.next = (self.tick_beats.q.val() != 0) | self.pending.q.val();
@@ -208,7 +194,7 @@ impl Logic for CellDeframer {
                     self.tick_shift.d.next = self.byte_start_tick.val();
                     self.tick_beats.d.next = 4.into();
                     self.pending.d.next = true;
-                    self.pending_data.d.next = self.byte.val();
+                    self.pending_data.d.next = self.byte_data.val();
                     self.pending_last.d.next = false;
                     self.pending_error.d.next = false;
                 } else {
@@ -221,7 +207,7 @@ impl Logic for CellDeframer {
                 }
             } else {
                 self.pending.d.next = true;
-                self.pending_data.d.next = self.byte.val();
+                self.pending_data.d.next = self.byte_data.val();
                 self.pending_last.d.next = false;
                 self.pending_error.d.next = false;
                 self.index.d.next = self.index.q.val() + 1;
@@ -235,7 +221,7 @@ impl Logic for CellDeframer {
                 } else if self.index.q.val() == self.last_index.val() {
                     self.in_packet.d.next = false;
                     self.pending_last.d.next = true;
-                    if self.byte.val() == self.end_of_packet.val() {
+                    if self.byte_data.val() == self.end_of_packet.val() {
                         self.aligned.d.next = true;
                         self.pulse_good.d.next = true;
                     } else {
@@ -272,13 +258,13 @@ impl Logic for CellDeframer {
             self.pulse_framing_error.d.next = false;
             self.pulse_resync.d.next = false;
         }
-        self.good.next = self.pulse_good.q.val();
-        self.rejected_end_byte.next = self.pulse_rejected_end_byte.q.val();
-        self.rejected_framing.next = self.pulse_rejected_framing.q.val();
-        self.rejected_truncated.next = self.pulse_rejected_truncated.q.val();
-        self.garbage_byte.next = self.pulse_garbage_byte.q.val();
-        self.framing_error.next = self.pulse_framing_error.q.val();
-        self.resync.next = self.pulse_resync.q.val();
+        self.events.next = bit_cast::<8, 1>(self.pulse_good.q.val().into())
+            | (bit_cast::<8, 1>(self.pulse_rejected_end_byte.q.val().into()) << 2)
+            | (bit_cast::<8, 1>(self.pulse_rejected_framing.q.val().into()) << 3)
+            | (bit_cast::<8, 1>(self.pulse_rejected_truncated.q.val().into()) << 4)
+            | (bit_cast::<8, 1>(self.pulse_garbage_byte.q.val().into()) << 5)
+            | (bit_cast::<8, 1>(self.pulse_framing_error.q.val().into()) << 6)
+            | (bit_cast::<8, 1>(self.pulse_resync.q.val().into()) << 7);
     }
 }
 
@@ -331,7 +317,7 @@ mod tests {
                 u.byte_strobe.next = strobe.is_some();
                 u.uart_busy.next = busy;
                 if let Some((byte, broken, tick)) = strobe {
-                    u.byte.next = u64::from(byte).into();
+                    u.byte_data.next = u64::from(byte).into();
                     u.byte_framing_error.next = broken;
                     u.byte_start_tick.next = u64::from(tick).into();
                 }
@@ -344,17 +330,19 @@ mod tests {
                         u.packets.error.val(),
                     ));
                 }
-                for (pulse, count) in [
-                    (u.good.val(), &mut counts.good),
-                    (u.rejected_end_byte.val(), &mut counts.end_byte),
-                    (u.rejected_framing.val(), &mut counts.framing),
-                    (u.rejected_truncated.val(), &mut counts.truncated),
-                    (u.garbage_byte.val(), &mut counts.garbage),
-                    (u.framing_error.val(), &mut counts.any_framing),
-                    (u.resync.val(), &mut counts.resync),
+                let events = u.events.val().to_u8();
+                for (bit, count) in [
+                    (0, &mut counts.good),
+                    (2, &mut counts.end_byte),
+                    (3, &mut counts.framing),
+                    (4, &mut counts.truncated),
+                    (5, &mut counts.garbage),
+                    (6, &mut counts.any_framing),
+                    (7, &mut counts.resync),
                 ] {
-                    *count += u32::from(pulse);
+                    *count += u32::from(events >> bit & 1);
                 }
+                assert_eq!(events & 2, 0, "the deframer drops nothing");
                 bench.cycle();
             };
         for input in inputs {

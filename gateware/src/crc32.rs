@@ -16,7 +16,7 @@ pub const POLYNOMIAL_REFLECTED: u64 = 0xEDB8_8320_u64;
 #[derive(LogicBlock)]
 pub struct Crc32Byte {
     /// Register before the byte.
-    pub crc: Signal<In, Bits<32>>,
+    pub register: Signal<In, Bits<32>>,
     /// The byte.
     pub data: Signal<In, Bits<8>>,
     /// Register after the byte.
@@ -28,7 +28,7 @@ pub struct Crc32Byte {
 impl Default for Crc32Byte {
     fn default() -> Self {
         Self {
-            crc: Default::default(),
+            register: Default::default(),
             data: Default::default(),
             updated: Default::default(),
             polynomial: Constant::new(POLYNOMIAL_REFLECTED.into()),
@@ -40,7 +40,7 @@ impl Default for Crc32Byte {
 impl Logic for Crc32Byte {
     #[hdl_gen]
     fn update(&mut self) {
-        self.stage[0].next = self.crc.val();
+        self.stage[0].next = self.register.val();
         for i in 0..8 {
             if self.stage[i].val().get_bit(0) ^ self.data.val().get_bit(i) {
                 self.stage[i + 1].next = (self.stage[i].val() >> 1) ^ self.polynomial.val();
@@ -61,7 +61,7 @@ mod tests {
         block.connect_all();
         let mut crc: u64 = 0xFFFF_FFFF;
         for b in bytes {
-            block.crc.next = crc.into();
+            block.register.next = crc.into();
             block.data.next = u64::from(*b).into();
             assert!(simulate(&mut block, 100));
             crc = block.updated.val().to_u64();

@@ -91,8 +91,6 @@ pub struct FrameTransmitter {
     pub gmii_tx_en: Signal<Out, Bit>,
     /// GMII transmit error (never set).
     pub gmii_tx_er: Signal<Out, Bit>,
-    /// Datagrams started since reset (the next sequence number).
-    pub sequence: Signal<Out, Bits<32>>,
     template: ROM<Bits<8>, 7>,
     udp_constant_sum: Constant<Bits<32>>,
     ip_constant_sum: Constant<Bits<32>>,
@@ -108,7 +106,7 @@ pub struct FrameTransmitter {
     next_sequence: DFF<Bits<32>>,
     txd: DFF<Bits<8>>,
     tx_en: DFF<Bit>,
-    byte: Signal<Local, Bits<8>>,
+    tx_byte: Signal<Local, Bits<8>>,
     body_end: Signal<Local, Bits<11>>,
     padded_end: Signal<Local, Bits<11>>,
     total_len: Signal<Local, Bits<16>>,
@@ -148,7 +146,6 @@ impl FrameTransmitter {
             gmii_txd: Default::default(),
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
-            sequence: Default::default(),
             template: t.into_iter().map(|b| u64::from(b).into()).into(),
             udp_constant_sum: Constant::new(udp_constant.into()),
             ip_constant_sum: Constant::new(ip_constant.into()),
@@ -164,7 +161,7 @@ impl FrameTransmitter {
             next_sequence: Default::default(),
             txd: Default::default(),
             tx_en: Default::default(),
-            byte: Default::default(),
+            tx_byte: Default::default(),
             body_end: Default::default(),
             padded_end: Default::default(),
             total_len: Default::default(),
@@ -245,44 +242,44 @@ impl Logic for FrameTransmitter {
 
         // The byte at `index`.
         self.template.address.next = self.index.q.val().get_bits::<7>(0);
-        self.byte.next = self.template.data.val();
+        self.tx_byte.next = self.template.data.val();
         if self.index.q.val() == 24 {
-            self.byte.next = self.total_len.val().get_bits::<8>(8);
+            self.tx_byte.next = self.total_len.val().get_bits::<8>(8);
         } else if self.index.q.val() == 25 {
-            self.byte.next = self.total_len.val().get_bits::<8>(0);
+            self.tx_byte.next = self.total_len.val().get_bits::<8>(0);
         } else if self.index.q.val() == 32 {
-            self.byte.next = self.ip_checksum.val().get_bits::<8>(8);
+            self.tx_byte.next = self.ip_checksum.val().get_bits::<8>(8);
         } else if self.index.q.val() == 33 {
-            self.byte.next = self.ip_checksum.val().get_bits::<8>(0);
+            self.tx_byte.next = self.ip_checksum.val().get_bits::<8>(0);
         } else if self.index.q.val() == 46 {
-            self.byte.next = self.udp_len.val().get_bits::<8>(8);
+            self.tx_byte.next = self.udp_len.val().get_bits::<8>(8);
         } else if self.index.q.val() == 47 {
-            self.byte.next = self.udp_len.val().get_bits::<8>(0);
+            self.tx_byte.next = self.udp_len.val().get_bits::<8>(0);
         } else if self.index.q.val() == 48 {
-            self.byte.next = self.udp_checksum.val().get_bits::<8>(8);
+            self.tx_byte.next = self.udp_checksum.val().get_bits::<8>(8);
         } else if self.index.q.val() == 49 {
-            self.byte.next = self.udp_checksum.val().get_bits::<8>(0);
+            self.tx_byte.next = self.udp_checksum.val().get_bits::<8>(0);
         } else if self.index.q.val() == 53 {
-            self.byte.next = self.kind_held.q.val();
+            self.tx_byte.next = self.kind_held.q.val();
         } else if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
-            self.byte.next = self.fields.q.val().get_bits::<8>(112);
+            self.tx_byte.next = self.fields.q.val().get_bits::<8>(112);
         } else if (self.index.q.val() >= 74) & (self.index.q.val() < self.body_end.val()) {
-            self.byte.next = self.payload_data.val();
+            self.tx_byte.next = self.payload_data.val();
         } else if (self.index.q.val() >= self.body_end.val())
             & (self.index.q.val() < self.padded_end.val())
         {
-            self.byte.next = 0.into();
+            self.tx_byte.next = 0.into();
         } else if self.index.q.val() >= self.padded_end.val() {
-            self.byte.next = !self.crc_register.q.val().get_bits::<8>(0);
+            self.tx_byte.next = !self.crc_register.q.val().get_bits::<8>(0);
         }
         self.payload_address.next = self.index.q.val() + 1 - 74;
-        self.crc.crc.next = self.crc_register.q.val();
-        self.crc.data.next = self.byte.val();
+        self.crc.register.next = self.crc_register.q.val();
+        self.crc.data.next = self.tx_byte.val();
 
         self.tx_en.d.next = false;
         if self.sending.q.val() {
             self.tx_en.d.next = true;
-            self.txd.d.next = self.byte.val();
+            self.txd.d.next = self.tx_byte.val();
             self.index.d.next = self.index.q.val() + 1;
             if self.index.q.val() < 10 {
                 self.checksum.d.next = self.checksum.q.val() + self.checksum_word.val();
@@ -328,7 +325,6 @@ impl Logic for FrameTransmitter {
         self.gmii_txd.next = self.txd.q.val();
         self.gmii_tx_en.next = self.tx_en.q.val();
         self.gmii_tx_er.next = false;
-        self.sequence.next = self.next_sequence.q.val();
     }
 }
 

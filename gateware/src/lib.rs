@@ -17,6 +17,7 @@ pub mod cell_deframer;
 pub mod counter_file;
 pub mod crc32;
 pub mod frame_transmitter;
+pub mod interface_box;
 pub mod packet_arbiter;
 pub mod port_buffer;
 pub mod status_reporter;
@@ -24,6 +25,7 @@ pub mod stream;
 pub mod timestamp;
 pub mod uart_rx;
 pub mod udp_framer;
+pub mod verilog;
 
 #[cfg(test)]
 pub(crate) mod testbench;

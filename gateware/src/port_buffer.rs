@@ -3,7 +3,7 @@
 //! Two slots of 32 bytes in one RAM. A packet from the deframer (4 tick bytes and 20 cell
 //! bytes) is written as it arrives and becomes visible only when its `last` beat arrives
 //! without `error`; a packet with `error` is forgotten. When both slots are full as a packet
-//! starts, the whole packet is dropped and `dropped_overflow` pulses when it ends.
+//! starts, the whole packet is dropped and a dropped-overflow event pulses when it ends.
 //!
 //! Output: 25 beats per packet, `last` on the final one: a flags byte (bit 0 =
 //! `skinbox_protocol::record::FLAG_LOSS_BEFORE`: packets of this port were dropped or
@@ -34,8 +34,9 @@ pub struct PortBuffer {
     pub sink: ByteStreamSink,
     /// Whole good packets, flags first.
     pub source: ByteStreamSource,
-    /// Counter pulse: a good packet dropped because both slots were full.
-    pub dropped_overflow: Signal<Out, Bit>,
+    /// Counter events, bit i = `skinbox_protocol::PortCounter` i: bit 1 (dropped
+    /// overflow) for one clock per good packet dropped because both slots were full.
+    pub events: Signal<Out, Bits<8>>,
     memory: RAM<Bits<9>, 6>,
     stored_beats: Constant<Bits<5>>,
     used: DFF<Bits<2>>,
@@ -59,7 +60,7 @@ impl Default for PortBuffer {
             reset: Default::default(),
             sink: Default::default(),
             source: Default::default(),
-            dropped_overflow: Default::default(),
+            events: Default::default(),
             memory: Default::default(),
             stored_beats: Constant::new((STORED_BEATS as u64).into()),
             used: Default::default(),
@@ -179,7 +180,7 @@ impl Logic for PortBuffer {
             self.read_slot.d.next = false;
             self.read_beat.d.next = 0.into();
         }
-        self.dropped_overflow.next = self.dropped_pulse.q.val();
+        self.events.next = bit_cast::<8, 1>(self.dropped_pulse.q.val().into()) << 1;
     }
 }
 
@@ -248,7 +249,8 @@ mod tests {
             if r && u.source.valid.val() {
                 beats.push((u.source.data.val().to_u8(), u.source.last.val()));
             }
-            drops += u32::from(u.dropped_overflow.val());
+            drops += u32::from(u.events.val().to_u8() >> 1 & 1);
+            assert_eq!(u.events.val().to_u8() & !2, 0);
             if offer {
                 next += 1;
                 wait = spacing;

@@ -53,8 +53,6 @@ pub struct StatusReporter {
     pub read_address: Signal<In, Bits<11>>,
     /// The body byte, one clock after its address.
     pub read_data: Signal<Out, Bits<8>>,
-    /// This boot's id.
-    pub boot_id: Signal<Out, Bits<32>>,
     memory: RAM<Bits<8>, 11>,
     period: Constant<Bits<32>>,
     ports: Constant<Bits<7>>,
@@ -74,7 +72,7 @@ pub struct StatusReporter {
     reset_seen: DFF<Bit>,
     remaining: Signal<Local, Bits<7>>,
     word_value: Signal<Local, Bits<32>>,
-    byte: Signal<Local, Bits<8>>,
+    tx_byte: Signal<Local, Bits<8>>,
     write: Signal<Local, Bit>,
 }
 
@@ -123,7 +121,6 @@ impl StatusReporter {
             sending: Default::default(),
             read_address: Default::default(),
             read_data: Default::default(),
-            boot_id: Default::default(),
             memory: Default::default(),
             period: Constant::new(period_ticks.into()),
             ports: Constant::new((ports as u64).into()),
@@ -143,7 +140,7 @@ impl StatusReporter {
             reset_seen: Default::default(),
             remaining: Default::default(),
             word_value: Default::default(),
-            byte: Default::default(),
+            tx_byte: Default::default(),
             write: Default::default(),
         }
     }
@@ -162,7 +159,6 @@ impl Logic for StatusReporter {
         self.memory.read_clock.next = self.clock.val();
         self.memory.read_address.next = self.read_address.val();
         self.read_data.next = self.memory.read_data.val();
-        self.boot_id.next = self.boot_seed.val() + self.resets.q.val();
 
         // A report is due every period, counted from report start to report start; one
         // that comes due while the previous is still going starts right after it.
@@ -186,7 +182,7 @@ impl Logic for StatusReporter {
         } else if self.word.q.val() == 3 {
             self.word_value.next = bit_cast::<32, 7>(self.first_port.q.val()) << 24;
         }
-        self.byte.next = self.shift.q.val().get_bits::<8>(24);
+        self.tx_byte.next = self.shift.q.val().get_bits::<8>(24);
 
         match self.state.q.val() {
             ReportState::Wait => {
@@ -212,7 +208,7 @@ impl Logic for StatusReporter {
                 self.phase.d.next = self.phase.q.val() + 1;
                 if self.phase.q.val() == 1 {
                     self.write.next = true;
-                    self.byte.next = self.word_value.val().get_bits::<8>(24);
+                    self.tx_byte.next = self.word_value.val().get_bits::<8>(24);
                     self.shift.d.next = self.word_value.val() << 8;
                 } else if self.phase.q.val() >= 2 {
                     self.write.next = true;
@@ -246,13 +242,13 @@ impl Logic for StatusReporter {
 
         self.memory.write_enable.next = self.write.val();
         self.memory.write_address.next = self.offset.q.val();
-        self.memory.write_data.next = self.byte.val();
+        self.memory.write_data.next = self.tx_byte.val();
         if self.write.val() {
             self.offset.d.next = self.offset.q.val() + 1;
             if self.offset.q.val().get_bit(0) {
-                self.sum.d.next = self.sum.q.val() + bit_cast::<32, 8>(self.byte.val());
+                self.sum.d.next = self.sum.q.val() + bit_cast::<32, 8>(self.tx_byte.val());
             } else {
-                self.sum.d.next = self.sum.q.val() + (bit_cast::<32, 8>(self.byte.val()) << 8);
+                self.sum.d.next = self.sum.q.val() + (bit_cast::<32, 8>(self.tx_byte.val()) << 8);
             }
         }
 

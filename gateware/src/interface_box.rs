@@ -1,0 +1,282 @@
+//! InterfaceBox: the whole box for simulation, N UART pins in, GMII out.
+//!
+//! Per port: [`UartRx`] -> [`CellDeframer`] -> [`PortBuffer`]; then the [`PacketArbiter`]
+//! merges the ports into the [`UdpFramer`], which also sends the [`StatusReporter`]'s
+//! datagrams. The [`CounterFile`] counts every port's events. The ports stay in reset
+//! until the counters are cleared (about 4 us after reset), so no event goes uncounted.
+//!
+//! Timestamps: a record's tick is the tick of the first clock edge that sampled its
+//! packet's first start bit low at the pin (the true falling edge lies in the tick before).
+
+use crate::cell_deframer::CellDeframer;
+use crate::counter_file::CounterFile;
+use crate::packet_arbiter::{PacketArbiter, MAX_PORTS};
+use crate::port_buffer::PortBuffer;
+use crate::status_reporter::StatusReporter;
+use crate::timestamp::TimestampCounter;
+use crate::uart_rx::UartRx;
+use crate::udp_framer::{FramerConfig, UdpFramer};
+use rust_hdl::prelude::*;
+use skinbox_protocol::{CellFraming, LinkConfig};
+use std::fmt;
+
+/// Parameters of the box.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct BoxConfig {
+    /// UART ports, 1 to 64.
+    pub ports: usize,
+    /// Box clock, also the GMII clock (125 MHz for Gigabit Ethernet).
+    pub clock_hz: u64,
+    /// UART rate of the cells.
+    pub baud: u64,
+    /// A datagram leaves when its first record has waited this long.
+    pub flush_timeout_ticks: u64,
+    /// Time between status reports.
+    pub status_period_ticks: u64,
+    /// Line idle time, in bit times, that truncates a packet.
+    pub idle_gap_bits: u64,
+    /// Ethernet, IPv4 and UDP addresses.
+    pub link: LinkConfig,
+    /// Box id in every datagram.
+    pub box_id: u16,
+    /// Header and end-of-packet bytes of the cells.
+    pub framing: CellFraming,
+    /// Boot ids count resets from this value.
+    pub boot_seed: u32,
+}
+
+impl Default for BoxConfig {
+    /// 8 ports, 125 MHz, 4 Mbit/s, 100 us flush timeout, 100 ms status period.
+    fn default() -> Self {
+        BoxConfig {
+            ports: 8,
+            clock_hz: crate::CLOCK_HZ,
+            baud: crate::CELL_BAUD,
+            flush_timeout_ticks: 12_500,
+            status_period_ticks: 12_500_000,
+            idle_gap_bits: 10,
+            link: LinkConfig::DEFAULT,
+            box_id: 1,
+            framing: CellFraming::DEFAULT,
+            boot_seed: 0x5EED_0000,
+        }
+    }
+}
+
+/// A parameter set the box cannot be built with.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigError(pub String);
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "invalid box parameters: {}", self.0)
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+impl BoxConfig {
+    /// Clocks in one UART bit (31.25 by default).
+    pub fn clocks_per_bit(&self) -> f64 {
+        self.clock_hz as f64 / self.baud as f64
+    }
+
+    /// Idle-gap timeout in clocks.
+    pub fn idle_gap_clocks(&self) -> u64 {
+        (self.idle_gap_bits as f64 * self.clocks_per_bit()).round() as u64
+    }
+
+    /// Checks every parameter; the message says which and why.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let fail = |m: String| Err(ConfigError(m));
+        if !(1..=MAX_PORTS).contains(&self.ports) {
+            return fail(format!(
+                "ports = {}: the box has 1 to {MAX_PORTS} ports",
+                self.ports
+            ));
+        }
+        if self.baud == 0 || self.clock_hz < 4 * self.baud {
+            return fail(format!(
+                "clock {} Hz must be at least 4 x the baud rate {} (the UART samples 3 times per bit middle)",
+                self.clock_hz, self.baud
+            ));
+        }
+        // The counter file needs three clocks per port between a port's event bursts.
+        let byte_clocks = 10.0 * self.clocks_per_bit() * 0.95;
+        if (3 * self.ports) as f64 > byte_clocks {
+            return fail(format!(
+                "{} ports at {} clocks per byte: the counters need 3 clocks per port per byte",
+                self.ports, byte_clocks as u64
+            ));
+        }
+        if !(1..1 << 31).contains(&self.flush_timeout_ticks) {
+            return fail(format!(
+                "flush timeout {} ticks: must be 1 to 2^31 - 1",
+                self.flush_timeout_ticks
+            ));
+        }
+        if !(1..1 << 32).contains(&self.status_period_ticks) {
+            return fail(format!(
+                "status period {} ticks: must be 1 to 2^32 - 1 (34 s)",
+                self.status_period_ticks
+            ));
+        }
+        if self.idle_gap_bits < 2 || self.idle_gap_clocks() >= 1 << 16 {
+            return fail(format!(
+                "idle gap {} bits: must be at least 2 bit times and below 65536 clocks",
+                self.idle_gap_bits
+            ));
+        }
+        if self.framing.data_header == self.framing.event_header {
+            return fail("data and event headers must differ".into());
+        }
+        Ok(())
+    }
+}
+
+/// The interface box.
+#[derive(LogicBlock)]
+pub struct InterfaceBox {
+    /// The box clock, 125 MHz.
+    pub clock: Signal<In, Clock>,
+    /// Synchronous reset, active high.
+    pub reset: Signal<In, Bit>,
+    /// The UART pins of the ports, idle high.
+    pub uart_rx: Vec<Signal<In, Bit>>,
+    /// GMII transmit data.
+    pub gmii_txd: Signal<Out, Bits<8>>,
+    /// GMII transmit enable.
+    pub gmii_tx_en: Signal<Out, Bit>,
+    /// GMII transmit error.
+    pub gmii_tx_er: Signal<Out, Bit>,
+    timestamp: TimestampCounter,
+    uarts: Vec<UartRx>,
+    deframers: Vec<CellDeframer>,
+    buffers: Vec<PortBuffer>,
+    arbiter: PacketArbiter,
+    counters: CounterFile,
+    status: StatusReporter,
+    framer: UdpFramer,
+    port_reset: DFF<Bit>,
+}
+
+impl InterfaceBox {
+    /// Builds the box; fails with a message when a parameter is impossible.
+    pub fn new(config: &BoxConfig) -> Result<Self, ConfigError> {
+        config.validate()?;
+        let n = config.ports;
+        Ok(Self {
+            clock: Default::default(),
+            reset: Default::default(),
+            uart_rx: (0..n).map(|_| Default::default()).collect(),
+            gmii_txd: Default::default(),
+            gmii_tx_en: Default::default(),
+            gmii_tx_er: Default::default(),
+            timestamp: Default::default(),
+            uarts: (0..n)
+                .map(|_| UartRx::new(config.clock_hz, config.baud))
+                .collect(),
+            deframers: (0..n)
+                .map(|_| CellDeframer::new(config.framing, config.idle_gap_clocks()))
+                .collect(),
+            buffers: (0..n).map(|_| PortBuffer::default()).collect(),
+            arbiter: PacketArbiter::new(n),
+            counters: CounterFile::new(n),
+            status: StatusReporter::new(n, config.status_period_ticks, config.boot_seed),
+            framer: UdpFramer::new(&FramerConfig {
+                link: config.link,
+                box_id: config.box_id,
+                port_count: n as u8,
+                flush_timeout_ticks: config.flush_timeout_ticks,
+            }),
+            port_reset: Default::default(),
+        })
+    }
+
+    /// The box with every block connected, ready to simulate or generate.
+    pub fn connected(config: &BoxConfig) -> Result<Self, ConfigError> {
+        let mut b = Self::new(config)?;
+        b.connect_all();
+        Ok(b)
+    }
+}
+
+impl Logic for InterfaceBox {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(self, clock, port_reset);
+        self.port_reset.d.next = self.reset.val() | !self.counters.ready.val();
+        self.timestamp.clock.next = self.clock.val();
+        self.timestamp.reset.next = self.reset.val();
+        for i in 0..self.uarts.len() {
+            // pin -> UART -> deframer -> buffer -> arbiter
+            self.uarts[i].clock.next = self.clock.val();
+            self.uarts[i].reset.next = self.port_reset.q.val();
+            self.uarts[i].rx.next = self.uart_rx[i].val();
+            self.uarts[i].tick.next = self.timestamp.tick.val().get_bits::<32>(0);
+            self.deframers[i].clock.next = self.clock.val();
+            self.deframers[i].reset.next = self.port_reset.q.val();
+            self.deframers[i].byte_data.next = self.uarts[i].data.val();
+            self.deframers[i].byte_strobe.next = self.uarts[i].strobe.val();
+            self.deframers[i].byte_framing_error.next = self.uarts[i].framing_error.val();
+            self.deframers[i].byte_start_tick.next = self.uarts[i].start_tick.val();
+            self.deframers[i].uart_busy.next = self.uarts[i].busy.val();
+            self.buffers[i].clock.next = self.clock.val();
+            self.buffers[i].reset.next = self.port_reset.q.val();
+            self.buffers[i].sink.data.next = self.deframers[i].packets.data.val();
+            self.buffers[i].sink.valid.next = self.deframers[i].packets.valid.val();
+            self.buffers[i].sink.last.next = self.deframers[i].packets.last.val();
+            self.buffers[i].sink.error.next = self.deframers[i].packets.error.val();
+            self.deframers[i].packets.ready.next = self.buffers[i].sink.ready.val();
+            self.arbiter.ports[i].data.next = self.buffers[i].source.data.val();
+            self.arbiter.ports[i].valid.next = self.buffers[i].source.valid.val();
+            self.arbiter.ports[i].last.next = self.buffers[i].source.last.val();
+            self.arbiter.ports[i].error.next = self.buffers[i].source.error.val();
+            self.buffers[i].source.ready.next = self.arbiter.ports[i].ready.val();
+            // counter events, bit i = skinbox_protocol::PortCounter i
+            self.counters.events[i].next =
+                self.deframers[i].events.val() | self.buffers[i].events.val();
+        }
+        self.arbiter.clock.next = self.clock.val();
+        self.arbiter.reset.next = self.reset.val();
+        self.counters.clock.next = self.clock.val();
+        self.counters.reset.next = self.reset.val();
+        self.counters.read_address.next = self.status.counter_address.val();
+
+        self.framer.clock.next = self.clock.val();
+        self.framer.reset.next = self.reset.val();
+        self.framer.tick.next = self.timestamp.tick.val();
+        self.framer.records.data.next = self.arbiter.records.data.val();
+        self.framer.records.valid.next = self.arbiter.records.valid.val();
+        self.framer.records.last.next = self.arbiter.records.last.val();
+        self.framer.records.error.next = self.arbiter.records.error.val();
+        self.arbiter.records.ready.next = self.framer.records.ready.val();
+
+        self.status.clock.next = self.clock.val();
+        self.status.reset.next = self.reset.val();
+        self.status.tick.next = self.timestamp.tick.val();
+        self.status.datagrams_sent.next = self.framer.datagrams_sent.val();
+        self.status.records_sent.next = self.framer.records_sent.val();
+        self.status.counters_ready.next = self.counters.ready.val();
+        self.status.counter_data.next = self.counters.read_data.val();
+        self.status.taken.next = self.framer.status_taken.val();
+        self.status.sending.next = self.framer.status_sending.val();
+        self.status.read_address.next = self.framer.status_address.val();
+        self.framer.status_request.next = self.status.request.val();
+        self.framer.status_entry_count.next = self.status.entry_count.val();
+        self.framer.status_body_len.next = self.status.body_len.val();
+        self.framer.status_body_sum.next = self.status.body_sum.val();
+        self.framer.status_tick.next = self.status.report_tick.val();
+        self.framer.status_data.next = self.status.read_data.val();
+
+        self.gmii_txd.next = self.framer.gmii_txd.val();
+        self.gmii_tx_en.next = self.framer.gmii_tx_en.val();
+        self.gmii_tx_er.next = self.framer.gmii_tx_er.val();
+    }
+}
+
+/// The box's Verilog, top module `top`.
+pub fn verilog(config: &BoxConfig) -> Result<String, ConfigError> {
+    let b = InterfaceBox::connected(config)?;
+    Ok(generate_verilog(&b))
+}
