@@ -280,3 +280,159 @@ pub fn verilog(config: &BoxConfig) -> Result<String, ConfigError> {
     let b = InterfaceBox::connected(config)?;
     Ok(generate_verilog(&b))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::{bit_period, check_frame, Bench, GmiiCapture, UartLine};
+    use skinbox_protocol::datagram::DatagramBody;
+    use skinbox_protocol::status::PortCounter;
+    use skinbox_protocol::{Channel, DataRepr, DatagramRepr, EventRepr};
+
+    #[test]
+    fn impossible_parameters_are_refused_with_a_reason() {
+        let bad = [
+            (
+                BoxConfig {
+                    ports: 0,
+                    ..Default::default()
+                },
+                "ports = 0",
+            ),
+            (
+                BoxConfig {
+                    ports: 65,
+                    ..Default::default()
+                },
+                "1 to 64 ports",
+            ),
+            (
+                BoxConfig {
+                    baud: 40_000_000,
+                    ..Default::default()
+                },
+                "at least 4 x the baud",
+            ),
+            (
+                BoxConfig {
+                    flush_timeout_ticks: 0,
+                    ..Default::default()
+                },
+                "flush timeout",
+            ),
+            (
+                BoxConfig {
+                    status_period_ticks: 1 << 33,
+                    ..Default::default()
+                },
+                "status period",
+            ),
+            (
+                BoxConfig {
+                    idle_gap_bits: 1,
+                    ..Default::default()
+                },
+                "idle gap",
+            ),
+        ];
+        for (config, reason) in bad {
+            let err = InterfaceBox::new(&config).err().expect("refused");
+            assert!(err.to_string().contains(reason), "{err}");
+        }
+        assert!(InterfaceBox::new(&BoxConfig::default()).is_ok());
+    }
+
+    #[test]
+    fn packets_on_two_pins_become_stamped_records_and_counted_status() {
+        let config = BoxConfig {
+            ports: 2,
+            flush_timeout_ticks: 2_000,
+            status_period_ticks: 20_000,
+            ..BoxConfig::default()
+        };
+        let data = DataRepr::from_raw(17, [3, -2, 260, 1, 0, 9, 450, 61, 0])
+            .unwrap()
+            .to_bytes();
+        let event = EventRepr::new(18, 5, false, &[(Channel::Force2, 33)])
+            .unwrap()
+            .to_bytes();
+        // port 0 at +1 % baud error, port 1 at -2 %; start edges at fractional times
+        let mut lines = [UartLine::default(), UartLine::default()];
+        let starts = [1000.3, 1400.8];
+        lines[0].bytes(&data, starts[0], bit_period(1e4));
+        lines[1].bytes(&event, starts[1], bit_period(-2e4));
+        let clocks = 23_000;
+        let levels: Vec<Vec<bool>> = lines.iter().map(|l| l.levels(clocks)).collect();
+
+        let mut bench = Bench::new(InterfaceBox::connected(&config).unwrap(), |b| &mut b.clock);
+        let mut capture = GmiiCapture::default();
+        for e in 1..clocks {
+            let u = &mut bench.uut;
+            u.reset.next = e <= 3;
+            for (p, l) in levels.iter().enumerate() {
+                u.uart_rx[p].next = l[e as usize];
+            }
+            bench.cycle();
+            let u = &bench.uut;
+            capture.clock(
+                e,
+                u.gmii_tx_en.val(),
+                u.gmii_txd.val().to_u8(),
+                u.gmii_tx_er.val(),
+            );
+        }
+        let datagrams: Vec<DatagramRepr> = capture
+            .frames
+            .iter()
+            .map(|f| DatagramRepr::parse(&check_frame(f).unwrap()).unwrap())
+            .collect();
+        let kinds: Vec<&str> = datagrams
+            .iter()
+            .map(|d| match d.body {
+                DatagramBody::Records(_) => "records",
+                DatagramBody::Status(_) => "status",
+            })
+            .collect();
+        assert_eq!(kinds, ["status", "records", "status"]);
+        assert_eq!(
+            datagrams.iter().map(|d| d.sequence).collect::<Vec<_>>(),
+            [0, 1, 2]
+        );
+
+        let DatagramBody::Records(records) = &datagrams[1].body else {
+            unreachable!()
+        };
+        assert_eq!(records.len(), 2);
+        // the tick counter reads e - 3 after edge e (reset held for edges 1..=3); a record's
+        // tick is that of the first edge that sampled its start bit low
+        for (r, (port, cell, start)) in records
+            .iter()
+            .zip([(0u8, data, starts[0]), (1, event, starts[1])])
+        {
+            assert_eq!((r.port, r.flags, r.cell_packet), (port, 0, cell));
+            assert_eq!(
+                r.tick(datagrams[1].base_tick),
+                start.ceil() as u64 - 3,
+                "port {port}"
+            );
+        }
+
+        let DatagramBody::Status(boot) = &datagrams[0].body else {
+            unreachable!()
+        };
+        assert_eq!(boot.boot_id, config.boot_seed + 1);
+        assert!(
+            boot.ports.iter().all(|p| p.0 == [0; 8]),
+            "nothing counted yet"
+        );
+        let DatagramBody::Status(later) = &datagrams[2].body else {
+            unreachable!()
+        };
+        assert_eq!((later.datagrams_sent, later.records_sent), (1, 2));
+        for p in &later.ports {
+            assert_eq!(p.get(PortCounter::PacketsGood), 1);
+            let others: u32 = PortCounter::ALL[1..].iter().map(|c| p.get(*c)).sum();
+            assert_eq!(others, 0, "no loss, garbage or error: {p:?}");
+        }
+    }
+}
