@@ -70,3 +70,43 @@ fn unknown_subcommand_fails_with_a_message() {
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("frobnicate"), "{err}");
 }
+
+#[test]
+fn verilog_command_writes_a_linted_box() {
+    let dir = std::env::temp_dir().join(format!("skinbox-cli-verilog-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("box.v");
+    let out = skinbox(&[
+        "verilog",
+        "--ports",
+        "3",
+        "-o",
+        file.to_str().unwrap(),
+        "--lint",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["ports"], 3);
+    assert_eq!(report["lint_clean"], true);
+    let text = std::fs::read_to_string(&file).unwrap();
+    assert!(text.contains("module top("));
+    // one UART pin per port
+    for p in 0..3 {
+        assert!(text.contains(&format!("uart_rx${p}")), "pin {p}");
+    }
+    assert!(!text.contains("uart_rx$3"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn verilog_command_refuses_impossible_port_counts() {
+    let out = skinbox(&["verilog", "--ports", "65"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(err.contains("ports = 65"), "{err}");
+}

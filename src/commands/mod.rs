@@ -1,6 +1,7 @@
 //! Subcommands of `skinbox`: argument parsing here, the work in the library crates.
 
 mod examples;
+mod verilog;
 
 use clap::{Parser, Subcommand};
 
@@ -20,12 +21,15 @@ pub struct Cli {
 pub enum Command {
     /// Show example cell packets and box datagrams, as bytes and decoded.
     Examples,
+    /// Write the interface box's Verilog (top module `top`).
+    Verilog(verilog::Args),
 }
 
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Examples => examples::run(cli.json),
+        Command::Verilog(args) => verilog::run(&args, cli.json),
     }
 }
 
