@@ -435,4 +435,104 @@ mod tests {
             assert_eq!(others, 0, "no loss, garbage or error: {p:?}");
         }
     }
+
+    #[test]
+    fn injected_faults_reach_the_status_counters() {
+        let config = BoxConfig {
+            ports: 2,
+            flush_timeout_ticks: 2_000,
+            status_period_ticks: 45_000,
+            ..BoxConfig::default()
+        };
+        let p = bit_period(0.0);
+        let good = |id: u16| {
+            DataRepr {
+                cell_id: id,
+                ..Default::default()
+            }
+            .to_bytes()
+        };
+        let mut faulty = UartLine::default();
+        // 3 garbage bytes, then a good packet
+        let mut t = faulty.bytes(&[0x00, 0x13, 0x37], 1000.0, p);
+        t = faulty.bytes(&good(1), t + 3.0 * p, p);
+        // a truncated packet: 8 bytes, then the line idles
+        t = faulty.bytes(&good(2)[..8], t + 3.0 * p, p);
+        t += 40.0 * p;
+        // a packet with a framing error in byte 5; the bytes after it are garbage
+        let broken = good(3);
+        t = faulty.bytes(&broken[..5], t, p);
+        t = faulty.frame(broken[5], t, p, false);
+        t = faulty.bytes(&broken[6..], t, p);
+        // a packet with a wrong end byte, then a good one
+        let mut wrong_end = good(4);
+        wrong_end[19] = 0x54;
+        t = faulty.bytes(&wrong_end, t + 3.0 * p, p);
+        faulty.bytes(&good(5), t + 3.0 * p, p);
+        let mut clean = UartLine::default();
+        clean.bytes(&good(9), 2000.0, p);
+
+        let clocks = 47_000;
+        let levels = [faulty.levels(clocks), clean.levels(clocks)];
+        let mut bench = Bench::new(InterfaceBox::connected(&config).unwrap(), |b| &mut b.clock);
+        let mut capture = GmiiCapture::default();
+        for e in 1..clocks {
+            let u = &mut bench.uut;
+            u.reset.next = e <= 3;
+            for (port, l) in levels.iter().enumerate() {
+                u.uart_rx[port].next = l[e as usize];
+            }
+            bench.cycle();
+            let u = &bench.uut;
+            capture.clock(
+                e,
+                u.gmii_tx_en.val(),
+                u.gmii_txd.val().to_u8(),
+                u.gmii_tx_er.val(),
+            );
+        }
+        let datagrams: Vec<DatagramRepr> = capture
+            .frames
+            .iter()
+            .map(|f| DatagramRepr::parse(&check_frame(f).unwrap()).unwrap())
+            .collect();
+        let delivered: Vec<(u8, u8, [u8; 20])> = datagrams
+            .iter()
+            .filter_map(|d| match &d.body {
+                DatagramBody::Records(r) => Some(r.clone()),
+                DatagramBody::Status(_) => None,
+            })
+            .flatten()
+            .map(|r| (r.port, r.flags, r.cell_packet))
+            .collect();
+        // only whole good packets come out, in order of completion; the first of port 0
+        // after its losses is flagged
+        assert_eq!(
+            delivered,
+            [(1, 0, good(9)), (0, 0, good(1)), (0, 1, good(5))]
+        );
+        let status = datagrams
+            .iter()
+            .rev()
+            .find_map(|d| match &d.body {
+                DatagramBody::Status(s) => Some(s.clone()),
+                DatagramBody::Records(_) => None,
+            })
+            .unwrap();
+        let count = |port: usize, c: PortCounter| status.ports[port].get(c);
+        assert_eq!(count(0, PortCounter::PacketsGood), 2);
+        assert_eq!(count(0, PortCounter::RejectedTruncated), 1);
+        assert_eq!(count(0, PortCounter::RejectedFraming), 1);
+        assert_eq!(count(0, PortCounter::RejectedEndByte), 1);
+        assert_eq!(count(0, PortCounter::FramingErrors), 1);
+        assert_eq!(count(0, PortCounter::DroppedOverflow), 0);
+        // 3 leading garbage bytes + 13 of the 14 bytes after the framing error: the low
+        // stop bit runs into the next byte's start bit and its zero data bits, so that
+        // byte has no falling edge and is never framed
+        assert_eq!(count(0, PortCounter::GarbageBytes), 3 + 13);
+        // truncated, framing, end byte: three rejections
+        assert_eq!(count(0, PortCounter::Resyncs), 3);
+        assert_eq!(status.ports[1].0, [1, 0, 0, 0, 0, 0, 0, 0]);
+        assert_eq!(status.records_sent, 3);
+    }
 }
