@@ -1,0 +1,107 @@
+//! A safe handle to one simulated box.
+
+use crate::binding::Instance;
+use crate::model::{CosimError, Model};
+use std::path::Path;
+use std::sync::Arc;
+
+/// One byte the box sent on GMII.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GmiiByte {
+    /// Clock cycle (rising edges since the Dut was made) at which `gmii_txd` held it.
+    pub cycle: u64,
+    /// The byte.
+    pub data: u8,
+}
+
+/// One simulated interface box: UART pins and reset in, GMII bytes out.
+pub struct Dut {
+    model: Arc<Model>,
+    instance: Instance,
+    cycle: u64,
+    tx_errors: u64,
+    offsets: Vec<u32>,
+    bytes: Vec<u8>,
+}
+
+const BUFFER: usize = 1 << 16;
+
+impl Dut {
+    /// A new box in reset, all pins idle (high). With `vcd`, the model must have tracing.
+    pub fn new(model: &Arc<Model>, vcd: Option<&Path>) -> Result<Dut, CosimError> {
+        if vcd.is_some() && !model.has_trace() {
+            return Err(CosimError::Load {
+                path: vcd.unwrap_or(Path::new("")).to_path_buf(),
+                message: "VCD requested from a model built without tracing".into(),
+            });
+        }
+        let instance = Instance::new(&model.library, vcd)?;
+        Ok(Dut {
+            model: model.clone(),
+            instance,
+            cycle: 0,
+            tx_errors: 0,
+            offsets: vec![0; BUFFER],
+            bytes: vec![0; BUFFER],
+        })
+    }
+
+    /// Number of UART ports.
+    pub fn ports(&self) -> usize {
+        self.model.config().ports
+    }
+
+    /// Rising clock edges so far.
+    pub fn cycle(&self) -> u64 {
+        self.cycle
+    }
+
+    /// Clocks with `gmii_tx_er` high so far (the box never sets it).
+    pub fn tx_errors(&self) -> u64 {
+        self.tx_errors
+    }
+
+    /// Drives UART pin `port` (panics when out of range: a harness bug).
+    pub fn set_rx(&mut self, port: usize, level: bool) {
+        assert!(
+            port < self.ports(),
+            "port {port} of a {}-port box",
+            self.ports()
+        );
+        self.instance
+            .set_rx(&self.model.library, port as u32, level);
+    }
+
+    /// Drives the synchronous reset.
+    pub fn set_reset(&mut self, on: bool) {
+        self.instance.set_reset(&self.model.library, on);
+    }
+
+    /// Runs `cycles` clock cycles with the inputs held, passing every GMII byte to `sink`.
+    pub fn run(&mut self, cycles: u64, mut sink: impl FnMut(GmiiByte)) {
+        let mut left = cycles;
+        while left > 0 {
+            let (ran, stored, errors) = self.instance.run(
+                &self.model.library,
+                left,
+                &mut self.offsets,
+                &mut self.bytes,
+            );
+            for (offset, data) in self.offsets[..stored].iter().zip(&self.bytes[..stored]) {
+                sink(GmiiByte {
+                    cycle: self.cycle + u64::from(*offset) + 1,
+                    data: *data,
+                });
+            }
+            self.tx_errors += errors;
+            self.cycle += ran;
+            left -= ran;
+        }
+    }
+}
+
+impl Drop for Dut {
+    fn drop(&mut self) {
+        self.instance.free(&self.model.library);
+    }
+}

@@ -1,0 +1,20 @@
+//! Verilator co-simulation of the skinbox interface box.
+//!
+//! [`model::Model::build`] turns a [`BoxConfig`] into a verilated, compiled and loaded
+//! model: the gateware crate writes the Verilog, Verilator 5 (`--cc -O3`) translates it, the
+//! C++ compiler builds it with a small generated `extern "C"` shim into a shared library in
+//! a cache directory, and the library is loaded. Verilator's runtime is compiled once per
+//! Verilator version and shared by every model. A design that was built before is loaded
+//! from the cache in milliseconds.
+//!
+//! [`dut::Dut`] is the safe handle to one instance: set UART pins and reset, run clock
+//! cycles, receive the GMII bytes.
+//!
+//! [`BoxConfig`]: skinbox_gateware::interface_box::BoxConfig
+
+mod binding;
+pub mod dut;
+pub mod model;
+
+pub use dut::{Dut, GmiiByte};
+pub use model::{CosimError, Model};
