@@ -14,7 +14,11 @@
 
 mod binding;
 pub mod dut;
+pub mod frames;
+pub mod harness;
+pub mod line;
 pub mod model;
+pub mod pcap;
 
 pub use dut::{Dut, GmiiByte};
 pub use model::{CosimError, Model};

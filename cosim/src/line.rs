@@ -1,0 +1,117 @@
+//! UART lines as pin transitions at exact times.
+//!
+//! A cell's UART sends 8N1 frames with its own bit period (its clock error) from exact
+//! start times. The box samples the pin at its rising clock edges: edge `k` is at
+//! `k x 8 ns` after the simulation starts, and a transition at time `t` is first seen by
+//! edge `ceil(t / 8 ns)`. The box stamps a packet with the tick of that edge.
+
+use skinbox_protocol::TICK_NS;
+
+/// One byte on a line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UartByte {
+    /// Time of the start bit's falling edge, ns from the start of the simulation.
+    pub start_ns: f64,
+    /// Length of one bit on this line, ns (250 ns at 4 Mbit/s, less for a fast clock).
+    pub bit_ns: f64,
+    /// The byte.
+    pub value: u8,
+    /// Level of the stop bit (low makes a framing error).
+    pub stop_level: bool,
+}
+
+impl UartByte {
+    /// Time after the stop bit.
+    pub fn end_ns(&self) -> f64 {
+        self.start_ns + 10.0 * self.bit_ns
+    }
+}
+
+/// A pin level change, as the clock edge that first samples it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Transition {
+    /// The first rising edge that samples the new level.
+    pub edge: u64,
+    /// The new level.
+    pub level: bool,
+}
+
+/// The edge that first samples a change at `t_ns`.
+pub fn first_edge(t_ns: f64) -> u64 {
+    (t_ns / TICK_NS as f64).ceil().max(0.0) as u64
+}
+
+/// The transitions of a line sending `bytes` (in time order, not overlapping), idle high
+/// before, between and after them. Transitions that no edge can see (shorter than a
+/// clock) are kept; the later one wins at the edge.
+pub fn transitions(bytes: &[UartByte]) -> Vec<Transition> {
+    let mut out: Vec<Transition> = Vec::with_capacity(bytes.len() * 6);
+    let mut level = true;
+    let mut push = |t_ns: f64, new: bool, level: &mut bool| {
+        if new != *level {
+            out.push(Transition {
+                edge: first_edge(t_ns),
+                level: new,
+            });
+            *level = new;
+        }
+    };
+    for b in bytes {
+        push(b.start_ns, false, &mut level);
+        for bit in 0..8 {
+            push(
+                b.start_ns + (1 + bit) as f64 * b.bit_ns,
+                b.value >> bit & 1 == 1,
+                &mut level,
+            );
+        }
+        push(b.start_ns + 9.0 * b.bit_ns, b.stop_level, &mut level);
+        push(b.end_ns(), true, &mut level);
+    }
+    out
+}
+
+/// Back-to-back 8N1 bytes of one UART with bit length `bit_ns` from `start_ns`.
+pub fn back_to_back(data: &[u8], start_ns: f64, bit_ns: f64) -> Vec<UartByte> {
+    data.iter()
+        .enumerate()
+        .map(|(i, value)| UartByte {
+            start_ns: start_ns + i as f64 * 10.0 * bit_ns,
+            bit_ns,
+            value: *value,
+            stop_level: true,
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_byte_is_start_data_lsb_first_and_stop() {
+        // 0x35 = 0011_0101: LSB first 1,0,1,0,1,1,0,0
+        let t = transitions(&back_to_back(&[0x35], 100.0, 250.0));
+        let levels: Vec<(u64, bool)> = t.iter().map(|t| (t.edge, t.level)).collect();
+        let at = |bits: f64| first_edge(100.0 + bits * 250.0);
+        assert_eq!(
+            levels,
+            vec![
+                (at(0.0), false),
+                (at(1.0), true),
+                (at(2.0), false),
+                (at(3.0), true),
+                (at(4.0), false),
+                (at(5.0), true),
+                (at(7.0), false),
+                (at(9.0), true),
+            ]
+        );
+        assert_eq!(
+            first_edge(100.0),
+            13,
+            "100 ns is sampled by the edge at 104 ns"
+        );
+        assert_eq!(first_edge(104.0), 13);
+    }
+}
