@@ -51,10 +51,13 @@ pub fn realistic_payloads(min_packets: usize, seed: u64) -> (Vec<Vec<u8>>, synth
     };
     loop {
         let capture = synth::generate(&config);
-        if capture.cell_packets() >= min_packets {
+        let have = capture.cell_packets().max(1);
+        if have >= min_packets {
             return (capture.payloads(), capture);
         }
-        config.samples_per_cell *= 2;
+        // Packets grow with samples: scale once, with a margin for the random walk.
+        let scale = min_packets as f64 / have as f64 * 1.05;
+        config.samples_per_cell = (f64::from(config.samples_per_cell) * scale).ceil() as u32;
     }
 }
 

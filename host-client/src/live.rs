@@ -23,13 +23,38 @@ pub const DEFAULT_RECV_BUFFER_BYTES: usize = 64 << 20;
 /// `net.core.rmem_max` unless the process may override that). Call inside a tokio runtime.
 pub fn bind_udp(addr: SocketAddr, recv_buffer_bytes: usize) -> io::Result<(UdpSocket, usize)> {
     let socket = Socket::new(Domain::for_address(addr), Type::DGRAM, Some(Protocol::UDP))?;
-    // Ask for the size; fall back silently to what the kernel gives.
-    let _ = socket.set_recv_buffer_size(recv_buffer_bytes);
+    // SO_RCVBUFFORCE passes net.core.rmem_max when the process may (CAP_NET_ADMIN);
+    // otherwise SO_RCVBUF gets what the kernel allows.
+    if !force_recv_buffer(&socket, recv_buffer_bytes) {
+        let _ = socket.set_recv_buffer_size(recv_buffer_bytes);
+    }
     let granted = socket.recv_buffer_size().unwrap_or(0);
     socket.set_nonblocking(true)?;
     socket.bind(&addr.into())?;
     let socket = UdpSocket::from_std(socket.into())?;
     Ok((socket, granted))
+}
+
+#[cfg(target_os = "linux")]
+fn force_recv_buffer(socket: &Socket, bytes: usize) -> bool {
+    use std::os::fd::AsRawFd;
+    let value = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
+    // SAFETY: setsockopt reads one c_int through a valid pointer of the given length.
+    let rc = unsafe {
+        libc::setsockopt(
+            socket.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_RCVBUFFORCE,
+            (&value as *const libc::c_int).cast(),
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
+    rc == 0
+}
+
+#[cfg(not(target_os = "linux"))]
+fn force_recv_buffer(_socket: &Socket, _bytes: usize) -> bool {
+    false
 }
 
 /// When a capture stops by itself, and how often it reports progress.

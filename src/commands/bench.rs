@@ -27,7 +27,7 @@ pub struct DecodeBenchArgs {
 #[derive(Debug, Args)]
 pub struct LiveBenchArgs {
     /// Record rates to try, in records per second, rising.
-    #[arg(long, value_delimiter = ',', default_values_t = [250e3, 500e3, 1e6, 2e6, 3e6, 4.5e6, 6e6])]
+    #[arg(long, value_delimiter = ',', default_values_t = [500e3, 1e6, 2e6, 3e6, 4.5e6, 6e6, 7e6, 8e6])]
     pub rates: Vec<f64>,
     /// Seconds per rate step.
     #[arg(long, default_value_t = 1.0)]

@@ -64,7 +64,12 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         udp_port: args.port,
     };
     let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
-    let rows = writer.finish()?;
+    let rows = match writer.finish() {
+        Ok(rows) => rows,
+        // The reader went away (`| head`): not an error of ours.
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
+        Err(e) => return Err(e.into()),
+    };
     eprintln!(
         "{rows} rows from {} records in {} datagrams; {} datagrams missing, {} event packets missing, {} bad input",
         report.records,

@@ -31,6 +31,10 @@ pub struct ReplayArgs {
 
 /// Replays the file and prints what was sent.
 pub fn run(args: ReplayArgs, json: bool) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.rate.is_none_or(|r| r > 0.0) && args.speed > 0.0,
+        "--rate and --speed must be positive"
+    );
     let bytes = pcap::read_file(&args.file)?;
     let (payloads, scan) = pcap::udp_payloads(&bytes, args.port)?;
     let pacing = match (args.rate, args.unpaced) {
