@@ -7,6 +7,9 @@
 //! the cell's event sequence shows a gap: a stale channel may hold an old value, and it
 //! stops being stale when it fires again (or a data packet refreshes every channel).
 //! Channels never received are *unknown* (value 0) until they fire.
+//!
+//! One sample is emitted per packet: a sample whose seven to nine events were split into two
+//! packets gives two samples at the two packets' ticks, the second one complete.
 
 use serde::Serialize;
 use skinbox_protocol::{CellRepr, Channel, ChannelMask};

@@ -216,3 +216,58 @@ impl<W: Write> RecordSink for RowWriter<W> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinbox_protocol::{DataRepr, EventRepr};
+
+    fn record(cell: CellRepr) -> DecodedRecord {
+        DecodedRecord {
+            box_id: 1,
+            datagram_sequence: 9,
+            port: 2,
+            flags: 0,
+            tick: 250_000_000,
+            cell,
+            event_packets_missing_before: 0,
+        }
+    }
+
+    #[test]
+    fn csv_rows_hold_units_and_box_time() {
+        let data = DataRepr::from_raw(17, [2, -3, 258, 1, 0, 2, 310, 61, 0]).unwrap();
+        let event = EventRepr::new(17, 41, false, &[(Channel::Force1, 512)]).unwrap();
+        let mut w = RowWriter::new(Vec::new(), RowFormat::Csv, RowKind::Packets);
+        w.record(&record(CellRepr::Data(data)));
+        w.record(&record(CellRepr::Event(event)));
+        let text = String::from_utf8(w.out.clone()).unwrap();
+        assert_eq!(w.finish().unwrap(), 2);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 3);
+        // 2 s = 250 M ticks of 8 ns; raw steps 1/256 g, 1/1024, 1/65536, 0.5 C.
+        let proximity = 310.0f64 / 65536.0;
+        assert_eq!(
+            lines[1],
+            format!(
+                "2.000000000,250000000,1,9,2,0,17,data,,0,0,0.0078125,-0.01171875,1.0078125,\
+                 0.0009765625,0,0.001953125,{proximity},30.5,0"
+            )
+        );
+        assert_eq!(
+            lines[2],
+            "2.000000000,250000000,1,9,2,0,17,event,41,0,0,,,,0.5,,,,,"
+        );
+    }
+
+    #[test]
+    fn jsonl_rows_parse() {
+        let event = EventRepr::new(5, 7, true, &[(Channel::Temperature1, 61)]).unwrap();
+        let mut w = RowWriter::new(Vec::new(), RowFormat::JsonLines, RowKind::Packets);
+        w.record(&record(CellRepr::Event(event)));
+        let v: serde_json::Value = serde_json::from_slice(&w.out).unwrap();
+        assert_eq!(v["values"]["temperature_1"], 30.5);
+        assert_eq!(v["second_part"], true);
+        assert_eq!(v["time_s"], 2.0);
+    }
+}

@@ -181,3 +181,70 @@ fn box_reset_is_counted_from_the_boot_id() {
     assert_eq!(r.losses.datagrams_missing, 0, "{:?}", r.losses);
     assert_eq!(records.len(), before.truth.len() + after.truth.len());
 }
+
+#[derive(Default)]
+struct Pairs {
+    records: Vec<DecodedRecord>,
+    samples: Vec<skinbox_host::Sample>,
+}
+
+impl skinbox_host::RecordSink for Pairs {
+    fn record(&mut self, record: &DecodedRecord) {
+        self.records.push(*record);
+    }
+    fn wants_samples(&self) -> bool {
+        true
+    }
+    fn sample(&mut self, sample: &skinbox_host::Sample) {
+        self.samples.push(*sample);
+    }
+}
+
+#[test]
+fn event_gaps_make_the_converter_mark_channels_stale() {
+    let c = capture(1, 0);
+    let kept: Vec<Vec<u8>> = c
+        .payloads()
+        .into_iter()
+        .enumerate()
+        .filter(|(i, _)| *i != 6)
+        .map(|(_, p)| p)
+        .collect();
+    let mut d = Decoder::new(DecoderConfig::default());
+    let mut pairs = Pairs::default();
+    for p in &kept {
+        d.push_datagram(p, &mut pairs);
+    }
+    assert_eq!(pairs.records.len(), pairs.samples.len());
+    let mut gapped = std::collections::HashSet::new();
+    let mut stale_after_gap = 0;
+    for (r, s) in pairs.records.iter().zip(&pairs.samples) {
+        assert_eq!((r.cell.cell_id(), r.tick), (s.cell_id, s.tick));
+        match &r.cell {
+            CellRepr::Data(data) => {
+                assert_eq!(s.raw, data.raw_values());
+                assert!(!s.is_stale());
+            }
+            CellRepr::Event(e) => {
+                for (ch, raw) in e.events() {
+                    assert_eq!(s.raw[ch.index()], raw);
+                    assert!(!s.stale.contains(ch));
+                }
+                if r.event_packets_missing_before > 0 {
+                    gapped.insert(e.cell_id);
+                    let want: skinbox_protocol::ChannelMask = s
+                        .known
+                        .iter()
+                        .filter(|ch| !e.channels.contains(*ch))
+                        .collect();
+                    assert_eq!(s.stale, want);
+                    stale_after_gap += 1;
+                } else if !gapped.contains(&e.cell_id) {
+                    assert!(!s.is_stale(), "cell {} never had a gap", e.cell_id);
+                }
+            }
+        }
+    }
+    assert_eq!(stale_after_gap, d.report().losses.event_sequence_gaps);
+    assert!(stale_after_gap > 0);
+}
