@@ -236,8 +236,10 @@ impl Decoder {
                         body: skinbox_protocol::datagram::DatagramBody::Status(status),
                         ..
                     }) => {
+                        if !self.take_status(sequence, &status) {
+                            return DatagramOutcome::Duplicate;
+                        }
                         self.status_datagrams += 1;
-                        self.take_status(sequence, &status);
                         DatagramOutcome::Status
                     }
                     Ok(_) => DatagramOutcome::Rejected,
@@ -258,8 +260,8 @@ impl Decoder {
         }
     }
 
-    fn take_status(&mut self, sequence: u32, status: &StatusRepr) {
-        self.status_reports += 1;
+    /// Takes a status report; false when it is a duplicate.
+    fn take_status(&mut self, sequence: u32, status: &StatusRepr) -> bool {
         if self.box_state.boot_id != Some(status.boot_id) {
             if self.box_state.boot_id.is_some() {
                 self.box_resets += 1;
@@ -282,8 +284,9 @@ impl Decoder {
                 ..BoxState::default()
             };
         } else if self.sequence.push(sequence) == SequenceEvent::Duplicate {
-            return;
+            return false;
         }
+        self.status_reports += 1;
         if let Some(before) = self.box_state.datagrams_sent {
             self.datagrams_sent_delta += wrapping_delta(status.datagrams_sent, before);
         }
@@ -306,6 +309,7 @@ impl Decoder {
             self.box_state.ports.insert(port, now);
             self.last_counters.insert(port, now);
         }
+        true
     }
 
     fn take_records<S: RecordSink + ?Sized>(&mut self, d: &Datagram<&[u8]>, sink: &mut S) -> usize {

@@ -21,6 +21,8 @@
 //! kinds, non-UDP frames, truncated pcap files) is counted by reason in
 //! [`report::BadInput`], never a panic.
 
+#![warn(missing_docs)]
+
 pub mod bad_input;
 pub mod bench;
 pub mod convert;

@@ -248,3 +248,31 @@ fn event_gaps_make_the_converter_mark_channels_stale() {
     assert_eq!(stale_after_gap, d.report().losses.event_sequence_gaps);
     assert!(stale_after_gap > 0);
 }
+
+#[test]
+fn duplicate_status_datagrams_are_skipped() {
+    let c = synth::generate(&SynthConfig {
+        cells: 10,
+        samples_per_cell: 30,
+        status_every: 2,
+        ..SynthConfig::default()
+    });
+    let mut payloads = c.payloads();
+    let status_at = c
+        .datagrams
+        .iter()
+        .position(|d| matches!(d.body, DatagramBody::Status(_)))
+        .unwrap();
+    let copy = payloads[status_at].clone();
+    payloads.insert(status_at + 1, copy);
+    let statuses = c
+        .datagrams
+        .iter()
+        .filter(|d| matches!(d.body, DatagramBody::Status(_)))
+        .count() as u64;
+    let (r, _) = decode(&payloads);
+    assert_eq!(r.status_datagrams, statuses);
+    assert_eq!(r.box_status.status_reports, statuses);
+    assert_eq!(r.losses.datagrams_duplicate, 1);
+    assert_eq!(r.losses.datagrams_missing, 0);
+}
