@@ -233,10 +233,11 @@ impl Decoder {
                 match DatagramRepr::parse(payload) {
                     Ok(DatagramRepr {
                         sequence,
+                        base_tick,
                         body: skinbox_protocol::datagram::DatagramBody::Status(status),
                         ..
                     }) => {
-                        if !self.take_status(sequence, &status) {
+                        if !self.take_status(sequence, base_tick, &status) {
                             return DatagramOutcome::Duplicate;
                         }
                         self.status_datagrams += 1;
@@ -250,7 +251,10 @@ impl Decoder {
                 }
             }
             DatagramKind::Records => {
-                if self.sequence.push(d.sequence()) == SequenceEvent::Duplicate {
+                // The base tick tells a copy from a new datagram of a restarted box.
+                if self.sequence.push_tagged(d.sequence(), Some(d.base_tick()))
+                    == SequenceEvent::Duplicate
+                {
                     return DatagramOutcome::Duplicate;
                 }
                 self.records_datagrams += 1;
@@ -261,7 +265,7 @@ impl Decoder {
     }
 
     /// Takes a status report; false when it is a duplicate.
-    fn take_status(&mut self, sequence: u32, status: &StatusRepr) -> bool {
+    fn take_status(&mut self, sequence: u32, base_tick: u64, status: &StatusRepr) -> bool {
         if self.box_state.boot_id != Some(status.boot_id) {
             if self.box_state.boot_id.is_some() {
                 self.box_resets += 1;
@@ -271,19 +275,19 @@ impl Decoder {
                     (1..crate::sequence::WINDOW).contains(&sequence.wrapping_sub(h))
                 });
                 if continues {
-                    self.sequence.push(sequence);
+                    self.sequence.push_tagged(sequence, Some(base_tick));
                 } else {
-                    self.sequence.begin_at(sequence);
+                    self.sequence.begin_at(sequence, base_tick);
                 }
             } else {
-                self.sequence.push(sequence);
+                self.sequence.push_tagged(sequence, Some(base_tick));
             }
             self.boot_ids.push(status.boot_id);
             self.box_state = BoxState {
                 boot_id: Some(status.boot_id),
                 ..BoxState::default()
             };
-        } else if self.sequence.push(sequence) == SequenceEvent::Duplicate {
+        } else if self.sequence.push_tagged(sequence, Some(base_tick)) == SequenceEvent::Duplicate {
             return false;
         }
         self.status_reports += 1;

@@ -5,6 +5,10 @@
 //! so a late datagram fills its gap (counted as reordered, no longer missing) and a second
 //! copy is a duplicate. A number further back than the window is taken as a restart of the
 //! numbering (a box reset whose status report has not arrived yet).
+//!
+//! Each number can carry a tag (the decoder uses the datagram's base tick): a number seen
+//! before with a different tag is not a copy but a new datagram of a numbering that started
+//! again, so it is taken as a restart, never dropped as a duplicate.
 
 use serde::Serialize;
 
@@ -56,6 +60,7 @@ pub struct SequenceTracker {
     /// Numbers since the (re)start, to tell a late datagram from one before the capture.
     span: u64,
     seen: Box<[u64; WORDS]>,
+    tags: Vec<u64>,
     counts: SequenceCounts,
 }
 
@@ -72,6 +77,7 @@ impl SequenceTracker {
             highest: None,
             span: 0,
             seen: Box::new([0; WORDS]),
+            tags: vec![0; WINDOW as usize],
             counts: SequenceCounts::default(),
         }
     }
@@ -90,35 +96,55 @@ impl SequenceTracker {
         }
     }
 
-    fn start(&mut self, seq: u32) {
+    fn start(&mut self, seq: u32, tag: u64) {
         self.seen.fill(0);
         self.highest = Some(seq);
         self.span = 0;
         self.set(seq, true);
+        self.tags[(seq % WINDOW) as usize] = tag;
         self.counts.received += 1;
+    }
+
+    /// A number seen before: a copy when the tags agree, else the numbering restarted.
+    fn seen_again(&mut self, seq: u32, tag: Option<u64>) -> SequenceEvent {
+        match tag {
+            Some(t) if self.tags[(seq % WINDOW) as usize] != t => {
+                self.counts.restarts += 1;
+                self.start(seq, t);
+                SequenceEvent::Restart
+            }
+            _ => {
+                self.counts.duplicate += 1;
+                SequenceEvent::Duplicate
+            }
+        }
     }
 
     /// Starts the numbering again at `seq` (a box reset), forgetting the window.
     pub fn restart_at(&mut self, seq: u32) {
         self.counts.restarts += 1;
-        self.start(seq);
+        self.start(seq, 0);
     }
 
     /// Starts the numbering at `seq` without counting a restart (the caller knows why).
-    pub fn begin_at(&mut self, seq: u32) {
-        self.start(seq);
+    pub fn begin_at(&mut self, seq: u32, tag: u64) {
+        self.start(seq, tag);
     }
 
     /// Takes one sequence number.
     pub fn push(&mut self, seq: u32) -> SequenceEvent {
+        self.push_tagged(seq, None)
+    }
+
+    /// Takes one sequence number with a tag that tells a copy from a new datagram.
+    pub fn push_tagged(&mut self, seq: u32, tag: Option<u64>) -> SequenceEvent {
         let Some(highest) = self.highest else {
-            self.start(seq);
+            self.start(seq, tag.unwrap_or(0));
             return SequenceEvent::First;
         };
         let ahead = seq.wrapping_sub(highest);
         if ahead == 0 {
-            self.counts.duplicate += 1;
-            return SequenceEvent::Duplicate;
+            return self.seen_again(seq, tag);
         }
         if ahead < 1 << 31 {
             if ahead >= WINDOW {
@@ -129,6 +155,7 @@ impl SequenceTracker {
                 }
             }
             self.set(seq, true);
+            self.tags[(seq % WINDOW) as usize] = tag.unwrap_or(0);
             self.highest = Some(seq);
             self.span += u64::from(ahead);
             self.counts.received += 1;
@@ -145,10 +172,10 @@ impl SequenceTracker {
             return SequenceEvent::Restart;
         }
         if self.bit(seq) {
-            self.counts.duplicate += 1;
-            return SequenceEvent::Duplicate;
+            return self.seen_again(seq, tag);
         }
         self.set(seq, true);
+        self.tags[(seq % WINDOW) as usize] = tag.unwrap_or(0);
         self.counts.received += 1;
         self.counts.reordered += 1;
         if u64::from(behind) <= self.span {
@@ -197,6 +224,22 @@ mod tests {
     fn late_from_before_the_capture_is_not_unmissed() {
         let c = run(&[10, 11, 9]);
         assert_eq!((c.missing, c.reordered, c.received), (0, 1, 3));
+    }
+
+    #[test]
+    fn same_number_other_tag_restarts() {
+        let mut t = SequenceTracker::new();
+        for s in 0..10 {
+            t.push_tagged(s, Some(1000 + u64::from(s)));
+        }
+        assert_eq!(t.push_tagged(4, Some(1004)), SequenceEvent::Duplicate);
+        assert_eq!(t.push_tagged(0, Some(7)), SequenceEvent::Restart);
+        assert_eq!(t.push_tagged(1, Some(8)), SequenceEvent::InOrder);
+        let c = t.counts();
+        assert_eq!(
+            (c.duplicate, c.restarts, c.missing, c.received),
+            (1, 1, 0, 12)
+        );
     }
 
     #[test]

@@ -276,3 +276,30 @@ fn duplicate_status_datagrams_are_skipped() {
     assert_eq!(r.losses.datagrams_duplicate, 1);
     assert_eq!(r.losses.datagrams_missing, 0);
 }
+
+#[test]
+fn box_reset_before_its_status_arrives_loses_nothing() {
+    let mut config = SynthConfig {
+        cells: 20,
+        samples_per_cell: 30,
+        status_every: 4,
+        boot_id: 0xaaaa_0001,
+        ..SynthConfig::default()
+    };
+    let before = synth::generate(&config);
+    config.boot_id = 0xbbbb_0002;
+    config.seed = 2;
+    config.start_tick = 1_000; // the box's clock starts again too
+    let after = synth::generate(&config);
+    // In sending order: the new boot's first records datagrams reuse numbers 0.. that the
+    // old boot used, before the new boot's first status report says so.
+    let mut payloads = before.payloads();
+    payloads.extend(after.payloads());
+    let (r, records) = decode(&payloads);
+    assert_eq!(records.len(), before.truth.len() + after.truth.len());
+    let l = &r.losses;
+    assert_eq!(l.box_resets, 1);
+    assert_eq!(l.sequence_restarts, 1);
+    assert_eq!(l.datagrams_duplicate, 0);
+    assert_eq!(l.datagrams_missing, 0);
+}
