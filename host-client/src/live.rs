@@ -112,7 +112,7 @@ where
     let cpu_start = crate::thread_cpu_ns();
     let mut stats = CaptureStats::default();
     let mut buf = vec![0u8; 65_536];
-    let mut ticker = tokio::time::interval(limits.progress_every);
+    let mut ticker = tokio::time::interval(limits.progress_every.max(Duration::from_millis(1)));
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     ticker.tick().await;
     tokio::pin!(shutdown);

@@ -36,6 +36,10 @@ pub struct CaptureArgs {
 /// Runs the capture on a single-threaded tokio runtime until the duration, the count or
 /// Ctrl-C; prints a summary line every second on stderr and the report at the end.
 pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.duration.is_none_or(|s| s.is_finite() && s > 0.0),
+        "--duration must be a positive number of seconds"
+    );
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
