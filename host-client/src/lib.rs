@@ -19,7 +19,7 @@
 //!
 //! Bad input (truncated or garbled frames and datagrams, wrong magic or version, unknown
 //! kinds, non-UDP frames, truncated pcap files) is counted by reason in
-//! [`report::BadInput`], never a panic.
+//! [`BadInput`], never a panic.
 
 #![warn(missing_docs)]
 
