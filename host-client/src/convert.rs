@@ -73,15 +73,21 @@ impl Default for EventToData {
 impl EventToData {
     /// A converter that knows no cell.
     pub fn new() -> Self {
-        EventToData {
-            cells: vec![CellState::default(); CELL_IDS],
+        EventToData { cells: Vec::new() }
+    }
+
+    /// The state of a cell, growing the table to the highest id seen (ids are 14 bits).
+    fn cell(&mut self, cell_id: u16) -> &mut CellState {
+        let index = usize::from(cell_id) % CELL_IDS;
+        if index >= self.cells.len() {
+            self.cells.resize(index + 1, CellState::default());
         }
+        &mut self.cells[index]
     }
 
     /// Marks every known channel of `cell_id` stale (an event packet of it was lost).
     pub fn mark_gap(&mut self, cell_id: u16) {
-        let s = &mut self.cells[usize::from(cell_id) % CELL_IDS];
-        s.stale = ChannelMask::CHANNEL_BITS;
+        self.cell(cell_id).stale = ChannelMask::CHANNEL_BITS;
     }
 
     /// Takes one cell packet at `tick`; `gap_before` says the cell's event sequence showed a
@@ -91,7 +97,7 @@ impl EventToData {
         if gap_before {
             self.mark_gap(cell_id);
         }
-        let s = &mut self.cells[usize::from(cell_id) % CELL_IDS];
+        let s = self.cell(cell_id);
         let updated = match cell {
             CellRepr::Data(d) => {
                 s.raw = d.raw_values();

@@ -170,7 +170,7 @@ impl Decoder {
         Decoder {
             config,
             sequence: SequenceTracker::new(),
-            cells: vec![CellCounters::default(); CELL_IDS],
+            cells: Vec::new(),
             converter: None,
             bad: BadInput::default(),
             records_datagrams: 0,
@@ -348,7 +348,12 @@ impl Decoder {
             self.last_tick = tick;
             self.min_tick = self.min_tick.min(tick);
             self.max_tick = self.max_tick.max(tick);
-            let c = &mut self.cells[usize::from(cell.cell_id()) % CELL_IDS];
+            // The table grows to the highest cell id seen (ids are 14 bits).
+            let index = usize::from(cell.cell_id()) % CELL_IDS;
+            if index >= self.cells.len() {
+                self.cells.resize(index + 1, CellCounters::default());
+            }
+            let c = &mut self.cells[index];
             c.port = port;
             let mut missing_before = 0u16;
             match &cell {

@@ -12,8 +12,9 @@
 
 use serde::Serialize;
 
-/// How many sequence numbers behind the highest one are remembered.
-pub const WINDOW: u32 = 1 << 16;
+/// How many sequence numbers behind the highest one are remembered: 0.2 s of a full
+/// link (82,000 datagrams/s); a LAN does not reorder further than that.
+pub const WINDOW: u32 = 1 << 14;
 const WORDS: usize = (WINDOW / 64) as usize;
 
 /// What one sequence number was.
