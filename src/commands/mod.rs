@@ -1,6 +1,11 @@
 //! Subcommands of `skinbox`: argument parsing here, the work in the library crates.
 
+mod bench;
+mod capture;
+mod decode;
 mod examples;
+mod replay;
+mod stats;
 mod verilog;
 
 use clap::{Parser, Subcommand};
@@ -23,6 +28,17 @@ pub enum Command {
     Examples,
     /// Write the interface box's Verilog (top module `top`).
     Verilog(verilog::Args),
+    /// Receive the box's datagrams live on a UDP socket; optionally record a pcap.
+    Capture(capture::CaptureArgs),
+    /// Send the UDP payloads of a pcap to a socket, at a rate or as recorded.
+    Replay(replay::ReplayArgs),
+    /// Decode a pcap to cell packets or full samples (CSV or JSON lines).
+    Decode(decode::DecodeArgs),
+    /// Report rates, losses, box counters and host cost of a pcap.
+    Stats(stats::StatsArgs),
+    /// Benchmarks: `skinbox bench <what>`.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
 }
 
 /// Runs one parsed command line.
@@ -30,6 +46,11 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Examples => examples::run(cli.json),
         Command::Verilog(args) => verilog::run(&args, cli.json),
+        Command::Capture(args) => capture::run(args, cli.json),
+        Command::Replay(args) => replay::run(args, cli.json),
+        Command::Decode(args) => decode::run(args, cli.json),
+        Command::Stats(args) => stats::run(args, cli.json),
+        Command::Bench(what) => bench::run(what, cli.json),
     }
 }
 

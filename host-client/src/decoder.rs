@@ -1,0 +1,562 @@
+//! The I/O-free decoder: box datagrams in, decoded records (and full samples) out, with
+//! every loss and every piece of bad input counted.
+//!
+//! Losses it sees, in the order a packet could be lost on its way:
+//! - the box's own counters from status datagrams (port buffer overflow, rejected packets),
+//!   as deltas between successive reports, and the record flag `FLAG_LOSS_BEFORE`;
+//! - datagram sequence gaps, duplicates and reordering ([`crate::sequence`]);
+//! - per-cell event packet sequence gaps (a lost event packet, wherever it was lost);
+//! - box resets: the boot id of the status datagrams changes.
+
+use crate::convert::{EventToData, Sample, CELL_IDS};
+use crate::report::{self, BoxStatusReport, CellReport, LossReport, Report};
+use crate::sequence::{SequenceEvent, SequenceTracker};
+use crate::BadInput;
+use skinbox_protocol::datagram::{Datagram, DatagramKind};
+use skinbox_protocol::record::FLAG_LOSS_BEFORE;
+use skinbox_protocol::status::{PortCounter, StatusRepr};
+use skinbox_protocol::{CellFraming, CellRepr, Channel, DatagramRepr, Modality};
+use std::collections::BTreeMap;
+
+/// How many distinct box ids a report lists.
+pub const MAX_BOX_IDS: usize = 16;
+
+/// Settings of a decoder.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DecoderConfig {
+    /// Header and end-of-packet bytes of the cells (a parameter of the box).
+    pub framing: CellFraming,
+    /// The cells' sample rate, for "packet rate in % of data mode". The papers' event
+    /// rate tables (2nd paper, Fig. 8) sample at 125 Hz.
+    pub sample_rate_hz: f64,
+}
+
+impl Default for DecoderConfig {
+    fn default() -> Self {
+        DecoderConfig {
+            framing: CellFraming::DEFAULT,
+            sample_rate_hz: 125.0,
+        }
+    }
+}
+
+/// One decoded record: a cell packet with its box time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct DecodedRecord {
+    /// Box that sent it.
+    pub box_id: u16,
+    /// Sequence number of the datagram that carried it.
+    pub datagram_sequence: u32,
+    /// UART port of the box.
+    pub port: u8,
+    /// Record flags (`FLAG_LOSS_BEFORE`).
+    pub flags: u8,
+    /// 64-bit box tick (8 ns) of the packet's first start bit.
+    pub tick: u64,
+    /// The cell packet.
+    pub cell: CellRepr,
+    /// Event packets of this cell missing just before this one (0 for data packets).
+    pub event_packets_missing_before: u16,
+}
+
+impl DecodedRecord {
+    /// Box time in seconds.
+    pub fn time_s(&self) -> f64 {
+        crate::ticks_to_seconds(self.tick)
+    }
+}
+
+/// Where decoded records and samples go.
+pub trait RecordSink {
+    /// One decoded record, in datagram order.
+    fn record(&mut self, record: &DecodedRecord);
+    /// Whether [`RecordSink::sample`] should be called (the converter costs time).
+    fn wants_samples(&self) -> bool {
+        false
+    }
+    /// The full sample of the record's cell after it.
+    fn sample(&mut self, _sample: &Sample) {}
+}
+
+/// A sink that drops everything (for reports only).
+impl RecordSink for () {
+    fn record(&mut self, _record: &DecodedRecord) {}
+}
+
+/// A sink that keeps every record.
+impl RecordSink for Vec<DecodedRecord> {
+    fn record(&mut self, record: &DecodedRecord) {
+        self.push(*record);
+    }
+}
+
+/// What became of one datagram.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DatagramOutcome {
+    /// A records datagram; its records were decoded (bad ones counted).
+    Records {
+        /// Records in it.
+        records: usize,
+    },
+    /// A status datagram.
+    Status,
+    /// A duplicate of a datagram already decoded: skipped.
+    Duplicate,
+    /// Rejected as bad input.
+    Rejected,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct CellCounters {
+    port: u8,
+    data_packets: u64,
+    event_packets: u64,
+    channel_events: [u64; Channel::COUNT],
+    last_event_sequence: Option<u16>,
+    event_sequence_gaps: u64,
+    event_packets_missing: u64,
+    event_packets_repeated: u64,
+}
+
+#[derive(Debug, Clone, Default)]
+struct BoxState {
+    boot_id: Option<u32>,
+    /// Last counters per port since the current boot.
+    ports: BTreeMap<u8, [u32; PortCounter::ALL.len()]>,
+    datagrams_sent: Option<u32>,
+    records_sent: Option<u32>,
+}
+
+/// The decoder. Feed it UDP payloads with [`Decoder::push_datagram`].
+#[derive(Debug, Clone)]
+pub struct Decoder {
+    config: DecoderConfig,
+    sequence: SequenceTracker,
+    cells: Vec<CellCounters>,
+    converter: Option<EventToData>,
+    bad: BadInput,
+    records_datagrams: u64,
+    status_datagrams: u64,
+    records: u64,
+    data_packets: u64,
+    event_packets: u64,
+    events_per_packet: [u64; 7],
+    first_tick: Option<u64>,
+    last_tick: u64,
+    min_tick: u64,
+    max_tick: u64,
+    records_flagged_loss_before: BTreeMap<u8, u64>,
+    box_state: BoxState,
+    box_ids: Vec<u16>,
+    boot_ids: Vec<u32>,
+    box_resets: u64,
+    status_reports: u64,
+    counter_deltas: BTreeMap<u8, [u64; PortCounter::ALL.len()]>,
+    last_counters: BTreeMap<u8, [u32; PortCounter::ALL.len()]>,
+    datagrams_sent_delta: u64,
+    records_sent_delta: u64,
+}
+
+impl Default for Decoder {
+    fn default() -> Self {
+        Self::new(DecoderConfig::default())
+    }
+}
+
+fn wrapping_delta(now: u32, before: u32) -> u64 {
+    u64::from(now.wrapping_sub(before))
+}
+
+impl Decoder {
+    /// A decoder that has seen nothing.
+    pub fn new(config: DecoderConfig) -> Self {
+        Decoder {
+            config,
+            sequence: SequenceTracker::new(),
+            cells: Vec::new(),
+            converter: None,
+            bad: BadInput::default(),
+            records_datagrams: 0,
+            status_datagrams: 0,
+            records: 0,
+            data_packets: 0,
+            event_packets: 0,
+            events_per_packet: [0; 7],
+            first_tick: None,
+            last_tick: 0,
+            min_tick: u64::MAX,
+            max_tick: 0,
+            records_flagged_loss_before: BTreeMap::new(),
+            box_state: BoxState::default(),
+            box_ids: Vec::new(),
+            boot_ids: Vec::new(),
+            box_resets: 0,
+            status_reports: 0,
+            counter_deltas: BTreeMap::new(),
+            last_counters: BTreeMap::new(),
+            datagrams_sent_delta: 0,
+            records_sent_delta: 0,
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &DecoderConfig {
+        &self.config
+    }
+
+    /// Bad input counted so far; shells add their own (frames, pcap) here.
+    pub fn bad_input_mut(&mut self) -> &mut BadInput {
+        &mut self.bad
+    }
+
+    /// Records decoded so far.
+    pub fn records(&self) -> u64 {
+        self.records
+    }
+
+    /// Takes one UDP payload that should be a box datagram.
+    pub fn push_datagram<S: RecordSink + ?Sized>(
+        &mut self,
+        payload: &[u8],
+        sink: &mut S,
+    ) -> DatagramOutcome {
+        let d = match Datagram::new_checked(payload) {
+            Ok(d) => d,
+            Err(e) => {
+                self.bad.count_error("datagram", &e);
+                return DatagramOutcome::Rejected;
+            }
+        };
+        // One decoder follows one box; other box ids are listed (a few) so a mixed
+        // capture shows in the report instead of as spurious sequence losses only.
+        if self.box_ids.len() < MAX_BOX_IDS && !self.box_ids.contains(&d.box_id()) {
+            self.box_ids.push(d.box_id());
+        }
+        match d.kind() {
+            DatagramKind::Status => {
+                // A status datagram is small and rare: parse it whole.
+                match DatagramRepr::parse(payload) {
+                    Ok(DatagramRepr {
+                        sequence,
+                        base_tick,
+                        body: skinbox_protocol::datagram::DatagramBody::Status(status),
+                        ..
+                    }) => {
+                        if !self.take_status(sequence, base_tick, &status) {
+                            return DatagramOutcome::Duplicate;
+                        }
+                        self.status_datagrams += 1;
+                        DatagramOutcome::Status
+                    }
+                    Ok(_) => DatagramOutcome::Rejected,
+                    Err(e) => {
+                        self.bad.count_error("status", &e);
+                        DatagramOutcome::Rejected
+                    }
+                }
+            }
+            DatagramKind::Records => {
+                // The base tick tells a copy from a new datagram of a restarted box.
+                if self.sequence.push_tagged(d.sequence(), Some(d.base_tick()))
+                    == SequenceEvent::Duplicate
+                {
+                    return DatagramOutcome::Duplicate;
+                }
+                self.records_datagrams += 1;
+                let n = self.take_records(&d, sink);
+                DatagramOutcome::Records { records: n }
+            }
+        }
+    }
+
+    /// Takes a status report; false when it is a duplicate.
+    fn take_status(&mut self, sequence: u32, base_tick: u64, status: &StatusRepr) -> bool {
+        if self.box_state.boot_id != Some(status.boot_id) {
+            if self.box_state.boot_id.is_some() {
+                self.box_resets += 1;
+                // The box numbers datagrams from its reset on: go on from this status
+                // datagram, unless the numbering already restarted just before it.
+                let continues = self.sequence.highest().is_some_and(|h| {
+                    (1..crate::sequence::WINDOW).contains(&sequence.wrapping_sub(h))
+                });
+                if continues {
+                    self.sequence.push_tagged(sequence, Some(base_tick));
+                } else {
+                    self.sequence.begin_at(sequence, base_tick);
+                }
+            } else {
+                self.sequence.push_tagged(sequence, Some(base_tick));
+            }
+            self.boot_ids.push(status.boot_id);
+            self.box_state = BoxState {
+                boot_id: Some(status.boot_id),
+                ..BoxState::default()
+            };
+        } else if self.sequence.push_tagged(sequence, Some(base_tick)) == SequenceEvent::Duplicate {
+            return false;
+        }
+        self.status_reports += 1;
+        if let Some(before) = self.box_state.datagrams_sent {
+            self.datagrams_sent_delta += wrapping_delta(status.datagrams_sent, before);
+        }
+        if let Some(before) = self.box_state.records_sent {
+            self.records_sent_delta += wrapping_delta(status.records_sent, before);
+        }
+        self.box_state.datagrams_sent = Some(status.datagrams_sent);
+        self.box_state.records_sent = Some(status.records_sent);
+        for (i, counters) in status.ports.iter().enumerate() {
+            let port = status.first_port.wrapping_add(i as u8);
+            let now = counters.0;
+            if let Some(before) = self.box_state.ports.get(&port) {
+                let deltas = self.counter_deltas.entry(port).or_default();
+                for c in PortCounter::ALL {
+                    deltas[c.index()] += wrapping_delta(now[c.index()], before[c.index()]);
+                }
+            } else {
+                self.counter_deltas.entry(port).or_default();
+            }
+            self.box_state.ports.insert(port, now);
+            self.last_counters.insert(port, now);
+        }
+        true
+    }
+
+    fn take_records<S: RecordSink + ?Sized>(&mut self, d: &Datagram<&[u8]>, sink: &mut S) -> usize {
+        let base = d.base_tick();
+        let box_id = d.box_id();
+        let datagram_sequence = d.sequence();
+        let framing = self.config.framing;
+        let wants_samples = sink.wants_samples();
+        if wants_samples && self.converter.is_none() {
+            self.converter = Some(EventToData::new());
+        }
+        let mut n = 0;
+        for r in d.records() {
+            n += 1;
+            let cell = match CellRepr::parse(r.cell_packet(), &framing) {
+                Ok(cell) => cell,
+                Err(e) => {
+                    self.bad.count_error("record", &e);
+                    continue;
+                }
+            };
+            let tick = base.wrapping_add_signed(i64::from(r.tick_offset()));
+            let port = r.port();
+            let flags = r.flags();
+            if flags & FLAG_LOSS_BEFORE != 0 {
+                *self.records_flagged_loss_before.entry(port).or_insert(0) += 1;
+            }
+            self.records += 1;
+            if self.first_tick.is_none() {
+                self.first_tick = Some(tick);
+            }
+            self.last_tick = tick;
+            self.min_tick = self.min_tick.min(tick);
+            self.max_tick = self.max_tick.max(tick);
+            // The table grows to the highest cell id seen (ids are 14 bits).
+            let index = usize::from(cell.cell_id()) % CELL_IDS;
+            if index >= self.cells.len() {
+                self.cells.resize(index + 1, CellCounters::default());
+            }
+            let c = &mut self.cells[index];
+            c.port = port;
+            let mut missing_before = 0u16;
+            match &cell {
+                CellRepr::Data(_) => {
+                    c.data_packets += 1;
+                    self.data_packets += 1;
+                }
+                CellRepr::Event(e) => {
+                    c.event_packets += 1;
+                    self.event_packets += 1;
+                    let mut bits = e.channels.bits();
+                    self.events_per_packet[bits.count_ones() as usize] += 1;
+                    while bits != 0 {
+                        let i = bits.trailing_zeros() as usize;
+                        c.channel_events[i] += 1;
+                        bits &= bits - 1;
+                    }
+                    if let Some(last) = c.last_event_sequence {
+                        let ahead = e.sequence.wrapping_sub(last);
+                        if ahead == 0 || ahead >= 1 << 15 {
+                            // A repeat or an older packet: a duplicated or reordered datagram.
+                            c.event_packets_repeated += 1;
+                        } else if ahead > 1 {
+                            missing_before = ahead - 1;
+                            c.event_sequence_gaps += 1;
+                            c.event_packets_missing += u64::from(missing_before);
+                        }
+                    }
+                    if c.last_event_sequence
+                        .is_none_or(|last| e.sequence.wrapping_sub(last) < 1 << 15)
+                    {
+                        c.last_event_sequence = Some(e.sequence);
+                    }
+                }
+            }
+            let record = DecodedRecord {
+                box_id,
+                datagram_sequence,
+                port,
+                flags,
+                tick,
+                cell,
+                event_packets_missing_before: missing_before,
+            };
+            sink.record(&record);
+            if wants_samples {
+                if let Some(conv) = self.converter.as_mut() {
+                    let sample = conv.push(tick, &cell, missing_before > 0);
+                    sink.sample(&sample);
+                }
+            }
+        }
+        n
+    }
+
+    /// Duration the records span, plus one sample period: N samples per cell at the
+    /// sample rate make exactly N / rate seconds, so data mode reads 100 %.
+    pub fn duration_s(&self) -> f64 {
+        if self.records == 0 {
+            return 0.0;
+        }
+        crate::ticks_to_seconds(self.max_tick - self.min_tick) + 1.0 / self.config.sample_rate_hz
+    }
+
+    /// Everything so far, as the papers report it.
+    pub fn report(&self) -> Report {
+        let duration_s = self.duration_s();
+        let per_s = |n: u64| {
+            if duration_s > 0.0 {
+                n as f64 / duration_s
+            } else {
+                0.0
+            }
+        };
+        let expected_per_cell = self.config.sample_rate_hz * duration_s;
+        let mut cells = Vec::new();
+        let mut modality_events: BTreeMap<Modality, u64> =
+            Modality::ALL.iter().map(|m| (*m, 0)).collect();
+        let mut losses = LossReport::default();
+        for (id, c) in self.cells.iter().enumerate() {
+            let packets = c.data_packets + c.event_packets;
+            if packets == 0 {
+                continue;
+            }
+            let mut by_modality: BTreeMap<Modality, u64> =
+                Modality::ALL.iter().map(|m| (*m, 0)).collect();
+            for ch in Channel::ALL {
+                *by_modality.entry(ch.modality()).or_insert(0) += c.channel_events[ch.index()];
+            }
+            for (m, n) in &by_modality {
+                *modality_events.entry(*m).or_insert(0) += n;
+            }
+            losses.event_sequence_gaps += c.event_sequence_gaps;
+            losses.event_packets_missing += c.event_packets_missing;
+            losses.event_packets_repeated += c.event_packets_repeated;
+            cells.push(CellReport {
+                cell_id: id as u16,
+                port: c.port,
+                data_packets: c.data_packets,
+                event_packets: c.event_packets,
+                packet_rate_percent_of_data_mode: report::percent(
+                    packets as f64,
+                    expected_per_cell,
+                ),
+                events_per_second: by_modality.iter().map(|(m, n)| (*m, per_s(*n))).collect(),
+                event_sequence_gaps: c.event_sequence_gaps,
+                event_packets_missing: c.event_packets_missing,
+            });
+        }
+        let cells_active = cells.len() as u64;
+        let per_cell_s = |n: u64| {
+            if cells_active == 0 || duration_s <= 0.0 {
+                0.0
+            } else {
+                n as f64 / cells_active as f64 / duration_s
+            }
+        };
+        let seq = self.sequence.counts();
+        losses.datagrams_missing = seq.missing;
+        losses.datagrams_duplicate = seq.duplicate;
+        losses.datagrams_reordered = seq.reordered;
+        losses.datagram_sequence_gaps = seq.gaps;
+        losses.sequence_restarts = seq.restarts;
+        losses.box_resets = self.box_resets;
+        losses.records_flagged_loss_before = self.records_flagged_loss_before.clone();
+        let mut box_packets_lost = 0;
+        let counter_deltas: BTreeMap<u8, BTreeMap<&'static str, u64>> = self
+            .counter_deltas
+            .iter()
+            .map(|(port, d)| {
+                for c in PortCounter::ALL {
+                    if c.is_packet_loss() {
+                        box_packets_lost += d[c.index()];
+                    }
+                }
+                (
+                    *port,
+                    PortCounter::ALL
+                        .iter()
+                        .map(|c| (c.name(), d[c.index()]))
+                        .collect(),
+                )
+            })
+            .collect();
+        losses.box_packets_lost = box_packets_lost;
+        Report {
+            sample_rate_hz: self.config.sample_rate_hz,
+            box_ids: self.box_ids.clone(),
+            records_datagrams: self.records_datagrams,
+            status_datagrams: self.status_datagrams,
+            records: self.records,
+            data_packets: self.data_packets,
+            event_packets: self.event_packets,
+            first_tick: self.first_tick.unwrap_or(0),
+            last_tick: self.last_tick,
+            first_time_s: crate::ticks_to_seconds(self.first_tick.unwrap_or(0)),
+            last_time_s: crate::ticks_to_seconds(self.last_tick),
+            duration_s,
+            cells_active,
+            packets_per_second: per_s(self.records),
+            packet_rate_percent_of_data_mode: report::percent(
+                self.records as f64,
+                expected_per_cell * cells_active as f64,
+            ),
+            event_packet_rate_percent_of_data_mode: report::percent(
+                self.event_packets as f64,
+                expected_per_cell * cells_active as f64,
+            ),
+            events_per_cell_per_second: modality_events
+                .iter()
+                .map(|(m, n)| (*m, per_cell_s(*n)))
+                .collect(),
+            events_per_packet_histogram: self.events_per_packet[1..].to_vec(),
+            losses,
+            box_status: BoxStatusReport {
+                status_reports: self.status_reports,
+                boot_ids: self.boot_ids.clone(),
+                datagrams_sent_delta: self.datagrams_sent_delta,
+                records_sent_delta: self.records_sent_delta,
+                counter_deltas,
+                last_counters: self
+                    .last_counters
+                    .iter()
+                    .map(|(port, v)| {
+                        (
+                            *port,
+                            PortCounter::ALL
+                                .iter()
+                                .map(|c| (c.name(), v[c.index()]))
+                                .collect(),
+                        )
+                    })
+                    .collect(),
+            },
+            bad_input: self.bad.clone(),
+            frames: Default::default(),
+            host: None,
+            cells,
+        }
+    }
+}

@@ -1,0 +1,273 @@
+//! Decoded records and samples as CSV or JSON lines, in physical units with box time.
+
+use crate::convert::Sample;
+use crate::decoder::{DecodedRecord, RecordSink};
+use skinbox_protocol::{CellRepr, Channel};
+use std::io::{self, Write};
+
+/// Text format of the rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RowFormat {
+    /// Comma-separated values with a header line.
+    Csv,
+    /// One JSON object per line.
+    JsonLines,
+}
+
+/// What one row is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RowKind {
+    /// One row per cell packet as received (data and event packets).
+    Packets,
+    /// One row per cell packet: the cell's full sample after it (event-to-data converter).
+    Samples,
+}
+
+/// A [`RecordSink`] writing rows. The first write error stops writing and is kept.
+pub struct RowWriter<W: Write> {
+    out: W,
+    format: RowFormat,
+    kind: RowKind,
+    header_written: bool,
+    rows: u64,
+    error: Option<io::Error>,
+}
+
+impl<W: Write> RowWriter<W> {
+    /// A writer of `kind` rows in `format`.
+    pub fn new(out: W, format: RowFormat, kind: RowKind) -> Self {
+        RowWriter {
+            out,
+            format,
+            kind,
+            header_written: false,
+            rows: 0,
+            error: None,
+        }
+    }
+
+    /// Rows written.
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// Flushes; returns the first error.
+    pub fn finish(mut self) -> io::Result<u64> {
+        if let Some(e) = self.error.take() {
+            return Err(e);
+        }
+        if !self.header_written && self.format == RowFormat::Csv {
+            self.header()?;
+        }
+        self.out.flush()?;
+        Ok(self.rows)
+    }
+
+    fn header(&mut self) -> io::Result<()> {
+        self.header_written = true;
+        let channels: Vec<&str> = Channel::ALL.iter().map(|c| c.name()).collect();
+        match self.kind {
+            RowKind::Packets => writeln!(
+                self.out,
+                "time_s,tick,box_id,datagram_sequence,port,flags,cell_id,kind,event_sequence,second_part,event_packets_missing_before,{}",
+                channels.join(",")
+            ),
+            RowKind::Samples => writeln!(
+                self.out,
+                "time_s,tick,cell_id,updated_mask,stale_mask,known_mask,{}",
+                channels.join(",")
+            ),
+        }
+    }
+
+    fn write_packet(&mut self, r: &DecodedRecord) -> io::Result<()> {
+        let mut values: [Option<f64>; Channel::COUNT] = [None; Channel::COUNT];
+        let (kind, sequence, second) = match &r.cell {
+            CellRepr::Data(d) => {
+                for c in Channel::ALL {
+                    values[c.index()] = Some(c.to_units(d.raw(c)));
+                }
+                ("data", None, false)
+            }
+            CellRepr::Event(e) => {
+                for (c, raw) in e.events() {
+                    values[c.index()] = Some(c.to_units(raw));
+                }
+                ("event", Some(e.sequence), e.second_part)
+            }
+        };
+        match self.format {
+            RowFormat::Csv => {
+                if !self.header_written {
+                    self.header()?;
+                }
+                write!(
+                    self.out,
+                    "{:.9},{},{},{},{},{},{},{},{},{},{}",
+                    r.time_s(),
+                    r.tick,
+                    r.box_id,
+                    r.datagram_sequence,
+                    r.port,
+                    r.flags,
+                    r.cell.cell_id(),
+                    kind,
+                    sequence.map(|s| s.to_string()).unwrap_or_default(),
+                    u8::from(second),
+                    r.event_packets_missing_before
+                )?;
+                for v in values {
+                    match v {
+                        Some(v) => write!(self.out, ",{v}")?,
+                        None => self.out.write_all(b",")?,
+                    }
+                }
+                self.out.write_all(b"\n")
+            }
+            RowFormat::JsonLines => {
+                let map: serde_json::Map<String, serde_json::Value> = Channel::ALL
+                    .iter()
+                    .filter_map(|c| values[c.index()].map(|v| (c.name().to_string(), v.into())))
+                    .collect();
+                let row = serde_json::json!({
+                    "time_s": r.time_s(),
+                    "tick": r.tick,
+                    "box_id": r.box_id,
+                    "datagram_sequence": r.datagram_sequence,
+                    "port": r.port,
+                    "flags": r.flags,
+                    "cell_id": r.cell.cell_id(),
+                    "kind": kind,
+                    "event_sequence": sequence,
+                    "second_part": second,
+                    "event_packets_missing_before": r.event_packets_missing_before,
+                    "values": map,
+                });
+                serde_json::to_writer(&mut self.out, &row)?;
+                self.out.write_all(b"\n")
+            }
+        }
+    }
+
+    fn write_sample(&mut self, s: &Sample) -> io::Result<()> {
+        match self.format {
+            RowFormat::Csv => {
+                if !self.header_written {
+                    self.header()?;
+                }
+                write!(
+                    self.out,
+                    "{:.9},{},{},{},{},{}",
+                    s.time_s(),
+                    s.tick,
+                    s.cell_id,
+                    s.updated.bits(),
+                    s.stale.bits(),
+                    s.known.bits()
+                )?;
+                for c in Channel::ALL {
+                    write!(self.out, ",{}", s.value(c))?;
+                }
+                self.out.write_all(b"\n")
+            }
+            RowFormat::JsonLines => {
+                let map: serde_json::Map<String, serde_json::Value> = Channel::ALL
+                    .iter()
+                    .map(|c| (c.name().to_string(), s.value(*c).into()))
+                    .collect();
+                let row = serde_json::json!({
+                    "time_s": s.time_s(),
+                    "tick": s.tick,
+                    "cell_id": s.cell_id,
+                    "updated": s.updated.iter().map(|c| c.name()).collect::<Vec<_>>(),
+                    "stale": s.stale.iter().map(|c| c.name()).collect::<Vec<_>>(),
+                    "known": s.known.iter().map(|c| c.name()).collect::<Vec<_>>(),
+                    "values": map,
+                });
+                serde_json::to_writer(&mut self.out, &row)?;
+                self.out.write_all(b"\n")
+            }
+        }
+    }
+}
+
+impl<W: Write> RecordSink for RowWriter<W> {
+    fn record(&mut self, record: &DecodedRecord) {
+        if self.kind != RowKind::Packets || self.error.is_some() {
+            return;
+        }
+        match self.write_packet(record) {
+            Ok(()) => self.rows += 1,
+            Err(e) => self.error = Some(e),
+        }
+    }
+
+    fn wants_samples(&self) -> bool {
+        self.kind == RowKind::Samples
+    }
+
+    fn sample(&mut self, sample: &Sample) {
+        if self.error.is_some() {
+            return;
+        }
+        match self.write_sample(sample) {
+            Ok(()) => self.rows += 1,
+            Err(e) => self.error = Some(e),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinbox_protocol::{DataRepr, EventRepr};
+
+    fn record(cell: CellRepr) -> DecodedRecord {
+        DecodedRecord {
+            box_id: 1,
+            datagram_sequence: 9,
+            port: 2,
+            flags: 0,
+            tick: 250_000_000,
+            cell,
+            event_packets_missing_before: 0,
+        }
+    }
+
+    #[test]
+    fn csv_rows_hold_units_and_box_time() {
+        let data = DataRepr::from_raw(17, [2, -3, 258, 1, 0, 2, 310, 61, 0]).unwrap();
+        let event = EventRepr::new(17, 41, false, &[(Channel::Force1, 512)]).unwrap();
+        let mut w = RowWriter::new(Vec::new(), RowFormat::Csv, RowKind::Packets);
+        w.record(&record(CellRepr::Data(data)));
+        w.record(&record(CellRepr::Event(event)));
+        let text = String::from_utf8(w.out.clone()).unwrap();
+        assert_eq!(w.finish().unwrap(), 2);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 3);
+        // 2 s = 250 M ticks of 8 ns; raw steps 1/256 g, 1/1024, 1/65536, 0.5 C.
+        let proximity = 310.0f64 / 65536.0;
+        assert_eq!(
+            lines[1],
+            format!(
+                "2.000000000,250000000,1,9,2,0,17,data,,0,0,0.0078125,-0.01171875,1.0078125,\
+                 0.0009765625,0,0.001953125,{proximity},30.5,0"
+            )
+        );
+        assert_eq!(
+            lines[2],
+            "2.000000000,250000000,1,9,2,0,17,event,41,0,0,,,,0.5,,,,,"
+        );
+    }
+
+    #[test]
+    fn jsonl_rows_parse() {
+        let event = EventRepr::new(5, 7, true, &[(Channel::Temperature1, 61)]).unwrap();
+        let mut w = RowWriter::new(Vec::new(), RowFormat::JsonLines, RowKind::Packets);
+        w.record(&record(CellRepr::Event(event)));
+        let v: serde_json::Value = serde_json::from_slice(&w.out).unwrap();
+        assert_eq!(v["values"]["temperature_1"], 30.5);
+        assert_eq!(v["second_part"], true);
+        assert_eq!(v["time_s"], 2.0);
+    }
+}

@@ -1,0 +1,254 @@
+//! Reading and writing pcap files (pcap-file's parser and writer, etherparse's slicer and
+//! builder), and decoding a pcap into a [`Report`] in one call.
+//!
+//! A pcap is read whole into memory and parsed with `pcap_file::pcap::PcapParser`, so a
+//! truncated last packet is told apart from a corrupt record and counted, not fatal.
+
+use crate::decoder::{DecodedRecord, Decoder, DecoderConfig, RecordSink};
+use crate::frame::{self, FrameReject, LinkType, UdpDatagram};
+use crate::report::{FrameCounts, HostCost, Report};
+use crate::BadInput;
+use pcap_file::pcap::PcapParseError;
+use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
+use pcap_file::{DataLink, Endianness};
+use std::io::Write;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::time::Duration;
+
+/// Why a pcap cannot be read at all.
+#[derive(Debug, thiserror::Error)]
+pub enum PcapError {
+    /// The file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// What failed.
+        source: std::io::Error,
+    },
+    /// The global header is not a pcap header.
+    #[error("not a pcap file: {0}")]
+    NotPcap(String),
+    /// A link type this decoder does not read.
+    #[error("unsupported pcap link type {0:?} (Ethernet, raw IPv4/IPv6 are read)")]
+    LinkType(DataLink),
+    /// Writing a packet failed.
+    #[error("writing pcap: {0}")]
+    Write(String),
+}
+
+/// What to decode from a pcap.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PcapOptions {
+    /// Decoder settings.
+    pub decoder: DecoderConfig,
+    /// Only UDP datagrams with this source or destination port (default: any port).
+    pub udp_port: Option<u16>,
+}
+
+/// Frames and bad input of one pass over a pcap.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PcapScan {
+    /// Frame counts.
+    pub frames: FrameCounts,
+    /// Frames and pcap records rejected.
+    pub bad: BadInput,
+}
+
+/// Calls `f` with the timestamp and UDP datagram of every frame of a pcap that carries one;
+/// counts every other frame by reason.
+pub fn for_each_udp_payload<'a>(
+    bytes: &'a [u8],
+    udp_port: Option<u16>,
+    mut f: impl FnMut(Duration, UdpDatagram<'a>),
+) -> Result<PcapScan, PcapError> {
+    let (mut rest, parser) =
+        PcapParser::new(bytes).map_err(|e| PcapError::NotPcap(e.to_string()))?;
+    let link = match parser.header().datalink {
+        DataLink::ETHERNET => LinkType::Ethernet,
+        DataLink::RAW | DataLink::IPV4 | DataLink::IPV6 => LinkType::RawIp,
+        other => return Err(PcapError::LinkType(other)),
+    };
+    let mut scan = PcapScan::default();
+    let (mut first_ts, mut last_ts) = (None, Duration::ZERO);
+    while !rest.is_empty() {
+        match parser.next_packet(rest) {
+            Ok((next, packet)) => {
+                rest = next;
+                scan.frames.frames += 1;
+                let ts = packet.timestamp();
+                first_ts.get_or_insert(ts);
+                last_ts = ts;
+                // `next_packet` borrows from `bytes`: the data is a borrowed Cow.
+                let data: &'a [u8] = match packet.into_data() {
+                    std::borrow::Cow::Borrowed(d) => d,
+                    std::borrow::Cow::Owned(_) => continue,
+                };
+                match frame::udp_payload(data, link, udp_port) {
+                    Ok(udp) => {
+                        scan.frames.udp_payloads += 1;
+                        f(ts, udp);
+                    }
+                    Err(FrameReject::OtherPort(_)) => scan.frames.other_port += 1,
+                    Err(reject) => reject.count_in(&mut scan.bad),
+                }
+            }
+            Err(PcapParseError::IncompleteBuffer(needed, have)) => {
+                scan.bad.count("pcap: truncated at end of file", || {
+                    format!("pcap: truncated at end of file: the last record needs {needed} bytes, {have} remain")
+                });
+                break;
+            }
+            Err(e) => {
+                let left = rest.len();
+                scan.bad.count("pcap: corrupt packet record", || {
+                    format!("pcap: corrupt packet record, {left} bytes left unread: {e}")
+                });
+                break;
+            }
+        }
+    }
+    if let Some(first) = first_ts {
+        scan.frames.capture_span_s = last_ts.saturating_sub(first).as_secs_f64();
+    }
+    Ok(scan)
+}
+
+/// Decodes a pcap held in memory: every box datagram into `sink`, and the report. The
+/// report's `host` holds this thread's CPU time per cell packet.
+pub fn decode_pcap_with<S: RecordSink + ?Sized>(
+    bytes: &[u8],
+    options: &PcapOptions,
+    sink: &mut S,
+) -> Result<Report, PcapError> {
+    let wall = std::time::Instant::now();
+    let cpu = crate::thread_cpu_ns();
+    let mut decoder = Decoder::new(options.decoder);
+    let scan = for_each_udp_payload(bytes, options.udp_port, |_, udp| {
+        decoder.push_datagram(udp.payload, sink);
+    })?;
+    let cpu_ns = crate::thread_cpu_ns().saturating_sub(cpu);
+    decoder.bad_input_mut().merge(&scan.bad);
+    let mut report = decoder.report();
+    report.frames = scan.frames;
+    report.host = Some(HostCost {
+        cpu_s: cpu_ns as f64 * 1e-9,
+        wall_s: wall.elapsed().as_secs_f64(),
+        cpu_ns_per_packet: if report.records > 0 {
+            cpu_ns as f64 / report.records as f64
+        } else {
+            0.0
+        },
+    });
+    Ok(report)
+}
+
+/// A decoded pcap: the report and every record.
+#[derive(Debug, Clone)]
+pub struct PcapDecode {
+    /// The report.
+    pub report: Report,
+    /// Every decoded record, in capture order.
+    pub records: Vec<DecodedRecord>,
+}
+
+/// Decodes a pcap held in memory, keeping every record.
+pub fn decode_pcap_bytes(bytes: &[u8], options: &PcapOptions) -> Result<PcapDecode, PcapError> {
+    let mut records = Vec::new();
+    let report = decode_pcap_with(bytes, options, &mut records)?;
+    Ok(PcapDecode { report, records })
+}
+
+/// Decodes a pcap file, keeping every record: the call for a co-simulation that wrote one.
+pub fn decode_pcap_file(
+    path: impl AsRef<Path>,
+    options: &PcapOptions,
+) -> Result<PcapDecode, PcapError> {
+    let bytes = read_file(path.as_ref())?;
+    decode_pcap_bytes(&bytes, options)
+}
+
+/// Reads a whole file, with its name in the error.
+pub fn read_file(path: &Path) -> Result<Vec<u8>, PcapError> {
+    std::fs::read(path).map_err(|source| PcapError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// One UDP payload of a pcap with its capture time.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TimedPayload {
+    /// Capture time (since the epoch, as pcap stores it).
+    pub timestamp: Duration,
+    /// The UDP payload.
+    pub payload: Vec<u8>,
+}
+
+/// The UDP payloads of a pcap (on `udp_port` if given), with the scan's counts.
+pub fn udp_payloads(
+    bytes: &[u8],
+    udp_port: Option<u16>,
+) -> Result<(Vec<TimedPayload>, PcapScan), PcapError> {
+    let mut out = Vec::new();
+    let scan = for_each_udp_payload(bytes, udp_port, |timestamp, udp| {
+        out.push(TimedPayload {
+            timestamp,
+            payload: udp.payload.to_vec(),
+        })
+    })?;
+    Ok((out, scan))
+}
+
+/// Writes Ethernet II frames to a pcap (nanosecond timestamps).
+pub struct PcapFrameWriter<W: Write> {
+    writer: PcapWriter<W>,
+}
+
+impl<W: Write> PcapFrameWriter<W> {
+    /// Writes the pcap header.
+    pub fn new(writer: W) -> Result<Self, PcapError> {
+        let header = PcapHeader {
+            datalink: DataLink::ETHERNET,
+            ts_resolution: pcap_file::pcap::PcapTsResolution::NanoSecond,
+            endianness: Endianness::native(),
+            ..PcapHeader::default()
+        };
+        let writer =
+            PcapWriter::with_header(writer, header).map_err(|e| PcapError::Write(e.to_string()))?;
+        Ok(PcapFrameWriter { writer })
+    }
+
+    /// Writes one frame.
+    pub fn write_frame(&mut self, timestamp: Duration, frame: &[u8]) -> Result<(), PcapError> {
+        let packet = PcapPacket::new(timestamp, frame.len() as u32, frame)
+            .map_err(|e| PcapError::Write(e.to_string()))?;
+        self.writer
+            .write_packet(&packet)
+            .map_err(|e| PcapError::Write(e.to_string()))?;
+        Ok(())
+    }
+
+    /// Writes a UDP payload inside an Ethernet II / IPv4 / UDP frame.
+    pub fn write_udp(
+        &mut self,
+        timestamp: Duration,
+        source: SocketAddr,
+        destination: SocketAddr,
+        payload: &[u8],
+    ) -> Result<(), PcapError> {
+        self.write_frame(
+            timestamp,
+            &frame::build_udp_frame(source, destination, payload),
+        )
+    }
+
+    /// Flushes and returns the writer.
+    pub fn finish(mut self) -> Result<W, PcapError> {
+        self.writer
+            .flush()
+            .map_err(|e| PcapError::Write(e.to_string()))?;
+        Ok(self.writer.into_inner())
+    }
+}

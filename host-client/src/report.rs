@@ -1,0 +1,232 @@
+//! The report: what the papers report per scene, every loss, the box's counters, bad input
+//! and the host's own cost. Serialises to JSON as is.
+
+use crate::BadInput;
+use serde::Serialize;
+use skinbox_protocol::Modality;
+use std::collections::BTreeMap;
+
+/// `part / whole` in percent, 0 when `whole` is 0.
+pub fn percent(part: f64, whole: f64) -> f64 {
+    if whole > 0.0 {
+        100.0 * part / whole
+    } else {
+        0.0
+    }
+}
+
+/// One cell's share.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CellReport {
+    /// Cell id.
+    pub cell_id: u16,
+    /// Port of its last record.
+    pub port: u8,
+    /// Data packets received.
+    pub data_packets: u64,
+    /// Event packets received.
+    pub event_packets: u64,
+    /// All its packets against one per sample period.
+    pub packet_rate_percent_of_data_mode: f64,
+    /// Channel events per second by modality (events of a modality's channels summed).
+    pub events_per_second: BTreeMap<Modality, f64>,
+    /// Gaps in its event packet sequence.
+    pub event_sequence_gaps: u64,
+    /// Event packets missing in those gaps.
+    pub event_packets_missing: u64,
+}
+
+/// Every loss the host can see.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct LossReport {
+    /// Datagram sequence numbers never received.
+    pub datagrams_missing: u64,
+    /// Datagram sequence gaps when they opened (some may have filled later).
+    pub datagram_sequence_gaps: u64,
+    /// Copies of datagrams already received (skipped).
+    pub datagrams_duplicate: u64,
+    /// Datagrams that arrived after a later one.
+    pub datagrams_reordered: u64,
+    /// Times the datagram numbering started again without a status report saying so.
+    pub sequence_restarts: u64,
+    /// Box resets: the boot id of the status datagrams changed.
+    pub box_resets: u64,
+    /// Gaps in the cells' event packet sequences.
+    pub event_sequence_gaps: u64,
+    /// Event packets missing in those gaps.
+    pub event_packets_missing: u64,
+    /// Event packets whose sequence number was not ahead of the cell's last one.
+    pub event_packets_repeated: u64,
+    /// Records flagged "packets of this port dropped before", by port.
+    pub records_flagged_loss_before: BTreeMap<u8, u64>,
+    /// Packets the box itself lost (overflow and rejects), from its counter deltas.
+    pub box_packets_lost: u64,
+}
+
+/// What the box's status datagrams said.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct BoxStatusReport {
+    /// Status datagrams taken (duplicates skipped).
+    pub status_reports: u64,
+    /// Boot ids seen, in order.
+    pub boot_ids: Vec<u32>,
+    /// Records datagrams the box sent between its first and last report (per boot, summed).
+    pub datagrams_sent_delta: u64,
+    /// Records the box sent between its first and last report (per boot, summed).
+    pub records_sent_delta: u64,
+    /// Per port, each counter's growth (by `PortCounter::name`) between successive reports of one boot, summed.
+    pub counter_deltas: BTreeMap<u8, BTreeMap<&'static str, u64>>,
+    /// Per port, the counters of the last report.
+    pub last_counters: BTreeMap<u8, BTreeMap<&'static str, u32>>,
+}
+
+/// Frames of a pcap or a live socket, before the box datagram decoder.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct FrameCounts {
+    /// Frames (pcap packets or received datagrams).
+    pub frames: u64,
+    /// Frames whose UDP payload went to the datagram decoder.
+    pub udp_payloads: u64,
+    /// UDP frames skipped by the port filter.
+    pub other_port: u64,
+    /// Time span of the frames by the capture's clock, in seconds.
+    pub capture_span_s: f64,
+}
+
+/// The host's own cost of decoding.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct HostCost {
+    /// CPU time of the decoding thread, in seconds.
+    pub cpu_s: f64,
+    /// Wall time, in seconds.
+    pub wall_s: f64,
+    /// CPU time per cell packet, in nanoseconds (the original driver: about 10,000).
+    pub cpu_ns_per_packet: f64,
+}
+
+/// The whole report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// Sample rate the rates are relative to.
+    pub sample_rate_hz: f64,
+    /// Box ids seen.
+    pub box_ids: Vec<u16>,
+    /// Records datagrams decoded (duplicates skipped).
+    pub records_datagrams: u64,
+    /// Status datagrams decoded.
+    pub status_datagrams: u64,
+    /// Records with a valid cell packet.
+    pub records: u64,
+    /// Cell data packets.
+    pub data_packets: u64,
+    /// Cell event packets.
+    pub event_packets: u64,
+    /// Box tick of the first record.
+    pub first_tick: u64,
+    /// Box tick of the last record.
+    pub last_tick: u64,
+    /// Box time of the first record, in seconds.
+    pub first_time_s: f64,
+    /// Box time of the last record, in seconds.
+    pub last_time_s: f64,
+    /// Span of the record ticks plus one sample period, in seconds.
+    pub duration_s: f64,
+    /// Cells that sent at least one packet.
+    pub cells_active: u64,
+    /// Cell packets per second of box time.
+    pub packets_per_second: f64,
+    /// All packets against every active cell sending every sample.
+    pub packet_rate_percent_of_data_mode: f64,
+    /// Event packets against every active cell sending every sample (2nd paper, Fig. 8).
+    pub event_packet_rate_percent_of_data_mode: f64,
+    /// Channel events per active cell per second, by modality (2nd paper, Fig. 8).
+    pub events_per_cell_per_second: BTreeMap<Modality, f64>,
+    /// Event packets carrying 1, 2, ... 6 channels.
+    pub events_per_packet_histogram: Vec<u64>,
+    /// Every loss.
+    pub losses: LossReport,
+    /// The box's own counters.
+    pub box_status: BoxStatusReport,
+    /// Rejected input by reason.
+    pub bad_input: BadInput,
+    /// Frames before the datagram decoder.
+    pub frames: FrameCounts,
+    /// The host's cost, when the shell measured it.
+    pub host: Option<HostCost>,
+    /// Per cell.
+    pub cells: Vec<CellReport>,
+}
+
+impl Report {
+    /// A few lines for a person.
+    pub fn summary(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "{} records in {} datagrams (+{} status) over {:.3} s box time: {} data, {} event packets",
+            self.records,
+            self.records_datagrams,
+            self.status_datagrams,
+            self.duration_s,
+            self.data_packets,
+            self.event_packets
+        );
+        let _ = writeln!(
+            s,
+            "{} cells active at {} Hz: packet rate {:.2} % of data mode (events {:.2} %), {:.0} packets/s",
+            self.cells_active,
+            self.sample_rate_hz,
+            self.packet_rate_percent_of_data_mode,
+            self.event_packet_rate_percent_of_data_mode,
+            self.packets_per_second
+        );
+        let rates: Vec<String> = self
+            .events_per_cell_per_second
+            .iter()
+            .map(|(m, r)| format!("{} {:.2}", m.name(), r))
+            .collect();
+        let _ = writeln!(s, "events per cell per second: {}", rates.join(", "));
+        let _ = writeln!(
+            s,
+            "events per packet (1..6): {:?}",
+            self.events_per_packet_histogram
+        );
+        let l = &self.losses;
+        let _ = writeln!(
+            s,
+            "losses: {} datagrams missing ({} gaps), {} duplicate, {} reordered, {} restarts, \
+             {} box resets; {} event packets missing in {} gaps; box lost {} packets",
+            l.datagrams_missing,
+            l.datagram_sequence_gaps,
+            l.datagrams_duplicate,
+            l.datagrams_reordered,
+            l.sequence_restarts,
+            l.box_resets,
+            l.event_packets_missing,
+            l.event_sequence_gaps,
+            l.box_packets_lost
+        );
+        let _ = writeln!(
+            s,
+            "box status: {} reports, boot ids {:x?}, {} datagrams and {} records sent between reports",
+            self.box_status.status_reports,
+            self.box_status.boot_ids,
+            self.box_status.datagrams_sent_delta,
+            self.box_status.records_sent_delta
+        );
+        let _ = writeln!(
+            s,
+            "bad input: {} ({:?})",
+            self.bad_input.total, self.bad_input.by_reason
+        );
+        if let Some(h) = &self.host {
+            let _ = writeln!(
+                s,
+                "host: {:.3} s CPU, {:.1} ns CPU per packet",
+                h.cpu_s, h.cpu_ns_per_packet
+            );
+        }
+        s
+    }
+}

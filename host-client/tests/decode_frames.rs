@@ -1,0 +1,262 @@
+//! Decoding frames built independently: etherparse's PacketBuilder for Ethernet/IPv4/UDP,
+//! pcap-file's writer for the file, the format crate's emitters for the payloads.
+
+use etherparse::PacketBuilder;
+use pcap_file::pcap::{PcapPacket, PcapWriter};
+use skinbox_host::pcap::{decode_pcap_bytes, PcapOptions};
+use skinbox_host::synth::{self, SynthConfig};
+use skinbox_protocol::datagram::DatagramBody;
+use skinbox_protocol::{CellFraming, CellRepr, DatagramRepr};
+use std::time::Duration;
+
+const BOX_PORT: u16 = 5_000;
+
+fn udp_frame(src_port: u16, dst_port: u16, payload: &[u8]) -> Vec<u8> {
+    let b = PacketBuilder::ethernet2([2, 0, 0, 0, 0, 2], [2, 0, 0, 0, 0, 1])
+        .ipv4([192, 0, 2, 10], [192, 0, 2, 1], 64)
+        .udp(src_port, dst_port);
+    let mut v = Vec::new();
+    b.write(&mut v, payload).unwrap();
+    v
+}
+
+fn tcp_frame(payload: &[u8]) -> Vec<u8> {
+    let b = PacketBuilder::ethernet2([2, 0, 0, 0, 0, 2], [2, 0, 0, 0, 0, 1])
+        .ipv4([192, 0, 2, 10], [192, 0, 2, 1], 64)
+        .tcp(BOX_PORT, 80, 1, 1024);
+    let mut v = Vec::new();
+    b.write(&mut v, payload).unwrap();
+    v
+}
+
+fn pcap_of(frames: &[Vec<u8>]) -> Vec<u8> {
+    let mut w = PcapWriter::new(Vec::new()).unwrap();
+    for (i, f) in frames.iter().enumerate() {
+        let p = PcapPacket::new(
+            Duration::from_micros(1_000 + i as u64),
+            f.len() as u32,
+            &f[..],
+        )
+        .unwrap();
+        w.write_packet(&p).unwrap();
+    }
+    w.into_inner()
+}
+
+#[test]
+fn every_record_decodes_to_what_was_emitted() {
+    let capture = synth::generate(&SynthConfig {
+        cells: 40,
+        samples_per_cell: 30,
+        ..SynthConfig::default()
+    });
+    let mut frames: Vec<Vec<u8>> = capture
+        .payloads()
+        .iter()
+        .map(|p| udp_frame(BOX_PORT, 6_000, p))
+        .collect();
+    // Ethernet padding and a trailing FCS do not change the payload.
+    frames[0].extend_from_slice(&[0xde, 0xad, 0xbe, 0xef]);
+    let decoded = decode_pcap_bytes(&pcap_of(&frames), &PcapOptions::default()).unwrap();
+
+    assert_eq!(decoded.records.len(), capture.truth.len());
+    for (got, want) in decoded.records.iter().zip(&capture.truth) {
+        assert_eq!(got.datagram_sequence, want.datagram_sequence);
+        assert_eq!(got.tick, want.tick);
+        assert_eq!(got.port, want.record.port);
+        assert_eq!(got.flags, want.record.flags);
+        assert_eq!(
+            got.cell.to_bytes(&CellFraming::DEFAULT),
+            want.record.cell_packet
+        );
+        assert_eq!(
+            got.cell,
+            CellRepr::parse(&want.record.cell_packet, &CellFraming::DEFAULT).unwrap()
+        );
+    }
+    let r = &decoded.report;
+    assert_eq!(r.records, capture.truth.len() as u64);
+    assert_eq!(r.data_packets, capture.data_packets);
+    assert_eq!(r.event_packets, capture.event_packets);
+    assert_eq!(r.cells_active, 40);
+    assert_eq!(r.bad_input.total, 0);
+    assert_eq!(r.losses.datagrams_missing, 0);
+    assert_eq!(r.losses.event_packets_missing, 0);
+    assert_eq!(r.frames.frames, frames.len() as u64);
+    // Data-mode cells send every sample: 20 cells x 30 samples.
+    assert_eq!(capture.data_packets, 20 * 30);
+    // Event histogram sums to the event packets.
+    assert_eq!(
+        r.events_per_packet_histogram.iter().sum::<u64>(),
+        capture.event_packets
+    );
+}
+
+#[test]
+fn bad_input_is_counted_by_reason() {
+    let capture = synth::generate(&SynthConfig {
+        cells: 8,
+        samples_per_cell: 10,
+        status_every: 0,
+        ..SynthConfig::default()
+    });
+    let good = capture.payloads();
+    let mut frames: Vec<Vec<u8>> = good.iter().map(|p| udp_frame(BOX_PORT, 6_000, p)).collect();
+    let sample = good[0].clone();
+
+    let mut bad_magic = sample.clone();
+    bad_magic[0] = b'X';
+    let mut bad_version = sample.clone();
+    bad_version[2] = 9;
+    let mut bad_kind = sample.clone();
+    bad_kind[3] = 7;
+    let truncated = sample[..sample.len() - 3].to_vec();
+    let mut bad_cell = sample.clone();
+    // The first record's cell packet starts at 24 + 6: break its end-of-packet byte.
+    bad_cell[24 + 6 + 19] = 0x00;
+    // A fresh sequence number so the datagram is not a duplicate.
+    bad_cell[8..12].copy_from_slice(&1_000u32.to_be_bytes());
+
+    frames.push(udp_frame(BOX_PORT, 6_000, &bad_magic));
+    frames.push(udp_frame(BOX_PORT, 6_000, &bad_version));
+    frames.push(udp_frame(BOX_PORT, 6_000, &bad_kind));
+    frames.push(udp_frame(BOX_PORT, 6_000, &truncated));
+    frames.push(udp_frame(BOX_PORT, 6_000, &bad_cell));
+    frames.push(tcp_frame(&sample));
+    frames.push(udp_frame(BOX_PORT, 6_000, &[])); // empty payload
+    frames.push(vec![0xff; 10]); // not even an Ethernet header
+    let mut file = pcap_of(&frames);
+    // One more packet record whose data is cut off: a truncated file.
+    let extra = pcap_of(&[udp_frame(BOX_PORT, 6_000, &sample)]);
+    file.extend_from_slice(&extra[24..extra.len() - 100]);
+
+    let d = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
+    let b = &d.report.bad_input;
+    let by = |reason: &str| b.get(reason);
+    assert_eq!(by("datagram: bad magic"), 1, "{b:?}");
+    assert_eq!(by("datagram: unsupported version"), 1, "{b:?}");
+    assert_eq!(by("datagram: unknown kind"), 1, "{b:?}");
+    assert_eq!(by("datagram: truncated"), 2, "{b:?}"); // cut one, empty one
+    assert_eq!(by("record: bad end-of-packet byte"), 1, "{b:?}");
+    assert_eq!(by("frame: not UDP"), 1, "{b:?}");
+    assert_eq!(by("frame: malformed"), 1, "{b:?}");
+    assert_eq!(by("pcap: truncated at end of file"), 1, "{b:?}");
+    assert_eq!(b.total, 9);
+    // The good records all arrived, plus the bad datagram's other records.
+    let bad_cell_records = capture.datagrams[0].to_bytes().len() / 26 - 1;
+    assert_eq!(
+        d.records.len(),
+        capture.truth.len() + bad_cell_records,
+        "{:?}",
+        d.report.losses
+    );
+}
+
+#[test]
+fn port_filter_skips_other_traffic() {
+    let capture = synth::generate(&SynthConfig {
+        cells: 4,
+        samples_per_cell: 5,
+        status_every: 0,
+        ..SynthConfig::default()
+    });
+    let mut frames: Vec<Vec<u8>> = capture
+        .payloads()
+        .iter()
+        .map(|p| udp_frame(BOX_PORT, 6_000, p))
+        .collect();
+    frames.push(udp_frame(53, 53, b"not a box datagram: other traffic"));
+    let file = pcap_of(&frames);
+    let options = PcapOptions {
+        udp_port: Some(BOX_PORT),
+        ..PcapOptions::default()
+    };
+    let d = decode_pcap_bytes(&file, &options).unwrap();
+    assert_eq!(d.report.frames.other_port, 1);
+    assert_eq!(d.report.bad_input.total, 0);
+    assert_eq!(d.records.len(), capture.truth.len());
+    // Without the filter, the DNS-looking payload is a datagram with a bad magic.
+    let d = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
+    assert_eq!(d.report.bad_input.get("datagram: bad magic"), 1);
+}
+
+#[test]
+fn status_datagrams_give_counter_deltas() {
+    let capture = synth::generate(&SynthConfig {
+        cells: 16,
+        samples_per_cell: 40,
+        status_every: 3,
+        ..SynthConfig::default()
+    });
+    let statuses: Vec<_> = capture
+        .datagrams
+        .iter()
+        .filter_map(|d| match &d.body {
+            DatagramBody::Status(s) => Some(s.clone()),
+            _ => None,
+        })
+        .collect();
+    assert!(statuses.len() >= 3);
+    let frames: Vec<Vec<u8>> = capture
+        .payloads()
+        .iter()
+        .map(|p| udp_frame(BOX_PORT, 6_000, p))
+        .collect();
+    let d = decode_pcap_bytes(&pcap_of(&frames), &PcapOptions::default()).unwrap();
+    let (first, last) = (&statuses[0], statuses.last().unwrap());
+    let s = &d.report.box_status;
+    assert_eq!(s.status_reports, statuses.len() as u64);
+    assert_eq!(
+        s.records_sent_delta,
+        u64::from(last.records_sent - first.records_sent)
+    );
+    for port in 0..8u8 {
+        let want = last.ports[usize::from(port)].0[0] - first.ports[usize::from(port)].0[0];
+        assert_eq!(s.counter_deltas[&port]["packets_good"], u64::from(want));
+    }
+    assert_eq!(d.report.losses.box_packets_lost, 0);
+    assert_eq!(d.report.losses.box_resets, 0);
+}
+
+#[test]
+fn datagram_repr_roundtrip_through_frames() {
+    // A hand-made datagram, emitted by the format crate, decoded through the whole path.
+    use skinbox_protocol::{Channel, DataRepr, EventRepr, RecordRepr};
+    let data = DataRepr::from_raw(17, [2, -3, 258, 1, 0, 2, 310, 61, 0]).unwrap();
+    let event = EventRepr::new(17, 41, false, &[(Channel::Force1, 212)]).unwrap();
+    let d = DatagramRepr {
+        box_id: 3,
+        port_count: 8,
+        flags: 0,
+        sequence: 77,
+        base_tick: 1_000_000,
+        body: DatagramBody::Records(vec![
+            RecordRepr {
+                port: 2,
+                flags: 0,
+                tick_offset: -50,
+                cell_packet: data.to_bytes(),
+            },
+            RecordRepr {
+                port: 2,
+                flags: 1,
+                tick_offset: 6_250,
+                cell_packet: event.to_bytes(),
+            },
+        ]),
+    };
+    let file = pcap_of(&[udp_frame(BOX_PORT, 6_000, &d.to_bytes())]);
+    let out = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
+    assert_eq!(out.records.len(), 2);
+    assert_eq!(out.records[0].tick, 999_950);
+    assert_eq!(out.records[0].cell, CellRepr::Data(data));
+    assert_eq!(out.records[1].tick, 1_006_250);
+    assert_eq!(out.records[1].time_s(), 1_006_250.0 * 8e-9);
+    assert_eq!(out.records[1].cell, CellRepr::Event(event));
+    assert_eq!(out.records[1].box_id, 3);
+    assert_eq!(out.report.losses.records_flagged_loss_before[&2], 1);
+    assert_eq!(
+        out.report.events_per_packet_histogram,
+        vec![1, 0, 0, 0, 0, 0]
+    );
+}

@@ -1,0 +1,81 @@
+//! `skinbox bench <what>`: benchmarks, each printing its figures (JSON with --json).
+//! Add a variant to [`BenchCommand`] for another benchmark.
+
+use clap::{Args, Subcommand};
+
+/// The benchmarks.
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Decode an in-memory capture (data and event mode mixed); prints packets_per_second.
+    Decode(DecodeBenchArgs),
+    /// Replay on loopback at rising rates; prints max_lossless_records_per_second.
+    Live(LiveBenchArgs),
+}
+
+/// Arguments of `skinbox bench decode`.
+#[derive(Debug, Args)]
+pub struct DecodeBenchArgs {
+    /// At least this many cell packets.
+    #[arg(long, default_value_t = 1_000_000)]
+    pub packets: usize,
+    /// Rounds; the fastest counts.
+    #[arg(long, default_value_t = 3)]
+    pub rounds: u32,
+}
+
+/// Arguments of `skinbox bench live`.
+#[derive(Debug, Args)]
+pub struct LiveBenchArgs {
+    /// Record rates to try, in records per second, rising.
+    #[arg(long, value_delimiter = ',', default_values_t = [500e3, 1e6, 2e6, 3e6, 4.5e6, 6e6, 7e6, 8e6])]
+    pub rates: Vec<f64>,
+    /// Seconds per rate step.
+    #[arg(long, default_value_t = 1.0)]
+    pub step_s: f64,
+}
+
+/// Runs one benchmark.
+pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
+    match what {
+        BenchCommand::Decode(a) => {
+            let r = skinbox_host::bench::bench_decode(a.packets, a.rounds);
+            if json {
+                return super::print_json(&r);
+            }
+            println!(
+                "decoded {} cell packets ({} data, {} event) in {} datagrams: {:.2} M packets/s on one core, {:.1} ns per packet (goal 10 M/s)",
+                r.cell_packets,
+                r.data_packets,
+                r.event_packets,
+                r.datagrams,
+                r.packets_per_second / 1e6,
+                r.ns_per_packet
+            );
+            Ok(())
+        }
+        BenchCommand::Live(a) => {
+            let r = skinbox_host::bench::bench_live(&a.rates, a.step_s)?;
+            if json {
+                return super::print_json(&r);
+            }
+            for s in &r.steps {
+                println!(
+                    "{:9.0} records/s asked, {:9.0} sent: {} of {} datagrams received, {} missing, {:.0} ns CPU per record{}",
+                    s.target_records_per_second,
+                    s.sent_records_per_second,
+                    s.datagrams_received,
+                    s.datagrams_sent,
+                    s.datagrams_missing,
+                    s.receiver_cpu_ns_per_record,
+                    if s.lossless { "" } else { "  LOSS" }
+                );
+            }
+            println!(
+                "max lossless: {:.2} M records/s (goal 4.5 M), receive buffer {} bytes",
+                r.max_lossless_records_per_second / 1e6,
+                r.recv_buffer_bytes
+            );
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,121 @@
+//! `skinbox capture`: receive the box's datagrams live on a UDP socket.
+
+use clap::Args;
+use skinbox_host::live::{self, CaptureLimits};
+use skinbox_host::pcap::PcapFrameWriter;
+use skinbox_host::{Decoder, DecoderConfig};
+use std::io::Write;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Arguments of `skinbox capture`.
+#[derive(Debug, Args)]
+pub struct CaptureArgs {
+    /// Address to listen on, e.g. 0.0.0.0:5000 (port 0 picks a free port; the bound address
+    /// is printed on stderr first).
+    #[arg(long)]
+    pub listen: SocketAddr,
+    /// Record every datagram to this pcap file.
+    #[arg(long)]
+    pub pcap: Option<PathBuf>,
+    /// Stop after this many seconds (default: at Ctrl-C).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Stop after this many datagrams.
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// Socket receive buffer to ask for, in bytes.
+    #[arg(long, default_value_t = live::DEFAULT_RECV_BUFFER_BYTES)]
+    pub recv_buffer: usize,
+    /// The cells' sample rate, for rates in % of data mode.
+    #[arg(long, default_value_t = 125.0)]
+    pub sample_rate_hz: f64,
+}
+
+/// Runs the capture on a single-threaded tokio runtime until the duration, the count or
+/// Ctrl-C; prints a summary line every second on stderr and the report at the end.
+pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.duration.is_none_or(|s| s.is_finite() && s > 0.0),
+        "--duration must be a positive number of seconds"
+    );
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(async move {
+        let (socket, granted) = live::bind_udp(args.listen, args.recv_buffer)?;
+        eprintln!(
+            "listening on {} (receive buffer {} bytes)",
+            socket.local_addr()?,
+            granted
+        );
+        let mut recorder = match &args.pcap {
+            Some(path) => Some(PcapFrameWriter::new(std::io::BufWriter::new(
+                std::fs::File::create(path)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
+            ))?),
+            None => None,
+        };
+        let mut decoder = Decoder::new(DecoderConfig {
+            sample_rate_hz: args.sample_rate_hz,
+            ..DecoderConfig::default()
+        });
+        let duration = args.duration;
+        let shutdown = async move {
+            match duration {
+                Some(s) => {
+                    tokio::select! {
+                        _ = tokio::time::sleep(Duration::from_secs_f64(s)) => {}
+                        _ = tokio::signal::ctrl_c() => {}
+                    }
+                }
+                None => {
+                    let _ = tokio::signal::ctrl_c().await;
+                }
+            }
+        };
+        let stats = live::run_capture(
+            &socket,
+            &mut decoder,
+            &mut (),
+            recorder.as_mut(),
+            CaptureLimits {
+                max_datagrams: args.count,
+                progress_every: Duration::from_secs(1),
+            },
+            shutdown,
+            &mut |s, d| {
+                let r = d.report();
+                eprintln!(
+                    "{:7.1} s: {} datagrams, {} records, {} missing, {} bad, {:.1} % CPU",
+                    s.wall_s,
+                    s.datagrams,
+                    s.records,
+                    r.losses.datagrams_missing,
+                    r.bad_input.total,
+                    100.0 * s.cpu_s / s.wall_s.max(1e-9)
+                );
+            },
+        )
+        .await?;
+        if let Some(w) = recorder {
+            w.finish()?.flush()?;
+        }
+        let mut report = decoder.report();
+        report.frames.frames = stats.datagrams;
+        report.frames.udp_payloads = stats.datagrams;
+        report.frames.capture_span_s = stats.wall_s;
+        report.host = Some(skinbox_host::report::HostCost {
+            cpu_s: stats.cpu_s,
+            wall_s: stats.wall_s,
+            cpu_ns_per_packet: stats.cpu_s * 1e9 / report.records.max(1) as f64,
+        });
+        if json {
+            super::print_json(&serde_json::json!({ "capture": stats, "report": report }))
+        } else {
+            print!("{}", report.summary());
+            Ok(())
+        }
+    })
+}
