@@ -1,6 +1,6 @@
 //! How the box's datagrams travel: Ethernet II, IPv4 without options, UDP.
 //!
-//! The defaults address documentation networks (RFC 5737) and the UDP port "SK"; a real
+//! The defaults address documentation networks (RFC 5737) and a dynamic UDP port; a real
 //! installation sets its own through the box parameters.
 
 /// Ethernet, IPv4 and UDP addresses of the box and its host.
@@ -20,11 +20,12 @@ pub struct LinkConfig {
     pub host_port: u16,
 }
 
-/// UDP port "SK" (0x534B).
-pub const DEFAULT_PORT: u16 = 0x534B;
+/// UDP port of box and host: 54091 (0xD34B, "SK" with the top bit set), in the dynamic
+/// range that IANA never assigns to a service.
+pub const DEFAULT_PORT: u16 = 0xD34B;
 
 impl LinkConfig {
-    /// Box 02:53:4b:00:00:01 at 192.0.2.10:21323 to broadcast, 192.0.2.1:21323.
+    /// Box 02:53:4b:00:00:01 at 192.0.2.10:54091 to broadcast, 192.0.2.1:54091.
     pub const DEFAULT: LinkConfig = LinkConfig {
         box_mac: [0x02, 0x53, 0x4B, 0x00, 0x00, 0x01],
         host_mac: [0xFF; 6],
