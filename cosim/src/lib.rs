@@ -19,6 +19,7 @@ pub mod harness;
 pub mod line;
 pub mod model;
 pub mod pcap;
+pub mod sim;
 
 pub use dut::{Dut, GmiiByte};
 pub use model::{CosimError, Model};

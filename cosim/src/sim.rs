@@ -1,0 +1,200 @@
+//! One co-simulation run: packets on the box's UART pins, frames out, everything checked.
+
+use crate::frames::{assemble, check};
+use crate::harness::play;
+use crate::line::{transitions, UartByte};
+use crate::model::{default_cache_dir, CosimError, Model};
+use crate::pcap::PcapOut;
+use crate::Dut;
+use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_protocol::datagram::DatagramBody;
+use skinbox_protocol::status::PortCounter;
+use skinbox_protocol::{DatagramRepr, PortCounters, TICK_NS};
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// One cell packet as it leaves the bus root on its way to a box pin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SentPacket {
+    /// The 20 bytes.
+    pub bytes: [u8; 20],
+    /// Falling edge of the first start bit at the box pin, ns from the simulation start.
+    pub start_ns: f64,
+    /// Bit length of the sending UART, ns.
+    pub bit_ns: f64,
+}
+
+/// What to simulate.
+#[derive(Debug, Clone)]
+pub struct SimSpec {
+    /// Box parameters.
+    pub config: BoxConfig,
+    /// Packets per port, each port's in time order and not overlapping.
+    pub ports: Vec<Vec<SentPacket>>,
+    /// Simulated time, ns (the box also needs time to flush after the last packet).
+    pub duration_ns: u64,
+    /// Write the frames here.
+    pub pcap: Option<PathBuf>,
+    /// Write a VCD trace here (builds a traced model).
+    pub vcd: Option<PathBuf>,
+}
+
+/// Clock cycles the box is held in reset at the start.
+pub const RESET_CYCLES: u64 = 4;
+
+/// What came out, checked.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct SimReport {
+    /// Frames the box sent; every one passed the independent checks.
+    pub frames: u64,
+    /// Records datagrams.
+    pub record_datagrams: u64,
+    /// Status datagrams.
+    pub status_datagrams: u64,
+    /// Records received.
+    pub records: u64,
+    /// Packets put on the pins.
+    pub packets_sent: u64,
+    /// Packets sent that came back in a record unchanged.
+    pub packets_delivered: u64,
+    /// Records whose cell bytes match no packet sent on their port (must be 0).
+    pub records_corrupted: u64,
+    /// Packets sent but not delivered (the box's counters must explain them).
+    pub dropped: u64,
+    /// Losses by cause from the last status report, summed over ports.
+    pub losses_by_cause: Vec<(String, u64)>,
+    /// Largest stamp minus true start edge, in ticks (must be below 1).
+    pub ts_error_max_ticks: f64,
+    /// Mean stamp minus true start edge, in ticks.
+    pub ts_error_mean_ticks: f64,
+    /// Smallest gap between frames, clocks.
+    pub min_inter_frame_gap: Option<u64>,
+    /// Simulated seconds.
+    pub sim_seconds: f64,
+    /// Wall-clock seconds of the clock loop (model build excluded).
+    pub wall_seconds: f64,
+    /// Simulated clock cycles per wall second.
+    pub cycles_per_second: f64,
+}
+
+/// Runs `spec` on the verilated box.
+pub fn run_rtl(spec: &SimSpec) -> Result<SimReport, CosimError> {
+    let model = Model::build(&spec.config, spec.vcd.is_some(), &default_cache_dir())?;
+    let mut dut = Dut::new(&model, spec.vcd.as_deref())?;
+    let lines: Vec<_> = spec
+        .ports
+        .iter()
+        .map(|packets| {
+            let bytes: Vec<UartByte> = packets
+                .iter()
+                .flat_map(|p| {
+                    p.bytes.iter().enumerate().map(move |(i, value)| UartByte {
+                        start_ns: p.start_ns + i as f64 * 10.0 * p.bit_ns,
+                        bit_ns: p.bit_ns,
+                        value: *value,
+                        stop_level: true,
+                    })
+                })
+                .collect();
+            transitions(&bytes)
+        })
+        .collect();
+    let cycles = spec.duration_ns / TICK_NS;
+    let started = Instant::now();
+    let out = play(&mut dut, &lines, RESET_CYCLES, cycles);
+    let wall = started.elapsed().as_secs_f64();
+    let (frames, min_gap) = assemble(&out);
+
+    let mut report = SimReport {
+        frames: frames.len() as u64,
+        packets_sent: spec.ports.iter().map(|p| p.len() as u64).sum(),
+        min_inter_frame_gap: min_gap,
+        sim_seconds: cycles as f64 * TICK_NS as f64 * 1e-9,
+        wall_seconds: wall,
+        cycles_per_second: cycles as f64 / wall.max(1e-9),
+        ..Default::default()
+    };
+    let mut pcap = match &spec.pcap {
+        Some(path) => Some(
+            PcapOut::new(
+                std::fs::File::create(path).map_err(|source| CosimError::Io {
+                    path: path.clone(),
+                    source,
+                })?,
+            )
+            .map_err(|e| tool("writing the pcap", e))?,
+        ),
+        None => None,
+    };
+    // each port's packets, to be matched in order
+    let mut pending: Vec<VecDeque<&SentPacket>> =
+        spec.ports.iter().map(|p| p.iter().collect()).collect();
+    let mut last_status: Vec<PortCounters> = vec![PortCounters::default(); spec.config.ports];
+    let (mut error_sum, mut error_count) = (0.0, 0u64);
+    for frame in &frames {
+        let (ethernet, payload) = check(&frame.bytes).map_err(|e| tool("checking a frame", e))?;
+        if let Some(pcap) = &mut pcap {
+            pcap.write(frame.first_cycle * TICK_NS, ethernet)
+                .map_err(|e| tool("writing the pcap", e))?;
+        }
+        let datagram = DatagramRepr::parse(payload).map_err(|e| tool("parsing a datagram", e))?;
+        match datagram.body {
+            DatagramBody::Records(records) => {
+                report.record_datagrams += 1;
+                for r in records {
+                    report.records += 1;
+                    let queue = &mut pending[usize::from(r.port)];
+                    // packets before this one on the port were lost
+                    match queue.iter().position(|p| p.bytes == r.cell_packet) {
+                        Some(k) => {
+                            queue.drain(..k);
+                            let sent = queue.pop_front().expect("found above");
+                            report.packets_delivered += 1;
+                            let stamp_ns =
+                                (r.tick(datagram.base_tick) + RESET_CYCLES) as f64 * TICK_NS as f64;
+                            let error = (stamp_ns - sent.start_ns) / TICK_NS as f64;
+                            report.ts_error_max_ticks = report.ts_error_max_ticks.max(error);
+                            error_sum += error;
+                            error_count += 1;
+                        }
+                        None => report.records_corrupted += 1,
+                    }
+                }
+            }
+            DatagramBody::Status(status) => {
+                report.status_datagrams += 1;
+                for (i, counters) in status.ports.iter().enumerate() {
+                    last_status[usize::from(status.first_port) + i] = *counters;
+                }
+            }
+        }
+    }
+    if let Some(pcap) = pcap {
+        pcap.into_inner().map_err(|e| tool("writing the pcap", e))?;
+    }
+    report.ts_error_mean_ticks = if error_count > 0 {
+        error_sum / error_count as f64
+    } else {
+        0.0
+    };
+    report.dropped = report.packets_sent - report.packets_delivered;
+    report.losses_by_cause = PortCounter::ALL
+        .iter()
+        .filter(|c| c.is_packet_loss() || **c == PortCounter::GarbageBytes)
+        .map(|c| {
+            (
+                c.name().to_string(),
+                last_status.iter().map(|p| u64::from(p.get(*c))).sum(),
+            )
+        })
+        .collect();
+    Ok(report)
+}
+
+fn tool(step: &'static str, e: impl std::fmt::Display) -> CosimError {
+    CosimError::Tool {
+        step,
+        output: e.to_string(),
+    }
+}
