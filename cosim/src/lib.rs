@@ -12,6 +12,7 @@
 //!
 //! [`BoxConfig`]: skinbox_gateware::interface_box::BoxConfig
 
+pub mod bench;
 mod binding;
 pub mod dut;
 pub mod frames;

@@ -10,6 +10,22 @@ pub enum BenchCommand {
     Decode(DecodeBenchArgs),
     /// Replay on loopback at rising rates; prints max_lossless_records_per_second.
     Live(LiveBenchArgs),
+    /// Verilator co-simulation: the harness against the bare model loop.
+    Sim(SimBenchArgs),
+}
+
+/// Arguments of `skinbox bench sim`.
+#[derive(Debug, Args)]
+pub struct SimBenchArgs {
+    /// Ports of the box.
+    #[arg(long, default_value_t = 8)]
+    pub ports: usize,
+    /// Clock cycles per measurement.
+    #[arg(long, default_value_t = 5_000_000)]
+    pub cycles: u64,
+    /// Rounds; the fastest counts.
+    #[arg(long, default_value_t = 3)]
+    pub rounds: u32,
 }
 
 /// Arguments of `skinbox bench decode`.
@@ -37,6 +53,21 @@ pub struct LiveBenchArgs {
 /// Runs one benchmark.
 pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
     match what {
+        BenchCommand::Sim(a) => {
+            let r = skinbox_cosim::bench::bench_sim(a.ports, a.cycles, a.rounds)?;
+            if json {
+                return super::print_json(&r);
+            }
+            println!(
+                "{}-port box, {} cycles: harness {:.2} M cycles/s, bare loop {:.2} M cycles/s ({:.0} % of bare; goals 5 M and 75 %)",
+                r.ports,
+                r.cycles,
+                r.rtl_cycles_per_second / 1e6,
+                r.bare_cycles_per_second / 1e6,
+                100.0 * r.harness_fraction_of_bare
+            );
+            Ok(())
+        }
         BenchCommand::Decode(a) => {
             let r = skinbox_host::bench::bench_decode(a.packets, a.rounds);
             if json {
