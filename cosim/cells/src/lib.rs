@@ -1,0 +1,28 @@
+//! Skin cell models, the bus model and calibrated scenes for the skinbox co-simulation.
+//!
+//! Read in the order a packet is made:
+//! - [`signal`]: the true physical signals of a scene and the sensor noise;
+//! - [`cell`]: quantisation, data mode and event mode (Algorithm 1, send-on-delta);
+//! - [`bus`]: hop latency and the root FIFO feeding the 4 Mbit/s UART; [`BusPacket`] is
+//!   what the co-simulation drives onto a box pin;
+//! - [`scene`]: scene files (`cosim/scenes/*.toml`) and [`Scene::generate`], which gives
+//!   every bus's packet stream, the rates and the reconstruction error;
+//! - [`calibration`]: the scenes against the papers' Fig. 8 table.
+
+pub mod bus;
+pub mod calibration;
+pub mod cell;
+pub mod rng;
+pub mod scene;
+pub mod signal;
+
+pub use bus::{BusPacket, BusStats, RootFifo};
+pub use cell::{Cell, CellConfig, Mode, SendOnDelta, Thresholds};
+pub use scene::{
+    BusStream, CellTruth, GenerateOptions, Generated, Scene, SceneError, SceneStats,
+};
+
+/// Directory of the scene files shipped with the project.
+pub fn scenes_dir() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes")
+}
