@@ -296,3 +296,236 @@ impl Cell {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinbox_protocol::{CellRepr, DataRepr};
+
+    /// A resting sample well inside every sensor range.
+    const BASE: [i32; Channel::COUNT] = [10, -20, 256, 100, 200, 300, 5_000, 60, 40];
+
+    fn event_cell(enabled: ChannelMask) -> Cell {
+        Cell::new(CellConfig {
+            cell_id: 42,
+            mode: Mode::Event,
+            thresholds: Thresholds::table_i(),
+            enabled,
+        })
+    }
+
+    fn events(packets: &SamplePackets) -> Vec<EventRepr> {
+        packets
+            .as_slice()
+            .iter()
+            .map(|b| EventRepr::parse(b).expect("a valid event packet"))
+            .collect()
+    }
+
+    fn with(channel: Channel, raw: i32) -> [i32; Channel::COUNT] {
+        let mut s = BASE;
+        s[channel.index()] = raw;
+        s
+    }
+
+    #[test]
+    fn first_sample_sends_every_enabled_channel() {
+        let mut cell = event_cell(ChannelMask::ALL);
+        let p = events(&cell.sample_raw(&BASE));
+        assert_eq!(p.len(), 2);
+        let sent: Vec<_> = p.iter().flat_map(|e| e.events()).collect();
+        assert_eq!(sent, Channel::ALL.map(|c| (c, BASE[c.index()])).to_vec());
+        assert!(cell.sample_raw(&BASE).as_slice().is_empty());
+    }
+
+    #[test]
+    fn each_threshold_is_strict_on_both_sides() {
+        for c in Channel::ALL {
+            let t = i32::from(c.table_i_threshold_raw());
+            let b = BASE[c.index()];
+            let mut cell = event_cell(ChannelMask::ALL);
+            cell.sample_raw(&BASE);
+            // Exactly the threshold away, up or down: no event.
+            for v in [b + t, b - t] {
+                let out = cell.sample_raw(&with(c, v));
+                assert!(out.as_slice().is_empty(), "{c}: {v} fired at threshold {t}");
+                assert_eq!(cell.send_on_delta().last_sent(c), Some(b));
+            }
+            // One step more: exactly this channel fires, with its value.
+            let up = events(&cell.sample_raw(&with(c, b + t + 1)));
+            assert_eq!(up.len(), 1, "{c}");
+            assert_eq!(up[0].events().collect::<Vec<_>>(), vec![(c, b + t + 1)]);
+            assert_eq!(cell.send_on_delta().last_sent(c), Some(b + t + 1));
+            // Downwards from the new last value: threshold holds, threshold + 1 fires.
+            let mut s = with(c, b + 1);
+            assert!(cell.sample_raw(&s).as_slice().is_empty(), "{c}");
+            s[c.index()] = b;
+            let down = events(&cell.sample_raw(&s));
+            assert_eq!(down[0].events().collect::<Vec<_>>(), vec![(c, b)], "{c}");
+        }
+    }
+
+    #[test]
+    fn temperature_flicker_of_one_step_never_fires() {
+        assert_eq!(Channel::Temperature1.table_i_threshold_raw(), 1);
+        let mut cell = event_cell(ChannelMask::ALL);
+        cell.sample_raw(&BASE);
+        for k in 0..100 {
+            let s = with(Channel::Temperature1, 60 + (k % 2));
+            assert!(cell.sample_raw(&s).as_slice().is_empty(), "sample {k}");
+        }
+        let p = events(&cell.sample_raw(&with(Channel::Temperature1, 62)));
+        assert_eq!(
+            p[0].events().collect::<Vec<_>>(),
+            vec![(Channel::Temperature1, 62)]
+        );
+    }
+
+    #[test]
+    fn last_sent_moves_only_for_fired_channels() {
+        let mut cell = event_cell(ChannelMask::ALL);
+        cell.sample_raw(&BASE);
+        // accel x creeps by 3 (below its threshold of 5) while force 1 jumps.
+        let mut s = BASE;
+        s[0] += 3;
+        s[3] += 50;
+        let p = events(&cell.sample_raw(&s));
+        assert_eq!(
+            p[0].events().collect::<Vec<_>>(),
+            vec![(Channel::Force1, 150)]
+        );
+        assert_eq!(cell.send_on_delta().last_sent(Channel::AccelX), Some(10));
+        // Another 3: 6 from what was sent, so it fires now, although only 3 from the last
+        // sample.
+        s[0] += 3;
+        let p = events(&cell.sample_raw(&s));
+        assert_eq!(
+            p[0].events().collect::<Vec<_>>(),
+            vec![(Channel::AccelX, 16)]
+        );
+    }
+
+    #[test]
+    fn disabled_channels_never_fire() {
+        let enabled: ChannelMask = [Channel::AccelZ, Channel::Proximity].into_iter().collect();
+        let mut cell = event_cell(enabled);
+        let first = events(&cell.sample_raw(&BASE));
+        assert_eq!(first.len(), 1);
+        assert_eq!(first[0].channels, enabled);
+        // Every channel jumps: only the enabled two are sent.
+        let jump = BASE.map(|v| v + 100);
+        let p = events(&cell.sample_raw(&jump));
+        assert_eq!(p[0].channels, enabled);
+        assert_eq!(
+            p[0].events().collect::<Vec<_>>(),
+            vec![(Channel::AccelZ, 356), (Channel::Proximity, 5_100)]
+        );
+        assert_eq!(cell.send_on_delta().last_sent(Channel::Force1), None);
+    }
+
+    #[test]
+    fn six_events_fit_one_packet_and_seven_to_nine_split() {
+        for fired in 6..=9usize {
+            let mut cell = event_cell(ChannelMask::ALL);
+            cell.sample_raw(&BASE);
+            let seq = cell.next_sequence();
+            let mut s = BASE;
+            for v in s.iter_mut().take(fired) {
+                *v += 10;
+            }
+            let p = events(&cell.sample_raw(&s));
+            let expected: Vec<_> = Channel::ALL[..fired]
+                .iter()
+                .map(|&c| (c, BASE[c.index()] + 10))
+                .collect();
+            if fired == 6 {
+                assert_eq!(p.len(), 1);
+            } else {
+                assert_eq!(p.len(), 2, "{fired} events");
+                assert_eq!(p[0].channels.len(), 6);
+                assert!(!p[0].second_part);
+                assert!(p[1].second_part);
+                assert_eq!(p[1].channels.len(), fired - 6);
+                assert_eq!(p[1].sequence, seq.wrapping_add(1));
+            }
+            assert_eq!(p[0].sequence, seq);
+            let all: Vec<_> = p.iter().flat_map(|e| e.events()).collect();
+            assert_eq!(all, expected, "{fired} events");
+            assert_eq!(cell.next_sequence(), seq.wrapping_add(p.len() as u16));
+        }
+    }
+
+    #[test]
+    fn sequence_numbers_count_event_packets_and_wrap() {
+        let mut cell = event_cell(ChannelMask::ALL);
+        assert_eq!(cell.sample_raw(&BASE).as_slice().len(), 2); // sequences 0 and 1
+        let mut expected = 2u16;
+        let mut high = false;
+        for k in 0..90_000u32 {
+            // Proximity jumps by 100 at four samples of five: one packet each.
+            let quiet = k % 5 == 4;
+            if !quiet {
+                high = !high;
+            }
+            let prox = if high { 5_100 } else { 5_000 };
+            let p = events(&cell.sample_raw(&with(Channel::Proximity, prox)));
+            if quiet {
+                assert!(p.is_empty(), "sample {k}");
+                continue;
+            }
+            assert_eq!(p.len(), 1);
+            assert_eq!(p[0].sequence, expected, "sample {k}");
+            expected = expected.wrapping_add(1);
+        }
+        // 2 + 72,000 packets: the counter wrapped once, past 65,535 to 0.
+        assert_eq!(cell.next_sequence(), 6_466);
+        assert_eq!(cell.next_sequence(), expected);
+    }
+
+    #[test]
+    fn data_mode_sends_every_sample_saturated_to_the_sensor_ranges() {
+        let mut cell = Cell::new(CellConfig {
+            cell_id: 7,
+            mode: Mode::Data,
+            thresholds: Thresholds::table_i(),
+            enabled: ChannelMask::ALL,
+        });
+        for _ in 0..3 {
+            let out = cell.sample_raw(&BASE);
+            assert_eq!(out.as_slice().len(), 1);
+            let d = DataRepr::parse(&out.as_slice()[0]).unwrap();
+            assert_eq!((d.cell_id, d.raw_values()), (7, BASE));
+        }
+        let wild = [9_999, -9_999, 0, -5, 2_000, 1_023, 70_000, 300, -1];
+        let out = cell.sample_raw(&wild);
+        match CellRepr::parse(&out.as_slice()[0], &Default::default()).unwrap() {
+            CellRepr::Data(d) => {
+                assert_eq!(d.raw_values(), [511, -512, 0, 0, 1_023, 1_023, 65_535, 255, 0])
+            }
+            other => panic!("expected a data packet, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn quantisation_rounds_to_the_nearest_step_and_saturates() {
+        assert_eq!(quantise(Channel::AccelX, 0.02), 5); // 5.12 steps
+        assert_eq!(quantise(Channel::AccelX, -0.0215), -6); // -5.504 steps
+        assert_eq!(quantise(Channel::AccelZ, 3.0), 511);
+        assert_eq!(quantise(Channel::Force1, -0.1), 0);
+        assert_eq!(quantise(Channel::Temperature1, 30.24), 60);
+        assert_eq!(quantise(Channel::Temperature1, 30.26), 61);
+        assert_eq!(quantise(Channel::Proximity, f64::NAN), 0);
+        assert_eq!(quantise(Channel::Proximity, f64::INFINITY), 65_535);
+        assert_eq!(full_range_units(Channel::AccelY), 4.0);
+        assert_eq!(full_range_units(Channel::Temperature2), 128.0);
+    }
+
+    #[test]
+    fn thresholds_from_units_match_table_i() {
+        assert_eq!(
+            Thresholds::from_units(0.02, 0.001, 0.0001, 0.5),
+            Thresholds::table_i()
+        );
+        assert_eq!(Thresholds::table_i().raw, [5, 5, 5, 1, 1, 1, 6, 1, 1]);
+    }
+}
