@@ -1,5 +1,6 @@
 //! Subcommands of `skinbox`: argument parsing here, the work in the library crates.
 
+mod calibrate;
 mod examples;
 
 use clap::{Parser, Subcommand};
@@ -20,12 +21,15 @@ pub struct Cli {
 pub enum Command {
     /// Show example cell packets and box datagrams, as bytes and decoded.
     Examples,
+    /// Check the cell models' scenes against the papers' event rates (Fig. 8).
+    Calibrate(calibrate::Args),
 }
 
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Examples => examples::run(cli.json),
+        Command::Calibrate(args) => calibrate::run(args, cli.json),
     }
 }
 

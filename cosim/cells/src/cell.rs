@@ -84,7 +84,9 @@ impl Thresholds {
                     Modality::Proximity => proximity,
                     Modality::Temperature => temperature_c,
                 };
-                (host / c.units_per_lsb() + 1e-9).floor().clamp(0.0, 65535.0) as u16
+                (host / c.units_per_lsb() + 1e-9)
+                    .floor()
+                    .clamp(0.0, 65535.0) as u16
             }),
         }
     }
@@ -284,7 +286,7 @@ impl Cell {
                 // with one to nine entries: the split cannot fail.
                 let (first, second) =
                     EventRepr::split(id, self.next_sequence, &events[..fired.len()])
-                    .expect("events of one sample form valid packets");
+                        .expect("events of one sample form valid packets");
                 out.push(first.to_bytes());
                 self.next_sequence = self.next_sequence.wrapping_add(1);
                 if let Some(second) = second {
@@ -500,7 +502,10 @@ mod tests {
         let out = cell.sample_raw(&wild);
         match CellRepr::parse(&out.as_slice()[0], &Default::default()).unwrap() {
             CellRepr::Data(d) => {
-                assert_eq!(d.raw_values(), [511, -512, 0, 0, 1_023, 1_023, 65_535, 255, 0])
+                assert_eq!(
+                    d.raw_values(),
+                    [511, -512, 0, 0, 1_023, 1_023, 65_535, 255, 0]
+                )
             }
             other => panic!("expected a data packet, got {other:?}"),
         }

@@ -18,9 +18,7 @@ pub mod signal;
 
 pub use bus::{BusPacket, BusStats, RootFifo};
 pub use cell::{Cell, CellConfig, Mode, SendOnDelta, Thresholds};
-pub use scene::{
-    BusStream, CellTruth, GenerateOptions, Generated, Scene, SceneError, SceneStats,
-};
+pub use scene::{BusStream, CellTruth, GenerateOptions, Generated, Scene, SceneError, SceneStats};
 
 /// Directory of the scene files shipped with the project.
 pub fn scenes_dir() -> std::path::PathBuf {

@@ -13,6 +13,7 @@ use crate::signal::SignalModel;
 use serde::Deserialize;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::{Channel, ChannelMask, Modality};
+use std::cmp::Reverse;
 use std::fmt;
 use std::path::Path;
 
@@ -317,13 +318,21 @@ type Problem = (&'static str, &'static str, String);
 
 fn positive(table: &'static str, key: &'static str, v: f64, out: &mut Vec<Problem>) {
     if !(v.is_finite() && v > 0.0) {
-        out.push((table, key, format!("`{key}` must be a number > 0, found {v}")));
+        out.push((
+            table,
+            key,
+            format!("`{key}` must be a number > 0, found {v}"),
+        ));
     }
 }
 
 fn non_negative(table: &'static str, key: &'static str, v: f64, out: &mut Vec<Problem>) {
     if !(v.is_finite() && v >= 0.0) {
-        out.push((table, key, format!("`{key}` must be a number >= 0, found {v}")));
+        out.push((
+            table,
+            key,
+            format!("`{key}` must be a number >= 0, found {v}"),
+        ));
     }
 }
 
@@ -419,14 +428,20 @@ impl Scene {
             p.push((
                 "scene",
                 "sample_rate_hz",
-                format!("`sample_rate_hz` must be at most 10000, found {}", s.sample_rate_hz),
+                format!(
+                    "`sample_rate_hz` must be at most 10000, found {}",
+                    s.sample_rate_hz
+                ),
             ));
         }
         if s.cells == 0 || s.cells > 16_382 {
             p.push((
                 "scene",
                 "cells",
-                format!("`cells` must be 1..=16382 (cell ids 1..=cells), found {}", s.cells),
+                format!(
+                    "`cells` must be 1..=16382 (cell ids 1..=cells), found {}",
+                    s.cells
+                ),
             ));
         }
         if s.buses == 0 {
@@ -444,25 +459,39 @@ impl Scene {
             ));
         }
         if s.columns == 0 {
-            p.push(("scene", "columns", "`columns` must be at least 1".to_string()));
+            p.push((
+                "scene",
+                "columns",
+                "`columns` must be at least 1".to_string(),
+            ));
         }
         positive("scene", "cell_pitch_m", s.cell_pitch_m, &mut p);
         if c.bus.fifo_packets == 0 {
-            p.push(("bus", "fifo_packets", "`fifo_packets` must be at least 1".into()));
+            p.push((
+                "bus",
+                "fifo_packets",
+                "`fifo_packets` must be at least 1".into(),
+            ));
         }
         let b = &c.bus;
         if !(b.uart_error_ppm.is_finite() && (0.0..=100_000.0).contains(&b.uart_error_ppm)) {
             p.push((
                 "bus",
                 "uart_error_ppm",
-                format!("`uart_error_ppm` must be 0..=100000, found {}", b.uart_error_ppm),
+                format!(
+                    "`uart_error_ppm` must be 0..=100000, found {}",
+                    b.uart_error_ppm
+                ),
             ));
         }
         if !(b.clock_drift_ppm.is_finite() && (0.0..=10_000.0).contains(&b.clock_drift_ppm)) {
             p.push((
                 "bus",
                 "clock_drift_ppm",
-                format!("`clock_drift_ppm` must be 0..=10000, found {}", b.clock_drift_ppm),
+                format!(
+                    "`clock_drift_ppm` must be 0..=10000, found {}",
+                    b.clock_drift_ppm
+                ),
             ));
         }
         let t = &c.thresholds;
@@ -504,8 +533,7 @@ impl Scene {
             positive("hammer", "decay_s", h.decay_s, &mut p);
             non_negative("hammer", "attenuation_per_m", h.attenuation_per_m, &mut p);
             non_negative("hammer", "proximity", h.proximity, &mut p);
-            if !(h.ring_hz[0] > 0.0 && h.ring_hz[0] <= h.ring_hz[1] && h.ring_hz[1].is_finite())
-            {
+            if !(h.ring_hz[0] > 0.0 && h.ring_hz[0] <= h.ring_hz[1] && h.ring_hz[1].is_finite()) {
                 p.push((
                     "hammer",
                     "ring_hz",
@@ -519,16 +547,28 @@ impl Scene {
         if let Some(st) = &c.stroke {
             region("stroke", st.region, &mut p);
             if st.hands == 0 || st.hands > 16 {
-                p.push(("stroke", "hands", format!("`hands` must be 1..=16, found {}", st.hands)));
+                p.push((
+                    "stroke",
+                    "hands",
+                    format!("`hands` must be 1..=16, found {}", st.hands),
+                ));
             }
             if !(0.001..=1.0).contains(&st.speed_m_per_s) {
                 p.push((
                     "stroke",
                     "speed_m_per_s",
-                    format!("`speed_m_per_s` must be 0.001..=1, found {}", st.speed_m_per_s),
+                    format!(
+                        "`speed_m_per_s` must be 0.001..=1, found {}",
+                        st.speed_m_per_s
+                    ),
                 ));
             }
-            positive("stroke", "return_speed_factor", st.return_speed_factor, &mut p);
+            positive(
+                "stroke",
+                "return_speed_factor",
+                st.return_speed_factor,
+                &mut p,
+            );
             positive("stroke", "lower_s", st.lower_s, &mut p);
             non_negative("stroke", "lift_height_m", st.lift_height_m, &mut p);
             positive("stroke", "hand_radius_m", st.hand_radius_m, &mut p);
@@ -589,8 +629,14 @@ impl Scene {
         let mut stats = SceneStats::new(s.duration_s - s.warmup_s, s.cells);
         let mut truth = Vec::new();
         let mut buses = Vec::new();
+        // Reused from bus to bus: fresh memory for a million packets costs page faults.
+        let mut pending: Vec<Pending> = Vec::new();
+        let mut ready_ps: Vec<u64> = Vec::new();
+        let mut run_ends: Vec<usize> = Vec::new();
         for (bus_index, cells) in self.bus_cells().into_iter().enumerate() {
-            let mut pending: Vec<Pending> = Vec::new();
+            pending.clear();
+            ready_ps.clear();
+            run_ends.clear();
             let mut root_error_ppm = 0.0;
             for (position, index) in cells.clone().enumerate() {
                 let cell_id = (index + 1) as u16;
@@ -617,7 +663,6 @@ impl Scene {
                     truth: Vec::new(),
                 };
                 let delay_ns = c.bus.processing_ns + position as u64 * c.bus.hop_latency_ns;
-                let mut order = 0u32;
                 let mut k = 0u64;
                 loop {
                     let t_s = phase_s + k as f64 * cell_period_s;
@@ -641,15 +686,12 @@ impl Scene {
                     }
                     if options.keep_packets {
                         for bytes in packets.as_slice() {
+                            ready_ps.push((sample_time_ns + delay_ns) * 1000);
                             pending.push(Pending {
-                                ready_ps: (sample_time_ns + delay_ns) * 1000,
-                                position: position as u32,
-                                order,
                                 cell_id,
                                 bytes: *bytes,
                                 sample_time_ns,
                             });
-                            order += 1;
                         }
                     } else {
                         stats.offered += packets.as_slice().len() as u64;
@@ -658,14 +700,31 @@ impl Scene {
                 if keep_truth {
                     truth.push(trace);
                 }
+                run_ends.push(pending.len());
             }
             let bit_period = bit_period_ps(root_error_ppm);
             let mut fifo = RootFifo::new(c.bus.fifo_packets, bit_period);
-            pending.sort_unstable_by_key(|p| (p.ready_ps, p.position, p.order));
+            // Offer the packets to the root FIFO in arrival order: merge the cells' runs (each
+            // already in time order); ties go to the lower index, i.e. the cell nearer the
+            // root, then sending order. Arrival times sit in their own array so the merge
+            // reads little memory.
             let mut packets = Vec::with_capacity(pending.len());
             let mut dropped_per_cell = vec![0u64; cells.len()];
-            for p in &pending {
-                match fifo.offer(p.ready_ps) {
+            let mut heap = std::collections::BinaryHeap::with_capacity(run_ends.len());
+            let mut run_start = 0;
+            for (run, &end) in run_ends.iter().enumerate() {
+                if run_start < end {
+                    heap.push(Reverse((ready_ps[run_start], run_start as u32, run)));
+                }
+                run_start = end;
+            }
+            while let Some(Reverse((ready, i, run))) = heap.pop() {
+                let next = i as usize + 1;
+                if next < run_ends[run] {
+                    heap.push(Reverse((ready_ps[next], next as u32, run)));
+                }
+                let p = &pending[i as usize];
+                match fifo.offer(ready) {
                     Some(pin_edge_ps) => packets.push(BusPacket {
                         cell_id: p.cell_id,
                         bytes: p.bytes,
@@ -673,7 +732,7 @@ impl Scene {
                         pin_edge_ps,
                         bit_period_ps: bit_period,
                     }),
-                    None => dropped_per_cell[p.position as usize] += 1,
+                    None => dropped_per_cell[run] += 1,
                 }
             }
             if options.keep_packets {
@@ -697,9 +756,6 @@ impl Scene {
 }
 
 struct Pending {
-    ready_ps: u64,
-    position: u32,
-    order: u32,
     cell_id: u16,
     bytes: [u8; PACKET_LEN],
     sample_time_ns: u64,

@@ -40,12 +40,62 @@ pub struct SignalModel {
     blow_times_s: Vec<f64>,
 }
 
+/// A damped oscillation `a * exp(-(t - t0) / tau) * sin(w (t - t0) + phi)` evaluated at
+/// increasing times. A cell samples at a fixed period, so the step from one call to the next
+/// is nearly always the same: then one complex multiplication advances it instead of a sine
+/// and an exponential.
+#[derive(Debug, Clone, Copy)]
+struct Phasor {
+    re: f64,
+    im: f64,
+    last_s: f64,
+    decay_per_s: f64,
+    omega: f64,
+    step_s: f64,
+    step_re: f64,
+    step_im: f64,
+}
+
+impl Phasor {
+    fn new(amplitude: f64, frequency_hz: f64, phase: f64, decay_per_s: f64, start_s: f64) -> Self {
+        let (s, c) = phase.sin_cos();
+        Phasor {
+            re: amplitude * c,
+            im: amplitude * s,
+            last_s: start_s,
+            decay_per_s,
+            omega: TAU * frequency_hz,
+            // No step yet: time never runs backwards, so the first call computes one.
+            step_s: -1.0,
+            step_re: 0.0,
+            step_im: 0.0,
+        }
+    }
+
+    /// The value at `t_s` (not before the last call).
+    fn at(&mut self, t_s: f64) -> f64 {
+        let dt = t_s - self.last_s;
+        if dt != 0.0 {
+            if (dt - self.step_s).abs() > 1e-12 {
+                let (s, c) = (self.omega * dt).sin_cos();
+                let g = (-self.decay_per_s * dt).exp();
+                self.step_s = dt;
+                self.step_re = g * c;
+                self.step_im = g * s;
+            }
+            let re = self.re * self.step_re - self.im * self.step_im;
+            self.im = self.re * self.step_im + self.im * self.step_re;
+            self.re = re;
+            self.last_s = t_s;
+        }
+        self.im
+    }
+}
+
 #[derive(Debug, Clone, Copy)]
 struct Ringing {
     start_s: f64,
-    amplitude_g: [f64; 3],
-    frequency_hz: [f64; 3],
-    phase: [f64; 3],
+    axes: [Phasor; 3],
 }
 
 /// Per-cell state of the signal model: its place, static offsets and random stream.
@@ -55,7 +105,7 @@ pub struct CellSignal {
     rng: Rng,
     rest: [f64; Channel::COUNT],
     motion_axis: [f64; 3],
-    temperature_phase: f64,
+    temperature_drift: Option<Phasor>,
     next_blow: usize,
     ringing: Vec<Ringing>,
 }
@@ -143,13 +193,28 @@ impl SignalModel {
         rest[PROX] = rng.range(0.0, 450.0) / 65536.0;
         rest[T1] = rng.range(29.0, 32.0);
         let mut motion_axis = [rng.normal(), rng.normal(), rng.normal()];
-        let norm = motion_axis.iter().map(|a| a * a).sum::<f64>().sqrt().max(1e-9);
+        let norm = motion_axis
+            .iter()
+            .map(|a| a * a)
+            .sum::<f64>()
+            .sqrt()
+            .max(1e-9);
         for a in &mut motion_axis {
             *a /= norm;
         }
+        let temperature_phase = rng.range(0.0, TAU);
+        let temperature_drift = self.config.temperature.as_ref().map(|t| {
+            Phasor::new(
+                t.drift_c,
+                1.0 / t.drift_period_s,
+                temperature_phase,
+                0.0,
+                0.0,
+            )
+        });
         CellSignal {
             place,
-            temperature_phase: rng.range(0.0, TAU),
+            temperature_drift,
             rng,
             rest,
             motion_axis,
@@ -170,8 +235,8 @@ impl SignalModel {
         let f = cell.place.row_fraction;
 
         // Temperature: slow drift.
-        if let Some(t) = &c.temperature {
-            v[T1] += t.drift_c * (TAU * t_s / t.drift_period_s + cell.temperature_phase).sin();
+        if let Some(drift) = &mut cell.temperature_drift {
+            v[T1] += drift.at(t_s);
         }
 
         // Accelerations that are physical (part of the truth): smooth arm motion, its
@@ -232,19 +297,19 @@ impl SignalModel {
         if u >= 1.0 {
             return;
         }
-        // Point-to-point move: acceleration one sine period, speed a raised sine.
-        let accel = m.accel_g * (TAU * u).sin();
-        let speed = (PI * u).sin();
+        // Point-to-point move: acceleration one sine period, speed a raised sine
+        // (sin 2x = 2 sin x cos x: one call for both).
+        let (sin_half, cos_half) = (PI * u).sin_cos();
+        let accel = m.accel_g * 2.0 * sin_half * cos_half;
+        let speed = sin_half;
         let reach = 0.3 + 0.7 * cell.place.row_fraction;
-        for k in 0..3 {
-            dynamic[k] += reach
-                * (accel * cell.motion_axis[k] + m.vibration_g * speed * cell.rng.normal());
+        for (d, axis) in dynamic.iter_mut().zip(cell.motion_axis) {
+            *d += reach * (accel * axis + m.vibration_g * speed * cell.rng.normal());
         }
     }
 
     fn hammer(&self, h: &HammerConfig, cell: &mut CellSignal, t_s: f64, dynamic: &mut [f64; 3]) {
-        while cell.next_blow < self.blow_times_s.len() && self.blow_times_s[cell.next_blow] <= t_s
-        {
+        while cell.next_blow < self.blow_times_s.len() && self.blow_times_s[cell.next_blow] <= t_s {
             let start_s = self.blow_times_s[cell.next_blow];
             cell.next_blow += 1;
             let distance_m = self.distance_to_end_m(cell);
@@ -252,20 +317,20 @@ impl SignalModel {
             let r = &mut cell.rng;
             let ringing = Ringing {
                 start_s,
-                amplitude_g: [gain * r.normal(), gain * r.normal(), gain * r.normal()],
-                frequency_hz: [0, 1, 2].map(|_| r.range(h.ring_hz[0], h.ring_hz[1])),
-                phase: [0, 1, 2].map(|_| r.range(0.0, TAU)),
+                axes: [0, 1, 2].map(|_| {
+                    let amplitude_g = gain * r.normal();
+                    let frequency_hz = r.range(h.ring_hz[0], h.ring_hz[1]);
+                    let phase = r.range(0.0, TAU);
+                    Phasor::new(amplitude_g, frequency_hz, phase, 1.0 / h.decay_s, start_s)
+                }),
             };
             cell.ringing.push(ringing);
         }
         let horizon = 8.0 * h.decay_s;
         cell.ringing.retain(|r| t_s - r.start_s < horizon);
-        for r in &cell.ringing {
-            let age = t_s - r.start_s;
-            let envelope = (-age / h.decay_s).exp();
-            for k in 0..3 {
-                dynamic[k] +=
-                    r.amplitude_g[k] * envelope * (TAU * r.frequency_hz[k] * age + r.phase[k]).sin();
+        for r in &mut cell.ringing {
+            for (k, axis) in r.axes.iter_mut().enumerate() {
+                dynamic[k] += axis.at(t_s);
             }
         }
     }

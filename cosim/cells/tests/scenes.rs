@@ -110,7 +110,10 @@ fn a_fixed_seed_gives_the_same_packets_and_another_seed_does_not() {
     assert_eq!(packets(&a), packets(&b));
     let mut other = short("moving_arm", 1.2);
     other.config.scene.seed += 1;
-    assert_ne!(packets(&a), packets(&other.generate(&GenerateOptions::default())));
+    assert_ne!(
+        packets(&a),
+        packets(&other.generate(&GenerateOptions::default()))
+    );
 }
 
 /// One bus of 66 cells in data mode at `rate_hz`.
@@ -143,7 +146,10 @@ fn a_bus_below_20000_packets_per_second_delivers_every_sample_in_time() {
         let position = bus.cell_ids.iter().position(|&id| id == p.cell_id).unwrap() as u64;
         let ready_ps = (p.sample_time_ns + b.processing_ns + position * b.hop_latency_ns) * 1000;
         assert!(p.pin_edge_ps >= ready_ps);
-        assert!(p.pin_edge_ps >= previous_end_ps, "packets overlap on the pin");
+        assert!(
+            p.pin_edge_ps >= previous_end_ps,
+            "packets overlap on the pin"
+        );
         assert_eq!(p.pin_end_ps() - p.pin_edge_ps, BITS_PER_PACKET * 250_000);
         previous_end_ps = p.pin_end_ps();
     }
@@ -167,8 +173,15 @@ fn a_bus_above_20000_packets_per_second_drops_and_counts_every_drop() {
         .windows(2)
         .filter(|w| w[1].pin_edge_ps == w[0].pin_end_ps())
         .count();
-    assert!(bus.packets.windows(2).all(|w| w[1].pin_edge_ps >= w[0].pin_end_ps()));
-    assert!(back_to_back as u64 >= s.sent - 100, "{back_to_back} of {}", s.sent);
+    assert!(bus
+        .packets
+        .windows(2)
+        .all(|w| w[1].pin_edge_ps >= w[0].pin_end_ps()));
+    assert!(
+        back_to_back as u64 >= s.sent - 100,
+        "{back_to_back} of {}",
+        s.sent
+    );
     let span_ps = bus.packets.last().unwrap().pin_end_ps() - bus.packets[0].pin_edge_ps;
     assert!(span_ps / 50_000_000 >= s.sent - 100);
     // 26,400 offered, about 20,000 carried in the second plus what the FIFO held.
@@ -189,7 +202,11 @@ fn cells_keep_their_own_clocks() {
         assert!(times.len() >= 249 && times.len() <= 251, "{}", times.len());
         let period_ns = (times[times.len() - 1] - times[0]) as f64 / (times.len() - 1) as f64;
         // 8 ms +- 100 ppm (0.8 us), +- 1 ns of rounding.
-        assert!((period_ns - 8e6).abs() <= 801.0, "cell {}: {period_ns}", t.cell_id);
+        assert!(
+            (period_ns - 8e6).abs() <= 801.0,
+            "cell {}: {period_ns}",
+            t.cell_id
+        );
         assert!(times[0] < 8_000_000);
         phases.push(times[0]);
         // Temperature 2 reads 0, as on the real cells.
@@ -280,9 +297,21 @@ fn a_good_scene_parses() {
 #[test]
 fn scene_errors_name_file_line_and_problem() {
     let cases: [(String, usize, &str); 7] = [
-        (GOOD.replace("seed = 1", "seed = 1\nspeed = 3"), 4, "unknown field `speed`"),
-        (GOOD.replace("cells = 10", "cells = \"many\""), 4, "invalid type"),
-        (GOOD.replace("duration_s = 2.0", "duration_s = -2.0"), 2, "`duration_s` must be"),
+        (
+            GOOD.replace("seed = 1", "seed = 1\nspeed = 3"),
+            4,
+            "unknown field `speed`",
+        ),
+        (
+            GOOD.replace("cells = 10", "cells = \"many\""),
+            4,
+            "invalid type",
+        ),
+        (
+            GOOD.replace("duration_s = 2.0", "duration_s = -2.0"),
+            2,
+            "`duration_s` must be",
+        ),
         (
             GOOD.replace("cells = 10", "cells = 200"),
             5,
@@ -309,7 +338,10 @@ fn scene_errors_name_file_line_and_problem() {
         assert_eq!(e.file, "bad.toml");
         assert_eq!(e.line, Some(line), "{e}");
         assert!(e.message.contains(what), "{e}");
-        assert!(e.to_string().starts_with(&format!("bad.toml:{line}: ")), "{e}");
+        assert!(
+            e.to_string().starts_with(&format!("bad.toml:{line}: ")),
+            "{e}"
+        );
     }
 }
 
