@@ -191,6 +191,10 @@ pub struct HammerConfig {
     /// normalised (0 for none).
     #[serde(default)]
     pub proximity: f64,
+    /// Impact force each blow puts on the force sensors at the end effector, normalised
+    /// (0 for none); it fades within 20 ms and over 5 cm of skin.
+    #[serde(default)]
+    pub force: f64,
 }
 
 /// `[stroke]`: hands stroking a region: a contact patch moving along the limb.
@@ -412,6 +416,13 @@ impl Scene {
         let s = &c.scene;
         let mut p = Vec::new();
         positive("scene", "duration_s", s.duration_s, &mut p);
+        if s.duration_s > 3_600.0 {
+            p.push((
+                "scene",
+                "duration_s",
+                format!("`duration_s` must be at most 3600, found {}", s.duration_s),
+            ));
+        }
         non_negative("scene", "warmup_s", s.warmup_s, &mut p);
         if s.warmup_s >= s.duration_s {
             p.push((
@@ -533,6 +544,7 @@ impl Scene {
             positive("hammer", "decay_s", h.decay_s, &mut p);
             non_negative("hammer", "attenuation_per_m", h.attenuation_per_m, &mut p);
             non_negative("hammer", "proximity", h.proximity, &mut p);
+            non_negative("hammer", "force", h.force, &mut p);
             if !(h.ring_hz[0] > 0.0 && h.ring_hz[0] <= h.ring_hz[1] && h.ring_hz[1].is_finite()) {
                 p.push((
                     "hammer",

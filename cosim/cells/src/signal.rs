@@ -249,15 +249,19 @@ impl SignalModel {
         }
         if let Some(h) = &c.hammer {
             self.hammer(h, cell, t_s, &mut dynamic);
-            if h.proximity > 0.0 {
-                v[PROX] += self.hammer_proximity(h, cell, t_s);
+            if h.proximity > 0.0 || h.force > 0.0 {
+                self.hammer_near_end(h, cell, t_s, &mut v);
             }
         }
         if let Some(st) = &c.stroke {
-            if in_region(st.region, f) {
+            // The hand is felt a little beyond the region it strokes.
+            let length_m = self.rows as f64 * c.scene.cell_pitch_m;
+            let reach_m = st.hand_radius_m + c.scene.cell_pitch_m + 8.0 * st.proximity_range_m;
+            let x = cell.place.x_m;
+            if x >= st.region[0] * length_m - reach_m && x <= st.region[1] * length_m + reach_m {
                 let contact = self.stroke(st, cell, t_s, &mut v);
                 // The stroked limb shakes while a hand rubs it.
-                if contact && st.vibration_g > 0.0 {
+                if contact && in_region(st.region, f) && st.vibration_g > 0.0 {
                     for d in &mut dynamic {
                         *d += st.vibration_g * cell.rng.normal();
                     }
@@ -335,23 +339,39 @@ impl SignalModel {
         }
     }
 
-    /// The hammer head swings in to each blow and out again: a proximity pulse 0.1 s wide
-    /// on the cells near the end effector.
-    fn hammer_proximity(&self, h: &HammerConfig, cell: &CellSignal, t_s: f64) -> f64 {
-        const WIDTH_S: f64 = 0.1;
+    /// Near the end effector the hammer is felt directly: its head swings in to each blow and
+    /// out again (a proximity pulse 0.1 s wide) and the impact presses on the force sensors
+    /// (a force step decaying in 20 ms). Both fade over 5 cm of skin.
+    fn hammer_near_end(
+        &self,
+        h: &HammerConfig,
+        cell: &CellSignal,
+        t_s: f64,
+        v: &mut [f64; Channel::COUNT],
+    ) {
+        const SWING_S: f64 = 0.1;
+        const IMPACT_S: f64 = 0.02;
         const RANGE_M: f64 = 0.05;
         let distance_m = self.distance_to_end_m(cell);
         if distance_m > 10.0 * RANGE_M {
-            return 0.0;
+            return;
         }
-        let mut p = 0.0;
+        let reach = (-distance_m / RANGE_M).exp();
+        let mut swing = 0.0;
+        let mut impact = 0.0;
         for i in [cell.next_blow.wrapping_sub(1), cell.next_blow] {
             if let Some(&blow_s) = self.blow_times_s.get(i) {
-                let u = (t_s - blow_s) / WIDTH_S;
-                p += (-u * u).exp();
+                let u = (t_s - blow_s) / SWING_S;
+                swing += (-u * u).exp();
+                if t_s >= blow_s {
+                    impact += (-(t_s - blow_s) / IMPACT_S).exp();
+                }
             }
         }
-        h.proximity * (-distance_m / RANGE_M).exp() * p
+        v[PROX] += h.proximity * reach * swing;
+        for k in 0..3 {
+            v[F1 + k] += h.force * reach * impact;
+        }
     }
 
     fn distance_to_end_m(&self, cell: &CellSignal) -> f64 {
@@ -429,12 +449,15 @@ impl SignalModel {
         v: &mut [f64; Channel::COUNT],
     ) -> bool {
         let pitch = self.config.scene.cell_pitch_m;
+        let circumference_m = self.config.scene.columns.max(1) as f64 * pitch;
         let mut contact = false;
         for hand in 0..st.hands {
             let h = self.hand(st, hand, t_s);
             contact |= h.height_m <= 0.0;
             let dx = cell.place.x_m - h.x_m;
-            let dy = cell.place.y_m - h.y_m;
+            // Around the limb the distance wraps: the skin closes on itself.
+            let dy = (cell.place.y_m - h.y_m + 0.5 * circumference_m).rem_euclid(circumference_m)
+                - 0.5 * circumference_m;
             let lateral = (dx * dx + dy * dy).sqrt();
             let edge = (lateral - st.hand_radius_m).max(0.0);
             let distance = (edge * edge + h.height_m * h.height_m).sqrt();

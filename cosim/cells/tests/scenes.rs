@@ -3,7 +3,7 @@
 use skinbox_cells::bus::{BITS_PER_PACKET, MAX_CELLS_PER_BUS};
 use skinbox_cells::calibration::{calibrate, Figure, FACTOR, SEED_TABLE};
 use skinbox_cells::{scenes_dir, GenerateOptions, Mode, Scene};
-use skinbox_protocol::{CellRepr, Channel};
+use skinbox_protocol::{CellRepr, Channel, Modality};
 use std::sync::OnceLock;
 
 const SCENES: [&str; 8] = [
@@ -256,9 +256,17 @@ fn events_rebuild_the_true_signal() {
     }
     assert_eq!(next, packets.len());
     // Threshold, half a step of rounding and five sigma of sensor noise, in steps.
-    let noise_steps = [1.0, 1.0, 1.0, 0.25, 0.25, 0.25, 0.5, 0.25, 0.0];
+    let n = &scene.config.noise;
     for c in Channel::ALL {
-        let bound = f64::from(c.table_i_threshold_raw()) + 0.5 + 5.0 * noise_steps[c.index()];
+        let sigma_units = match c.modality() {
+            Modality::Acceleration => n.accel_g,
+            Modality::Force => n.force,
+            Modality::Proximity => n.proximity,
+            Modality::Temperature if c == Channel::Temperature1 => n.temperature_c,
+            Modality::Temperature => 0.0,
+        };
+        let bound =
+            f64::from(c.table_i_threshold_raw()) + 0.5 + 5.0 * sigma_units / c.units_per_lsb();
         assert!(
             worst[c.index()] <= bound,
             "{c}: {} steps off, bound {bound}",
