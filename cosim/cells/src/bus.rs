@@ -123,6 +123,11 @@ impl RootFifo {
         Some(start)
     }
 
+    /// Bit period of the UART, ps.
+    pub fn bit_period_ps(&self) -> u32 {
+        self.bit_period_ps
+    }
+
     /// Counters so far.
     pub fn stats(&self) -> &BusStats {
         &self.stats

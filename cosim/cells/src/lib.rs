@@ -9,6 +9,8 @@
 //!   every bus's packet stream, the rates and the reconstruction error;
 //! - [`calibration`]: the scenes against the papers' Fig. 8 table.
 
+#![warn(missing_docs)]
+
 pub mod bus;
 pub mod calibration;
 pub mod cell;
@@ -18,7 +20,9 @@ pub mod signal;
 
 pub use bus::{BusPacket, BusStats, RootFifo};
 pub use cell::{Cell, CellConfig, Mode, SendOnDelta, Thresholds};
-pub use scene::{BusStream, CellTruth, GenerateOptions, Generated, Scene, SceneError, SceneStats};
+pub use scene::{
+    BusStream, CellClock, CellTruth, GenerateOptions, Generated, Scene, SceneError, SceneStats,
+};
 
 /// Directory of the scene files shipped with the project.
 pub fn scenes_dir() -> std::path::PathBuf {

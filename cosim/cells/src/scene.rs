@@ -620,6 +620,19 @@ impl Scene {
             .collect()
     }
 
+    /// The clock of the cell at `index` (0-based), drawn from the scene seed.
+    pub fn cell_clock(&self, index: usize) -> CellClock {
+        let c = &self.config;
+        let mut rng = Rng::for_stream(c.scene.seed ^ 0xC10C, index as u64);
+        let drift_ppm = rng.range(-c.bus.clock_drift_ppm, c.bus.clock_drift_ppm);
+        let uart_error_ppm = rng.range(-c.bus.uart_error_ppm, c.bus.uart_error_ppm);
+        CellClock {
+            phase_s: rng.range(0.0, 1.0 / c.scene.sample_rate_hz),
+            drift_ppm,
+            uart_error_ppm,
+        }
+    }
+
     /// The bus of each cell position: cells `0..cells` are dealt to buses in contiguous runs
     /// of at most `ceil(cells / buses)`, the first of each run being its root.
     pub fn bus_cells(&self) -> Vec<std::ops::Range<usize>> {
@@ -650,17 +663,16 @@ impl Scene {
             ready_ps.clear();
             run_ends.clear();
             let mut root_error_ppm = 0.0;
+            let mut cell_uart_error_ppm = Vec::with_capacity(cells.len());
             for (position, index) in cells.clone().enumerate() {
                 let cell_id = (index + 1) as u16;
-                // Clock of this cell: its own phase, sample-rate drift and UART error.
-                let mut clock = Rng::for_stream(s.seed ^ 0xC10C, index as u64);
-                let drift_ppm = clock.range(-c.bus.clock_drift_ppm, c.bus.clock_drift_ppm);
-                let uart_error_ppm = clock.range(-c.bus.uart_error_ppm, c.bus.uart_error_ppm);
-                let phase_s = clock.range(0.0, period_s);
+                let clock = self.cell_clock(index);
                 if position == 0 {
-                    root_error_ppm = uart_error_ppm;
+                    root_error_ppm = clock.uart_error_ppm;
                 }
-                let cell_period_s = period_s / (1.0 + drift_ppm * 1e-6);
+                cell_uart_error_ppm.push(clock.uart_error_ppm);
+                let phase_s = clock.phase_s;
+                let cell_period_s = period_s / (1.0 + clock.drift_ppm * 1e-6);
                 let mut cell = Cell::new(CellConfig {
                     cell_id,
                     mode: s.mode,
@@ -716,37 +728,14 @@ impl Scene {
             }
             let bit_period = bit_period_ps(root_error_ppm);
             let mut fifo = RootFifo::new(c.bus.fifo_packets, bit_period);
-            // Offer the packets to the root FIFO in arrival order: merge the cells' runs (each
-            // already in time order); ties go to the lower index, i.e. the cell nearer the
-            // root, then sending order. Arrival times sit in their own array so the merge
-            // reads little memory.
-            let mut packets = Vec::with_capacity(pending.len());
             let mut dropped_per_cell = vec![0u64; cells.len()];
-            let mut heap = std::collections::BinaryHeap::with_capacity(run_ends.len());
-            let mut run_start = 0;
-            for (run, &end) in run_ends.iter().enumerate() {
-                if run_start < end {
-                    heap.push(Reverse((ready_ps[run_start], run_start as u32, run)));
-                }
-                run_start = end;
-            }
-            while let Some(Reverse((ready, i, run))) = heap.pop() {
-                let next = i as usize + 1;
-                if next < run_ends[run] {
-                    heap.push(Reverse((ready_ps[next], next as u32, run)));
-                }
-                let p = &pending[i as usize];
-                match fifo.offer(ready) {
-                    Some(pin_edge_ps) => packets.push(BusPacket {
-                        cell_id: p.cell_id,
-                        bytes: p.bytes,
-                        sample_time_ns: p.sample_time_ns,
-                        pin_edge_ps,
-                        bit_period_ps: bit_period,
-                    }),
-                    None => dropped_per_cell[run] += 1,
-                }
-            }
+            let packets = to_pin(
+                &mut fifo,
+                &pending,
+                &ready_ps,
+                &run_ends,
+                &mut dropped_per_cell,
+            );
             if options.keep_packets {
                 stats.offered += pending.len() as u64;
             }
@@ -754,6 +743,7 @@ impl Scene {
                 bus: bus_index,
                 cell_ids: cells.map(|i| (i + 1) as u16).collect(),
                 root_uart_error_ppm: root_error_ppm,
+                cell_uart_error_ppm,
                 packets,
                 stats: fifo.stats().clone(),
                 dropped_per_cell,
@@ -767,6 +757,57 @@ impl Scene {
     }
 }
 
+/// Offers a bus's packets to its root FIFO in arrival order and returns those that reach the
+/// pin. `pending` holds the cells' runs one after the other, each in time order and ending at
+/// `run_ends[position]`; `ready_ps[i]` is the arrival of `pending[i]` at the root. The runs
+/// are merged; ties go to the lower index, i.e. the cell nearer the root, then sending
+/// order. Arrival times sit in their own array so the merge reads little memory.
+fn to_pin(
+    fifo: &mut RootFifo,
+    pending: &[Pending],
+    ready_ps: &[u64],
+    run_ends: &[usize],
+    dropped_per_cell: &mut [u64],
+) -> Vec<BusPacket> {
+    let mut packets = Vec::with_capacity(pending.len());
+    let mut heap = std::collections::BinaryHeap::with_capacity(run_ends.len());
+    let mut run_start = 0;
+    for (run, &end) in run_ends.iter().enumerate() {
+        if run_start < end {
+            heap.push(Reverse((ready_ps[run_start], run_start, run)));
+        }
+        run_start = end;
+    }
+    while let Some(Reverse((ready, i, run))) = heap.pop() {
+        if i + 1 < run_ends[run] {
+            heap.push(Reverse((ready_ps[i + 1], i + 1, run)));
+        }
+        let p = &pending[i];
+        match fifo.offer(ready) {
+            Some(pin_edge_ps) => packets.push(BusPacket {
+                cell_id: p.cell_id,
+                bytes: p.bytes,
+                sample_time_ns: p.sample_time_ns,
+                pin_edge_ps,
+                bit_period_ps: fifo.bit_period_ps(),
+            }),
+            None => dropped_per_cell[run] += 1,
+        }
+    }
+    packets
+}
+
+/// A cell's clock: when it samples and how fast its UART runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellClock {
+    /// Time of the first sample, s (uniform in one sample period).
+    pub phase_s: f64,
+    /// Sample-rate error, ppm (uniform in +-`clock_drift_ppm`; positive is fast).
+    pub drift_ppm: f64,
+    /// UART clock error, ppm (uniform in +-`uart_error_ppm`; positive is fast).
+    pub uart_error_ppm: f64,
+}
+
 struct Pending {
     cell_id: u16,
     bytes: [u8; PACKET_LEN],
@@ -776,7 +817,8 @@ struct Pending {
 /// What [`Scene::generate`] keeps.
 #[derive(Debug, Clone)]
 pub struct GenerateOptions {
-    /// Run the buses and keep every packet (off: only count, for rate studies).
+    /// Run the buses and keep every packet. Off: only count (for rate studies); the bus
+    /// streams then hold no packets and zero counters.
     pub keep_packets: bool,
     /// Cells (by id) whose true signals are kept sample by sample.
     pub truth_cells: Vec<u16>,
@@ -800,6 +842,8 @@ pub struct BusStream {
     pub cell_ids: Vec<u16>,
     /// UART clock error of the root cell, which drives the pin, ppm.
     pub root_uart_error_ppm: f64,
+    /// UART clock error of every cell, in chain order, ppm (the root's is the pin's).
+    pub cell_uart_error_ppm: Vec<f64>,
     /// Packets in pin order (ascending `pin_edge_ps`, back to back at best).
     pub packets: Vec<BusPacket>,
     /// Offered, sent and dropped packets, FIFO peak.

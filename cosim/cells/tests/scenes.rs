@@ -368,3 +368,32 @@ fn a_bad_region_and_a_missing_file_are_reported() {
     let e = error_of("[scene\nduration_s = 1.0\n");
     assert_eq!(e.line, Some(1), "{e}");
 }
+
+#[test]
+fn the_pin_runs_on_the_root_cells_uart_clock() {
+    let scene = short("moving_arm", 1.0);
+    let g = scene.generate(&GenerateOptions::default());
+    let mut roots = Vec::new();
+    for bus in &g.buses {
+        assert_eq!(bus.cell_uart_error_ppm.len(), bus.cell_ids.len());
+        assert!(bus
+            .cell_uart_error_ppm
+            .iter()
+            .all(|e| e.abs() <= scene.config.bus.uart_error_ppm));
+        assert_eq!(bus.root_uart_error_ppm, bus.cell_uart_error_ppm[0]);
+        let root = skinbox_cells::bus::bit_period_ps(bus.root_uart_error_ppm);
+        assert!(!bus.packets.is_empty());
+        assert!(bus.packets.iter().all(|p| p.bit_period_ps == root));
+        // +-1 % around 250 ns.
+        assert!((247_524..=252_526).contains(&root), "{root}");
+        roots.push(root);
+        assert_eq!(
+            scene
+                .cell_clock(usize::from(bus.cell_ids[0]) - 1)
+                .uart_error_ppm,
+            bus.root_uart_error_ppm
+        );
+    }
+    roots.dedup();
+    assert_eq!(roots.len(), g.buses.len(), "buses share a clock: {roots:?}");
+}
