@@ -8,6 +8,26 @@
 //! - [`scene`]: scene files (`cosim/scenes/*.toml`) and [`Scene::generate`], which gives
 //!   every bus's packet stream, the rates and the reconstruction error;
 //! - [`calibration`]: the scenes against the papers' Fig. 8 table.
+//!
+//! What the co-simulation drives onto the box pins:
+//!
+//! ```
+//! use skinbox_cells::{scenes_dir, GenerateOptions, Scene};
+//!
+//! let mut scene = Scene::load(&scenes_dir().join("force_test_stand.toml")).unwrap();
+//! scene.config.scene.duration_s = 2.0;
+//! scene.check().unwrap();
+//! let generated = scene.generate(&GenerateOptions::default());
+//! for bus in &generated.buses {
+//!     for p in &bus.packets {
+//!         // Bit k of the packet (k = 0: the first start bit) starts at this time, in ps.
+//!         let bit_ps = |k: u64| p.pin_edge_ps + k * u64::from(p.bit_period_ps);
+//!         assert!(bit_ps(0) / 1000 >= p.sample_time_ns);
+//!         assert_eq!(p.bytes.len(), 20);
+//!     }
+//!     assert_eq!(bus.stats.dropped, 0);
+//! }
+//! ```
 
 #![warn(missing_docs)]
 

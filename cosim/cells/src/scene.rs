@@ -369,9 +369,10 @@ impl Scene {
     pub fn parse(text: &str, file: &str) -> Result<Scene, SceneError> {
         let mut config: SceneConfig = toml::from_str(text).map_err(|e| SceneError {
             file: file.to_string(),
-            line: e
-                .span()
-                .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1),
+            line: e.span().map(|s| {
+                let before = text.get(..s.start).unwrap_or(text);
+                before.matches('\n').count() + 1
+            }),
             message: e.message().trim().to_string(),
         })?;
         if config.scene.name.is_empty() {

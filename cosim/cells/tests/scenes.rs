@@ -397,3 +397,53 @@ fn the_pin_runs_on_the_root_cells_uart_clock() {
     roots.dedup();
     assert_eq!(roots.len(), g.buses.len(), "buses share a clock: {roots:?}");
 }
+
+#[test]
+fn mangled_scene_files_give_errors_not_panics() {
+    // Every value of a good file replaced, one at a time, by something wrong.
+    let wrong = [
+        "-1",
+        "0",
+        "nan",
+        "inf",
+        "-inf",
+        "1e309",
+        "\"x\"",
+        "[",
+        "[1.0]",
+        "99999999999999999999",
+        "true",
+        "é",
+    ];
+    let good = format!(
+        "{GOOD}\n[stroke]\nregion = [0.1, 0.2]\nhands = 1\nspeed_m_per_s = 0.05\n\
+         return_speed_factor = 3.0\nlower_s = 0.3\nlift_height_m = 0.08\nhand_radius_m = 0.04\n\
+         force = 0.1\nproximity = 0.5\nproximity_range_m = 0.015\nvibration_g = 0.0\n\
+         \n[hammer]\nblows_per_s = 1.0\npeak_g = 0.1\nring_hz = [15.0, 45.0]\ndecay_s = 0.2\n\
+         attenuation_per_m = 1.0\n"
+    );
+    Scene::parse(&good, "good.toml").unwrap();
+    let lines: Vec<&str> = good.lines().collect();
+    let mut rejected = 0;
+    for (i, line) in lines.iter().enumerate() {
+        let Some((key, _)) = line.split_once(" = ") else {
+            continue;
+        };
+        for w in wrong {
+            let mut mangled = lines.clone();
+            let replaced = format!("{key} = {w}");
+            mangled[i] = &replaced;
+            match Scene::parse(&mangled.join("\n"), "m.toml") {
+                Err(e) => {
+                    rejected += 1;
+                    assert!(e.line.is_some(), "{e}");
+                    assert!(e.to_string().starts_with("m.toml:"), "{e}");
+                }
+                // Zero is legal for a seed, a noise level or a stimulus amplitude; nothing
+                // else on this list is.
+                Ok(_) => assert_eq!(w, "0", "{replaced} was accepted"),
+            }
+        }
+    }
+    assert_eq!(rejected, 300);
+}
