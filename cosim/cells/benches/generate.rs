@@ -16,11 +16,12 @@ fn thread_cpu_s() -> Option<f64> {
 }
 
 fn main() {
-    // `cargo bench` passes `--bench`; any other argument picks scenes by name.
-    let filters: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| !a.starts_with("--"))
-        .collect();
+    // `cargo bench` passes `--bench`; without it (`cargo test --all-targets`) this is a smoke
+    // test on one bus. Any other argument picks scenes by name.
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let full = args.iter().any(|a| a == "--bench");
+    let (cells, buses, runs) = if full { (5_742, 87, 3) } else { (66, 1, 1) };
+    let filters: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
     for (name, mode) in [
         ("moving_arm", Mode::Event),
         ("moving_arm", Mode::Data),
@@ -33,8 +34,8 @@ fn main() {
         let mut scene = Scene::load(&scenes_dir().join(format!("{name}.toml")))
             .unwrap_or_else(|e| panic!("{e}"));
         let s = &mut scene.config.scene;
-        s.cells = 5_742;
-        s.buses = 87; // 66 cells each
+        s.cells = cells;
+        s.buses = buses; // 66 cells each
         s.columns = 60;
         s.sample_rate_hz = 250.0;
         s.duration_s = 1.0;
@@ -45,7 +46,7 @@ fn main() {
         let mut best_cpu_s = f64::INFINITY;
         let mut packets = 0;
         let mut dropped = 0;
-        for _ in 0..3 {
+        for _ in 0..runs {
             let start = Instant::now();
             let cpu_start = thread_cpu_s();
             let g = scene.generate(&GenerateOptions::default());
@@ -57,7 +58,7 @@ fn main() {
             dropped = g.buses.iter().map(|b| b.stats.dropped).sum::<u64>();
         }
         println!(
-            "{{\"scene\": \"{name}\", \"mode\": \"{mode:?}\", \"cells\": 5742, \
+            "{{\"scene\": \"{name}\", \"mode\": \"{mode:?}\", \"cells\": {cells}, \
              \"sample_rate_hz\": 250, \"simulated_s\": 1.0, \"wall_s\": {best_s:.3}, \
              \"cpu_s\": {best_cpu_s:.3}, \"packets\": {packets}, \"dropped\": {dropped}}}"
         );

@@ -246,7 +246,7 @@ impl Cell {
         for (i, c) in Channel::ALL.into_iter().enumerate() {
             raw[i] = quantise(c, values_units[i]);
         }
-        self.sample_raw(&raw)
+        self.send(&raw)
     }
 
     /// One sample of raw values (saturated to the sensor ranges first): a data packet in data
@@ -257,7 +257,11 @@ impl Cell {
             let r = sensor_range_raw(c);
             clamped[i] = raw[i].clamp(*r.start(), *r.end());
         }
-        let raw = clamped;
+        self.send(&clamped)
+    }
+
+    /// Sends a sample already inside the sensor ranges.
+    fn send(&mut self, raw: &[i32; Channel::COUNT]) -> SamplePackets {
         let id = self.config.cell_id;
         let mut out = SamplePackets::default();
         match self.config.mode {
@@ -273,7 +277,7 @@ impl Cell {
                 out.fired = ChannelMask::ALL;
             }
             Mode::Event => {
-                let fired = self.send_on_delta.step(&raw);
+                let fired = self.send_on_delta.step(raw);
                 if fired.is_empty() {
                     return out;
                 }

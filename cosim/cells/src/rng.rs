@@ -38,6 +38,7 @@ impl Rng {
     }
 
     /// 64 random bits.
+    #[inline]
     pub fn next_u64(&mut self) -> u64 {
         let result = (self.s[0].wrapping_add(self.s[3]))
             .rotate_left(23)
@@ -53,6 +54,7 @@ impl Rng {
     }
 
     /// Uniform in [0, 1).
+    #[inline]
     pub fn uniform(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
@@ -64,16 +66,23 @@ impl Rng {
 
     /// Standard normal, by the ziggurat method (Marsaglia and Tsang, 2000): exact, tails
     /// included, which matters for rare noise events; about one table look-up per draw.
+    #[inline]
     pub fn normal(&mut self) -> f64 {
         let zig = ziggurat();
+        let bits = self.next_u64();
+        let i = (bits & 0xff) as usize;
+        let u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+        let x = u * zig.x[i];
+        if x.abs() < zig.x[i + 1] {
+            return x;
+        }
+        self.normal_slow(zig, i, u, x)
+    }
+
+    /// The rare draws (about 1 %) outside a layer's rectangle.
+    #[cold]
+    fn normal_slow(&mut self, zig: &Ziggurat, mut i: usize, mut u: f64, mut x: f64) -> f64 {
         loop {
-            let bits = self.next_u64();
-            let i = (bits & 0xff) as usize;
-            let u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
-            let x = u * zig.x[i];
-            if x.abs() < zig.x[i + 1] {
-                return x;
-            }
             if i == 0 {
                 // The tail beyond R (Marsaglia 1964).
                 loop {
@@ -85,6 +94,13 @@ impl Rng {
                 }
             }
             if zig.f[i + 1] + (zig.f[i] - zig.f[i + 1]) * self.uniform() < (-0.5 * x * x).exp() {
+                return x;
+            }
+            let bits = self.next_u64();
+            i = (bits & 0xff) as usize;
+            u = 2.0 * ((bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)) - 1.0;
+            x = u * zig.x[i];
+            if x.abs() < zig.x[i + 1] {
                 return x;
             }
         }
