@@ -1,6 +1,7 @@
 //! Subcommands of `skinbox`: argument parsing here, the work in the library crates.
 
 mod bench;
+mod calibrate;
 mod capture;
 mod decode;
 mod examples;
@@ -39,6 +40,8 @@ pub enum Command {
     /// Benchmarks: `skinbox bench <what>`.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Check the cell models' scenes against the papers' event rates (Fig. 8).
+    Calibrate(calibrate::Args),
 }
 
 /// Runs one parsed command line.
@@ -51,6 +54,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Decode(args) => decode::run(args, cli.json),
         Command::Stats(args) => stats::run(args, cli.json),
         Command::Bench(what) => bench::run(what, cli.json),
+        Command::Calibrate(args) => calibrate::run(args, cli.json),
     }
 }
 

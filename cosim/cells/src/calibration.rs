@@ -1,0 +1,118 @@
+//! Calibration of the scenes to the source papers: event rates per cell per second of each
+//! modality and the packet rate in percent of data mode, at 125 Hz with 260 cells in event
+//! mode (Bergner et al., 2nd paper, Fig. 8), and the reconstruction error per channel.
+
+use crate::scene::{GenerateOptions, Scene, SceneError, SceneStats};
+use skinbox_protocol::{Channel, Modality};
+
+/// One scene's row of the seed table: events per cell per second (acceleration, force,
+/// proximity, temperature) and packets in percent of data mode.
+#[derive(Debug, Clone, Copy)]
+pub struct SeedRow {
+    /// Scene file stem.
+    pub scene: &'static str,
+    /// Events per cell per second, in [`Modality::ALL`] order.
+    pub events_per_cell_s: [f64; 4],
+    /// Event packets in percent of data mode.
+    pub packet_rate_pct: f64,
+}
+
+/// The papers' Fig. 8 (2nd paper), as the issue on cell models gives it.
+pub const SEED_TABLE: [SeedRow; 6] = [
+    SeedRow {
+        scene: "idle",
+        events_per_cell_s: [1.23, 0.21, 4.17, 0.15],
+        packet_rate_pct: 4.57,
+    },
+    SeedRow {
+        scene: "stroking_upper_arm",
+        events_per_cell_s: [9.33, 1.95, 17.9, 0.20],
+        packet_rate_pct: 20.1,
+    },
+    SeedRow {
+        scene: "stroking_arm",
+        events_per_cell_s: [14.6, 3.09, 26.2, 0.20],
+        packet_rate_pct: 29.9,
+    },
+    SeedRow {
+        scene: "hammering_end_effector",
+        events_per_cell_s: [137.0, 0.57, 5.69, 0.29],
+        packet_rate_pct: 71.7,
+    },
+    SeedRow {
+        scene: "moving_arm",
+        events_per_cell_s: [174.0, 1.85, 4.65, 0.36],
+        packet_rate_pct: 76.6,
+    },
+    SeedRow {
+        scene: "reactive_control",
+        events_per_cell_s: [86.0, 3.66, 8.60, 0.27],
+        packet_rate_pct: 51.8,
+    },
+];
+
+/// Largest allowed ratio between model and seed (either way).
+pub const FACTOR: f64 = 1.25;
+
+/// One figure: the seed's value and the model's.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Figure {
+    /// Scene file stem.
+    pub scene: String,
+    /// `events_per_cell_s_<modality>`, `packet_rate_pct` or `rms_error_pct_<channel>`.
+    pub quantity: String,
+    /// The papers' value, if they give one.
+    pub seed: Option<f64>,
+    /// The model's value.
+    pub model: f64,
+}
+
+impl Figure {
+    /// Model over seed, if there is a seed value.
+    pub fn ratio(&self) -> Option<f64> {
+        self.seed.map(|s| self.model / s)
+    }
+}
+
+/// The figures of one generated scene: the 5 rate figures against `row`, then the RMS
+/// reconstruction error of every channel.
+pub fn figures(row: &SeedRow, stats: &SceneStats) -> Vec<Figure> {
+    let mut out = Vec::new();
+    for (i, m) in Modality::ALL.into_iter().enumerate() {
+        out.push(Figure {
+            scene: row.scene.to_string(),
+            quantity: format!("events_per_cell_s_{}", m.name()),
+            seed: Some(row.events_per_cell_s[i]),
+            model: stats.events_per_cell_s(m),
+        });
+    }
+    out.push(Figure {
+        scene: row.scene.to_string(),
+        quantity: "packet_rate_pct".to_string(),
+        seed: Some(row.packet_rate_pct),
+        model: stats.packet_rate_pct(),
+    });
+    for c in Channel::ALL {
+        out.push(Figure {
+            scene: row.scene.to_string(),
+            quantity: format!("rms_error_pct_{}", c.name()),
+            seed: None,
+            model: stats.rms_error_pct(c),
+        });
+    }
+    out
+}
+
+/// Loads each seed scene from `dir`, generates it (counting only) and returns its figures.
+pub fn calibrate(dir: &std::path::Path) -> Result<Vec<Figure>, SceneError> {
+    let mut out = Vec::new();
+    for row in &SEED_TABLE {
+        let scene = Scene::load(&dir.join(format!("{}.toml", row.scene)))?;
+        let generated = scene.generate(&GenerateOptions {
+            keep_packets: false,
+            truth_cells: Vec::new(),
+        });
+        out.extend(figures(row, &generated.stats));
+    }
+    Ok(out)
+}

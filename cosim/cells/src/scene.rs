@@ -1,0 +1,967 @@
+//! Scenes: TOML files naming the cells, buses, mode, thresholds, duration, seed and stimulus,
+//! and the generation of each bus's packet stream from them.
+//!
+//! A scene file has a `[scene]` table and optional tables `[bus]`, `[thresholds]`,
+//! `[noise]`, `[temperature]`, `[motion]`, `[hammer]`, `[stroke]`, `[crosstalk]` and
+//! `[force_stand]` (see `cosim/scenes/*.toml` and `docs/scenes.md`). Unknown keys are errors;
+//! every error names the file, the line and what is wrong.
+
+use crate::bus::{bit_period_ps, BusPacket, BusStats, RootFifo, MAX_CELLS_PER_BUS};
+use crate::cell::{full_range_units, Cell, CellConfig, Mode, Thresholds};
+use crate::rng::Rng;
+use crate::signal::SignalModel;
+use serde::Deserialize;
+use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::{Channel, ChannelMask, Modality};
+use std::cmp::Reverse;
+use std::fmt;
+use std::path::Path;
+
+/// A scene file that could not be used: which file, which line, what is wrong.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub struct SceneError {
+    /// File name as given.
+    pub file: String,
+    /// 1-based line, when the problem has one.
+    pub line: Option<usize>,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.line {
+            Some(line) => write!(f, "{}:{}: {}", self.file, line, self.message),
+            None => write!(f, "{}: {}", self.file, self.message),
+        }
+    }
+}
+
+/// `[scene]`: what runs, for how long, on how many cells.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneTable {
+    /// Scene name (defaults to the file stem).
+    #[serde(default)]
+    pub name: String,
+    /// Simulated duration, s.
+    pub duration_s: f64,
+    /// Start of the measurement window, s (the first samples send every channel).
+    #[serde(default = "default_warmup_s")]
+    pub warmup_s: f64,
+    /// Seed of every random choice of the scene.
+    pub seed: u64,
+    /// Number of cells (ids 1..=cells).
+    pub cells: usize,
+    /// Number of buses; cells are dealt to them in contiguous runs.
+    pub buses: usize,
+    /// Data or event mode.
+    pub mode: Mode,
+    /// Nominal sample rate of every cell, Hz.
+    pub sample_rate_hz: f64,
+    /// Cells around the limb.
+    #[serde(default = "default_columns")]
+    pub columns: usize,
+    /// Distance between cell centres, m.
+    #[serde(default = "default_pitch_m")]
+    pub cell_pitch_m: f64,
+}
+
+fn default_warmup_s() -> f64 {
+    1.0
+}
+fn default_columns() -> usize {
+    10
+}
+fn default_pitch_m() -> f64 {
+    0.025
+}
+
+/// `[bus]`: relaying and UART.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BusConfig {
+    /// From a sample to its packet ready in the cell, ns.
+    pub processing_ns: u64,
+    /// Store-and-forward delay per relaying cell, ns (one 50 us packet plus handling).
+    pub hop_latency_ns: u64,
+    /// Packets the root cell's FIFO holds, including the one on the wire.
+    pub fifo_packets: usize,
+    /// Largest UART clock error of a cell, ppm (each cell draws one in +-this).
+    pub uart_error_ppm: f64,
+    /// Largest sample clock drift of a cell, ppm (each cell draws one in +-this).
+    pub clock_drift_ppm: f64,
+}
+
+impl Default for BusConfig {
+    fn default() -> Self {
+        BusConfig {
+            processing_ns: 20_000,
+            hop_latency_ns: 52_000,
+            fifo_packets: 32,
+            uart_error_ppm: 10_000.0,
+            clock_drift_ppm: 100.0,
+        }
+    }
+}
+
+/// `[thresholds]`: send-on-delta thresholds in host units and the enable mask.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ThresholdConfig {
+    /// Acceleration threshold, g.
+    pub accel_g: f64,
+    /// Force threshold, normalised.
+    pub force: f64,
+    /// Proximity threshold, normalised.
+    pub proximity: f64,
+    /// Temperature threshold, C.
+    pub temperature_c: f64,
+    /// Channels enabled for events, by name (`accel_x` .. `temperature_2`).
+    pub enabled: Vec<String>,
+}
+
+impl Default for ThresholdConfig {
+    fn default() -> Self {
+        ThresholdConfig {
+            accel_g: 0.02,
+            force: 0.001,
+            proximity: 0.0001,
+            temperature_c: 0.5,
+            enabled: Channel::ALL.iter().map(|c| c.name().to_string()).collect(),
+        }
+    }
+}
+
+/// `[noise]`: sensor noise (standard deviation) per modality, host units.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseConfig {
+    /// Accelerometer noise, g.
+    pub accel_g: f64,
+    /// Force noise, normalised.
+    pub force: f64,
+    /// Proximity noise, normalised.
+    pub proximity: f64,
+    /// Temperature noise, C.
+    pub temperature_c: f64,
+}
+
+/// `[temperature]`: slow drift of the first temperature sensor.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TemperatureConfig {
+    /// Drift amplitude, C.
+    pub drift_c: f64,
+    /// Drift period, s.
+    pub drift_period_s: f64,
+}
+
+/// `[motion]`: the arm moves point to point with smooth accelerations.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionConfig {
+    /// Row fractions of the moving links.
+    pub region: [f64; 2],
+    /// Peak acceleration at the end effector, g.
+    pub accel_g: f64,
+    /// Duration of one move, s.
+    pub move_s: f64,
+    /// Rest between moves, s.
+    pub rest_s: f64,
+    /// Structural vibration while moving, g (standard deviation at full speed).
+    pub vibration_g: f64,
+}
+
+/// `[hammer]`: blows on the end effector, each a spike with decaying ringing.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HammerConfig {
+    /// Mean blows per second.
+    pub blows_per_s: f64,
+    /// Ringing amplitude at the end effector, g.
+    pub peak_g: f64,
+    /// Range of ringing frequencies, Hz.
+    pub ring_hz: [f64; 2],
+    /// Decay time constant of the ringing, s.
+    pub decay_s: f64,
+    /// Amplitude decay along the limb away from the end effector, 1/m.
+    pub attenuation_per_m: f64,
+    /// Proximity the hammer head and hand cause at the end effector as they swing in,
+    /// normalised (0 for none).
+    #[serde(default)]
+    pub proximity: f64,
+    /// Impact force each blow puts on the force sensors at the end effector, normalised
+    /// (0 for none); it fades within 20 ms and over 5 cm of skin.
+    #[serde(default)]
+    pub force: f64,
+}
+
+/// `[stroke]`: hands stroking a region: a contact patch moving along the limb.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StrokeConfig {
+    /// Row fractions stroked.
+    pub region: [f64; 2],
+    /// Hands stroking at once (evenly out of phase).
+    pub hands: usize,
+    /// Stroke speed, m/s (1-10 cm/s).
+    pub speed_m_per_s: f64,
+    /// Return speed in the air, as a multiple of the stroke speed.
+    pub return_speed_factor: f64,
+    /// Time to lower the hand onto the skin (and to lift it), s.
+    pub lower_s: f64,
+    /// Height of the hand in the air, m.
+    pub lift_height_m: f64,
+    /// Radius of the contact patch, m.
+    pub hand_radius_m: f64,
+    /// Peak pressure on a force sensor under the patch, normalised.
+    pub force: f64,
+    /// Proximity under the hand, normalised.
+    pub proximity: f64,
+    /// Decay length of proximity with distance, m.
+    pub proximity_range_m: f64,
+    /// Vibration of the stroked region while a hand touches it, g (standard deviation).
+    pub vibration_g: f64,
+    /// Time the hand stays away (no proximity) after each stroke, s.
+    #[serde(default)]
+    pub pause_s: f64,
+    /// Frequency at which the pressure swings between half and full while in contact (a hand
+    /// following an arm that yields), Hz; 0 for none.
+    #[serde(default)]
+    pub pressure_hz: f64,
+}
+
+/// `[crosstalk]`: inertial response of the capacitive sensors to acceleration.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CrosstalkConfig {
+    /// Force reading per g of dynamic acceleration.
+    pub force_per_g: f64,
+    /// Proximity reading per g of dynamic acceleration.
+    pub proximity_per_g: f64,
+}
+
+/// `[force_stand]`: a test stand presses a probe with a sinusoidal force.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForceStandConfig {
+    /// Row fractions under the probe.
+    pub region: [f64; 2],
+    /// Peak force, N (0 to peak).
+    pub amplitude_n: f64,
+    /// Frequency, Hz.
+    pub frequency_hz: f64,
+    /// Normalised force per newton (the cell's sensitivity).
+    pub force_per_n: f64,
+    /// Proximity with the probe on the cell, normalised.
+    pub proximity: f64,
+}
+
+/// A whole scene file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneConfig {
+    /// `[scene]`.
+    pub scene: SceneTable,
+    /// `[bus]`.
+    #[serde(default)]
+    pub bus: BusConfig,
+    /// `[thresholds]`.
+    #[serde(default)]
+    pub thresholds: ThresholdConfig,
+    /// `[noise]`.
+    pub noise: NoiseConfig,
+    /// `[temperature]`.
+    pub temperature: Option<TemperatureConfig>,
+    /// `[motion]`.
+    pub motion: Option<MotionConfig>,
+    /// `[hammer]`.
+    pub hammer: Option<HammerConfig>,
+    /// `[stroke]`.
+    pub stroke: Option<StrokeConfig>,
+    /// `[crosstalk]`.
+    pub crosstalk: Option<CrosstalkConfig>,
+    /// `[force_stand]`.
+    pub force_stand: Option<ForceStandConfig>,
+}
+
+/// A checked scene, ready to generate.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The scene's settings; change them (e.g. `scene.cells`) and call [`Scene::check`].
+    pub config: SceneConfig,
+    file: String,
+}
+
+/// The line of `key` in `[table]` of `text`, if written there.
+fn line_of(text: &str, table: &str, key: &str) -> Option<usize> {
+    let mut current = String::new();
+    for (i, line) in text.lines().enumerate() {
+        let l = line.trim();
+        if l.starts_with('[') {
+            current = l.trim_matches(|c| c == '[' || c == ']').trim().to_string();
+            if key.is_empty() && current == table {
+                return Some(i + 1);
+            }
+            continue;
+        }
+        if current == table && !key.is_empty() {
+            if let Some(rest) = l.strip_prefix(key) {
+                if rest.trim_start().starts_with('=') {
+                    return Some(i + 1);
+                }
+            }
+        }
+    }
+    None
+}
+
+/// One problem found by [`Scene::check`]: table, key, message.
+type Problem = (&'static str, &'static str, String);
+
+fn positive(table: &'static str, key: &'static str, v: f64, out: &mut Vec<Problem>) {
+    if !(v.is_finite() && v > 0.0) {
+        out.push((
+            table,
+            key,
+            format!("`{key}` must be a number > 0, found {v}"),
+        ));
+    }
+}
+
+fn non_negative(table: &'static str, key: &'static str, v: f64, out: &mut Vec<Problem>) {
+    if !(v.is_finite() && v >= 0.0) {
+        out.push((
+            table,
+            key,
+            format!("`{key}` must be a number >= 0, found {v}"),
+        ));
+    }
+}
+
+fn region(table: &'static str, r: [f64; 2], out: &mut Vec<Problem>) {
+    if !(r[0].is_finite() && r[1].is_finite() && 0.0 <= r[0] && r[0] <= r[1] && r[1] <= 1.0) {
+        out.push((
+            table,
+            "region",
+            format!(
+                "`region` must be [from, to] with 0 <= from <= to <= 1, found [{}, {}]",
+                r[0], r[1]
+            ),
+        ));
+    }
+}
+
+impl Scene {
+    /// Reads and checks a scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+            file: file.clone(),
+            line: None,
+            message: format!("cannot read: {e}"),
+        })?;
+        Scene::parse(&text, &file)
+    }
+
+    /// Parses and checks scene text; `file` names it in errors and gives the default name.
+    pub fn parse(text: &str, file: &str) -> Result<Scene, SceneError> {
+        let mut config: SceneConfig = toml::from_str(text).map_err(|e| SceneError {
+            file: file.to_string(),
+            line: e.span().map(|s| {
+                let before = text.get(..s.start).unwrap_or(text);
+                before.matches('\n').count() + 1
+            }),
+            message: e.message().trim().to_string(),
+        })?;
+        if config.scene.name.is_empty() {
+            config.scene.name = Path::new(file)
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+        }
+        let scene = Scene {
+            config,
+            file: file.to_string(),
+        };
+        if let Some((table, key, message)) = scene.problems().into_iter().next() {
+            return Err(SceneError {
+                file: file.to_string(),
+                line: line_of(text, table, key).or_else(|| line_of(text, table, "")),
+                message: format!("[{table}] {message}"),
+            });
+        }
+        Ok(scene)
+    }
+
+    /// Checks the settings after a change: the first problem, without a line.
+    pub fn check(&self) -> Result<(), SceneError> {
+        match self.problems().into_iter().next() {
+            None => Ok(()),
+            Some((table, _, message)) => Err(SceneError {
+                file: self.file.clone(),
+                line: None,
+                message: format!("[{table}] {message}"),
+            }),
+        }
+    }
+
+    /// The scene's name.
+    pub fn name(&self) -> &str {
+        &self.config.scene.name
+    }
+
+    fn problems(&self) -> Vec<Problem> {
+        let c = &self.config;
+        let s = &c.scene;
+        let mut p = Vec::new();
+        positive("scene", "duration_s", s.duration_s, &mut p);
+        if s.duration_s > 3_600.0 {
+            p.push((
+                "scene",
+                "duration_s",
+                format!("`duration_s` must be at most 3600, found {}", s.duration_s),
+            ));
+        }
+        non_negative("scene", "warmup_s", s.warmup_s, &mut p);
+        if s.warmup_s >= s.duration_s {
+            p.push((
+                "scene",
+                "warmup_s",
+                format!(
+                    "`warmup_s` ({}) must be shorter than `duration_s` ({})",
+                    s.warmup_s, s.duration_s
+                ),
+            ));
+        }
+        positive("scene", "sample_rate_hz", s.sample_rate_hz, &mut p);
+        if s.sample_rate_hz > 10_000.0 {
+            p.push((
+                "scene",
+                "sample_rate_hz",
+                format!(
+                    "`sample_rate_hz` must be at most 10000, found {}",
+                    s.sample_rate_hz
+                ),
+            ));
+        }
+        if s.cells == 0 || s.cells > 16_382 {
+            p.push((
+                "scene",
+                "cells",
+                format!(
+                    "`cells` must be 1..=16382 (cell ids 1..=cells), found {}",
+                    s.cells
+                ),
+            ));
+        }
+        if s.buses == 0 {
+            p.push(("scene", "buses", "`buses` must be at least 1".to_string()));
+        } else if s.cells.div_ceil(s.buses) > MAX_CELLS_PER_BUS {
+            p.push((
+                "scene",
+                "buses",
+                format!(
+                    "{} cells on {} buses put {} cells on a bus; at most {MAX_CELLS_PER_BUS}",
+                    s.cells,
+                    s.buses,
+                    s.cells.div_ceil(s.buses)
+                ),
+            ));
+        }
+        if s.columns == 0 {
+            p.push((
+                "scene",
+                "columns",
+                "`columns` must be at least 1".to_string(),
+            ));
+        }
+        positive("scene", "cell_pitch_m", s.cell_pitch_m, &mut p);
+        if c.bus.fifo_packets == 0 {
+            p.push((
+                "bus",
+                "fifo_packets",
+                "`fifo_packets` must be at least 1".into(),
+            ));
+        }
+        let b = &c.bus;
+        if !(b.uart_error_ppm.is_finite() && (0.0..=100_000.0).contains(&b.uart_error_ppm)) {
+            p.push((
+                "bus",
+                "uart_error_ppm",
+                format!(
+                    "`uart_error_ppm` must be 0..=100000, found {}",
+                    b.uart_error_ppm
+                ),
+            ));
+        }
+        if !(b.clock_drift_ppm.is_finite() && (0.0..=10_000.0).contains(&b.clock_drift_ppm)) {
+            p.push((
+                "bus",
+                "clock_drift_ppm",
+                format!(
+                    "`clock_drift_ppm` must be 0..=10000, found {}",
+                    b.clock_drift_ppm
+                ),
+            ));
+        }
+        let t = &c.thresholds;
+        non_negative("thresholds", "accel_g", t.accel_g, &mut p);
+        non_negative("thresholds", "force", t.force, &mut p);
+        non_negative("thresholds", "proximity", t.proximity, &mut p);
+        non_negative("thresholds", "temperature_c", t.temperature_c, &mut p);
+        for name in &t.enabled {
+            if !Channel::ALL.iter().any(|ch| ch.name() == name) {
+                p.push((
+                    "thresholds",
+                    "enabled",
+                    format!(
+                        "unknown channel `{name}` in `enabled`; channels are {}",
+                        Channel::ALL.map(|c| c.name()).join(", ")
+                    ),
+                ));
+            }
+        }
+        let n = &c.noise;
+        non_negative("noise", "accel_g", n.accel_g, &mut p);
+        non_negative("noise", "force", n.force, &mut p);
+        non_negative("noise", "proximity", n.proximity, &mut p);
+        non_negative("noise", "temperature_c", n.temperature_c, &mut p);
+        if let Some(t) = &c.temperature {
+            non_negative("temperature", "drift_c", t.drift_c, &mut p);
+            positive("temperature", "drift_period_s", t.drift_period_s, &mut p);
+        }
+        if let Some(m) = &c.motion {
+            region("motion", m.region, &mut p);
+            non_negative("motion", "accel_g", m.accel_g, &mut p);
+            positive("motion", "move_s", m.move_s, &mut p);
+            non_negative("motion", "rest_s", m.rest_s, &mut p);
+            non_negative("motion", "vibration_g", m.vibration_g, &mut p);
+        }
+        if let Some(h) = &c.hammer {
+            non_negative("hammer", "blows_per_s", h.blows_per_s, &mut p);
+            non_negative("hammer", "peak_g", h.peak_g, &mut p);
+            positive("hammer", "decay_s", h.decay_s, &mut p);
+            non_negative("hammer", "attenuation_per_m", h.attenuation_per_m, &mut p);
+            non_negative("hammer", "proximity", h.proximity, &mut p);
+            non_negative("hammer", "force", h.force, &mut p);
+            if !(h.ring_hz[0] > 0.0 && h.ring_hz[0] <= h.ring_hz[1] && h.ring_hz[1].is_finite()) {
+                p.push((
+                    "hammer",
+                    "ring_hz",
+                    format!(
+                        "`ring_hz` must be [low, high] with 0 < low <= high, found [{}, {}]",
+                        h.ring_hz[0], h.ring_hz[1]
+                    ),
+                ));
+            }
+        }
+        if let Some(st) = &c.stroke {
+            region("stroke", st.region, &mut p);
+            if st.hands == 0 || st.hands > 16 {
+                p.push((
+                    "stroke",
+                    "hands",
+                    format!("`hands` must be 1..=16, found {}", st.hands),
+                ));
+            }
+            if !(0.001..=1.0).contains(&st.speed_m_per_s) {
+                p.push((
+                    "stroke",
+                    "speed_m_per_s",
+                    format!(
+                        "`speed_m_per_s` must be 0.001..=1, found {}",
+                        st.speed_m_per_s
+                    ),
+                ));
+            }
+            positive(
+                "stroke",
+                "return_speed_factor",
+                st.return_speed_factor,
+                &mut p,
+            );
+            positive("stroke", "lower_s", st.lower_s, &mut p);
+            non_negative("stroke", "lift_height_m", st.lift_height_m, &mut p);
+            positive("stroke", "hand_radius_m", st.hand_radius_m, &mut p);
+            non_negative("stroke", "force", st.force, &mut p);
+            non_negative("stroke", "proximity", st.proximity, &mut p);
+            positive("stroke", "proximity_range_m", st.proximity_range_m, &mut p);
+            non_negative("stroke", "vibration_g", st.vibration_g, &mut p);
+            non_negative("stroke", "pause_s", st.pause_s, &mut p);
+            non_negative("stroke", "pressure_hz", st.pressure_hz, &mut p);
+        }
+        if let Some(x) = &c.crosstalk {
+            non_negative("crosstalk", "force_per_g", x.force_per_g, &mut p);
+            non_negative("crosstalk", "proximity_per_g", x.proximity_per_g, &mut p);
+        }
+        if let Some(f) = &c.force_stand {
+            region("force_stand", f.region, &mut p);
+            non_negative("force_stand", "amplitude_n", f.amplitude_n, &mut p);
+            positive("force_stand", "frequency_hz", f.frequency_hz, &mut p);
+            non_negative("force_stand", "force_per_n", f.force_per_n, &mut p);
+            non_negative("force_stand", "proximity", f.proximity, &mut p);
+        }
+        p
+    }
+
+    /// The send-on-delta thresholds in raw units.
+    pub fn thresholds(&self) -> Thresholds {
+        let t = &self.config.thresholds;
+        Thresholds::from_units(t.accel_g, t.force, t.proximity, t.temperature_c)
+    }
+
+    /// The channels enabled for events.
+    pub fn enabled(&self) -> ChannelMask {
+        let names = &self.config.thresholds.enabled;
+        Channel::ALL
+            .into_iter()
+            .filter(|c| names.iter().any(|n| n == c.name()))
+            .collect()
+    }
+
+    /// The clock of the cell at `index` (0-based), drawn from the scene seed.
+    pub fn cell_clock(&self, index: usize) -> CellClock {
+        let c = &self.config;
+        let mut rng = Rng::for_stream(c.scene.seed ^ 0xC10C, index as u64);
+        let drift_ppm = rng.range(-c.bus.clock_drift_ppm, c.bus.clock_drift_ppm);
+        let uart_error_ppm = rng.range(-c.bus.uart_error_ppm, c.bus.uart_error_ppm);
+        CellClock {
+            phase_s: rng.range(0.0, 1.0 / c.scene.sample_rate_hz),
+            drift_ppm,
+            uart_error_ppm,
+        }
+    }
+
+    /// The bus of each cell position: cells `0..cells` are dealt to buses in contiguous runs
+    /// of at most `ceil(cells / buses)`, the first of each run being its root.
+    pub fn bus_cells(&self) -> Vec<std::ops::Range<usize>> {
+        let s = &self.config.scene;
+        let per_bus = s.cells.div_ceil(s.buses.max(1)).max(1);
+        (0..s.buses)
+            .map(|b| (b * per_bus).min(s.cells)..((b + 1) * per_bus).min(s.cells))
+            .collect()
+    }
+
+    /// Generates the scene: every bus's packet stream in pin order, with statistics.
+    pub fn generate(&self, options: &GenerateOptions) -> Generated {
+        let c = &self.config;
+        let s = &c.scene;
+        let model = SignalModel::new(c);
+        let thresholds = self.thresholds();
+        let enabled = self.enabled();
+        let period_s = 1.0 / s.sample_rate_hz;
+        let mut stats = SceneStats::new(s.duration_s - s.warmup_s, s.cells);
+        let mut truth = Vec::new();
+        let mut buses = Vec::new();
+        // Reused from bus to bus: fresh memory for a million packets costs page faults.
+        let mut pending: Vec<Pending> = Vec::new();
+        let mut ready_ps: Vec<u64> = Vec::new();
+        let mut run_ends: Vec<usize> = Vec::new();
+        for (bus_index, cells) in self.bus_cells().into_iter().enumerate() {
+            pending.clear();
+            ready_ps.clear();
+            run_ends.clear();
+            let mut root_error_ppm = 0.0;
+            let mut cell_uart_error_ppm = Vec::with_capacity(cells.len());
+            for (position, index) in cells.clone().enumerate() {
+                let cell_id = (index + 1) as u16;
+                let clock = self.cell_clock(index);
+                if position == 0 {
+                    root_error_ppm = clock.uart_error_ppm;
+                }
+                cell_uart_error_ppm.push(clock.uart_error_ppm);
+                let phase_s = clock.phase_s;
+                let cell_period_s = period_s / (1.0 + clock.drift_ppm * 1e-6);
+                let mut cell = Cell::new(CellConfig {
+                    cell_id,
+                    mode: s.mode,
+                    thresholds,
+                    enabled,
+                });
+                let mut signal = model.cell(index);
+                let keep_truth = options.truth_cells.contains(&cell_id);
+                let mut trace = CellTruth {
+                    cell_id,
+                    sample_time_ns: Vec::new(),
+                    truth: Vec::new(),
+                };
+                let delay_ns = c.bus.processing_ns + position as u64 * c.bus.hop_latency_ns;
+                let mut k = 0u64;
+                loop {
+                    let t_s = phase_s + k as f64 * cell_period_s;
+                    if t_s >= s.duration_s {
+                        break;
+                    }
+                    k += 1;
+                    let (value, noise) = model.sample(&mut signal, t_s);
+                    let mut measured = value;
+                    for (m, n) in measured.iter_mut().zip(noise) {
+                        *m += n;
+                    }
+                    let packets = cell.sample_units(&measured);
+                    let sample_time_ns = (t_s * 1e9).round() as u64;
+                    if keep_truth {
+                        trace.sample_time_ns.push(sample_time_ns);
+                        trace.truth.push(value);
+                    }
+                    if t_s >= s.warmup_s {
+                        stats.record(&cell, &packets, &value, s.mode, &measured);
+                    }
+                    if options.keep_packets {
+                        for bytes in packets.as_slice() {
+                            ready_ps.push((sample_time_ns + delay_ns) * 1000);
+                            pending.push(Pending {
+                                cell_id,
+                                bytes: *bytes,
+                                sample_time_ns,
+                            });
+                        }
+                    } else {
+                        stats.offered += packets.as_slice().len() as u64;
+                    }
+                }
+                if keep_truth {
+                    truth.push(trace);
+                }
+                run_ends.push(pending.len());
+            }
+            let bit_period = bit_period_ps(root_error_ppm);
+            let mut fifo = RootFifo::new(c.bus.fifo_packets, bit_period);
+            let mut dropped_per_cell = vec![0u64; cells.len()];
+            let packets = to_pin(
+                &mut fifo,
+                &pending,
+                &ready_ps,
+                &run_ends,
+                &mut dropped_per_cell,
+            );
+            if options.keep_packets {
+                stats.offered += pending.len() as u64;
+            }
+            buses.push(BusStream {
+                bus: bus_index,
+                cell_ids: cells.map(|i| (i + 1) as u16).collect(),
+                root_uart_error_ppm: root_error_ppm,
+                cell_uart_error_ppm,
+                packets,
+                stats: fifo.stats().clone(),
+                dropped_per_cell,
+            });
+        }
+        Generated {
+            buses,
+            stats,
+            truth,
+        }
+    }
+}
+
+/// Offers a bus's packets to its root FIFO in arrival order and returns those that reach the
+/// pin. `pending` holds the cells' runs one after the other, each in time order and ending at
+/// `run_ends[position]`; `ready_ps[i]` is the arrival of `pending[i]` at the root. The runs
+/// are merged; ties go to the lower index, i.e. the cell nearer the root, then sending
+/// order. Arrival times sit in their own array so the merge reads little memory.
+fn to_pin(
+    fifo: &mut RootFifo,
+    pending: &[Pending],
+    ready_ps: &[u64],
+    run_ends: &[usize],
+    dropped_per_cell: &mut [u64],
+) -> Vec<BusPacket> {
+    let mut packets = Vec::with_capacity(pending.len());
+    let mut heap = std::collections::BinaryHeap::with_capacity(run_ends.len());
+    let mut run_start = 0;
+    for (run, &end) in run_ends.iter().enumerate() {
+        if run_start < end {
+            heap.push(Reverse((ready_ps[run_start], run_start, run)));
+        }
+        run_start = end;
+    }
+    while let Some(Reverse((ready, i, run))) = heap.pop() {
+        if i + 1 < run_ends[run] {
+            heap.push(Reverse((ready_ps[i + 1], i + 1, run)));
+        }
+        let p = &pending[i];
+        match fifo.offer(ready) {
+            Some(pin_edge_ps) => packets.push(BusPacket {
+                cell_id: p.cell_id,
+                bytes: p.bytes,
+                sample_time_ns: p.sample_time_ns,
+                pin_edge_ps,
+                bit_period_ps: fifo.bit_period_ps(),
+            }),
+            None => dropped_per_cell[run] += 1,
+        }
+    }
+    packets
+}
+
+/// A cell's clock: when it samples and how fast its UART runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellClock {
+    /// Time of the first sample, s (uniform in one sample period).
+    pub phase_s: f64,
+    /// Sample-rate error, ppm (uniform in +-`clock_drift_ppm`; positive is fast).
+    pub drift_ppm: f64,
+    /// UART clock error, ppm (uniform in +-`uart_error_ppm`; positive is fast).
+    pub uart_error_ppm: f64,
+}
+
+struct Pending {
+    cell_id: u16,
+    bytes: [u8; PACKET_LEN],
+    sample_time_ns: u64,
+}
+
+/// What [`Scene::generate`] keeps.
+#[derive(Debug, Clone)]
+pub struct GenerateOptions {
+    /// Run the buses and keep every packet. Off: only count (for rate studies); the bus
+    /// streams then hold no packets and zero counters.
+    pub keep_packets: bool,
+    /// Cells (by id) whose true signals are kept sample by sample.
+    pub truth_cells: Vec<u16>,
+}
+
+impl Default for GenerateOptions {
+    fn default() -> Self {
+        GenerateOptions {
+            keep_packets: true,
+            truth_cells: Vec::new(),
+        }
+    }
+}
+
+/// One bus's packet stream as the box pin sees it.
+#[derive(Debug, Clone)]
+pub struct BusStream {
+    /// Bus index (the box port it is wired to).
+    pub bus: usize,
+    /// Cell ids along the chain, root first.
+    pub cell_ids: Vec<u16>,
+    /// UART clock error of the root cell, which drives the pin, ppm.
+    pub root_uart_error_ppm: f64,
+    /// UART clock error of every cell, in chain order, ppm (the root's is the pin's).
+    pub cell_uart_error_ppm: Vec<f64>,
+    /// Packets in pin order (ascending `pin_edge_ps`, back to back at best).
+    pub packets: Vec<BusPacket>,
+    /// Offered, sent and dropped packets, FIFO peak.
+    pub stats: BusStats,
+    /// Packets dropped per cell, in chain order.
+    pub dropped_per_cell: Vec<u64>,
+}
+
+/// The true signals of one cell, sample by sample.
+#[derive(Debug, Clone)]
+pub struct CellTruth {
+    /// The cell.
+    pub cell_id: u16,
+    /// True sample times, ns.
+    pub sample_time_ns: Vec<u64>,
+    /// True physical values (host units, no sensor noise, not quantised) per sample.
+    pub truth: Vec<[f64; Channel::COUNT]>,
+}
+
+/// Result of [`Scene::generate`].
+#[derive(Debug, Clone)]
+pub struct Generated {
+    /// One stream per bus.
+    pub buses: Vec<BusStream>,
+    /// Rates and reconstruction error over the measurement window.
+    pub stats: SceneStats,
+    /// True signals of the cells asked for.
+    pub truth: Vec<CellTruth>,
+}
+
+/// Rates and reconstruction error of a scene over its measurement window (after warm-up),
+/// counted at the cells (before any bus drop).
+#[derive(Debug, Clone)]
+pub struct SceneStats {
+    /// Length of the window, s.
+    pub window_s: f64,
+    /// Cells.
+    pub cells: usize,
+    /// Samples taken in the window.
+    pub samples: u64,
+    /// Packets sent in the window.
+    pub packets: u64,
+    /// Events (values sent) per channel in the window (every channel in data mode).
+    pub events: [u64; Channel::COUNT],
+    /// Packets the cells produced over the whole run (window and warm-up).
+    pub offered: u64,
+    squared_error: [f64; Channel::COUNT],
+}
+
+impl SceneStats {
+    fn new(window_s: f64, cells: usize) -> SceneStats {
+        SceneStats {
+            window_s,
+            cells,
+            samples: 0,
+            packets: 0,
+            events: [0; Channel::COUNT],
+            offered: 0,
+            squared_error: [0.0; Channel::COUNT],
+        }
+    }
+
+    fn record(
+        &mut self,
+        cell: &Cell,
+        packets: &crate::cell::SamplePackets,
+        truth: &[f64; Channel::COUNT],
+        mode: Mode,
+        measured: &[f64; Channel::COUNT],
+    ) {
+        self.samples += 1;
+        self.packets += packets.as_slice().len() as u64;
+        match mode {
+            Mode::Data => {
+                for c in Channel::ALL {
+                    let i = c.index();
+                    self.events[i] += 1;
+                    let sent = c.to_units(crate::cell::quantise(c, measured[i]));
+                    self.squared_error[i] += (sent - truth[i]).powi(2);
+                }
+            }
+            Mode::Event => {
+                for c in packets.fired().iter() {
+                    self.events[c.index()] += 1;
+                }
+                let sod = cell.send_on_delta();
+                for c in Channel::ALL {
+                    let i = c.index();
+                    // The host holds the last value sent (Algorithm 2); a channel never sent
+                    // reads 0 there.
+                    let held = c.to_units(sod.last_sent(c).unwrap_or(0));
+                    self.squared_error[i] += (held - truth[i]).powi(2);
+                }
+            }
+        }
+    }
+
+    /// Events per cell per second of a modality (all its channels together).
+    pub fn events_per_cell_s(&self, modality: Modality) -> f64 {
+        let n: u64 = Channel::ALL
+            .iter()
+            .filter(|c| c.modality() == modality)
+            .map(|c| self.events[c.index()])
+            .sum();
+        n as f64 / (self.cells as f64 * self.window_s)
+    }
+
+    /// Packets in percent of data mode (one packet per sample).
+    pub fn packet_rate_pct(&self) -> f64 {
+        100.0 * self.packets as f64 / self.samples.max(1) as f64
+    }
+
+    /// RMS error of the reconstructed channel (hold last value) against the true signal, in
+    /// percent of the channel's full range.
+    pub fn rms_error_pct(&self, channel: Channel) -> f64 {
+        let i = channel.index();
+        100.0 * (self.squared_error[i] / self.samples.max(1) as f64).sqrt()
+            / full_range_units(channel)
+    }
+}
