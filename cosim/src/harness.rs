@@ -13,6 +13,21 @@ pub fn play(
     reset_cycles: u64,
     cycles: u64,
 ) -> Vec<GmiiByte> {
+    play_with_progress(dut, lines, reset_cycles, cycles, &mut |_| {})
+}
+
+/// Cycles between progress calls.
+pub const PROGRESS_STEP: u64 = 1 << 20;
+
+/// As [`play`], calling `progress` with the cycles run about every [`PROGRESS_STEP`].
+pub fn play_with_progress(
+    dut: &mut Dut,
+    lines: &[Vec<Transition>],
+    reset_cycles: u64,
+    cycles: u64,
+    progress: &mut dyn FnMut(u64),
+) -> Vec<GmiiByte> {
+    let mut next_report = PROGRESS_STEP;
     assert!(
         lines.len() <= dut.ports(),
         "{} lines for a {}-port box",
@@ -38,13 +53,19 @@ pub fn play(
         if due > dut.cycle() {
             dut.run(due - dut.cycle(), |b| out.push(b));
         }
+        if dut.cycle() >= next_report {
+            progress(dut.cycle());
+            next_report = dut.cycle() + PROGRESS_STEP;
+        }
         dut.set_rx(port, lines[port][index].level);
         if let Some(next) = lines[port].get(index + 1) {
             heap.push(Reverse((next.edge, port, index + 1)));
         }
     }
-    if cycles > dut.cycle() {
-        dut.run(cycles - dut.cycle(), |b| out.push(b));
+    while cycles > dut.cycle() {
+        let step = (cycles - dut.cycle()).min(PROGRESS_STEP);
+        dut.run(step, |b| out.push(b));
+        progress(dut.cycle());
     }
     out
 }

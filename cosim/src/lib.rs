@@ -20,6 +20,7 @@ pub mod harness;
 pub mod line;
 pub mod model;
 pub mod pcap;
+pub mod scene;
 pub mod sim;
 
 pub use dut::{Dut, GmiiByte};

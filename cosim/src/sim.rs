@@ -1,7 +1,7 @@
 //! One co-simulation run: packets on the box's UART pins, frames out, everything checked.
 
 use crate::frames::{assemble, check};
-use crate::harness::play;
+use crate::harness::play_with_progress;
 use crate::line::{transitions, UartByte};
 use crate::model::{default_cache_dir, CosimError, Model};
 use crate::pcap::PcapOut;
@@ -62,6 +62,8 @@ pub struct SimReport {
     pub records_corrupted: u64,
     /// Packets sent but not delivered (the box's counters must explain them).
     pub dropped: u64,
+    /// Good packets the box counted, from the last status report, summed over ports.
+    pub box_packets_good: u64,
     /// Losses by cause from the last status report, summed over ports.
     pub losses_by_cause: Vec<(String, u64)>,
     /// Largest stamp minus true start edge, in ticks (must be below 1).
@@ -80,6 +82,14 @@ pub struct SimReport {
 
 /// Runs `spec` on the verilated box.
 pub fn run_rtl(spec: &SimSpec) -> Result<SimReport, CosimError> {
+    run_rtl_with_progress(spec, &mut |_, _| {})
+}
+
+/// As [`run_rtl`], calling `progress(cycles done, cycles in all)` as it goes.
+pub fn run_rtl_with_progress(
+    spec: &SimSpec,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<SimReport, CosimError> {
     let model = Model::build(&spec.config, spec.vcd.is_some(), &default_cache_dir())?;
     let mut dut = Dut::new(&model, spec.vcd.as_deref())?;
     let lines: Vec<_> = spec
@@ -102,7 +112,9 @@ pub fn run_rtl(spec: &SimSpec) -> Result<SimReport, CosimError> {
         .collect();
     let cycles = spec.duration_ns / TICK_NS;
     let started = Instant::now();
-    let out = play(&mut dut, &lines, RESET_CYCLES, cycles);
+    let out = play_with_progress(&mut dut, &lines, RESET_CYCLES, cycles, &mut |done| {
+        progress(done, cycles)
+    });
     let wall = started.elapsed().as_secs_f64();
     let (frames, min_gap) = assemble(&out);
 
@@ -179,6 +191,10 @@ pub fn run_rtl(spec: &SimSpec) -> Result<SimReport, CosimError> {
         0.0
     };
     report.dropped = report.packets_sent - report.packets_delivered;
+    report.box_packets_good = last_status
+        .iter()
+        .map(|p| u64::from(p.get(PortCounter::PacketsGood)))
+        .sum();
     report.losses_by_cause = PortCounter::ALL
         .iter()
         .filter(|c| c.is_packet_loss() || **c == PortCounter::GarbageBytes)

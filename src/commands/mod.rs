@@ -6,6 +6,7 @@ mod capture;
 mod decode;
 mod examples;
 mod replay;
+mod sim;
 mod stats;
 mod verilog;
 
@@ -29,6 +30,8 @@ pub enum Command {
     Examples,
     /// Write the interface box's Verilog (top module `top`).
     Verilog(verilog::Args),
+    /// Play a scene through the co-simulated box (Verilator) to a pcap and a decoded report.
+    Sim(sim::Args),
     /// Receive the box's datagrams live on a UDP socket; optionally record a pcap.
     Capture(capture::CaptureArgs),
     /// Send the UDP payloads of a pcap to a socket, at a rate or as recorded.
@@ -49,6 +52,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Examples => examples::run(cli.json),
         Command::Verilog(args) => verilog::run(&args, cli.json),
+        Command::Sim(args) => sim::run(&args, cli.json),
         Command::Capture(args) => capture::run(args, cli.json),
         Command::Replay(args) => replay::run(args, cli.json),
         Command::Decode(args) => decode::run(args, cli.json),

@@ -1,0 +1,57 @@
+//! A scene of the cell models on the box's pins: one bus per port.
+
+use crate::sim::{SentPacket, SimSpec};
+use skinbox_cells::scene::{GenerateOptions, Generated, Scene};
+use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_protocol::TICK_NS;
+
+/// Time the box gets after the scene's last packet, besides one status period: the flush
+/// timeout and the frames out.
+pub const DRAIN_NS: u64 = 2_000_000;
+
+/// The packets of `generated` as a simulation of `config` (whose port count must equal the
+/// scene's bus count): bus `i` drives port `i`, each packet with the bit period of the
+/// bus's root cell. Packets ending after `duration_ns` are left out. The simulation runs
+/// one status period and [`DRAIN_NS`] longer, so the last status report counts every
+/// packet.
+pub fn spec(generated: &Generated, config: BoxConfig, duration_ns: u64) -> SimSpec {
+    assert_eq!(config.ports, generated.buses.len(), "one port per bus");
+    let ports = generated
+        .buses
+        .iter()
+        .map(|bus| {
+            bus.packets
+                .iter()
+                .filter(|p| p.pin_end_ps() / 1000 <= duration_ns)
+                .map(|p| SentPacket {
+                    bytes: p.bytes,
+                    start_ns: p.pin_edge_ps as f64 / 1000.0,
+                    bit_ns: f64::from(p.bit_period_ps) / 1000.0,
+                })
+                .collect()
+        })
+        .collect();
+    SimSpec {
+        duration_ns: (duration_ns + config.status_period_ticks * TICK_NS + DRAIN_NS)
+            .div_ceil(TICK_NS)
+            * TICK_NS,
+        config,
+        ports,
+        pcap: None,
+        vcd: None,
+    }
+}
+
+/// Generates `scene` for `duration_s` (overriding its own duration) and keeps the packets.
+/// The scene's statistics window then covers the whole run (no warm-up): the box sees the
+/// start-up burst of the cells too.
+pub fn generate(
+    scene: &Scene,
+    duration_s: f64,
+) -> Result<Generated, skinbox_cells::scene::SceneError> {
+    let mut scene = scene.clone();
+    scene.config.scene.duration_s = duration_s;
+    scene.config.scene.warmup_s = 0.0;
+    scene.check()?;
+    Ok(scene.generate(&GenerateOptions::default()))
+}

@@ -1,0 +1,173 @@
+//! `skinbox sim`: a scene of skin cells through the co-simulated box to a pcap, decoded by
+//! the host client.
+
+use anyhow::Context;
+use serde::Serialize;
+use skinbox_cells::scene::Scene;
+use skinbox_cosim::sim::{run_rtl_with_progress, SimReport};
+use skinbox_gateware::interface_box::BoxConfig;
+use std::path::PathBuf;
+
+/// Arguments of `skinbox sim`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Scene file (TOML); the built-in default is the stroking-upper-arm scene.
+    scene: Option<PathBuf>,
+    /// Simulated time of the scene, ms (the box then gets 2 ms to flush).
+    #[arg(long, default_value_t = 20.0)]
+    duration_ms: f64,
+    /// Number of cells (overrides the scene).
+    #[arg(long)]
+    cells: Option<usize>,
+    /// Flush timeout of the box, us.
+    #[arg(long, default_value_t = 100.0)]
+    flush_timeout_us: f64,
+    /// Status period of the box, ms (the run ends after a report that counts every packet).
+    #[arg(long, default_value_t = 5.0)]
+    status_period_ms: f64,
+    /// Write the frames to this pcap (default: SCENE.pcap in the current directory).
+    #[arg(long)]
+    pcap: Option<PathBuf>,
+    /// Write a VCD trace of the box (slow; builds a traced model).
+    #[arg(long)]
+    vcd: Option<PathBuf>,
+}
+
+#[derive(Serialize)]
+struct Output {
+    scene: String,
+    cells: usize,
+    buses: usize,
+    mode: String,
+    packets_offered_by_cells: u64,
+    packets_dropped_at_bus_roots: u64,
+    #[serde(flatten)]
+    sim: SimReport,
+    pcap: PathBuf,
+    host: skinbox_host::Report,
+}
+
+/// Runs the scene.
+pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
+    let path = args
+        .scene
+        .clone()
+        .unwrap_or_else(|| skinbox_cells::scenes_dir().join("stroking_upper_arm.toml"));
+    let mut scene = Scene::load(&path)?;
+    if let Some(cells) = args.cells {
+        scene.config.scene.cells = cells;
+    }
+    anyhow::ensure!(
+        args.duration_ms > 0.0 && args.duration_ms <= 10_000.0,
+        "--duration-ms {} must be above 0 and at most 10,000 (RTL runs about 1 M cycles/s)",
+        args.duration_ms
+    );
+    let generated = skinbox_cosim::scene::generate(&scene, args.duration_ms * 1e-3)?;
+    let buses = generated.buses.len();
+    anyhow::ensure!(
+        (1..=64).contains(&buses),
+        "the scene has {buses} buses; the box has 1 to 64 ports, one per bus"
+    );
+    let config = BoxConfig {
+        ports: buses,
+        flush_timeout_ticks: (args.flush_timeout_us * 125.0).round() as u64,
+        status_period_ticks: (args.status_period_ms * 125_000.0).round() as u64,
+        ..BoxConfig::default()
+    };
+    let pcap = args
+        .pcap
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("{}.pcap", scene.name())));
+    let mut spec = skinbox_cosim::scene::spec(&generated, config, (args.duration_ms * 1e6) as u64);
+    spec.pcap = Some(pcap.clone());
+    spec.vcd = args.vcd.clone();
+
+    let bar = indicatif::ProgressBar::new(spec.duration_ns / 8);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{msg} [{bar:40}] {percent}% {elapsed} (ETA {eta})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_message("building the model");
+    let report = run_rtl_with_progress(&spec, &mut |done, _| {
+        bar.set_message("simulating");
+        bar.set_position(done);
+    })?;
+    bar.finish_and_clear();
+
+    let host = skinbox_host::decode_pcap_file(&pcap, &Default::default())
+        .with_context(|| format!("decoding {}", pcap.display()))?
+        .report;
+    let out = Output {
+        scene: scene.name().to_string(),
+        cells: scene.config.scene.cells,
+        buses,
+        mode: format!("{:?}", scene.config.scene.mode).to_lowercase(),
+        packets_offered_by_cells: generated.buses.iter().map(|b| b.stats.offered).sum(),
+        packets_dropped_at_bus_roots: generated.buses.iter().map(|b| b.stats.dropped).sum(),
+        sim: report,
+        pcap,
+        host,
+    };
+    if json {
+        return super::print_json(&out);
+    }
+    print_summary(&out);
+    Ok(())
+}
+
+fn print_summary(o: &Output) {
+    let s = &o.sim;
+    println!(
+        "scene {}: {} cells on {} buses, {} mode, {:.1} ms simulated",
+        o.scene,
+        o.cells,
+        o.buses,
+        o.mode,
+        s.sim_seconds * 1e3
+    );
+    println!(
+        "cells:  {} packets offered, {} dropped at the bus roots (FIFO full), {} on the box pins",
+        o.packets_offered_by_cells, o.packets_dropped_at_bus_roots, s.packets_sent
+    );
+    println!(
+        "box:    {} frames ({} records, {} status), {} records; {} of {} packets delivered, {} corrupted",
+        s.frames, s.record_datagrams, s.status_datagrams, s.records, s.packets_delivered, s.packets_sent, s.records_corrupted
+    );
+    let losses: Vec<String> = s
+        .losses_by_cause
+        .iter()
+        .map(|(c, n)| format!("{c} {n}"))
+        .collect();
+    println!(
+        "        box counters: {} good, {}",
+        s.box_packets_good,
+        losses.join(", ")
+    );
+    println!(
+        "        timestamps: stamp - true start edge {:.3} ticks max, {:.3} mean (8 ns ticks)",
+        s.ts_error_max_ticks, s.ts_error_mean_ticks
+    );
+    let h = &o.host;
+    println!(
+        "host:   {} records ({} data, {} event), {} cells active, {:.1} % of data mode",
+        h.records,
+        h.data_packets,
+        h.event_packets,
+        h.cells_active,
+        h.packet_rate_percent_of_data_mode
+    );
+    println!(
+        "        losses seen: {} datagrams missing, {} event sequence gaps ({} event packets missing), {} box packets lost",
+        h.losses.datagrams_missing, h.losses.event_sequence_gaps, h.losses.event_packets_missing, h.losses.box_packets_lost
+    );
+    println!(
+        "speed:  {:.2} M cycles/s, {:.2} s wall for {:.1} ms simulated",
+        s.cycles_per_second / 1e6,
+        s.wall_seconds,
+        s.sim_seconds * 1e3
+    );
+    println!("pcap:   {}", o.pcap.display());
+}

@@ -1,0 +1,55 @@
+//! `skinbox sim`: a scene through the verilated box to a pcap and the host's report.
+
+use std::process::Command;
+
+#[test]
+fn idle_scene_through_the_box_to_a_decoded_pcap() {
+    let dir = std::env::temp_dir().join(format!("skinbox-sim-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let pcap = dir.join("idle.pcap");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/cosim/scenes/idle.toml");
+    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args([
+            "sim",
+            scene,
+            "--duration-ms",
+            "8",
+            "--cells",
+            "132",
+            "--status-period-ms",
+            "2",
+            "--json",
+            "--pcap",
+        ])
+        .arg(&pcap)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "frames",
+        "records",
+        "dropped",
+        "ts_error_max_ticks",
+        "sim_seconds",
+        "wall_seconds",
+        "cycles_per_second",
+    ] {
+        assert!(r.get(key).is_some(), "missing {key}: {r}");
+    }
+    let sent = r["packets_sent"].as_u64().unwrap();
+    assert!(sent > 100, "{r}");
+    // everything on the pins arrived, the box counted it, the host decoded it
+    assert_eq!(r["packets_delivered"].as_u64(), Some(sent));
+    assert_eq!(r["records_corrupted"].as_u64(), Some(0));
+    assert_eq!(r["box_packets_good"].as_u64(), Some(sent));
+    assert_eq!(r["host"]["records"].as_u64(), Some(sent));
+    assert!(r["ts_error_max_ticks"].as_f64().unwrap() < 1.0);
+    assert_eq!(r["buses"].as_u64(), Some(4), "the scene names four buses");
+    assert!(std::fs::metadata(&pcap).unwrap().len() > 1000);
+    std::fs::remove_dir_all(&dir).ok();
+}
