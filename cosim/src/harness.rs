@@ -29,6 +29,10 @@ pub fn play_with_progress(
 ) -> Vec<GmiiByte> {
     let mut next_report = PROGRESS_STEP;
     assert!(
+        lines.iter().all(|l| is_ordered(l)),
+        "line transitions must be in edge order"
+    );
+    assert!(
         lines.len() <= dut.ports(),
         "{} lines for a {}-port box",
         lines.len(),
@@ -70,7 +74,7 @@ pub fn play_with_progress(
     out
 }
 
-/// A [`Transition`] list check: edges in order (a harness bug otherwise).
+/// Whether a [`Transition`] list is in edge order, as [`play`] needs.
 pub fn is_ordered(line: &[Transition]) -> bool {
     line.windows(2).all(|w| w[0].edge <= w[1].edge)
 }
