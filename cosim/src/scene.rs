@@ -9,12 +9,13 @@ use skinbox_protocol::TICK_NS;
 /// timeout and the frames out.
 pub const DRAIN_NS: u64 = 2_000_000;
 
-/// The packets of `generated` as a simulation of `config` (whose port count must equal the
-/// scene's bus count): bus `i` drives port `i`, each packet with the bit period of the
-/// bus's root cell. Packets ending after `duration_ns` are left out. The simulation runs
-/// one status period and [`DRAIN_NS`] longer, so the last status report counts every
+/// The packets of `generated` from scene time `from_ns` on, as a simulation of `config`
+/// (whose port count must equal the scene's bus count) that starts at `from_ns`: bus `i`
+/// drives port `i`, each packet with the bit period of the bus's root cell. Packets that
+/// start before `from_ns` or end after `from_ns + duration_ns` are left out. The simulation
+/// runs one status period and [`DRAIN_NS`] longer, so the last status report counts every
 /// packet.
-pub fn spec(generated: &Generated, config: BoxConfig, duration_ns: u64) -> SimSpec {
+pub fn spec(generated: &Generated, config: BoxConfig, from_ns: u64, duration_ns: u64) -> SimSpec {
     assert_eq!(config.ports, generated.buses.len(), "one port per bus");
     let ports = generated
         .buses
@@ -22,10 +23,11 @@ pub fn spec(generated: &Generated, config: BoxConfig, duration_ns: u64) -> SimSp
         .map(|bus| {
             bus.packets
                 .iter()
-                .filter(|p| p.pin_end_ps() / 1000 <= duration_ns)
+                .filter(|p| p.pin_edge_ps >= from_ns * 1000)
+                .filter(|p| p.pin_end_ps() / 1000 <= from_ns + duration_ns)
                 .map(|p| SentPacket {
                     bytes: p.bytes,
-                    start_ns: p.pin_edge_ps as f64 / 1000.0,
+                    start_ns: p.pin_edge_ps as f64 / 1000.0 - from_ns as f64,
                     bit_ns: f64::from(p.bit_period_ps) / 1000.0,
                 })
                 .collect()

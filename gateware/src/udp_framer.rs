@@ -309,14 +309,18 @@ impl Logic for UdpFramer {
             self.transmitter.body_sum.next = self.status_body_sum.val();
         }
         self.status_taken_pulse.d.next = self.start_status.val();
+        // Each start names the memory the transmitter reads next; a start can come in the
+        // very clock the previous frame (of either kind) ends.
         if self.start_records.val() {
             self.pending.d.next = false;
             self.sending_records.d.next = true;
+            self.sending_status.d.next = false;
             self.datagram_count.d.next = self.datagram_count.q.val() + 1;
             self.record_count.d.next =
                 self.record_count.q.val() + bit_cast::<32, 6>(self.pending_count.q.val());
         } else if self.start_status.val() {
             self.sending_status.d.next = true;
+            self.sending_records.d.next = false;
         } else if self.transmitter.idle.val() {
             self.sending_records.d.next = false;
             self.sending_status.d.next = false;
@@ -569,6 +573,42 @@ mod tests {
         assert!(got[..got.len() - 1]
             .iter()
             .all(|d| records_of(d).len() == 55));
+    }
+
+    #[test]
+    fn records_waiting_behind_a_status_datagram_are_sent_from_their_own_buffer() {
+        // the records close (timeout) while the status frame is on the wire, so they start
+        // in the clock the status frame ends
+        let status = StatusRepr {
+            boot_id: 7,
+            datagrams_sent: 0,
+            records_sent: 0,
+            first_port: 0,
+            ports: vec![PortCounters([9; 8]); 8],
+        };
+        let whole = DatagramRepr {
+            box_id: 3,
+            port_count: 8,
+            flags: 0,
+            sequence: 0,
+            base_tick: 777_777,
+            body: DatagramBody::Status(status),
+        };
+        let body = whole.to_bytes()[24..].to_vec();
+        let input: Vec<(u64, RecordRepr)> = (0..3).map(|i| (50, record(i, 40))).collect();
+        let run = run(&input, Some((TIMEOUT, body, 8)), 4 * TIMEOUT);
+        let got = datagrams(&run.capture);
+        assert_eq!(got.len(), 2);
+        assert_eq!(got[0], whole);
+        let gap =
+            run.capture.starts[1] - run.capture.starts[0] - run.capture.frames[0].len() as u64;
+        assert!(
+            gap <= 13,
+            "the records left right after the status frame ({gap} clocks)"
+        );
+        let sent: Vec<[u8; 20]> = input.iter().map(|r| r.1.cell_packet).collect();
+        let out: Vec<[u8; 20]> = records_of(&got[1]).iter().map(|r| r.cell_packet).collect();
+        assert_eq!(out, sent);
     }
 
     #[test]

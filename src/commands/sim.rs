@@ -13,8 +13,12 @@ use std::path::PathBuf;
 pub struct Args {
     /// Scene file (TOML); the built-in default is the stroking-upper-arm scene.
     scene: Option<PathBuf>,
-    /// Simulated time of the scene, ms (the box then gets 2 ms to flush).
-    #[arg(long, default_value_t = 20.0)]
+    /// Scene time at which the box starts to listen, ms: the default skips the scenes'
+    /// one-second warm-up, where every cell's first sample sends all nine channels.
+    #[arg(long, default_value_t = 1000.0)]
+    from_ms: f64,
+    /// Simulated time of the scene, ms (then one status period and 2 ms to flush).
+    #[arg(long, default_value_t = 100.0)]
     duration_ms: f64,
     /// Number of cells (overrides the scene).
     #[arg(long)]
@@ -38,6 +42,7 @@ struct Output {
     scene: String,
     cells: usize,
     buses: usize,
+    from_ms: f64,
     mode: String,
     packets_offered_by_cells: u64,
     packets_dropped_at_bus_roots: u64,
@@ -62,7 +67,13 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         "--duration-ms {} must be above 0 and at most 10,000 (RTL runs about 1 M cycles/s)",
         args.duration_ms
     );
-    let generated = skinbox_cosim::scene::generate(&scene, args.duration_ms * 1e-3)?;
+    anyhow::ensure!(
+        args.from_ms >= 0.0,
+        "--from-ms {} must not be negative",
+        args.from_ms
+    );
+    let generated =
+        skinbox_cosim::scene::generate(&scene, (args.from_ms + args.duration_ms) * 1e-3)?;
     let buses = generated.buses.len();
     anyhow::ensure!(
         (1..=64).contains(&buses),
@@ -78,7 +89,12 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         .pcap
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{}.pcap", scene.name())));
-    let mut spec = skinbox_cosim::scene::spec(&generated, config, (args.duration_ms * 1e6) as u64);
+    let mut spec = skinbox_cosim::scene::spec(
+        &generated,
+        config,
+        (args.from_ms * 1e6) as u64,
+        (args.duration_ms * 1e6) as u64,
+    );
     spec.pcap = Some(pcap.clone());
     spec.vcd = args.vcd.clone();
 
@@ -104,6 +120,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         scene: scene.name().to_string(),
         cells: scene.config.scene.cells,
         buses,
+        from_ms: args.from_ms,
         mode: format!("{:?}", scene.config.scene.mode).to_lowercase(),
         packets_offered_by_cells: generated.buses.iter().map(|b| b.stats.offered).sum(),
         packets_dropped_at_bus_roots: generated.buses.iter().map(|b| b.stats.dropped).sum(),
@@ -121,15 +138,16 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
 fn print_summary(o: &Output) {
     let s = &o.sim;
     println!(
-        "scene {}: {} cells on {} buses, {} mode, {:.1} ms simulated",
+        "scene {}: {} cells on {} buses, {} mode, {:.1} ms simulated from {:.0} ms on",
         o.scene,
         o.cells,
         o.buses,
         o.mode,
-        s.sim_seconds * 1e3
+        s.sim_seconds * 1e3,
+        o.from_ms
     );
     println!(
-        "cells:  {} packets offered, {} dropped at the bus roots (FIFO full), {} on the box pins",
+        "cells:  {} packets offered since the scene start, {} dropped at the bus roots (FIFO full); {} on the box pins in the window",
         o.packets_offered_by_cells, o.packets_dropped_at_bus_roots, s.packets_sent
     );
     println!(
