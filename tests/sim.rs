@@ -12,6 +12,8 @@ fn idle_scene_through_the_box_to_a_decoded_pcap() {
         .args([
             "sim",
             scene,
+            "--from-ms",
+            "0",
             "--duration-ms",
             "8",
             "--cells",
