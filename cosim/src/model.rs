@@ -103,7 +103,11 @@ impl Model {
             let _guard = BUILD_LOCK.lock().unwrap_or_else(|e| e.into_inner());
             if !library_path.exists() {
                 let runtime = build_runtime(cache_dir, &version, trace)?;
-                build_model(&text, config.ports, trace, &dir, &runtime)?;
+                let built = build_model(&text, config.ports, trace, &dir, &runtime);
+                // a failed build leaves no scratch directory behind
+                std::fs::remove_dir_all(dir.with_extension(format!("tmp{}", std::process::id())))
+                    .ok();
+                built?;
             }
         }
         let library = Library::open(&library_path, config.ports)?;

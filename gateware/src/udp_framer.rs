@@ -6,7 +6,8 @@
 //! rebuilt from the current time), every record's tick is rewritten as a signed offset
 //! from it (the input pauses 4 clocks for that), and the ones'-complement sum of the body
 //! grows with every byte. A datagram closes when it holds 55 records (1454 bytes) or when
-//! its first record has waited `flush_timeout_ticks`; it then goes to the
+//! its first record has waited `flush_timeout_ticks` (one clock later, as the deadline test
+//! is registered, and after a record on its way in is complete); it then goes to the
 //! [`FrameTransmitter`] while the other buffer fills (double buffering). When both
 //! buffers are busy the input is not ready: records wait upstream, none is lost here.
 //!
@@ -75,13 +76,14 @@ pub struct UdpFramer {
     transmitter: FrameTransmitter,
     memory: RAM<Bits<8>, 12>,
     max_records: Constant<Bits<6>>,
-    flush_timeout: Constant<Bits<64>>,
+    flush_timeout: Constant<Bits<32>>,
     fill_buffer: DFF<Bit>,
     fill_count: DFF<Bits<6>>,
     fill_offset: DFF<Bits<11>>,
     fill_sum: DFF<Bits<32>>,
     fill_base_tick: DFF<Bits<64>>,
-    fill_deadline: DFF<Bits<64>>,
+    fill_deadline: DFF<Bits<32>>,
+    deadline_passed: DFF<Bit>,
     beat: DFF<Bits<5>>,
     tick_low: DFF<Bits<32>>,
     offset_bytes: DFF<Bits<32>>,
@@ -105,6 +107,7 @@ pub struct UdpFramer {
     accept: Signal<Local, Bit>,
     start_records: Signal<Local, Bit>,
     start_status: Signal<Local, Bit>,
+    deadline_delta: Signal<Local, Bits<32>>,
 }
 
 impl UdpFramer {
@@ -144,6 +147,7 @@ impl UdpFramer {
             fill_sum: Default::default(),
             fill_base_tick: Default::default(),
             fill_deadline: Default::default(),
+            deadline_passed: Default::default(),
             beat: Default::default(),
             tick_low: Default::default(),
             offset_bytes: Default::default(),
@@ -167,6 +171,7 @@ impl UdpFramer {
             accept: Default::default(),
             start_records: Default::default(),
             start_status: Default::default(),
+            deadline_delta: Default::default(),
         }
     }
 }
@@ -185,6 +190,7 @@ impl Logic for UdpFramer {
             fill_sum,
             fill_base_tick,
             fill_deadline,
+            deadline_passed,
             beat,
             tick_low,
             offset_bytes,
@@ -206,12 +212,16 @@ impl Logic for UdpFramer {
         self.memory.write_clock.next = self.clock.val();
         self.memory.read_clock.next = self.clock.val();
 
+        // The flush deadline passed: a registered, wrap-safe 32-bit test (the timeout is far
+        // below 2^31 ticks), kept off the accept path's timing.
+        // (a bit of an expression is not Verilog: the difference gets its own signal)
+        self.deadline_delta.next = self.tick.val().get_bits::<32>(0) - self.fill_deadline.q.val();
+        self.deadline_passed.d.next = !self.deadline_delta.val().get_bit(31);
         // Close the filling datagram at a record boundary when full or due.
         self.close_due.next = (self.beat.q.val() == 0)
             & (self.offset_left.q.val() == 0)
             & ((self.fill_count.q.val() == self.max_records.val())
-                | ((self.fill_count.q.val() != 0)
-                    & (self.tick.val() >= self.fill_deadline.q.val())));
+                | ((self.fill_count.q.val() != 0) & self.deadline_passed.q.val()));
         self.can_close.next = !self.pending.q.val() & !self.sending_records.q.val();
         // No beat moves while a datagram closes (it would land in the old buffer) or while a
         // full datagram waits for a free buffer.
@@ -250,7 +260,8 @@ impl Logic for UdpFramer {
                         - bit_cast::<64, 32>(
                             self.tick.val().get_bits::<32>(0) - self.record_tick.val(),
                         );
-                    self.fill_deadline.d.next = self.tick.val() + self.flush_timeout.val();
+                    self.fill_deadline.d.next =
+                        self.tick.val().get_bits::<32>(0) + self.flush_timeout.val();
                 } else {
                     self.offset_bytes.d.next =
                         self.record_tick.val() - self.fill_base_tick.q.val().get_bits::<32>(0);
