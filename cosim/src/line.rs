@@ -45,19 +45,66 @@ pub fn first_edge(t_ns: f64) -> u64 {
 /// before, between and after them. Transitions that no edge can see (shorter than a
 /// clock) are kept; the later one wins at the edge.
 pub fn transitions(bytes: &[UartByte]) -> Vec<Transition> {
+    jittered_transitions(bytes, &Jitter::NONE).0
+}
+
+/// Random timing noise on a line's edges: each level change moves by an offset drawn
+/// uniformly from `-peak_ns..=peak_ns`, independently per edge (seeded, repeatable).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Jitter {
+    /// Largest offset of one edge, ns (at most a quarter bit, so edges keep their order).
+    pub peak_ns: f64,
+    /// Seed of the offsets.
+    pub seed: u64,
+}
+
+impl Jitter {
+    /// Exact edges.
+    pub const NONE: Jitter = Jitter {
+        peak_ns: 0.0,
+        seed: 0,
+    };
+}
+
+/// As [`transitions`], each edge moved by `jitter`; also returns the jittered time of
+/// every byte's start-bit falling edge (the true edge the box should stamp).
+pub fn jittered_transitions(bytes: &[UartByte], jitter: &Jitter) -> (Vec<Transition>, Vec<f64>) {
+    let mut state = jitter.seed ^ 0x9E37_79B9_7F4A_7C15;
+    let mut offset = move || {
+        if jitter.peak_ns == 0.0 {
+            return 0.0;
+        }
+        // splitmix64
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        ((z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) * jitter.peak_ns
+    };
+    let mut starts = Vec::with_capacity(bytes.len());
     let mut out: Vec<Transition> = Vec::with_capacity(bytes.len() * 6);
     let mut level = true;
-    let mut push = |t_ns: f64, new: bool, level: &mut bool| {
-        if new != *level {
-            out.push(Transition {
-                edge: first_edge(t_ns),
-                level: new,
-            });
-            *level = new;
+    let mut push = |t_ns: f64, new: bool, level: &mut bool| -> f64 {
+        if new == *level {
+            return t_ns;
         }
+        let t = t_ns + offset();
+        out.push(Transition {
+            edge: first_edge(t),
+            level: new,
+        });
+        *level = new;
+        t
     };
     for b in bytes {
-        push(b.start_ns, false, &mut level);
+        assert!(
+            jitter.peak_ns <= b.bit_ns / 4.0,
+            "jitter {} ns is more than a quarter bit",
+            jitter.peak_ns
+        );
+        // a start bit after a high stop bit is always a falling edge
+        starts.push(push(b.start_ns, false, &mut level));
         for bit in 0..8 {
             push(
                 b.start_ns + (1 + bit) as f64 * b.bit_ns,
@@ -68,7 +115,7 @@ pub fn transitions(bytes: &[UartByte]) -> Vec<Transition> {
         push(b.start_ns + 9.0 * b.bit_ns, b.stop_level, &mut level);
         push(b.end_ns(), true, &mut level);
     }
-    out
+    (out, starts)
 }
 
 /// Back-to-back 8N1 bytes of one UART with bit length `bit_ns` from `start_ns`.
@@ -87,6 +134,35 @@ pub fn back_to_back(data: &[u8], start_ns: f64, bit_ns: f64) -> Vec<UartByte> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn jitter_moves_every_edge_within_its_peak_and_keeps_the_order() {
+        let bytes = back_to_back(&[0x55, 0xAA, 0x0F, 0x00, 0xFF], 1000.0, 250.0);
+        let exact = transitions(&bytes);
+        let jitter = Jitter {
+            peak_ns: 20.0,
+            seed: 7,
+        };
+        let (moved, starts) = jittered_transitions(&bytes, &jitter);
+        assert_eq!(moved.len(), exact.len());
+        let mut differ = 0;
+        for (m, e) in moved.iter().zip(&exact) {
+            assert_eq!(m.level, e.level);
+            // 20 ns is 2.5 clocks: an edge moves by at most 3 clocks
+            assert!(m.edge.abs_diff(e.edge) <= 3, "{m:?} vs {e:?}");
+            differ += usize::from(m.edge != e.edge);
+        }
+        assert!(differ > exact.len() / 2, "the edges did move");
+        assert!(moved.windows(2).all(|w| w[0].edge <= w[1].edge));
+        for (s, b) in starts.iter().zip(&bytes) {
+            assert!((s - b.start_ns).abs() <= 20.0);
+        }
+        assert_eq!(
+            jittered_transitions(&bytes, &jitter),
+            (moved, starts),
+            "seeded"
+        );
+    }
 
     #[test]
     fn a_byte_is_start_data_lsb_first_and_stop() {

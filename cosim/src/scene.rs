@@ -1,5 +1,6 @@
 //! A scene of the cell models on the box's pins: one bus per port.
 
+use crate::line::Jitter;
 use crate::sim::{SentPacket, SimSpec};
 use skinbox_cells::scene::{GenerateOptions, Generated, Scene};
 use skinbox_gateware::interface_box::BoxConfig;
@@ -41,6 +42,7 @@ pub fn spec(generated: &Generated, config: BoxConfig, from_ns: u64, duration_ns:
         ports,
         pcap: None,
         vcd: None,
+        jitter: Jitter::NONE,
     }
 }
 

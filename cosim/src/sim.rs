@@ -2,7 +2,7 @@
 
 use crate::frames::{assemble, check};
 use crate::harness::play_with_progress;
-use crate::line::{transitions, UartByte};
+use crate::line::{jittered_transitions, Jitter, UartByte};
 use crate::model::{default_cache_dir, CosimError, Model};
 use crate::pcap::PcapOut;
 use crate::Dut;
@@ -38,6 +38,8 @@ pub struct SimSpec {
     pub pcap: Option<PathBuf>,
     /// Write a VCD trace here (builds a traced model).
     pub vcd: Option<PathBuf>,
+    /// Edge jitter of every line (seeded per port from `jitter.seed`).
+    pub jitter: Jitter,
 }
 
 /// Clock cycles the box is held in reset at the start.
@@ -92,10 +94,12 @@ pub fn run_rtl_with_progress(
 ) -> Result<SimReport, CosimError> {
     let model = Model::build(&spec.config, spec.vcd.is_some(), &default_cache_dir())?;
     let mut dut = Dut::new(&model, spec.vcd.as_deref())?;
-    let lines: Vec<_> = spec
+    // per port: its transitions and the true (jittered) start edge of every packet
+    let (lines, true_starts): (Vec<_>, Vec<Vec<f64>>) = spec
         .ports
         .iter()
-        .map(|packets| {
+        .enumerate()
+        .map(|(port, packets)| {
             let bytes: Vec<UartByte> = packets
                 .iter()
                 .flat_map(|p| {
@@ -107,9 +111,14 @@ pub fn run_rtl_with_progress(
                     })
                 })
                 .collect();
-            transitions(&bytes)
+            let jitter = Jitter {
+                seed: spec.jitter.seed.wrapping_add(port as u64),
+                ..spec.jitter
+            };
+            let (line, starts) = jittered_transitions(&bytes, &jitter);
+            (line, starts.iter().step_by(20).copied().collect())
         })
-        .collect();
+        .unzip();
     let cycles = spec.duration_ns / TICK_NS;
     let started = Instant::now();
     let out = play_with_progress(&mut dut, &lines, RESET_CYCLES, cycles, &mut |done| {
@@ -139,9 +148,13 @@ pub fn run_rtl_with_progress(
         ),
         None => None,
     };
-    // each port's packets, to be matched in order
-    let mut pending: Vec<VecDeque<&SentPacket>> =
-        spec.ports.iter().map(|p| p.iter().collect()).collect();
+    // each port's packets with their true start edges, to be matched in order
+    let mut pending: Vec<VecDeque<(&SentPacket, f64)>> = spec
+        .ports
+        .iter()
+        .zip(&true_starts)
+        .map(|(p, t)| p.iter().zip(t.iter().copied()).collect())
+        .collect();
     let mut last_status: Vec<PortCounters> = vec![PortCounters::default(); spec.config.ports];
     let (mut error_sum, mut error_count) = (0.0, 0u64);
     for frame in &frames {
@@ -158,14 +171,14 @@ pub fn run_rtl_with_progress(
                     report.records += 1;
                     let queue = &mut pending[usize::from(r.port)];
                     // packets before this one on the port were lost
-                    match queue.iter().position(|p| p.bytes == r.cell_packet) {
+                    match queue.iter().position(|p| p.0.bytes == r.cell_packet) {
                         Some(k) => {
                             queue.drain(..k);
-                            let sent = queue.pop_front().expect("found above");
+                            let (_, true_start_ns) = queue.pop_front().expect("found above");
                             report.packets_delivered += 1;
                             let stamp_ns =
                                 (r.tick(datagram.base_tick) + RESET_CYCLES) as f64 * TICK_NS as f64;
-                            let error = (stamp_ns - sent.start_ns) / TICK_NS as f64;
+                            let error = (stamp_ns - true_start_ns) / TICK_NS as f64;
                             report.ts_error_max_ticks = report.ts_error_max_ticks.max(error);
                             error_sum += error;
                             error_count += 1;

@@ -44,6 +44,7 @@ fn busy_ports_fill_datagrams_a_lull_flushes_by_timeout() {
         duration_ns: 5_000 + u64::from(per_port) * 50_000 + 2_000_000,
         pcap: None,
         vcd: None,
+        jitter: skinbox_cosim::line::Jitter::NONE,
     };
     let report = run_rtl(&spec).unwrap();
     assert_eq!(report.packets_delivered, 8 * u64::from(per_port));

@@ -35,6 +35,9 @@ pub struct Args {
     /// Write a VCD trace of the box (slow; builds a traced model).
     #[arg(long)]
     vcd: Option<PathBuf>,
+    /// Random edge jitter of every UART line, peak ns (uniform, seeded by the scene seed).
+    #[arg(long, default_value_t = 0.0)]
+    jitter_ns: f64,
 }
 
 #[derive(Serialize)]
@@ -97,6 +100,15 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     );
     spec.pcap = Some(pcap.clone());
     spec.vcd = args.vcd.clone();
+    anyhow::ensure!(
+        (0.0..=50.0).contains(&args.jitter_ns),
+        "--jitter-ns {} must be 0 to 50 (a fifth of a bit)",
+        args.jitter_ns
+    );
+    spec.jitter = skinbox_cosim::line::Jitter {
+        peak_ns: args.jitter_ns,
+        seed: scene.config.scene.seed,
+    };
 
     let bar = indicatif::ProgressBar::new(spec.duration_ns / 8);
     bar.set_style(
