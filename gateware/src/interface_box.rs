@@ -289,6 +289,34 @@ mod tests {
     use skinbox_protocol::status::PortCounter;
     use skinbox_protocol::{Channel, DataRepr, DatagramRepr, EventRepr};
 
+    /// Runs the box on the pin levels (one list per port, indexed by clock edge, reset
+    /// for edges 1 to 3) and returns its datagrams, every frame checked.
+    fn run_box(config: &BoxConfig, levels: &[Vec<bool>]) -> Vec<DatagramRepr> {
+        let mut bench = Bench::new(InterfaceBox::connected(config).unwrap(), |b| &mut b.clock);
+        let mut capture = GmiiCapture::default();
+        let clocks = levels.iter().map(Vec::len).max().unwrap_or(0) as u64;
+        for e in 1..clocks {
+            let u = &mut bench.uut;
+            u.reset.next = e <= 3;
+            for (port, l) in levels.iter().enumerate() {
+                u.uart_rx[port].next = l[e as usize];
+            }
+            bench.cycle();
+            let u = &bench.uut;
+            capture.clock(
+                e,
+                u.gmii_tx_en.val(),
+                u.gmii_txd.val().to_u8(),
+                u.gmii_tx_er.val(),
+            );
+        }
+        capture
+            .frames
+            .iter()
+            .map(|f| DatagramRepr::parse(&check_frame(f).unwrap()).unwrap())
+            .collect()
+    }
+
     #[test]
     fn impossible_parameters_are_refused_with_a_reason() {
         let bad = [
@@ -364,28 +392,7 @@ mod tests {
         let clocks = 23_000;
         let levels: Vec<Vec<bool>> = lines.iter().map(|l| l.levels(clocks)).collect();
 
-        let mut bench = Bench::new(InterfaceBox::connected(&config).unwrap(), |b| &mut b.clock);
-        let mut capture = GmiiCapture::default();
-        for e in 1..clocks {
-            let u = &mut bench.uut;
-            u.reset.next = e <= 3;
-            for (p, l) in levels.iter().enumerate() {
-                u.uart_rx[p].next = l[e as usize];
-            }
-            bench.cycle();
-            let u = &bench.uut;
-            capture.clock(
-                e,
-                u.gmii_tx_en.val(),
-                u.gmii_txd.val().to_u8(),
-                u.gmii_tx_er.val(),
-            );
-        }
-        let datagrams: Vec<DatagramRepr> = capture
-            .frames
-            .iter()
-            .map(|f| DatagramRepr::parse(&check_frame(f).unwrap()).unwrap())
-            .collect();
+        let datagrams = run_box(&config, &levels);
         let kinds: Vec<&str> = datagrams
             .iter()
             .map(|d| match d.body {
@@ -474,28 +481,7 @@ mod tests {
 
         let clocks = 47_000;
         let levels = [faulty.levels(clocks), clean.levels(clocks)];
-        let mut bench = Bench::new(InterfaceBox::connected(&config).unwrap(), |b| &mut b.clock);
-        let mut capture = GmiiCapture::default();
-        for e in 1..clocks {
-            let u = &mut bench.uut;
-            u.reset.next = e <= 3;
-            for (port, l) in levels.iter().enumerate() {
-                u.uart_rx[port].next = l[e as usize];
-            }
-            bench.cycle();
-            let u = &bench.uut;
-            capture.clock(
-                e,
-                u.gmii_tx_en.val(),
-                u.gmii_txd.val().to_u8(),
-                u.gmii_tx_er.val(),
-            );
-        }
-        let datagrams: Vec<DatagramRepr> = capture
-            .frames
-            .iter()
-            .map(|f| DatagramRepr::parse(&check_frame(f).unwrap()).unwrap())
-            .collect();
+        let datagrams = run_box(&config, &levels);
         let delivered: Vec<(u8, u8, [u8; 20])> = datagrams
             .iter()
             .filter_map(|d| match &d.body {
