@@ -201,7 +201,6 @@ impl Logic for CellDeframer {
                     self.pulse_garbage_byte.d.next = true;
                     if self.aligned.q.val() {
                         self.aligned.d.next = false;
-                        self.pulse_garbage_byte.d.next = true;
                         self.pulse_resync.d.next = true;
                     }
                 }
