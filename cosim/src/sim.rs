@@ -2,7 +2,7 @@
 
 use crate::frames::{assemble, check};
 use crate::harness::play_with_progress;
-use crate::line::{jittered_transitions, Jitter, UartByte};
+use crate::line::{back_to_back, jittered_transitions, Jitter, UartByte};
 use crate::model::{default_cache_dir, CosimError, Model};
 use crate::pcap::PcapOut;
 use crate::Dut;
@@ -82,8 +82,17 @@ pub struct SimReport {
     pub cycles_per_second: f64,
 }
 
+/// A finished run: the report and every datagram the box sent, in order.
+#[derive(Debug, Clone)]
+pub struct SimRun {
+    /// What came out, checked.
+    pub report: SimReport,
+    /// The box's datagrams (every frame passed the independent checks).
+    pub datagrams: Vec<DatagramRepr>,
+}
+
 /// Runs `spec` on the verilated box.
-pub fn run_rtl(spec: &SimSpec) -> Result<SimReport, CosimError> {
+pub fn run_rtl(spec: &SimSpec) -> Result<SimRun, CosimError> {
     run_rtl_with_progress(spec, &mut |_, _| {})
 }
 
@@ -91,7 +100,7 @@ pub fn run_rtl(spec: &SimSpec) -> Result<SimReport, CosimError> {
 pub fn run_rtl_with_progress(
     spec: &SimSpec,
     progress: &mut dyn FnMut(u64, u64),
-) -> Result<SimReport, CosimError> {
+) -> Result<SimRun, CosimError> {
     let model = Model::build(&spec.config, spec.vcd.is_some(), &default_cache_dir())?;
     let mut dut = Dut::new(&model, spec.vcd.as_deref())?;
     // per port: its transitions and the true (jittered) start edge of every packet
@@ -102,14 +111,7 @@ pub fn run_rtl_with_progress(
         .map(|(port, packets)| {
             let bytes: Vec<UartByte> = packets
                 .iter()
-                .flat_map(|p| {
-                    p.bytes.iter().enumerate().map(move |(i, value)| UartByte {
-                        start_ns: p.start_ns + i as f64 * 10.0 * p.bit_ns,
-                        bit_ns: p.bit_ns,
-                        value: *value,
-                        stop_level: true,
-                    })
-                })
+                .flat_map(|p| back_to_back(&p.bytes, p.start_ns, p.bit_ns))
                 .collect();
             let jitter = Jitter {
                 seed: spec.jitter.seed.wrapping_add(port as u64),
@@ -157,6 +159,7 @@ pub fn run_rtl_with_progress(
         .collect();
     let mut last_status: Vec<PortCounters> = vec![PortCounters::default(); spec.config.ports];
     let (mut error_sum, mut error_count) = (0.0, 0u64);
+    let mut datagrams = Vec::with_capacity(frames.len());
     for frame in &frames {
         let (ethernet, payload) = check(&frame.bytes).map_err(|e| tool("checking a frame", e))?;
         if let Some(pcap) = &mut pcap {
@@ -164,7 +167,7 @@ pub fn run_rtl_with_progress(
                 .map_err(|e| tool("writing the pcap", e))?;
         }
         let datagram = DatagramRepr::parse(payload).map_err(|e| tool("parsing a datagram", e))?;
-        match datagram.body {
+        match &datagram.body {
             DatagramBody::Records(records) => {
                 report.record_datagrams += 1;
                 for r in records {
@@ -194,6 +197,7 @@ pub fn run_rtl_with_progress(
                 }
             }
         }
+        datagrams.push(datagram);
     }
     if let Some(pcap) = pcap {
         pcap.into_inner().map_err(|e| tool("writing the pcap", e))?;
@@ -218,7 +222,7 @@ pub fn run_rtl_with_progress(
             )
         })
         .collect();
-    Ok(report)
+    Ok(SimRun { report, datagrams })
 }
 
 fn tool(step: &'static str, e: impl std::fmt::Display) -> CosimError {

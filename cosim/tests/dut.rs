@@ -1,47 +1,11 @@
 //! The verilated box, driven through the safe `Dut`: a cell packet on a pin comes out as
-//! a record in a valid Ethernet frame.
+//! a record in a valid Ethernet frame (checked by `frames::check`: crc crate, etherparse).
 
-use skinbox_cosim::{Dut, GmiiByte, Model};
+use skinbox_cosim::frames::{assemble, check};
+use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{DataRepr, DatagramRepr};
-
-/// Frames from GMII bytes: a frame ends where consecutive cycles stop.
-fn frames(bytes: &[GmiiByte]) -> Vec<Vec<u8>> {
-    let mut frames: Vec<Vec<u8>> = vec![];
-    let mut last = None;
-    for b in bytes {
-        if last != Some(b.cycle - 1) {
-            frames.push(vec![]);
-        }
-        frames.last_mut().unwrap().push(b.data);
-        last = Some(b.cycle);
-    }
-    frames
-}
-
-/// The UDP payload after checking the FCS with the crc crate and the checksums with
-/// etherparse.
-fn payload(frame: &[u8]) -> Vec<u8> {
-    assert_eq!(
-        &frame[..8],
-        &[0x55, 0x55, 0x55, 0x55, 0x55, 0x55, 0x55, 0xD5]
-    );
-    let (body, fcs) = frame[8..].split_at(frame.len() - 12);
-    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(body);
-    assert_eq!(fcs, crc.to_le_bytes());
-    let h = etherparse::PacketHeaders::from_ethernet_slice(body).unwrap();
-    let Some(etherparse::NetHeaders::Ipv4(ip, _)) = &h.net else {
-        panic!("not IPv4")
-    };
-    assert_eq!(ip.header_checksum, ip.calc_header_checksum());
-    let Some(etherparse::TransportHeader::Udp(udp)) = &h.transport else {
-        panic!("not UDP")
-    };
-    let data = &h.payload.slice()[..usize::from(udp.length) - 8];
-    assert_eq!(udp.checksum, udp.calc_checksum_ipv4(ip, data).unwrap());
-    data.to_vec()
-}
 
 #[test]
 fn a_packet_on_a_pin_becomes_a_record() {
@@ -78,9 +42,10 @@ fn a_packet_on_a_pin_becomes_a_record() {
     dut.run(5_000, |b| out.push(b));
     assert_eq!(dut.tx_errors(), 0);
 
-    let datagrams: Vec<DatagramRepr> = frames(&out)
+    let (frames, _) = assemble(&out);
+    let datagrams: Vec<DatagramRepr> = frames
         .iter()
-        .map(|f| DatagramRepr::parse(&payload(f)).unwrap())
+        .map(|f| DatagramRepr::parse(check(&f.bytes).unwrap().1).unwrap())
         .collect();
     assert_eq!(datagrams.len(), 2, "status at boot, then the records");
     let DatagramBody::Records(records) = &datagrams[1].body else {

@@ -49,7 +49,7 @@ fn eight_ports_at_line_rate_lose_nothing() {
             seed: 42,
         },
     };
-    let report = run_rtl(&spec).unwrap();
+    let report = run_rtl(&spec).unwrap().report;
     eprintln!("{report:?}");
     assert_eq!(report.packets_sent, (ports * per_port) as u64);
     assert_eq!(report.packets_delivered, report.packets_sent);

@@ -29,7 +29,7 @@ fn busy_ports_fill_datagrams_a_lull_flushes_by_timeout() {
     };
     let per_port = 60;
     let spec = SimSpec {
-        config: config.clone(),
+        config,
         ports: (0..8u16)
             .map(|p| {
                 (0..per_port)
@@ -46,40 +46,15 @@ fn busy_ports_fill_datagrams_a_lull_flushes_by_timeout() {
         vcd: None,
         jitter: skinbox_cosim::line::Jitter::NONE,
     };
-    let report = run_rtl(&spec).unwrap();
-    assert_eq!(report.packets_delivered, 8 * u64::from(per_port));
-    // replay the same spec to read the datagrams themselves
-    let model = Model::build(&config, false, &skinbox_cosim::model::default_cache_dir()).unwrap();
-    let mut dut = Dut::new(&model, None).unwrap();
-    let lines: Vec<_> = spec
-        .ports
+    let run = run_rtl(&spec).unwrap();
+    assert_eq!(run.report.packets_delivered, 8 * u64::from(per_port));
+    let sizes: Vec<(usize, u8)> = run
+        .datagrams
         .iter()
-        .map(|ps| {
-            let bytes: Vec<UartByte> = ps
-                .iter()
-                .flat_map(|p| back_to_back(&p.bytes, p.start_ns, p.bit_ns))
-                .collect();
-            transitions(&bytes)
+        .filter_map(|d| match &d.body {
+            DatagramBody::Records(r) => Some((r.len(), d.flags)),
+            DatagramBody::Status(_) => None,
         })
-        .collect();
-    let out = play(&mut dut, &lines, 4, spec.duration_ns / 8);
-    let (frames, _) = assemble(&out);
-    let sizes: Vec<(usize, u8)> = frames
-        .iter()
-        .filter_map(
-            |f| match DatagramRepr::parse(check(&f.bytes).unwrap().1).unwrap() {
-                d @ DatagramRepr {
-                    body: DatagramBody::Records(_),
-                    ..
-                } => {
-                    let DatagramBody::Records(r) = &d.body else {
-                        unreachable!()
-                    };
-                    Some((r.len(), d.flags))
-                }
-                _ => None,
-            },
-        )
         .collect();
     let total: usize = sizes.iter().map(|s| s.0).sum();
     assert_eq!(total, 480);

@@ -122,7 +122,8 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     let report = run_rtl_with_progress(&spec, &mut |done, _| {
         bar.set_message("simulating");
         bar.set_position(done);
-    })?;
+    })?
+    .report;
     bar.finish_and_clear();
 
     let host = skinbox_host::decode_pcap_file(&pcap, &Default::default())
