@@ -16,7 +16,7 @@ use crate::stream::{ByteStreamSink, ByteStreamSource};
 use rust_hdl::prelude::*;
 use skinbox_protocol::cell::PACKET_LEN;
 
-/// Packets a port buffer holds.
+/// Packets a port buffer holds (the slot index is one bit wide, so this is 2).
 pub const SLOTS: usize = 2;
 /// Beats of a stored packet: tick and cell bytes.
 pub const STORED_BEATS: usize = TICK_BEATS + PACKET_LEN;
@@ -39,6 +39,7 @@ pub struct PortBuffer {
     pub events: Signal<Out, Bits<8>>,
     memory: RAM<Bits<9>, 6>,
     stored_beats: Constant<Bits<5>>,
+    slots: Constant<Bits<2>>,
     used: DFF<Bits<2>>,
     write_slot: DFF<Bit>,
     write_index: DFF<Bits<5>>,
@@ -63,6 +64,7 @@ impl Default for PortBuffer {
             events: Default::default(),
             memory: Default::default(),
             stored_beats: Constant::new((STORED_BEATS as u64).into()),
+            slots: Constant::new((SLOTS as u64).into()),
             used: Default::default(),
             write_slot: Default::default(),
             write_index: Default::default(),
@@ -108,8 +110,8 @@ impl Logic for PortBuffer {
             | (bit_cast::<9, 1>(self.loss_pending.q.val().into()) << 8);
         if self.sink.valid.val() {
             if self.write_index.q.val() == 0 {
-                self.dropping.d.next = self.used.q.val() == 2;
-                self.memory.write_enable.next = self.used.q.val() != 2;
+                self.dropping.d.next = self.used.q.val() == self.slots.val();
+                self.memory.write_enable.next = self.used.q.val() != self.slots.val();
             } else {
                 self.memory.write_enable.next =
                     !self.dropping.q.val() & (self.write_index.q.val() < self.stored_beats.val());
@@ -122,7 +124,7 @@ impl Logic for PortBuffer {
                 if self.sink.error.val() {
                     self.loss_pending.d.next = true;
                 } else if self.dropping.q.val()
-                    | ((self.write_index.q.val() == 0) & (self.used.q.val() == 2))
+                    | ((self.write_index.q.val() == 0) & (self.used.q.val() == self.slots.val()))
                 {
                     self.loss_pending.d.next = true;
                     self.dropped_pulse.d.next = true;

@@ -56,6 +56,7 @@ pub struct StatusReporter {
     memory: RAM<Bits<8>, 11>,
     period: Constant<Bits<32>>,
     ports: Constant<Bits<7>>,
+    ports_per_page: Constant<Bits<7>>,
     boot_seed: Constant<Bits<32>>,
     timer: DFF<Bits<32>>,
     due: DFF<Bit>,
@@ -124,6 +125,7 @@ impl StatusReporter {
             memory: Default::default(),
             period: Constant::new(period_ticks.into()),
             ports: Constant::new((ports as u64).into()),
+            ports_per_page: Constant::new((PORTS_PER_STATUS as u64).into()),
             boot_seed: Constant::new(u64::from(boot_seed).into()),
             timer: Default::default(),
             due: Default::default(),
@@ -199,8 +201,8 @@ impl Logic for StatusReporter {
                 self.offset.d.next = 0.into();
                 self.sum.d.next = 0.into();
                 self.tick_held.d.next = self.tick.val();
-                self.page_ports.d.next = 32.into();
-                if self.remaining.val() < 32 {
+                self.page_ports.d.next = self.ports_per_page.val();
+                if self.remaining.val() < self.ports_per_page.val() {
                     self.page_ports.d.next = self.remaining.val();
                 }
             }

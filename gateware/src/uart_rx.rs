@@ -47,6 +47,7 @@ pub struct UartRx {
     pub busy: Signal<Out, Bit>,
     phase_increment: Constant<Bits<17>>,
     phase_start: Constant<Bits<16>>,
+    start_latency: Constant<Bits<32>>,
     sync_meta: DFF<Bit>,
     sync_stable: DFF<Bit>,
     sync_previous: DFF<Bit>,
@@ -92,6 +93,7 @@ impl UartRx {
             busy: Default::default(),
             phase_increment: Constant::new(increment.into()),
             phase_start: Constant::new(start.into()),
+            start_latency: Constant::new(START_LATENCY_TICKS.into()),
             sync_meta: Default::default(),
             sync_stable: Default::default(),
             sync_previous: Default::default(),
@@ -150,7 +152,7 @@ impl Logic for UartRx {
             self.receiving.d.next = true;
             self.phase.d.next = self.phase_start.val();
             self.bit_index.d.next = 0.into();
-            self.start_edge_tick.d.next = self.tick.val() - 1;
+            self.start_edge_tick.d.next = self.tick.val() - self.start_latency.val();
         }
         if self.bit_middle.val() {
             self.bit_index.d.next = self.bit_index.q.val() + 1;
