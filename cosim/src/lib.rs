@@ -19,7 +19,6 @@ pub mod frames;
 pub mod harness;
 pub mod line;
 pub mod model;
-pub mod pcap;
 pub mod scene;
 pub mod sim;
 

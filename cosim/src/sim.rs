@@ -4,7 +4,6 @@ use crate::frames::{assemble, check};
 use crate::harness::play_with_progress;
 use crate::line::{back_to_back, jittered_transitions, Jitter, UartByte};
 use crate::model::{default_cache_dir, CosimError, Model};
-use crate::pcap::PcapOut;
 use crate::Dut;
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::datagram::DatagramBody;
@@ -12,7 +11,7 @@ use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::{DatagramRepr, PortCounters, TICK_NS};
 use std::collections::VecDeque;
 use std::path::PathBuf;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// One cell packet as it leaves the bus root on its way to a box pin.
 #[derive(Debug, Clone, PartialEq)]
@@ -140,12 +139,12 @@ pub fn run_rtl_with_progress(
     };
     let mut pcap = match &spec.pcap {
         Some(path) => Some(
-            PcapOut::new(
-                std::fs::File::create(path).map_err(|source| CosimError::Io {
+            skinbox_host::pcap::PcapFrameWriter::new(std::fs::File::create(path).map_err(
+                |source| CosimError::Io {
                     path: path.clone(),
                     source,
-                })?,
-            )
+                },
+            )?)
             .map_err(|e| tool("writing the pcap", e))?,
         ),
         None => None,
@@ -163,7 +162,7 @@ pub fn run_rtl_with_progress(
     for frame in &frames {
         let (ethernet, payload) = check(&frame.bytes).map_err(|e| tool("checking a frame", e))?;
         if let Some(pcap) = &mut pcap {
-            pcap.write(frame.first_cycle * TICK_NS, ethernet)
+            pcap.write_frame(Duration::from_nanos(frame.first_cycle * TICK_NS), ethernet)
                 .map_err(|e| tool("writing the pcap", e))?;
         }
         let datagram = DatagramRepr::parse(payload).map_err(|e| tool("parsing a datagram", e))?;
@@ -200,7 +199,7 @@ pub fn run_rtl_with_progress(
         datagrams.push(datagram);
     }
     if let Some(pcap) = pcap {
-        pcap.into_inner().map_err(|e| tool("writing the pcap", e))?;
+        pcap.finish().map_err(|e| tool("writing the pcap", e))?;
     }
     report.ts_error_mean_ticks = if error_count > 0 {
         error_sum / error_count as f64

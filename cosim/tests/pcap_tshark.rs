@@ -4,9 +4,9 @@
 use skinbox_cosim::frames::{assemble, check};
 use skinbox_cosim::harness::play;
 use skinbox_cosim::line::{back_to_back, transitions};
-use skinbox_cosim::pcap::PcapOut;
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_host::pcap::PcapFrameWriter;
 use skinbox_protocol::{CellRepr, Channel, DataRepr, EventRepr, TICK_NS};
 use std::process::Command;
 
@@ -59,12 +59,16 @@ fn tshark_accepts_the_pcap_and_the_host_decodes_what_was_sent() {
     let dir = std::env::temp_dir().join(format!("skinbox-tshark-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("cosim.pcap");
-    let mut pcap = PcapOut::new(std::fs::File::create(&path).unwrap()).unwrap();
+    let mut pcap = PcapFrameWriter::new(std::fs::File::create(&path).unwrap()).unwrap();
     for f in &frames {
         let (ethernet, _) = check(&f.bytes).unwrap();
-        pcap.write(f.first_cycle * TICK_NS, ethernet).unwrap();
+        pcap.write_frame(
+            std::time::Duration::from_nanos(f.first_cycle * TICK_NS),
+            ethernet,
+        )
+        .unwrap();
     }
-    pcap.into_inner().unwrap();
+    pcap.finish().unwrap();
 
     let tshark = Command::new("tshark")
         .args(["-n", "-r"])
