@@ -148,58 +148,10 @@ impl GmiiCapture {
     }
 }
 
-/// Checks one GMII frame with independent code and returns its UDP payload: preamble and
-/// SFD, FCS (crc crate), Ethernet II / IPv4 / UDP structure, lengths and both checksums
-/// (etherparse), minimum size.
+/// Checks one GMII frame with independent code (`skinbox_frame_check`) and returns its UDP
+/// payload.
 pub fn check_frame(frame: &[u8]) -> Result<Vec<u8>, String> {
-    use etherparse::{NetHeaders, PacketHeaders, TransportHeader};
-    if frame.len() < 8 + 64 {
-        return Err(format!(
-            "frame of {} bytes is shorter than preamble + 64",
-            frame.len()
-        ));
-    }
-    if frame[..7] != [0x55; 7] || frame[7] != 0xD5 {
-        return Err(format!("bad preamble/SFD {:02x?}", &frame[..8]));
-    }
-    let (body, fcs) = frame[8..].split_at(frame.len() - 12);
-    let expected = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(body);
-    if fcs != expected.to_le_bytes() {
-        return Err(format!(
-            "FCS {fcs:02x?}, expected {:02x?}",
-            expected.to_le_bytes()
-        ));
-    }
-    let headers = PacketHeaders::from_ethernet_slice(body).map_err(|e| e.to_string())?;
-    let Some(NetHeaders::Ipv4(ip, _)) = &headers.net else {
-        return Err("not IPv4".into());
-    };
-    if ip.header_checksum != ip.calc_header_checksum() {
-        return Err(format!(
-            "IPv4 checksum {:#06x}, expected {:#06x}",
-            ip.header_checksum,
-            ip.calc_header_checksum()
-        ));
-    }
-    let Some(TransportHeader::Udp(udp)) = &headers.transport else {
-        return Err("not UDP".into());
-    };
-    let payload = headers.payload.slice();
-    let udp_payload = &payload[..usize::from(udp.length) - 8];
-    let sum = udp
-        .calc_checksum_ipv4(ip, udp_payload)
-        .map_err(|e| e.to_string())?;
-    if udp.checksum != sum {
-        return Err(format!(
-            "UDP checksum {:#06x}, expected {sum:#06x}",
-            udp.checksum
-        ));
-    }
-    if usize::from(ip.total_len) != 20 + usize::from(udp.length) {
-        return Err("IPv4 and UDP lengths disagree".into());
-    }
-    if payload[udp_payload.len()..].iter().any(|b| *b != 0) {
-        return Err("padding is not zero".into());
-    }
-    Ok(udp_payload.to_vec())
+    skinbox_frame_check::check(frame)
+        .map(|(_, payload)| payload.to_vec())
+        .map_err(|e| e.to_string())
 }

@@ -1,0 +1,180 @@
+//! Checks one Ethernet frame as it left the box on GMII, with code that is not the box's:
+//! preamble and SFD, FCS with the crc crate, Ethernet II / IPv4 / UDP structure, lengths
+//! and both checksums with etherparse, zero padding, minimum size. Used by the gateware's
+//! block tests and by the co-simulation.
+
+use std::fmt;
+
+/// What is wrong with a frame.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FrameError(pub String);
+
+impl fmt::Display for FrameError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for FrameError {}
+
+/// Checks a frame with code that is not the box's: preamble and SFD, FCS with the crc
+/// crate, Ethernet II / IPv4 / UDP with etherparse (both checksums, lengths), zero
+/// padding, minimum size. Returns the Ethernet frame without preamble and FCS, and the
+/// UDP payload.
+pub fn check(frame: &[u8]) -> Result<(&[u8], &[u8]), FrameError> {
+    use etherparse::{NetHeaders, PacketHeaders, TransportHeader};
+    let fail = |m: String| Err(FrameError(m));
+    if frame.len() < 8 + 64 {
+        return fail(format!(
+            "{} bytes: shorter than preamble + 64-byte minimum frame",
+            frame.len()
+        ));
+    }
+    if frame[..7] != [0x55; 7] || frame[7] != 0xD5 {
+        return fail(format!("preamble/SFD {:02x?}", &frame[..8]));
+    }
+    let (ethernet, fcs) = frame[8..].split_at(frame.len() - 12);
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(ethernet);
+    if fcs != crc.to_le_bytes() {
+        return fail(format!(
+            "FCS {fcs:02x?}, computed {:02x?}",
+            crc.to_le_bytes()
+        ));
+    }
+    let headers =
+        PacketHeaders::from_ethernet_slice(ethernet).map_err(|e| FrameError(e.to_string()))?;
+    let Some(NetHeaders::Ipv4(ip, _)) = &headers.net else {
+        return fail("not IPv4".into());
+    };
+    if ip.header_checksum != ip.calc_header_checksum() {
+        return fail(format!(
+            "IPv4 checksum {:#06x}, computed {:#06x}",
+            ip.header_checksum,
+            ip.calc_header_checksum()
+        ));
+    }
+    let Some(TransportHeader::Udp(udp)) = &headers.transport else {
+        return fail("not UDP".into());
+    };
+    let rest = headers.payload.slice();
+    let udp_len = usize::from(udp.length);
+    if udp_len < 8 || udp_len - 8 > rest.len() || usize::from(ip.total_len) != 20 + udp_len {
+        return fail(format!(
+            "lengths: IPv4 total {}, UDP {}",
+            ip.total_len, udp.length
+        ));
+    }
+    let payload = &rest[..udp_len - 8];
+    let sum = udp
+        .calc_checksum_ipv4(ip, payload)
+        .map_err(|e| FrameError(e.to_string()))?;
+    if udp.checksum != sum {
+        return fail(format!(
+            "UDP checksum {:#06x}, computed {sum:#06x}",
+            udp.checksum
+        ));
+    }
+    // padding: the bytes after the IPv4 packet (etherparse's payload stops at its end)
+    let packet_end = 14 + usize::from(ip.total_len);
+    if ethernet
+        .get(packet_end..)
+        .is_some_and(|pad| pad.iter().any(|b| *b != 0))
+    {
+        return fail("non-zero padding after the IPv4 packet".into());
+    }
+    Ok((ethernet, payload))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Preamble, an Ethernet/IPv4/UDP frame built by etherparse, zero padding to 60 bytes,
+    /// and the FCS.
+    fn frame(payload: &[u8]) -> Vec<u8> {
+        let builder = etherparse::PacketBuilder::ethernet2([2, 0, 0, 0, 0, 1], [0xFF; 6])
+            .ipv4([192, 0, 2, 10], [192, 0, 2, 1], 64)
+            .udp(54091, 54091);
+        let mut ethernet = Vec::new();
+        builder.write(&mut ethernet, payload).unwrap();
+        ethernet.resize(ethernet.len().max(60), 0);
+        with_fcs(&ethernet)
+    }
+
+    /// A valid IPv4 frame that carries TCP.
+    fn tcp_frame() -> Vec<u8> {
+        let builder = etherparse::PacketBuilder::ethernet2([2, 0, 0, 0, 0, 1], [0xFF; 6])
+            .ipv4([192, 0, 2, 10], [192, 0, 2, 1], 64)
+            .tcp(54091, 80, 1, 1024);
+        let mut ethernet = Vec::new();
+        builder.write(&mut ethernet, &[0; 20]).unwrap();
+        with_fcs(&ethernet)
+    }
+
+    fn with_fcs(ethernet: &[u8]) -> Vec<u8> {
+        let mut out = vec![0x55; 7];
+        out.push(0xD5);
+        out.extend_from_slice(ethernet);
+        let fcs = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(ethernet);
+        out.extend_from_slice(&fcs.to_le_bytes());
+        out
+    }
+
+    /// Changes one byte of the Ethernet part and recomputes the FCS, so only the layer under
+    /// test is wrong.
+    fn corrupt(frame: &[u8], at: usize) -> Vec<u8> {
+        let mut ethernet = frame[8..frame.len() - 4].to_vec();
+        ethernet[at] ^= 0x40;
+        with_fcs(&ethernet)
+    }
+
+    #[test]
+    fn a_good_frame_gives_its_payload() {
+        for len in [0, 1, 5, 100, 1472] {
+            let payload: Vec<u8> = (0..len).map(|i| (i * 7) as u8).collect();
+            let f = frame(&payload);
+            let (ethernet, got) = check(&f).unwrap();
+            assert_eq!(got, &payload[..], "payload of {len} bytes");
+            assert_eq!(ethernet.len(), f.len() - 12);
+        }
+    }
+
+    #[test]
+    fn every_kind_of_damage_is_named() {
+        let good = frame(b"sixteen bytes...");
+        let cases: Vec<(Vec<u8>, &str)> = vec![
+            (good[..70].to_vec(), "shorter than"),
+            (
+                [
+                    &[0x55, 0x55, 0x55, 0x55, 0x55, 0x55, 0x55, 0xD4][..],
+                    &good[8..],
+                ]
+                .concat(),
+                "preamble",
+            ),
+            (
+                {
+                    let mut f = good.clone();
+                    *f.last_mut().unwrap() ^= 1;
+                    f
+                },
+                "FCS",
+            ),
+            (corrupt(&good, 14 + 8), "IPv4 checksum"), // TTL
+            (corrupt(&good, 14 + 20 + 8), "UDP checksum"), // first payload byte
+            (corrupt(&good, 12), "not IPv4"),          // EtherType
+            // IP protocol: the header checksum is then stale, and caught first
+            (corrupt(&good, 14 + 9), "IPv4 checksum"),
+            (tcp_frame(), "not UDP"),
+        ];
+        for (frame, expected) in cases {
+            let err = check(&frame).expect_err(expected);
+            assert!(err.to_string().contains(expected), "{expected}: got {err}");
+        }
+        // non-zero padding after a short payload
+        let mut ethernet = good[8..good.len() - 4].to_vec();
+        *ethernet.last_mut().unwrap() = 7;
+        let err = check(&with_fcs(&ethernet)).unwrap_err();
+        assert!(err.to_string().contains("padding"), "{err}");
+    }
+}
