@@ -85,6 +85,54 @@ pub fn check(frame: &[u8]) -> Result<(&[u8], &[u8]), FrameError> {
     Ok((ethernet, payload))
 }
 
+/// Addresses of a UDP frame for [`encode`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UdpAddresses {
+    /// Source MAC.
+    pub source_mac: [u8; 6],
+    /// Destination MAC.
+    pub destination_mac: [u8; 6],
+    /// Source IPv4 address.
+    pub source_ip: [u8; 4],
+    /// Destination IPv4 address.
+    pub destination_ip: [u8; 4],
+    /// Source UDP port.
+    pub source_port: u16,
+    /// Destination UDP port.
+    pub destination_port: u16,
+}
+
+/// Builds the frame a box sends for `payload`, with etherparse and the crc crate (not the
+/// box's code): preamble and SFD, Ethernet II, IPv4 (identification 0, don't fragment,
+/// TTL 64), UDP with its checksum, zero padding to the 60-byte minimum, FCS. Fails when
+/// the payload does not fit one IPv4 packet.
+pub fn encode(addresses: &UdpAddresses, payload: &[u8]) -> Result<Vec<u8>, FrameError> {
+    let a = addresses;
+    let mut ip = etherparse::Ipv4Header::new(
+        0,
+        64,
+        etherparse::IpNumber::UDP,
+        a.source_ip,
+        a.destination_ip,
+    )
+    .map_err(|e| FrameError(e.to_string()))?;
+    ip.dont_fragment = true;
+    let builder = etherparse::PacketBuilder::ethernet2(a.source_mac, a.destination_mac)
+        .ip(etherparse::IpHeaders::Ipv4(ip, Default::default()))
+        .udp(a.source_port, a.destination_port);
+    let mut ethernet = Vec::with_capacity(builder.size(payload.len()).max(60));
+    builder
+        .write(&mut ethernet, payload)
+        .map_err(|e| FrameError(e.to_string()))?;
+    ethernet.resize(ethernet.len().max(60), 0);
+    let mut frame = vec![0x55; 7];
+    frame.push(0xD5);
+    frame.extend_from_slice(&ethernet);
+    let fcs = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&ethernet);
+    frame.extend_from_slice(&fcs.to_le_bytes());
+    Ok(frame)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -126,6 +174,31 @@ mod tests {
         let mut ethernet = frame[8..frame.len() - 4].to_vec();
         ethernet[at] ^= 0x40;
         with_fcs(&ethernet)
+    }
+
+    #[test]
+    fn encoded_frames_pass_the_check_and_carry_their_payload() {
+        let a = UdpAddresses {
+            source_mac: [2, 0x53, 0x4B, 0, 0, 1],
+            destination_mac: [0xFF; 6],
+            source_ip: [192, 0, 2, 10],
+            destination_ip: [192, 0, 2, 1],
+            source_port: 54091,
+            destination_port: 54091,
+        };
+        for len in [0, 1, 17, 18, 19, 100, 1472] {
+            let payload: Vec<u8> = (0..len).map(|i| (i * 7 + 3) as u8).collect();
+            let frame = encode(&a, &payload).unwrap();
+            assert_eq!(frame.len(), 8 + (14 + 28 + len).max(60) + 4, "{len}");
+            let (ethernet, got) = check(&frame).unwrap();
+            assert_eq!(got, &payload[..]);
+            // IPv4 flags: don't fragment, no offset; identification 0; TTL 64
+            assert_eq!(&ethernet[18..23], &[0, 0, 0x40, 0, 64]);
+        }
+        assert!(
+            encode(&a, &[0; 65_508]).is_err(),
+            "IPv4 holds at most 65,507 UDP payload bytes"
+        );
     }
 
     #[test]

@@ -14,6 +14,9 @@
 
 use rust_hdl::prelude::*;
 
+/// Clocks the counter file spends clearing its memories after reset (`ready` low).
+pub const CLEAR_CLOCKS: u64 = 512;
+
 /// Counters per port (`skinbox_protocol::PortCounter`).
 pub const COUNTERS: usize = 8;
 
@@ -210,7 +213,7 @@ mod tests {
         }
         assert_eq!(
             bench.cycles,
-            1 + 512,
+            1 + CLEAR_CLOCKS,
             "clearing takes 512 clocks after the reset edge"
         );
         let mut next_event = vec![0; ports];

@@ -24,6 +24,18 @@ pub const PHASE_BITS: usize = 16;
 /// synchroniser's second flop.
 pub const START_LATENCY_TICKS: u64 = 1;
 
+/// Phase accumulator value right after a start edge is detected: half a bit, so the
+/// accumulator carries near each bit middle (the detection latency of two clocks and the
+/// majority window, centred one clock before the carry, cancel out; the tolerance tests
+/// check that the window is centred).
+pub const PHASE_START: u64 = 1 << (PHASE_BITS - 1);
+
+/// Phase added per clock: `2^PHASE_BITS * baud / clock`, rounded (2097 for 4 Mbit/s at
+/// 125 MHz).
+pub fn phase_increment(clock_hz: u64, baud: u64) -> u64 {
+    ((1u64 << PHASE_BITS) as f64 * baud as f64 / clock_hz as f64).round() as u64
+}
+
 /// UART receiver for one pin.
 #[derive(LogicBlock)]
 pub struct UartRx {
@@ -74,13 +86,8 @@ impl UartRx {
             baud > 0 && clock_hz >= 4 * baud,
             "UartRx: clock {clock_hz} Hz must be at least 4 x baud {baud}"
         );
-        let ratio = baud as f64 / clock_hz as f64;
-        let one = (1u64 << PHASE_BITS) as f64;
-        let increment = (one * ratio).round() as u64;
-        // Starting the accumulator at half a bit makes it carry near each bit middle: the
-        // detection latency (two clocks) and the majority window (centred one clock before
-        // the carry) cancel out. The tolerance tests check that the window is centred.
-        let start = (one * 0.5).round() as u64;
+        let increment = phase_increment(clock_hz, baud);
+        let start = PHASE_START;
         Self {
             clock: Default::default(),
             reset: Default::default(),
