@@ -41,4 +41,12 @@ pub fn assemble(bytes: &[GmiiByte]) -> (Vec<Frame>, Option<u64>) {
     (frames, min_gap)
 }
 
+/// Shortest gap between consecutive frames, in clocks.
+pub fn min_gap(frames: &[Frame]) -> Option<u64> {
+    frames
+        .windows(2)
+        .map(|w| w[1].first_cycle - (w[0].first_cycle + w[0].bytes.len() as u64))
+        .min()
+}
+
 pub use skinbox_frame_check::{check, FrameError};

@@ -19,6 +19,7 @@ pub mod frames;
 pub mod harness;
 pub mod line;
 pub mod model;
+pub mod reference;
 pub mod scene;
 pub mod sim;
 

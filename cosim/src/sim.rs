@@ -1,11 +1,12 @@
 //! One co-simulation run: packets on the box's UART pins, frames out, everything checked.
 
-use crate::frames::{assemble, check};
+use crate::frames::{assemble, check, min_gap, Frame};
 use crate::harness::play_with_progress;
-use crate::line::{back_to_back, jittered_transitions, Jitter, UartByte};
+use crate::line::{back_to_back, jittered_transitions, Jitter, Transition, UartByte};
 use crate::model::{default_cache_dir, CosimError, Model};
 use crate::Dut;
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::{DatagramRepr, PortCounters, TICK_NS};
@@ -88,6 +89,8 @@ pub struct SimRun {
     pub report: SimReport,
     /// The box's datagrams (every frame passed the independent checks).
     pub datagrams: Vec<DatagramRepr>,
+    /// The frames as sent, preamble to FCS, with the cycle of their first byte.
+    pub frames: Vec<Frame>,
 }
 
 /// Runs `spec` on the verilated box.
@@ -95,16 +98,33 @@ pub fn run_rtl(spec: &SimSpec) -> Result<SimRun, CosimError> {
     run_rtl_with_progress(spec, &mut |_, _| {})
 }
 
-/// As [`run_rtl`], calling `progress(cycles done, cycles in all)` as it goes.
-pub fn run_rtl_with_progress(
+/// Which model of the box runs a [`SimSpec`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Fidelity {
+    /// The verilated gateware, every clock: the truth.
+    #[default]
+    Rtl,
+    /// The packet-level reference model ([`crate::reference`]).
+    Reference,
+}
+
+/// Runs `spec` at the chosen fidelity, calling `progress(cycles done, cycles in all)`.
+pub fn run_with_progress(
     spec: &SimSpec,
+    fidelity: Fidelity,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<SimRun, CosimError> {
-    let model = Model::build(&spec.config, spec.vcd.is_some(), &default_cache_dir())?;
-    let mut dut = Dut::new(&model, spec.vcd.as_deref())?;
-    // per port: its transitions and the true (jittered) start edge of every packet
-    let (lines, true_starts): (Vec<_>, Vec<Vec<f64>>) = spec
-        .ports
+    match fidelity {
+        Fidelity::Rtl => run_rtl_with_progress(spec, progress),
+        Fidelity::Reference => crate::reference::run_reference_with_progress(spec, progress),
+    }
+}
+
+/// Every port's pin transitions (each line with its own seeded jitter) and the true,
+/// jittered start edge of every packet, ns.
+pub fn lines(spec: &SimSpec) -> (Vec<Vec<Transition>>, Vec<Vec<f64>>) {
+    spec.ports
         .iter()
         .enumerate()
         .map(|(port, packets)| {
@@ -117,21 +137,46 @@ pub fn run_rtl_with_progress(
                 ..spec.jitter
             };
             let (line, starts) = jittered_transitions(&bytes, &jitter);
-            (line, starts.iter().step_by(20).copied().collect())
+            (line, starts.iter().step_by(PACKET_LEN).copied().collect())
         })
-        .unzip();
-    let cycles = spec.duration_ns / TICK_NS;
+        .unzip()
+}
+
+/// Clock cycles a spec runs for.
+pub fn cycles(spec: &SimSpec) -> u64 {
+    spec.duration_ns / TICK_NS
+}
+
+/// As [`run_rtl`], calling `progress(cycles done, cycles in all)` as it goes.
+pub fn run_rtl_with_progress(
+    spec: &SimSpec,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<SimRun, CosimError> {
+    let model = Model::build(&spec.config, spec.vcd.is_some(), &default_cache_dir())?;
+    let mut dut = Dut::new(&model, spec.vcd.as_deref())?;
+    let (lines, true_starts) = lines(spec);
+    let cycles = cycles(spec);
     let started = Instant::now();
     let out = play_with_progress(&mut dut, &lines, RESET_CYCLES, cycles, &mut |done| {
         progress(done, cycles)
     });
     let wall = started.elapsed().as_secs_f64();
-    let (frames, min_gap) = assemble(&out);
+    let (frames, _) = assemble(&out);
+    analyse(spec, &frames, &true_starts, wall)
+}
 
+/// Checks every frame, writes the pcap and measures what the frames delivered.
+pub(crate) fn analyse(
+    spec: &SimSpec,
+    frames: &[Frame],
+    true_starts: &[Vec<f64>],
+    wall: f64,
+) -> Result<SimRun, CosimError> {
+    let cycles = cycles(spec);
     let mut report = SimReport {
         frames: frames.len() as u64,
         packets_sent: spec.ports.iter().map(|p| p.len() as u64).sum(),
-        min_inter_frame_gap: min_gap,
+        min_inter_frame_gap: min_gap(frames),
         sim_seconds: cycles as f64 * TICK_NS as f64 * 1e-9,
         wall_seconds: wall,
         cycles_per_second: cycles as f64 / wall.max(1e-9),
@@ -153,13 +198,13 @@ pub fn run_rtl_with_progress(
     let mut pending: Vec<VecDeque<(&SentPacket, f64)>> = spec
         .ports
         .iter()
-        .zip(&true_starts)
+        .zip(true_starts)
         .map(|(p, t)| p.iter().zip(t.iter().copied()).collect())
         .collect();
     let mut last_status: Vec<PortCounters> = vec![PortCounters::default(); spec.config.ports];
     let (mut error_sum, mut error_count) = (0.0, 0u64);
     let mut datagrams = Vec::with_capacity(frames.len());
-    for frame in &frames {
+    for frame in frames {
         let (ethernet, payload) = check(&frame.bytes).map_err(|e| tool("checking a frame", e))?;
         if let Some(pcap) = &mut pcap {
             pcap.write_frame(Duration::from_nanos(frame.first_cycle * TICK_NS), ethernet)
@@ -221,7 +266,11 @@ pub fn run_rtl_with_progress(
             )
         })
         .collect();
-    Ok(SimRun { report, datagrams })
+    Ok(SimRun {
+        report,
+        datagrams,
+        frames: frames.to_vec(),
+    })
 }
 
 fn tool(step: &'static str, e: impl std::fmt::Display) -> CosimError {

@@ -1,0 +1,678 @@
+//! The shared back end: port buffers, arbiter, framer, transmitter, status reporter and
+//! counter file. It runs through the clock cycles in which something moves (a record
+//! between buffer and framer, a datagram closing, a frame starting, a report beginning or
+//! ending) and jumps over every stretch in which only free-running counters advance.
+
+use super::front::{PortFront, StartedPacket};
+use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAX_RECORDS};
+use skinbox_protocol::status::PortCounter;
+use skinbox_protocol::{DatagramRepr, PortCounters, RecordRepr, StatusRepr};
+use std::collections::VecDeque;
+
+/// Fixed numbers of the back end.
+#[derive(Debug, Clone)]
+pub(super) struct BackTiming {
+    /// Ports.
+    pub ports: usize,
+    /// Tick of cycle `c` is `c - tick_offset`.
+    pub tick_offset: u64,
+    /// First cycle the counter file is ready (status reports may start).
+    pub counters_ready_from: u64,
+    /// Flush timeout in ticks.
+    pub flush_timeout: u64,
+    /// Status period in clocks.
+    pub status_period: u64,
+    /// Ports per status datagram.
+    pub ports_per_status: usize,
+    /// Boot id in the status reports.
+    pub boot_id: u32,
+    /// Box id and port count in every datagram header.
+    pub box_id: u16,
+    /// Frame bytes before the body (preamble to the box header).
+    pub body_start: u64,
+    /// Shortest frame, preamble to the end of the padding.
+    pub min_padded_end: u64,
+    /// FCS and inter-frame gap after the padding.
+    pub frame_tail: u64,
+    /// Clocks from a transmitter start to its first GMII byte.
+    pub start_to_first_byte: u64,
+}
+
+/// A frame the back end sends.
+#[derive(Debug, Clone)]
+pub(super) struct SentFrame {
+    /// Cycle of its first preamble byte on GMII.
+    pub first_cycle: u64,
+    /// The datagram.
+    pub datagram: DatagramRepr,
+}
+
+/// Port buffer beats: flags, 4 tick bytes, 20 cell bytes.
+const LAST_BEAT: u8 = 24;
+/// Framer beat at which the tick offset is computed (the last tick byte).
+const OFFSET_BEAT: u8 = 5;
+/// Clocks the framer pauses after [`OFFSET_BEAT`] to write the offset bytes.
+const OFFSET_PAUSE: u8 = 4;
+/// Last framer beat of a record.
+const RECORD_END_BEAT: u8 = 25;
+const DROPPED: u8 = 1 << PortCounter::DroppedOverflow as u8;
+
+#[derive(Debug, Clone)]
+struct Stored {
+    flags: u8,
+    stamp: u32,
+    bytes: [u8; PACKET_LEN],
+}
+
+#[derive(Debug, Default)]
+struct Buffer {
+    slots: VecDeque<Stored>,
+    read_beat: u8,
+    dropping: bool,
+    loss_pending: bool,
+    /// Loss flag captured with the first beat of the packet being written.
+    flag_of_writing: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Report {
+    Wait,
+    Start,
+    /// Writing the body: the request follows at cycle `request_at`.
+    Build {
+        from: u64,
+        request_at: u64,
+    },
+    Request,
+    Sending,
+}
+
+/// Counter file of one port: pending event bits served one per scanner visit.
+#[derive(Debug, Default)]
+struct PortCounting {
+    /// Events (cycle on the input, bits), in cycle order.
+    events: Vec<(u64, u8)>,
+    next_event: usize,
+    /// Cycle up to which visits were processed (exclusive).
+    done_until: u64,
+    pending: u8,
+    /// Per counter: the cycles whose edge writes an increment, ascending.
+    writes: [Vec<u64>; 8],
+}
+
+struct FrontBeat {
+    cycle: u64,
+    port: usize,
+    packet: usize,
+    first: bool,
+}
+
+/// The back end's state: the registers of the gateware that matter to the frames.
+pub(super) struct Back<'a> {
+    t: BackTiming,
+    fronts: &'a [PortFront],
+    beats: Vec<FrontBeat>,
+    next_beat: usize,
+    buffers: Vec<Buffer>,
+    counting: Vec<PortCounting>,
+    // arbiter
+    arbiter_port: usize,
+    granted: bool,
+    prefix_sent: bool,
+    // framer
+    beat: u8,
+    offset_left: u8,
+    fill: Vec<RecordRepr>,
+    record: RecordRepr,
+    base_tick: u64,
+    deadline: u32,
+    deadline_passed: bool,
+    pending: Option<DatagramRepr>,
+    sending_records: bool,
+    sending_status: bool,
+    status_taken: bool,
+    /// Cycles from which each records datagram counts as sent, and the records sum.
+    started_records: Vec<(u64, u64)>,
+    records_sent: u64,
+    // transmitter
+    idle_from: u64,
+    sequence: u32,
+    // status reporter
+    report: Report,
+    due: bool,
+    first_port: usize,
+    page_ports: usize,
+    report_tick: u64,
+    status_body: Option<StatusRepr>,
+    /// Frames sent, in order.
+    pub frames: Vec<SentFrame>,
+}
+
+impl<'a> Back<'a> {
+    pub(super) fn new(t: BackTiming, fronts: &'a [PortFront]) -> Self {
+        let mut beats: Vec<FrontBeat> = fronts
+            .iter()
+            .enumerate()
+            .flat_map(|(port, f)| {
+                f.packets.iter().enumerate().flat_map(move |(i, p)| {
+                    [(p.first_beat, true), (p.last_beat, false)].map(|(cycle, first)| FrontBeat {
+                        cycle,
+                        port,
+                        packet: i,
+                        first,
+                    })
+                })
+            })
+            .collect();
+        beats.sort_by_key(|b| (b.cycle, b.port));
+        let counting = fronts
+            .iter()
+            .map(|f| PortCounting {
+                events: f.events.clone(),
+                ..Default::default()
+            })
+            .collect();
+        Back {
+            buffers: (0..t.ports).map(|_| Buffer::default()).collect(),
+            counting,
+            t,
+            fronts,
+            beats,
+            next_beat: 0,
+            arbiter_port: 0,
+            granted: false,
+            prefix_sent: false,
+            beat: 0,
+            offset_left: 0,
+            fill: vec![],
+            record: empty_record(),
+            base_tick: 0,
+            deadline: 0,
+            deadline_passed: false,
+            pending: None,
+            sending_records: false,
+            sending_status: false,
+            status_taken: false,
+            started_records: vec![],
+            records_sent: 0,
+            idle_from: 0,
+            sequence: 0,
+            report: Report::Wait,
+            due: false,
+            first_port: 0,
+            page_ports: 0,
+            report_tick: 0,
+            status_body: None,
+            frames: vec![],
+        }
+    }
+
+    fn tick(&self, c: u64) -> u64 {
+        c - self.t.tick_offset
+    }
+
+    /// The status timer reaches zero in cycle `c` (every period from the end of reset).
+    fn timer_zero(&self, c: u64) -> bool {
+        c >= self.t.tick_offset && (c - self.t.tick_offset).is_multiple_of(self.t.status_period)
+    }
+
+    /// First cycle at or after `c` in which the status timer is zero.
+    fn next_timer_zero(&self, c: u64) -> u64 {
+        let c = c.max(self.t.tick_offset);
+        let since = (c - self.t.tick_offset) % self.t.status_period;
+        if since == 0 {
+            c
+        } else {
+            c + self.t.status_period - since
+        }
+    }
+
+    /// Runs cycles `from..end`.
+    pub(super) fn run(&mut self, from: u64, end: u64) {
+        let mut c = from;
+        while c < end {
+            if self.quiet(c) {
+                let next = self.next_event(c).min(end);
+                if next > c {
+                    self.skip(c, next);
+                    c = next;
+                    continue;
+                }
+            }
+            self.step(c);
+            c += 1;
+        }
+    }
+
+    /// Nothing but free-running counters changes in cycle `c`.
+    fn quiet(&self, c: u64) -> bool {
+        let idle = c >= self.idle_from;
+        !self.granted
+            && self.buffers.iter().all(|b| b.slots.is_empty())
+            && self.offset_left == 0
+            && self.beat == 0
+            && !self.close_now()
+            && !(idle
+                && (self.pending.is_some()
+                    || self.report == Report::Request
+                    || self.sending_records
+                    || self.sending_status))
+            && !self.status_taken
+            && match self.report {
+                Report::Wait => !(self.due && c >= self.t.counters_ready_from),
+                Report::Start => false,
+                Report::Build { request_at, .. } => c + 1 != request_at,
+                Report::Request => true,
+                Report::Sending => self.sending_status,
+            }
+            && self.beats.get(self.next_beat).is_none_or(|b| b.cycle > c)
+    }
+
+    /// The earliest cycle after `c` at which something may change.
+    fn next_event(&self, c: u64) -> u64 {
+        let mut next = u64::MAX;
+        if let Some(b) = self.beats.get(self.next_beat) {
+            next = next.min(b.cycle);
+        }
+        if c < self.idle_from {
+            next = next.min(self.idle_from);
+        }
+        if !self.fill.is_empty() && !self.deadline_passed {
+            // deadline_passed rises one clock after the tick reaches the deadline
+            let due = self.deadline_cycle() + 1;
+            next = next.min(due.max(c + 1));
+        }
+        match self.report {
+            Report::Wait => {
+                let due_at = if self.due {
+                    self.t.counters_ready_from
+                } else {
+                    self.next_timer_zero(c) + 1
+                };
+                next = next.min(due_at.max(c + 1));
+            }
+            Report::Build { request_at, .. } => next = next.min(request_at - 1),
+            _ => {}
+        }
+        next.max(c + 1)
+    }
+
+    /// Cycle whose tick equals the deadline (the deadline is 32 bits of tick).
+    fn deadline_cycle(&self) -> u64 {
+        let now = self.base_tick;
+        let delta = self.deadline.wrapping_sub(now as u32) as u64;
+        now + delta + self.t.tick_offset
+    }
+
+    /// Advances the free-running counters over the quiet cycles `from..to`.
+    fn skip(&mut self, from: u64, to: u64) {
+        let n = to - from;
+        self.arbiter_port = (self.arbiter_port + (n % self.t.ports as u64) as usize) % self.t.ports;
+        if self.next_timer_zero(from) < to {
+            self.due = true;
+        }
+        // the registered deadline test as of the last skipped cycle
+        let last_tick = self.tick(to - 1) as u32;
+        self.deadline_passed = (last_tick.wrapping_sub(self.deadline) as i32) >= 0;
+    }
+
+    fn close_due(&self) -> bool {
+        self.beat == 0
+            && self.offset_left == 0
+            && (self.fill.len() == MAX_RECORDS || (!self.fill.is_empty() && self.deadline_passed))
+    }
+
+    fn close_now(&self) -> bool {
+        self.close_due() && self.pending.is_none() && !self.sending_records
+    }
+
+    /// One clock cycle of every block, as the gateware computes it.
+    fn step(&mut self, c: u64) {
+        let n = self.t.ports;
+        let tick = self.tick(c);
+        let idle = c >= self.idle_from;
+
+        // framer input control
+        let closing = self.close_now();
+        let accept = self.offset_left == 0
+            && !closing
+            && !(self.beat == 0 && self.fill.len() == MAX_RECORDS);
+
+        // arbiter and the granted port's buffer
+        let p = self.arbiter_port;
+        let port_valid = !self.buffers[p].slots.is_empty();
+        let port_last = self.buffers[p].read_beat == LAST_BEAT;
+        let mut next_port = p;
+        let mut next_granted = self.granted;
+        let mut next_prefix_sent = self.prefix_sent;
+        let mut record_valid = false;
+        let mut read_done = None;
+        if !self.granted {
+            if port_valid {
+                next_granted = true;
+                next_prefix_sent = false;
+            } else {
+                next_port = (p + 1) % n;
+            }
+        } else if !self.prefix_sent {
+            record_valid = true;
+            if accept {
+                next_prefix_sent = true;
+            }
+        } else {
+            record_valid = port_valid;
+            if port_valid && accept {
+                let b = &mut self.buffers[p];
+                if port_last {
+                    b.read_beat = 0;
+                    read_done = Some(p);
+                    next_granted = false;
+                    next_port = (p + 1) % n;
+                } else {
+                    b.read_beat += 1;
+                }
+            }
+        }
+
+        // framer: one beat or one offset byte per clock
+        let mut next_deadline = self.deadline;
+        if self.offset_left != 0 {
+            self.offset_left -= 1;
+        } else if record_valid && accept {
+            let slot = self.buffers[p]
+                .slots
+                .front()
+                .expect("a granted port has a packet")
+                .clone();
+            match self.beat {
+                0 => self.record.port = p as u8,
+                1 => self.record.flags = slot.flags,
+                OFFSET_BEAT => {
+                    self.offset_left = OFFSET_PAUSE;
+                    if self.fill.is_empty() {
+                        // the base tick: the 64-bit tick whose low half is the stamp
+                        self.base_tick = tick - u64::from((tick as u32).wrapping_sub(slot.stamp));
+                        next_deadline = (tick as u32).wrapping_add(self.t.flush_timeout as u32);
+                        self.record.tick_offset = 0;
+                    } else {
+                        self.record.tick_offset =
+                            slot.stamp.wrapping_sub(self.base_tick as u32) as i32;
+                    }
+                }
+                RECORD_END_BEAT => {
+                    self.record.cell_packet = slot.bytes;
+                    self.fill
+                        .push(std::mem::replace(&mut self.record, empty_record()));
+                }
+                _ => {}
+            }
+            self.beat = if self.beat == RECORD_END_BEAT {
+                0
+            } else {
+                self.beat + 1
+            };
+        }
+        if let Some(p) = read_done {
+            self.buffers[p].slots.pop_front();
+        }
+        let next_deadline_passed = (tick as u32).wrapping_sub(self.deadline) as i32 >= 0;
+        self.deadline = next_deadline;
+
+        // transmitter: a waiting records datagram first, then a status datagram (both
+        // decided on the registers as they are: a datagram closing now waits a clock)
+        let pending_q = self.pending.is_some();
+        let start_records = idle && pending_q;
+        let start_status = idle && !pending_q && self.report == Report::Request;
+
+        // the status reporter sees the framer's registers as they are
+        self.step_report(c, tick);
+        self.status_taken = start_status;
+
+        if start_records {
+            let mut d = self.pending.take().expect("checked");
+            if let DatagramBody::Records(r) = &d.body {
+                self.records_sent += r.len() as u64;
+            }
+            self.started_records.push((c + 1, self.records_sent));
+            d.sequence = self.sequence;
+            self.send(c, d);
+            self.sending_records = true;
+            self.sending_status = false;
+        } else if start_status {
+            let status = self
+                .status_body
+                .take()
+                .expect("a requested report has a body");
+            let d = DatagramRepr {
+                box_id: self.t.box_id,
+                port_count: self.t.ports as u8,
+                flags: 0,
+                sequence: self.sequence,
+                base_tick: self.report_tick,
+                body: DatagramBody::Status(status),
+            };
+            self.send(c, d);
+            self.sending_status = true;
+            self.sending_records = false;
+        } else if idle {
+            self.sending_records = false;
+            self.sending_status = false;
+        }
+        if closing {
+            let records = std::mem::take(&mut self.fill);
+            let flags = if records.len() == MAX_RECORDS {
+                0
+            } else {
+                FLAG_FLUSH_TIMEOUT
+            };
+            self.pending = Some(DatagramRepr {
+                box_id: self.t.box_id,
+                port_count: self.t.ports as u8,
+                flags,
+                sequence: 0,
+                base_tick: self.base_tick,
+                body: DatagramBody::Records(records),
+            });
+        }
+
+        // port buffers' write side: the deframers' first and last beats this cycle
+        let mut commits = vec![];
+        while let Some(b) = self.beats.get(self.next_beat).filter(|b| b.cycle == c) {
+            let (port, packet, first) = (b.port, b.packet, b.first);
+            self.next_beat += 1;
+            let p: &StartedPacket = &self.fronts[port].packets[packet];
+            let buffer = &mut self.buffers[port];
+            let used = buffer.slots.len() + usize::from(read_done == Some(port));
+            if first {
+                buffer.dropping = used == super::SLOTS;
+                buffer.flag_of_writing = buffer.loss_pending;
+            } else if !p.good {
+                buffer.loss_pending = true;
+            } else if buffer.dropping {
+                buffer.loss_pending = true;
+                self.counting[port].add(c + 1, DROPPED);
+            } else {
+                commits.push((
+                    port,
+                    Stored {
+                        flags: u8::from(buffer.flag_of_writing),
+                        stamp: p.stamp as u32,
+                        bytes: p.bytes,
+                    },
+                ));
+                buffer.loss_pending = false;
+            }
+        }
+        for (port, s) in commits {
+            self.buffers[port].slots.push_back(s);
+        }
+
+        self.arbiter_port = next_port;
+        self.granted = next_granted;
+        self.prefix_sent = next_prefix_sent;
+        self.deadline_passed = next_deadline_passed;
+    }
+
+    /// Starts a frame in cycle `c`.
+    fn send(&mut self, c: u64, d: DatagramRepr) {
+        let body_len = (d.buffer_len() - HEADER_LEN) as u64;
+        let padded_end = (self.t.body_start + body_len).max(self.t.min_padded_end);
+        self.idle_from = c + padded_end + self.t.frame_tail;
+        self.sequence = self.sequence.wrapping_add(1);
+        self.frames.push(SentFrame {
+            first_cycle: c + self.t.start_to_first_byte,
+            datagram: d,
+        });
+    }
+
+    /// Value of a framer count register in cycle `at`: (from cycle, value) steps.
+    fn count_at(&self, at: u64, records: bool) -> u32 {
+        let k = self
+            .started_records
+            .partition_point(|(from, _)| *from <= at);
+        if records {
+            k.checked_sub(1)
+                .map_or(0, |i| self.started_records[i].1 as u32)
+        } else {
+            k as u32
+        }
+    }
+
+    /// One cycle of the status reporter, on the registers as they are.
+    fn step_report(&mut self, c: u64, tick: u64) {
+        let mut due = self.due || self.timer_zero(c);
+        match self.report {
+            Report::Wait => {
+                if self.due && c >= self.t.counters_ready_from {
+                    due = false;
+                    self.first_port = 0;
+                    self.report = Report::Start;
+                }
+            }
+            Report::Start => {
+                self.report_tick = tick;
+                self.page_ports = self.t.ports_per_status.min(self.t.ports - self.first_port);
+                // words: boot id, datagrams, records, first port, 8 counters per port;
+                // five clocks each
+                let words = 4 + 8 * self.page_ports as u64;
+                self.report = Report::Build {
+                    from: c + 1,
+                    request_at: c + 1 + 5 * words,
+                };
+            }
+            Report::Build { from, request_at } => {
+                if c + 1 == request_at {
+                    self.status_body = Some(self.status_body(from));
+                    self.report = Report::Request;
+                }
+            }
+            Report::Request => {
+                if self.status_taken {
+                    self.report = Report::Sending;
+                }
+            }
+            Report::Sending => {
+                if !self.sending_status {
+                    self.first_port += self.page_ports;
+                    self.report = if self.first_port == self.t.ports {
+                        Report::Wait
+                    } else {
+                        Report::Start
+                    };
+                }
+            }
+        }
+        self.due = due;
+    }
+
+    /// The body written from cycle `from`: word `w` reads its value in cycle
+    /// `from + 5 w + 1`, counters through an address taken at the edge after `from + 5 w`.
+    fn status_body(&mut self, from: u64) -> StatusRepr {
+        let word_read = |w: u64| from + 5 * w;
+        let mut ports = Vec::with_capacity(self.page_ports);
+        for i in 0..self.page_ports {
+            let port = self.first_port + i;
+            let first_word = 4 + 8 * i as u64;
+            let last_read = word_read(first_word + 7);
+            self.counting[port].advance(port, self.t.ports, self.t.tick_offset, last_read + 1);
+            let mut counters = PortCounters::default();
+            for (k, counter) in PortCounter::ALL.iter().enumerate() {
+                let read = word_read(first_word + k as u64);
+                counters.set(*counter, self.counting[port].value(k, read));
+            }
+            ports.push(counters);
+        }
+        StatusRepr {
+            boot_id: self.t.boot_id,
+            datagrams_sent: self.count_at(word_read(1) + 1, false),
+            records_sent: self.count_at(word_read(2) + 1, true),
+            first_port: self.first_port as u8,
+            ports,
+        }
+    }
+}
+
+fn empty_record() -> RecordRepr {
+    RecordRepr {
+        port: 0,
+        flags: 0,
+        tick_offset: 0,
+        cell_packet: [0; PACKET_LEN],
+    }
+}
+
+impl PortCounting {
+    /// An event generated by the back end (a dropped packet), in cycle order.
+    fn add(&mut self, cycle: u64, bits: u8) {
+        let at = self.events[self.next_event..].partition_point(|e| e.0 <= cycle) + self.next_event;
+        self.events.insert(at, (cycle, bits));
+    }
+
+    /// Serves pending bits at the scanner visits of `port` before cycle `until`.
+    fn advance(&mut self, port: usize, ports: usize, visit_offset: u64, until: u64) {
+        let ports = ports as i128;
+        // first visit of this port at or after cycle c: the scanner is at (c - offset) mod N
+        let visit = |c: u64| {
+            let phase = (c as i128 - visit_offset as i128 - port as i128).rem_euclid(ports);
+            c + ((ports - phase) % ports) as u64
+        };
+        let mut c = self.done_until;
+        while c < until {
+            if self.pending == 0 {
+                let Some(&(e, bits)) = self.events.get(self.next_event) else {
+                    break;
+                };
+                if e + 1 >= until {
+                    break;
+                }
+                self.next_event += 1;
+                self.pending |= bits;
+                c = c.max(e + 1);
+                continue;
+            }
+            let v = visit(c);
+            // events that arrive before this visit join the pending bits
+            if let Some(&(e, bits)) = self.events.get(self.next_event) {
+                if e < v {
+                    self.next_event += 1;
+                    self.pending |= bits;
+                    continue;
+                }
+            }
+            if v >= until {
+                break;
+            }
+            let lowest = self.pending.trailing_zeros() as usize;
+            self.pending &= !(1 << lowest);
+            self.writes[lowest].push(v + 2);
+            c = v + 1;
+        }
+        self.done_until = c.min(until).max(self.done_until);
+    }
+
+    /// The counter as a read whose address is taken at the edge after cycle `read` sees it.
+    fn value(&self, counter: usize, read: u64) -> u32 {
+        self.writes[counter].partition_point(|w| *w <= read) as u32
+    }
+}

@@ -1,0 +1,150 @@
+//! The reference model: the box's frames predicted in pure Rust, without Verilator and
+//! without a clock loop, from the same pin transitions the RTL co-simulation plays.
+//!
+//! - Front end, per port ([`front`]): the UART receiver's decisions are arithmetic on the
+//!   transition list: the first low sample of a start bit, the accumulator's carries at the
+//!   ten bit middles, the majority of the three samples there; the deframer follows the
+//!   bytes, the idle timer and its rejections. Out come the packets with their stamps and the
+//!   cycles of their first and last beats into the port buffer, and the counter events.
+//! - Back end ([`back`]): port buffers, arbiter, framer, transmitter, status reporter and
+//!   counter file, run only through the clocks in which a record moves or a datagram
+//!   closes or starts; the stretches between are skipped (only free-running counters
+//!   advance there, and they are advanced arithmetically).
+//!
+//! It predicts every frame byte for byte and the cycle of its first byte on GMII; the tests
+//! compare it with the RTL on the regression scenes. Its timing constants come from the
+//! gateware and protocol crates where they are named there; the few clock latencies that
+//! are properties of the register structure (two clocks from a start edge to the
+//! accumulator, two from a transmitter start to GMII, and so on) are written in the two
+//! modules with the reasoning, and the byte-for-byte tests hold them to the RTL.
+
+mod back;
+mod front;
+
+use crate::frames::{Frame, FrameError};
+use crate::line::Transition;
+use crate::model::CosimError;
+use crate::sim::{analyse, cycles, lines, SimRun, SimSpec, RESET_CYCLES};
+use back::{Back, BackTiming};
+use front::{port_front, FrontTiming, PortFront};
+use skinbox_frame_check::{encode, UdpAddresses};
+use skinbox_gateware::counter_file::CLEAR_CLOCKS;
+use skinbox_gateware::frame_transmitter::BODY_START;
+use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_gateware::status_reporter::PORTS_PER_STATUS;
+use skinbox_gateware::uart_rx::{phase_increment, PHASE_START};
+use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP, MIN_FRAME_LEN, PREAMBLE_LEN};
+use std::time::Instant;
+
+pub(crate) use skinbox_gateware::port_buffer::SLOTS;
+pub(crate) use skinbox_gateware::uart_rx::PHASE_BITS;
+
+/// Clocks from the cycle a transmitter start is decided to the first GMII byte: the
+/// transmitter registers `sending`, then its output byte.
+const START_TO_FIRST_BYTE: u64 = 2;
+
+/// Runs `spec` on the reference model.
+pub fn run_reference(spec: &SimSpec) -> Result<SimRun, CosimError> {
+    run_reference_with_progress(spec, &mut |_, _| {})
+}
+
+/// As [`run_reference`], calling `progress(cycles done, cycles in all)` as it goes.
+pub fn run_reference_with_progress(
+    spec: &SimSpec,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<SimRun, CosimError> {
+    let started = Instant::now();
+    let (lines, true_starts) = lines(spec);
+    let frames = predict_frames_with_progress(&spec.config, &lines, cycles(spec), progress)?;
+    let wall = started.elapsed().as_secs_f64();
+    analyse(spec, &frames, &true_starts, wall)
+}
+
+/// The frames the box sends when its pins carry `lines` (one transition list per port, as
+/// the RTL harness plays them, after [`RESET_CYCLES`] of reset) for `cycles` clocks: each
+/// frame preamble to FCS with the cycle of its first byte, cut where the run ends.
+pub fn predict_frames(
+    config: &BoxConfig,
+    lines: &[Vec<Transition>],
+    cycles: u64,
+) -> Result<Vec<Frame>, CosimError> {
+    predict_frames_with_progress(config, lines, cycles, &mut |_, _| {})
+}
+
+fn predict_frames_with_progress(
+    config: &BoxConfig,
+    lines: &[Vec<Transition>],
+    end: u64,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Vec<Frame>, CosimError> {
+    config.validate()?;
+    // counters clear for CLEAR_CLOCKS after reset; the ports leave reset a clock later
+    let counters_ready_from = RESET_CYCLES + CLEAR_CLOCKS;
+    let front_timing = FrontTiming {
+        phase_increment: phase_increment(config.clock_hz, config.baud),
+        phase_start: PHASE_START,
+        idle_gap_clocks: config.idle_gap_clocks(),
+        framing: config.framing,
+        port_reset_until: counters_ready_from + 1,
+        tick_offset: RESET_CYCLES,
+    };
+    let mut fronts: Vec<PortFront> = lines
+        .iter()
+        .map(|l| port_front(l, &front_timing, end))
+        .collect();
+    fronts.resize_with(config.ports, PortFront::default);
+    let mut back = Back::new(
+        BackTiming {
+            ports: config.ports,
+            tick_offset: RESET_CYCLES,
+            counters_ready_from,
+            flush_timeout: config.flush_timeout_ticks,
+            status_period: config.status_period_ticks,
+            ports_per_status: PORTS_PER_STATUS,
+            // the boot id counts the reset the run starts with
+            boot_id: config.boot_seed.wrapping_add(1),
+            box_id: config.box_id,
+            body_start: BODY_START as u64,
+            min_padded_end: (PREAMBLE_LEN + MIN_FRAME_LEN) as u64,
+            frame_tail: (FCS_LEN + INTER_FRAME_GAP) as u64,
+            start_to_first_byte: START_TO_FIRST_BYTE,
+        },
+        &fronts,
+    );
+    let step = 1 << 24;
+    let mut done = RESET_CYCLES;
+    while done < end {
+        let to = (done + step).min(end);
+        back.run(done, to);
+        done = to;
+        progress(done, end);
+    }
+    let link = &config.link;
+    let addresses = UdpAddresses {
+        source_mac: link.box_mac,
+        destination_mac: link.host_mac,
+        source_ip: link.box_ip,
+        destination_ip: link.host_ip,
+        source_port: link.box_port,
+        destination_port: link.host_port,
+    };
+    let mut frames = Vec::with_capacity(back.frames.len());
+    for f in &back.frames {
+        let mut bytes = encode(&addresses, &f.datagram.to_bytes()).map_err(|e: FrameError| {
+            CosimError::Tool {
+                step: "encoding a predicted frame",
+                output: e.to_string(),
+            }
+        })?;
+        // the run ends at cycle `end`: a frame still going is cut there, as on the pins
+        let room = (end + 1).saturating_sub(f.first_cycle) as usize;
+        bytes.truncate(room);
+        if !bytes.is_empty() {
+            frames.push(Frame {
+                first_cycle: f.first_cycle,
+                bytes,
+            });
+        }
+    }
+    Ok(frames)
+}

@@ -1,0 +1,304 @@
+//! The reference model against the verilated box: every frame byte for byte, and the
+//! cycle of its first byte, on each regression scene.
+
+use skinbox_cells::scene::Scene;
+use skinbox_cosim::frames::{assemble, check, Frame};
+use skinbox_cosim::harness::play;
+use skinbox_cosim::line::{
+    back_to_back, jittered_transitions, transitions, Jitter, Transition, UartByte,
+};
+use skinbox_cosim::reference::predict_frames;
+use skinbox_cosim::sim::RESET_CYCLES;
+use skinbox_cosim::{Dut, Model};
+use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_protocol::datagram::DatagramBody;
+use skinbox_protocol::{Channel, DataRepr, DatagramRepr, EventRepr};
+
+fn rtl_frames(config: &BoxConfig, lines: &[Vec<Transition>], cycles: u64) -> Vec<Frame> {
+    let model = Model::build(config, false, &skinbox_cosim::model::default_cache_dir()).unwrap();
+    let mut dut = Dut::new(&model, None).unwrap();
+    let out = play(&mut dut, lines, RESET_CYCLES, cycles);
+    assemble(&out).0
+}
+
+fn describe(f: &Frame) -> String {
+    match check(&f.bytes) {
+        Ok((_, payload)) => match DatagramRepr::parse(payload) {
+            Ok(d) => format!("cycle {} {d:?}", f.first_cycle),
+            Err(e) => format!("cycle {} unparsable datagram: {e}", f.first_cycle),
+        },
+        Err(e) => format!("cycle {} bad frame: {e}", f.first_cycle),
+    }
+}
+
+/// Runs both models and asserts the same frames at the same cycles; returns them.
+fn agree(config: &BoxConfig, lines: &[Vec<Transition>], cycles: u64) -> Vec<Frame> {
+    let rtl = rtl_frames(config, lines, cycles);
+    let reference = predict_frames(config, lines, cycles).unwrap();
+    for (i, (r, m)) in rtl.iter().zip(&reference).enumerate() {
+        assert!(
+            r == m,
+            "frame {i} differs:\n RTL       {}\n reference {}",
+            describe(r),
+            describe(m)
+        );
+    }
+    assert_eq!(
+        rtl.len(),
+        reference.len(),
+        "frame counts differ; first extra: {:?}",
+        rtl.get(reference.len())
+            .or(reference.get(rtl.len()))
+            .map(describe)
+    );
+    rtl
+}
+
+fn data(id: u16, k: i32) -> [u8; 20] {
+    DataRepr::from_raw(id, [k, -7, 250, 1, 2, 3, 4000, 61, 0])
+        .unwrap()
+        .to_bytes()
+}
+
+fn records(frames: &[Frame]) -> usize {
+    frames
+        .iter()
+        .map(|f| {
+            match DatagramRepr::parse(check(&f.bytes).unwrap().1)
+                .unwrap()
+                .body
+            {
+                DatagramBody::Records(r) => r.len(),
+                DatagramBody::Status(_) => 0,
+            }
+        })
+        .sum()
+}
+
+#[test]
+fn one_port_a_few_packets() {
+    let config = BoxConfig {
+        ports: 1,
+        flush_timeout_ticks: 3_000,
+        status_period_ticks: 40_000,
+        ..BoxConfig::default()
+    };
+    let bytes: Vec<UartByte> = (0..6)
+        .flat_map(|k| {
+            back_to_back(
+                &data(k + 1, k.into()),
+                7_000.0 + f64::from(k) * 61_000.0,
+                251.0,
+            )
+        })
+        .collect();
+    let frames = agree(&config, &[transitions(&bytes)], 60_000);
+    assert_eq!(records(&frames), 6);
+}
+
+/// Every port at line rate, each with its own clock error and +-10 ns of jitter: full
+/// datagrams, arbiter contention, status reports while records flow.
+#[test]
+fn eight_ports_at_line_rate_with_jitter() {
+    let ports = 8;
+    let per_port = 60;
+    let config = BoxConfig {
+        ports,
+        status_period_ticks: 200_000,
+        ..BoxConfig::default()
+    };
+    let lines: Vec<Vec<Transition>> = (0..ports)
+        .map(|port| {
+            let bit_ns = 250.0 / (1.0 + (port as f64 - 3.5) / 350.0);
+            let first = 10_000.0 + port as f64 * 37.3;
+            let bytes: Vec<UartByte> = (0..per_port)
+                .flat_map(|k| {
+                    let id = (port * per_port + k + 1) as u16;
+                    let packet = if k % 2 == 0 {
+                        data(id, k as i32)
+                    } else {
+                        EventRepr::new(id, k as u16, false, &[(Channel::AccelZ, -(k as i32))])
+                            .unwrap()
+                            .to_bytes()
+                    };
+                    back_to_back(&packet, first + k as f64 * 200.0 * bit_ns, bit_ns)
+                })
+                .collect();
+            let jitter = Jitter {
+                peak_ns: 10.0,
+                seed: 42 + port as u64,
+            };
+            jittered_transitions(&bytes, &jitter).0
+        })
+        .collect();
+    let cycles = (10_000 + per_port as u64 * 50_600 + 150_000) / 8;
+    let frames = agree(&config, &lines, cycles);
+    assert_eq!(records(&frames), ports * per_port);
+}
+
+/// Garbage, truncation, a wrong end byte, a framing error inside a packet, a glitch
+/// shorter than half a bit: the counters of the status reports, and the loss flags.
+#[test]
+fn injected_faults() {
+    let config = BoxConfig {
+        ports: 2,
+        flush_timeout_ticks: 2_000,
+        status_period_ticks: 30_000,
+        ..BoxConfig::default()
+    };
+    let bit = 250.0;
+    let mut faulty: Vec<UartByte> = vec![];
+    let mut t = 10_000.0;
+    let push = |data: &[u8], gap_bits: f64, t: &mut f64, out: &mut Vec<UartByte>| {
+        let bytes = back_to_back(data, *t, bit);
+        *t = bytes.last().map_or(*t, |b| b.end_ns()) + gap_bits * bit;
+        out.extend(bytes);
+    };
+    push(&[0x00, 0x10, 0x20, 0x30, 0x40], 3.0, &mut t, &mut faulty);
+    push(&data(1, 1), 3.0, &mut t, &mut faulty);
+    push(&data(2, 2)[..12], 40.0, &mut t, &mut faulty);
+    let mut wrong_end = data(3, 3);
+    wrong_end[19] = 0x5A;
+    push(&wrong_end, 3.0, &mut t, &mut faulty);
+    push(&data(4, 4), 3.0, &mut t, &mut faulty);
+    let mut broken = back_to_back(&data(5, 5), t, bit);
+    broken[10].stop_level = false;
+    t = broken.last().unwrap().end_ns() + 30.0 * bit;
+    faulty.extend(broken);
+    push(&data(6, 6), 3.0, &mut t, &mut faulty);
+    let mut line = transitions(&faulty);
+    // a 60 ns low glitch on the idle line, then a good packet
+    let glitch = (t / 8.0) as u64 + 200;
+    line.push(Transition {
+        edge: glitch,
+        level: false,
+    });
+    line.push(Transition {
+        edge: glitch + 8,
+        level: true,
+    });
+    line.extend(transitions(&back_to_back(
+        &data(7, 7),
+        (glitch + 400) as f64 * 8.0,
+        bit,
+    )));
+    let clean = transitions(&back_to_back(&data(9, 9), 30_000.0, 247.0));
+    let frames = agree(&config, &[line, clean], 100_000);
+    assert_eq!(records(&frames), 5);
+}
+
+/// A scene's packets through the 4-bus box: the default job's traffic, shortened.
+#[test]
+fn stroking_scene() {
+    let scene = Scene::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/stroking_upper_arm.toml"),
+    )
+    .unwrap();
+    let generated = skinbox_cosim::scene::generate(&scene, 1.02).unwrap();
+    let spec = skinbox_cosim::scene::spec(
+        &generated,
+        BoxConfig {
+            ports: generated.buses.len(),
+            status_period_ticks: 625_000,
+            ..BoxConfig::default()
+        },
+        1_000_000_000,
+        20_000_000,
+    );
+    let (lines, _) = skinbox_cosim::sim::lines(&spec);
+    let frames = agree(&spec.config, &lines, skinbox_cosim::sim::cycles(&spec));
+    let sent: usize = spec.ports.iter().map(Vec::len).sum();
+    assert!(sent > 50, "{sent} packets");
+    assert_eq!(records(&frames), sent);
+}
+
+/// splitmix64: the random traffic below is seeded and reproducible.
+struct Random(u64);
+
+impl Random {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+
+    fn uniform(&mut self, low: f64, high: f64) -> f64 {
+        low + (high - low) * (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// One port's random traffic: bursts of packets back to back or with short gaps, each
+/// line with its own clock error, and now and then a fault (garbage, truncation, wrong end
+/// byte, low stop bit) or a glitch.
+fn random_line(r: &mut Random, port: usize, end_ns: f64) -> Vec<Transition> {
+    let bit = 250.0 * r.uniform(0.97, 1.03);
+    let mut t = r.uniform(5_000.0, 20_000.0);
+    let mut bytes: Vec<UartByte> = vec![];
+    let mut id = (port as u16) << 10;
+    while t < end_ns {
+        id += 1;
+        let mut packet = data(id, r.below(1000) as i32);
+        let fault = r.below(40);
+        let b0 = match fault {
+            0 => back_to_back(&[0x11, 0x22, 0x33][..1 + r.below(3) as usize], t, bit),
+            1 => back_to_back(&packet[..1 + r.below(19) as usize], t, bit),
+            2 => {
+                packet[19] ^= 0x10;
+                back_to_back(&packet, t, bit)
+            }
+            _ => back_to_back(&packet, t, bit),
+        };
+        let mut b = b0;
+        if fault == 3 {
+            // a low stop bit; the line returns high after it, one bit before the next
+            // start edge (so jitter cannot swap the two edges)
+            let k = r.below(20) as usize;
+            b[k].stop_level = false;
+            for later in &mut b[k + 1..] {
+                later.start_ns += bit;
+            }
+        }
+        t = b.last().unwrap().end_ns() + if fault == 3 { bit } else { 0.0 };
+        bytes.extend(b);
+        // back to back, a short gap, or a pause longer than the flush timeout
+        t += match r.below(8) {
+            0..=2 => 0.0,
+            3..=5 => r.uniform(0.0, 3.0) * bit,
+            6 => r.uniform(10.0, 400.0) * bit,
+            _ => r.uniform(400.0, 1_500.0) * bit,
+        };
+    }
+    let jitter = Jitter {
+        peak_ns: r.uniform(0.0, 30.0),
+        seed: r.next(),
+    };
+    jittered_transitions(&bytes, &jitter).0
+}
+
+/// Random traffic on three ports, several seeds: datagram boundaries by timeout and by
+/// size land on every clock relative to the records, status reports cross records.
+#[test]
+fn random_traffic() {
+    let config = BoxConfig {
+        ports: 3,
+        flush_timeout_ticks: 1_500,
+        status_period_ticks: 20_000,
+        ..BoxConfig::default()
+    };
+    let cycles = 400_000;
+    let mut total = 0;
+    for seed in 0..8 {
+        let mut r = Random(seed);
+        let lines: Vec<Vec<Transition>> = (0..config.ports)
+            .map(|port| random_line(&mut r, port, (cycles - 10_000) as f64 * 8.0))
+            .collect();
+        total += records(&agree(&config, &lines, cycles));
+    }
+    assert!(total > 600, "{total} records");
+}
