@@ -55,3 +55,45 @@ fn idle_scene_through_the_box_to_a_decoded_pcap() {
     assert!(std::fs::metadata(&pcap).unwrap().len() > 1000);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `--fidelity reference` writes the very pcap the RTL writes, and says which model ran.
+#[test]
+fn reference_fidelity_writes_the_rtl_pcap() {
+    let dir = std::env::temp_dir().join(format!("skinbox-sim-fidelity-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |fidelity: &str| {
+        let pcap = dir.join(format!("{fidelity}.pcap"));
+        let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+            .args([
+                "sim",
+                "--duration-ms",
+                "6",
+                "--jitter-ns",
+                "15",
+                "--status-period-ms",
+                "2",
+                "--fidelity",
+                fidelity,
+                "--json",
+                "--pcap",
+            ])
+            .arg(&pcap)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(r["fidelity"].as_str(), Some(fidelity));
+        (r, std::fs::read(&pcap).unwrap())
+    };
+    let (rtl, rtl_pcap) = run("rtl");
+    let (reference, reference_pcap) = run("reference");
+    assert!(rtl["records"].as_u64().unwrap() > 20, "{rtl}");
+    assert_eq!(rtl["records"], reference["records"]);
+    assert_eq!(rtl["ts_error_max_ticks"], reference["ts_error_max_ticks"]);
+    assert!(rtl_pcap == reference_pcap, "the pcaps differ");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,9 +1,12 @@
-//! Speed of the co-simulation: the full harness against the bare model loop, same design,
-//! measured in one run.
+//! Speed of the co-simulation: the full harness against the bare model loop and the
+//! reference model, same design and traffic, measured in one run.
 
+use crate::frames::assemble;
 use crate::harness::play;
 use crate::line::{back_to_back, transitions};
 use crate::model::{default_cache_dir, CosimError, Model};
+use crate::reference::predict_frames;
+use crate::sim::RESET_CYCLES;
 use crate::Dut;
 use skinbox_gateware::interface_box::BoxConfig;
 use std::time::Instant;
@@ -23,7 +26,29 @@ pub struct SimBench {
     pub harness_fraction_of_bare: f64,
     /// GMII bytes the harness collected (the box was busy).
     pub gmii_bytes: u64,
+    /// The reference model on the same line-rate traffic, simulated cycles per second.
+    pub line_rate_reference_cycles_per_second: f64,
+    /// Reference speed over harness speed with every port at line rate (its worst case:
+    /// its cost grows with the bytes on the pins, the RTL's does not).
+    pub line_rate_reference_speedup: f64,
+    /// The scene both models ran ([`SCENE`], its buses on the box's ports).
+    pub scene: String,
+    /// Ports of the scene's box.
+    pub scene_ports: usize,
+    /// Cycles of the scene run.
+    pub scene_cycles: u64,
+    /// RTL harness on the scene, cycles per second.
+    pub scene_rtl_cycles_per_second: f64,
+    /// Reference model on the scene, cycles per second.
+    pub scene_reference_cycles_per_second: f64,
+    /// Reference speed over RTL speed on the scene.
+    pub reference_speedup: f64,
+    /// The reference predicted exactly the frames the RTL sent, in both runs.
+    pub reference_agrees: bool,
 }
+
+/// The scene of the reference comparison: the default job's scene, 20 ms after warm-up.
+pub const SCENE: &str = "stroking_upper_arm";
 
 /// Measures `cycles` clock cycles of an 8-port box each way, fastest of `rounds`.
 pub fn bench_sim(ports: usize, cycles: u64, rounds: u32) -> Result<SimBench, CosimError> {
@@ -47,22 +72,29 @@ pub fn bench_sim(ports: usize, cycles: u64, rounds: u32) -> Result<SimBench, Cos
             transitions(&back_to_back(&data, 5_000.0 + p as f64 * 13.0, bit_ns))
         })
         .collect();
-    let (mut rtl, mut bare, mut gmii) = (0.0f64, 0.0f64, 0u64);
+    let (mut rtl, mut bare, mut reference, mut gmii) = (0.0f64, 0.0f64, 0.0f64, 0u64);
+    let mut agrees = true;
     for _ in 0..rounds.max(1) {
         let mut dut = Dut::new(&model, None)?;
         let started = Instant::now();
-        let out = play(&mut dut, &lines, 4, cycles);
+        let out = play(&mut dut, &lines, RESET_CYCLES, cycles);
         rtl = rtl.max(cycles as f64 / started.elapsed().as_secs_f64());
         gmii = out.len() as u64;
 
+        let started = Instant::now();
+        let predicted = predict_frames(&config, &lines, cycles)?;
+        reference = reference.max(cycles as f64 / started.elapsed().as_secs_f64());
+        agrees &= predicted == assemble(&out).0;
+
         let mut dut = Dut::new(&model, None)?;
         dut.set_reset(true);
-        dut.run(4, |_| {});
+        dut.run(RESET_CYCLES, |_| {});
         dut.set_reset(false);
         let started = Instant::now();
         dut.run(cycles, |_| {});
         bare = bare.max(cycles as f64 / started.elapsed().as_secs_f64());
     }
+    let scene = scene_speeds(rounds)?;
     Ok(SimBench {
         ports,
         cycles,
@@ -70,5 +102,62 @@ pub fn bench_sim(ports: usize, cycles: u64, rounds: u32) -> Result<SimBench, Cos
         bare_cycles_per_second: bare,
         harness_fraction_of_bare: rtl / bare,
         gmii_bytes: gmii,
+        line_rate_reference_cycles_per_second: reference,
+        line_rate_reference_speedup: reference / rtl,
+        scene: SCENE.to_string(),
+        scene_ports: scene.ports,
+        scene_cycles: scene.cycles,
+        scene_rtl_cycles_per_second: scene.rtl,
+        scene_reference_cycles_per_second: scene.reference,
+        reference_speedup: scene.reference / scene.rtl,
+        reference_agrees: agrees && scene.agrees,
+    })
+}
+
+struct SceneSpeeds {
+    ports: usize,
+    cycles: u64,
+    rtl: f64,
+    reference: f64,
+    agrees: bool,
+}
+
+/// RTL and reference on [`SCENE`], fastest of `rounds`.
+fn scene_speeds(rounds: u32) -> Result<SceneSpeeds, CosimError> {
+    let path = skinbox_cells::scenes_dir().join(format!("{SCENE}.toml"));
+    let scene = skinbox_cells::scene::Scene::load(&path).map_err(|e| CosimError::Tool {
+        step: "loading the bench scene",
+        output: e.to_string(),
+    })?;
+    let generated = crate::scene::generate(&scene, 1.02).map_err(|e| CosimError::Tool {
+        step: "generating the bench scene",
+        output: e.to_string(),
+    })?;
+    let config = BoxConfig {
+        ports: generated.buses.len(),
+        status_period_ticks: 625_000,
+        ..BoxConfig::default()
+    };
+    let spec = crate::scene::spec(&generated, config, 1_000_000_000, 20_000_000);
+    let (lines, _) = crate::sim::lines(&spec);
+    let cycles = crate::sim::cycles(&spec);
+    let model = Model::build(&spec.config, false, &default_cache_dir())?;
+    let (mut rtl, mut reference, mut agrees) = (0.0f64, 0.0f64, true);
+    for _ in 0..rounds.max(1) {
+        let mut dut = Dut::new(&model, None)?;
+        let started = Instant::now();
+        let out = play(&mut dut, &lines, RESET_CYCLES, cycles);
+        rtl = rtl.max(cycles as f64 / started.elapsed().as_secs_f64());
+        let started = Instant::now();
+        let predicted = predict_frames(&spec.config, &lines, cycles)?;
+        reference = reference.max(cycles as f64 / started.elapsed().as_secs_f64());
+        agrees &= predicted == assemble(&out).0;
+    }
+    Ok(SceneSpeeds {
+        ports: spec.config.ports,
+        cycles,
+        rtl,
+        reference,
+        agrees,
     })
 }

@@ -10,7 +10,8 @@ pub enum BenchCommand {
     Decode(DecodeBenchArgs),
     /// Replay on loopback at rising rates; prints max_lossless_records_per_second.
     Live(LiveBenchArgs),
-    /// Verilator co-simulation: the harness against the bare model loop.
+    /// Verilator co-simulation: the harness against the bare model loop and the reference
+    /// model.
     Sim(SimBenchArgs),
 }
 
@@ -65,6 +66,29 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 r.rtl_cycles_per_second / 1e6,
                 r.bare_cycles_per_second / 1e6,
                 100.0 * r.harness_fraction_of_bare
+            );
+            println!(
+                "reference model on the same line-rate traffic: {:.0} M cycles/s, {:.0} x the harness",
+                r.line_rate_reference_cycles_per_second / 1e6,
+                r.line_rate_reference_speedup,
+            );
+            println!(
+                "scene {} ({} ports, {} cycles): RTL {:.2} M cycles/s, reference {:.0} M cycles/s: {:.0} x (goal 1,000 x); frames {}",
+                r.scene,
+                r.scene_ports,
+                r.scene_cycles,
+                r.scene_rtl_cycles_per_second / 1e6,
+                r.scene_reference_cycles_per_second / 1e6,
+                r.reference_speedup,
+                if r.reference_agrees {
+                    "identical to the RTL's"
+                } else {
+                    "DIFFER from the RTL's"
+                }
+            );
+            anyhow::ensure!(
+                r.reference_agrees,
+                "the reference model's frames differ from the RTL's"
             );
             Ok(())
         }

@@ -4,7 +4,7 @@
 use anyhow::Context;
 use serde::Serialize;
 use skinbox_cells::scene::Scene;
-use skinbox_cosim::sim::{run_rtl_with_progress, SimReport};
+use skinbox_cosim::sim::{run_with_progress, Fidelity, SimReport};
 use skinbox_gateware::interface_box::BoxConfig;
 use std::path::PathBuf;
 
@@ -38,6 +38,28 @@ pub struct Args {
     /// Random edge jitter of every UART line, peak ns (uniform, seeded by the scene seed).
     #[arg(long, default_value_t = 0.0)]
     jitter_ns: f64,
+    /// Which model of the box: the verilated RTL, or the packet-level reference model
+    /// (same frames, orders of magnitude faster).
+    #[arg(long, value_enum, default_value_t = FidelityArg::Rtl)]
+    fidelity: FidelityArg,
+}
+
+/// `--fidelity` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum FidelityArg {
+    /// Verilator, every clock.
+    Rtl,
+    /// Packet-level reference model.
+    Reference,
+}
+
+impl From<FidelityArg> for Fidelity {
+    fn from(f: FidelityArg) -> Self {
+        match f {
+            FidelityArg::Rtl => Fidelity::Rtl,
+            FidelityArg::Reference => Fidelity::Reference,
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -46,6 +68,7 @@ struct Output {
     cells: usize,
     buses: usize,
     from_ms: f64,
+    fidelity: Fidelity,
     mode: String,
     packets_offered_by_cells: u64,
     packets_dropped_at_bus_roots: u64,
@@ -67,7 +90,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     }
     anyhow::ensure!(
         args.duration_ms > 0.0 && args.duration_ms <= 10_000.0,
-        "--duration-ms {} must be above 0 and at most 10,000 (RTL runs about 1 M cycles/s)",
+        "--duration-ms {} must be above 0 and at most 10,000 (the RTL runs about 2 M cycles/s)",
         args.duration_ms
     );
     anyhow::ensure!(
@@ -119,7 +142,12 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         .progress_chars("=> "),
     );
     bar.set_message("building the model");
-    let report = run_rtl_with_progress(&spec, &mut |done, _| {
+    let fidelity = Fidelity::from(args.fidelity);
+    anyhow::ensure!(
+        fidelity == Fidelity::Rtl || args.vcd.is_none(),
+        "--vcd traces the RTL; it needs --fidelity rtl"
+    );
+    let report = run_with_progress(&spec, fidelity, &mut |done, _| {
         bar.set_message("simulating");
         bar.set_position(done);
     })?
@@ -134,6 +162,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         cells: scene.config.scene.cells,
         buses,
         from_ms: args.from_ms,
+        fidelity,
         mode: format!("{:?}", scene.config.scene.mode).to_lowercase(),
         packets_offered_by_cells: generated.buses.iter().map(|b| b.stats.offered).sum(),
         packets_dropped_at_bus_roots: generated.buses.iter().map(|b| b.stats.dropped).sum(),
@@ -151,13 +180,17 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
 fn print_summary(o: &Output) {
     let s = &o.sim;
     println!(
-        "scene {}: {} cells on {} buses, {} mode, {:.1} ms simulated from {:.0} ms on",
+        "scene {}: {} cells on {} buses, {} mode, {:.1} ms simulated from {:.0} ms on ({} model)",
         o.scene,
         o.cells,
         o.buses,
         o.mode,
         s.sim_seconds * 1e3,
-        o.from_ms
+        o.from_ms,
+        match o.fidelity {
+            Fidelity::Rtl => "RTL",
+            Fidelity::Reference => "reference",
+        }
     );
     println!(
         "cells:  {} packets offered since the scene start, {} dropped at the bus roots (FIFO full); {} on the box pins in the window",

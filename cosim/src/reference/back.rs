@@ -383,8 +383,7 @@ impl<'a> Back<'a> {
             let slot = self.buffers[p]
                 .slots
                 .front()
-                .expect("a granted port has a packet")
-                .clone();
+                .expect("a granted port has a packet");
             match self.beat {
                 0 => self.record.port = p as u8,
                 1 => self.record.flags = slot.flags,
@@ -477,7 +476,6 @@ impl<'a> Back<'a> {
         }
 
         // port buffers' write side: the deframers' first and last beats this cycle
-        let mut commits = vec![];
         while let Some(b) = self.beats.get(self.next_beat).filter(|b| b.cycle == c) {
             let (port, packet, first) = (b.port, b.packet, b.first);
             self.next_beat += 1;
@@ -493,19 +491,15 @@ impl<'a> Back<'a> {
                 buffer.loss_pending = true;
                 self.counting[port].add(c + 1, DROPPED);
             } else {
-                commits.push((
-                    port,
-                    Stored {
-                        flags: u8::from(buffer.flag_of_writing),
-                        stamp: p.stamp as u32,
-                        bytes: p.bytes,
-                    },
-                ));
+                // (a port's first and last beats never share a cycle, so `used` above
+                // is not changed by this)
+                buffer.slots.push_back(Stored {
+                    flags: u8::from(buffer.flag_of_writing),
+                    stamp: p.stamp as u32,
+                    bytes: p.bytes,
+                });
                 buffer.loss_pending = false;
             }
-        }
-        for (port, s) in commits {
-            self.buffers[port].slots.push_back(s);
         }
 
         self.arbiter_port = next_port;

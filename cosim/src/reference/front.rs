@@ -9,6 +9,7 @@
 use crate::line::Transition;
 use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 use skinbox_protocol::status::PortCounter;
+use std::cell::Cell;
 
 /// Fixed numbers of the UART receiver and deframer.
 #[derive(Debug, Clone, Copy)]
@@ -61,19 +62,36 @@ pub(super) struct PortFront {
     pub events: Vec<(u64, u8)>,
 }
 
-/// The synchronised pin of one port.
+/// The synchronised pin of one port. Queries move forward in time with small steps back,
+/// so a cursor finds the transition in a few comparisons.
 struct Pin<'a> {
     transitions: &'a [Transition],
     reset_until: u64,
+    /// Number of transitions due by the last edge asked for.
+    cursor: Cell<usize>,
 }
 
 impl Pin<'_> {
+    /// Transitions due by edge `e` (with an edge at or before `e`).
+    fn due(&self, e: u64) -> usize {
+        let t = self.transitions;
+        let mut i = self.cursor.get();
+        while i < t.len() && t[i].edge <= e {
+            i += 1;
+        }
+        while i > 0 && t[i - 1].edge > e {
+            i -= 1;
+        }
+        self.cursor.set(i);
+        i
+    }
+
     /// Level captured at edge `e`: the last transition due by then; high in reset.
     fn level(&self, e: u64) -> bool {
         if e <= self.reset_until {
             return true;
         }
-        let i = self.transitions.partition_point(|t| t.edge <= e);
+        let i = self.due(e);
         i == 0 || self.transitions[i - 1].level
     }
 
@@ -89,7 +107,7 @@ impl Pin<'_> {
         if !self.level(from) && self.level(from - 1) {
             return Some(from);
         }
-        let mut i = self.transitions.partition_point(|t| t.edge <= from);
+        let mut i = self.due(from);
         while i < self.transitions.len() {
             let e = self.transitions[i].edge;
             let mut j = i;
@@ -177,6 +195,7 @@ pub(super) fn port_front(transitions: &[Transition], t: &FrontTiming, end: u64) 
     let pin = Pin {
         transitions,
         reset_until: t.port_reset_until,
+        cursor: Cell::new(0),
     };
     let receptions = receive(&pin, t, end);
     let mut out = PortFront::default();
