@@ -5,6 +5,8 @@
 
 use skinbox_cosim::frames::{assemble, check};
 use skinbox_cosim::harness::play;
+use skinbox_cosim::reference::predict_frames;
+use skinbox_cosim::sim::RESET_CYCLES;
 use skinbox_cosim::line::{back_to_back, transitions};
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
@@ -48,8 +50,13 @@ fn run(error_percent: f64) -> (usize, usize, u32) {
     let bit_ns = 250.0 / (1.0 + error_percent / 100.0);
     let line = transitions(&back_to_back(&bytes, 10_000.0, bit_ns));
     let cycles = (10_000.0 + bytes.len() as f64 * 10.0 * bit_ns) as u64 / 8 + 2_000_100;
-    let out = play(&mut dut, &[line], 3, cycles);
+    let out = play(&mut dut, std::slice::from_ref(&line), RESET_CYCLES, cycles);
     let (frames, _) = assemble(&out);
+    // the reference model predicts the same frames, failures included
+    assert!(
+        predict_frames(&config, &[line], cycles).unwrap() == frames,
+        "reference and RTL differ at {error_percent} %"
+    );
     let sent: HashSet<[u8; 20]> = sent.into_iter().collect();
     let (mut intact, mut corrupted, mut rejected) = (0, 0, 0);
     for f in &frames {

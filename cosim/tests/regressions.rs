@@ -4,7 +4,8 @@
 use skinbox_cosim::frames::{assemble, check};
 use skinbox_cosim::harness::play;
 use skinbox_cosim::line::{back_to_back, transitions, UartByte};
-use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec};
+use skinbox_cosim::reference::{predict_frames, run_reference};
+use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec, RESET_CYCLES};
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, MAX_RECORDS};
@@ -47,6 +48,10 @@ fn busy_ports_fill_datagrams_a_lull_flushes_by_timeout() {
         jitter: skinbox_cosim::line::Jitter::NONE,
     };
     let run = run_rtl(&spec).unwrap();
+    assert!(
+        run_reference(&spec).unwrap().frames == run.frames,
+        "reference and RTL differ"
+    );
     assert_eq!(run.report.packets_delivered, 8 * u64::from(per_port));
     let sizes: Vec<(usize, u8)> = run
         .datagrams
@@ -103,13 +108,13 @@ fn status_counters_match_injected_faults() {
     let model = Model::build(&config, false, &skinbox_cosim::model::default_cache_dir()).unwrap();
     let mut dut = Dut::new(&model, None).unwrap();
     let clean = back_to_back(&packet(9), 30_000.0, bit);
-    let out = play(
-        &mut dut,
-        &[transitions(&faulty), transitions(&clean)],
-        4,
-        600_000,
-    );
+    let lines = [transitions(&faulty), transitions(&clean)];
+    let out = play(&mut dut, &lines, RESET_CYCLES, 600_000);
     let (frames, _) = assemble(&out);
+    assert!(
+        predict_frames(&config, &lines, 600_000).unwrap() == frames,
+        "reference and RTL differ"
+    );
     let datagrams: Vec<DatagramRepr> = frames
         .iter()
         .map(|f| DatagramRepr::parse(check(&f.bytes).unwrap().1).unwrap())
