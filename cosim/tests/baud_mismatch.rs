@@ -5,9 +5,9 @@
 
 use skinbox_cosim::frames::{assemble, check};
 use skinbox_cosim::harness::play;
+use skinbox_cosim::line::{back_to_back, transitions};
 use skinbox_cosim::reference::predict_frames;
 use skinbox_cosim::sim::RESET_CYCLES;
-use skinbox_cosim::line::{back_to_back, transitions};
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::datagram::DatagramBody;
