@@ -284,6 +284,7 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             at: (seed_cells, original[1][1].max(0.1)),
             text: "original box, 5,742 cells (seed)".into(),
         }],
+        legend: chart::Legend::UpperLeft,
     };
     let text = format!(
         "Latency the box adds to a record (end of its packet at the pin to the end of its \

@@ -43,7 +43,7 @@ fn noise_factors(quick: bool) -> Vec<f64> {
 
 fn losses(quick: bool) -> Vec<f64> {
     if quick {
-        vec![0.001, 0.01, 0.1]
+        vec![0.001, 0.03, 0.1]
     } else {
         vec![0.0001, 0.0003, 0.001, 0.003, 0.01, 0.03, 0.1, 0.3]
     }
@@ -215,7 +215,7 @@ fn baud(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             baud_errors_pct(quick)[0] - 0.5,
             *baud_errors_pct(quick).last().expect("swept") + 0.5,
         ),
-        y_range: (-2.0, 115.0),
+        y_range: (-2.0, 170.0),
         series: pts
             .into_iter()
             .zip(names)
@@ -232,12 +232,13 @@ fn baud(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                 } else {
                     String::new()
                 },
-                points: vec![(x, -2.0), (x, 115.0)],
+                points: vec![(x, -2.0), (x, 170.0)],
                 style: chart::Style::Dashed,
                 color: 6,
             }))
             .collect(),
         marks: Vec::new(),
+        legend: chart::Legend::UpperRight,
     };
     Ok(Section {
         id: "C4a",
@@ -343,6 +344,7 @@ fn bus(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                 at: (66.0, 0.0),
                 text: "seed: 66 cells, 16,000 packets/s".into(),
             }],
+            legend: chart::Legend::UpperLeft,
         }],
     })
 }
@@ -411,6 +413,7 @@ fn noise(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             y_range: (0.0, 200.0),
             series,
             marks: Vec::new(),
+            legend: chart::Legend::UpperLeft,
         }],
     })
 }
@@ -428,7 +431,7 @@ pub fn crossing(points: &[(f64, f64)], level: f64) -> Option<f64> {
 
 fn loss_run(base: &Scene, quick: bool, loss: f64, refresh_s: f64) -> anyhow::Result<(f64, f64)> {
     let mut sc = base.clone();
-    sc.config.scene.duration_s = if quick { 4.0 } else { 11.0 };
+    sc.config.scene.duration_s = if quick { 6.0 } else { 11.0 };
     sc.config.thresholds.refresh_s = refresh_s;
     sc.check()?;
     let g = sc.generate(&GenerateOptions {
@@ -490,8 +493,9 @@ fn loss(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             }
             series.push(chart::Series {
                 label: format!(
-                    "{}, {}",
+                    "{}{}, {}",
                     name.replace('_', " "),
+                    if s == 0 { "" } else { " (dashed)" },
                     if refresh > 0.0 {
                         format!("refresh every {refresh} s")
                     } else {
@@ -571,7 +575,7 @@ fn loss(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
              holds the last value it received; a channel it never received reads 0 until the \
              channel fires. A refresh is one data packet with every channel. Solid: idle; \
              dashed: stroking upper arm.",
-            if quick { 3 } else { 10 }
+            if quick { 5 } else { 10 }
         ),
         findings,
         tables: vec![table],
@@ -583,9 +587,10 @@ fn loss(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             x_log: true,
             y_log: true,
             x_range: (x0 * 0.8, x1 * 1.25),
-            y_range: (0.05, y_max * 1.5),
+            y_range: (0.05, y_max * 6.0),
             series,
             marks: Vec::new(),
+            legend: chart::Legend::UpperLeft,
         }],
     })
 }

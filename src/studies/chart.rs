@@ -71,6 +71,21 @@ pub struct Chart {
     pub series: Vec<Series>,
     /// Marked points.
     pub marks: Vec<Mark>,
+    /// Corner of the legend.
+    pub legend: Legend,
+}
+
+/// Where the legend goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Legend {
+    /// Upper left corner.
+    UpperLeft,
+    /// Upper right corner.
+    UpperRight,
+    /// Lower left corner.
+    LowerLeft,
+    /// Lower right corner.
+    LowerRight,
 }
 
 /// Colour-blind-safe palette (Okabe and Ito), then black.
@@ -185,11 +200,27 @@ impl Chart {
             .y_label_formatter(&fmt)
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 16))
-            .light_line_style(RGBColor(235, 235, 235))
-            .bold_line_style(RGBColor(210, 210, 210))
+            .x_labels(10)
+            .y_labels(8)
+            .light_line_style(TRANSPARENT)
+            .bold_line_style(RGBColor(220, 220, 220))
             .draw()
             .map_err(e)?;
+        // Points outside the ranges are left out (plotters does not clip lines to the plot
+        // area, and a log axis has no place for 0); the summary's tables hold them all.
+        let (xr, yr) = (self.x_range, self.y_range);
+        let inside = |p: &(f64, f64)| {
+            p.0 >= xr.0.min(xr.1)
+                && p.0 <= xr.0.max(xr.1)
+                && p.1 >= yr.0.min(yr.1)
+                && p.1 <= yr.0.max(yr.1)
+        };
         for s in &self.series {
+            let points: Vec<(f64, f64)> = s.points.iter().copied().filter(inside).collect();
+            let s = Series {
+                points,
+                ..s.clone()
+            };
             let c = color(s.color);
             let legend_style = c.stroke_width(2);
             let anno = match s.style {
@@ -216,7 +247,7 @@ impl Chart {
             anno.label(&s.label)
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], legend_style));
         }
-        for m in &self.marks {
+        for m in self.marks.iter().filter(|m| inside(&m.at)) {
             chart
                 .draw_series(std::iter::once(
                     EmptyElement::at(m.at)
@@ -227,7 +258,12 @@ impl Chart {
         }
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
+            .position(match self.legend {
+                Legend::UpperLeft => SeriesLabelPosition::UpperLeft,
+                Legend::UpperRight => SeriesLabelPosition::UpperRight,
+                Legend::LowerLeft => SeriesLabelPosition::LowerLeft,
+                Legend::LowerRight => SeriesLabelPosition::LowerRight,
+            })
             .label_font(("sans-serif", 14))
             .background_style(WHITE.mix(0.85))
             .border_style(RGBColor(180, 180, 180))
@@ -287,6 +323,7 @@ mod write_tests {
                 at: (10.0, 40.0),
                 text: "seed".into(),
             }],
+            legend: Legend::UpperLeft,
         };
         let [png, svg] = chart.write(&dir).unwrap();
         let bytes = std::fs::read(&png).unwrap();

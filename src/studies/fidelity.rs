@@ -271,6 +271,7 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                 },
             ],
             marks: Vec::new(),
+            legend: chart::Legend::UpperRight,
         },
         chart::Chart {
             name: "c2_speed".into(),
@@ -302,6 +303,7 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                 },
             ],
             marks: Vec::new(),
+            legend: chart::Legend::UpperRight,
         },
     ];
     Ok(Section {

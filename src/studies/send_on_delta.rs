@@ -50,8 +50,8 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
     for (i, row) in SEED_TABLE.iter().enumerate() {
         let base = scene(row.scene)?;
         let mut points = Vec::new();
-        let mut runs: Vec<Option<f64>> = scales(quick).into_iter().map(Some).collect();
-        runs.push(None); // data mode
+        // data mode first: the curve runs from it through rising thresholds
+        let runs = std::iter::once(None).chain(scales(quick).into_iter().map(Some));
         for scale in runs {
             progress.step(&format!(
                 "C1: {} at {}",
@@ -128,11 +128,12 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
         x_label: "RMS reconstruction error, mean of 8 channels (% of full range)".into(),
         y_label: "packets (% of data mode)".into(),
         x_log: false,
-        y_log: true,
+        y_log: false,
         x_range: (0.0, x_max * 1.1),
-        y_range: (1.0, y_max * 1.5),
+        y_range: (0.0, y_max * 1.05),
         series,
         marks,
+        legend: chart::Legend::UpperRight,
     };
     Ok(Section {
         id: "C1",
