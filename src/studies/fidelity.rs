@@ -314,8 +314,11 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
              {:.0} ms window. RTL: the verilated box (clock loop only; its input comes from the \
              cell models, timed on their own row). Rate model: the closed form, with the \
              scene's calibrated packet rate (20.1 % of data mode), compared with the RTL's \
-             records and datagrams in the same window. The packet-level reference model is not \
-             part of this build, so its level is missing here.",
+             records and datagrams in the same window. The calibrated rate is the mean of the \
+             260-cell skin; a smaller skin puts its cells closer to the stroking hand, which is \
+             the rate model's error there: it knows means, not where a scene is busy. The \
+             packet-level reference model is not part of this build, so its level is missing \
+             here.",
             window * 1e3
         ),
         findings,
