@@ -244,8 +244,19 @@ impl Chart {
                     .draw_series(s.points.iter().map(|&p| Circle::new(p, 4, c.filled())))
                     .map_err(e)?,
             };
-            anno.label(&s.label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], legend_style));
+            if !s.label.is_empty() {
+                // A dashed series shows two dashes in the legend.
+                let gap = if s.style == Style::Dashed {
+                    (8, 12)
+                } else {
+                    (10, 10)
+                };
+                anno.label(&s.label).legend(move |(x, y)| {
+                    EmptyElement::at((x, y))
+                        + PathElement::new(vec![(0, 0), (gap.0, 0)], legend_style)
+                        + PathElement::new(vec![(gap.1, 0), (20, 0)], legend_style)
+                });
+            }
         }
         for m in self.marks.iter().filter(|m| inside(&m.at)) {
             chart
