@@ -321,8 +321,10 @@ mod tests {
             flush_timeout_ns: 100_000.0,
         }
         .run(&[1_000.0]);
-        // 240 ns to write it, 100 us timeout, 140 wire bytes at 8 ns.
-        assert_eq!(b.latency_ns, vec![240.0 + 100_000.0 + 140.0 * 8.0]);
+        // 240 ns to write it, 100 us timeout, 116 wire bytes at 8 ns (66 of Ethernet,
+        // IPv4, UDP, preamble and gap, 24 of datagram header, 26 of record).
+        assert_eq!(records_frame_wire_bytes(1.0), 116.0);
+        assert_eq!(b.latency_ns, vec![240.0 + 100_000.0 + 116.0 * 8.0]);
         assert_eq!(b.datagrams, 1);
     }
 
@@ -336,18 +338,31 @@ mod tests {
         assert_eq!(b.datagrams, 2);
         let end = 240.0 + 10_000.0 + records_frame_wire_bytes(3.0) * 8.0;
         assert_eq!(&b.latency_ns[..3], &[end, end - 1_000.0, end - 2_000.0]);
-        // 200 records at once: written back to back, 55 a datagram, each closing when full
-        // and the previous one has left.
-        let b = model.run(&[0.0; 200]);
+        // 200 records at once: written back to back (13.2 us for 55) while the previous
+        // datagram is on the wire (12.16 us); with a timeout longer than that each datagram
+        // closes full.
+        let b = FramerModel {
+            flush_timeout_ns: 100_000.0,
+        }
+        .run(&[0.0; 200]);
         assert_eq!(b.datagrams, 4);
         let first_end = 55.0 * 240.0 + 1520.0 * 8.0;
         assert_eq!(b.latency_ns[0], first_end);
-        // The second datagram filled while the first was sent (13.2 us < 12.16 us + ...),
-        // then waited for the wire.
         assert_eq!(
             b.latency_ns[55],
             (110.0 * 240.0f64).max(first_end) + 1520.0 * 8.0
         );
+        // With the 10 us timeout the first datagram is due at 10.24 us; the 43rd record,
+        // begun at 10.08 us, is completed (at 10.32 us) before it closes. Later ones leave as
+        // soon as the one before has left the wire.
+        let b = model.run(&[0.0; 200]);
+        assert_eq!(b.datagrams, 5);
+        assert_eq!(
+            b.latency_ns[0],
+            43.0 * 240.0 + records_frame_wire_bytes(43.0) * 8.0
+        );
+        assert_eq!(b.latency_ns[42], b.latency_ns[0]);
+        assert!(b.latency_ns[43] > b.latency_ns[0]);
     }
 
     #[test]
