@@ -6,6 +6,7 @@ mod capture;
 mod decode;
 mod examples;
 mod replay;
+mod report;
 mod sim;
 mod stats;
 mod verilog;
@@ -45,6 +46,8 @@ pub enum Command {
     Bench(bench::BenchCommand),
     /// Check the cell models' scenes against the papers' event rates (Fig. 8).
     Calibrate(calibrate::Args),
+    /// Run the studies (speed against accuracy, failure boundaries): charts and a summary.
+    Report(report::Args),
 }
 
 /// Runs one parsed command line.
@@ -59,6 +62,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Stats(args) => stats::run(args, cli.json),
         Command::Bench(what) => bench::run(what, cli.json),
         Command::Calibrate(args) => calibrate::run(args, cli.json),
+        Command::Report(args) => report::run_report(&args, cli.json),
     }
 }
 

@@ -111,6 +111,7 @@ pub fn calibrate(dir: &std::path::Path) -> Result<Vec<Figure>, SceneError> {
         let generated = scene.generate(&GenerateOptions {
             keep_packets: false,
             truth_cells: Vec::new(),
+            ..Default::default()
         });
         out.extend(figures(row, &generated.stats));
     }

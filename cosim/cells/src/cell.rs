@@ -10,6 +10,11 @@
 //!
 //! A cell starts with no value sent, so its first sample fires every enabled channel: the
 //! host then holds a full state from the start.
+//!
+//! An optional periodic full refresh (not in the papers; [`CellConfig::refresh_every_samples`])
+//! sends one data packet with every channel every N samples in event mode, and takes its
+//! values as `last_sent`: a host that lost an event, or the cell's first packets, holds the
+//! true state again after at most one refresh period.
 
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::{Channel, ChannelMask, DataRepr, EventRepr, Modality};
@@ -141,6 +146,13 @@ impl SendOnDelta {
         }
     }
 
+    /// Takes `raw` as sent on every enabled channel (a full refresh carried them all).
+    pub fn refresh(&mut self, raw: &[i32; Channel::COUNT]) {
+        for c in self.enabled.iter() {
+            self.last_sent[c.index()] = Some(raw[c.index()]);
+        }
+    }
+
     /// The value last sent on `channel`, if any.
     pub fn last_sent(&self, channel: Channel) -> Option<i32> {
         self.last_sent[channel.index()]
@@ -180,6 +192,9 @@ pub struct CellConfig {
     pub thresholds: Thresholds,
     /// Channels enabled for events (event mode).
     pub enabled: ChannelMask,
+    /// Event mode: every this many samples (counted from the first, which fires every
+    /// channel anyway) send one data packet with every channel instead of events; 0 never.
+    pub refresh_every_samples: u32,
 }
 
 /// Up to two 20-byte packets one sample produces.
@@ -213,6 +228,7 @@ pub struct Cell {
     config: CellConfig,
     send_on_delta: SendOnDelta,
     next_sequence: u16,
+    samples: u64,
 }
 
 impl Cell {
@@ -222,6 +238,7 @@ impl Cell {
             send_on_delta: SendOnDelta::new(config.thresholds, config.enabled),
             config,
             next_sequence: 0,
+            samples: 0,
         }
     }
 
@@ -264,7 +281,17 @@ impl Cell {
     fn send(&mut self, raw: &[i32; Channel::COUNT]) -> SamplePackets {
         let id = self.config.cell_id;
         let mut out = SamplePackets::default();
-        match self.config.mode {
+        let every = u64::from(self.config.refresh_every_samples);
+        let refresh = every > 0 && self.samples > 0 && self.samples.is_multiple_of(every);
+        self.samples += 1;
+        let mode = match self.config.mode {
+            Mode::Event if refresh => {
+                self.send_on_delta.refresh(raw);
+                Mode::Data
+            }
+            mode => mode,
+        };
+        match mode {
             Mode::Data => {
                 let data = DataRepr {
                     cell_id: id,
@@ -317,6 +344,7 @@ mod tests {
             mode: Mode::Event,
             thresholds: Thresholds::table_i(),
             enabled,
+            refresh_every_samples: 0,
         })
     }
 
@@ -495,6 +523,7 @@ mod tests {
             mode: Mode::Data,
             thresholds: Thresholds::table_i(),
             enabled: ChannelMask::ALL,
+            refresh_every_samples: 0,
         });
         for _ in 0..3 {
             let out = cell.sample_raw(&BASE);
@@ -512,6 +541,40 @@ mod tests {
                 )
             }
             other => panic!("expected a data packet, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_refresh_sends_every_channel_in_one_data_packet_every_n_samples() {
+        let mut cell = Cell::new(CellConfig {
+            cell_id: 9,
+            mode: Mode::Event,
+            thresholds: Thresholds::table_i(),
+            enabled: ChannelMask::ALL,
+            refresh_every_samples: 4,
+        });
+        // Sample 0: the first sample, all nine channels as events in two packets.
+        assert_eq!(events(&cell.sample_raw(&BASE)).len(), 2);
+        let mut s = BASE;
+        for k in 1..=12u32 {
+            // accel x creeps by 2 a sample: below its threshold of 5 until a refresh or
+            // the third step.
+            s[0] += 2;
+            let out = cell.sample_raw(&s);
+            if k % 4 == 0 {
+                assert_eq!(out.as_slice().len(), 1, "sample {k}");
+                let d = DataRepr::parse(&out.as_slice()[0]).unwrap();
+                assert_eq!(d.raw_values(), s, "sample {k}");
+                assert_eq!(out.fired(), ChannelMask::ALL);
+                for c in Channel::ALL {
+                    assert_eq!(cell.send_on_delta().last_sent(c), Some(s[c.index()]));
+                }
+            } else {
+                // Between refreshes Algorithm 1 runs from the refreshed values: accel x
+                // fires at 6 from what was sent (k = 3, 7, 11).
+                let fired = !out.as_slice().is_empty();
+                assert_eq!(fired, k % 4 == 3, "sample {k}");
+            }
         }
     }
 

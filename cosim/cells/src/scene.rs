@@ -12,7 +12,7 @@ use crate::rng::Rng;
 use crate::signal::SignalModel;
 use serde::Deserialize;
 use skinbox_protocol::cell::PACKET_LEN;
-use skinbox_protocol::{Channel, ChannelMask, Modality};
+use skinbox_protocol::{CellFraming, CellRepr, Channel, ChannelMask, Modality};
 use std::cmp::Reverse;
 use std::fmt;
 use std::path::Path;
@@ -91,6 +91,9 @@ pub struct BusConfig {
     pub uart_error_ppm: f64,
     /// Largest sample clock drift of a cell, ppm (each cell draws one in +-this).
     pub clock_drift_ppm: f64,
+    /// Most cells on one bus: the papers' 66 ([`MAX_CELLS_PER_BUS`]); studies of longer
+    /// chains raise it.
+    pub max_cells: usize,
 }
 
 impl Default for BusConfig {
@@ -101,6 +104,7 @@ impl Default for BusConfig {
             fifo_packets: 32,
             uart_error_ppm: 10_000.0,
             clock_drift_ppm: 100.0,
+            max_cells: MAX_CELLS_PER_BUS,
         }
     }
 }
@@ -119,6 +123,23 @@ pub struct ThresholdConfig {
     pub temperature_c: f64,
     /// Channels enabled for events, by name (`accel_x` .. `temperature_2`).
     pub enabled: Vec<String>,
+    /// Period of a full refresh in event mode, s: one data packet with every channel
+    /// (see [`crate::cell::CellConfig::refresh_every_samples`]); 0 for none, as in the papers.
+    pub refresh_s: f64,
+}
+
+impl ThresholdConfig {
+    /// The same thresholds times `factor` (the enable mask and refresh unchanged); they are
+    /// rounded down to whole raw steps when used, as Table I's are.
+    pub fn scaled(&self, factor: f64) -> ThresholdConfig {
+        ThresholdConfig {
+            accel_g: self.accel_g * factor,
+            force: self.force * factor,
+            proximity: self.proximity * factor,
+            temperature_c: self.temperature_c * factor,
+            ..self.clone()
+        }
+    }
 }
 
 impl Default for ThresholdConfig {
@@ -129,6 +150,7 @@ impl Default for ThresholdConfig {
             proximity: 0.0001,
             temperature_c: 0.5,
             enabled: Channel::ALL.iter().map(|c| c.name().to_string()).collect(),
+            refresh_s: 0.0,
         }
     }
 }
@@ -145,6 +167,18 @@ pub struct NoiseConfig {
     pub proximity: f64,
     /// Temperature noise, C.
     pub temperature_c: f64,
+}
+
+impl NoiseConfig {
+    /// Every noise level times `factor`.
+    pub fn scaled(&self, factor: f64) -> NoiseConfig {
+        NoiseConfig {
+            accel_g: self.accel_g * factor,
+            force: self.force * factor,
+            proximity: self.proximity * factor,
+            temperature_c: self.temperature_c * factor,
+        }
+    }
 }
 
 /// `[temperature]`: slow drift of the first temperature sensor.
@@ -458,15 +492,16 @@ impl Scene {
         }
         if s.buses == 0 {
             p.push(("scene", "buses", "`buses` must be at least 1".to_string()));
-        } else if s.cells.div_ceil(s.buses) > MAX_CELLS_PER_BUS {
+        } else if s.cells.div_ceil(s.buses) > c.bus.max_cells {
             p.push((
                 "scene",
                 "buses",
                 format!(
-                    "{} cells on {} buses put {} cells on a bus; at most {MAX_CELLS_PER_BUS}",
+                    "{} cells on {} buses put {} cells on a bus; at most {} (`[bus] max_cells`)",
                     s.cells,
                     s.buses,
-                    s.cells.div_ceil(s.buses)
+                    s.cells.div_ceil(s.buses),
+                    c.bus.max_cells
                 ),
             ));
         }
@@ -511,6 +546,7 @@ impl Scene {
         non_negative("thresholds", "force", t.force, &mut p);
         non_negative("thresholds", "proximity", t.proximity, &mut p);
         non_negative("thresholds", "temperature_c", t.temperature_c, &mut p);
+        non_negative("thresholds", "refresh_s", t.refresh_s, &mut p);
         for name in &t.enabled {
             if !Channel::ALL.iter().any(|ch| ch.name() == name) {
                 p.push((
@@ -652,6 +688,9 @@ impl Scene {
         let thresholds = self.thresholds();
         let enabled = self.enabled();
         let period_s = 1.0 / s.sample_rate_hz;
+        let refresh_every_samples = (c.thresholds.refresh_s * s.sample_rate_hz)
+            .round()
+            .min(f64::from(u32::MAX)) as u32;
         let mut stats = SceneStats::new(s.duration_s - s.warmup_s, s.cells);
         let mut truth = Vec::new();
         let mut buses = Vec::new();
@@ -679,6 +718,7 @@ impl Scene {
                     mode: s.mode,
                     thresholds,
                     enabled,
+                    refresh_every_samples,
                 });
                 let mut signal = model.cell(index);
                 let keep_truth = options.truth_cells.contains(&cell_id);
@@ -687,6 +727,10 @@ impl Scene {
                     sample_time_ns: Vec::new(),
                     truth: Vec::new(),
                 };
+                // What a host holds of this cell (Algorithm 2): the values of every packet
+                // that was not lost on the way, read back from the packet bytes.
+                let mut held = [None; Channel::COUNT];
+                let mut loss_rng = Rng::for_stream(s.seed ^ 0x1055, index as u64);
                 let delay_ns = c.bus.processing_ns + position as u64 * c.bus.hop_latency_ns;
                 let mut k = 0u64;
                 loop {
@@ -706,8 +750,16 @@ impl Scene {
                         trace.sample_time_ns.push(sample_time_ns);
                         trace.truth.push(value);
                     }
+                    let mut lost = 0;
+                    for bytes in packets.as_slice() {
+                        if options.packet_loss > 0.0 && loss_rng.uniform() < options.packet_loss {
+                            lost += 1;
+                        } else {
+                            hold(&mut held, bytes);
+                        }
+                    }
                     if t_s >= s.warmup_s {
-                        stats.record(&cell, &packets, &value, s.mode, &measured);
+                        stats.record(&packets, lost, &value, &held);
                     }
                     if options.keep_packets {
                         for bytes in packets.as_slice() {
@@ -755,6 +807,25 @@ impl Scene {
             stats,
             truth,
         }
+    }
+}
+
+/// Takes the values of one packet into a host's held state, as the event-to-data converter
+/// (Algorithm 2) does: every channel of a data packet, the fired channels of an event packet.
+fn hold(held: &mut [Option<i32>; Channel::COUNT], bytes: &[u8; PACKET_LEN]) {
+    match CellRepr::parse(bytes, &CellFraming::DEFAULT) {
+        Ok(CellRepr::Data(d)) => {
+            for (h, v) in held.iter_mut().zip(d.raw_values()) {
+                *h = Some(v);
+            }
+        }
+        Ok(CellRepr::Event(e)) => {
+            for (channel, raw) in e.events() {
+                held[channel.index()] = Some(raw);
+            }
+        }
+        // The cells make only valid packets (their tests parse every one).
+        Err(e) => unreachable!("a cell made an invalid packet: {e}"),
     }
 }
 
@@ -823,6 +894,10 @@ pub struct GenerateOptions {
     pub keep_packets: bool,
     /// Cells (by id) whose true signals are kept sample by sample.
     pub truth_cells: Vec<u16>,
+    /// Probability that a packet is lost between its cell and the host (independent per
+    /// packet, seeded by the scene seed), for the reconstruction error only: the buses
+    /// still carry every packet.
+    pub packet_loss: f64,
 }
 
 impl Default for GenerateOptions {
@@ -830,6 +905,7 @@ impl Default for GenerateOptions {
         GenerateOptions {
             keep_packets: true,
             truth_cells: Vec::new(),
+            packet_loss: 0.0,
         }
     }
 }
@@ -891,6 +967,8 @@ pub struct SceneStats {
     pub events: [u64; Channel::COUNT],
     /// Packets the cells produced over the whole run (window and warm-up).
     pub offered: u64,
+    /// Packets of the window lost on the way to the host ([`GenerateOptions::packet_loss`]).
+    pub packets_lost: u64,
     squared_error: [f64; Channel::COUNT],
 }
 
@@ -903,42 +981,29 @@ impl SceneStats {
             packets: 0,
             events: [0; Channel::COUNT],
             offered: 0,
+            packets_lost: 0,
             squared_error: [0.0; Channel::COUNT],
         }
     }
 
     fn record(
         &mut self,
-        cell: &Cell,
         packets: &crate::cell::SamplePackets,
+        lost: u64,
         truth: &[f64; Channel::COUNT],
-        mode: Mode,
-        measured: &[f64; Channel::COUNT],
+        held: &[Option<i32>; Channel::COUNT],
     ) {
         self.samples += 1;
         self.packets += packets.as_slice().len() as u64;
-        match mode {
-            Mode::Data => {
-                for c in Channel::ALL {
-                    let i = c.index();
-                    self.events[i] += 1;
-                    let sent = c.to_units(crate::cell::quantise(c, measured[i]));
-                    self.squared_error[i] += (sent - truth[i]).powi(2);
-                }
-            }
-            Mode::Event => {
-                for c in packets.fired().iter() {
-                    self.events[c.index()] += 1;
-                }
-                let sod = cell.send_on_delta();
-                for c in Channel::ALL {
-                    let i = c.index();
-                    // The host holds the last value sent (Algorithm 2); a channel never sent
-                    // reads 0 there.
-                    let held = c.to_units(sod.last_sent(c).unwrap_or(0));
-                    self.squared_error[i] += (held - truth[i]).powi(2);
-                }
-            }
+        self.packets_lost += lost;
+        for c in packets.fired().iter() {
+            self.events[c.index()] += 1;
+        }
+        for c in Channel::ALL {
+            let i = c.index();
+            // A channel the host never received reads 0 there.
+            let value = c.to_units(held[i].unwrap_or(0));
+            self.squared_error[i] += (value - truth[i]).powi(2);
         }
     }
 
@@ -957,8 +1022,8 @@ impl SceneStats {
         100.0 * self.packets as f64 / self.samples.max(1) as f64
     }
 
-    /// RMS error of the reconstructed channel (hold last value) against the true signal, in
-    /// percent of the channel's full range.
+    /// RMS error of the reconstructed channel (the host holds the last value it received)
+    /// against the true signal, in percent of the channel's full range.
     pub fn rms_error_pct(&self, channel: Channel) -> f64 {
         let i = channel.index();
         100.0 * (self.squared_error[i] / self.samples.max(1) as f64).sqrt()

@@ -194,6 +194,7 @@ fn cells_keep_their_own_clocks() {
     let g = scene.generate(&GenerateOptions {
         keep_packets: false,
         truth_cells: vec![1, 2, 260],
+        ..Default::default()
     });
     assert_eq!(g.truth.len(), 3);
     let mut phases = Vec::new();
@@ -225,6 +226,7 @@ fn events_rebuild_the_true_signal() {
     let g = scene.generate(&GenerateOptions {
         keep_packets: true,
         truth_cells: vec![id],
+        ..Default::default()
     });
     let truth = &g.truth[0];
     let mut packets: Vec<_> = g

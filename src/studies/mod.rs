@@ -1,0 +1,208 @@
+//! The studies of `skinbox report`: speed against accuracy, and the point where each method
+//! fails (issue 8; DESIGN.md sections 4, 6 and 7).
+//!
+//! - C1 [`send_on_delta`]: per scene, packet rate against reconstruction error over a sweep
+//!   of thresholds around the papers' Table I.
+//! - C2 [`fidelity`]: wall time per simulated second against error relative to the RTL, for
+//!   the RTL co-simulation and the closed-form [`rate_model`], across skin sizes.
+//! - C3 [`batching`]: the flush timeout's latency against the link capacity it reaches.
+//! - C4 [`boundaries`]: UART baud mismatch (RTL), cells per bus, sensor noise, event loss.
+//!
+//! [`run`] runs them and writes `summary.md` (every number behind every chart, as tables)
+//! and each chart as PNG and SVG into one directory. `quick` runs reduced sweeps (the test
+//! suite runs them).
+
+pub mod batching;
+pub mod boundaries;
+pub mod chart;
+pub mod fidelity;
+pub mod rate_model;
+pub mod send_on_delta;
+
+use anyhow::Context;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Output directory (created if missing).
+    pub out: PathBuf,
+    /// Reduced sweeps.
+    pub quick: bool,
+}
+
+/// Reports progress: one call per finished step.
+pub struct Progress<'a> {
+    done: u64,
+    total: u64,
+    report: &'a mut dyn FnMut(u64, u64, &str),
+}
+
+impl<'a> Progress<'a> {
+    /// A progress of `total` steps, reported to `report(done, total, what is next)`.
+    pub fn new(total: u64, report: &'a mut dyn FnMut(u64, u64, &str)) -> Self {
+        Progress {
+            done: 0,
+            total,
+            report,
+        }
+    }
+
+    /// Starts the next step.
+    pub fn step(&mut self, what: &str) {
+        (self.report)(self.done, self.total, what);
+        self.done += 1;
+    }
+}
+
+/// A table of the summary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Table {
+    /// Column headers.
+    pub headers: Vec<String>,
+    /// Rows of cells, as printed.
+    pub rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    /// An empty table with these columns.
+    pub fn new(headers: &[&str]) -> Table {
+        Table {
+            headers: headers.iter().map(|h| h.to_string()).collect(),
+            rows: Vec::new(),
+        }
+    }
+
+    /// Appends a row (as many cells as headers).
+    pub fn row(&mut self, cells: Vec<String>) {
+        assert_eq!(cells.len(), self.headers.len(), "one cell per column");
+        self.rows.push(cells);
+    }
+
+    /// The table as GitHub markdown.
+    pub fn to_markdown(&self) -> String {
+        let mut s = format!("| {} |\n", self.headers.join(" | "));
+        let _ = writeln!(s, "|{}", "---|".repeat(self.headers.len()));
+        for r in &self.rows {
+            let _ = writeln!(s, "| {} |", r.join(" | "));
+        }
+        s
+    }
+}
+
+/// One study's part of the summary.
+#[derive(Debug, Clone)]
+pub struct Section {
+    /// `C1` .. `C4d`.
+    pub id: &'static str,
+    /// Heading.
+    pub title: String,
+    /// What was done and how to read it.
+    pub text: String,
+    /// Key numbers: (what, value), printed as a two-column table.
+    pub findings: Vec<(String, String)>,
+    /// Every number behind the charts.
+    pub tables: Vec<Table>,
+    /// The charts.
+    pub charts: Vec<chart::Chart>,
+}
+
+/// What [`run`] wrote.
+#[derive(Debug, Clone)]
+pub struct Written {
+    /// The summary.
+    pub summary: PathBuf,
+    /// Every chart file (PNG and SVG).
+    pub charts: Vec<PathBuf>,
+    /// Wall time of the whole run, s.
+    pub wall_s: f64,
+}
+
+/// Steps [`run`] reports.
+pub fn steps(quick: bool) -> u64 {
+    send_on_delta::steps(quick)
+        + fidelity::steps(quick)
+        + batching::steps(quick)
+        + boundaries::steps(quick)
+        + 1
+}
+
+/// Runs every study and writes the summary and charts.
+pub fn run(options: &Options, progress: &mut Progress) -> anyhow::Result<Written> {
+    let started = Instant::now();
+    std::fs::create_dir_all(&options.out)
+        .with_context(|| format!("creating {}", options.out.display()))?;
+    let q = options.quick;
+    let mut sections = vec![send_on_delta::study(q, progress)?];
+    sections.push(fidelity::study(q, progress)?);
+    sections.push(batching::study(q, progress)?);
+    sections.extend(boundaries::study(q, progress)?);
+    progress.step("writing the charts");
+    let mut charts = Vec::new();
+    for s in &sections {
+        for c in &s.charts {
+            charts.extend(c.write(&options.out)?);
+        }
+    }
+    let wall_s = started.elapsed().as_secs_f64();
+    let summary = options.out.join("summary.md");
+    std::fs::write(&summary, summary_markdown(&sections, q, wall_s))
+        .with_context(|| format!("writing {}", summary.display()))?;
+    Ok(Written {
+        summary,
+        charts,
+        wall_s,
+    })
+}
+
+fn summary_markdown(sections: &[Section], quick: bool, wall_s: f64) -> String {
+    let mut s = String::from("# skinbox report\n\n");
+    let _ = writeln!(
+        s,
+        "Written by `skinbox report{}` in {wall_s:.1} s of wall time. Every number behind \
+         every chart is in the tables below; the charts are beside this file as PNG and SVG.\n",
+        if quick { " --quick" } else { "" }
+    );
+    for sec in sections {
+        let _ = writeln!(s, "## {} {}\n\n{}\n", sec.id, sec.title, sec.text);
+        for c in &sec.charts {
+            let _ = writeln!(s, "![{}]({}.png)\n", c.title, c.name);
+        }
+        if !sec.findings.is_empty() {
+            let mut t = Table::new(&["finding", "value"]);
+            for (k, v) in &sec.findings {
+                t.row(vec![k.clone(), v.clone()]);
+            }
+            let _ = writeln!(s, "{}", t.to_markdown());
+        }
+        for t in &sec.tables {
+            let _ = writeln!(s, "{}", t.to_markdown());
+        }
+    }
+    s
+}
+
+/// The cell models' scene file `name` (`cosim/scenes/<name>.toml`).
+pub fn scene(name: &str) -> anyhow::Result<skinbox_cells::Scene> {
+    Ok(skinbox_cells::Scene::load(
+        &skinbox_cells::scenes_dir().join(format!("{name}.toml")),
+    )?)
+}
+
+/// Mean RMS reconstruction error of the eight channels that carry a signal (the second
+/// temperature sensor reads 0), % of each channel's full range.
+pub fn mean_error_pct(stats: &skinbox_cells::SceneStats) -> f64 {
+    use skinbox_protocol::Channel;
+    Channel::ALL[..8]
+        .iter()
+        .map(|&c| stats.rms_error_pct(c))
+        .sum::<f64>()
+        / 8.0
+}
+
+/// Path helper for tests and the command: `<dir>/<name>.png`.
+pub fn png(dir: &Path, name: &str) -> PathBuf {
+    dir.join(format!("{name}.png"))
+}

@@ -1,0 +1,228 @@
+//! `skinbox report --quick`: every study runs, the summary holds the numbers behind each
+//! chart, and every chart is a readable PNG and SVG.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::process::Command;
+
+/// The markdown tables of one `## <id> ...` section: each a list of rows, each row a map
+/// from column header to cell.
+fn tables(summary: &str, id: &str) -> Vec<Vec<HashMap<String, String>>> {
+    let heading = format!("## {id} ");
+    let start = summary
+        .find(&heading)
+        .unwrap_or_else(|| panic!("no section {id}"));
+    let body = &summary[start + heading.len()..];
+    let body = &body[..body.find("\n## ").unwrap_or(body.len())];
+    let mut out = Vec::new();
+    let mut lines = body.lines().peekable();
+    while let Some(line) = lines.next() {
+        if !line.starts_with('|') {
+            continue;
+        }
+        let cells = |l: &str| -> Vec<String> {
+            l.trim()
+                .trim_matches('|')
+                .split(" | ")
+                .map(|c| c.trim().to_string())
+                .collect()
+        };
+        let headers = cells(line);
+        lines.next(); // |---|
+        let mut rows = Vec::new();
+        while let Some(l) = lines.peek().filter(|l| l.starts_with('|')) {
+            let r = cells(l);
+            assert_eq!(r.len(), headers.len(), "{l}");
+            rows.push(headers.iter().cloned().zip(r).collect());
+            lines.next();
+        }
+        out.push(rows);
+    }
+    out
+}
+
+fn num(row: &HashMap<String, String>, column: &str) -> f64 {
+    let v = row
+        .get(column)
+        .unwrap_or_else(|| panic!("no column {column}: {row:?}"));
+    v.trim_start_matches('+')
+        .parse()
+        .unwrap_or_else(|_| panic!("{column}: {v} is not a number"))
+}
+
+fn finding<'a>(rows: &'a [HashMap<String, String>], starts: &str) -> &'a str {
+    &rows
+        .iter()
+        .find(|r| r["finding"].starts_with(starts))
+        .unwrap_or_else(|| panic!("no finding {starts}"))["value"]
+}
+
+/// A PNG by its signature and IHDR (width, height), and some non-white pixels to show that
+/// something (text, lines) was drawn.
+fn check_png(path: &Path) {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{}", path.display());
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let width = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
+    let height = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
+    assert_eq!((width, height), (800, 500), "{}", path.display());
+    assert!(bytes.len() > 20_000, "{}: almost empty", path.display());
+}
+
+fn check_svg(path: &Path, title: &str) {
+    let text = std::fs::read_to_string(path).unwrap();
+    assert!(text.trim_start().starts_with("<svg"), "{}", path.display());
+    assert!(text.trim_end().ends_with("</svg>"), "{}", path.display());
+    assert!(text.contains(title), "{}: no title {title}", path.display());
+    assert!(
+        text.matches("<text").count() > 10,
+        "{}: no labels",
+        path.display()
+    );
+}
+
+#[test]
+fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
+    let dir = std::env::temp_dir().join(format!("skinbox-report-{}", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args(["report", "--quick", "--json", "--out"])
+        .arg(&dir)
+        .output()
+        .expect("run skinbox");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let written: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let summary = std::fs::read_to_string(dir.join("summary.md")).unwrap();
+
+    // Every chart the summary shows exists as a PNG and an SVG.
+    let charts = [
+        ("c1_send_on_delta", "C1 Send-on-delta"),
+        ("c2_fidelity", "C2 Fidelity"),
+        ("c2_speed", "C2 Fidelity"),
+        ("c3_batching", "C3 Batching"),
+        ("c4a_baud_mismatch", "C4a UART baud mismatch"),
+        ("c4b_cells_per_bus", "C4b Cells per bus"),
+        ("c4c_sensor_noise", "C4c Sensor noise"),
+        ("c4d_event_loss", "C4d Event loss"),
+    ];
+    assert_eq!(
+        written["charts"].as_array().unwrap().len(),
+        2 * charts.len()
+    );
+    for (name, title) in charts {
+        assert!(summary.contains(&format!("({name}.png)")), "{name}");
+        check_png(&dir.join(format!("{name}.png")));
+        check_svg(&dir.join(format!("{name}.svg")), title);
+    }
+
+    // C1: Table I saves packets in every scene; data mode is 100 %; larger thresholds send
+    // fewer packets.
+    let c1 = &tables(&summary, "C1")[1];
+    assert_eq!(c1.len(), 6 * 4);
+    for r in c1 {
+        let rate = num(r, "packets (% of data mode)");
+        match r["threshold scale"].as_str() {
+            "data mode" => assert_eq!(rate, 100.0),
+            "1" => assert!(rate < 90.0, "{r:?}"),
+            _ => {}
+        }
+        assert!(
+            num(r, "RMS error, mean of 8 channels (% FS)") < 1.0,
+            "{r:?}"
+        );
+    }
+    let rate_of = |scene: &str, scale: &str| {
+        num(
+            c1.iter()
+                .find(|r| r["scene"] == scene && r["threshold scale"] == scale)
+                .unwrap(),
+            "packets (% of data mode)",
+        )
+    };
+    assert!(rate_of("moving_arm", "4") < rate_of("moving_arm", "1"));
+    assert!(rate_of("moving_arm", "1") < rate_of("moving_arm", "0.25"));
+    let idle = rate_of("idle", "1");
+    assert!((3.0..7.0).contains(&idle), "idle at Table I: {idle} %");
+
+    // C2: the RTL ran and delivered; the rate model stays within 25 % of it.
+    let c2 = &tables(&summary, "C2")[1];
+    let rtl = c2
+        .iter()
+        .find(|r| r["level"].starts_with("RTL"))
+        .expect("an RTL row");
+    assert!(num(rtl, "records in the window") > 20.0);
+    assert!(num(rtl, "stamp - true edge, max (ticks)") < 1.0);
+    let rate = c2
+        .iter()
+        .find(|r| r["level"].starts_with("rate model") && r["buses"] == rtl["buses"])
+        .unwrap();
+    assert!(
+        num(rate, "records error vs RTL (%)").abs() < 25.0,
+        "{rate:?}"
+    );
+    assert!(num(rate, "wall time per simulated s (s)") < 1e-3);
+    assert!(c2.iter().any(|r| r["cells"] == "5742"));
+
+    // C3: the latency grows with the flush timeout; a lone record waits about the timeout.
+    let c3 = &tables(&summary, "C3")[0];
+    let light = |t: &str| {
+        c3.iter()
+            .find(|r| r["load"].starts_with("260") && r["flush timeout (us)"] == t)
+            .unwrap()
+    };
+    let p50_100 = num(light("100"), "latency p50 (us)");
+    assert!((100.0..110.0).contains(&p50_100), "{p50_100}");
+    assert!(num(light("1"), "latency p50 (us)") < num(light("10"), "latency p50 (us)"));
+    let original = c3
+        .iter()
+        .find(|r| r["box"].starts_with("original") && r["load"].starts_with("260"))
+        .unwrap();
+    assert!(num(original, "latency p50 (us)") < 1.0);
+
+    // C4a: +-4 % all good, +-6 % fails safe.
+    let c4a = &tables(&summary, "C4a");
+    assert_eq!(finding(&c4a[0], "every packet delivered"), "-4.0 .. +4.0");
+    assert_eq!(finding(&c4a[0], "largest share corrupted"), "0.0");
+    for r in &c4a[1] {
+        assert_eq!(num(r, "corrupted but delivered (%)"), 0.0, "{r:?}");
+        let e = num(r, "baud error (%)");
+        if e.abs() <= 4.0 {
+            assert_eq!(num(r, "good (%)"), 100.0, "{r:?}");
+        } else {
+            assert!(num(r, "rejected (%)") > 0.0, "{r:?}");
+        }
+    }
+
+    // C4b: 66 cells at 250 Hz lose nothing; 100 lose the excess over 20,000 packets/s.
+    let c4b = &tables(&summary, "C4b")[1];
+    for r in c4b.iter().filter(|r| r["series"] == "data mode, 250 Hz") {
+        let cells = num(r, "cells on the bus");
+        let loss = num(r, "dropped (%)");
+        if cells <= 66.0 {
+            assert_eq!(loss, 0.0, "{r:?}");
+        } else {
+            assert!((loss - num(r, "closed form (%)")).abs() < 2.0, "{r:?}");
+            assert!(loss > 10.0, "{r:?}");
+        }
+    }
+
+    // C4c: event storms above data mode at a few times the calibrated noise.
+    let c4c = &tables(&summary, "C4c");
+    let storm: f64 = finding(&c4c[0], "idle: noise where").parse().unwrap();
+    assert!((2.0..8.0).contains(&storm), "{storm}");
+
+    // C4d: at 3 % loss the error passes 0.5 % without refresh and stays below it with one.
+    let c4d = &tables(&summary, "C4d");
+    for r in c4d[1].iter().filter(|r| r["packet loss (%)"] == "3") {
+        let e = num(r, "RMS error, mean of 8 channels (% FS)");
+        if r["full refresh every (s)"] == "never" {
+            assert!(e > 0.5, "{r:?}");
+        } else {
+            assert!(e < 0.5, "{r:?}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
