@@ -147,7 +147,8 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
     let idle = rate_of("idle", "1");
     assert!((3.0..7.0).contains(&idle), "idle at Table I: {idle} %");
 
-    // C2: the RTL ran and delivered; the rate model stays within 25 % of it.
+    // C2: the RTL ran and delivered; the rate model stays within 25 % of it; the reference
+    // model agrees with it frame for frame.
     let c2 = &tables(&summary, "C2")[1];
     let rtl = c2
         .iter()
@@ -165,6 +166,21 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
     );
     assert!(num(rate, "wall time per simulated s (s)") < 1e-3);
     assert!(c2.iter().any(|r| r["cells"] == "5742"));
+    // the reference model sends the RTL's frames, faster
+    let reference = c2
+        .iter()
+        .find(|r| r["level"].starts_with("reference") && r["buses"] == rtl["buses"])
+        .expect("a reference row beside the RTL");
+    assert_eq!(num(reference, "datagrams error vs RTL (%)"), 0.0);
+    assert_eq!(
+        reference["records in the window"],
+        rtl["records in the window"]
+    );
+    assert!(
+        num(reference, "wall time per simulated s (s)") * 20.0
+            < num(rtl, "wall time per simulated s (s)"),
+        "{reference:?} against {rtl:?}"
+    );
 
     // C3: the latency grows with the flush timeout; a lone record waits about the timeout.
     let c3 = &tables(&summary, "C3")[0];

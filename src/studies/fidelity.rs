@@ -2,9 +2,9 @@
 //! the RTL, for each level of DESIGN.md section 6 that is here, across skin sizes from one
 //! bus to 5,742 cells:
 //! 1. RTL: the verilated box, every clock, UART pins driven bit by bit (the truth);
+//! 2. the packet-level reference model (`skinbox_cosim::reference`), compared frame by
+//!    frame with the RTL where both run, and alone up to the 64-port box;
 //! 3. the closed-form [`rate_model`](super::rate_model).
-//!
-//! The packet-level reference model (level 2) is not in this build of the report.
 //!
 //! The skin is the stroking-upper-arm scene (event mode, 125 Hz) with 66 cells a bus. The
 //! RTL runs where it is affordable (1 and 4 buses; 4 in the quick run); the rate model runs
@@ -14,7 +14,8 @@
 use super::rate_model::{predict, RateInputs};
 use super::{chart, scene, Progress, Section, Table};
 use skinbox_cells::calibration::SEED_TABLE;
-use skinbox_cosim::sim::run_rtl;
+use skinbox_cosim::reference::run_reference;
+use skinbox_cosim::sim::{run_rtl, SimSpec};
 use skinbox_gateware::interface_box::BoxConfig;
 use std::time::Instant;
 
@@ -46,9 +47,57 @@ fn window_s(quick: bool) -> f64 {
     }
 }
 
+/// Skin sizes the reference model runs alone (the box has at most 64 ports).
+fn reference_only_buses(quick: bool) -> Vec<usize> {
+    if quick {
+        vec![]
+    } else {
+        vec![8, 16, 32, 64]
+    }
+}
+
 /// Steps [`study`] reports.
 pub fn steps(quick: bool) -> u64 {
-    (rtl_buses(quick).len() + 1) as u64
+    (rtl_buses(quick).len() + reference_only_buses(quick).len() + 1) as u64
+}
+
+struct ReferencePoint {
+    buses: usize,
+    wall_per_sim_s: f64,
+    records: u64,
+    datagrams: u64,
+    /// Frames that differ from the RTL's (None: no RTL run).
+    frames_differing: Option<usize>,
+    ts_max_ticks: f64,
+}
+
+/// The spec of the stroking skin with `buses` buses of 66 cells, and the cell models'
+/// wall time per simulated second.
+fn skin_spec(
+    base: &skinbox_cells::scene::Scene,
+    buses: usize,
+    window: f64,
+) -> anyhow::Result<(SimSpec, f64)> {
+    let mut sc = base.clone();
+    sc.config.scene.cells = buses * CELLS_PER_BUS;
+    sc.config.scene.buses = buses;
+    let from_s = 1.0;
+    let started = Instant::now();
+    let generated = skinbox_cosim::scene::generate(&sc, from_s + window)?;
+    let generate_s = started.elapsed().as_secs_f64();
+    let config = BoxConfig {
+        ports: buses,
+        flush_timeout_ticks: FLUSH_TICKS,
+        status_period_ticks: STATUS_TICKS,
+        ..BoxConfig::default()
+    };
+    let spec = skinbox_cosim::scene::spec(
+        &generated,
+        config,
+        (from_s * 1e9) as u64,
+        (window * 1e9) as u64,
+    );
+    Ok((spec, generate_s / (from_s + window)))
 }
 
 struct RtlPoint {
@@ -95,28 +144,14 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
     let base = scene(SCENE)?;
     let window = window_s(quick);
     let mut rtl = Vec::new();
+    let mut reference = Vec::new();
     for buses in rtl_buses(quick) {
-        progress.step(&format!("C2: RTL co-simulation, {buses} buses"));
-        let mut sc = base.clone();
-        sc.config.scene.cells = buses * CELLS_PER_BUS;
-        sc.config.scene.buses = buses;
-        let from_s = 1.0;
-        let started = Instant::now();
-        let generated = skinbox_cosim::scene::generate(&sc, from_s + window)?;
-        let generate_s = started.elapsed().as_secs_f64();
-        let config = BoxConfig {
-            ports: buses,
-            flush_timeout_ticks: FLUSH_TICKS,
-            status_period_ticks: STATUS_TICKS,
-            ..BoxConfig::default()
-        };
-        let spec = skinbox_cosim::scene::spec(
-            &generated,
-            config,
-            (from_s * 1e9) as u64,
-            (window * 1e9) as u64,
-        );
-        let r = run_rtl(&spec)?.report;
+        progress.step(&format!(
+            "C2: RTL co-simulation and reference model, {buses} buses"
+        ));
+        let (spec, generate_per_sim_s) = skin_spec(&base, buses, window)?;
+        let run = run_rtl(&spec)?;
+        let r = &run.report;
         anyhow::ensure!(
             r.records_corrupted == 0 && r.packets_delivered == r.packets_sent,
             "the RTL lost or corrupted packets of the stroking scene: {r:?}"
@@ -124,11 +159,40 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
         rtl.push(RtlPoint {
             buses,
             wall_per_sim_s: r.wall_seconds / r.sim_seconds,
-            generate_per_sim_s: generate_s / (from_s + window),
+            generate_per_sim_s,
             records: r.records,
             datagrams: r.frames,
             sim_s: r.sim_seconds,
             ts_max_ticks: r.ts_error_max_ticks,
+        });
+        let m = run_reference(&spec)?;
+        let differing = run
+            .frames
+            .iter()
+            .zip(&m.frames)
+            .filter(|(a, b)| a != b)
+            .count()
+            + run.frames.len().abs_diff(m.frames.len());
+        reference.push(ReferencePoint {
+            buses,
+            wall_per_sim_s: m.report.wall_seconds / m.report.sim_seconds,
+            records: m.report.records,
+            datagrams: m.report.frames,
+            frames_differing: Some(differing),
+            ts_max_ticks: m.report.ts_error_max_ticks,
+        });
+    }
+    for buses in reference_only_buses(quick) {
+        progress.step(&format!("C2: reference model, {buses} buses"));
+        let (spec, _) = skin_spec(&base, buses, window)?;
+        let m = run_reference(&spec)?;
+        reference.push(ReferencePoint {
+            buses,
+            wall_per_sim_s: m.report.wall_seconds / m.report.sim_seconds,
+            records: m.report.records,
+            datagrams: m.report.frames,
+            frames_differing: None,
+            ts_max_ticks: m.report.ts_error_max_ticks,
         });
     }
     progress.step("C2: rate model");
@@ -173,7 +237,51 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
         speed_rtl.push(((p.buses * CELLS_PER_BUS) as f64, p.wall_per_sim_s));
         speed_cells.push(((p.buses * CELLS_PER_BUS) as f64, p.generate_per_sim_s));
     }
+    let mut error_points_reference = Vec::new();
+    let mut speed_reference = Vec::new();
     let mut findings = Vec::new();
+    for p in &reference {
+        let frames = match p.frames_differing {
+            Some(d) => {
+                let pct = 100.0 * d as f64 / p.datagrams.max(1) as f64;
+                error_points_reference.push((p.wall_per_sim_s, pct));
+                findings.push((
+                    format!("reference model against RTL, {} buses", p.buses),
+                    format!(
+                        "{d} of {} frames differ; {:.0} x faster",
+                        p.datagrams,
+                        rtl.iter()
+                            .find(|r| r.buses == p.buses)
+                            .map_or(0.0, |r| r.wall_per_sim_s / p.wall_per_sim_s)
+                    ),
+                ));
+                (format!("{pct:.1}"), format!("{pct:.1}"))
+            }
+            None => ("no RTL run".into(), "no RTL run".into()),
+        };
+        speed_reference.push(((p.buses * CELLS_PER_BUS) as f64, p.wall_per_sim_s));
+        table.row(vec![
+            "reference model (packet level)".into(),
+            p.buses.to_string(),
+            (p.buses * CELLS_PER_BUS).to_string(),
+            format!("{:.4}", p.wall_per_sim_s),
+            p.records.to_string(),
+            p.datagrams.to_string(),
+            frames.0,
+            frames.1,
+            format!("{:.3}", p.ts_max_ticks),
+        ]);
+    }
+    if let Some(p) = reference.iter().max_by_key(|p| p.buses) {
+        findings.push((
+            format!(
+                "reference model wall time per simulated s, {} buses ({} cells)",
+                p.buses,
+                p.buses * CELLS_PER_BUS
+            ),
+            format!("{:.3} s", p.wall_per_sim_s),
+        ));
+    }
     for buses in sizes() {
         let wall = rate_model_wall_s(buses);
         let pred = predict(&rate_inputs(buses));
@@ -235,10 +343,12 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
     }
     let rtl_label = "RTL (Verilator), every clock";
     let rate_label = "rate model (closed form)";
+    let reference_label = "reference model (packet level)";
     let cells_label = "cell models (packets for RTL)";
     let all_walls = speed_rtl
         .iter()
         .chain(&speed_rate)
+        .chain(&speed_reference)
         .chain(&speed_cells)
         .map(|p| p.1);
     let (w_min, w_max) = all_walls.fold((f64::MAX, 0.0f64), |(a, b), w| (a.min(w), b.max(w)));
@@ -262,6 +372,12 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                     points: error_points_rtl,
                     style: chart::Style::Points,
                     color: 0,
+                },
+                chart::Series {
+                    label: reference_label.into(),
+                    points: error_points_reference,
+                    style: chart::Style::Points,
+                    color: 3,
                 },
                 chart::Series {
                     label: rate_label.into(),
@@ -296,6 +412,12 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                     color: 1,
                 },
                 chart::Series {
+                    label: reference_label.into(),
+                    points: speed_reference,
+                    style: chart::Style::Line,
+                    color: 3,
+                },
+                chart::Series {
                     label: rate_label.into(),
                     points: speed_rate,
                     style: chart::Style::Line,
@@ -312,13 +434,17 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
         text: format!(
             "The stroking-upper-arm scene (event mode, 125 Hz, 66 cells a bus) from 1 s on, a \
              {:.0} ms window. RTL: the verilated box (clock loop only; its input comes from the \
-             cell models, timed on their own row). Rate model: the closed form, with the \
+             cell models, timed on their own row). Reference model: the packet-level prediction \
+             from the same pin transitions, compared frame by frame with the RTL (its error is \
+             the share of frames that differ), and run alone up to the 64-port box. Rate \
+             model: the closed form, with the \
              scene's calibrated packet rate (20.1 % of data mode), compared with the RTL's \
              records and datagrams in the same window. The calibrated rate is the mean of the \
              260-cell skin; a smaller skin puts its cells closer to the stroking hand, which is \
-             the rate model's error there: it knows means, not where a scene is busy. The \
-             packet-level reference model is not part of this build, so its level is missing \
-             here.",
+             the rate model's error there: it knows means, not where a scene is busy. Which \
+             level a question needs: the gateware's own behaviour (timing, stamps, counters) \
+             needs the RTL once per change; every frame of a scene of thousands of cells, the \
+             reference model; loads and capacities of whole skins, the rate model.",
             window * 1e3
         ),
         findings,
