@@ -1,7 +1,7 @@
 //! InterfaceBox: the whole box for simulation, N UART pins in, GMII out.
 //!
 //! Per port: [`UartRx`] -> [`CellDeframer`] -> [`PortBuffer`]; then the [`PacketArbiter`]
-//! merges the ports into the [`UdpFramer`], which also sends the [`StatusReporter`]'s
+//! merges the ports, through a [`RegisterSlice`], into the [`UdpFramer`], which also sends the [`StatusReporter`]'s
 //! datagrams. The [`CounterFile`] counts every port's events. The ports stay in reset
 //! until the counters are cleared (about 4 us after reset), so no event goes uncounted.
 //!
@@ -12,6 +12,7 @@ use crate::cell_deframer::CellDeframer;
 use crate::counter_file::CounterFile;
 use crate::packet_arbiter::{PacketArbiter, MAX_PORTS};
 use crate::port_buffer::PortBuffer;
+use crate::register_slice::RegisterSlice;
 use crate::status_reporter::StatusReporter;
 use crate::timestamp::TimestampCounter;
 use crate::uart_rx::UartRx;
@@ -154,6 +155,7 @@ pub struct InterfaceBox {
     deframers: Vec<CellDeframer>,
     buffers: Vec<PortBuffer>,
     arbiter: PacketArbiter,
+    record_slice: RegisterSlice,
     counters: CounterFile,
     status: StatusReporter,
     framer: UdpFramer,
@@ -181,6 +183,7 @@ impl InterfaceBox {
                 .collect(),
             buffers: (0..n).map(|_| PortBuffer::default()).collect(),
             arbiter: PacketArbiter::new(n),
+            record_slice: RegisterSlice::default(),
             counters: CounterFile::new(n),
             status: StatusReporter::new(n, config.status_period_ticks, config.boot_seed),
             framer: UdpFramer::new(&FramerConfig {
@@ -246,11 +249,20 @@ impl Logic for InterfaceBox {
         self.framer.clock.next = self.clock.val();
         self.framer.reset.next = self.reset.val();
         self.framer.tick.next = self.timestamp.tick.val();
-        self.framer.records.data.next = self.arbiter.records.data.val();
-        self.framer.records.valid.next = self.arbiter.records.valid.val();
-        self.framer.records.last.next = self.arbiter.records.last.val();
-        self.framer.records.error.next = self.arbiter.records.error.val();
-        self.arbiter.records.ready.next = self.framer.records.ready.val();
+        // arbiter -> register slice -> framer: no combinational path from the framer's
+        // ready back to the port buffers' memories
+        self.record_slice.clock.next = self.clock.val();
+        self.record_slice.reset.next = self.reset.val();
+        self.record_slice.sink.data.next = self.arbiter.records.data.val();
+        self.record_slice.sink.valid.next = self.arbiter.records.valid.val();
+        self.record_slice.sink.last.next = self.arbiter.records.last.val();
+        self.record_slice.sink.error.next = self.arbiter.records.error.val();
+        self.arbiter.records.ready.next = self.record_slice.sink.ready.val();
+        self.framer.records.data.next = self.record_slice.source.data.val();
+        self.framer.records.valid.next = self.record_slice.source.valid.val();
+        self.framer.records.last.next = self.record_slice.source.last.val();
+        self.framer.records.error.next = self.record_slice.source.error.val();
+        self.record_slice.source.ready.next = self.framer.records.ready.val();
 
         self.status.clock.next = self.clock.val();
         self.status.reset.next = self.reset.val();

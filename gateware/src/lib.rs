@@ -20,6 +20,7 @@ pub mod frame_transmitter;
 pub mod interface_box;
 pub mod packet_arbiter;
 pub mod port_buffer;
+pub mod register_slice;
 pub mod status_reporter;
 pub mod stream;
 pub mod timestamp;

@@ -1,9 +1,10 @@
-//! The shared back end: port buffers, arbiter, framer, transmitter, status reporter and
+//! The shared back end: port buffers, arbiter, register slice, framer, transmitter, status reporter and
 //! counter file. It runs through the clock cycles in which something moves (a record
 //! between buffer and framer, a datagram closing, a frame starting, a report beginning or
 //! ending) and jumps over every stretch in which only free-running counters advance.
 
 use super::front::{PortFront, StartedPacket};
+use skinbox_gateware::status_reporter::CLOCKS_PER_WORD;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAX_RECORDS};
 use skinbox_protocol::status::PortCounter;
@@ -65,6 +66,13 @@ struct Stored {
     bytes: [u8; PACKET_LEN],
 }
 
+/// A beat in the register slice between arbiter and framer: its port and packet.
+#[derive(Debug, Clone)]
+struct SliceBeat {
+    port: u8,
+    slot: Stored,
+}
+
 #[derive(Debug, Default)]
 struct Buffer {
     slots: VecDeque<Stored>,
@@ -120,6 +128,9 @@ pub(super) struct Back<'a> {
     arbiter_port: usize,
     granted: bool,
     prefix_sent: bool,
+    // register slice
+    slice_main: Option<SliceBeat>,
+    slice_skid: Option<SliceBeat>,
     // framer
     beat: u8,
     offset_left: u8,
@@ -183,6 +194,8 @@ impl<'a> Back<'a> {
             arbiter_port: 0,
             granted: false,
             prefix_sent: false,
+            slice_main: None,
+            slice_skid: None,
             beat: 0,
             offset_left: 0,
             fill: vec![],
@@ -249,6 +262,7 @@ impl<'a> Back<'a> {
     fn quiet(&self, c: u64) -> bool {
         let idle = c >= self.idle_from;
         !self.granted
+            && self.slice_main.is_none()
             && self.buffers.iter().all(|b| b.slots.is_empty())
             && self.offset_left == 0
             && self.beat == 0
@@ -339,14 +353,15 @@ impl<'a> Back<'a> {
             && !closing
             && !(self.beat == 0 && self.fill.len() == MAX_RECORDS);
 
-        // arbiter and the granted port's buffer
+        // arbiter and the granted port's buffer, into the register slice
+        let slice_ready = self.slice_skid.is_none();
         let p = self.arbiter_port;
         let port_valid = !self.buffers[p].slots.is_empty();
         let port_last = self.buffers[p].read_beat == LAST_BEAT;
         let mut next_port = p;
         let mut next_granted = self.granted;
         let mut next_prefix_sent = self.prefix_sent;
-        let mut record_valid = false;
+        let mut offered = None;
         let mut read_done = None;
         if !self.granted {
             if port_valid {
@@ -356,13 +371,19 @@ impl<'a> Back<'a> {
                 next_port = (p + 1) % n;
             }
         } else if !self.prefix_sent {
-            record_valid = true;
-            if accept {
+            offered = self.buffers[p].slots.front().map(|s| SliceBeat {
+                port: p as u8,
+                slot: s.clone(),
+            });
+            if slice_ready {
                 next_prefix_sent = true;
             }
-        } else {
-            record_valid = port_valid;
-            if port_valid && accept {
+        } else if port_valid {
+            offered = self.buffers[p].slots.front().map(|s| SliceBeat {
+                port: p as u8,
+                slot: s.clone(),
+            });
+            if slice_ready {
                 let b = &mut self.buffers[p];
                 if port_last {
                     b.read_beat = 0;
@@ -375,17 +396,15 @@ impl<'a> Back<'a> {
             }
         }
 
-        // framer: one beat or one offset byte per clock
+        // framer: one beat from the slice or one offset byte per clock
         let mut next_deadline = self.deadline;
+        let framer_takes = self.offset_left == 0 && accept && self.slice_main.is_some();
         if self.offset_left != 0 {
             self.offset_left -= 1;
-        } else if record_valid && accept {
-            let slot = self.buffers[p]
-                .slots
-                .front()
-                .expect("a granted port has a packet");
+        } else if let Some(beat) = self.slice_main.as_ref().filter(|_| accept) {
+            let slot = &beat.slot;
             match self.beat {
-                0 => self.record.port = p as u8,
+                0 => self.record.port = beat.port,
                 1 => self.record.flags = slot.flags,
                 OFFSET_BEAT => {
                     self.offset_left = OFFSET_PAUSE;
@@ -411,6 +430,16 @@ impl<'a> Back<'a> {
             } else {
                 self.beat + 1
             };
+        }
+        // the register slice: its output moves when the framer takes it
+        let take_in = offered.is_some() && slice_ready;
+        if self.slice_main.is_none() || framer_takes {
+            self.slice_main = match self.slice_skid.take() {
+                Some(b) => Some(b),
+                None => offered.filter(|_| take_in),
+            };
+        } else if take_in {
+            self.slice_skid = offered;
         }
         if let Some(p) = read_done {
             self.buffers[p].slots.pop_front();
@@ -547,12 +576,11 @@ impl<'a> Back<'a> {
             Report::Start => {
                 self.report_tick = tick;
                 self.page_ports = self.t.ports_per_status.min(self.t.ports - self.first_port);
-                // words: boot id, datagrams, records, first port, 8 counters per port;
-                // five clocks each
+                // words: boot id, datagrams, records, first port, 8 counters per port
                 let words = 4 + 8 * self.page_ports as u64;
                 self.report = Report::Build {
                     from: c + 1,
-                    request_at: c + 1 + 5 * words,
+                    request_at: c + 1 + CLOCKS_PER_WORD * words,
                 };
             }
             Report::Build { from, request_at } => {
@@ -581,9 +609,10 @@ impl<'a> Back<'a> {
     }
 
     /// The body written from cycle `from`: word `w` reads its value in cycle
-    /// `from + 5 w + 1`, counters through an address taken at the edge after `from + 5 w`.
+    /// `from + CLOCKS_PER_WORD w + 1`, counters through an address taken at the edge after
+    /// `from + CLOCKS_PER_WORD w`.
     fn status_body(&mut self, from: u64) -> StatusRepr {
-        let word_read = |w: u64| from + 5 * w;
+        let word_read = |w: u64| from + CLOCKS_PER_WORD * w;
         let mut ports = Vec::with_capacity(self.page_ports);
         for i in 0..self.page_ports {
             let port = self.first_port + i;
