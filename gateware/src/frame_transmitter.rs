@@ -11,7 +11,10 @@
 //! constant words (addresses, ports, magic, box id) plus the body sum, and adds one
 //! variable header word per clock. The body memory is read one clock ahead
 //! (`payload_address` for the next byte; `payload_data` must be that byte one clock later).
-//! Outputs are registered: `gmii_txd`/`gmii_tx_en` follow the byte counter by one clock.
+//! Output: the selected byte goes into a register, the CRC is computed from that register,
+//! and the output register takes the byte or, at the end, the FCS: `gmii_txd`/`gmii_tx_en`
+//! follow the byte counter by two clocks, and no path runs from byte selection through the
+//! CRC. The frame geometry (lengths, IPv4 checksum) is registered at the start.
 
 use crate::crc32::Crc32Byte;
 use rust_hdl::prelude::*;
@@ -100,20 +103,23 @@ pub struct FrameTransmitter {
     gap: DFF<Bits<4>>,
     kind_held: DFF<Bits<8>>,
     fields: DFF<Bits<120>>,
-    length: DFF<Bits<11>>,
     checksum: DFF<Bits<32>>,
     crc_register: DFF<Bits<32>>,
     next_sequence: DFF<Bits<32>>,
     txd: DFF<Bits<8>>,
     tx_en: DFF<Bit>,
+    body_end: DFF<Bits<11>>,
+    padded_end: DFF<Bits<11>>,
+    total_len: DFF<Bits<16>>,
+    udp_len: DFF<Bits<16>>,
+    ip_checksum: DFF<Bits<16>>,
+    stage_byte: DFF<Bits<8>>,
+    stage_valid: DFF<Bit>,
+    stage_crc: DFF<Bit>,
+    stage_fcs: DFF<Bit>,
     tx_byte: Signal<Local, Bits<8>>,
-    body_end: Signal<Local, Bits<11>>,
-    padded_end: Signal<Local, Bits<11>>,
-    total_len: Signal<Local, Bits<16>>,
-    udp_len: Signal<Local, Bits<16>>,
     ip_sum: Signal<Local, Bits<32>>,
     ip_fold: Signal<Local, Bits<32>>,
-    ip_checksum: Signal<Local, Bits<16>>,
     udp_checksum: Signal<Local, Bits<16>>,
     checksum_word: Signal<Local, Bits<32>>,
 }
@@ -155,20 +161,23 @@ impl FrameTransmitter {
             gap: Default::default(),
             kind_held: Default::default(),
             fields: Default::default(),
-            length: Default::default(),
             checksum: Default::default(),
             crc_register: Default::default(),
             next_sequence: Default::default(),
             txd: Default::default(),
             tx_en: Default::default(),
-            tx_byte: Default::default(),
             body_end: Default::default(),
             padded_end: Default::default(),
             total_len: Default::default(),
             udp_len: Default::default(),
+            ip_checksum: Default::default(),
+            stage_byte: Default::default(),
+            stage_valid: Default::default(),
+            stage_crc: Default::default(),
+            stage_fcs: Default::default(),
+            tx_byte: Default::default(),
             ip_sum: Default::default(),
             ip_fold: Default::default(),
-            ip_checksum: Default::default(),
             udp_checksum: Default::default(),
             checksum_word: Default::default(),
         }
@@ -191,24 +200,26 @@ impl Logic for FrameTransmitter {
             gap,
             kind_held,
             fields,
-            length,
             checksum,
             crc_register,
             next_sequence,
             txd,
-            tx_en
+            tx_en,
+            body_end,
+            padded_end,
+            total_len,
+            udp_len,
+            ip_checksum,
+            stage_byte,
+            stage_valid,
+            stage_crc,
+            stage_fcs
         );
-        // Frame geometry from the body length.
-        self.body_end.next = self.length.q.val() + 74;
-        self.padded_end.next = self.body_end.val();
-        if self.body_end.val() < 68 {
-            self.padded_end.next = 68.into();
-        }
-        self.total_len.next = bit_cast::<16, 11>(self.length.q.val()) + 52;
-        self.udp_len.next = bit_cast::<16, 11>(self.length.q.val()) + 32;
-        self.ip_sum.next = self.ip_constant_sum.val() + bit_cast::<32, 16>(self.total_len.val());
+        // Frame geometry: registered at the start from the body length (lengths), one clock
+        // later the IPv4 checksum (needed from byte 32 on).
+        self.ip_sum.next = self.ip_constant_sum.val() + bit_cast::<32, 16>(self.total_len.q.val());
         self.ip_fold.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
-        self.ip_checksum.next =
+        self.ip_checksum.d.next =
             !bit_cast::<16, 32>((self.ip_fold.val() & 0xFFFF) + (self.ip_fold.val() >> 16));
         self.udp_checksum.next = !bit_cast::<16, 32>(self.checksum.q.val());
         if self.checksum.q.val().get_bits::<16>(0) == 0xFFFF {
@@ -219,7 +230,7 @@ impl Logic for FrameTransmitter {
         // One variable word of the UDP checksum per clock while the preamble goes out.
         self.checksum_word.next = 0.into();
         if self.index.q.val() == 0 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.udp_len.val()) << 1;
+            self.checksum_word.next = bit_cast::<32, 16>(self.udp_len.q.val()) << 1;
         } else if self.index.q.val() == 1 {
             self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
         } else if self.index.q.val() == 2 {
@@ -244,17 +255,17 @@ impl Logic for FrameTransmitter {
         self.template.address.next = self.index.q.val().get_bits::<7>(0);
         self.tx_byte.next = self.template.data.val();
         if self.index.q.val() == 24 {
-            self.tx_byte.next = self.total_len.val().get_bits::<8>(8);
+            self.tx_byte.next = self.total_len.q.val().get_bits::<8>(8);
         } else if self.index.q.val() == 25 {
-            self.tx_byte.next = self.total_len.val().get_bits::<8>(0);
+            self.tx_byte.next = self.total_len.q.val().get_bits::<8>(0);
         } else if self.index.q.val() == 32 {
-            self.tx_byte.next = self.ip_checksum.val().get_bits::<8>(8);
+            self.tx_byte.next = self.ip_checksum.q.val().get_bits::<8>(8);
         } else if self.index.q.val() == 33 {
-            self.tx_byte.next = self.ip_checksum.val().get_bits::<8>(0);
+            self.tx_byte.next = self.ip_checksum.q.val().get_bits::<8>(0);
         } else if self.index.q.val() == 46 {
-            self.tx_byte.next = self.udp_len.val().get_bits::<8>(8);
+            self.tx_byte.next = self.udp_len.q.val().get_bits::<8>(8);
         } else if self.index.q.val() == 47 {
-            self.tx_byte.next = self.udp_len.val().get_bits::<8>(0);
+            self.tx_byte.next = self.udp_len.q.val().get_bits::<8>(0);
         } else if self.index.q.val() == 48 {
             self.tx_byte.next = self.udp_checksum.val().get_bits::<8>(8);
         } else if self.index.q.val() == 49 {
@@ -263,23 +274,34 @@ impl Logic for FrameTransmitter {
             self.tx_byte.next = self.kind_held.q.val();
         } else if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
             self.tx_byte.next = self.fields.q.val().get_bits::<8>(112);
-        } else if (self.index.q.val() >= 74) & (self.index.q.val() < self.body_end.val()) {
+        } else if (self.index.q.val() >= 74) & (self.index.q.val() < self.body_end.q.val()) {
             self.tx_byte.next = self.payload_data.val();
-        } else if (self.index.q.val() >= self.body_end.val())
-            & (self.index.q.val() < self.padded_end.val())
-        {
+        } else if self.index.q.val() >= self.body_end.q.val() {
+            // padding (the FCS replaces these bytes at the output)
             self.tx_byte.next = 0.into();
-        } else if self.index.q.val() >= self.padded_end.val() {
-            self.tx_byte.next = !self.crc_register.q.val().get_bits::<8>(0);
         }
         self.payload_address.next = self.index.q.val() + 1 - 74;
-        self.crc.register.next = self.crc_register.q.val();
-        self.crc.data.next = self.tx_byte.val();
 
-        self.tx_en.d.next = false;
+        // Output stage: the byte goes through a register, the CRC is computed from that
+        // register, and the FCS is put in at the output, so no path runs from the byte
+        // selection through the CRC.
+        self.stage_valid.d.next = self.sending.q.val();
+        self.stage_byte.d.next = self.tx_byte.val();
+        self.stage_crc.d.next =
+            (self.index.q.val() >= 8) & (self.index.q.val() < self.padded_end.q.val());
+        self.stage_fcs.d.next = self.index.q.val() >= self.padded_end.q.val();
+        self.crc.register.next = self.crc_register.q.val();
+        self.crc.data.next = self.stage_byte.q.val();
+        self.tx_en.d.next = self.stage_valid.q.val();
+        self.txd.d.next = self.stage_byte.q.val();
+        if self.stage_valid.q.val() & self.stage_crc.q.val() {
+            self.crc_register.d.next = self.crc.updated.val();
+        } else if self.stage_valid.q.val() & self.stage_fcs.q.val() {
+            self.txd.d.next = !self.crc_register.q.val().get_bits::<8>(0);
+            self.crc_register.d.next = self.crc_register.q.val() >> 8;
+        }
+
         if self.sending.q.val() {
-            self.tx_en.d.next = true;
-            self.txd.d.next = self.tx_byte.val();
             self.index.d.next = self.index.q.val() + 1;
             if self.index.q.val() < 10 {
                 self.checksum.d.next = self.checksum.q.val() + self.checksum_word.val();
@@ -291,13 +313,10 @@ impl Logic for FrameTransmitter {
                 self.fields.d.next = self.fields.q.val() << 8;
             }
             if self.index.q.val() == 7 {
+                // the SFD is in the output stage now: the CRC starts with the next byte
                 self.crc_register.d.next = 0xFFFF_FFFF_u64.into();
-            } else if (self.index.q.val() >= 8) & (self.index.q.val() < self.padded_end.val()) {
-                self.crc_register.d.next = self.crc.updated.val();
-            } else if self.index.q.val() >= self.padded_end.val() {
-                self.crc_register.d.next = self.crc_register.q.val() >> 8;
             }
-            if self.index.q.val() == self.padded_end.val() + 3 {
+            if self.index.q.val() == self.padded_end.q.val() + 3 {
                 self.sending.d.next = false;
                 self.gap.d.next = 11.into();
             }
@@ -307,7 +326,14 @@ impl Logic for FrameTransmitter {
             self.sending.d.next = true;
             self.index.d.next = 0.into();
             self.kind_held.d.next = self.kind.val();
-            self.length.d.next = self.body_len.val();
+            self.body_end.d.next = self.body_len.val() + 74;
+            self.padded_end.d.next = self.body_len.val() + 74;
+            if (self.body_len.val() + 74) < 68 {
+                // (a box datagram's frame is never this short: the rule is kept general)
+                self.padded_end.d.next = 68.into();
+            }
+            self.total_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 52;
+            self.udp_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 32;
             self.checksum.d.next = self.udp_constant_sum.val() + self.body_sum.val();
             self.fields.d.next = (bit_cast::<120, 8>(self.flags.val()) << 112)
                 | (bit_cast::<120, 32>(self.next_sequence.q.val()) << 80)
@@ -317,6 +343,7 @@ impl Logic for FrameTransmitter {
         }
         if self.reset.val() {
             self.sending.d.next = false;
+            self.stage_valid.d.next = false;
             self.gap.d.next = 0.into();
             self.tx_en.d.next = false;
             self.next_sequence.d.next = 0.into();

@@ -40,8 +40,8 @@ pub(crate) use skinbox_gateware::port_buffer::SLOTS;
 pub(crate) use skinbox_gateware::uart_rx::PHASE_BITS;
 
 /// Clocks from the cycle a transmitter start is decided to the first GMII byte: the
-/// transmitter registers `sending`, then its output byte.
-const START_TO_FIRST_BYTE: u64 = 2;
+/// transmitter registers `sending`, then the byte, then the output (with the FCS).
+const START_TO_FIRST_BYTE: u64 = 3;
 
 /// Runs `spec` on the reference model.
 pub fn run_reference(spec: &SimSpec) -> Result<SimRun, CosimError> {
