@@ -216,7 +216,7 @@ impl Logic for InterfaceBox {
             self.uarts[i].clock.next = self.clock.val();
             self.uarts[i].reset.next = self.port_reset.q.val();
             self.uarts[i].rx.next = self.uart_rx[i].val();
-            self.uarts[i].tick.next = self.timestamp.tick.val().get_bits::<32>(0);
+            self.uarts[i].tick.next = self.timestamp.previous.val();
             self.deframers[i].clock.next = self.clock.val();
             self.deframers[i].reset.next = self.port_reset.q.val();
             self.deframers[i].byte_data.next = self.uarts[i].data.val();

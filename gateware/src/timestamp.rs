@@ -1,7 +1,8 @@
 //! TimestampCounter: the box time, a free-running 64-bit count of 8 ns ticks.
 //!
 //! At 125 MHz it wraps after 4,677 years. Latency: the count after a rising edge is the
-//! number of edges since reset went low. Cost: one 64-bit incrementer.
+//! number of edges since reset went low. Cost: one 64-bit incrementer and a 32-bit copy of
+//! the previous count (shared by every UART receiver instead of a subtractor each).
 
 use rust_hdl::prelude::*;
 
@@ -14,18 +15,25 @@ pub struct TimestampCounter {
     pub reset: Signal<In, Bit>,
     /// The current tick.
     pub tick: Signal<Out, Bits<64>>,
+    /// The low 32 bits of the tick before the current one (`tick - 1`, from a register),
+    /// for the UART receivers' start stamps.
+    pub previous: Signal<Out, Bits<32>>,
     count: DFF<Bits<64>>,
+    previous_low: DFF<Bits<32>>,
 }
 
 impl Logic for TimestampCounter {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, count);
+        dff_setup!(self, clock, count, previous_low);
         self.count.d.next = self.count.q.val() + 1;
+        self.previous_low.d.next = self.count.q.val().get_bits::<32>(0);
         if self.reset.val() {
             self.count.d.next = 0.into();
+            self.previous_low.d.next = 0xFFFF_FFFF_u64.into();
         }
         self.tick.next = self.count.q.val();
+        self.previous.next = self.previous_low.q.val();
     }
 }
 

@@ -45,7 +45,9 @@ pub struct UartRx {
     pub reset: Signal<In, Bit>,
     /// The UART pin, asynchronous, idle high.
     pub rx: Signal<In, Bit>,
-    /// Box time, low 32 bits of the tick counter.
+    /// Box time of the previous clock, low 32 bits (`TimestampCounter::previous`): the
+    /// tick of the edge before the current one, which is the first edge that sampled a
+    /// start bit low when the edge is detected ([`START_LATENCY_TICKS`] earlier).
     pub tick: Signal<In, Bits<32>>,
     /// Received byte, valid with `strobe`.
     pub data: Signal<Out, Bits<8>>,
@@ -59,7 +61,6 @@ pub struct UartRx {
     pub busy: Signal<Out, Bit>,
     phase_increment: Constant<Bits<17>>,
     phase_start: Constant<Bits<16>>,
-    start_latency: Constant<Bits<32>>,
     sync_meta: DFF<Bit>,
     sync_stable: DFF<Bit>,
     sync_previous: DFF<Bit>,
@@ -72,7 +73,6 @@ pub struct UartRx {
     data_out: DFF<Bits<8>>,
     strobe_out: DFF<Bit>,
     framing_error_out: DFF<Bit>,
-    start_tick_out: DFF<Bits<32>>,
     phase_sum: Signal<Local, Bits<17>>,
     majority: Signal<Local, Bit>,
     bit_middle: Signal<Local, Bit>,
@@ -100,7 +100,6 @@ impl UartRx {
             busy: Default::default(),
             phase_increment: Constant::new(increment.into()),
             phase_start: Constant::new(start.into()),
-            start_latency: Constant::new(START_LATENCY_TICKS.into()),
             sync_meta: Default::default(),
             sync_stable: Default::default(),
             sync_previous: Default::default(),
@@ -113,7 +112,6 @@ impl UartRx {
             data_out: Default::default(),
             strobe_out: Default::default(),
             framing_error_out: Default::default(),
-            start_tick_out: Default::default(),
             phase_sum: Default::default(),
             majority: Default::default(),
             bit_middle: Default::default(),
@@ -138,8 +136,7 @@ impl Logic for UartRx {
             start_edge_tick,
             data_out,
             strobe_out,
-            framing_error_out,
-            start_tick_out
+            framing_error_out
         );
         self.sync_meta.d.next = self.rx.val();
         self.sync_stable.d.next = self.sync_meta.q.val();
@@ -159,7 +156,7 @@ impl Logic for UartRx {
             self.receiving.d.next = true;
             self.phase.d.next = self.phase_start.val();
             self.bit_index.d.next = 0.into();
-            self.start_edge_tick.d.next = self.tick.val() - self.start_latency.val();
+            self.start_edge_tick.d.next = self.tick.val();
         }
         if self.bit_middle.val() {
             self.bit_index.d.next = self.bit_index.q.val() + 1;
@@ -173,7 +170,6 @@ impl Logic for UartRx {
                 self.strobe_out.d.next = true;
                 self.data_out.d.next = self.shift.q.val();
                 self.framing_error_out.d.next = !self.majority.val();
-                self.start_tick_out.d.next = self.start_edge_tick.q.val();
             } else {
                 self.shift.d.next = (self.shift.q.val() >> 1).replace_bit(7, self.majority.val());
             }
@@ -188,7 +184,8 @@ impl Logic for UartRx {
         self.data.next = self.data_out.q.val();
         self.strobe.next = self.strobe_out.q.val();
         self.framing_error.next = self.framing_error_out.q.val();
-        self.start_tick.next = self.start_tick_out.q.val();
+        // stable until the next start edge is detected, which is after the strobe
+        self.start_tick.next = self.start_edge_tick.q.val();
         self.busy.next = self.receiving.q.val();
     }
 }
@@ -214,7 +211,8 @@ mod tests {
         let levels = line.levels(line.end().ceil() as u64 + 100);
         for e in 1..levels.len() as u64 {
             bench.uut.rx.next = levels[e as usize];
-            bench.uut.tick.next = (e - 1).into();
+            // the previous clock's tick, as the timestamp counter's `previous` gives it
+            bench.uut.tick.next = (e.wrapping_sub(1 + START_LATENCY_TICKS) & 0xFFFF_FFFF).into();
             bench.cycle();
             assert_eq!(bench.cycles - first, e);
             if bench.uut.strobe.val() {
