@@ -48,10 +48,10 @@ pub struct PortBuffer {
     dropped_pulse: DFF<Bit>,
     read_slot: DFF<Bit>,
     read_beat: DFF<Bits<5>>,
+    current_address: DFF<Bits<6>>,
     read_fire: Signal<Local, Bit>,
     commit: Signal<Local, Bit>,
-    next_beat: Signal<Local, Bits<5>>,
-    next_slot: Signal<Local, Bit>,
+    next_address: Signal<Local, Bits<6>>,
 }
 
 impl Default for PortBuffer {
@@ -73,10 +73,10 @@ impl Default for PortBuffer {
             dropped_pulse: Default::default(),
             read_slot: Default::default(),
             read_beat: Default::default(),
+            current_address: Default::default(),
             read_fire: Default::default(),
             commit: Default::default(),
-            next_beat: Default::default(),
-            next_slot: Default::default(),
+            next_address: Default::default(),
         }
     }
 }
@@ -94,7 +94,8 @@ impl Logic for PortBuffer {
             loss_pending,
             dropped_pulse,
             read_slot,
-            read_beat
+            read_beat,
+            current_address
         );
         self.memory.write_clock.next = self.clock.val();
         self.memory.read_clock.next = self.clock.val();
@@ -147,22 +148,23 @@ impl Logic for PortBuffer {
             self.source.data.next = self.memory.read_data.val().get_bits::<8>(0);
         }
         self.read_fire.next = self.source.valid.val() & self.source.ready.val();
-        self.next_beat.next = self.read_beat.q.val();
-        self.next_slot.next = self.read_slot.q.val();
-        if self.read_fire.val() {
-            if self.read_beat.q.val() == self.stored_beats.val() {
-                self.next_beat.next = 0.into();
-                self.next_slot.next = !self.read_slot.q.val();
-            } else {
-                self.next_beat.next = self.read_beat.q.val() + 1;
-            }
+        // The address of the beat after the one shown comes from registers only, so the
+        // path from `ready` to the memory is one multiplexer.
+        self.next_address.next = (bit_cast::<6, 1>(self.read_slot.q.val().into()) << 5)
+            | bit_cast::<6, 5>(self.read_beat.q.val());
+        if self.read_beat.q.val() == self.stored_beats.val() {
+            self.next_address.next = bit_cast::<6, 1>((!self.read_slot.q.val()).into()) << 5;
         }
-        self.read_beat.d.next = self.next_beat.val();
-        self.read_slot.d.next = self.next_slot.val();
-        self.memory.read_address.next = bit_cast::<6, 1>(self.next_slot.val().into()) << 5;
-        if self.next_beat.val() != 0 {
-            self.memory.read_address.next = (bit_cast::<6, 1>(self.next_slot.val().into()) << 5)
-                | bit_cast::<6, 5>(self.next_beat.val() - 1);
+        self.memory.read_address.next = self.current_address.q.val();
+        if self.read_fire.val() {
+            self.memory.read_address.next = self.next_address.val();
+            self.current_address.d.next = self.next_address.val();
+            if self.read_beat.q.val() == self.stored_beats.val() {
+                self.read_beat.d.next = 0.into();
+                self.read_slot.d.next = !self.read_slot.q.val();
+            } else {
+                self.read_beat.d.next = self.read_beat.q.val() + 1;
+            }
         }
 
         // Occupancy.
@@ -181,6 +183,7 @@ impl Logic for PortBuffer {
             self.dropped_pulse.d.next = false;
             self.read_slot.d.next = false;
             self.read_beat.d.next = 0.into();
+            self.current_address.d.next = 0.into();
         }
         self.events.next = bit_cast::<8, 1>(self.dropped_pulse.q.val().into()) << 1;
     }
