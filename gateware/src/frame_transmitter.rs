@@ -9,8 +9,9 @@
 //!
 //! The checksums are finished while the preamble goes out: the UDP sum starts from the
 //! constant words (addresses, ports, magic, box id) plus the body sum, and adds one
-//! variable header word per clock. The body memory is read one clock ahead
-//! (`payload_address` for the next byte; `payload_data` must be that byte one clock later).
+//! variable header word per clock. The body memory is read two clocks ahead
+//! (`payload_address`; `payload_data` must be that byte two clocks later: a block RAM read
+//! and a register after it).
 //! Output: the selected byte goes into a register, the CRC is computed from that register,
 //! and the output register takes the byte or, at the end, the FCS: `gmii_txd`/`gmii_tx_en`
 //! follow the byte counter by two clocks, and no path runs from byte selection through the
@@ -84,7 +85,8 @@ pub struct FrameTransmitter {
     pub body_len: Signal<In, Bits<11>>,
     /// Sum of the body's big-endian 16-bit words, not folded.
     pub body_sum: Signal<In, Bits<32>>,
-    /// Body byte to read; its data must arrive on `payload_data` one clock later.
+    /// Body byte to read; its data must arrive on `payload_data` two clocks later (a memory
+    /// read and a register).
     pub payload_address: Signal<Out, Bits<11>>,
     /// Body byte read.
     pub payload_data: Signal<In, Bits<8>>,
@@ -280,7 +282,7 @@ impl Logic for FrameTransmitter {
             // padding (the FCS replaces these bytes at the output)
             self.tx_byte.next = 0.into();
         }
-        self.payload_address.next = self.index.q.val() + 1 - 74;
+        self.payload_address.next = self.index.q.val() + 2 - 74;
 
         // Output stage: the byte goes through a register, the CRC is computed from that
         // register, and the FCS is put in at the output, so no path runs from the byte
@@ -401,10 +403,11 @@ mod tests {
         let mut queue = datagrams.to_vec();
         queue.reverse();
         let mut memory: Vec<u8> = vec![];
-        let mut read: u64 = 0;
+        // addresses of the last two clocks: the data comes two clocks after its address
+        let mut reads: [u64; 2] = [0, 0];
         for clock in 0..20_000u64 {
             let u = &mut bench.uut;
-            u.payload_data.next = u64::from(*memory.get(read as usize).unwrap_or(&0xEE)).into();
+            u.payload_data.next = u64::from(*memory.get(reads[1] as usize).unwrap_or(&0xEE)).into();
             u.start.next = false;
             bench.settle();
             if bench.uut.idle.val() {
@@ -422,7 +425,7 @@ mod tests {
                     bench.settle();
                 }
             }
-            read = bench.uut.payload_address.val().to_u64();
+            reads = [bench.uut.payload_address.val().to_u64(), reads[0]];
             let u = &bench.uut;
             capture.clock(
                 clock,

@@ -59,7 +59,8 @@ pub struct UdpFramer {
     pub status_taken: Signal<Out, Bit>,
     /// The transmitter is reading the status memory.
     pub status_sending: Signal<Out, Bit>,
-    /// Status memory byte to read (data due one clock later on `status_data`).
+    /// Status memory byte to read (data due one clock later on `status_data`, which the
+    /// framer registers).
     pub status_address: Signal<Out, Bits<11>>,
     /// Status memory byte.
     pub status_data: Signal<In, Bits<8>>,
@@ -99,6 +100,8 @@ pub struct UdpFramer {
     status_taken_pulse: DFF<Bit>,
     datagram_count: DFF<Bits<32>>,
     record_count: DFF<Bits<32>>,
+    records_byte: DFF<Bits<8>>,
+    status_byte: DFF<Bits<8>>,
     record_tick: Signal<Local, Bits<32>>,
     write: Signal<Local, Bit>,
     write_data: Signal<Local, Bits<8>>,
@@ -163,6 +166,8 @@ impl UdpFramer {
             status_taken_pulse: Default::default(),
             datagram_count: Default::default(),
             record_count: Default::default(),
+            records_byte: Default::default(),
+            status_byte: Default::default(),
             record_tick: Default::default(),
             write: Default::default(),
             write_data: Default::default(),
@@ -205,7 +210,9 @@ impl Logic for UdpFramer {
             sending_status,
             status_taken_pulse,
             datagram_count,
-            record_count
+            record_count,
+            records_byte,
+            status_byte
         );
         self.transmitter.clock.next = self.clock.val();
         self.transmitter.reset.next = self.reset.val();
@@ -340,9 +347,12 @@ impl Logic for UdpFramer {
         self.memory.read_address.next = (bit_cast::<12, 1>((!self.fill_buffer.q.val()).into())
             << 11)
             | bit_cast::<12, 11>(self.transmitter.payload_address.val());
-        self.transmitter.payload_data.next = self.memory.read_data.val();
+        // both memories' outputs go straight into registers (block RAM reads are slow)
+        self.records_byte.d.next = self.memory.read_data.val();
+        self.status_byte.d.next = self.status_data.val();
+        self.transmitter.payload_data.next = self.records_byte.q.val();
         if self.sending_status.q.val() {
-            self.transmitter.payload_data.next = self.status_data.val();
+            self.transmitter.payload_data.next = self.status_byte.q.val();
         }
         self.status_address.next = self.transmitter.payload_address.val();
 
