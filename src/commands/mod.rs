@@ -8,6 +8,7 @@ mod examples;
 mod replay;
 mod sim;
 mod stats;
+mod synth;
 mod verilog;
 
 use clap::{Parser, Subcommand};
@@ -45,6 +46,8 @@ pub enum Command {
     Bench(bench::BenchCommand),
     /// Check the cell models' scenes against the papers' event rates (Fig. 8).
     Calibrate(calibrate::Args),
+    /// Synthesise the box for an ECP5 board: resources, Fmax and a bitstream.
+    Synth(synth::Args),
 }
 
 /// Runs one parsed command line.
@@ -59,6 +62,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Stats(args) => stats::run(args, cli.json),
         Command::Bench(what) => bench::run(what, cli.json),
         Command::Calibrate(args) => calibrate::run(args, cli.json),
+        Command::Synth(args) => synth::run(&args, cli.json),
     }
 }
 
