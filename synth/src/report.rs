@@ -172,6 +172,28 @@ impl NextpnrReport {
     }
 }
 
+/// A line of nextpnr's "Device utilisation" table, `Info: \t TRELLIS_COMB:   27625/  24288
+/// 113%`, as the resource and its use; `None` for any other line.
+pub fn utilisation_line(line: &str) -> Option<(String, Use)> {
+    let rest = line.strip_prefix("Info:")?.trim();
+    let (name, counts) = rest.split_once(':')?;
+    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        return None;
+    }
+    let (used, rest) = counts.split_once('/')?;
+    let available = rest.split_whitespace().next()?;
+    if !rest.trim_end().ends_with('%') {
+        return None;
+    }
+    Some((
+        name.to_string(),
+        Use {
+            used: used.trim().parse().ok()?,
+            available: available.parse().ok()?,
+        },
+    ))
+}
+
 fn summarise(from: String, to: String, path: &[Segment], box_instance: &str) -> CriticalPath {
     let mut blocks: Vec<String> = Vec::new();
     let mut visit = |cell: &str| {
@@ -321,6 +343,35 @@ mod tests {
         assert_eq!(block("reset_count_TRELLIS_FF_Q").as_deref(), Some("board"));
         assert_eq!(block("interface_box.uarts$0.x").as_deref(), Some("uarts$0"));
         assert_eq!(block("$nextpnr_CCU2C_103$CCU2_COMB0"), None);
+    }
+
+    #[test]
+    fn utilisation_lines_of_the_log_parse_and_other_lines_do_not() {
+        assert_eq!(
+            utilisation_line("Info: \t        TRELLIS_COMB:   27625/  24288   113%"),
+            Some((
+                "TRELLIS_COMB".to_string(),
+                Use {
+                    used: 27625,
+                    available: 24288
+                }
+            ))
+        );
+        assert_eq!(
+            utilisation_line("Info: \t              DP16KD:       5/     56     8%")
+                .unwrap()
+                .1
+                .used,
+            5
+        );
+        for other in [
+            "Info: Device utilisation:",
+            "Info: constraining clock net 'clk25' to 25.00 MHz",
+            "Info:     at initial placer iter 0, wirelen = 9288",
+            "Info: Max frequency for clock 'clk': 72.68 MHz (FAIL at 125.00 MHz)",
+        ] {
+            assert_eq!(utilisation_line(other), None, "{other}");
+        }
     }
 
     #[test]

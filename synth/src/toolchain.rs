@@ -98,7 +98,10 @@ impl Toolchain {
             pip,
             "pip install",
             &self.venv.join("pip-install.log"),
-            on_line,
+            &mut |l| {
+                on_line(l);
+                Ok(())
+            },
         )?;
         std::fs::write(self.venv.join(STAMP), PACKAGES.join("\n"))
             .map_err(|e| SynthError::io(format!("writing {}", self.venv.display()), e))?;
@@ -107,12 +110,13 @@ impl Toolchain {
 }
 
 /// Runs `command` to the end, writing what it prints (stdout and stderr, line by line) to
-/// `log` and handing each line to `on_line`. Fails when it cannot start or exits non-zero.
+/// `log` and handing each line to `on_line`. Fails when it cannot start or exits non-zero,
+/// and stops it when `on_line` returns an error, with that error.
 pub(crate) fn run_logged(
     mut command: Command,
     tool: &str,
     log: &Path,
-    on_line: &mut dyn FnMut(&str),
+    on_line: &mut dyn FnMut(&str) -> Result<(), SynthError>,
 ) -> Result<(), SynthError> {
     let mut file = std::fs::File::create(log)
         .map_err(|e| SynthError::io(format!("creating {}", log.display()), e))?;
@@ -152,7 +156,11 @@ pub(crate) fn run_logged(
     for line in rx {
         writeln!(file, "{line}")
             .map_err(|e| SynthError::io(format!("writing {}", log.display()), e))?;
-        on_line(&line);
+        if let Err(stop) = on_line(&line) {
+            child.kill().ok();
+            child.wait().ok();
+            return Err(stop);
+        }
         tail.push(line);
         if tail.len() > 20 {
             tail.remove(0);
@@ -207,13 +215,34 @@ mod tests {
         let mut command = Command::new("sh");
         command.args(["-c", "echo one; echo two >&2; exit 3"]);
         let mut lines = Vec::new();
-        let err = run_logged(command, "sh", &log, &mut |l| lines.push(l.to_string())).unwrap_err();
+        let err = run_logged(command, "sh", &log, &mut |l| {
+            lines.push(l.to_string());
+            Ok(())
+        })
+        .unwrap_err();
         lines.sort();
         assert_eq!(lines, ["one", "two"]);
         let text = err.to_string();
         assert!(text.contains("sh failed"), "{text}");
         assert!(text.contains("two"), "{text}");
         assert_eq!(std::fs::read_to_string(&log).unwrap().lines().count(), 2);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_callback_error_stops_the_command() {
+        let dir = std::env::temp_dir().join(format!("skinbox-run-stop-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut command = Command::new("sh");
+        command.args(["-c", "echo stop; sleep 30; echo never"]);
+        let started = std::time::Instant::now();
+        let err = run_logged(command, "sh", &dir.join("tool.log"), &mut |l| {
+            assert_eq!(l, "stop");
+            Err(SynthError::io("stopped", std::io::ErrorKind::Other.into()))
+        })
+        .unwrap_err();
+        assert!(err.to_string().starts_with("stopped"), "{err}");
+        assert!(started.elapsed().as_secs() < 20);
         std::fs::remove_dir_all(&dir).ok();
     }
 }
