@@ -17,8 +17,8 @@
 //!   clocks (16.8 ms, more than the 10 ms the design brief asks for), and the box stays in
 //!   reset until then too, so its first status datagram is not sent into a PHY in reset.
 //!   Losing lock starts the sequence again.
-//! - one status LED (active low): dark without PLL lock; then a 1 Hz heartbeat (bit 26 of a
-//!   free-running counter) that each frame start inverts for 2^18 clocks (2.1 ms), so
+//! - one status LED (active low): dark until the PHY reset ends; then a 1 Hz heartbeat (bit 26
+//!   of a free-running counter) that each frame start inverts for 2^19 clocks (4.2 ms), so
 //!   traffic shows as flicker.
 //! - the UART inputs, straight from the pins: the box's `UartRx` synchronises them.
 //!
@@ -154,10 +154,10 @@ pub fn lpf_sites(lpf: &str) -> Vec<(String, String)> {
 /// Dividers of an ECP5 `EHXPLLL` with feedback from its primary output CLKOP:
 /// `f_out = f_in * clkfb_div / clki_div`, `f_vco = f_out * clkop_div`.
 ///
-/// Limits from the ECP5 family data sheet (DS1044, sysCLOCK PLL timing), as Project Trellis'
-/// `ecppll` uses them: phase detector input 3.125 to 400 MHz, VCO 400 to 800 MHz. For 25 to
-/// 125 MHz this gives the same dividers as `ecppll -i 25 -o 125`: CLKI_DIV 1, CLKFB_DIV 5,
-/// CLKOP_DIV 5 (VCO 625 MHz), CLKOP_CPHASE 2.
+/// Limits as Project Trellis' PLL calculator (`ecppll.cpp`) has them: phase detector input
+/// 3.125 to 400 MHz, VCO 400 to 800 MHz, output 10 to 400 MHz. For 25 to 125 MHz this gives
+/// the same dividers as `ecppll -i 25 -o 125`: CLKI_DIV 1, CLKFB_DIV 5, CLKOP_DIV 5 (VCO
+/// 625 MHz), CLKOP_CPHASE 2.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct Pll {
     /// Reference divider.
@@ -173,10 +173,14 @@ pub struct Pll {
 impl Pll {
     const PFD_HZ: (u64, u64) = (3_125_000, 400_000_000);
     const VCO_HZ: (u64, u64) = (400_000_000, 800_000_000);
+    const OUTPUT_HZ: (u64, u64) = (10_000_000, 400_000_000);
 
     /// Dividers that make exactly `output_hz` from `input_hz`, with the VCO nearest
     /// 600 MHz (mid-range); `None` when no divider set makes it exactly.
     pub fn new(input_hz: u64, output_hz: u64) -> Option<Pll> {
+        if !(Self::OUTPUT_HZ.0..=Self::OUTPUT_HZ.1).contains(&output_hz) {
+            return None;
+        }
         let mut best: Option<(u64, Pll)> = None;
         for clki_div in 1..=128u64 {
             let pfd = input_hz / clki_div;
@@ -370,8 +374,9 @@ mod tests {
     #[test]
     fn pll_refuses_what_no_divider_makes_exactly() {
         assert_eq!(Pll::new(25_000_000, 124_999_999), None);
-        // 1 GHz needs a VCO above 800 MHz.
-        assert_eq!(Pll::new(25_000_000, 1_000_000_000), None);
+        // Above the 400 MHz output limit, below the 10 MHz one.
+        assert_eq!(Pll::new(25_000_000, 500_000_000), None);
+        assert_eq!(Pll::new(25_000_000, 5_000_000), None);
         let pll = Pll::new(25_000_000, 100_000_000).unwrap();
         assert_eq!(
             25_000_000 / pll.clki_div * pll.clkfb_div,
