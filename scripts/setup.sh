@@ -37,3 +37,19 @@ require_debian_packages() {
         DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${missing[@]}" >&2
     fi
 }
+
+# require_python_venv: python3 with its venv module (for the synthesis tools, which
+# `skinbox synth` installs from PyPI into build/synth-venv).
+require_python_venv() {
+    if command -v python3 >/dev/null && python3 -c 'import venv, ensurepip' 2>/dev/null; then
+        return 0
+    fi
+    if [ "$(id -u)" -ne 0 ]; then
+        die "python3 with venv missing: run 'sudo apt-get update && sudo apt-get install -y python3 python3-venv' and run again"
+    fi
+    echo "skinbox setup: installing python3 python3-venv with apt-get" >&2
+    if ! DEBIAN_FRONTEND=noninteractive apt-get install -y -q python3 python3-venv >&2; then
+        apt-get update -q >&2
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -q python3 python3-venv >&2
+    fi
+}

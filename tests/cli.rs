@@ -110,3 +110,27 @@ fn verilog_command_refuses_impossible_port_counts() {
     let err = String::from_utf8(out.stderr).unwrap();
     assert!(err.contains("ports = 65"), "{err}");
 }
+
+#[test]
+fn synth_refuses_bad_arguments_and_a_missing_python_before_running_any_tool() {
+    let out = skinbox(&["synth", "--board", "ulx3s"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("colorlight-i5"), "{stderr}");
+
+    let venv = std::env::temp_dir().join(format!("skinbox-cli-venv-{}", std::process::id()));
+    let venv = venv.to_str().unwrap();
+    let out = skinbox(&["synth", "--ports", "0", "--venv", venv]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("ports = 0"), "{stderr}");
+
+    let out = skinbox(&["synth", "--venv", venv, "--python", "/nonexistent/python3"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("apt-get install -y python3 python3-venv"),
+        "{stderr}"
+    );
+    assert!(!std::path::Path::new(venv).exists());
+}

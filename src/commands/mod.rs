@@ -9,6 +9,7 @@ mod replay;
 mod report;
 mod sim;
 mod stats;
+mod synth;
 mod verilog;
 
 use clap::{Parser, Subcommand};
@@ -48,6 +49,8 @@ pub enum Command {
     Calibrate(calibrate::Args),
     /// Run the studies (speed against accuracy, failure boundaries): charts and a summary.
     Report(report::Args),
+    /// Synthesise the box for an ECP5 board: resources, Fmax and a bitstream.
+    Synth(synth::Args),
 }
 
 /// Runs one parsed command line.
@@ -63,6 +66,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bench(what) => bench::run(what, cli.json),
         Command::Calibrate(args) => calibrate::run(args, cli.json),
         Command::Report(args) => report::run_report(&args, cli.json),
+        Command::Synth(args) => synth::run(&args, cli.json),
     }
 }
 

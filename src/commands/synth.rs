@@ -1,0 +1,169 @@
+//! `skinbox synth`: the box with its board top through yosys, nextpnr-ecp5 and ecppack.
+
+use skinbox_gateware::board::Board;
+use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_synth::{Event, FlowOptions, Stage, SynthReport, Toolchain};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `skinbox synth`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Board: colorlight-i5 (LFE5U-25F) or colorlight-i9 (LFE5U-45F, same pinout).
+    #[arg(long, default_value = "colorlight-i5", value_parser = parse_board)]
+    board: Board,
+    /// UART ports of the box (1 to 64).
+    #[arg(long, default_value_t = BoxConfig::default().ports)]
+    ports: usize,
+    /// nextpnr placer seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Directory for the run's files (default: build/synth/BOARD-Np).
+    #[arg(long)]
+    out_dir: Option<PathBuf>,
+    /// The venv with the tools; created and filled with pip when missing.
+    #[arg(long)]
+    venv: Option<PathBuf>,
+    /// Python interpreter that creates the venv.
+    #[arg(long, default_value = "python3")]
+    python: String,
+}
+
+fn parse_board(name: &str) -> Result<Board, String> {
+    Board::from_name(name).ok_or_else(|| {
+        let names: Vec<_> = Board::ALL.iter().map(|b| b.name()).collect();
+        format!("unknown board {name:?}; boards: {}", names.join(", "))
+    })
+}
+
+/// `$SKINBOX_BUILD_DIR`, else `build/` in the workspace (as the co-simulation's cache).
+fn build_dir() -> PathBuf {
+    std::env::var_os("SKINBOX_BUILD_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("build"))
+}
+
+/// Runs the flow; fails after printing the report when the box clock is not met.
+pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
+    let config = BoxConfig {
+        ports: args.ports,
+        ..BoxConfig::default()
+    };
+    config.validate().map_err(anyhow::Error::msg)?;
+    let build = build_dir();
+    let toolchain = Toolchain::at(args.venv.clone().unwrap_or(build.join("synth-venv")));
+    let options = FlowOptions {
+        board: args.board,
+        config,
+        out_dir: args.out_dir.clone().unwrap_or_else(|| {
+            build
+                .join("synth")
+                .join(format!("{}-{}p", args.board.name(), args.ports))
+        }),
+        seed: args.seed,
+    };
+
+    let bar = indicatif::ProgressBar::new_spinner();
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {prefix} [{elapsed}] {wide_msg}")
+            .expect("valid template"),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    let mut stage_started = Instant::now();
+    let mut progress = |event: Event<'_>| match event {
+        Event::Stage(stage) => {
+            let since = stage_started.elapsed().as_secs_f64();
+            stage_started = Instant::now();
+            bar.suspend(|| eprintln!("skinbox synth: {} (+{since:.0} s)", stage.describe()));
+            bar.set_prefix(stage.describe());
+            bar.set_message("");
+            bar.reset_elapsed();
+        }
+        Event::Line(line) => bar.set_message(line.trim().to_string()),
+    };
+
+    if !toolchain.is_installed() {
+        progress(Event::Stage(Stage::Install));
+        let started = Instant::now();
+        toolchain
+            .install(&args.python, &mut |line| progress(Event::Line(line)))
+            .map_err(anyhow::Error::new)?;
+        bar.suspend(|| {
+            eprintln!(
+                "skinbox synth: tools installed into {} in {:.0} s",
+                toolchain.venv().display(),
+                started.elapsed().as_secs_f64()
+            )
+        });
+    }
+    let report = skinbox_synth::run(&toolchain, &options, &mut progress);
+    bar.finish_and_clear();
+    let report = report.map_err(anyhow::Error::new)?;
+
+    if json {
+        super::print_json(&report)?;
+    } else {
+        print_report(&report);
+    }
+    if !report.timing_met {
+        anyhow::bail!(
+            "timing not met: the {} MHz box clock reaches {:.1} MHz after place and route \
+             (bitstream written anyway; critical paths in {})",
+            report.target_mhz,
+            report.fmax_mhz,
+            report.out_dir.join("report.json").display()
+        );
+    }
+    Ok(())
+}
+
+fn percent(used: u64, available: u64) -> f64 {
+    if available == 0 {
+        0.0
+    } else {
+        100.0 * used as f64 / available as f64
+    }
+}
+
+fn print_report(r: &SynthReport) {
+    println!("{} ({}), {} ports", r.board, r.part, r.ports);
+    println!(
+        "  LUT4    {} logic LUT4 + {} CCU2C + {} DPR16X4; {} of {} LUT4 sites ({:.1} %)",
+        r.lut4,
+        r.ccu2c,
+        r.dpram16x4,
+        r.lut4_sites,
+        r.lut4_sites_available,
+        percent(r.lut4_sites, r.lut4_sites_available)
+    );
+    println!(
+        "  FF      {} of {} ({:.1} %)",
+        r.ff,
+        r.ff_available,
+        percent(r.ff, r.ff_available)
+    );
+    println!("  BRAM    {} of {} DP16KD", r.bram, r.bram_available);
+    println!("  IO      {} of {}", r.io, r.io_available);
+    println!(
+        "  Fmax    {:.1} MHz for the {} MHz box clock: {}",
+        r.fmax_mhz,
+        r.target_mhz,
+        if r.timing_met { "met" } else { "NOT MET" }
+    );
+    for path in &r.critical_paths {
+        println!(
+            "  path    {:.2} ns ({:.2} ns routing, {} logic levels) {} -> {}: {}",
+            path.delay_ns,
+            path.routing_ns,
+            path.logic_levels,
+            path.from_clock,
+            path.to_clock,
+            path.blocks.join(" -> ")
+        );
+    }
+    println!("  bits    {}", r.bitstream.display());
+    println!(
+        "  time    yosys {:.0} s, nextpnr {:.0} s, ecppack {:.0} s, total {:.0} s",
+        r.seconds.yosys, r.seconds.nextpnr, r.seconds.ecppack, r.seconds.total
+    );
+}
