@@ -115,6 +115,7 @@ pub struct FrameTransmitter {
     total_len: DFF<Bits<16>>,
     udp_len: DFF<Bits<16>>,
     ip_checksum: DFF<Bits<16>>,
+    checksum_term: DFF<Bits<32>>,
     stage_byte: DFF<Bits<8>>,
     stage_valid: DFF<Bit>,
     stage_crc: DFF<Bit>,
@@ -173,6 +174,7 @@ impl FrameTransmitter {
             total_len: Default::default(),
             udp_len: Default::default(),
             ip_checksum: Default::default(),
+            checksum_term: Default::default(),
             stage_byte: Default::default(),
             stage_valid: Default::default(),
             stage_crc: Default::default(),
@@ -212,6 +214,7 @@ impl Logic for FrameTransmitter {
             total_len,
             udp_len,
             ip_checksum,
+            checksum_term,
             stage_byte,
             stage_valid,
             stage_crc,
@@ -252,6 +255,7 @@ impl Logic for FrameTransmitter {
         } else if self.index.q.val() == 9 {
             self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(0));
         }
+        self.checksum_term.d.next = self.checksum_word.val();
 
         // The byte at `index`.
         self.template.address.next = self.index.q.val().get_bits::<7>(0);
@@ -305,9 +309,10 @@ impl Logic for FrameTransmitter {
 
         if self.sending.q.val() {
             self.index.d.next = self.index.q.val() + 1;
-            if self.index.q.val() < 10 {
-                self.checksum.d.next = self.checksum.q.val() + self.checksum_word.val();
-            } else if self.index.q.val() < 12 {
+            // the word chosen at byte i is added at byte i + 1 (from a register)
+            if (self.index.q.val() >= 1) & (self.index.q.val() <= 10) {
+                self.checksum.d.next = self.checksum.q.val() + self.checksum_term.q.val();
+            } else if (self.index.q.val() >= 11) & (self.index.q.val() < 13) {
                 self.checksum.d.next =
                     (self.checksum.q.val() & 0xFFFF) + (self.checksum.q.val() >> 16);
             }
