@@ -6,12 +6,14 @@
 //! resumes at the next port, so with every port busy the grants cycle 0, 1, .., N-1, 0 and
 //! no port waits more than N - 1 packets (starvation-free). A scan costs at most N clocks
 //! per packet: 64 ports at 20,000 packets/s each need 1.3 M packets/s, the arbiter serves
-//! more than 1.4 M with 26-beat records.
+//! more than 1.4 M with 26-beat records. Each port's `ready` comes from a one-hot register
+//! (the port whose beats flow) and the output's `ready`, so no port-number decoder lies
+//! on the path to the port buffers' memories.
 //!
 //! Output: each packet prefixed with its port number, so a 25-beat port-buffer packet
 //! (flags, tick, cell bytes) becomes a 26-beat record in the layout of
 //! `skinbox_protocol::record`, with the absolute low 32 tick bits where the datagram has
-//! its tick offset. Cost: an N-to-1 multiplexer of 11 bits and 8 flip-flops.
+//! its tick offset. Cost: an N-to-1 multiplexer of 11 bits and N + 8 flip-flops.
 
 use crate::stream::{ByteStreamSink, ByteStreamSource};
 use rust_hdl::prelude::*;
@@ -34,6 +36,9 @@ pub struct PacketArbiter {
     port: DFF<Bits<6>>,
     granted: DFF<Bit>,
     prefix_sent: DFF<Bit>,
+    /// One-hot: bit i is set while port i's beats flow (granted, prefix sent), so each
+    /// port's `ready` is one gate from registers.
+    flowing: DFF<Bits<64>>,
     port_valid: Signal<Local, Bit>,
     port_last: Signal<Local, Bit>,
     port_data: Signal<Local, Bits<8>>,
@@ -56,6 +61,7 @@ impl PacketArbiter {
             port: Default::default(),
             granted: Default::default(),
             prefix_sent: Default::default(),
+            flowing: Default::default(),
             port_valid: Default::default(),
             port_last: Default::default(),
             port_data: Default::default(),
@@ -67,7 +73,7 @@ impl PacketArbiter {
 impl Logic for PacketArbiter {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, port, granted, prefix_sent);
+        dff_setup!(self, clock, port, granted, prefix_sent, flowing);
         self.port_valid.next = false;
         self.port_last.next = false;
         self.port_error.next = false;
@@ -79,9 +85,8 @@ impl Logic for PacketArbiter {
                 self.port_last.next = self.ports[i].last.val();
                 self.port_error.next = self.ports[i].error.val();
                 self.port_data.next = self.ports[i].data.val();
-                self.ports[i].ready.next =
-                    self.granted.q.val() & self.prefix_sent.q.val() & self.records.ready.val();
             }
+            self.ports[i].ready.next = self.flowing.q.val().get_bit(i) & self.records.ready.val();
         }
         self.records.valid.next = false;
         self.records.data.next = self.port_data.val();
@@ -101,6 +106,7 @@ impl Logic for PacketArbiter {
             self.records.data.next = bit_cast::<8, 6>(self.port.q.val());
             if self.records.ready.val() {
                 self.prefix_sent.d.next = true;
+                self.flowing.d.next = bit_cast::<64, 1>(true.into()) << self.port.q.val();
             }
         } else {
             self.records.valid.next = self.port_valid.val();
@@ -108,6 +114,7 @@ impl Logic for PacketArbiter {
             self.records.error.next = self.port_error.val();
             if self.port_valid.val() & self.port_last.val() & self.records.ready.val() {
                 self.granted.d.next = false;
+                self.flowing.d.next = 0.into();
                 if self.port.q.val() == self.last_port.val() {
                     self.port.d.next = 0.into();
                 } else {
@@ -119,6 +126,7 @@ impl Logic for PacketArbiter {
             self.port.d.next = 0.into();
             self.granted.d.next = false;
             self.prefix_sent.d.next = false;
+            self.flowing.d.next = 0.into();
         }
     }
 }
