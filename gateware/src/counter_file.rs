@@ -42,6 +42,9 @@ pub struct CounterFile {
     clear_address: DFF<Bits<9>>,
     update: DFF<Bit>,
     update_address: DFF<Bits<9>>,
+    value: DFF<Bits<32>>,
+    write_pending: DFF<Bit>,
+    write_pending_address: DFF<Bits<9>>,
     counting_memory: RAM<Bits<32>, 9>,
     reading_memory: RAM<Bits<32>, 9>,
     current: Signal<Local, Bits<8>>,
@@ -73,6 +76,9 @@ impl CounterFile {
             clear_address: Default::default(),
             update: Default::default(),
             update_address: Default::default(),
+            value: Default::default(),
+            write_pending: Default::default(),
+            write_pending_address: Default::default(),
             counting_memory: Default::default(),
             reading_memory: Default::default(),
             current: Default::default(),
@@ -95,7 +101,10 @@ impl Logic for CounterFile {
             clearing,
             clear_address,
             update,
-            update_address
+            update_address,
+            value,
+            write_pending,
+            write_pending_address
         );
         self.counting_memory.read_clock.next = self.clock.val();
         self.counting_memory.write_clock.next = self.clock.val();
@@ -151,15 +160,19 @@ impl Logic for CounterFile {
             }
         }
 
-        // Read now, write the incremented value next clock (never the same address twice
-        // in a row: the scanner moves on every clock).
+        // Read now, register the value the next clock (block RAM outputs are slow), write it
+        // incremented the clock after. A counter's next event comes at least a byte time
+        // later, long after its write.
         self.counting_memory.read_address.next =
             (bit_cast::<9, 6>(self.port.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
         self.update.d.next = (self.clear_mask.val() != 0) & !self.clearing.q.val();
         self.update_address.d.next = self.counting_memory.read_address.val();
-        self.write_enable.next = self.update.q.val();
-        self.write_address.next = self.update_address.q.val();
-        self.write_data.next = self.counting_memory.read_data.val() + 1;
+        self.value.d.next = self.counting_memory.read_data.val();
+        self.write_pending.d.next = self.update.q.val();
+        self.write_pending_address.d.next = self.update_address.q.val();
+        self.write_enable.next = self.write_pending.q.val();
+        self.write_address.next = self.write_pending_address.q.val();
+        self.write_data.next = self.value.q.val() + 1;
         if self.clearing.q.val() {
             self.write_enable.next = true;
             self.write_address.next = self.clear_address.q.val();
@@ -189,6 +202,7 @@ impl Logic for CounterFile {
             self.clearing.d.next = true;
             self.clear_address.d.next = 0.into();
             self.update.d.next = false;
+            self.write_pending.d.next = false;
         }
     }
 }

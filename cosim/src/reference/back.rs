@@ -688,7 +688,8 @@ impl PortCounting {
             }
             let lowest = self.pending.trailing_zeros() as usize;
             self.pending &= !(1 << lowest);
-            self.writes[lowest].push(v + 2);
+            // read at the edge after the visit, registered, written the edge after that
+            self.writes[lowest].push(v + 3);
             c = v + 1;
         }
         self.done_until = c.min(until).max(self.done_until);
