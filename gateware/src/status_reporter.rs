@@ -5,8 +5,8 @@
 //! records sent, first port, then the eight counters of up to 32 ports (one datagram per
 //! 32 ports). It sums the body's 16-bit words while writing, asks the framer to send it
 //! (`request`), and after the framer read the memory (`sending` fell) goes on with the
-//! next ports or waits for the next period. Building a page of 32 ports takes 1,560 clocks
-//! (six per word: the counter memory's output is registered before it is summed).
+//! next ports or waits for the next period. Building a page of 32 ports takes 1,820 clocks
+//! (seven per word: the counter memory's output is registered twice before it is summed).
 //!
 //! The boot id is a seed parameter plus the number of resets since configuration, so
 //! each reset is visible; a power cycle restarts the count (the host also sees the
@@ -14,8 +14,13 @@
 
 use rust_hdl::prelude::*;
 
-/// Clocks per 32-bit word of the status body.
-pub const CLOCKS_PER_WORD: u64 = 6;
+/// Clocks per 32-bit word of the status body: the address, the memory read, its register,
+/// the word into the shift register, four bytes out.
+pub const CLOCKS_PER_WORD: u64 = 7;
+
+/// Clock of a word (from its first) in which its value is taken: counters and the framer's
+/// counts alike.
+pub const WORD_VALUE_CLOCK: u64 = 2;
 
 /// Ports per status datagram.
 pub const PORTS_PER_STATUS: usize = 32;
@@ -70,6 +75,7 @@ pub struct StatusReporter {
     word: DFF<Bits<9>>,
     phase: DFF<Bits<3>>,
     shift: DFF<Bits<32>>,
+    counter_held: DFF<Bits<32>>,
     offset: DFF<Bits<11>>,
     sum: DFF<Bits<32>>,
     tick_held: DFF<Bits<64>>,
@@ -139,6 +145,7 @@ impl StatusReporter {
             word: Default::default(),
             phase: Default::default(),
             shift: Default::default(),
+            counter_held: Default::default(),
             offset: Default::default(),
             sum: Default::default(),
             tick_held: Default::default(),
@@ -153,14 +160,28 @@ impl StatusReporter {
 }
 
 // Words of a page: 0 boot id, 1 datagrams sent, 2 records sent, 3 first port and reserved,
-// 4.. the counters (port-major). Each word takes six clocks (CLOCKS_PER_WORD): address,
-// the value into the shift register, then four bytes.
+// 4.. the counters (port-major). Each word takes seven clocks (CLOCKS_PER_WORD): address,
+// memory read, its register, the value into the shift register, then four bytes.
 impl Logic for StatusReporter {
     #[hdl_gen]
     fn update(&mut self) {
         dff_setup!(
-            self, clock, timer, due, state, first_port, page_ports, word, phase, shift, offset,
-            sum, tick_held, resets, reset_seen
+            self,
+            clock,
+            timer,
+            due,
+            state,
+            first_port,
+            page_ports,
+            word,
+            phase,
+            shift,
+            counter_held,
+            offset,
+            sum,
+            tick_held,
+            resets,
+            reset_seen
         );
         self.memory.write_clock.next = self.clock.val();
         self.memory.read_clock.next = self.clock.val();
@@ -179,7 +200,9 @@ impl Logic for StatusReporter {
         self.write.next = false;
         self.counter_address.next =
             (bit_cast::<9, 7>(self.first_port.q.val()) << 3) + (self.word.q.val() - 4);
-        self.word_value.next = self.counter_data.val();
+        // the counter memory's output goes straight into a register (block RAM reads are slow)
+        self.counter_held.d.next = self.counter_data.val();
+        self.word_value.next = self.counter_held.q.val();
         if self.word.q.val() == 0 {
             self.word_value.next = self.boot_seed.val() + self.resets.q.val();
         } else if self.word.q.val() == 1 {
@@ -213,14 +236,13 @@ impl Logic for StatusReporter {
             }
             ReportState::Build => {
                 self.phase.d.next = self.phase.q.val() + 1;
-                if self.phase.q.val() == 1 {
-                    // the word (the counter memory's output) goes straight into a register
+                if self.phase.q.val() == 2 {
                     self.shift.d.next = self.word_value.val();
-                } else if self.phase.q.val() >= 2 {
+                } else if self.phase.q.val() >= 3 {
                     self.write.next = true;
                     self.shift.d.next = self.shift.q.val() << 8;
                 }
-                if self.phase.q.val() == 5 {
+                if self.phase.q.val() == 6 {
                     self.phase.d.next = 0.into();
                     self.word.d.next = self.word.q.val() + 1;
                     if self.word.q.val() == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + 3 {

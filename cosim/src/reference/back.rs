@@ -4,7 +4,7 @@
 //! ending) and jumps over every stretch in which only free-running counters advance.
 
 use super::front::{PortFront, StartedPacket};
-use skinbox_gateware::status_reporter::CLOCKS_PER_WORD;
+use skinbox_gateware::status_reporter::{CLOCKS_PER_WORD, WORD_VALUE_CLOCK};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAX_RECORDS};
 use skinbox_protocol::status::PortCounter;
@@ -608,9 +608,9 @@ impl<'a> Back<'a> {
         self.due = due;
     }
 
-    /// The body written from cycle `from`: word `w` reads its value in cycle
-    /// `from + CLOCKS_PER_WORD w + 1`, counters through an address taken at the edge after
-    /// `from + CLOCKS_PER_WORD w`.
+    /// The body written from cycle `from`: word `w` takes its value in cycle
+    /// `from + CLOCKS_PER_WORD w + WORD_VALUE_CLOCK`, counters through an address taken at
+    /// the edge after `from + CLOCKS_PER_WORD w`.
     fn status_body(&mut self, from: u64) -> StatusRepr {
         let word_read = |w: u64| from + CLOCKS_PER_WORD * w;
         let mut ports = Vec::with_capacity(self.page_ports);
@@ -628,8 +628,8 @@ impl<'a> Back<'a> {
         }
         StatusRepr {
             boot_id: self.t.boot_id,
-            datagrams_sent: self.count_at(word_read(1) + 1, false),
-            records_sent: self.count_at(word_read(2) + 1, true),
+            datagrams_sent: self.count_at(word_read(1) + WORD_VALUE_CLOCK, false),
+            records_sent: self.count_at(word_read(2) + WORD_VALUE_CLOCK, true),
             first_port: self.first_port as u8,
             ports,
         }
