@@ -40,6 +40,8 @@ pub struct CounterFile {
     port: DFF<Bits<6>>,
     clearing: DFF<Bit>,
     clear_address: DFF<Bits<9>>,
+    sampled: DFF<Bits<8>>,
+    visited: DFF<Bits<6>>,
     update: DFF<Bit>,
     update_address: DFF<Bits<9>>,
     value: DFF<Bits<32>>,
@@ -74,6 +76,8 @@ impl CounterFile {
             port: Default::default(),
             clearing: Default::default(),
             clear_address: Default::default(),
+            sampled: Default::default(),
+            visited: Default::default(),
             update: Default::default(),
             update_address: Default::default(),
             value: Default::default(),
@@ -100,6 +104,8 @@ impl Logic for CounterFile {
             port,
             clearing,
             clear_address,
+            sampled,
+            visited,
             update,
             update_address,
             value,
@@ -111,7 +117,8 @@ impl Logic for CounterFile {
         self.reading_memory.read_clock.next = self.clock.val();
         self.reading_memory.write_clock.next = self.clock.val();
 
-        // The visited port's pending bits and the lowest one set.
+        // Stage 1: the visited port's pending bits into a register (without the bit stage 2
+        // clears this clock, should it be the same port: a one-port box).
         self.current.next = 0.into();
         for i in 0..self.pending.len() {
             self.pending[i].clock.next = self.clock.val();
@@ -119,39 +126,46 @@ impl Logic for CounterFile {
                 self.current.next = self.pending[i].q.val();
             }
         }
+        // Stage 2: the lowest pending bit of the port visited a clock ago.
         self.lowest.next = 0.into();
         self.clear_mask.next = 0.into();
-        if self.current.val().get_bit(0) {
+        if self.sampled.q.val().get_bit(0) {
             self.lowest.next = 0.into();
             self.clear_mask.next = 1.into();
-        } else if self.current.val().get_bit(1) {
+        } else if self.sampled.q.val().get_bit(1) {
             self.lowest.next = 1.into();
             self.clear_mask.next = 2.into();
-        } else if self.current.val().get_bit(2) {
+        } else if self.sampled.q.val().get_bit(2) {
             self.lowest.next = 2.into();
             self.clear_mask.next = 4.into();
-        } else if self.current.val().get_bit(3) {
+        } else if self.sampled.q.val().get_bit(3) {
             self.lowest.next = 3.into();
             self.clear_mask.next = 8.into();
-        } else if self.current.val().get_bit(4) {
+        } else if self.sampled.q.val().get_bit(4) {
             self.lowest.next = 4.into();
             self.clear_mask.next = 16.into();
-        } else if self.current.val().get_bit(5) {
+        } else if self.sampled.q.val().get_bit(5) {
             self.lowest.next = 5.into();
             self.clear_mask.next = 32.into();
-        } else if self.current.val().get_bit(6) {
+        } else if self.sampled.q.val().get_bit(6) {
             self.lowest.next = 6.into();
             self.clear_mask.next = 64.into();
-        } else if self.current.val().get_bit(7) {
+        } else if self.sampled.q.val().get_bit(7) {
             self.lowest.next = 7.into();
             self.clear_mask.next = 128.into();
         }
         if self.clearing.q.val() {
             self.clear_mask.next = 0.into();
         }
+        // (stage 1's register, now that stage 2's clear is known)
+        self.sampled.d.next = self.current.val();
+        if self.port.q.val() == self.visited.q.val() {
+            self.sampled.d.next = self.current.val() & !self.clear_mask.val();
+        }
+        self.visited.d.next = self.port.q.val();
         for i in 0..self.pending.len() {
             self.pending[i].d.next = self.pending[i].q.val() | self.events[i].val();
-            if self.port.q.val().index() == i {
+            if self.visited.q.val().index() == i {
                 self.pending[i].d.next =
                     (self.pending[i].q.val() & !self.clear_mask.val()) | self.events[i].val();
             }
@@ -164,7 +178,7 @@ impl Logic for CounterFile {
         // incremented the clock after. A counter's next event comes at least a byte time
         // later, long after its write.
         self.counting_memory.read_address.next =
-            (bit_cast::<9, 6>(self.port.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
+            (bit_cast::<9, 6>(self.visited.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
         self.update.d.next = (self.clear_mask.val() != 0) & !self.clearing.q.val();
         self.update_address.d.next = self.counting_memory.read_address.val();
         self.value.d.next = self.counting_memory.read_data.val();
@@ -203,6 +217,7 @@ impl Logic for CounterFile {
             self.clear_address.d.next = 0.into();
             self.update.d.next = false;
             self.write_pending.d.next = false;
+            self.sampled.d.next = 0.into();
         }
     }
 }

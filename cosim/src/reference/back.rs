@@ -688,8 +688,9 @@ impl PortCounting {
             }
             let lowest = self.pending.trailing_zeros() as usize;
             self.pending &= !(1 << lowest);
-            // read at the edge after the visit, registered, written the edge after that
-            self.writes[lowest].push(v + 3);
+            // pending bits sampled at the visit, the address a clock later, the memory's
+            // output registered, the increment written the edge after that
+            self.writes[lowest].push(v + 4);
             c = v + 1;
         }
         self.done_until = c.min(until).max(self.done_until);
