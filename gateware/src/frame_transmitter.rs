@@ -332,6 +332,11 @@ impl Logic for FrameTransmitter {
         } else if self.start.val() {
             self.sending.d.next = true;
             self.index.d.next = 0.into();
+            self.next_sequence.d.next = self.next_sequence.q.val() + 1;
+        }
+        // The descriptor is taken in every clock without a frame going out, so `start` only
+        // has to set `sending` (the descriptor must be valid in the clock of `start`).
+        if !self.sending.q.val() {
             self.kind_held.d.next = self.kind.val();
             self.body_end.d.next = self.body_len.val() + 74;
             self.padded_end.d.next = self.body_len.val() + 74;
@@ -346,7 +351,6 @@ impl Logic for FrameTransmitter {
                 | (bit_cast::<120, 32>(self.next_sequence.q.val()) << 80)
                 | (bit_cast::<120, 64>(self.base_tick.val()) << 16)
                 | bit_cast::<120, 16>(self.entry_count.val());
-            self.next_sequence.d.next = self.next_sequence.q.val() + 1;
         }
         if self.reset.val() {
             self.sending.d.next = false;

@@ -318,7 +318,8 @@ impl Logic for UdpFramer {
         self.transmitter.base_tick.next = self.pending_base_tick.q.val();
         self.transmitter.body_len.next = self.pending_len.q.val();
         self.transmitter.body_sum.next = self.pending_sum.q.val();
-        if self.start_status.val() {
+        // the descriptor of what would start now (the transmitter takes it while idle)
+        if !self.pending.q.val() & self.status_request.val() {
             self.transmitter.kind.next = 2.into();
             self.transmitter.flags.next = 0.into();
             self.transmitter.entry_count.next = self.status_entry_count.val();
