@@ -302,3 +302,51 @@ fn random_traffic() {
     }
     assert!(total > 600, "{total} records");
 }
+
+/// A packet whose counter event lands at every clock around the status report's read of
+/// that counter: the counter file's and the reporter's latencies must agree to the clock.
+#[test]
+fn status_snapshot_at_every_clock_around_a_counter_event() {
+    let config = BoxConfig {
+        ports: 1,
+        flush_timeout_ticks: 500,
+        status_period_ticks: 20_000,
+        ..BoxConfig::default()
+    };
+    let model = Model::build(&config, false, &skinbox_cosim::model::default_cache_dir()).unwrap();
+    let cycles = 26_000;
+    let mut counts = std::collections::BTreeSet::new();
+    // the second report starts at about clock 20,005 and reads port 0's good-packet counter
+    // some 30 clocks later; the packet's 20 bytes take about 6,250 clocks
+    for offset in 0..90u64 {
+        let start_ns = ((20_000 - 6_250 - 30 + offset) * 8) as f64;
+        let line = transitions(&back_to_back(&data(1, 1), start_ns, 250.0));
+        let lines = [line];
+        let mut dut = Dut::new(&model, None).unwrap();
+        let rtl = assemble(&play(&mut dut, &lines, RESET_CYCLES, cycles)).0;
+        let reference = predict_frames(&config, &lines, cycles).unwrap();
+        assert!(
+            rtl == reference,
+            "offset {offset}: RTL and reference differ"
+        );
+        // the second status report counted the packet or not, depending on the offset
+        let good: Vec<u32> = rtl
+            .iter()
+            .filter_map(|f| {
+                match DatagramRepr::parse(check(&f.bytes).unwrap().1)
+                    .unwrap()
+                    .body
+                {
+                    DatagramBody::Status(s) => Some(s.ports[0].0[0]),
+                    DatagramBody::Records(_) => None,
+                }
+            })
+            .collect();
+        counts.insert(good.get(1).copied());
+    }
+    assert_eq!(
+        counts,
+        [Some(0), Some(1)].into_iter().collect(),
+        "the sweep crosses the report's read of the counter"
+    );
+}
