@@ -22,6 +22,7 @@ pub mod model;
 pub mod reference;
 pub mod scene;
 pub mod sim;
+pub mod traffic;
 
 pub use dut::{Dut, GmiiByte};
 pub use model::{CosimError, Model};

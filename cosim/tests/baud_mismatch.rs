@@ -8,32 +8,15 @@ use skinbox_cosim::harness::play;
 use skinbox_cosim::line::{back_to_back, transitions};
 use skinbox_cosim::reference::predict_frames;
 use skinbox_cosim::sim::RESET_CYCLES;
+use skinbox_cosim::traffic::random_data_packets;
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::status::PortCounter;
-use skinbox_protocol::{DataRepr, DatagramRepr};
+use skinbox_protocol::DatagramRepr;
 use std::collections::HashSet;
 
 const PACKETS: usize = 150;
-
-/// Random full-range data packets (fixed seed).
-fn packets() -> Vec<[u8; 20]> {
-    let mut state = 0x2545_F491_4F6C_DD1Du64;
-    (0..PACKETS)
-        .map(|i| {
-            let mut raw = [0i32; 9];
-            for (c, v) in raw.iter_mut().enumerate() {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                let range = skinbox_protocol::Channel::ALL[c].data_range();
-                *v = range.start() + (state % (range.end() - range.start() + 1) as u64) as i32;
-            }
-            DataRepr::from_raw(i as u16 + 1, raw).unwrap().to_bytes()
-        })
-        .collect()
-}
 
 /// (delivered intact, delivered corrupted, rejected packets + garbage bytes counted).
 fn run(error_percent: f64) -> (usize, usize, u32) {
@@ -45,7 +28,7 @@ fn run(error_percent: f64) -> (usize, usize, u32) {
     };
     let model = Model::build(&config, false, &skinbox_cosim::model::default_cache_dir()).unwrap();
     let mut dut = Dut::new(&model, None).unwrap();
-    let sent = packets();
+    let sent = random_data_packets(PACKETS);
     let bytes: Vec<u8> = sent.iter().flatten().copied().collect();
     let bit_ns = 250.0 / (1.0 + error_percent / 100.0);
     let line = transitions(&back_to_back(&bytes, 10_000.0, bit_ns));

@@ -12,8 +12,8 @@ use super::{chart, mean_error_pct, scene, Progress, Section, Table};
 use skinbox_cells::{GenerateOptions, Mode, Scene};
 use skinbox_cosim::line::Jitter;
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec};
+use skinbox_cosim::traffic::random_data_packets;
 use skinbox_gateware::interface_box::BoxConfig;
-use skinbox_protocol::{Channel, DataRepr};
 
 fn baud_errors_pct(quick: bool) -> Vec<f64> {
     if quick {
@@ -86,26 +86,6 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Vec<Section
     ])
 }
 
-/// Random full-range data packets (fixed seed), as `cosim/tests/baud_mismatch.rs` sends.
-fn random_packets(n: usize) -> Vec<[u8; 20]> {
-    let mut state = 0x2545_F491_4F6C_DD1Du64;
-    (0..n)
-        .map(|i| {
-            let mut raw = [0i32; 9];
-            for (c, v) in raw.iter_mut().enumerate() {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                let range = Channel::ALL[c].data_range();
-                *v = range.start() + (state % (range.end() - range.start() + 1) as u64) as i32;
-            }
-            DataRepr::from_raw(i as u16 + 1, raw)
-                .expect("values inside the ranges")
-                .to_bytes()
-        })
-        .collect()
-}
-
 /// (good, rejected, corrupted) fractions of `packets` sent back to back on one port whose
 /// UART runs `error_pct` fast, through the verilated box.
 fn baud_point(error_pct: f64, packets: &[[u8; 20]]) -> anyhow::Result<[f64; 3]> {
@@ -145,7 +125,7 @@ fn baud_point(error_pct: f64, packets: &[[u8; 20]]) -> anyhow::Result<[f64; 3]> 
 }
 
 fn baud(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
-    let packets = random_packets(if quick { 40 } else { 150 });
+    let packets = random_data_packets(if quick { 40 } else { 150 });
     let mut table = Table::new(&[
         "baud error (%)",
         "good (%)",
