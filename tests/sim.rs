@@ -1,6 +1,24 @@
 //! `skinbox sim`: a scene through the verilated box to a pcap and the host's report.
 
+use std::path::Path;
 use std::process::Command;
+
+/// Runs `skinbox sim ARGS --json --pcap PCAP`, asserts it succeeded, returns its JSON.
+fn sim_json(args: &[&str], pcap: &Path) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .arg("sim")
+        .args(args)
+        .args(["--json", "--pcap"])
+        .arg(pcap)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
 
 #[test]
 fn idle_scene_through_the_box_to_a_decoded_pcap() {
@@ -8,9 +26,8 @@ fn idle_scene_through_the_box_to_a_decoded_pcap() {
     std::fs::create_dir_all(&dir).unwrap();
     let pcap = dir.join("idle.pcap");
     let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/cosim/scenes/idle.toml");
-    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
-        .args([
-            "sim",
+    let r = sim_json(
+        &[
             scene,
             "--from-ms",
             "0",
@@ -20,18 +37,9 @@ fn idle_scene_through_the_box_to_a_decoded_pcap() {
             "132",
             "--status-period-ms",
             "2",
-            "--json",
-            "--pcap",
-        ])
-        .arg(&pcap)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
+        &pcap,
     );
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     for key in [
         "frames",
         "records",
@@ -63,9 +71,8 @@ fn reference_fidelity_writes_the_rtl_pcap() {
     std::fs::create_dir_all(&dir).unwrap();
     let run = |fidelity: &str| {
         let pcap = dir.join(format!("{fidelity}.pcap"));
-        let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
-            .args([
-                "sim",
+        let r = sim_json(
+            &[
                 "--duration-ms",
                 "6",
                 "--jitter-ns",
@@ -74,18 +81,9 @@ fn reference_fidelity_writes_the_rtl_pcap() {
                 "2",
                 "--fidelity",
                 fidelity,
-                "--json",
-                "--pcap",
-            ])
-            .arg(&pcap)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+            ],
+            &pcap,
         );
-        let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         assert_eq!(r["fidelity"].as_str(), Some(fidelity));
         (r, std::fs::read(&pcap).unwrap())
     };

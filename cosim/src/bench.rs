@@ -124,21 +124,13 @@ struct SceneSpeeds {
 
 /// RTL and reference on [`SCENE`], fastest of `rounds`.
 fn scene_speeds(rounds: u32) -> Result<SceneSpeeds, CosimError> {
-    let path = skinbox_cells::scenes_dir().join(format!("{SCENE}.toml"));
-    let scene = skinbox_cells::scene::Scene::load(&path).map_err(|e| CosimError::Tool {
-        step: "loading the bench scene",
-        output: e.to_string(),
-    })?;
-    let generated = crate::scene::generate(&scene, 1.02).map_err(|e| CosimError::Tool {
-        step: "generating the bench scene",
-        output: e.to_string(),
-    })?;
-    let config = BoxConfig {
-        ports: generated.buses.len(),
-        status_period_ticks: 625_000,
-        ..BoxConfig::default()
-    };
-    let spec = crate::scene::spec(&generated, config, 1_000_000_000, 20_000_000);
+    let spec =
+        crate::scene::builtin_spec(SCENE, 1_000_000_000, 20_000_000, 625_000).map_err(|e| {
+            CosimError::Tool {
+                step: "generating the bench scene",
+                output: e.to_string(),
+            }
+        })?;
     let (lines, _) = crate::sim::lines(&spec);
     let cycles = crate::sim::cycles(&spec);
     let model = Model::build(&spec.config, false, &default_cache_dir())?;

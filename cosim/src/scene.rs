@@ -59,3 +59,22 @@ pub fn generate(
     scene.check()?;
     Ok(scene.generate(&GenerateOptions::default()))
 }
+
+/// The built-in scene `name` (a file in `skinbox_cells::scenes_dir()`) from scene time
+/// `from_ns` for `duration_ns`, on a box with one port per bus and the given status period
+/// (other parameters default).
+pub fn builtin_spec(
+    name: &str,
+    from_ns: u64,
+    duration_ns: u64,
+    status_period_ticks: u64,
+) -> Result<SimSpec, skinbox_cells::scene::SceneError> {
+    let scene = Scene::load(&skinbox_cells::scenes_dir().join(format!("{name}.toml")))?;
+    let generated = generate(&scene, (from_ns + duration_ns) as f64 * 1e-9)?;
+    let config = BoxConfig {
+        ports: generated.buses.len(),
+        status_period_ticks,
+        ..BoxConfig::default()
+    };
+    Ok(spec(&generated, config, from_ns, duration_ns))
+}

@@ -1,7 +1,6 @@
 //! The reference model against the verilated box: every frame byte for byte, and the
 //! cycle of its first byte, on each regression scene.
 
-use skinbox_cells::scene::Scene;
 use skinbox_cosim::frames::{assemble, check, Frame};
 use skinbox_cosim::harness::play;
 use skinbox_cosim::line::{
@@ -9,6 +8,7 @@ use skinbox_cosim::line::{
 };
 use skinbox_cosim::reference::predict_frames;
 use skinbox_cosim::sim::RESET_CYCLES;
+use skinbox_cosim::traffic::SplitMix64;
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::datagram::DatagramBody;
@@ -136,75 +136,16 @@ fn eight_ports_at_line_rate_with_jitter() {
     assert_eq!(records(&frames), ports * per_port);
 }
 
-/// Garbage, truncation, a wrong end byte, a framing error inside a packet, a glitch
-/// shorter than half a bit: the counters of the status reports, and the loss flags.
-#[test]
-fn injected_faults() {
-    let config = BoxConfig {
-        ports: 2,
-        flush_timeout_ticks: 2_000,
-        status_period_ticks: 30_000,
-        ..BoxConfig::default()
-    };
-    let bit = 250.0;
-    let mut faulty: Vec<UartByte> = vec![];
-    let mut t = 10_000.0;
-    let push = |data: &[u8], gap_bits: f64, t: &mut f64, out: &mut Vec<UartByte>| {
-        let bytes = back_to_back(data, *t, bit);
-        *t = bytes.last().map_or(*t, |b| b.end_ns()) + gap_bits * bit;
-        out.extend(bytes);
-    };
-    push(&[0x00, 0x10, 0x20, 0x30, 0x40], 3.0, &mut t, &mut faulty);
-    push(&data(1, 1), 3.0, &mut t, &mut faulty);
-    push(&data(2, 2)[..12], 40.0, &mut t, &mut faulty);
-    let mut wrong_end = data(3, 3);
-    wrong_end[19] = 0x5A;
-    push(&wrong_end, 3.0, &mut t, &mut faulty);
-    push(&data(4, 4), 3.0, &mut t, &mut faulty);
-    let mut broken = back_to_back(&data(5, 5), t, bit);
-    broken[10].stop_level = false;
-    t = broken.last().unwrap().end_ns() + 30.0 * bit;
-    faulty.extend(broken);
-    push(&data(6, 6), 3.0, &mut t, &mut faulty);
-    let mut line = transitions(&faulty);
-    // a 60 ns low glitch on the idle line, then a good packet
-    let glitch = (t / 8.0) as u64 + 200;
-    line.push(Transition {
-        edge: glitch,
-        level: false,
-    });
-    line.push(Transition {
-        edge: glitch + 8,
-        level: true,
-    });
-    line.extend(transitions(&back_to_back(
-        &data(7, 7),
-        (glitch + 400) as f64 * 8.0,
-        bit,
-    )));
-    let clean = transitions(&back_to_back(&data(9, 9), 30_000.0, 247.0));
-    let frames = agree(&config, &[line, clean], 100_000);
-    assert_eq!(records(&frames), 5);
-}
-
 /// A scene's packets through the 4-bus box: the default job's traffic, shortened.
 #[test]
 fn stroking_scene() {
-    let scene = Scene::load(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/stroking_upper_arm.toml"),
-    )
-    .unwrap();
-    let generated = skinbox_cosim::scene::generate(&scene, 1.02).unwrap();
-    let spec = skinbox_cosim::scene::spec(
-        &generated,
-        BoxConfig {
-            ports: generated.buses.len(),
-            status_period_ticks: 625_000,
-            ..BoxConfig::default()
-        },
+    let spec = skinbox_cosim::scene::builtin_spec(
+        "stroking_upper_arm",
         1_000_000_000,
         20_000_000,
-    );
+        625_000,
+    )
+    .unwrap();
     let (lines, _) = skinbox_cosim::sim::lines(&spec);
     let frames = agree(&spec.config, &lines, skinbox_cosim::sim::cycles(&spec));
     let sent: usize = spec.ports.iter().map(Vec::len).sum();
@@ -212,31 +153,10 @@ fn stroking_scene() {
     assert_eq!(records(&frames), sent);
 }
 
-/// splitmix64: the random traffic below is seeded and reproducible.
-struct Random(u64);
-
-impl Random {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-
-    fn uniform(&mut self, low: f64, high: f64) -> f64 {
-        low + (high - low) * (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// One port's random traffic: bursts of packets back to back or with short gaps, each
 /// line with its own clock error, and now and then a fault (garbage, truncation, wrong end
 /// byte, low stop bit) or a glitch.
-fn random_line(r: &mut Random, port: usize, end_ns: f64) -> Vec<Transition> {
+fn random_line(r: &mut SplitMix64, port: usize, end_ns: f64) -> Vec<Transition> {
     let bit = 250.0 * r.uniform(0.97, 1.03);
     let mut t = r.uniform(5_000.0, 20_000.0);
     let mut bytes: Vec<UartByte> = vec![];
@@ -276,7 +196,7 @@ fn random_line(r: &mut Random, port: usize, end_ns: f64) -> Vec<Transition> {
     }
     let jitter = Jitter {
         peak_ns: r.uniform(0.0, 30.0),
-        seed: r.next(),
+        seed: r.next_u64(),
     };
     jittered_transitions(&bytes, &jitter).0
 }
@@ -294,7 +214,7 @@ fn random_traffic() {
     let cycles = 400_000;
     let mut total = 0;
     for seed in 0..8 {
-        let mut r = Random(seed);
+        let mut r = SplitMix64(seed);
         let lines: Vec<Vec<Transition>> = (0..config.ports)
             .map(|port| random_line(&mut r, port, (cycles - 10_000) as f64 * 8.0))
             .collect();

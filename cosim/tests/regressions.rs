@@ -3,7 +3,7 @@
 
 use skinbox_cosim::frames::{assemble, check};
 use skinbox_cosim::harness::play;
-use skinbox_cosim::line::{back_to_back, transitions, UartByte};
+use skinbox_cosim::line::{back_to_back, transitions, Transition, UartByte};
 use skinbox_cosim::reference::{predict_frames, run_reference};
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec, RESET_CYCLES};
 use skinbox_cosim::{Dut, Model};
@@ -103,12 +103,26 @@ fn status_counters_match_injected_faults() {
     // a framing error inside a packet: its 11th byte's stop bit low
     let mut broken = back_to_back(&packet(5), t, bit);
     broken[10].stop_level = false;
+    let end = broken.last().unwrap().end_ns();
     faulty.extend(broken);
+    // then a 60 ns low glitch on the idle line: the receiver starts nothing, counts nothing
+    let mut line = transitions(&faulty);
+    let glitch = (end / 8.0) as u64 + 300;
+    line.extend([
+        Transition {
+            edge: glitch,
+            level: false,
+        },
+        Transition {
+            edge: glitch + 8,
+            level: true,
+        },
+    ]);
 
     let model = Model::build(&config, false, &skinbox_cosim::model::default_cache_dir()).unwrap();
     let mut dut = Dut::new(&model, None).unwrap();
     let clean = back_to_back(&packet(9), 30_000.0, bit);
-    let lines = [transitions(&faulty), transitions(&clean)];
+    let lines = [line, transitions(&clean)];
     let out = play(&mut dut, &lines, RESET_CYCLES, 600_000);
     let (frames, _) = assemble(&out);
     assert!(
