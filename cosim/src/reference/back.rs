@@ -32,8 +32,6 @@ pub(super) struct BackTiming {
     pub box_id: u16,
     /// Frame bytes before the body (preamble to the box header).
     pub body_start: u64,
-    /// Shortest frame, preamble to the end of the padding.
-    pub min_padded_end: u64,
     /// FCS and inter-frame gap after the padding.
     pub frame_tail: u64,
     /// Clocks from a transmitter start to its first GMII byte.
@@ -361,8 +359,16 @@ impl<'a> Back<'a> {
         let mut next_port = p;
         let mut next_granted = self.granted;
         let mut next_prefix_sent = self.prefix_sent;
-        let mut offered = None;
         let mut read_done = None;
+        // a granted port offers its prefix, then its packet's beats
+        let offered = if self.granted && (!self.prefix_sent || port_valid) {
+            self.buffers[p].slots.front().map(|s| SliceBeat {
+                port: p as u8,
+                slot: s.clone(),
+            })
+        } else {
+            None
+        };
         if !self.granted {
             if port_valid {
                 next_granted = true;
@@ -371,28 +377,18 @@ impl<'a> Back<'a> {
                 next_port = (p + 1) % n;
             }
         } else if !self.prefix_sent {
-            offered = self.buffers[p].slots.front().map(|s| SliceBeat {
-                port: p as u8,
-                slot: s.clone(),
-            });
             if slice_ready {
                 next_prefix_sent = true;
             }
-        } else if port_valid {
-            offered = self.buffers[p].slots.front().map(|s| SliceBeat {
-                port: p as u8,
-                slot: s.clone(),
-            });
-            if slice_ready {
-                let b = &mut self.buffers[p];
-                if port_last {
-                    b.read_beat = 0;
-                    read_done = Some(p);
-                    next_granted = false;
-                    next_port = (p + 1) % n;
-                } else {
-                    b.read_beat += 1;
-                }
+        } else if port_valid && slice_ready {
+            let b = &mut self.buffers[p];
+            if port_last {
+                b.read_beat = 0;
+                read_done = Some(p);
+                next_granted = false;
+                next_port = (p + 1) % n;
+            } else {
+                b.read_beat += 1;
             }
         }
 
@@ -540,8 +536,8 @@ impl<'a> Back<'a> {
     /// Starts a frame in cycle `c`.
     fn send(&mut self, c: u64, d: DatagramRepr) {
         let body_len = (d.buffer_len() - HEADER_LEN) as u64;
-        let padded_end = (self.t.body_start + body_len).max(self.t.min_padded_end);
-        self.idle_from = c + padded_end + self.t.frame_tail;
+        // (the headers exceed the minimum frame: there is never padding)
+        self.idle_from = c + self.t.body_start + body_len + self.t.frame_tail;
         self.sequence = self.sequence.wrapping_add(1);
         self.frames.push(SentFrame {
             first_cycle: c + self.t.start_to_first_byte,
@@ -549,17 +545,14 @@ impl<'a> Back<'a> {
         });
     }
 
-    /// Value of a framer count register in cycle `at`: (from cycle, value) steps.
-    fn count_at(&self, at: u64, records: bool) -> u32 {
+    /// Records datagrams started before cycle `at` (the framer's count register then), and
+    /// the records they held.
+    fn sent_before(&self, at: u64) -> (u32, u32) {
         let k = self
             .started_records
             .partition_point(|(from, _)| *from <= at);
-        if records {
-            k.checked_sub(1)
-                .map_or(0, |i| self.started_records[i].1 as u32)
-        } else {
-            k as u32
-        }
+        let records = k.checked_sub(1).map_or(0, |i| self.started_records[i].1);
+        (k as u32, records as u32)
     }
 
     /// One cycle of the status reporter, on the registers as they are.
@@ -628,8 +621,8 @@ impl<'a> Back<'a> {
         }
         StatusRepr {
             boot_id: self.t.boot_id,
-            datagrams_sent: self.count_at(word_read(1) + WORD_VALUE_CLOCK, false),
-            records_sent: self.count_at(word_read(2) + WORD_VALUE_CLOCK, true),
+            datagrams_sent: self.sent_before(word_read(1) + WORD_VALUE_CLOCK).0,
+            records_sent: self.sent_before(word_read(2) + WORD_VALUE_CLOCK).1,
             first_port: self.first_port as u8,
             ports,
         }

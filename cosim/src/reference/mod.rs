@@ -33,7 +33,7 @@ use skinbox_gateware::frame_transmitter::BODY_START;
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_gateware::status_reporter::PORTS_PER_STATUS;
 use skinbox_gateware::uart_rx::{phase_increment, PHASE_START};
-use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP, MIN_FRAME_LEN, PREAMBLE_LEN};
+use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP};
 use std::time::Instant;
 
 pub(crate) use skinbox_gateware::port_buffer::SLOTS;
@@ -105,7 +105,6 @@ fn predict_frames_with_progress(
             boot_id: config.boot_seed.wrapping_add(1),
             box_id: config.box_id,
             body_start: BODY_START as u64,
-            min_padded_end: (PREAMBLE_LEN + MIN_FRAME_LEN) as u64,
             frame_tail: (FCS_LEN + INTER_FRAME_GAP) as u64,
             start_to_first_byte: START_TO_FIRST_BYTE,
         },
