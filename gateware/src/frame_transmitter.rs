@@ -4,8 +4,8 @@
 //! base tick, body length and the ones'-complement sum of the body's 16-bit words) and
 //! emits, one byte per clock: preamble and SFD, Ethernet II header, IPv4 header with its
 //! checksum, UDP header with its checksum, the 24-byte datagram header with the next
-//! sequence number, the body read from the payload memory, padding to the 60-byte minimum
-//! frame, the FCS, and then at least 12 idle clocks.
+//! sequence number, the body read from the payload memory, the FCS, and then at least 12
+//! idle clocks. (The headers alone exceed the 60-byte minimum frame: no padding is needed.)
 //!
 //! The checksums are finished while the preamble goes out: the UDP sum starts from the
 //! constant words (addresses, ports, magic, box id) plus the body sum, and adds one
@@ -25,6 +25,9 @@ use skinbox_protocol::link::*;
 /// Frame byte where the datagram body starts (preamble, Ethernet, IPv4, UDP, box header).
 pub const BODY_START: usize =
     PREAMBLE_LEN + ETHERNET_HEADER_LEN + IPV4_HEADER_LEN + UDP_HEADER_LEN + HEADER_LEN;
+
+// A datagram with an empty body still makes a minimum-size frame: no padding is ever needed.
+const _: () = assert!(BODY_START >= PREAMBLE_LEN + MIN_FRAME_LEN);
 
 const UDP_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN + IPV4_HEADER_LEN;
 const BOX_HEADER_AT: usize = UDP_AT + UDP_HEADER_LEN;
@@ -111,7 +114,6 @@ pub struct FrameTransmitter {
     txd: DFF<Bits<8>>,
     tx_en: DFF<Bit>,
     body_end: DFF<Bits<11>>,
-    padded_end: DFF<Bits<11>>,
     total_len: DFF<Bits<16>>,
     udp_len: DFF<Bits<16>>,
     ip_checksum: DFF<Bits<16>>,
@@ -170,7 +172,6 @@ impl FrameTransmitter {
             txd: Default::default(),
             tx_en: Default::default(),
             body_end: Default::default(),
-            padded_end: Default::default(),
             total_len: Default::default(),
             udp_len: Default::default(),
             ip_checksum: Default::default(),
@@ -191,7 +192,8 @@ impl FrameTransmitter {
 // The kernel below cannot name Rust constants, so it spells the frame positions as
 // literals: 7 SFD, 8 first CRC byte, 24 IPv4 total length, 32 IPv4 checksum, 46 UDP length,
 // 48 UDP checksum, 53 datagram kind, 57..72 flags/sequence/base tick/entry count,
-// 74 body, 68 = 8 + 60 minimum frame, 11 = inter-frame gap - 1.
+// 74 body, 11 = inter-frame gap - 1. A frame is never below the 60-byte minimum (the
+// headers alone end at 74 = 8 + 66), so it never needs padding.
 // `frame_positions_match_the_formats` checks them against the format constants.
 impl Logic for FrameTransmitter {
     #[hdl_gen]
@@ -210,7 +212,6 @@ impl Logic for FrameTransmitter {
             txd,
             tx_en,
             body_end,
-            padded_end,
             total_len,
             udp_len,
             ip_checksum,
@@ -280,11 +281,9 @@ impl Logic for FrameTransmitter {
             self.tx_byte.next = self.kind_held.q.val();
         } else if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
             self.tx_byte.next = self.fields.q.val().get_bits::<8>(112);
-        } else if (self.index.q.val() >= 74) & (self.index.q.val() < self.body_end.q.val()) {
+        } else if self.index.q.val() >= 74 {
+            // the body (the FCS replaces what follows it at the output)
             self.tx_byte.next = self.payload_data.val();
-        } else if self.index.q.val() >= self.body_end.q.val() {
-            // padding (the FCS replaces these bytes at the output)
-            self.tx_byte.next = 0.into();
         }
         self.payload_address.next = self.index.q.val() + 2 - 74;
 
@@ -294,8 +293,8 @@ impl Logic for FrameTransmitter {
         self.stage_valid.d.next = self.sending.q.val();
         self.stage_byte.d.next = self.tx_byte.val();
         self.stage_crc.d.next =
-            (self.index.q.val() >= 8) & (self.index.q.val() < self.padded_end.q.val());
-        self.stage_fcs.d.next = self.index.q.val() >= self.padded_end.q.val();
+            (self.index.q.val() >= 8) & (self.index.q.val() < self.body_end.q.val());
+        self.stage_fcs.d.next = self.index.q.val() >= self.body_end.q.val();
         self.crc.register.next = self.crc_register.q.val();
         self.crc.data.next = self.stage_byte.q.val();
         self.tx_en.d.next = self.stage_valid.q.val();
@@ -323,7 +322,7 @@ impl Logic for FrameTransmitter {
                 // the SFD is in the output stage now: the CRC starts with the next byte
                 self.crc_register.d.next = 0xFFFF_FFFF_u64.into();
             }
-            if self.index.q.val() == self.padded_end.q.val() + 3 {
+            if self.index.q.val() == self.body_end.q.val() + 3 {
                 self.sending.d.next = false;
                 self.gap.d.next = 11.into();
             }
@@ -339,11 +338,6 @@ impl Logic for FrameTransmitter {
         if !self.sending.q.val() {
             self.kind_held.d.next = self.kind.val();
             self.body_end.d.next = self.body_len.val() + 74;
-            self.padded_end.d.next = self.body_len.val() + 74;
-            if (self.body_len.val() + 74) < 68 {
-                // (a box datagram's frame is never this short: the rule is kept general)
-                self.padded_end.d.next = 68.into();
-            }
             self.total_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 52;
             self.udp_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 32;
             self.checksum.d.next = self.udp_constant_sum.val() + self.body_sum.val();
@@ -384,7 +378,6 @@ mod tests {
         assert_eq!(BODY_START, 74);
         assert_eq!((IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_AT), (24, 32, 42));
         assert_eq!((BOX_HEADER_AT + 3, FIELDS_AT, FIELDS_AT + 15), (53, 57, 72));
-        assert_eq!(PREAMBLE_LEN + MIN_FRAME_LEN, 68);
         assert_eq!(INTER_FRAME_GAP, 12);
         let t = template(&LinkConfig::DEFAULT, 7, 8);
         assert_eq!(
