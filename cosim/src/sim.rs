@@ -45,6 +45,11 @@ pub struct SimSpec {
 /// Clock cycles the box is held in reset at the start.
 pub const RESET_CYCLES: u64 = 4;
 
+/// Cycles before box tick 0: the reset and the box's reset register
+/// ([`skinbox_gateware::interface_box::RESET_LATENCY`]). A stamp of tick `t` means the
+/// edge of cycle `t + TICK_ZERO_CYCLE`.
+pub const TICK_ZERO_CYCLE: u64 = RESET_CYCLES + skinbox_gateware::interface_box::RESET_LATENCY;
+
 /// What came out, checked.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct SimReport {
@@ -223,8 +228,8 @@ pub(crate) fn analyse(
                             queue.drain(..k);
                             let (_, true_start_ns) = queue.pop_front().expect("found above");
                             report.packets_delivered += 1;
-                            let stamp_ns =
-                                (r.tick(datagram.base_tick) + RESET_CYCLES) as f64 * TICK_NS as f64;
+                            let stamp_ns = (r.tick(datagram.base_tick) + TICK_ZERO_CYCLE) as f64
+                                * TICK_NS as f64;
                             let error = (stamp_ns - true_start_ns) / TICK_NS as f64;
                             report.ts_error_max_ticks = report.ts_error_max_ticks.max(error);
                             error_sum += error;

@@ -3,7 +3,7 @@
 
 use skinbox_cosim::frames::{assemble, check};
 use skinbox_cosim::{Dut, Model};
-use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_gateware::interface_box::{BoxConfig, RESET_LATENCY};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{DataRepr, DatagramRepr};
 
@@ -53,6 +53,10 @@ fn a_packet_on_a_pin_becomes_a_record() {
     };
     assert_eq!(records.len(), 1);
     assert_eq!((records[0].port, records[0].cell_packet), (1, packet));
-    // reset for cycles 1..=3: the tick reads e - 3 after edge e; edge 1001 sampled low
-    assert_eq!(records[0].tick(datagrams[1].base_tick), 1001 - 3);
+    // reset pin high for cycles 1..=3, the box's reset register one more: the tick reads
+    // e - 3 - RESET_LATENCY after edge e; edge 1001 sampled low
+    assert_eq!(
+        records[0].tick(datagrams[1].base_tick),
+        1001 - 3 - RESET_LATENCY
+    );
 }

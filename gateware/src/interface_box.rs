@@ -135,12 +135,16 @@ impl BoxConfig {
     }
 }
 
+/// Clocks from the `reset` pin to the blocks (one register): box tick 0 is the clock
+/// `RESET_LATENCY` after the pin goes low.
+pub const RESET_LATENCY: u64 = 1;
+
 /// The interface box.
 #[derive(LogicBlock)]
 pub struct InterfaceBox {
     /// The box clock, 125 MHz.
     pub clock: Signal<In, Clock>,
-    /// Synchronous reset, active high.
+    /// Synchronous reset, active high; the blocks see it [`RESET_LATENCY`] clocks later.
     pub reset: Signal<In, Bit>,
     /// The UART pins of the ports, idle high.
     pub uart_rx: Vec<Signal<In, Bit>>,
@@ -159,6 +163,7 @@ pub struct InterfaceBox {
     counters: CounterFile,
     status: StatusReporter,
     framer: UdpFramer,
+    core_reset: DFF<Bit>,
     port_reset: DFF<Bit>,
 }
 
@@ -192,6 +197,7 @@ impl InterfaceBox {
                 port_count: n as u8,
                 flush_timeout_ticks: config.flush_timeout_ticks,
             }),
+            core_reset: Default::default(),
             port_reset: Default::default(),
         })
     }
@@ -207,10 +213,13 @@ impl InterfaceBox {
 impl Logic for InterfaceBox {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, port_reset);
-        self.port_reset.d.next = self.reset.val() | !self.counters.ready.val();
+        dff_setup!(self, clock, core_reset, port_reset);
+        // the reset pin drives one register, which drives the blocks: no combinational
+        // path from a pin into the core
+        self.core_reset.d.next = self.reset.val();
+        self.port_reset.d.next = self.core_reset.q.val() | !self.counters.ready.val();
         self.timestamp.clock.next = self.clock.val();
-        self.timestamp.reset.next = self.reset.val();
+        self.timestamp.reset.next = self.core_reset.q.val();
         for i in 0..self.uarts.len() {
             // pin -> UART -> deframer -> buffer -> arbiter
             self.uarts[i].clock.next = self.clock.val();
@@ -241,18 +250,18 @@ impl Logic for InterfaceBox {
                 self.deframers[i].events.val() | self.buffers[i].events.val();
         }
         self.arbiter.clock.next = self.clock.val();
-        self.arbiter.reset.next = self.reset.val();
+        self.arbiter.reset.next = self.core_reset.q.val();
         self.counters.clock.next = self.clock.val();
-        self.counters.reset.next = self.reset.val();
+        self.counters.reset.next = self.core_reset.q.val();
         self.counters.read_address.next = self.status.counter_address.val();
 
         self.framer.clock.next = self.clock.val();
-        self.framer.reset.next = self.reset.val();
+        self.framer.reset.next = self.core_reset.q.val();
         self.framer.tick.next = self.timestamp.tick.val();
         // arbiter -> register slice -> framer: no combinational path from the framer's
         // ready back to the port buffers' memories
         self.record_slice.clock.next = self.clock.val();
-        self.record_slice.reset.next = self.reset.val();
+        self.record_slice.reset.next = self.core_reset.q.val();
         self.record_slice.sink.data.next = self.arbiter.records.data.val();
         self.record_slice.sink.valid.next = self.arbiter.records.valid.val();
         self.record_slice.sink.last.next = self.arbiter.records.last.val();
@@ -265,7 +274,7 @@ impl Logic for InterfaceBox {
         self.record_slice.source.ready.next = self.framer.records.ready.val();
 
         self.status.clock.next = self.clock.val();
-        self.status.reset.next = self.reset.val();
+        self.status.reset.next = self.core_reset.q.val();
         self.status.tick.next = self.timestamp.tick.val();
         self.status.datagrams_sent.next = self.framer.datagrams_sent.val();
         self.status.records_sent.next = self.framer.records_sent.val();
@@ -422,8 +431,9 @@ mod tests {
             unreachable!()
         };
         assert_eq!(records.len(), 2);
-        // the tick counter reads e - 3 after edge e (reset held for edges 1..=3); a record's
-        // tick is that of the first edge that sampled its start bit low
+        // the tick counter reads e - 3 - RESET_LATENCY after edge e (the reset pin held for
+        // edges 1..=3); a record's tick is that of the first edge that sampled its start
+        // bit low
         for (r, (port, cell, start)) in records
             .iter()
             .zip([(0u8, data, starts[0]), (1, event, starts[1])])
@@ -431,7 +441,7 @@ mod tests {
             assert_eq!((r.port, r.flags, r.cell_packet), (port, 0, cell));
             assert_eq!(
                 r.tick(datagrams[1].base_tick),
-                start.ceil() as u64 - 3,
+                start.ceil() as u64 - 3 - RESET_LATENCY,
                 "port {port}"
             );
         }

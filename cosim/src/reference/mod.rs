@@ -24,7 +24,7 @@ mod front;
 use crate::frames::{Frame, FrameError};
 use crate::line::Transition;
 use crate::model::CosimError;
-use crate::sim::{analyse, cycles, lines, SimRun, SimSpec, RESET_CYCLES};
+use crate::sim::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
 use back::{Back, BackTiming};
 use front::{port_front, FrontTiming, PortFront};
 use skinbox_frame_check::{encode, UdpAddresses};
@@ -61,7 +61,7 @@ pub fn run_reference_with_progress(
 }
 
 /// The frames the box sends when its pins carry `lines` (one transition list per port, as
-/// the RTL harness plays them, after [`RESET_CYCLES`] of reset) for `cycles` clocks: each
+/// the RTL harness plays them, after [`crate::sim::RESET_CYCLES`] of reset) for `cycles` clocks: each
 /// frame preamble to FCS with the cycle of its first byte, cut where the run ends.
 pub fn predict_frames(
     config: &BoxConfig,
@@ -78,15 +78,16 @@ fn predict_frames_with_progress(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Vec<Frame>, CosimError> {
     config.validate()?;
-    // counters clear for CLEAR_CLOCKS after reset; the ports leave reset a clock later
-    let counters_ready_from = RESET_CYCLES + CLEAR_CLOCKS;
+    // counters clear for CLEAR_CLOCKS after the blocks leave reset; the ports leave reset
+    // a clock later
+    let counters_ready_from = TICK_ZERO_CYCLE + CLEAR_CLOCKS;
     let front_timing = FrontTiming {
         phase_increment: phase_increment(config.clock_hz, config.baud),
         phase_start: PHASE_START,
         idle_gap_clocks: config.idle_gap_clocks(),
         framing: config.framing,
         port_reset_until: counters_ready_from + 1,
-        tick_offset: RESET_CYCLES,
+        tick_offset: TICK_ZERO_CYCLE,
     };
     let mut fronts: Vec<PortFront> = lines
         .iter()
@@ -96,7 +97,7 @@ fn predict_frames_with_progress(
     let mut back = Back::new(
         BackTiming {
             ports: config.ports,
-            tick_offset: RESET_CYCLES,
+            tick_offset: TICK_ZERO_CYCLE,
             counters_ready_from,
             flush_timeout: config.flush_timeout_ticks,
             status_period: config.status_period_ticks,
@@ -111,7 +112,7 @@ fn predict_frames_with_progress(
         &fronts,
     );
     let step = 1 << 24;
-    let mut done = RESET_CYCLES;
+    let mut done = TICK_ZERO_CYCLE;
     while done < end {
         let to = (done + step).min(end);
         back.run(done, to);
