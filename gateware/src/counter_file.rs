@@ -12,6 +12,7 @@
 //! UART accepts), which holds for N <= 64. After reset the scanner first clears both RAMs
 //! (512 clocks) with `ready` low; the box holds its ports in reset until then.
 
+use crate::block_ram::BlockRam;
 use rust_hdl::prelude::*;
 
 /// Clocks the counter file spends clearing its memories after reset (`ready` low).
@@ -31,7 +32,7 @@ pub struct CounterFile {
     pub events: Vec<Signal<In, Bits<8>>>,
     /// Counter to read: port * 8 + counter.
     pub read_address: Signal<In, Bits<9>>,
-    /// The counter, one clock after its address.
+    /// The counter, two clocks after its address (from the memory's output register).
     pub read_data: Signal<Out, Bits<32>>,
     /// Counting: the clearing after reset is over.
     pub ready: Signal<Out, Bit>,
@@ -44,11 +45,10 @@ pub struct CounterFile {
     visited: DFF<Bits<6>>,
     update: DFF<Bit>,
     update_address: DFF<Bits<9>>,
-    value: DFF<Bits<32>>,
     write_pending: DFF<Bit>,
     write_pending_address: DFF<Bits<9>>,
-    counting_memory: RAM<Bits<32>, 9>,
-    reading_memory: RAM<Bits<32>, 9>,
+    counting_memory: BlockRam<32, 9>,
+    reading_memory: BlockRam<32, 9>,
     current: Signal<Local, Bits<8>>,
     lowest: Signal<Local, Bits<3>>,
     clear_mask: Signal<Local, Bits<8>>,
@@ -80,7 +80,6 @@ impl CounterFile {
             visited: Default::default(),
             update: Default::default(),
             update_address: Default::default(),
-            value: Default::default(),
             write_pending: Default::default(),
             write_pending_address: Default::default(),
             counting_memory: Default::default(),
@@ -108,14 +107,11 @@ impl Logic for CounterFile {
             visited,
             update,
             update_address,
-            value,
             write_pending,
             write_pending_address
         );
-        self.counting_memory.read_clock.next = self.clock.val();
-        self.counting_memory.write_clock.next = self.clock.val();
-        self.reading_memory.read_clock.next = self.clock.val();
-        self.reading_memory.write_clock.next = self.clock.val();
+        self.counting_memory.clock.next = self.clock.val();
+        self.reading_memory.clock.next = self.clock.val();
 
         // Stage 1: the visited port's pending bits into a register (without the bit stage 2
         // clears this clock, should it be the same port: a one-port box).
@@ -174,19 +170,18 @@ impl Logic for CounterFile {
             }
         }
 
-        // Read now, register the value the next clock (block RAM outputs are slow), write it
-        // incremented the clock after. A counter's next event comes at least a byte time
+        // Read now, the value comes two clocks later from the memory's output register, and
+        // is written incremented at the next edge. A counter's next event comes at least a byte time
         // later, long after its write.
         self.counting_memory.read_address.next =
             (bit_cast::<9, 6>(self.visited.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
         self.update.d.next = (self.clear_mask.val() != 0) & !self.clearing.q.val();
         self.update_address.d.next = self.counting_memory.read_address.val();
-        self.value.d.next = self.counting_memory.read_data.val();
         self.write_pending.d.next = self.update.q.val();
         self.write_pending_address.d.next = self.update_address.q.val();
         self.write_enable.next = self.write_pending.q.val();
         self.write_address.next = self.write_pending_address.q.val();
-        self.write_data.next = self.value.q.val() + 1;
+        self.write_data.next = self.counting_memory.read_data.val() + 1;
         if self.clearing.q.val() {
             self.write_enable.next = true;
             self.write_address.next = self.clear_address.q.val();
@@ -273,7 +268,7 @@ mod tests {
         for (p, counts) in expected.iter().enumerate() {
             for (c, count) in counts.iter().enumerate() {
                 bench.uut.read_address.next = ((p * COUNTERS + c) as u64).into();
-                bench.cycle();
+                bench.cycles(2);
                 let got = bench.uut.read_data.val().to_u32();
                 assert_eq!(got, *count, "port {p} counter {c}");
             }
@@ -302,14 +297,14 @@ mod tests {
         bench.uut.events[1].next = 0.into();
         bench.cycles(40);
         bench.uut.read_address.next = 15u64.into();
-        bench.cycle();
+        bench.cycles(2);
         assert_eq!(bench.uut.read_data.val().to_u32(), 1);
         bench.uut.reset.next = true;
         bench.cycle();
         bench.uut.reset.next = false;
         bench.cycles(600);
         bench.uut.read_address.next = 15u64.into();
-        bench.cycle();
+        bench.cycles(2);
         assert_eq!(bench.uut.read_data.val().to_u32(), 0);
     }
 }

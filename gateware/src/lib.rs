@@ -13,6 +13,7 @@
 //! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
 //! over one interface, [`stream`].
 
+pub mod block_ram;
 pub mod board;
 pub mod cell_deframer;
 pub mod counter_file;

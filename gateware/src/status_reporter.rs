@@ -12,6 +12,7 @@
 //! each reset is visible; a power cycle restarts the count (the host also sees the
 //! sequence number restart at 0).
 
+use crate::block_ram::BlockRam;
 use rust_hdl::prelude::*;
 
 /// Clocks per 32-bit word of the status body: the address, the memory read, its register,
@@ -42,7 +43,7 @@ pub struct StatusReporter {
     pub counters_ready: Signal<In, Bit>,
     /// Counter to read: port * 8 + counter.
     pub counter_address: Signal<Out, Bits<9>>,
-    /// The counter, one clock after its address.
+    /// The counter, two clocks after its address.
     pub counter_data: Signal<In, Bits<32>>,
     /// A status body is ready.
     pub request: Signal<Out, Bit>,
@@ -60,9 +61,9 @@ pub struct StatusReporter {
     pub sending: Signal<In, Bit>,
     /// Body byte to read.
     pub read_address: Signal<In, Bits<11>>,
-    /// The body byte, one clock after its address.
+    /// The body byte, two clocks after its address (from the memory's output register).
     pub read_data: Signal<Out, Bits<8>>,
-    memory: RAM<Bits<8>, 11>,
+    memory: BlockRam<8, 11>,
     period: Constant<Bits<32>>,
     ports: Constant<Bits<7>>,
     ports_per_page: Constant<Bits<7>>,
@@ -75,7 +76,6 @@ pub struct StatusReporter {
     word: DFF<Bits<9>>,
     phase: DFF<Bits<3>>,
     shift: DFF<Bits<32>>,
-    counter_held: DFF<Bits<32>>,
     offset: DFF<Bits<11>>,
     sum: DFF<Bits<32>>,
     tick_held: DFF<Bits<64>>,
@@ -145,7 +145,6 @@ impl StatusReporter {
             word: Default::default(),
             phase: Default::default(),
             shift: Default::default(),
-            counter_held: Default::default(),
             offset: Default::default(),
             sum: Default::default(),
             tick_held: Default::default(),
@@ -166,25 +165,10 @@ impl Logic for StatusReporter {
     #[hdl_gen]
     fn update(&mut self) {
         dff_setup!(
-            self,
-            clock,
-            timer,
-            due,
-            state,
-            first_port,
-            page_ports,
-            word,
-            phase,
-            shift,
-            counter_held,
-            offset,
-            sum,
-            tick_held,
-            resets,
-            reset_seen
+            self, clock, timer, due, state, first_port, page_ports, word, phase, shift, offset,
+            sum, tick_held, resets, reset_seen
         );
-        self.memory.write_clock.next = self.clock.val();
-        self.memory.read_clock.next = self.clock.val();
+        self.memory.clock.next = self.clock.val();
         self.memory.read_address.next = self.read_address.val();
         self.read_data.next = self.memory.read_data.val();
 
@@ -200,9 +184,8 @@ impl Logic for StatusReporter {
         self.write.next = false;
         self.counter_address.next =
             (bit_cast::<9, 7>(self.first_port.q.val()) << 3) + (self.word.q.val() - 4);
-        // the counter memory's output goes straight into a register (block RAM reads are slow)
-        self.counter_held.d.next = self.counter_data.val();
-        self.word_value.next = self.counter_held.q.val();
+        // the counter memory answers two clocks after the address (its output register)
+        self.word_value.next = self.counter_data.val();
         if self.word.q.val() == 0 {
             self.word_value.next = self.boot_seed.val() + self.resets.q.val();
         } else if self.word.q.val() == 1 {
@@ -319,7 +302,8 @@ mod tests {
         bench.cycles(3);
         bench.uut.reset.next = false;
         let mut pages = vec![];
-        let (mut counter_read, mut body_read) = (0usize, 0u64);
+        // the counter addresses of the last two clocks: the counter file answers two late
+        let (mut counter_reads, mut body_read) = ([0usize; 2], 0u64);
         let mut reading: Option<(u64, u16, u64, u64, Vec<u8>)> = None;
         for clock in 0..clocks {
             let u = &mut bench.uut;
@@ -327,15 +311,16 @@ mod tests {
             u.datagrams_sent.next = 77.into();
             u.records_sent.next = 4242.into();
             u.counters_ready.next = true;
-            u.counter_data.next = u64::from(counter(counter_read / 8, counter_read % 8)).into();
+            let read = counter_reads[1];
+            u.counter_data.next = u64::from(counter(read / 8, read % 8)).into();
             u.taken.next = false;
             u.sending.next = reading.is_some();
             u.read_address.next = body_read.into();
             bench.settle();
             let u = &bench.uut;
-            counter_read = u.counter_address.val().index();
+            counter_reads = [u.counter_address.val().index(), counter_reads[0]];
             if let Some((_, _, len, _, body)) = &mut reading {
-                if body_read >= 1 {
+                if body_read >= crate::block_ram::READ_LATENCY {
                     body.push(u.read_data.val().to_u8());
                 }
                 if body.len() as u64 == *len {

@@ -14,6 +14,7 @@
 //! Status datagrams come from the status block's own memory through the `status_*`
 //! ports and share the transmitter; a waiting records datagram goes first.
 
+use crate::block_ram::BlockRam;
 use crate::frame_transmitter::FrameTransmitter;
 use crate::stream::ByteStreamSink;
 use rust_hdl::prelude::*;
@@ -59,8 +60,8 @@ pub struct UdpFramer {
     pub status_taken: Signal<Out, Bit>,
     /// The transmitter is reading the status memory.
     pub status_sending: Signal<Out, Bit>,
-    /// Status memory byte to read (data due one clock later on `status_data`, which the
-    /// framer registers).
+    /// Status memory byte to read (its data due two clocks later on `status_data`, from
+    /// the memory's output register).
     pub status_address: Signal<Out, Bits<11>>,
     /// Status memory byte.
     pub status_data: Signal<In, Bits<8>>,
@@ -75,7 +76,7 @@ pub struct UdpFramer {
     /// GMII transmit error.
     pub gmii_tx_er: Signal<Out, Bit>,
     transmitter: FrameTransmitter,
-    memory: RAM<Bits<8>, 12>,
+    memory: BlockRam<8, 12>,
     max_records: Constant<Bits<6>>,
     flush_timeout: Constant<Bits<32>>,
     fill_buffer: DFF<Bit>,
@@ -100,8 +101,6 @@ pub struct UdpFramer {
     status_taken_pulse: DFF<Bit>,
     datagram_count: DFF<Bits<32>>,
     record_count: DFF<Bits<32>>,
-    records_byte: DFF<Bits<8>>,
-    status_byte: DFF<Bits<8>>,
     record_tick: Signal<Local, Bits<32>>,
     write: Signal<Local, Bit>,
     write_data: Signal<Local, Bits<8>>,
@@ -166,8 +165,6 @@ impl UdpFramer {
             status_taken_pulse: Default::default(),
             datagram_count: Default::default(),
             record_count: Default::default(),
-            records_byte: Default::default(),
-            status_byte: Default::default(),
             record_tick: Default::default(),
             write: Default::default(),
             write_data: Default::default(),
@@ -210,14 +207,11 @@ impl Logic for UdpFramer {
             sending_status,
             status_taken_pulse,
             datagram_count,
-            record_count,
-            records_byte,
-            status_byte
+            record_count
         );
         self.transmitter.clock.next = self.clock.val();
         self.transmitter.reset.next = self.reset.val();
-        self.memory.write_clock.next = self.clock.val();
-        self.memory.read_clock.next = self.clock.val();
+        self.memory.clock.next = self.clock.val();
 
         // The flush deadline passed: a registered, wrap-safe 32-bit test (the timeout is far
         // below 2^31 ticks), kept off the accept path's timing.
@@ -348,12 +342,10 @@ impl Logic for UdpFramer {
         self.memory.read_address.next = (bit_cast::<12, 1>((!self.fill_buffer.q.val()).into())
             << 11)
             | bit_cast::<12, 11>(self.transmitter.payload_address.val());
-        // both memories' outputs go straight into registers (block RAM reads are slow)
-        self.records_byte.d.next = self.memory.read_data.val();
-        self.status_byte.d.next = self.status_data.val();
-        self.transmitter.payload_data.next = self.records_byte.q.val();
+        // both memories answer two clocks after the address, from their output registers
+        self.transmitter.payload_data.next = self.memory.read_data.val();
         if self.sending_status.q.val() {
-            self.transmitter.payload_data.next = self.status_byte.q.val();
+            self.transmitter.payload_data.next = self.status_data.val();
         }
         self.status_address.next = self.transmitter.payload_address.val();
 
@@ -454,7 +446,8 @@ mod tests {
             status_taken: 0,
         };
         let mut status_pending = false;
-        let mut status_read: u64 = 0;
+        // the status memory's addresses of the last two clocks: it answers two clocks late
+        let mut status_reads: [u64; 2] = [0; 2];
         for clock in 0..clocks {
             let offer = next < records.len() && clock >= records[next].0;
             let u = &mut bench.uut;
@@ -474,7 +467,7 @@ mod tests {
                 u.status_body_sum.next = crate::frame_transmitter::word_sum(body).into();
                 u.status_tick.next = 777_777.into();
                 u.status_data.next =
-                    u64::from(*body.get(status_read as usize).unwrap_or(&0)).into();
+                    u64::from(*body.get(status_reads[1] as usize).unwrap_or(&0)).into();
             }
             bench.settle();
             let u = &bench.uut;
@@ -488,7 +481,7 @@ mod tests {
                     next += 1;
                 }
             }
-            status_read = u.status_address.val().to_u64();
+            status_reads = [u.status_address.val().to_u64(), status_reads[0]];
             if u.status_taken.val() {
                 run.status_taken += 1;
                 status_pending = false;

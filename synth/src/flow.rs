@@ -162,9 +162,10 @@ pub fn run(
         dir,
         "synth.ys",
         &format!(
-            "read_verilog {top}.v\n\
+            "read_verilog -D{bram} {top}.v\n\
              synth_ecp5 -top {top} -json {top}.json\n\
-             tee -q -o yosys-stat.json stat -json\n"
+             tee -q -o yosys-stat.json stat -json\n",
+            bram = skinbox_gateware::block_ram::ECP5_MACRO,
         ),
     )?;
 
