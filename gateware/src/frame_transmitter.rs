@@ -107,7 +107,10 @@ pub struct FrameTransmitter {
     index: DFF<Bits<11>>,
     gap: DFF<Bits<4>>,
     kind_held: DFF<Bits<8>>,
-    fields: DFF<Bits<120>>,
+    // the 15 header bytes (flags, sequence, base tick, entry count), most significant
+    // first, as one 120-bit shift register cut in two (no word over 64 bits to simulate)
+    fields_head: DFF<Bits<56>>,
+    fields_tail: DFF<Bits<64>>,
     checksum: DFF<Bits<32>>,
     crc_register: DFF<Bits<32>>,
     next_sequence: DFF<Bits<32>>,
@@ -165,7 +168,8 @@ impl FrameTransmitter {
             index: Default::default(),
             gap: Default::default(),
             kind_held: Default::default(),
-            fields: Default::default(),
+            fields_head: Default::default(),
+            fields_tail: Default::default(),
             checksum: Default::default(),
             crc_register: Default::default(),
             next_sequence: Default::default(),
@@ -205,7 +209,8 @@ impl Logic for FrameTransmitter {
             index,
             gap,
             kind_held,
-            fields,
+            fields_head,
+            fields_tail,
             checksum,
             crc_register,
             next_sequence,
@@ -240,21 +245,28 @@ impl Logic for FrameTransmitter {
         } else if self.index.q.val() == 1 {
             self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
         } else if self.index.q.val() == 2 {
-            self.checksum_word.next = bit_cast::<32, 8>(self.fields.q.val().get_bits::<8>(112));
+            self.checksum_word.next = bit_cast::<32, 8>(self.fields_head.q.val().get_bits::<8>(48));
         } else if self.index.q.val() == 3 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(96));
+            self.checksum_word.next =
+                bit_cast::<32, 16>(self.fields_head.q.val().get_bits::<16>(32));
         } else if self.index.q.val() == 4 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(80));
+            self.checksum_word.next =
+                bit_cast::<32, 16>(self.fields_head.q.val().get_bits::<16>(16));
         } else if self.index.q.val() == 5 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(64));
+            self.checksum_word.next =
+                bit_cast::<32, 16>(self.fields_head.q.val().get_bits::<16>(0));
         } else if self.index.q.val() == 6 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(48));
+            self.checksum_word.next =
+                bit_cast::<32, 16>(self.fields_tail.q.val().get_bits::<16>(48));
         } else if self.index.q.val() == 7 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(32));
+            self.checksum_word.next =
+                bit_cast::<32, 16>(self.fields_tail.q.val().get_bits::<16>(32));
         } else if self.index.q.val() == 8 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(16));
+            self.checksum_word.next =
+                bit_cast::<32, 16>(self.fields_tail.q.val().get_bits::<16>(16));
         } else if self.index.q.val() == 9 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.fields.q.val().get_bits::<16>(0));
+            self.checksum_word.next =
+                bit_cast::<32, 16>(self.fields_tail.q.val().get_bits::<16>(0));
         }
         self.checksum_term.d.next = self.checksum_word.val();
 
@@ -280,7 +292,7 @@ impl Logic for FrameTransmitter {
         } else if self.index.q.val() == 53 {
             self.tx_byte.next = self.kind_held.q.val();
         } else if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
-            self.tx_byte.next = self.fields.q.val().get_bits::<8>(112);
+            self.tx_byte.next = self.fields_head.q.val().get_bits::<8>(48);
         } else if self.index.q.val() >= 74 {
             // the body (the FCS replaces what follows it at the output)
             self.tx_byte.next = self.payload_data.val();
@@ -316,7 +328,9 @@ impl Logic for FrameTransmitter {
                     (self.checksum.q.val() & 0xFFFF) + (self.checksum.q.val() >> 16);
             }
             if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
-                self.fields.d.next = self.fields.q.val() << 8;
+                self.fields_head.d.next = (self.fields_head.q.val() << 8)
+                    | bit_cast::<56, 8>(self.fields_tail.q.val().get_bits::<8>(56));
+                self.fields_tail.d.next = self.fields_tail.q.val() << 8;
             }
             if self.index.q.val() == 7 {
                 // the SFD is in the output stage now: the CRC starts with the next byte
@@ -341,10 +355,12 @@ impl Logic for FrameTransmitter {
             self.total_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 52;
             self.udp_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 32;
             self.checksum.d.next = self.udp_constant_sum.val() + self.body_sum.val();
-            self.fields.d.next = (bit_cast::<120, 8>(self.flags.val()) << 112)
-                | (bit_cast::<120, 32>(self.next_sequence.q.val()) << 80)
-                | (bit_cast::<120, 64>(self.base_tick.val()) << 16)
-                | bit_cast::<120, 16>(self.entry_count.val());
+            self.fields_head.d.next = (bit_cast::<56, 8>(self.flags.val()) << 48)
+                | (bit_cast::<56, 32>(self.next_sequence.q.val()) << 16)
+                | bit_cast::<56, 16>(self.base_tick.val().get_bits::<16>(48));
+            self.fields_tail.d.next = (bit_cast::<64, 48>(self.base_tick.val().get_bits::<48>(0))
+                << 16)
+                | bit_cast::<64, 16>(self.entry_count.val());
         }
         if self.reset.val() {
             self.sending.d.next = false;
