@@ -20,6 +20,7 @@ pub mod counter_file;
 pub mod crc32;
 pub mod frame_transmitter;
 pub mod interface_box;
+pub mod lut_ram;
 pub mod packet_arbiter;
 pub mod port_buffer;
 pub mod register_slice;

@@ -12,6 +12,7 @@
 //! Cost: a 64 x 9 RAM and about 30 flip-flops.
 
 use crate::cell_deframer::TICK_BEATS;
+use crate::lut_ram::LutRam;
 use crate::stream::{ByteStreamSink, ByteStreamSource};
 use rust_hdl::prelude::*;
 use skinbox_protocol::cell::PACKET_LEN;
@@ -37,7 +38,7 @@ pub struct PortBuffer {
     /// Counter events, bit i = `skinbox_protocol::PortCounter` i: bit 1 (dropped
     /// overflow) for one clock per good packet dropped because both slots were full.
     pub events: Signal<Out, Bits<8>>,
-    memory: RAM<Bits<9>, 6>,
+    memory: LutRam<9, 6>,
     stored_beats: Constant<Bits<5>>,
     slots: Constant<Bits<2>>,
     used: DFF<Bits<2>>,
@@ -97,8 +98,7 @@ impl Logic for PortBuffer {
             read_beat,
             current_address
         );
-        self.memory.write_clock.next = self.clock.val();
-        self.memory.read_clock.next = self.clock.val();
+        self.memory.clock.next = self.clock.val();
 
         // Write side: always ready; store beats, commit on a good last beat.
         self.sink.ready.next = true;
@@ -148,16 +148,22 @@ impl Logic for PortBuffer {
             self.source.data.next = self.memory.read_data.val().get_bits::<8>(0);
         }
         self.read_fire.next = self.source.valid.val() & self.source.ready.val();
-        // The address of the beat after the one shown comes from registers only, so the
-        // path from `ready` to the memory is one multiplexer.
+        // The address of the beat after the one shown comes from registers only. The output
+        // register of the memory loads it on a transfer and holds the shown beat otherwise
+        // (its slot is committed, so its words do not change); while nothing is shown it
+        // follows the first beat of the read slot. So `ready` only enables the register:
+        // no path runs from it through the memory.
         self.next_address.next = (bit_cast::<6, 1>(self.read_slot.q.val().into()) << 5)
             | bit_cast::<6, 5>(self.read_beat.q.val());
         if self.read_beat.q.val() == self.stored_beats.val() {
             self.next_address.next = bit_cast::<6, 1>((!self.read_slot.q.val()).into()) << 5;
         }
+        self.memory.read_enable.next = self.read_fire.val() | !self.source.valid.val();
         self.memory.read_address.next = self.current_address.q.val();
-        if self.read_fire.val() {
+        if self.source.valid.val() {
             self.memory.read_address.next = self.next_address.val();
+        }
+        if self.read_fire.val() {
             self.current_address.d.next = self.next_address.val();
             if self.read_beat.q.val() == self.stored_beats.val() {
                 self.read_beat.d.next = 0.into();
