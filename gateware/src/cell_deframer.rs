@@ -27,6 +27,11 @@ use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 /// Beats of the packet stream before the cell bytes: the 32-bit start tick.
 pub const TICK_BEATS: usize = 4;
 
+/// Clocks between the receiver's outputs and the deframer's logic: its input register,
+/// which lets the two sit apart on the chip (the start tick is read unregistered; it holds
+/// until the next start edge, half a bit after the strobe at the earliest).
+pub const INPUT_REGISTER_CLOCKS: u64 = 1;
+
 /// Packet finder for one port.
 #[derive(LogicBlock)]
 pub struct CellDeframer {
@@ -55,6 +60,10 @@ pub struct CellDeframer {
     end_of_packet: Constant<Bits<8>>,
     last_index: Constant<Bits<5>>,
     idle_gap_clocks: Constant<Bits<16>>,
+    input_data: DFF<Bits<8>>,
+    input_strobe: DFF<Bit>,
+    input_framing_error: DFF<Bit>,
+    input_busy: DFF<Bit>,
     in_packet: DFF<Bit>,
     aligned: DFF<Bit>,
     index: DFF<Bits<5>>,
@@ -102,6 +111,10 @@ impl CellDeframer {
             end_of_packet: Constant::new(u64::from(framing.end_of_packet).into()),
             last_index: Constant::new((PACKET_LEN as u64 - 1).into()),
             idle_gap_clocks: Constant::new(idle_gap_clocks.into()),
+            input_data: Default::default(),
+            input_strobe: Default::default(),
+            input_framing_error: Default::default(),
+            input_busy: Default::default(),
             in_packet: Default::default(),
             aligned: Default::default(),
             index: Default::default(),
@@ -130,6 +143,10 @@ impl Logic for CellDeframer {
         dff_setup!(
             self,
             clock,
+            input_data,
+            input_strobe,
+            input_framing_error,
+            input_busy,
             in_packet,
             aligned,
             index,
@@ -148,6 +165,10 @@ impl Logic for CellDeframer {
             pulse_framing_error,
             pulse_resync
         );
+        self.input_data.d.next = self.byte_data.val();
+        self.input_strobe.d.next = self.byte_strobe.val();
+        self.input_framing_error.d.next = self.byte_framing_error.val();
+        self.input_busy.d.next = self.uart_busy.val();
         self.pulse_good.d.next = false;
         self.pulse_rejected_end_byte.d.next = false;
         self.pulse_rejected_framing.d.next = false;
@@ -155,9 +176,9 @@ impl Logic for CellDeframer {
         self.pulse_garbage_byte.d.next = false;
         self.pulse_framing_error.d.next = false;
         self.pulse_resync.d.next = false;
-        self.is_header.next = !self.byte_framing_error.val()
-            & ((self.byte_data.val() == self.data_header.val())
-                | (self.byte_data.val() == self.event_header.val()));
+        self.is_header.next = !self.input_framing_error.q.val()
+            & ((self.input_data.q.val() == self.data_header.val())
+                | (self.input_data.q.val() == self.event_header.val()));
 
         // Output: the tick bytes first, then the pending cell byte.
         self.packets.valid.next = (self.tick_beats.q.val() != 0) | self.pending.q.val();
@@ -177,14 +198,14 @@ impl Logic for CellDeframer {
         }
 
         // Idle-gap timer: counts clocks of idle line inside a packet.
-        if self.in_packet.q.val() & !self.uart_busy.val() & !self.byte_strobe.val() {
+        if self.in_packet.q.val() & !self.input_busy.q.val() & !self.input_strobe.q.val() {
             self.idle_clocks.d.next = self.idle_clocks.q.val() + 1;
         } else {
             self.idle_clocks.d.next = 0.into();
         }
 
-        if self.byte_strobe.val() {
-            if self.byte_framing_error.val() {
+        if self.input_strobe.q.val() {
+            if self.input_framing_error.q.val() {
                 self.pulse_framing_error.d.next = true;
             }
             if !self.in_packet.q.val() {
@@ -194,7 +215,7 @@ impl Logic for CellDeframer {
                     self.tick_shift.d.next = self.byte_start_tick.val();
                     self.tick_beats.d.next = 4.into();
                     self.pending.d.next = true;
-                    self.pending_data.d.next = self.byte_data.val();
+                    self.pending_data.d.next = self.input_data.q.val();
                     self.pending_last.d.next = false;
                     self.pending_error.d.next = false;
                 } else {
@@ -206,11 +227,11 @@ impl Logic for CellDeframer {
                 }
             } else {
                 self.pending.d.next = true;
-                self.pending_data.d.next = self.byte_data.val();
+                self.pending_data.d.next = self.input_data.q.val();
                 self.pending_last.d.next = false;
                 self.pending_error.d.next = false;
                 self.index.d.next = self.index.q.val() + 1;
-                if self.byte_framing_error.val() {
+                if self.input_framing_error.q.val() {
                     self.in_packet.d.next = false;
                     self.aligned.d.next = false;
                     self.pending_last.d.next = true;
@@ -220,7 +241,7 @@ impl Logic for CellDeframer {
                 } else if self.index.q.val() == self.last_index.val() {
                     self.in_packet.d.next = false;
                     self.pending_last.d.next = true;
-                    if self.byte_data.val() == self.end_of_packet.val() {
+                    if self.input_data.q.val() == self.end_of_packet.val() {
                         self.aligned.d.next = true;
                         self.pulse_good.d.next = true;
                     } else {
@@ -245,6 +266,8 @@ impl Logic for CellDeframer {
         }
 
         if self.reset.val() {
+            self.input_strobe.d.next = false;
+            self.input_busy.d.next = false;
             self.in_packet.d.next = false;
             self.aligned.d.next = false;
             self.tick_beats.d.next = 0.into();

@@ -7,6 +7,7 @@
 //! `level(e)` is what the synchroniser's first flop captured at edge `e`.
 
 use crate::line::Transition;
+use skinbox_gateware::cell_deframer::INPUT_REGISTER_CLOCKS;
 use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 use skinbox_protocol::status::PortCounter;
 use std::cell::Cell;
@@ -127,7 +128,7 @@ impl Pin<'_> {
 struct Byte {
     value: u8,
     framing_error: bool,
-    /// Cycle its strobe is high.
+    /// Cycle its strobe is high at the deframer (after its input register).
     strobe: u64,
     /// Tick of the first low sample of its start bit.
     stamp: u64,
@@ -150,13 +151,15 @@ fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Reception> {
         if m >= end {
             break;
         }
-        let busy_from = m + 2;
+        // as the deframer sees them: through its input register
+        let seen = INPUT_REGISTER_CLOCKS;
+        let busy_from = m + 2 + seen;
         let k0 = m + middles[0];
         if pin.majority(k0) {
             // a glitch: back to idle after the start bit's middle
             out.push(Reception {
                 busy_from,
-                count_from: k0 + 1,
+                count_from: k0 + 1 + seen,
                 byte: None,
             });
             from = k0;
@@ -169,11 +172,11 @@ fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Reception> {
         let k9 = m + middles[9];
         out.push(Reception {
             busy_from,
-            count_from: k9 + 2,
+            count_from: k9 + 2 + seen,
             byte: Some(Byte {
                 value,
                 framing_error: !pin.majority(k9),
-                strobe: k9 + 1,
+                strobe: k9 + 1 + seen,
                 stamp: m - t.tick_offset,
             }),
         });
