@@ -50,9 +50,10 @@ pub struct PortBuffer {
     read_slot: DFF<Bit>,
     read_beat: DFF<Bits<5>>,
     current_address: DFF<Bits<6>>,
+    next_address: DFF<Bits<6>>,
+    last_stored_index: Constant<Bits<5>>,
     read_fire: Signal<Local, Bit>,
     commit: Signal<Local, Bit>,
-    next_address: Signal<Local, Bits<6>>,
 }
 
 impl Default for PortBuffer {
@@ -78,6 +79,7 @@ impl Default for PortBuffer {
             read_fire: Default::default(),
             commit: Default::default(),
             next_address: Default::default(),
+            last_stored_index: Constant::new((STORED_BEATS as u64 - 1).into()),
         }
     }
 }
@@ -96,7 +98,8 @@ impl Logic for PortBuffer {
             dropped_pulse,
             read_slot,
             read_beat,
-            current_address
+            current_address,
+            next_address
         );
         self.memory.clock.next = self.clock.val();
 
@@ -148,28 +151,32 @@ impl Logic for PortBuffer {
             self.source.data.next = self.memory.read_data.val().get_bits::<8>(0);
         }
         self.read_fire.next = self.source.valid.val() & self.source.ready.val();
-        // The address of the beat after the one shown comes from registers only. The output
-        // register of the memory loads it on a transfer and holds the shown beat otherwise
-        // (its slot is committed, so its words do not change); while nothing is shown it
-        // follows the first beat of the read slot. So `ready` only enables the register:
-        // no path runs from it through the memory.
-        self.next_address.next = (bit_cast::<6, 1>(self.read_slot.q.val().into()) << 5)
-            | bit_cast::<6, 5>(self.read_beat.q.val());
-        if self.read_beat.q.val() == self.stored_beats.val() {
-            self.next_address.next = bit_cast::<6, 1>((!self.read_slot.q.val()).into()) << 5;
-        }
+        // Beat k > 0 is stored at address k - 1 of its slot, and the flags ride on the word
+        // of beat 1, so beats 0 and 1 read the same word. `next_address` (a register) is the
+        // word of the beat after the one shown. The output register of the memory loads it
+        // on a transfer and holds the shown beat otherwise (its slot is committed, so its
+        // words do not change); while nothing is shown it follows the first word of the
+        // read slot. So `ready` only enables the register: no path runs from it, nor from
+        // the beat count, through the memory.
         self.memory.read_enable.next = self.read_fire.val() | !self.source.valid.val();
         self.memory.read_address.next = self.current_address.q.val();
         if self.source.valid.val() {
-            self.memory.read_address.next = self.next_address.val();
+            self.memory.read_address.next = self.next_address.q.val();
         }
         if self.read_fire.val() {
-            self.current_address.d.next = self.next_address.val();
+            self.current_address.d.next = self.next_address.q.val();
+            self.next_address.d.next = (bit_cast::<6, 1>(self.read_slot.q.val().into()) << 5)
+                | bit_cast::<6, 5>(self.read_beat.q.val() + 1);
             if self.read_beat.q.val() == self.stored_beats.val() {
                 self.read_beat.d.next = 0.into();
                 self.read_slot.d.next = !self.read_slot.q.val();
+                self.next_address.d.next = bit_cast::<6, 1>((!self.read_slot.q.val()).into()) << 5;
             } else {
                 self.read_beat.d.next = self.read_beat.q.val() + 1;
+                if self.read_beat.q.val() == self.last_stored_index.val() {
+                    self.next_address.d.next =
+                        bit_cast::<6, 1>((!self.read_slot.q.val()).into()) << 5;
+                }
             }
         }
 
@@ -190,6 +197,7 @@ impl Logic for PortBuffer {
             self.read_slot.d.next = false;
             self.read_beat.d.next = 0.into();
             self.current_address.d.next = 0.into();
+            self.next_address.d.next = 0.into();
         }
         self.events.next = bit_cast::<8, 1>(self.dropped_pulse.q.val().into()) << 1;
     }
