@@ -64,6 +64,8 @@ pub struct CellDeframer {
     input_strobe: DFF<Bit>,
     input_framing_error: DFF<Bit>,
     input_busy: DFF<Bit>,
+    input_is_header: DFF<Bit>,
+    out_valid: DFF<Bit>,
     in_packet: DFF<Bit>,
     aligned: DFF<Bit>,
     index: DFF<Bits<5>>,
@@ -81,7 +83,8 @@ pub struct CellDeframer {
     pulse_garbage_byte: DFF<Bit>,
     pulse_framing_error: DFF<Bit>,
     pulse_resync: DFF<Bit>,
-    is_header: Signal<Local, Bit>,
+    tick_beats_next: Signal<Local, Bits<3>>,
+    pending_next: Signal<Local, Bit>,
 }
 
 impl CellDeframer {
@@ -115,6 +118,8 @@ impl CellDeframer {
             input_strobe: Default::default(),
             input_framing_error: Default::default(),
             input_busy: Default::default(),
+            input_is_header: Default::default(),
+            out_valid: Default::default(),
             in_packet: Default::default(),
             aligned: Default::default(),
             index: Default::default(),
@@ -132,7 +137,8 @@ impl CellDeframer {
             pulse_garbage_byte: Default::default(),
             pulse_framing_error: Default::default(),
             pulse_resync: Default::default(),
-            is_header: Default::default(),
+            tick_beats_next: Default::default(),
+            pending_next: Default::default(),
         }
     }
 }
@@ -147,6 +153,8 @@ impl Logic for CellDeframer {
             input_strobe,
             input_framing_error,
             input_busy,
+            input_is_header,
+            out_valid,
             in_packet,
             aligned,
             index,
@@ -176,12 +184,16 @@ impl Logic for CellDeframer {
         self.pulse_garbage_byte.d.next = false;
         self.pulse_framing_error.d.next = false;
         self.pulse_resync.d.next = false;
-        self.is_header.next = !self.input_framing_error.q.val()
-            & ((self.input_data.q.val() == self.data_header.val())
-                | (self.input_data.q.val() == self.event_header.val()));
+        // the header test on the receiver's outputs, registered with the byte
+        self.input_is_header.d.next = !self.byte_framing_error.val()
+            & ((self.byte_data.val() == self.data_header.val())
+                | (self.byte_data.val() == self.event_header.val()));
+        // the next values of the output registers: `valid` is a register too
+        self.tick_beats_next.next = self.tick_beats.q.val();
+        self.pending_next.next = self.pending.q.val();
 
         // Output: the tick bytes first, then the pending cell byte.
-        self.packets.valid.next = (self.tick_beats.q.val() != 0) | self.pending.q.val();
+        self.packets.valid.next = self.out_valid.q.val();
         self.packets.data.next = self.pending_data.q.val();
         self.packets.last.next = self.pending_last.q.val();
         self.packets.error.next = self.pending_error.q.val();
@@ -190,11 +202,11 @@ impl Logic for CellDeframer {
             self.packets.last.next = false;
             self.packets.error.next = false;
             if self.packets.ready.val() {
-                self.tick_beats.d.next = self.tick_beats.q.val() - 1;
+                self.tick_beats_next.next = self.tick_beats.q.val() - 1;
                 self.tick_shift.d.next = self.tick_shift.q.val() << 8;
             }
         } else if self.pending.q.val() & self.packets.ready.val() {
-            self.pending.d.next = false;
+            self.pending_next.next = false;
         }
 
         // Idle-gap timer: counts clocks of idle line inside a packet.
@@ -209,12 +221,12 @@ impl Logic for CellDeframer {
                 self.pulse_framing_error.d.next = true;
             }
             if !self.in_packet.q.val() {
-                if self.is_header.val() {
+                if self.input_is_header.q.val() {
                     self.in_packet.d.next = true;
                     self.index.d.next = 1.into();
                     self.tick_shift.d.next = self.byte_start_tick.val();
-                    self.tick_beats.d.next = 4.into();
-                    self.pending.d.next = true;
+                    self.tick_beats_next.next = 4.into();
+                    self.pending_next.next = true;
                     self.pending_data.d.next = self.input_data.q.val();
                     self.pending_last.d.next = false;
                     self.pending_error.d.next = false;
@@ -226,7 +238,7 @@ impl Logic for CellDeframer {
                     }
                 }
             } else {
-                self.pending.d.next = true;
+                self.pending_next.next = true;
                 self.pending_data.d.next = self.input_data.q.val();
                 self.pending_last.d.next = false;
                 self.pending_error.d.next = false;
@@ -257,7 +269,7 @@ impl Logic for CellDeframer {
             // truncated: close the packet with an error beat
             self.in_packet.d.next = false;
             self.aligned.d.next = false;
-            self.pending.d.next = true;
+            self.pending_next.next = true;
             self.pending_data.d.next = 0.into();
             self.pending_last.d.next = true;
             self.pending_error.d.next = true;
@@ -270,8 +282,8 @@ impl Logic for CellDeframer {
             self.input_busy.d.next = false;
             self.in_packet.d.next = false;
             self.aligned.d.next = false;
-            self.tick_beats.d.next = 0.into();
-            self.pending.d.next = false;
+            self.tick_beats_next.next = 0.into();
+            self.pending_next.next = false;
             self.pulse_good.d.next = false;
             self.pulse_rejected_end_byte.d.next = false;
             self.pulse_rejected_framing.d.next = false;
@@ -280,6 +292,9 @@ impl Logic for CellDeframer {
             self.pulse_framing_error.d.next = false;
             self.pulse_resync.d.next = false;
         }
+        self.tick_beats.d.next = self.tick_beats_next.val();
+        self.pending.d.next = self.pending_next.val();
+        self.out_valid.d.next = (self.tick_beats_next.val() != 0) | self.pending_next.val();
         self.events.next = bit_cast::<8, 1>(self.pulse_good.q.val().into())
             | (bit_cast::<8, 1>(self.pulse_rejected_end_byte.q.val().into()) << 2)
             | (bit_cast::<8, 1>(self.pulse_rejected_framing.q.val().into()) << 3)
