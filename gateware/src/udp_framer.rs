@@ -86,6 +86,14 @@ pub struct UdpFramer {
     fill_base_tick: DFF<Bits<64>>,
     fill_deadline: DFF<Bits<32>>,
     deadline_passed: DFF<Bit>,
+    // registered tests of beat, offset_left and fill_count, kept equal to them
+    beat_zero: DFF<Bit>,
+    offset_idle: DFF<Bit>,
+    fill_full: DFF<Bit>,
+    fill_nonzero: DFF<Bit>,
+    beat_next: Signal<Local, Bits<5>>,
+    offset_left_next: Signal<Local, Bits<3>>,
+    fill_count_next: Signal<Local, Bits<6>>,
     beat: DFF<Bits<5>>,
     tick_low: DFF<Bits<32>>,
     offset_bytes: DFF<Bits<32>>,
@@ -150,6 +158,13 @@ impl UdpFramer {
             fill_base_tick: Default::default(),
             fill_deadline: Default::default(),
             deadline_passed: Default::default(),
+            beat_zero: Default::default(),
+            offset_idle: Default::default(),
+            fill_full: Default::default(),
+            fill_nonzero: Default::default(),
+            beat_next: Default::default(),
+            offset_left_next: Default::default(),
+            fill_count_next: Default::default(),
             beat: Default::default(),
             tick_low: Default::default(),
             offset_bytes: Default::default(),
@@ -193,6 +208,10 @@ impl Logic for UdpFramer {
             fill_base_tick,
             fill_deadline,
             deadline_passed,
+            beat_zero,
+            offset_idle,
+            fill_full,
+            fill_nonzero,
             beat,
             tick_low,
             offset_bytes,
@@ -219,16 +238,19 @@ impl Logic for UdpFramer {
         self.deadline_delta.next = self.tick.val().get_bits::<32>(0) - self.fill_deadline.q.val();
         self.deadline_passed.d.next = !self.deadline_delta.val().get_bit(31);
         // Close the filling datagram at a record boundary when full or due.
-        self.close_due.next = (self.beat.q.val() == 0)
-            & (self.offset_left.q.val() == 0)
-            & ((self.fill_count.q.val() == self.max_records.val())
-                | ((self.fill_count.q.val() != 0) & self.deadline_passed.q.val()));
+        // (the tests of beat, offset_left and fill_count come from registers)
+        self.beat_next.next = self.beat.q.val();
+        self.offset_left_next.next = self.offset_left.q.val();
+        self.fill_count_next.next = self.fill_count.q.val();
+        self.close_due.next = self.beat_zero.q.val()
+            & self.offset_idle.q.val()
+            & (self.fill_full.q.val() | (self.fill_nonzero.q.val() & self.deadline_passed.q.val()));
         self.can_close.next = !self.pending.q.val() & !self.sending_records.q.val();
         // No beat moves while a datagram closes (it would land in the old buffer) or while a
         // full datagram waits for a free buffer.
-        self.accept.next = (self.offset_left.q.val() == 0)
+        self.accept.next = self.offset_idle.q.val()
             & !(self.close_due.val() & self.can_close.val())
-            & !((self.beat.q.val() == 0) & (self.fill_count.q.val() == self.max_records.val()));
+            & !(self.beat_zero.q.val() & self.fill_full.q.val());
         self.records.ready.next = self.accept.val();
 
         // Write one byte per clock: offset bytes while they are pending, else stream beats.
@@ -240,12 +262,12 @@ impl Logic for UdpFramer {
             self.write.next = true;
             self.write_data.next = self.offset_bytes.q.val().get_bits::<8>(24);
             self.offset_bytes.d.next = self.offset_bytes.q.val() << 8;
-            self.offset_left.d.next = self.offset_left.q.val() - 1;
+            self.offset_left_next.next = self.offset_left.q.val() - 1;
         } else if self.records.valid.val() & self.accept.val() {
-            self.beat.d.next = self.beat.q.val() + 1;
+            self.beat_next.next = self.beat.q.val() + 1;
             if self.beat.q.val() == 25 {
-                self.beat.d.next = 0.into();
-                self.fill_count.d.next = self.fill_count.q.val() + 1;
+                self.beat_next.next = 0.into();
+                self.fill_count_next.next = self.fill_count.q.val() + 1;
             }
             if (self.beat.q.val() >= 2) & (self.beat.q.val() <= 5) {
                 self.tick_low.d.next = self.record_tick.val();
@@ -253,7 +275,7 @@ impl Logic for UdpFramer {
                 self.write.next = true;
             }
             if self.beat.q.val() == 5 {
-                self.offset_left.d.next = 4.into();
+                self.offset_left_next.next = 4.into();
                 if self.fill_count.q.val() == 0 {
                     // first record: its tick is the base, rebuilt to 64 bits from now
                     self.offset_bytes.d.next = 0.into();
@@ -296,7 +318,7 @@ impl Logic for UdpFramer {
                 self.pending_flags.d.next = 1.into();
             }
             self.fill_buffer.d.next = !self.fill_buffer.q.val();
-            self.fill_count.d.next = 0.into();
+            self.fill_count_next.next = 0.into();
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
         }
@@ -351,11 +373,11 @@ impl Logic for UdpFramer {
 
         if self.reset.val() {
             self.fill_buffer.d.next = false;
-            self.fill_count.d.next = 0.into();
+            self.fill_count_next.next = 0.into();
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
-            self.beat.d.next = 0.into();
-            self.offset_left.d.next = 0.into();
+            self.beat_next.next = 0.into();
+            self.offset_left_next.next = 0.into();
             self.pending.d.next = false;
             self.sending_records.d.next = false;
             self.sending_status.d.next = false;
@@ -363,6 +385,13 @@ impl Logic for UdpFramer {
             self.datagram_count.d.next = 0.into();
             self.record_count.d.next = 0.into();
         }
+        self.beat.d.next = self.beat_next.val();
+        self.offset_left.d.next = self.offset_left_next.val();
+        self.fill_count.d.next = self.fill_count_next.val();
+        self.beat_zero.d.next = self.beat_next.val() == 0;
+        self.offset_idle.d.next = self.offset_left_next.val() == 0;
+        self.fill_full.d.next = self.fill_count_next.val() == self.max_records.val();
+        self.fill_nonzero.d.next = self.fill_count_next.val() != 0;
         self.status_taken.next = self.status_taken_pulse.q.val();
         self.status_sending.next = self.sending_status.q.val();
         self.datagrams_sent.next = self.datagram_count.q.val();
