@@ -99,7 +99,9 @@ pub struct FrameTransmitter {
     pub gmii_tx_en: Signal<Out, Bit>,
     /// GMII transmit error (never set).
     pub gmii_tx_er: Signal<Out, Bit>,
-    template: ROM<Bits<8>, 7>,
+    // the template shifted by one: byte i + 1 at address i (the lookup runs a clock ahead)
+    template_ahead: ROM<Bits<8>, 7>,
+    first_template_byte: Constant<Bits<8>>,
     udp_constant_sum: Constant<Bits<32>>,
     ip_constant_sum: Constant<Bits<32>>,
     crc: Crc32Byte,
@@ -117,6 +119,11 @@ pub struct FrameTransmitter {
     txd: DFF<Bits<8>>,
     tx_en: DFF<Bit>,
     body_end: DFF<Bits<11>>,
+    // the index before the frame's last one (its last FCS byte), set with the descriptor
+    end_minus_one: DFF<Bits<11>>,
+    // registered index tests, true at index 7 (the CRC starts) and at the last index
+    crc_starts: DFF<Bit>,
+    frame_ends: DFF<Bit>,
     total_len: DFF<Bits<16>>,
     udp_len: DFF<Bits<16>>,
     ip_checksum: DFF<Bits<16>>,
@@ -125,6 +132,13 @@ pub struct FrameTransmitter {
     stage_valid: DFF<Bit>,
     stage_crc: DFF<Bit>,
     stage_fcs: DFF<Bit>,
+    // where the byte at `index` comes from, one-hot, and the template byte, both looked
+    // up a clock ahead: bit 0 template, 1/2 IPv4 total length high/low, 3/4 IPv4
+    // checksum, 5/6 UDP length, 7/8 UDP checksum, 9 kind, 10 header fields, 11 body
+    byte_source: DFF<Bits<12>>,
+    template_byte: DFF<Bits<8>>,
+    udp_checksum_held: DFF<Bits<16>>,
+    source_ahead: Signal<Local, Bits<12>>,
     tx_byte: Signal<Local, Bits<8>>,
     ip_sum: Signal<Local, Bits<32>>,
     ip_fold: Signal<Local, Bits<32>>,
@@ -160,7 +174,13 @@ impl FrameTransmitter {
             gmii_txd: Default::default(),
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
-            template: t.into_iter().map(|b| u64::from(b).into()).into(),
+            first_template_byte: Constant::new(u64::from(t[0]).into()),
+            template_ahead: t
+                .iter()
+                .skip(1)
+                .chain(std::iter::once(&0))
+                .map(|&b| u64::from(b).into())
+                .into(),
             udp_constant_sum: Constant::new(udp_constant.into()),
             ip_constant_sum: Constant::new(ip_constant.into()),
             crc: Default::default(),
@@ -176,6 +196,9 @@ impl FrameTransmitter {
             txd: Default::default(),
             tx_en: Default::default(),
             body_end: Default::default(),
+            end_minus_one: Default::default(),
+            crc_starts: Default::default(),
+            frame_ends: Default::default(),
             total_len: Default::default(),
             udp_len: Default::default(),
             ip_checksum: Default::default(),
@@ -184,6 +207,10 @@ impl FrameTransmitter {
             stage_valid: Default::default(),
             stage_crc: Default::default(),
             stage_fcs: Default::default(),
+            byte_source: Default::default(),
+            template_byte: Default::default(),
+            udp_checksum_held: Default::default(),
+            source_ahead: Default::default(),
             tx_byte: Default::default(),
             ip_sum: Default::default(),
             ip_fold: Default::default(),
@@ -217,6 +244,9 @@ impl Logic for FrameTransmitter {
             txd,
             tx_en,
             body_end,
+            end_minus_one,
+            crc_starts,
+            frame_ends,
             total_len,
             udp_len,
             ip_checksum,
@@ -224,7 +254,10 @@ impl Logic for FrameTransmitter {
             stage_byte,
             stage_valid,
             stage_crc,
-            stage_fcs
+            stage_fcs,
+            byte_source,
+            template_byte,
+            udp_checksum_held
         );
         // Frame geometry: registered at the start from the body length (lengths), one clock
         // later the IPv4 checksum (needed from byte 32 on).
@@ -270,32 +303,80 @@ impl Logic for FrameTransmitter {
         }
         self.checksum_term.d.next = self.checksum_word.val();
 
-        // The byte at `index`.
-        self.template.address.next = self.index.q.val().get_bits::<7>(0);
-        self.tx_byte.next = self.template.data.val();
-        if self.index.q.val() == 24 {
-            self.tx_byte.next = self.total_len.q.val().get_bits::<8>(8);
-        } else if self.index.q.val() == 25 {
-            self.tx_byte.next = self.total_len.q.val().get_bits::<8>(0);
-        } else if self.index.q.val() == 32 {
-            self.tx_byte.next = self.ip_checksum.q.val().get_bits::<8>(8);
-        } else if self.index.q.val() == 33 {
-            self.tx_byte.next = self.ip_checksum.q.val().get_bits::<8>(0);
-        } else if self.index.q.val() == 46 {
-            self.tx_byte.next = self.udp_len.q.val().get_bits::<8>(8);
-        } else if self.index.q.val() == 47 {
-            self.tx_byte.next = self.udp_len.q.val().get_bits::<8>(0);
-        } else if self.index.q.val() == 48 {
-            self.tx_byte.next = self.udp_checksum.val().get_bits::<8>(8);
-        } else if self.index.q.val() == 49 {
-            self.tx_byte.next = self.udp_checksum.val().get_bits::<8>(0);
-        } else if self.index.q.val() == 53 {
-            self.tx_byte.next = self.kind_held.q.val();
-        } else if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
-            self.tx_byte.next = self.fields_head.q.val().get_bits::<8>(48);
-        } else if self.index.q.val() >= 74 {
-            // the body (the FCS replaces what follows it at the output)
-            self.tx_byte.next = self.payload_data.val();
+        // The byte at `index`, from a multiplexer whose select is a register: its source
+        // and the template byte are looked up a clock ahead, for the index that follows
+        // (`index + 1` while sending, 0 for a start).
+        self.template_ahead.address.next = self.index.q.val().get_bits::<7>(0);
+        self.template_byte.d.next = self.first_template_byte.val();
+        self.source_ahead.next = 1.into();
+        if self.sending.q.val() {
+            self.template_byte.d.next = self.template_ahead.data.val();
+            if self.index.q.val() == 23 {
+                self.source_ahead.next = 2.into();
+            } else if self.index.q.val() == 24 {
+                self.source_ahead.next = 4.into();
+            } else if self.index.q.val() == 31 {
+                self.source_ahead.next = 8.into();
+            } else if self.index.q.val() == 32 {
+                self.source_ahead.next = 16.into();
+            } else if self.index.q.val() == 45 {
+                self.source_ahead.next = 32.into();
+            } else if self.index.q.val() == 46 {
+                self.source_ahead.next = 64.into();
+            } else if self.index.q.val() == 47 {
+                self.source_ahead.next = 128.into();
+            } else if self.index.q.val() == 48 {
+                self.source_ahead.next = 256.into();
+            } else if self.index.q.val() == 52 {
+                self.source_ahead.next = 512.into();
+            } else if (self.index.q.val() >= 56) & (self.index.q.val() < 71) {
+                self.source_ahead.next = 1024.into();
+            } else if self.index.q.val() >= 73 {
+                // the body (the FCS replaces what follows it at the output)
+                self.source_ahead.next = 2048.into();
+            }
+        }
+        self.byte_source.d.next = self.source_ahead.val();
+        // (final long before byte 48: the sum is done by byte 13)
+        self.udp_checksum_held.d.next = self.udp_checksum.val();
+        self.tx_byte.next = 0.into();
+        if self.byte_source.q.val().get_bit(0) {
+            self.tx_byte.next = self.tx_byte.val() | self.template_byte.q.val();
+        }
+        if self.byte_source.q.val().get_bit(1) {
+            self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(8);
+        }
+        if self.byte_source.q.val().get_bit(2) {
+            self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(0);
+        }
+        if self.byte_source.q.val().get_bit(3) {
+            self.tx_byte.next = self.tx_byte.val() | self.ip_checksum.q.val().get_bits::<8>(8);
+        }
+        if self.byte_source.q.val().get_bit(4) {
+            self.tx_byte.next = self.tx_byte.val() | self.ip_checksum.q.val().get_bits::<8>(0);
+        }
+        if self.byte_source.q.val().get_bit(5) {
+            self.tx_byte.next = self.tx_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
+        }
+        if self.byte_source.q.val().get_bit(6) {
+            self.tx_byte.next = self.tx_byte.val() | self.udp_len.q.val().get_bits::<8>(0);
+        }
+        if self.byte_source.q.val().get_bit(7) {
+            self.tx_byte.next =
+                self.tx_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(8);
+        }
+        if self.byte_source.q.val().get_bit(8) {
+            self.tx_byte.next =
+                self.tx_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(0);
+        }
+        if self.byte_source.q.val().get_bit(9) {
+            self.tx_byte.next = self.tx_byte.val() | self.kind_held.q.val();
+        }
+        if self.byte_source.q.val().get_bit(10) {
+            self.tx_byte.next = self.tx_byte.val() | self.fields_head.q.val().get_bits::<8>(48);
+        }
+        if self.byte_source.q.val().get_bit(11) {
+            self.tx_byte.next = self.tx_byte.val() | self.payload_data.val();
         }
         self.payload_address.next = self.index.q.val() + 2 - 74;
 
@@ -318,6 +399,11 @@ impl Logic for FrameTransmitter {
             self.crc_register.d.next = self.crc_register.q.val() >> 8;
         }
 
+        // the index tests of the next clock, from this clock's index (it counts up by one
+        // while sending)
+        self.crc_starts.d.next = self.sending.q.val() & (self.index.q.val() == 6);
+        self.frame_ends.d.next =
+            self.sending.q.val() & (self.index.q.val() == self.end_minus_one.q.val());
         if self.sending.q.val() {
             self.index.d.next = self.index.q.val() + 1;
             // the word chosen at byte i is added at byte i + 1 (from a register)
@@ -332,11 +418,11 @@ impl Logic for FrameTransmitter {
                     | bit_cast::<56, 8>(self.fields_tail.q.val().get_bits::<8>(56));
                 self.fields_tail.d.next = self.fields_tail.q.val() << 8;
             }
-            if self.index.q.val() == 7 {
-                // the SFD is in the output stage now: the CRC starts with the next byte
+            if self.crc_starts.q.val() {
+                // index 7: the SFD is in the output stage now: the CRC starts with the next byte
                 self.crc_register.d.next = 0xFFFF_FFFF_u64.into();
             }
-            if self.index.q.val() == self.body_end.q.val() + 3 {
+            if self.frame_ends.q.val() {
                 self.sending.d.next = false;
                 self.gap.d.next = 11.into();
             }
@@ -352,6 +438,7 @@ impl Logic for FrameTransmitter {
         if !self.sending.q.val() {
             self.kind_held.d.next = self.kind.val();
             self.body_end.d.next = self.body_len.val() + 74;
+            self.end_minus_one.d.next = self.body_len.val() + 76;
             self.total_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 52;
             self.udp_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 32;
             self.checksum.d.next = self.udp_constant_sum.val() + self.body_sum.val();
@@ -365,6 +452,8 @@ impl Logic for FrameTransmitter {
         if self.reset.val() {
             self.sending.d.next = false;
             self.stage_valid.d.next = false;
+            self.crc_starts.d.next = false;
+            self.frame_ends.d.next = false;
             self.gap.d.next = 0.into();
             self.tx_en.d.next = false;
             self.next_sequence.d.next = 0.into();
