@@ -42,6 +42,10 @@ pub struct PortBuffer {
     stored_beats: Constant<Bits<5>>,
     slots: Constant<Bits<2>>,
     used: DFF<Bits<2>>,
+    // used != 0 and used == 2, kept in registers
+    occupied: DFF<Bit>,
+    full: DFF<Bit>,
+    used_next: Signal<Local, Bits<2>>,
     write_slot: DFF<Bit>,
     write_index: DFF<Bits<5>>,
     dropping: DFF<Bit>,
@@ -68,6 +72,9 @@ impl Default for PortBuffer {
             stored_beats: Constant::new((STORED_BEATS as u64).into()),
             slots: Constant::new((SLOTS as u64).into()),
             used: Default::default(),
+            occupied: Default::default(),
+            full: Default::default(),
+            used_next: Default::default(),
             write_slot: Default::default(),
             write_index: Default::default(),
             dropping: Default::default(),
@@ -91,6 +98,8 @@ impl Logic for PortBuffer {
             self,
             clock,
             used,
+            occupied,
+            full,
             write_slot,
             write_index,
             dropping,
@@ -114,8 +123,8 @@ impl Logic for PortBuffer {
             | (bit_cast::<9, 1>(self.loss_pending.q.val().into()) << 8);
         if self.sink.valid.val() {
             if self.write_index.q.val() == 0 {
-                self.dropping.d.next = self.used.q.val() == self.slots.val();
-                self.memory.write_enable.next = self.used.q.val() != self.slots.val();
+                self.dropping.d.next = self.full.q.val();
+                self.memory.write_enable.next = !self.full.q.val();
             } else {
                 self.memory.write_enable.next =
                     !self.dropping.q.val() & (self.write_index.q.val() < self.stored_beats.val());
@@ -128,7 +137,7 @@ impl Logic for PortBuffer {
                 if self.sink.error.val() {
                     self.loss_pending.d.next = true;
                 } else if self.dropping.q.val()
-                    | ((self.write_index.q.val() == 0) & (self.used.q.val() == self.slots.val()))
+                    | ((self.write_index.q.val() == 0) & self.full.q.val())
                 {
                     self.loss_pending.d.next = true;
                     self.dropped_pulse.d.next = true;
@@ -142,7 +151,7 @@ impl Logic for PortBuffer {
 
         // Read side: beat 0 is the flags byte, beats 1..=24 the stored bytes. The RAM reads
         // one clock late, so it is addressed with the beat shown after this edge.
-        self.source.valid.next = self.used.q.val() != 0;
+        self.source.valid.next = self.occupied.q.val();
         self.source.last.next = self.read_beat.q.val() == self.stored_beats.val();
         self.source.error.next = false;
         if self.read_beat.q.val() == 0 {
@@ -181,14 +190,15 @@ impl Logic for PortBuffer {
         }
 
         // Occupancy.
+        self.used_next.next = self.used.q.val();
         if self.commit.val() & !(self.read_fire.val() & self.source.last.val()) {
-            self.used.d.next = self.used.q.val() + 1;
+            self.used_next.next = self.used.q.val() + 1;
         } else if !self.commit.val() & self.read_fire.val() & self.source.last.val() {
-            self.used.d.next = self.used.q.val() - 1;
+            self.used_next.next = self.used.q.val() - 1;
         }
 
         if self.reset.val() {
-            self.used.d.next = 0.into();
+            self.used_next.next = 0.into();
             self.write_slot.d.next = false;
             self.write_index.d.next = 0.into();
             self.dropping.d.next = false;
@@ -199,6 +209,9 @@ impl Logic for PortBuffer {
             self.current_address.d.next = 0.into();
             self.next_address.d.next = 0.into();
         }
+        self.used.d.next = self.used_next.val();
+        self.occupied.d.next = self.used_next.val() != 0;
+        self.full.d.next = self.used_next.val() == self.slots.val();
         self.events.next = bit_cast::<8, 1>(self.dropped_pulse.q.val().into()) << 1;
     }
 }

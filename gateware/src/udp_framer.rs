@@ -78,6 +78,7 @@ pub struct UdpFramer {
     transmitter: FrameTransmitter,
     memory: BlockRam<8, 12>,
     max_records: Constant<Bits<6>>,
+    last_fill: Constant<Bits<6>>,
     flush_timeout: Constant<Bits<32>>,
     fill_buffer: DFF<Bit>,
     fill_count: DFF<Bits<6>>,
@@ -150,6 +151,7 @@ impl UdpFramer {
             transmitter: FrameTransmitter::new(&config.link, config.box_id, config.port_count),
             memory: Default::default(),
             max_records: Constant::new((MAX_RECORDS as u64).into()),
+            last_fill: Constant::new((MAX_RECORDS as u64 - 1).into()),
             flush_timeout: Constant::new(config.flush_timeout_ticks.into()),
             fill_buffer: Default::default(),
             fill_count: Default::default(),
@@ -242,6 +244,11 @@ impl Logic for UdpFramer {
         self.beat_next.next = self.beat.q.val();
         self.offset_left_next.next = self.offset_left.q.val();
         self.fill_count_next.next = self.fill_count.q.val();
+        // (each test is set and cleared by the events that change its counter, below)
+        self.beat_zero.d.next = self.beat_zero.q.val();
+        self.offset_idle.d.next = self.offset_idle.q.val();
+        self.fill_full.d.next = self.fill_full.q.val();
+        self.fill_nonzero.d.next = self.fill_nonzero.q.val();
         self.close_due.next = self.beat_zero.q.val()
             & self.offset_idle.q.val()
             & (self.fill_full.q.val() | (self.fill_nonzero.q.val() & self.deadline_passed.q.val()));
@@ -258,16 +265,21 @@ impl Logic for UdpFramer {
         self.write_data.next = self.records.data.val();
         self.record_tick.next =
             (self.tick_low.q.val() << 8) | bit_cast::<32, 8>(self.records.data.val());
-        if self.offset_left.q.val() != 0 {
+        if !self.offset_idle.q.val() {
             self.write.next = true;
             self.write_data.next = self.offset_bytes.q.val().get_bits::<8>(24);
             self.offset_bytes.d.next = self.offset_bytes.q.val() << 8;
             self.offset_left_next.next = self.offset_left.q.val() - 1;
+            self.offset_idle.d.next = self.offset_left.q.val() == 1;
         } else if self.records.valid.val() & self.accept.val() {
             self.beat_next.next = self.beat.q.val() + 1;
+            self.beat_zero.d.next = false;
             if self.beat.q.val() == 25 {
                 self.beat_next.next = 0.into();
+                self.beat_zero.d.next = true;
                 self.fill_count_next.next = self.fill_count.q.val() + 1;
+                self.fill_full.d.next = self.fill_count.q.val() == self.last_fill.val();
+                self.fill_nonzero.d.next = true;
             }
             if (self.beat.q.val() >= 2) & (self.beat.q.val() <= 5) {
                 self.tick_low.d.next = self.record_tick.val();
@@ -276,6 +288,7 @@ impl Logic for UdpFramer {
             }
             if self.beat.q.val() == 5 {
                 self.offset_left_next.next = 4.into();
+                self.offset_idle.d.next = false;
                 if self.fill_count.q.val() == 0 {
                     // first record: its tick is the base, rebuilt to 64 bits from now
                     self.offset_bytes.d.next = 0.into();
@@ -319,6 +332,8 @@ impl Logic for UdpFramer {
             }
             self.fill_buffer.d.next = !self.fill_buffer.q.val();
             self.fill_count_next.next = 0.into();
+            self.fill_full.d.next = false;
+            self.fill_nonzero.d.next = false;
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
         }
@@ -374,6 +389,10 @@ impl Logic for UdpFramer {
         if self.reset.val() {
             self.fill_buffer.d.next = false;
             self.fill_count_next.next = 0.into();
+            self.beat_zero.d.next = true;
+            self.offset_idle.d.next = true;
+            self.fill_full.d.next = false;
+            self.fill_nonzero.d.next = false;
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
             self.beat_next.next = 0.into();
@@ -388,10 +407,6 @@ impl Logic for UdpFramer {
         self.beat.d.next = self.beat_next.val();
         self.offset_left.d.next = self.offset_left_next.val();
         self.fill_count.d.next = self.fill_count_next.val();
-        self.beat_zero.d.next = self.beat_next.val() == 0;
-        self.offset_idle.d.next = self.offset_left_next.val() == 0;
-        self.fill_full.d.next = self.fill_count_next.val() == self.max_records.val();
-        self.fill_nonzero.d.next = self.fill_count_next.val() != 0;
         self.status_taken.next = self.status_taken_pulse.q.val();
         self.status_sending.next = self.sending_status.q.val();
         self.datagrams_sent.next = self.datagram_count.q.val();
