@@ -76,13 +76,9 @@ pub struct CellDeframer {
     pending_data: DFF<Bits<8>>,
     pending_last: DFF<Bit>,
     pending_error: DFF<Bit>,
-    pulse_good: DFF<Bit>,
-    pulse_rejected_end_byte: DFF<Bit>,
-    pulse_rejected_framing: DFF<Bit>,
-    pulse_rejected_truncated: DFF<Bit>,
-    pulse_garbage_byte: DFF<Bit>,
-    pulse_framing_error: DFF<Bit>,
-    pulse_resync: DFF<Bit>,
+    // the counter events of this clock, one bit each (`events`), from a register
+    event_bits: DFF<Bits<8>>,
+    events_now: Signal<Local, Bits<8>>,
     tick_beats_next: Signal<Local, Bits<3>>,
     pending_next: Signal<Local, Bit>,
 }
@@ -130,13 +126,8 @@ impl CellDeframer {
             pending_data: Default::default(),
             pending_last: Default::default(),
             pending_error: Default::default(),
-            pulse_good: Default::default(),
-            pulse_rejected_end_byte: Default::default(),
-            pulse_rejected_framing: Default::default(),
-            pulse_rejected_truncated: Default::default(),
-            pulse_garbage_byte: Default::default(),
-            pulse_framing_error: Default::default(),
-            pulse_resync: Default::default(),
+            event_bits: Default::default(),
+            events_now: Default::default(),
             tick_beats_next: Default::default(),
             pending_next: Default::default(),
         }
@@ -165,25 +156,13 @@ impl Logic for CellDeframer {
             pending_data,
             pending_last,
             pending_error,
-            pulse_good,
-            pulse_rejected_end_byte,
-            pulse_rejected_framing,
-            pulse_rejected_truncated,
-            pulse_garbage_byte,
-            pulse_framing_error,
-            pulse_resync
+            event_bits
         );
         self.input_data.d.next = self.byte_data.val();
         self.input_strobe.d.next = self.byte_strobe.val();
         self.input_framing_error.d.next = self.byte_framing_error.val();
         self.input_busy.d.next = self.uart_busy.val();
-        self.pulse_good.d.next = false;
-        self.pulse_rejected_end_byte.d.next = false;
-        self.pulse_rejected_framing.d.next = false;
-        self.pulse_rejected_truncated.d.next = false;
-        self.pulse_garbage_byte.d.next = false;
-        self.pulse_framing_error.d.next = false;
-        self.pulse_resync.d.next = false;
+        self.events_now.next = 0.into();
         // the header test on the receiver's outputs, registered with the byte
         self.input_is_header.d.next = !self.byte_framing_error.val()
             & ((self.byte_data.val() == self.data_header.val())
@@ -218,7 +197,7 @@ impl Logic for CellDeframer {
 
         if self.input_strobe.q.val() {
             if self.input_framing_error.q.val() {
-                self.pulse_framing_error.d.next = true;
+                self.events_now.next = self.events_now.val() | 64;
             }
             if !self.in_packet.q.val() {
                 if self.input_is_header.q.val() {
@@ -231,10 +210,10 @@ impl Logic for CellDeframer {
                     self.pending_last.d.next = false;
                     self.pending_error.d.next = false;
                 } else {
-                    self.pulse_garbage_byte.d.next = true;
+                    self.events_now.next = self.events_now.val() | 32;
                     if self.aligned.q.val() {
                         self.aligned.d.next = false;
-                        self.pulse_resync.d.next = true;
+                        self.events_now.next = self.events_now.val() | 128;
                     }
                 }
             } else {
@@ -248,19 +227,19 @@ impl Logic for CellDeframer {
                     self.aligned.d.next = false;
                     self.pending_last.d.next = true;
                     self.pending_error.d.next = true;
-                    self.pulse_rejected_framing.d.next = true;
-                    self.pulse_resync.d.next = true;
+                    self.events_now.next = self.events_now.val() | 8;
+                    self.events_now.next = self.events_now.val() | 128;
                 } else if self.index.q.val() == self.last_index.val() {
                     self.in_packet.d.next = false;
                     self.pending_last.d.next = true;
                     if self.input_data.q.val() == self.end_of_packet.val() {
                         self.aligned.d.next = true;
-                        self.pulse_good.d.next = true;
+                        self.events_now.next = self.events_now.val() | 1;
                     } else {
                         self.aligned.d.next = false;
                         self.pending_error.d.next = true;
-                        self.pulse_rejected_end_byte.d.next = true;
-                        self.pulse_resync.d.next = true;
+                        self.events_now.next = self.events_now.val() | 4;
+                        self.events_now.next = self.events_now.val() | 128;
                     }
                 }
             }
@@ -273,35 +252,24 @@ impl Logic for CellDeframer {
             self.pending_data.d.next = 0.into();
             self.pending_last.d.next = true;
             self.pending_error.d.next = true;
-            self.pulse_rejected_truncated.d.next = true;
-            self.pulse_resync.d.next = true;
+            self.events_now.next = self.events_now.val() | 16;
+            self.events_now.next = self.events_now.val() | 128;
         }
 
         if self.reset.val() {
+            self.events_now.next = 0.into();
             self.input_strobe.d.next = false;
             self.input_busy.d.next = false;
             self.in_packet.d.next = false;
             self.aligned.d.next = false;
             self.tick_beats_next.next = 0.into();
             self.pending_next.next = false;
-            self.pulse_good.d.next = false;
-            self.pulse_rejected_end_byte.d.next = false;
-            self.pulse_rejected_framing.d.next = false;
-            self.pulse_rejected_truncated.d.next = false;
-            self.pulse_garbage_byte.d.next = false;
-            self.pulse_framing_error.d.next = false;
-            self.pulse_resync.d.next = false;
         }
         self.tick_beats.d.next = self.tick_beats_next.val();
         self.pending.d.next = self.pending_next.val();
         self.out_valid.d.next = (self.tick_beats_next.val() != 0) | self.pending_next.val();
-        self.events.next = bit_cast::<8, 1>(self.pulse_good.q.val().into())
-            | (bit_cast::<8, 1>(self.pulse_rejected_end_byte.q.val().into()) << 2)
-            | (bit_cast::<8, 1>(self.pulse_rejected_framing.q.val().into()) << 3)
-            | (bit_cast::<8, 1>(self.pulse_rejected_truncated.q.val().into()) << 4)
-            | (bit_cast::<8, 1>(self.pulse_garbage_byte.q.val().into()) << 5)
-            | (bit_cast::<8, 1>(self.pulse_framing_error.q.val().into()) << 6)
-            | (bit_cast::<8, 1>(self.pulse_resync.q.val().into()) << 7);
+        self.event_bits.d.next = self.events_now.val();
+        self.events.next = self.event_bits.q.val();
     }
 }
 
