@@ -79,13 +79,17 @@ pub struct UdpFramer {
     memory: BlockRam<8, 12>,
     max_records: Constant<Bits<6>>,
     last_fill: Constant<Bits<6>>,
-    flush_timeout: Constant<Bits<32>>,
+    flush_timeout_less_one: Constant<Bits<32>>,
     fill_buffer: DFF<Bit>,
     fill_count: DFF<Bits<6>>,
     fill_offset: DFF<Bits<11>>,
     fill_sum: DFF<Bits<32>>,
     fill_base_tick: DFF<Bits<64>>,
     fill_deadline: DFF<Bits<32>>,
+    // the first record's age (now - its tick, low 32 bits), for the base tick and the
+    // deadline, which are set a clock later (off the accept path)
+    first_age: DFF<Bits<32>>,
+    first_seen: DFF<Bit>,
     deadline_passed: DFF<Bit>,
     // registered tests of beat, offset_left and fill_count, kept equal to them
     beat_zero: DFF<Bit>,
@@ -152,13 +156,15 @@ impl UdpFramer {
             memory: Default::default(),
             max_records: Constant::new((MAX_RECORDS as u64).into()),
             last_fill: Constant::new((MAX_RECORDS as u64 - 1).into()),
-            flush_timeout: Constant::new(config.flush_timeout_ticks.into()),
+            flush_timeout_less_one: Constant::new((config.flush_timeout_ticks - 1).into()),
             fill_buffer: Default::default(),
             fill_count: Default::default(),
             fill_offset: Default::default(),
             fill_sum: Default::default(),
             fill_base_tick: Default::default(),
             fill_deadline: Default::default(),
+            first_age: Default::default(),
+            first_seen: Default::default(),
             deadline_passed: Default::default(),
             beat_zero: Default::default(),
             offset_idle: Default::default(),
@@ -209,6 +215,8 @@ impl Logic for UdpFramer {
             fill_sum,
             fill_base_tick,
             fill_deadline,
+            first_age,
+            first_seen,
             deadline_passed,
             beat_zero,
             offset_idle,
@@ -237,6 +245,15 @@ impl Logic for UdpFramer {
         // The flush deadline passed: a registered, wrap-safe 32-bit test (the timeout is far
         // below 2^31 ticks), kept off the accept path's timing.
         // (a bit of an expression is not Verilog: the difference gets its own signal)
+        // The first record's base tick and deadline, a clock after its tick was complete:
+        // base = (now - 1) - age = now + !age (sign-extended), deadline = its tick + timeout.
+        self.first_seen.d.next = false;
+        if self.first_seen.q.val() {
+            self.fill_base_tick.d.next = self.tick.val()
+                + (bit_cast::<64, 32>(!self.first_age.q.val()) | 0xFFFF_FFFF_0000_0000_u64);
+            self.fill_deadline.d.next =
+                self.tick.val().get_bits::<32>(0) + self.flush_timeout_less_one.val();
+        }
         self.deadline_delta.next = self.tick.val().get_bits::<32>(0) - self.fill_deadline.q.val();
         self.deadline_passed.d.next = !self.deadline_delta.val().get_bit(31);
         // Close the filling datagram at a record boundary when full or due.
@@ -292,12 +309,9 @@ impl Logic for UdpFramer {
                 if self.fill_count.q.val() == 0 {
                     // first record: its tick is the base, rebuilt to 64 bits from now
                     self.offset_bytes.d.next = 0.into();
-                    self.fill_base_tick.d.next = self.tick.val()
-                        - bit_cast::<64, 32>(
-                            self.tick.val().get_bits::<32>(0) - self.record_tick.val(),
-                        );
-                    self.fill_deadline.d.next =
-                        self.tick.val().get_bits::<32>(0) + self.flush_timeout.val();
+                    self.first_age.d.next =
+                        self.tick.val().get_bits::<32>(0) - self.record_tick.val();
+                    self.first_seen.d.next = true;
                 } else {
                     self.offset_bytes.d.next =
                         self.record_tick.val() - self.fill_base_tick.q.val().get_bits::<32>(0);
@@ -387,6 +401,7 @@ impl Logic for UdpFramer {
         self.status_address.next = self.transmitter.payload_address.val();
 
         if self.reset.val() {
+            self.first_seen.d.next = false;
             self.fill_buffer.d.next = false;
             self.fill_count_next.next = 0.into();
             self.beat_zero.d.next = true;
