@@ -53,6 +53,8 @@ pub struct PortBuffer {
     dropped_pulse: DFF<Bit>,
     read_slot: DFF<Bit>,
     read_beat: DFF<Bits<5>>,
+    // read_beat == the last beat, kept in a register
+    last_beat: DFF<Bit>,
     current_address: DFF<Bits<6>>,
     next_address: DFF<Bits<6>>,
     last_stored_index: Constant<Bits<5>>,
@@ -82,6 +84,7 @@ impl Default for PortBuffer {
             dropped_pulse: Default::default(),
             read_slot: Default::default(),
             read_beat: Default::default(),
+            last_beat: Default::default(),
             current_address: Default::default(),
             read_fire: Default::default(),
             commit: Default::default(),
@@ -107,6 +110,7 @@ impl Logic for PortBuffer {
             dropped_pulse,
             read_slot,
             read_beat,
+            last_beat,
             current_address,
             next_address
         );
@@ -152,7 +156,7 @@ impl Logic for PortBuffer {
         // Read side: beat 0 is the flags byte, beats 1..=24 the stored bytes. The RAM reads
         // one clock late, so it is addressed with the beat shown after this edge.
         self.source.valid.next = self.occupied.q.val();
-        self.source.last.next = self.read_beat.q.val() == self.stored_beats.val();
+        self.source.last.next = self.last_beat.q.val();
         self.source.error.next = false;
         if self.read_beat.q.val() == 0 {
             self.source.data.next = bit_cast::<8, 1>(self.memory.read_data.val().get_bit(8).into());
@@ -176,13 +180,15 @@ impl Logic for PortBuffer {
             self.current_address.d.next = self.next_address.q.val();
             self.next_address.d.next = (bit_cast::<6, 1>(self.read_slot.q.val().into()) << 5)
                 | bit_cast::<6, 5>(self.read_beat.q.val() + 1);
-            if self.read_beat.q.val() == self.stored_beats.val() {
+            self.last_beat.d.next = false;
+            if self.last_beat.q.val() {
                 self.read_beat.d.next = 0.into();
                 self.read_slot.d.next = !self.read_slot.q.val();
                 self.next_address.d.next = bit_cast::<6, 1>((!self.read_slot.q.val()).into()) << 5;
             } else {
                 self.read_beat.d.next = self.read_beat.q.val() + 1;
                 if self.read_beat.q.val() == self.last_stored_index.val() {
+                    self.last_beat.d.next = true;
                     self.next_address.d.next =
                         bit_cast::<6, 1>((!self.read_slot.q.val()).into()) << 5;
                 }
@@ -206,6 +212,7 @@ impl Logic for PortBuffer {
             self.dropped_pulse.d.next = false;
             self.read_slot.d.next = false;
             self.read_beat.d.next = 0.into();
+            self.last_beat.d.next = false;
             self.current_address.d.next = 0.into();
             self.next_address.d.next = 0.into();
         }
