@@ -124,10 +124,6 @@ pub struct FrameTransmitter {
     // registered index tests, true at index 7 (the CRC starts) and at the last index
     crc_starts: DFF<Bit>,
     frame_ends: DFF<Bit>,
-    // !sending & gap == 0, kept in a register (the framer's start decision reads it)
-    idle_held: DFF<Bit>,
-    sending_next: Signal<Local, Bit>,
-    gap_next: Signal<Local, Bits<4>>,
     total_len: DFF<Bits<16>>,
     udp_len: DFF<Bits<16>>,
     ip_checksum: DFF<Bits<16>>,
@@ -136,14 +132,13 @@ pub struct FrameTransmitter {
     stage_valid: DFF<Bit>,
     stage_crc: DFF<Bit>,
     stage_fcs: DFF<Bit>,
-    // where the byte at `index` comes from besides the template, one-hot, and the
-    // template byte (0 where another source is used), both looked up a clock ahead:
-    // bit 0/1 IPv4 total length high/low, 2/3 IPv4 checksum, 4/5 UDP length, 6/7 UDP
-    // checksum, 8 kind, 9 header fields, 10 body
-    byte_source: DFF<Bits<11>>,
+    // where the byte at `index` comes from, one-hot, and the template byte, both looked
+    // up a clock ahead: bit 0 template, 1/2 IPv4 total length high/low, 3/4 IPv4
+    // checksum, 5/6 UDP length, 7/8 UDP checksum, 9 kind, 10 header fields, 11 body
+    byte_source: DFF<Bits<12>>,
     template_byte: DFF<Bits<8>>,
     udp_checksum_held: DFF<Bits<16>>,
-    source_ahead: Signal<Local, Bits<11>>,
+    source_ahead: Signal<Local, Bits<12>>,
     tx_byte: Signal<Local, Bits<8>>,
     ip_sum: Signal<Local, Bits<32>>,
     ip_fold: Signal<Local, Bits<32>>,
@@ -204,9 +199,6 @@ impl FrameTransmitter {
             end_minus_one: Default::default(),
             crc_starts: Default::default(),
             frame_ends: Default::default(),
-            idle_held: Default::default(),
-            sending_next: Default::default(),
-            gap_next: Default::default(),
             total_len: Default::default(),
             udp_len: Default::default(),
             ip_checksum: Default::default(),
@@ -255,7 +247,6 @@ impl Logic for FrameTransmitter {
             end_minus_one,
             crc_starts,
             frame_ends,
-            idle_held,
             total_len,
             udp_len,
             ip_checksum,
@@ -312,89 +303,79 @@ impl Logic for FrameTransmitter {
         }
         self.checksum_term.d.next = self.checksum_word.val();
 
-        // The byte at `index`, from registers through one OR of selected sources: the
-        // template byte (0 in the template wherever another source is used, and forced to 0
-        // in the body) and the one-hot source, both looked up a clock ahead for the index
-        // that follows (`index + 1` while sending, 0 for a start). The tests are
-        // independent, so no priority chain lies before the register.
+        // The byte at `index`, from a multiplexer whose select is a register: its source
+        // and the template byte are looked up a clock ahead, for the index that follows
+        // (`index + 1` while sending, 0 for a start).
         self.template_ahead.address.next = self.index.q.val().get_bits::<7>(0);
         self.template_byte.d.next = self.first_template_byte.val();
-        self.source_ahead.next = 0.into();
+        self.source_ahead.next = 1.into();
         if self.sending.q.val() {
             self.template_byte.d.next = self.template_ahead.data.val();
             if self.index.q.val() == 23 {
-                self.source_ahead.next = self.source_ahead.val() | 1;
-            }
-            if self.index.q.val() == 24 {
-                self.source_ahead.next = self.source_ahead.val() | 2;
-            }
-            if self.index.q.val() == 31 {
-                self.source_ahead.next = self.source_ahead.val() | 4;
-            }
-            if self.index.q.val() == 32 {
-                self.source_ahead.next = self.source_ahead.val() | 8;
-            }
-            if self.index.q.val() == 45 {
-                self.source_ahead.next = self.source_ahead.val() | 16;
-            }
-            if self.index.q.val() == 46 {
-                self.source_ahead.next = self.source_ahead.val() | 32;
-            }
-            if self.index.q.val() == 47 {
-                self.source_ahead.next = self.source_ahead.val() | 64;
-            }
-            if self.index.q.val() == 48 {
-                self.source_ahead.next = self.source_ahead.val() | 128;
-            }
-            if self.index.q.val() == 52 {
-                self.source_ahead.next = self.source_ahead.val() | 256;
-            }
-            if (self.index.q.val() >= 56) & (self.index.q.val() < 71) {
-                self.source_ahead.next = self.source_ahead.val() | 512;
-            }
-            if self.index.q.val() >= 73 {
+                self.source_ahead.next = 2.into();
+            } else if self.index.q.val() == 24 {
+                self.source_ahead.next = 4.into();
+            } else if self.index.q.val() == 31 {
+                self.source_ahead.next = 8.into();
+            } else if self.index.q.val() == 32 {
+                self.source_ahead.next = 16.into();
+            } else if self.index.q.val() == 45 {
+                self.source_ahead.next = 32.into();
+            } else if self.index.q.val() == 46 {
+                self.source_ahead.next = 64.into();
+            } else if self.index.q.val() == 47 {
+                self.source_ahead.next = 128.into();
+            } else if self.index.q.val() == 48 {
+                self.source_ahead.next = 256.into();
+            } else if self.index.q.val() == 52 {
+                self.source_ahead.next = 512.into();
+            } else if (self.index.q.val() >= 56) & (self.index.q.val() < 71) {
+                self.source_ahead.next = 1024.into();
+            } else if self.index.q.val() >= 73 {
                 // the body (the FCS replaces what follows it at the output)
-                self.source_ahead.next = self.source_ahead.val() | 1024;
-                self.template_byte.d.next = 0.into();
+                self.source_ahead.next = 2048.into();
             }
         }
         self.byte_source.d.next = self.source_ahead.val();
         // (final long before byte 48: the sum is done by byte 13)
         self.udp_checksum_held.d.next = self.udp_checksum.val();
-        self.tx_byte.next = self.template_byte.q.val();
+        self.tx_byte.next = 0.into();
         if self.byte_source.q.val().get_bit(0) {
-            self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(8);
+            self.tx_byte.next = self.tx_byte.val() | self.template_byte.q.val();
         }
         if self.byte_source.q.val().get_bit(1) {
-            self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(0);
+            self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(8);
         }
         if self.byte_source.q.val().get_bit(2) {
-            self.tx_byte.next = self.tx_byte.val() | self.ip_checksum.q.val().get_bits::<8>(8);
+            self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(3) {
-            self.tx_byte.next = self.tx_byte.val() | self.ip_checksum.q.val().get_bits::<8>(0);
+            self.tx_byte.next = self.tx_byte.val() | self.ip_checksum.q.val().get_bits::<8>(8);
         }
         if self.byte_source.q.val().get_bit(4) {
-            self.tx_byte.next = self.tx_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
+            self.tx_byte.next = self.tx_byte.val() | self.ip_checksum.q.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(5) {
-            self.tx_byte.next = self.tx_byte.val() | self.udp_len.q.val().get_bits::<8>(0);
+            self.tx_byte.next = self.tx_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
         }
         if self.byte_source.q.val().get_bit(6) {
-            self.tx_byte.next =
-                self.tx_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(8);
+            self.tx_byte.next = self.tx_byte.val() | self.udp_len.q.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(7) {
             self.tx_byte.next =
-                self.tx_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(0);
+                self.tx_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(8);
         }
         if self.byte_source.q.val().get_bit(8) {
-            self.tx_byte.next = self.tx_byte.val() | self.kind_held.q.val();
+            self.tx_byte.next =
+                self.tx_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(9) {
-            self.tx_byte.next = self.tx_byte.val() | self.fields_head.q.val().get_bits::<8>(48);
+            self.tx_byte.next = self.tx_byte.val() | self.kind_held.q.val();
         }
         if self.byte_source.q.val().get_bit(10) {
+            self.tx_byte.next = self.tx_byte.val() | self.fields_head.q.val().get_bits::<8>(48);
+        }
+        if self.byte_source.q.val().get_bit(11) {
             self.tx_byte.next = self.tx_byte.val() | self.payload_data.val();
         }
         self.payload_address.next = self.index.q.val() + 2 - 74;
@@ -418,8 +399,6 @@ impl Logic for FrameTransmitter {
             self.crc_register.d.next = self.crc_register.q.val() >> 8;
         }
 
-        self.sending_next.next = self.sending.q.val();
-        self.gap_next.next = self.gap.q.val();
         // the index tests of the next clock, from this clock's index (it counts up by one
         // while sending)
         self.crc_starts.d.next = self.sending.q.val() & (self.index.q.val() == 6);
@@ -444,13 +423,13 @@ impl Logic for FrameTransmitter {
                 self.crc_register.d.next = 0xFFFF_FFFF_u64.into();
             }
             if self.frame_ends.q.val() {
-                self.sending_next.next = false;
-                self.gap_next.next = 11.into();
+                self.sending.d.next = false;
+                self.gap.d.next = 11.into();
             }
         } else if self.gap.q.val() != 0 {
-            self.gap_next.next = self.gap.q.val() - 1;
+            self.gap.d.next = self.gap.q.val() - 1;
         } else if self.start.val() {
-            self.sending_next.next = true;
+            self.sending.d.next = true;
             self.index.d.next = 0.into();
             self.next_sequence.d.next = self.next_sequence.q.val() + 1;
         }
@@ -471,18 +450,15 @@ impl Logic for FrameTransmitter {
                 | bit_cast::<64, 16>(self.entry_count.val());
         }
         if self.reset.val() {
-            self.sending_next.next = false;
+            self.sending.d.next = false;
             self.stage_valid.d.next = false;
             self.crc_starts.d.next = false;
             self.frame_ends.d.next = false;
-            self.gap_next.next = 0.into();
+            self.gap.d.next = 0.into();
             self.tx_en.d.next = false;
             self.next_sequence.d.next = 0.into();
         }
-        self.sending.d.next = self.sending_next.val();
-        self.gap.d.next = self.gap_next.val();
-        self.idle_held.d.next = !self.sending_next.val() & (self.gap_next.val() == 0);
-        self.idle.next = self.idle_held.q.val();
+        self.idle.next = !self.sending.q.val() & (self.gap.q.val() == 0);
         self.gmii_txd.next = self.txd.q.val();
         self.gmii_tx_en.next = self.tx_en.q.val();
         self.gmii_tx_er.next = false;
@@ -514,19 +490,6 @@ mod tests {
             &[0, 0],
             "reserved header bytes"
         );
-        // the byte multiplexer ORs the template byte with the other sources: the template
-        // must be 0 wherever they are used, for any addresses and ids
-        let t = template(&LinkConfig::DEFAULT, 0xFFFF, 0xFF);
-        let variable = [
-            IP_TOTAL_LEN_AT..IP_TOTAL_LEN_AT + 2,
-            IP_CHECKSUM_AT..IP_CHECKSUM_AT + 2,
-            UDP_AT + 4..UDP_AT + 8,
-            BOX_HEADER_AT + 3..BOX_HEADER_AT + 4,
-            FIELDS_AT..FIELDS_AT + 15,
-        ];
-        for range in variable {
-            assert!(t[range.clone()].iter().all(|&b| b == 0), "{range:?}");
-        }
     }
 
     fn body_sum(body: &[u8]) -> u64 {
