@@ -5,7 +5,7 @@
 //! `k x 8 ns` after the simulation starts, and a transition at time `t` is first seen by
 //! edge `ceil(t / 8 ns)`. The box stamps a packet with the tick of that edge.
 
-use crate::traffic::SplitMix64;
+use skinbox_cells::rng::Rng;
 use skinbox_protocol::TICK_NS;
 
 /// One byte on a line.
@@ -70,12 +70,12 @@ impl Jitter {
 /// As [`transitions`], each edge moved by `jitter`; also returns the jittered time of
 /// every byte's start-bit falling edge (the true edge the box should stamp).
 pub fn jittered_transitions(bytes: &[UartByte], jitter: &Jitter) -> (Vec<Transition>, Vec<f64>) {
-    let mut random = SplitMix64(jitter.seed ^ 0x9E37_79B9_7F4A_7C15);
+    let mut random = Rng::new(jitter.seed);
     let mut offset = move || {
         if jitter.peak_ns == 0.0 {
             return 0.0;
         }
-        random.uniform(-jitter.peak_ns, jitter.peak_ns)
+        random.range(-jitter.peak_ns, jitter.peak_ns)
     };
     let mut starts = Vec::with_capacity(bytes.len());
     let mut out: Vec<Transition> = Vec::with_capacity(bytes.len() * 6);

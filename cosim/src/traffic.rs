@@ -1,36 +1,12 @@
 //! Seeded test traffic shared by the tests, benchmarks and studies.
 
+use skinbox_cells::rng::Rng;
 use skinbox_protocol::{Channel, DataRepr};
-
-/// splitmix64: a small seeded generator, the same sequence on every machine.
-#[derive(Debug, Clone)]
-pub struct SplitMix64(pub u64);
-
-impl SplitMix64 {
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `low..high`.
-    pub fn uniform(&mut self, low: f64, high: f64) -> f64 {
-        low + (high - low) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in `0..n`.
-    pub fn below(&mut self, n: u64) -> u64 {
-        self.next_u64() % n
-    }
-}
 
 /// `n` data packets (cell ids 1..=n) with every channel drawn over its full range, always
 /// the same for the same `n`.
 pub fn random_data_packets(n: usize) -> Vec<[u8; 20]> {
-    let mut random = SplitMix64(0x2545_F491_4F6C_DD1D);
+    let mut random = Rng::new(0x2545_F491_4F6C_DD1D);
     (0..n)
         .map(|i| {
             let mut raw = [0i32; 9];

@@ -1,6 +1,7 @@
 //! The reference model against the verilated box: every frame byte for byte, and the
 //! cycle of its first byte, on each regression scene.
 
+use skinbox_cells::rng::Rng;
 use skinbox_cosim::frames::{assemble, check, Frame};
 use skinbox_cosim::harness::play;
 use skinbox_cosim::line::{
@@ -8,7 +9,6 @@ use skinbox_cosim::line::{
 };
 use skinbox_cosim::reference::predict_frames;
 use skinbox_cosim::sim::RESET_CYCLES;
-use skinbox_cosim::traffic::SplitMix64;
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::datagram::DatagramBody;
@@ -156,9 +156,9 @@ fn stroking_scene() {
 /// One port's random traffic: bursts of packets back to back or with short gaps, each
 /// line with its own clock error, and now and then a fault (garbage, truncation, wrong end
 /// byte, low stop bit) or a glitch.
-fn random_line(r: &mut SplitMix64, port: usize, end_ns: f64) -> Vec<Transition> {
-    let bit = 250.0 * r.uniform(0.97, 1.03);
-    let mut t = r.uniform(5_000.0, 20_000.0);
+fn random_line(r: &mut Rng, port: usize, end_ns: f64) -> Vec<Transition> {
+    let bit = 250.0 * r.range(0.97, 1.03);
+    let mut t = r.range(5_000.0, 20_000.0);
     let mut bytes: Vec<UartByte> = vec![];
     let mut id = (port as u16) << 10;
     while t < end_ns {
@@ -189,13 +189,13 @@ fn random_line(r: &mut SplitMix64, port: usize, end_ns: f64) -> Vec<Transition> 
         // back to back, a short gap, or a pause longer than the flush timeout
         t += match r.below(8) {
             0..=2 => 0.0,
-            3..=5 => r.uniform(0.0, 3.0) * bit,
-            6 => r.uniform(10.0, 400.0) * bit,
-            _ => r.uniform(400.0, 1_500.0) * bit,
+            3..=5 => r.range(0.0, 3.0) * bit,
+            6 => r.range(10.0, 400.0) * bit,
+            _ => r.range(400.0, 1_500.0) * bit,
         };
     }
     let jitter = Jitter {
-        peak_ns: r.uniform(0.0, 30.0),
+        peak_ns: r.range(0.0, 30.0),
         seed: r.next_u64(),
     };
     jittered_transitions(&bytes, &jitter).0
@@ -214,7 +214,7 @@ fn random_traffic() {
     let cycles = 400_000;
     let mut total = 0;
     for seed in 0..8 {
-        let mut r = SplitMix64(seed);
+        let mut r = Rng::new(seed);
         let lines: Vec<Vec<Transition>> = (0..config.ports)
             .map(|port| random_line(&mut r, port, (cycles - 10_000) as f64 * 8.0))
             .collect();

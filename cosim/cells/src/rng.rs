@@ -64,6 +64,11 @@ impl Rng {
         low + (high - low) * self.uniform()
     }
 
+    /// An integer in `0..n` (`n` > 0; the modulo bias is below 2^-40 for `n` < 2^24).
+    pub fn below(&mut self, n: u64) -> u64 {
+        self.next_u64() % n
+    }
+
     /// Standard normal, by the ziggurat method (Marsaglia and Tsang, 2000): exact, tails
     /// included, which matters for rare noise events; about one table look-up per draw.
     #[inline]
