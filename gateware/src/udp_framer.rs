@@ -91,14 +91,11 @@ pub struct UdpFramer {
     first_age: DFF<Bits<32>>,
     first_seen: DFF<Bit>,
     deadline_passed: DFF<Bit>,
-    // registered tests of beat, offset_left and fill_count, kept equal to them
+    // beat == 0, offset_left == 0, fill_count == max and != 0, kept in registers
     beat_zero: DFF<Bit>,
     offset_idle: DFF<Bit>,
     fill_full: DFF<Bit>,
     fill_nonzero: DFF<Bit>,
-    beat_next: Signal<Local, Bits<5>>,
-    offset_left_next: Signal<Local, Bits<3>>,
-    fill_count_next: Signal<Local, Bits<6>>,
     beat: DFF<Bits<5>>,
     tick_low: DFF<Bits<32>>,
     offset_bytes: DFF<Bits<32>>,
@@ -170,9 +167,6 @@ impl UdpFramer {
             offset_idle: Default::default(),
             fill_full: Default::default(),
             fill_nonzero: Default::default(),
-            beat_next: Default::default(),
-            offset_left_next: Default::default(),
-            fill_count_next: Default::default(),
             beat: Default::default(),
             tick_low: Default::default(),
             offset_bytes: Default::default(),
@@ -258,14 +252,7 @@ impl Logic for UdpFramer {
         self.deadline_passed.d.next = !self.deadline_delta.val().get_bit(31);
         // Close the filling datagram at a record boundary when full or due.
         // (the tests of beat, offset_left and fill_count come from registers)
-        self.beat_next.next = self.beat.q.val();
-        self.offset_left_next.next = self.offset_left.q.val();
-        self.fill_count_next.next = self.fill_count.q.val();
         // (each test is set and cleared by the events that change its counter, below)
-        self.beat_zero.d.next = self.beat_zero.q.val();
-        self.offset_idle.d.next = self.offset_idle.q.val();
-        self.fill_full.d.next = self.fill_full.q.val();
-        self.fill_nonzero.d.next = self.fill_nonzero.q.val();
         self.close_due.next = self.beat_zero.q.val()
             & self.offset_idle.q.val()
             & (self.fill_full.q.val() | (self.fill_nonzero.q.val() & self.deadline_passed.q.val()));
@@ -286,15 +273,15 @@ impl Logic for UdpFramer {
             self.write.next = true;
             self.write_data.next = self.offset_bytes.q.val().get_bits::<8>(24);
             self.offset_bytes.d.next = self.offset_bytes.q.val() << 8;
-            self.offset_left_next.next = self.offset_left.q.val() - 1;
+            self.offset_left.d.next = self.offset_left.q.val() - 1;
             self.offset_idle.d.next = self.offset_left.q.val() == 1;
         } else if self.records.valid.val() & self.accept.val() {
-            self.beat_next.next = self.beat.q.val() + 1;
+            self.beat.d.next = self.beat.q.val() + 1;
             self.beat_zero.d.next = false;
             if self.beat.q.val() == 25 {
-                self.beat_next.next = 0.into();
+                self.beat.d.next = 0.into();
                 self.beat_zero.d.next = true;
-                self.fill_count_next.next = self.fill_count.q.val() + 1;
+                self.fill_count.d.next = self.fill_count.q.val() + 1;
                 self.fill_full.d.next = self.fill_count.q.val() == self.last_fill.val();
                 self.fill_nonzero.d.next = true;
             }
@@ -304,7 +291,7 @@ impl Logic for UdpFramer {
                 self.write.next = true;
             }
             if self.beat.q.val() == 5 {
-                self.offset_left_next.next = 4.into();
+                self.offset_left.d.next = 4.into();
                 self.offset_idle.d.next = false;
                 if self.fill_count.q.val() == 0 {
                     // first record: its tick is the base, rebuilt to 64 bits from now
@@ -345,7 +332,7 @@ impl Logic for UdpFramer {
                 self.pending_flags.d.next = 1.into();
             }
             self.fill_buffer.d.next = !self.fill_buffer.q.val();
-            self.fill_count_next.next = 0.into();
+            self.fill_count.d.next = 0.into();
             self.fill_full.d.next = false;
             self.fill_nonzero.d.next = false;
             self.fill_offset.d.next = 0.into();
@@ -403,15 +390,15 @@ impl Logic for UdpFramer {
         if self.reset.val() {
             self.first_seen.d.next = false;
             self.fill_buffer.d.next = false;
-            self.fill_count_next.next = 0.into();
+            self.fill_count.d.next = 0.into();
             self.beat_zero.d.next = true;
             self.offset_idle.d.next = true;
             self.fill_full.d.next = false;
             self.fill_nonzero.d.next = false;
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
-            self.beat_next.next = 0.into();
-            self.offset_left_next.next = 0.into();
+            self.beat.d.next = 0.into();
+            self.offset_left.d.next = 0.into();
             self.pending.d.next = false;
             self.sending_records.d.next = false;
             self.sending_status.d.next = false;
@@ -419,9 +406,6 @@ impl Logic for UdpFramer {
             self.datagram_count.d.next = 0.into();
             self.record_count.d.next = 0.into();
         }
-        self.beat.d.next = self.beat_next.val();
-        self.offset_left.d.next = self.offset_left_next.val();
-        self.fill_count.d.next = self.fill_count_next.val();
         self.status_taken.next = self.status_taken_pulse.q.val();
         self.status_sending.next = self.sending_status.q.val();
         self.datagrams_sent.next = self.datagram_count.q.val();
