@@ -10,8 +10,8 @@
 //! tick (the UART start tick of its header byte, low 32 bits, most significant byte
 //! first), then the 20 cell bytes. A rejected packet ends early or on its 20th byte with
 //! `last` and `error`, so a buffer that stored its beats discards them. The sink must take
-//! each beat within one byte time (the [`crate::port_buffer::PortBuffer`] always does);
-//! the deframer has no room for more.
+//! each beat within one byte time (the [`crate::packet_store::PacketStore`] takes one
+//! every round of its write ring, at most 32 clocks); the deframer has no room for more.
 //!
 //! Counter events (`events`, one clock each, bits in `skinbox_protocol::PortCounter`
 //! order): good, rejected end byte, rejected framing, rejected truncated, garbage byte,

@@ -1,8 +1,8 @@
 //! InterfaceBox: the whole box for simulation, N UART pins in, GMII out.
 //!
-//! Per port: [`UartRx`] -> [`CellDeframer`] -> [`PortBuffer`]; then the [`PacketArbiter`]
-//! merges the ports, through a [`RegisterSlice`], into the [`UdpFramer`], which also sends the [`StatusReporter`]'s
-//! datagrams. The [`CounterFile`] counts every port's events. The ports stay in reset
+//! Per port: [`UartRx`] -> [`CellDeframer`]; the [`PacketStore`] holds every port's
+//! packets in shared block RAM and merges them, one whole record at a time, into the
+//! [`UdpFramer`], which also sends the [`StatusReporter`]'s datagrams. The [`CounterFile`] counts every port's events. The ports stay in reset
 //! until the counters are cleared (about 4 us after reset), so no event goes uncounted.
 //!
 //! Timestamps: a record's tick is the tick of the first clock edge that sampled its
@@ -10,9 +10,7 @@
 
 use crate::cell_deframer::CellDeframer;
 use crate::counter_file::CounterFile;
-use crate::packet_arbiter::{PacketArbiter, MAX_PORTS};
-use crate::port_buffer::PortBuffer;
-use crate::register_slice::RegisterSlice;
+use crate::packet_store::{PacketStore, MAX_PORTS};
 use crate::status_reporter::StatusReporter;
 use crate::timestamp::TimestampCounter;
 use crate::uart_rx::UartRx;
@@ -157,9 +155,7 @@ pub struct InterfaceBox {
     timestamp: TimestampCounter,
     uarts: Vec<UartRx>,
     deframers: Vec<CellDeframer>,
-    buffers: Vec<PortBuffer>,
-    arbiter: PacketArbiter,
-    record_slice: RegisterSlice,
+    store: PacketStore,
     counters: CounterFile,
     status: StatusReporter,
     framer: UdpFramer,
@@ -186,9 +182,7 @@ impl InterfaceBox {
             deframers: (0..n)
                 .map(|_| CellDeframer::new(config.framing, config.idle_gap_clocks()))
                 .collect(),
-            buffers: (0..n).map(|_| PortBuffer::default()).collect(),
-            arbiter: PacketArbiter::new(n),
-            record_slice: RegisterSlice::default(),
+            store: PacketStore::new(n),
             counters: CounterFile::new(n),
             status: StatusReporter::new(n, config.status_period_ticks, config.boot_seed),
             framer: UdpFramer::new(&FramerConfig {
@@ -221,7 +215,7 @@ impl Logic for InterfaceBox {
         self.timestamp.clock.next = self.clock.val();
         self.timestamp.reset.next = self.core_reset.q.val();
         for i in 0..self.uarts.len() {
-            // pin -> UART -> deframer -> buffer -> arbiter
+            // pin -> UART -> deframer -> packet store
             self.uarts[i].clock.next = self.clock.val();
             self.uarts[i].reset.next = self.port_reset.q.val();
             self.uarts[i].rx.next = self.uart_rx[i].val();
@@ -233,24 +227,18 @@ impl Logic for InterfaceBox {
             self.deframers[i].byte_framing_error.next = self.uarts[i].framing_error.val();
             self.deframers[i].byte_start_tick.next = self.uarts[i].start_tick.val();
             self.deframers[i].uart_busy.next = self.uarts[i].busy.val();
-            self.buffers[i].clock.next = self.clock.val();
-            self.buffers[i].reset.next = self.port_reset.q.val();
-            self.buffers[i].sink.data.next = self.deframers[i].packets.data.val();
-            self.buffers[i].sink.valid.next = self.deframers[i].packets.valid.val();
-            self.buffers[i].sink.last.next = self.deframers[i].packets.last.val();
-            self.buffers[i].sink.error.next = self.deframers[i].packets.error.val();
-            self.deframers[i].packets.ready.next = self.buffers[i].sink.ready.val();
-            self.arbiter.ports[i].data.next = self.buffers[i].source.data.val();
-            self.arbiter.ports[i].valid.next = self.buffers[i].source.valid.val();
-            self.arbiter.ports[i].last.next = self.buffers[i].source.last.val();
-            self.arbiter.ports[i].error.next = self.buffers[i].source.error.val();
-            self.buffers[i].source.ready.next = self.arbiter.ports[i].ready.val();
+            self.store.ports[i].data.next = self.deframers[i].packets.data.val();
+            self.store.ports[i].valid.next = self.deframers[i].packets.valid.val();
+            self.store.ports[i].last.next = self.deframers[i].packets.last.val();
+            self.store.ports[i].error.next = self.deframers[i].packets.error.val();
+            self.deframers[i].packets.ready.next = self.store.ports[i].ready.val();
             // counter events, bit i = skinbox_protocol::PortCounter i
             self.counters.events[i].next =
-                self.deframers[i].events.val() | self.buffers[i].events.val();
+                self.deframers[i].events.val() | self.store.events[i].val();
         }
-        self.arbiter.clock.next = self.clock.val();
-        self.arbiter.reset.next = self.core_reset.q.val();
+        self.store.clock.next = self.clock.val();
+        self.store.reset.next = self.core_reset.q.val();
+        self.store.port_reset.next = self.port_reset.q.val();
         self.counters.clock.next = self.clock.val();
         self.counters.reset.next = self.core_reset.q.val();
         self.counters.read_address.next = self.status.counter_address.val();
@@ -258,20 +246,13 @@ impl Logic for InterfaceBox {
         self.framer.clock.next = self.clock.val();
         self.framer.reset.next = self.core_reset.q.val();
         self.framer.tick.next = self.timestamp.tick.val();
-        // arbiter -> register slice -> framer: no combinational path from the framer's
-        // ready back to the port buffers' memories
-        self.record_slice.clock.next = self.clock.val();
-        self.record_slice.reset.next = self.core_reset.q.val();
-        self.record_slice.sink.data.next = self.arbiter.records.data.val();
-        self.record_slice.sink.valid.next = self.arbiter.records.valid.val();
-        self.record_slice.sink.last.next = self.arbiter.records.last.val();
-        self.record_slice.sink.error.next = self.arbiter.records.error.val();
-        self.arbiter.records.ready.next = self.record_slice.sink.ready.val();
-        self.framer.records.data.next = self.record_slice.source.data.val();
-        self.framer.records.valid.next = self.record_slice.source.valid.val();
-        self.framer.records.last.next = self.record_slice.source.last.val();
-        self.framer.records.error.next = self.record_slice.source.error.val();
-        self.record_slice.source.ready.next = self.framer.records.ready.val();
+        // store -> framer: the store's output FIFO holds every beat in flight, so the
+        // framer's ready reaches its FIFO registers only
+        self.framer.records.data.next = self.store.records.data.val();
+        self.framer.records.valid.next = self.store.records.valid.val();
+        self.framer.records.last.next = self.store.records.last.val();
+        self.framer.records.error.next = self.store.records.error.val();
+        self.store.records.ready.next = self.framer.records.ready.val();
 
         self.status.clock.next = self.clock.val();
         self.status.reset.next = self.core_reset.q.val();

@@ -7,8 +7,10 @@
 //!    tick of its start edge;
 //! 2. [`cell_deframer::CellDeframer`]: finds 20-byte cell packets in the byte stream and
 //!    rejects broken ones, counting each cause;
-//! 3. [`port_buffer::PortBuffer`]: holds whole packets until the arbiter takes them;
-//! 4. [`packet_arbiter::PacketArbiter`]: merges the ports, one whole record at a time.
+//! 3. [`packet_store::PacketStore`]: holds every port's whole packets in shared block RAM
+//!    and merges the ports, one whole record at a time;
+//! 4. [`udp_framer::UdpFramer`]: batches the records into UDP datagrams and sends them,
+//!    with the [`status_reporter::StatusReporter`]'s, as Ethernet frames on GMII.
 //!
 //! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
 //! over one interface, [`stream`].
@@ -21,9 +23,7 @@ pub mod crc32;
 pub mod frame_transmitter;
 pub mod interface_box;
 pub mod lut_ram;
-pub mod packet_arbiter;
-pub mod port_buffer;
-pub mod register_slice;
+pub mod packet_store;
 pub mod status_reporter;
 pub mod stream;
 pub mod timestamp;

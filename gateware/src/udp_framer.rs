@@ -1,6 +1,6 @@
 //! UdpFramer: batches records into box datagrams and sends them as Ethernet frames.
 //!
-//! Records arrive as 26-beat stream packets from the arbiter (port, flags, the low 32 bits
+//! Records arrive as 26-beat stream packets from the packet store (port, flags, the low 32 bits
 //! of the start tick, 20 cell bytes). The framer writes them into one of two 2 KB payload
 //! buffers: the first record of a datagram sets its base tick (the full 64-bit tick,
 //! rebuilt from the current time), every record's tick is rewritten as a signed offset
@@ -41,7 +41,7 @@ pub struct UdpFramer {
     pub clock: Signal<In, Clock>,
     /// Synchronous reset.
     pub reset: Signal<In, Bit>,
-    /// Records from the arbiter.
+    /// Records from the packet store.
     pub records: ByteStreamSink,
     /// Box time.
     pub tick: Signal<In, Bits<64>>,
@@ -425,7 +425,7 @@ mod tests {
 
     const TIMEOUT: u64 = 3000;
 
-    /// A record as the arbiter sends it: the tick field holds the absolute low 32 bits.
+    /// A record as the packet store sends it: the tick field holds the absolute low 32 bits.
     fn record(i: usize, tick: u32) -> RecordRepr {
         RecordRepr {
             port: (i % 8) as u8,

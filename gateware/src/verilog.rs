@@ -15,8 +15,8 @@ use std::process::Command;
 /// `UNOPTFLAT` is not waived: rust-hdl writes each module's logic as one `always @(*)`
 /// block, so a block that drives a submodule's input and reads its output combinationally
 /// looks like a loop to Verilator (which then settles it by iteration, slowly). The design
-/// has none: the CRC works on a registered byte, and `ready` reaches the port buffers from
-/// registers (register slice, the arbiter's one-hot port register).
+/// has none: the CRC works on a registered byte, the store's `ready` to each deframer is a
+/// register bit, and its output `valid` is computed apart from the framer's `ready`.
 pub const LINT_WAIVERS: &[&str] = &["WIDTH", "DECLFILENAME", "UNUSEDSIGNAL", "UNUSEDPARAM"];
 
 /// What Verilator said.

@@ -1,9 +1,11 @@
-//! The shared back end: port buffers, arbiter, register slice, framer, transmitter, status reporter and
-//! counter file. It runs through the clock cycles in which something moves (a record
-//! between buffer and framer, a datagram closing, a frame starting, a report beginning or
+//! The shared back end: packet store (write ring, slots, reader, output FIFO), framer,
+//! transmitter, status reporter and counter file. It runs through the clock cycles in which
+//! something moves (a record between store and framer, a datagram closing, a frame starting, a report beginning or
 //! ending) and jumps over every stretch in which only free-running counters advance.
 
 use super::front::{PortFront, StartedPacket};
+use skinbox_gateware::cell_deframer::TICK_BEATS;
+use skinbox_gateware::packet_store::{FIFO_DEPTH, RECORD_BEATS};
 use skinbox_gateware::status_reporter::{CLOCKS_PER_WORD, WORD_VALUE_CLOCK};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAX_RECORDS};
@@ -36,6 +38,12 @@ pub(super) struct BackTiming {
     pub frame_tail: u64,
     /// Clocks from a transmitter start to its first GMII byte.
     pub start_to_first_byte: u64,
+    /// First cycle of the store's write ring (ring bit 0 visited).
+    pub visit_from: u64,
+    /// Clocks between two visits of a port by the write ring.
+    pub visit_period: u64,
+    /// Ports per bank of the store (the ring position of port p is p mod this).
+    pub bank_ports: usize,
 }
 
 /// A frame the back end sends.
@@ -47,8 +55,8 @@ pub(super) struct SentFrame {
     pub datagram: DatagramRepr,
 }
 
-/// Port buffer beats: flags, 4 tick bytes, 20 cell bytes.
-const LAST_BEAT: u8 = 24;
+/// Last issue of a store record (port, flags, 4 tick bytes, 20 cell bytes).
+const LAST_ISSUE: u8 = RECORD_BEATS as u8 - 1;
 /// Framer beat at which the tick offset is computed (the last tick byte).
 const OFFSET_BEAT: u8 = 5;
 /// Clocks the framer pauses after [`OFFSET_BEAT`] to write the offset bytes.
@@ -64,7 +72,7 @@ struct Stored {
     bytes: [u8; PACKET_LEN],
 }
 
-/// A beat in the register slice between arbiter and framer: its port and packet.
+/// A record beat in the store's read pipeline or output FIFO: its port and packet.
 #[derive(Debug, Clone)]
 struct SliceBeat {
     port: u8,
@@ -74,7 +82,6 @@ struct SliceBeat {
 #[derive(Debug, Default)]
 struct Buffer {
     slots: VecDeque<Stored>,
-    read_beat: u8,
     dropping: bool,
     loss_pending: bool,
     /// Loss flag captured with the first beat of the packet being written.
@@ -122,13 +129,15 @@ pub(super) struct Back<'a> {
     next_beat: usize,
     buffers: Vec<Buffer>,
     counting: Vec<PortCounting>,
-    // arbiter
-    arbiter_port: usize,
-    granted: bool,
-    prefix_sent: bool,
-    // register slice
-    slice_main: Option<SliceBeat>,
-    slice_skid: Option<SliceBeat>,
+    // store reader
+    scan: usize,
+    hit: bool,
+    hit_port: usize,
+    reading: Option<usize>,
+    issue_index: u8,
+    read1: Option<SliceBeat>,
+    read2: Option<SliceBeat>,
+    fifo: VecDeque<SliceBeat>,
     // framer
     beat: u8,
     offset_left: u8,
@@ -160,12 +169,29 @@ pub(super) struct Back<'a> {
 
 impl<'a> Back<'a> {
     pub(super) fn new(t: BackTiming, fronts: &'a [PortFront]) -> Self {
+        // The store's write ring takes a port's beat only on its visits: the first beat at
+        // the first visit from its cycle on; the tick beats and the header byte follow one
+        // visit each, and the last beat waits for them (it is the header byte itself when
+        // the packet ends there) and for its own cycle.
+        let next_visit = |port: usize, from: u64| -> u64 {
+            let period = t.visit_period;
+            let position = (port % t.bank_ports) as u64;
+            let at = (from.max(t.visit_from) - t.visit_from) % period;
+            from.max(t.visit_from) + (position + period - at) % period
+        };
+        let beats_after_first = TICK_BEATS as u64 - 1;
         let mut beats: Vec<FrontBeat> = fronts
             .iter()
             .enumerate()
             .flat_map(|(port, f)| {
                 f.packets.iter().enumerate().flat_map(move |(i, p)| {
-                    [(p.first_beat, true), (p.last_beat, false)].map(|(cycle, first)| FrontBeat {
+                    let first = next_visit(port, p.first_beat);
+                    let last = next_visit(
+                        port,
+                        p.last_beat
+                            .max(first + beats_after_first * t.visit_period + 1),
+                    );
+                    [(first, true), (last, false)].map(|(cycle, first)| FrontBeat {
                         cycle,
                         port,
                         packet: i,
@@ -189,11 +215,14 @@ impl<'a> Back<'a> {
             fronts,
             beats,
             next_beat: 0,
-            arbiter_port: 0,
-            granted: false,
-            prefix_sent: false,
-            slice_main: None,
-            slice_skid: None,
+            scan: 0,
+            hit: false,
+            hit_port: 0,
+            reading: None,
+            issue_index: 0,
+            read1: None,
+            read2: None,
+            fifo: VecDeque::new(),
             beat: 0,
             offset_left: 0,
             fill: vec![],
@@ -259,8 +288,11 @@ impl<'a> Back<'a> {
     /// Nothing but free-running counters changes in cycle `c`.
     fn quiet(&self, c: u64) -> bool {
         let idle = c >= self.idle_from;
-        !self.granted
-            && self.slice_main.is_none()
+        self.reading.is_none()
+            && !self.hit
+            && self.read1.is_none()
+            && self.read2.is_none()
+            && self.fifo.is_empty()
             && self.buffers.iter().all(|b| b.slots.is_empty())
             && self.offset_left == 0
             && self.beat == 0
@@ -320,7 +352,7 @@ impl<'a> Back<'a> {
     /// Advances the free-running counters over the quiet cycles `from..to`.
     fn skip(&mut self, from: u64, to: u64) {
         let n = to - from;
-        self.arbiter_port = (self.arbiter_port + (n % self.t.ports as u64) as usize) % self.t.ports;
+        self.scan = (self.scan + (n % self.t.ports as u64) as usize) % self.t.ports;
         if self.next_timer_zero(from) < to {
             self.due = true;
         }
@@ -351,53 +383,42 @@ impl<'a> Back<'a> {
             && !closing
             && !(self.beat == 0 && self.fill.len() == MAX_RECORDS);
 
-        // arbiter and the granted port's buffer, into the register slice
-        let slice_ready = self.slice_skid.is_none();
-        let p = self.arbiter_port;
-        let port_valid = !self.buffers[p].slots.is_empty();
-        let port_last = self.buffers[p].read_beat == LAST_BEAT;
-        let mut next_port = p;
-        let mut next_granted = self.granted;
-        let mut next_prefix_sent = self.prefix_sent;
+        // store reader: scan, grant, issue (on the registers as they are)
+        let in_flight = usize::from(self.read1.is_some()) + usize::from(self.read2.is_some());
+        let issue = self.reading.is_some() && self.fifo.len() + in_flight < FIFO_DEPTH;
         let mut read_done = None;
-        // a granted port offers its prefix, then its packet's beats
-        let offered = if self.granted && (!self.prefix_sent || port_valid) {
-            self.buffers[p].slots.front().map(|s| SliceBeat {
-                port: p as u8,
-                slot: s.clone(),
-            })
+        let mut next_reading = self.reading;
+        let mut next_hit = false;
+        let mut issued = None;
+        if let Some(p) = self.reading {
+            if issue {
+                issued = self.buffers[p].slots.front().map(|s| SliceBeat {
+                    port: p as u8,
+                    slot: s.clone(),
+                });
+                if self.issue_index == LAST_ISSUE {
+                    next_reading = None;
+                    read_done = Some(p);
+                } else {
+                    self.issue_index += 1;
+                }
+            }
+        } else if self.hit {
+            // grant; the scan already stands on the next port and waits there
+            next_reading = Some(self.hit_port);
+            self.issue_index = 0;
         } else {
-            None
-        };
-        if !self.granted {
-            if port_valid {
-                next_granted = true;
-                next_prefix_sent = false;
-            } else {
-                next_port = (p + 1) % n;
-            }
-        } else if !self.prefix_sent {
-            if slice_ready {
-                next_prefix_sent = true;
-            }
-        } else if port_valid && slice_ready {
-            let b = &mut self.buffers[p];
-            if port_last {
-                b.read_beat = 0;
-                read_done = Some(p);
-                next_granted = false;
-                next_port = (p + 1) % n;
-            } else {
-                b.read_beat += 1;
-            }
+            next_hit = !self.buffers[self.scan].slots.is_empty();
+            self.hit_port = self.scan;
+            self.scan = (self.scan + 1) % n;
         }
 
-        // framer: one beat from the slice or one offset byte per clock
+        // framer: one beat from the store's FIFO or one offset byte per clock
         let mut next_deadline = self.deadline;
-        let framer_takes = self.offset_left == 0 && accept && self.slice_main.is_some();
+        let framer_takes = self.offset_left == 0 && accept && !self.fifo.is_empty();
         if self.offset_left != 0 {
             self.offset_left -= 1;
-        } else if let Some(beat) = self.slice_main.as_ref().filter(|_| accept) {
+        } else if let Some(beat) = self.fifo.front().filter(|_| accept) {
             let slot = &beat.slot;
             match self.beat {
                 0 => self.record.port = beat.port,
@@ -427,16 +448,17 @@ impl<'a> Back<'a> {
                 self.beat + 1
             };
         }
-        // the register slice: its output moves when the framer takes it
-        let take_in = offered.is_some() && slice_ready;
-        if self.slice_main.is_none() || framer_takes {
-            self.slice_main = match self.slice_skid.take() {
-                Some(b) => Some(b),
-                None => offered.filter(|_| take_in),
-            };
-        } else if take_in {
-            self.slice_skid = offered;
+        // the read pipeline (two clocks of block RAM) and the FIFO
+        if framer_takes {
+            self.fifo.pop_front();
         }
+        if let Some(arrived) = self.read2.take() {
+            self.fifo.push_back(arrived);
+        }
+        self.read2 = self.read1.take();
+        self.read1 = issued;
+        self.reading = next_reading;
+        self.hit = next_hit;
         if let Some(p) = read_done {
             self.buffers[p].slots.pop_front();
         }
@@ -500,7 +522,7 @@ impl<'a> Back<'a> {
             });
         }
 
-        // port buffers' write side: the deframers' first and last beats this cycle
+        // store write side: the deframers' first and last beats taken this cycle
         while let Some(b) = self.beats.get(self.next_beat).filter(|b| b.cycle == c) {
             let (port, packet, first) = (b.port, b.packet, b.first);
             self.next_beat += 1;
@@ -527,9 +549,6 @@ impl<'a> Back<'a> {
             }
         }
 
-        self.arbiter_port = next_port;
-        self.granted = next_granted;
-        self.prefix_sent = next_prefix_sent;
         self.deadline_passed = next_deadline_passed;
     }
 

@@ -42,7 +42,7 @@ impl FrontTiming {
 /// A packet the deframer started (header seen), good or rejected.
 #[derive(Debug, Clone)]
 pub(super) struct StartedPacket {
-    /// Cycle of its first beat into the port buffer (the first tick byte).
+    /// Cycle its first beat (the first tick byte) is offered to the packet store.
     pub first_beat: u64,
     /// Cycle of its last beat (the 20th byte, or the error beat of a rejected packet).
     pub last_beat: u64,

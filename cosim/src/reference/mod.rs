@@ -5,9 +5,10 @@
 //!   transition list: the first low sample of a start bit, the accumulator's carries at the
 //!   ten bit middles, the majority of the three samples there; the deframer follows the
 //!   bytes, the idle timer and its rejections. Out come the packets with their stamps and the
-//!   cycles of their first and last beats into the port buffer, and the counter events.
-//! - Back end ([`back`]): port buffers, arbiter, framer, transmitter, status reporter and
-//!   counter file, run only through the clocks in which a record moves or a datagram
+//!   cycles their first and last beats are offered to the packet store, and the counter
+//!   events.
+//! - Back end ([`back`]): packet store (write ring, slots, reader), framer, transmitter,
+//!   status reporter and counter file, run only through the clocks in which a record moves or a datagram
 //!   closes or starts; the stretches between are skipped (only free-running counters
 //!   advance there, and they are advanced arithmetically).
 //!
@@ -36,7 +37,8 @@ use skinbox_gateware::uart_rx::{phase_increment, PHASE_START};
 use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP};
 use std::time::Instant;
 
-pub(crate) use skinbox_gateware::port_buffer::SLOTS;
+pub(crate) use skinbox_gateware::packet_store::SLOTS;
+use skinbox_gateware::packet_store::{visit_period, BANK_PORTS};
 pub(crate) use skinbox_gateware::uart_rx::PHASE_BITS;
 
 /// Clocks from the cycle a transmitter start is decided to the first GMII byte: the
@@ -108,6 +110,9 @@ fn predict_frames_with_progress(
             body_start: BODY_START as u64,
             frame_tail: (FCS_LEN + INTER_FRAME_GAP) as u64,
             start_to_first_byte: START_TO_FIRST_BYTE,
+            visit_from: counters_ready_from + 1,
+            visit_period: visit_period(config.ports) as u64,
+            bank_ports: BANK_PORTS,
         },
         &fronts,
     );
