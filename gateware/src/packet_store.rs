@@ -147,13 +147,15 @@ pub struct PacketStore {
     read2_bank: DFF<Bit>,
     read_word: Signal<Local, Bits<9>>,
     arrival: Signal<Local, Bits<9>>,
-    // output FIFO: entries of data and last (bit 8)
-    fifo: Vec<DFF<Bits<9>>>,
-    fifo_head: DFF<Bits<2>>,
+    // output FIFO, a shift register with the head in entry 0 (the output leaves a
+    // register): entries of data and last (bit 8)
+    fifo_0: DFF<Bits<9>>,
+    fifo_1: DFF<Bits<9>>,
+    fifo_2: DFF<Bits<9>>,
+    fifo_3: DFF<Bits<9>>,
     fifo_count: DFF<Bits<3>>,
-    fifo_tail: Signal<Local, Bits<2>>,
+    fifo_slot: Signal<Local, Bits<3>>,
     fifo_pop: Signal<Local, Bit>,
-    fifo_head_entry: Signal<Local, Bits<9>>,
 }
 
 impl PacketStore {
@@ -249,12 +251,13 @@ impl PacketStore {
             read2_bank: Default::default(),
             read_word: Default::default(),
             arrival: Default::default(),
-            fifo: (0..FIFO_DEPTH).map(|_| Default::default()).collect(),
-            fifo_head: Default::default(),
+            fifo_0: Default::default(),
+            fifo_1: Default::default(),
+            fifo_2: Default::default(),
+            fifo_3: Default::default(),
             fifo_count: Default::default(),
-            fifo_tail: Default::default(),
+            fifo_slot: Default::default(),
             fifo_pop: Default::default(),
-            fifo_head_entry: Default::default(),
         }
     }
 }
@@ -284,13 +287,12 @@ impl Logic for PacketStore {
             read2_kind,
             read2_last,
             read2_bank,
-            fifo_head,
+            fifo_0,
+            fifo_1,
+            fifo_2,
+            fifo_3,
             fifo_count
         );
-        for e in 0..self.fifo.len() {
-            self.fifo[e].clock.next = self.clock.val();
-            self.fifo[e].d.next = self.fifo[e].q.val();
-        }
 
         // ---- reader: scan, grant, issue ----
         self.hit_term.next = false;
@@ -377,29 +379,34 @@ impl Logic for PacketStore {
         }
 
         // ---- output FIFO ----
-        self.fifo_head_entry.next = self.fifo[0].q.val();
-        for e in 1..self.fifo.len() {
-            if self.fifo_head.q.val().index() == e {
-                self.fifo_head_entry.next = self.fifo[e].q.val();
-            }
-        }
         self.records.valid.next = self.fifo_count.q.val() != 0;
-        self.records.data.next = self.fifo_head_entry.val().get_bits::<8>(0);
-        self.records.last.next = self.fifo_head_entry.val().get_bit(8);
+        self.records.data.next = self.fifo_0.q.val().get_bits::<8>(0);
+        self.records.last.next = self.fifo_0.q.val().get_bit(8);
         self.records.error.next = false;
         // (from the count, not from `records.valid`: Verilator orders the statements
         // apart only when no assigned output is read back)
         self.fifo_pop.next = (self.fifo_count.q.val() != 0) & self.records.ready.val();
-        self.fifo_tail.next = self.fifo_head.q.val() + self.fifo_count.q.val().get_bits::<2>(0);
-        if self.read2_valid.q.val() {
-            for e in 0..self.fifo.len() {
-                if self.fifo_tail.val().index() == e {
-                    self.fifo[e].d.next = self.arrival.val();
-                }
-            }
-        }
+        // a pop moves every entry down one; the arrival goes behind the last kept entry
+        self.fifo_slot.next = self.fifo_count.q.val();
         if self.fifo_pop.val() {
-            self.fifo_head.d.next = self.fifo_head.q.val() + 1;
+            self.fifo_0.d.next = self.fifo_1.q.val();
+            self.fifo_1.d.next = self.fifo_2.q.val();
+            self.fifo_2.d.next = self.fifo_3.q.val();
+            self.fifo_slot.next = self.fifo_count.q.val() - 1;
+        }
+        if self.read2_valid.q.val() {
+            if self.fifo_slot.val() == 0 {
+                self.fifo_0.d.next = self.arrival.val();
+            }
+            if self.fifo_slot.val() == 1 {
+                self.fifo_1.d.next = self.arrival.val();
+            }
+            if self.fifo_slot.val() == 2 {
+                self.fifo_2.d.next = self.arrival.val();
+            }
+            if self.fifo_slot.val() == 3 {
+                self.fifo_3.d.next = self.arrival.val();
+            }
         }
         if self.read2_valid.q.val() & !self.fifo_pop.val() {
             self.fifo_count.d.next = self.fifo_count.q.val() + 1;
@@ -546,7 +553,6 @@ impl Logic for PacketStore {
             self.reading.d.next = false;
             self.read1_valid.d.next = false;
             self.read2_valid.d.next = false;
-            self.fifo_head.d.next = 0.into();
             self.fifo_count.d.next = 0.into();
         }
     }
