@@ -113,6 +113,10 @@ pub struct UdpFramer {
     record_count: DFF<Bits<32>>,
     record_tick: Signal<Local, Bits<32>>,
     write: Signal<Local, Bit>,
+    // the payload memory's write port, a clock after the decision (off the accept path)
+    memory_write: DFF<Bit>,
+    memory_write_address: DFF<Bits<12>>,
+    memory_write_data: DFF<Bits<8>>,
     write_data: Signal<Local, Bits<8>>,
     close_due: Signal<Local, Bit>,
     can_close: Signal<Local, Bit>,
@@ -184,6 +188,9 @@ impl UdpFramer {
             record_count: Default::default(),
             record_tick: Default::default(),
             write: Default::default(),
+            memory_write: Default::default(),
+            memory_write_address: Default::default(),
+            memory_write_data: Default::default(),
             write_data: Default::default(),
             close_due: Default::default(),
             can_close: Default::default(),
@@ -230,7 +237,10 @@ impl Logic for UdpFramer {
             sending_status,
             status_taken_pulse,
             datagram_count,
-            record_count
+            record_count,
+            memory_write,
+            memory_write_address,
+            memory_write_data
         );
         self.transmitter.clock.next = self.clock.val();
         self.transmitter.reset.next = self.reset.val();
@@ -305,10 +315,16 @@ impl Logic for UdpFramer {
                 }
             }
         }
-        self.memory.write_enable.next = self.write.val();
-        self.memory.write_data.next = self.write_data.val();
-        self.memory.write_address.next = (bit_cast::<12, 1>(self.fill_buffer.q.val().into()) << 11)
+        // the transmitter reads a buffer only after it closed, many clocks after its last
+        // byte was written, so the write may land a clock late
+        self.memory_write.d.next = self.write.val();
+        self.memory_write_data.d.next = self.write_data.val();
+        self.memory_write_address.d.next = (bit_cast::<12, 1>(self.fill_buffer.q.val().into())
+            << 11)
             | bit_cast::<12, 11>(self.fill_offset.q.val());
+        self.memory.write_enable.next = self.memory_write.q.val();
+        self.memory.write_data.next = self.memory_write_data.q.val();
+        self.memory.write_address.next = self.memory_write_address.q.val();
         if self.write.val() {
             self.fill_offset.d.next = self.fill_offset.q.val() + 1;
             if self.fill_offset.q.val().get_bit(0) {
@@ -388,6 +404,7 @@ impl Logic for UdpFramer {
         self.status_address.next = self.transmitter.payload_address.val();
 
         if self.reset.val() {
+            self.memory_write.d.next = false;
             self.first_seen.d.next = false;
             self.fill_buffer.d.next = false;
             self.fill_count.d.next = 0.into();
