@@ -297,11 +297,12 @@ impl Logic for PacketStore {
         // ---- reader: scan, grant, issue ----
         self.hit_term.next = false;
         self.hit_slot_term.next = false;
+        // an OR of AND terms, not a chain of multiplexers: it maps to a tree
         for i in 0..self.ports.len() {
-            if self.scan_onehot.q.val().get_bit(i) {
-                self.hit_term.next = self.hit_term.val() | self.occupied[i].q.val();
-                self.hit_slot_term.next = self.hit_slot_term.val() | self.read_slot[i].q.val();
-            }
+            self.hit_term.next = self.hit_term.val()
+                | (self.scan_onehot.q.val().get_bit(i) & self.occupied[i].q.val());
+            self.hit_slot_term.next = self.hit_slot_term.val()
+                | (self.scan_onehot.q.val().get_bit(i) & self.read_slot[i].q.val());
         }
         self.issue.next = self.reading.q.val()
             & ((bit_cast::<3, 1>(self.read1_valid.q.val().into())
@@ -476,15 +477,6 @@ impl Logic for PacketStore {
                     | bit_cast::<11, 5>(self.term_index.val());
                 self.word_data.next = bit_cast::<9, 8>(self.term_byte.val())
                     | (bit_cast::<9, 1>(self.term_loss.val().into()) << 8);
-                if self.port_bank[i].val() {
-                    self.bank_write_term[1].next = self.store_word.val();
-                    self.bank_address_term[1].next = self.word_address.val();
-                    self.bank_data_term[1].next = self.word_data.val();
-                } else {
-                    self.bank_write_term[0].next = self.store_word.val();
-                    self.bank_address_term[0].next = self.word_address.val();
-                    self.bank_data_term[0].next = self.word_data.val();
-                }
                 if self.write_index[i].q.val() < self.stored_beats.val() {
                     self.write_index[i].d.next = self.write_index[i].q.val() + 1;
                 }
@@ -503,6 +495,21 @@ impl Logic for PacketStore {
                         self.write_slot[i].d.next = !self.write_slot[i].q.val();
                     }
                 }
+            }
+            // the bank's write register takes the OR of its ports' words, each zero unless
+            // taken (an OR tree, not a chain of multiplexers)
+            if self.port_bank[i].val() {
+                self.bank_write_term[1].next =
+                    self.bank_write_term[1].val() | self.store_word.val();
+                self.bank_address_term[1].next =
+                    self.bank_address_term[1].val() | self.word_address.val();
+                self.bank_data_term[1].next = self.bank_data_term[1].val() | self.word_data.val();
+            } else {
+                self.bank_write_term[0].next =
+                    self.bank_write_term[0].val() | self.store_word.val();
+                self.bank_address_term[0].next =
+                    self.bank_address_term[0].val() | self.word_address.val();
+                self.bank_data_term[0].next = self.bank_data_term[0].val() | self.word_data.val();
             }
             // occupancy: +1 on commit, -1 when the reader finishes this port's record
             self.free[i].next =
