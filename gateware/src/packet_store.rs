@@ -21,7 +21,8 @@
 //! is 26 issues: the port number, the flags byte, the 24 stored bytes; each issue reads the
 //! RAM (two clocks) into a four-entry output FIFO, and an issue happens only when the FIFO
 //! has room for everything in flight, so the record stream's `ready` reaches nothing but
-//! the FIFO. With `ready` high a record takes 29 clocks plus the scan distance.
+//! the FIFO; the slot is freed a clock after the last issue. With `ready` high a record
+//! takes 30 clocks plus the scan distance.
 //!
 //! Output records: the layout of `skinbox_protocol::record` with the absolute low 32 tick
 //! bits where the datagram has its tick offset. Cost per port: about 15 flip-flops and
@@ -136,6 +137,8 @@ pub struct PacketStore {
     last_issue: Constant<Bits<5>>,
     issue: Signal<Local, Bit>,
     finishing: Signal<Local, Bit>,
+    // the record's last issue was a clock ago: its slot is freed now
+    freeing: DFF<Bit>,
     // read pipeline: kind 0 port number, 1 flags, 2 stored byte
     read1_valid: DFF<Bit>,
     read1_kind: DFF<Bits<2>>,
@@ -241,6 +244,7 @@ impl PacketStore {
             last_issue: Constant::new((RECORD_BEATS as u64 - 1).into()),
             issue: Default::default(),
             finishing: Default::default(),
+            freeing: Default::default(),
             read1_valid: Default::default(),
             read1_kind: Default::default(),
             read1_last: Default::default(),
@@ -291,7 +295,8 @@ impl Logic for PacketStore {
             fifo_1,
             fifo_2,
             fifo_3,
-            fifo_count
+            fifo_count,
+            freeing
         );
 
         // ---- reader: scan, grant, issue ----
@@ -312,7 +317,10 @@ impl Logic for PacketStore {
         self.finishing.next =
             self.issue.val() & (self.issue_index.q.val() == self.last_issue.val());
         self.hit.d.next = false;
-        if !self.reading.q.val() {
+        self.freeing.d.next = self.finishing.val();
+        // while a slot is freed (a clock after the last issue) the scan waits, so it never
+        // sees the freed port's occupancy before the free
+        if !self.reading.q.val() & !self.freeing.q.val() {
             if self.hit.q.val() {
                 // grant: the scan already stands on the next port and waits there
                 self.reading.d.next = true;
@@ -512,8 +520,9 @@ impl Logic for PacketStore {
                 self.bank_data_term[0].next = self.bank_data_term[0].val() | self.word_data.val();
             }
             // occupancy: +1 on commit, -1 when the reader finishes this port's record
+            // (`port` still holds the freed port: the next grant comes two clocks later)
             self.free[i].next =
-                self.finishing.val() & (self.port.q.val() == self.port_number[i].val());
+                self.freeing.q.val() & (self.port.q.val() == self.port_number[i].val());
             if self.free[i].val() {
                 self.read_slot[i].d.next = !self.read_slot[i].q.val();
             }
@@ -558,6 +567,7 @@ impl Logic for PacketStore {
             self.scan_onehot.d.next = self.scan_first.val();
             self.hit.d.next = false;
             self.reading.d.next = false;
+            self.freeing.d.next = false;
             self.read1_valid.d.next = false;
             self.read2_valid.d.next = false;
             self.fifo_count.d.next = 0.into();

@@ -134,6 +134,8 @@ pub(super) struct Back<'a> {
     hit: bool,
     hit_port: usize,
     reading: Option<usize>,
+    /// The port whose slot is freed this cycle (a clock after its record's last issue).
+    freeing: Option<usize>,
     issue_index: u8,
     read1: Option<SliceBeat>,
     read2: Option<SliceBeat>,
@@ -219,6 +221,7 @@ impl<'a> Back<'a> {
             hit: false,
             hit_port: 0,
             reading: None,
+            freeing: None,
             issue_index: 0,
             read1: None,
             read2: None,
@@ -289,6 +292,7 @@ impl<'a> Back<'a> {
     fn quiet(&self, c: u64) -> bool {
         let idle = c >= self.idle_from;
         self.reading.is_none()
+            && self.freeing.is_none()
             && !self.hit
             && self.read1.is_none()
             && self.read2.is_none()
@@ -386,7 +390,8 @@ impl<'a> Back<'a> {
         // store reader: scan, grant, issue (on the registers as they are)
         let in_flight = usize::from(self.read1.is_some()) + usize::from(self.read2.is_some());
         let issue = self.reading.is_some() && self.fifo.len() + in_flight < FIFO_DEPTH;
-        let mut read_done = None;
+        // the slot freed this cycle (registered: the record's last issue was a clock ago)
+        let read_done = self.freeing.take();
         let mut next_reading = self.reading;
         let mut next_hit = false;
         let mut issued = None;
@@ -398,11 +403,13 @@ impl<'a> Back<'a> {
                 });
                 if self.issue_index == LAST_ISSUE {
                     next_reading = None;
-                    read_done = Some(p);
+                    self.freeing = Some(p);
                 } else {
                     self.issue_index += 1;
                 }
             }
+        } else if read_done.is_some() {
+            // the scan waits while a slot is freed
         } else if self.hit {
             // grant; the scan already stands on the next port and waits there
             next_reading = Some(self.hit_port);
