@@ -2,7 +2,7 @@
 //! every loss and every piece of bad input counted.
 //!
 //! Losses it sees, in the order a packet could be lost on its way:
-//! - the box's own counters from status datagrams (port buffer overflow, rejected packets),
+//! - the box's own counters from status datagrams (packet slots overflowing, rejected packets),
 //!   as deltas between successive reports, and the record flag `FLAG_LOSS_BEFORE`;
 //! - datagram sequence gaps, duplicates and reordering ([`crate::sequence`]);
 //! - per-cell event packet sequence gaps (a lost event packet, wherever it was lost);

@@ -8,7 +8,7 @@
 //! | 6-25 | the 20 cell packet bytes, unchanged |
 //!
 //! The tick is the box time of the falling edge of the packet's first start bit at the
-//! box pin. The offset is signed because the arbiter may forward a packet that started
+//! box pin. The offset is signed because the packet store may forward a packet that started
 //! earlier after one that started later.
 
 use crate::cell::PACKET_LEN;

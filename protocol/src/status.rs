@@ -76,7 +76,7 @@ pub fn port_counters_layout() -> Vec<LayoutRow> {
 pub enum PortCounter {
     /// Packets the deframer accepted (header, length and end byte right).
     PacketsGood,
-    /// Good packets dropped whole because the port buffer was full.
+    /// Good packets dropped whole because both packet slots of the port were full.
     DroppedOverflow,
     /// Packets rejected: the 20th byte was not the end-of-packet value.
     RejectedEndByte,
