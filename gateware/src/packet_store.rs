@@ -750,15 +750,24 @@ mod tests {
         let n = 40;
         assert_eq!(visit_period(n), 32);
         let out = run(queues(n, 2), 0, &[true], 0, 5000);
-        assert_eq!(out.records.len(), 2 * n);
+        every_port_in_order(&out.records, n, 2);
+    }
+
+    /// Each of `n` ports' records are its `per_port` good packets, in order, unflagged.
+    fn every_port_in_order(records: &[Record], n: usize, per_port: usize) {
+        assert_eq!(records.len(), per_port * n);
         for p in 0..n {
-            let got: Vec<&Vec<u8>> = out
-                .records
+            let got: Vec<(u8, &Vec<u8>)> = records
                 .iter()
                 .filter(|r| r.0 as usize == p)
-                .map(|r| &r.2)
+                .map(|r| (r.1, &r.2))
                 .collect();
-            assert_eq!(got, vec![&good(p, 0).bytes, &good(p, 1).bytes], "port {p}");
+            let want: Vec<Vec<u8>> = (0..per_port).map(|k| good(p, k).bytes).collect();
+            assert_eq!(
+                got,
+                want.iter().map(|w| (0, w)).collect::<Vec<_>>(),
+                "port {p}"
+            );
         }
     }
 
@@ -771,17 +780,7 @@ mod tests {
             &[true, true, false, true, false, false, false, true],
         ] {
             let out = run(queues(n, 3), 30, ready, 0, 20_000);
-            assert_eq!(out.records.len(), 3 * n);
-            for p in 0..n {
-                let got: Vec<&Vec<u8>> = out
-                    .records
-                    .iter()
-                    .filter(|r| r.0 as usize == p)
-                    .map(|r| &r.2)
-                    .collect();
-                let want: Vec<Vec<u8>> = (0..3).map(|k| good(p, k).bytes).collect();
-                assert_eq!(got, want.iter().collect::<Vec<_>>(), "port {p}");
-            }
+            every_port_in_order(&out.records, n, 3);
         }
     }
 
