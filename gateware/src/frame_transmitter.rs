@@ -108,6 +108,8 @@ pub struct FrameTransmitter {
     sending: DFF<Bit>,
     index: DFF<Bits<11>>,
     gap: DFF<Bits<4>>,
+    // gap == 0, kept in a register (`idle` is one gate from registers)
+    gap_done: DFF<Bit>,
     kind_held: DFF<Bits<8>>,
     // the 15 header bytes (flags, sequence, base tick, entry count), most significant
     // first, as one 120-bit shift register cut in two (no word over 64 bits to simulate)
@@ -187,6 +189,7 @@ impl FrameTransmitter {
             sending: Default::default(),
             index: Default::default(),
             gap: Default::default(),
+            gap_done: Default::default(),
             kind_held: Default::default(),
             fields_head: Default::default(),
             fields_tail: Default::default(),
@@ -235,6 +238,7 @@ impl Logic for FrameTransmitter {
             sending,
             index,
             gap,
+            gap_done,
             kind_held,
             fields_head,
             fields_tail,
@@ -425,9 +429,11 @@ impl Logic for FrameTransmitter {
             if self.frame_ends.q.val() {
                 self.sending.d.next = false;
                 self.gap.d.next = 11.into();
+                self.gap_done.d.next = false;
             }
-        } else if self.gap.q.val() != 0 {
+        } else if !self.gap_done.q.val() {
             self.gap.d.next = self.gap.q.val() - 1;
+            self.gap_done.d.next = self.gap.q.val() == 1;
         } else if self.start.val() {
             self.sending.d.next = true;
             self.index.d.next = 0.into();
@@ -455,10 +461,11 @@ impl Logic for FrameTransmitter {
             self.crc_starts.d.next = false;
             self.frame_ends.d.next = false;
             self.gap.d.next = 0.into();
+            self.gap_done.d.next = true;
             self.tx_en.d.next = false;
             self.next_sequence.d.next = 0.into();
         }
-        self.idle.next = !self.sending.q.val() & (self.gap.q.val() == 0);
+        self.idle.next = !self.sending.q.val() & self.gap_done.q.val();
         self.gmii_txd.next = self.txd.q.val();
         self.gmii_tx_en.next = self.tx_en.q.val();
         self.gmii_tx_er.next = false;
