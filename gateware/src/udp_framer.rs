@@ -304,15 +304,22 @@ impl Logic for UdpFramer {
                 self.offset_left.d.next = 4.into();
                 self.offset_idle.d.next = false;
                 if self.fill_count.q.val() == 0 {
-                    // first record: its tick is the base, rebuilt to 64 bits from now
-                    self.offset_bytes.d.next = 0.into();
-                    self.first_age.d.next =
-                        self.tick.val().get_bits::<32>(0) - self.record_tick.val();
                     self.first_seen.d.next = true;
-                } else {
-                    self.offset_bytes.d.next =
-                        self.record_tick.val() - self.fill_base_tick.q.val().get_bits::<32>(0);
                 }
+            }
+        }
+        // The tick of a record is complete at its beat 5: the first record's age (its tick
+        // is the base, rebuilt to 64 bits from now) or a later record's offset is taken in
+        // every clock in which beat 5 is offered, not only when it moves, so the value of
+        // the clock it moves is the last one taken and `accept` stays off the enables of
+        // the two 32-bit subtractions.
+        if self.offset_idle.q.val() & self.records.valid.val() & (self.beat.q.val() == 5) {
+            if self.fill_count.q.val() == 0 {
+                self.offset_bytes.d.next = 0.into();
+                self.first_age.d.next = self.tick.val().get_bits::<32>(0) - self.record_tick.val();
+            } else {
+                self.offset_bytes.d.next =
+                    self.record_tick.val() - self.fill_base_tick.q.val().get_bits::<32>(0);
             }
         }
         // the transmitter reads a buffer only after it closed, many clocks after its last
