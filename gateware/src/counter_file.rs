@@ -47,6 +47,11 @@ pub struct CounterFile {
     update_address: DFF<Bits<9>>,
     write_pending: DFF<Bit>,
     write_pending_address: DFF<Bits<9>>,
+    // the incremented counter, written a clock after the addition (the 32-bit carry chain
+    // between the memory's output register and its write port is cut here)
+    increment_pending: DFF<Bit>,
+    increment_address: DFF<Bits<9>>,
+    increment_value: DFF<Bits<32>>,
     counting_memory: BlockRam<32, 9>,
     reading_memory: BlockRam<32, 9>,
     current: Signal<Local, Bits<8>>,
@@ -82,6 +87,9 @@ impl CounterFile {
             update_address: Default::default(),
             write_pending: Default::default(),
             write_pending_address: Default::default(),
+            increment_pending: Default::default(),
+            increment_address: Default::default(),
+            increment_value: Default::default(),
             counting_memory: Default::default(),
             reading_memory: Default::default(),
             current: Default::default(),
@@ -108,7 +116,10 @@ impl Logic for CounterFile {
             update,
             update_address,
             write_pending,
-            write_pending_address
+            write_pending_address,
+            increment_pending,
+            increment_address,
+            increment_value
         );
         self.counting_memory.clock.next = self.clock.val();
         self.reading_memory.clock.next = self.clock.val();
@@ -170,18 +181,21 @@ impl Logic for CounterFile {
             }
         }
 
-        // Read now, the value comes two clocks later from the memory's output register, and
-        // is written incremented at the next edge. A counter's next event comes at least a byte time
-        // later, long after its write.
+        // Read now, the value comes two clocks later from the memory's output register, is
+        // incremented into a register at the next edge and written at the one after. A
+        // counter's next event comes at least a byte time later, long after its write.
         self.counting_memory.read_address.next =
             (bit_cast::<9, 6>(self.visited.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
         self.update.d.next = (self.clear_mask.val() != 0) & !self.clearing.q.val();
         self.update_address.d.next = self.counting_memory.read_address.val();
         self.write_pending.d.next = self.update.q.val();
         self.write_pending_address.d.next = self.update_address.q.val();
-        self.write_enable.next = self.write_pending.q.val();
-        self.write_address.next = self.write_pending_address.q.val();
-        self.write_data.next = self.counting_memory.read_data.val() + 1;
+        self.increment_pending.d.next = self.write_pending.q.val();
+        self.increment_address.d.next = self.write_pending_address.q.val();
+        self.increment_value.d.next = self.counting_memory.read_data.val() + 1;
+        self.write_enable.next = self.increment_pending.q.val();
+        self.write_address.next = self.increment_address.q.val();
+        self.write_data.next = self.increment_value.q.val();
         if self.clearing.q.val() {
             self.write_enable.next = true;
             self.write_address.next = self.clear_address.q.val();
@@ -212,6 +226,7 @@ impl Logic for CounterFile {
             self.clear_address.d.next = 0.into();
             self.update.d.next = false;
             self.write_pending.d.next = false;
+            self.increment_pending.d.next = false;
             self.sampled.d.next = 0.into();
         }
     }

@@ -708,8 +708,8 @@ impl PortCounting {
             let lowest = self.pending.trailing_zeros() as usize;
             self.pending &= !(1 << lowest);
             // pending bits sampled at the visit, the address a clock later, the memory's
-            // output registered, the increment written the edge after that
-            self.writes[lowest].push(v + 4);
+            // output registered, the increment registered, written the edge after that
+            self.writes[lowest].push(v + 5);
             c = v + 1;
         }
         self.done_until = c.min(until).max(self.done_until);
