@@ -45,10 +45,8 @@ pub const SLOTS: usize = 2;
 pub const STORED_BEATS: usize = TICK_BEATS + PACKET_LEN;
 /// Beats of an output record: port, flags, tick and cell bytes.
 pub const RECORD_BEATS: usize = 2 + STORED_BEATS;
-/// Entries of the output FIFO.
+/// Entries of the output FIFO (its four registers `fifo_0` to `fifo_3`).
 pub const FIFO_DEPTH: usize = 4;
-/// Clocks from a beat taken to its word written (the write register).
-pub const WRITE_LATENCY: u64 = 1;
 
 /// Address bits of a bank: 5 port, 1 slot, 5 word.
 const BANK_ADDRESS_BITS: usize = 11;
@@ -82,7 +80,6 @@ pub struct PacketStore {
     ring_keep: Constant<Bits<64>>,
     ring_wrap_low: Constant<Bits<64>>,
     ring_wrap_high: Constant<Bits<64>>,
-    ring_low: Constant<Bits<64>>,
     ring_high: Constant<Bits<64>>,
     visit: DFF<Bits<64>>,
     visit_next: Signal<Local, Bits<64>>,
@@ -118,9 +115,11 @@ pub struct PacketStore {
     bank_address_term: Vec<Signal<Local, Bits<BANK_ADDRESS_BITS>>>,
     bank_data_term: Vec<Signal<Local, Bits<9>>>,
     stored_beats: Constant<Bits<5>>,
+    slots: Constant<Bits<2>>,
+    fifo_depth: Constant<Bits<3>>,
     // reader
-    last_port: Constant<Bits<6>>,
-    scan_first: Constant<Bits<64>>,
+    // bit 0 set: the first position of the write ring and of the scan
+    bit_zero: Constant<Bits<64>>,
     scan_wrap: Constant<Bits<64>>,
     scan: DFF<Bits<6>>,
     scan_onehot: DFF<Bits<64>>,
@@ -143,11 +142,9 @@ pub struct PacketStore {
     read1_valid: DFF<Bit>,
     read1_kind: DFF<Bits<2>>,
     read1_last: DFF<Bit>,
-    read1_bank: DFF<Bit>,
     read2_valid: DFF<Bit>,
     read2_kind: DFF<Bits<2>>,
     read2_last: DFF<Bit>,
-    read2_bank: DFF<Bit>,
     read_word: Signal<Local, Bits<9>>,
     arrival: Signal<Local, Bits<9>>,
     // output FIFO, a shift register with the head in entry 0 (the output leaves a
@@ -188,7 +185,6 @@ impl PacketStore {
             ring_keep: Constant::new((!(wrap_low | wrap_high)).into()),
             ring_wrap_low: Constant::new(wrap_low.into()),
             ring_wrap_high: Constant::new(wrap_high.into()),
-            ring_low: Constant::new(1u64.into()),
             ring_high: Constant::new(high.into()),
             visit: Default::default(),
             visit_next: Default::default(),
@@ -226,8 +222,9 @@ impl PacketStore {
             bank_address_term: (0..2).map(|_| Default::default()).collect(),
             bank_data_term: (0..2).map(|_| Default::default()).collect(),
             stored_beats: Constant::new((STORED_BEATS as u64).into()),
-            last_port: Constant::new((ports as u64 - 1).into()),
-            scan_first: Constant::new(1u64.into()),
+            slots: Constant::new((SLOTS as u64).into()),
+            fifo_depth: Constant::new((FIFO_DEPTH as u64).into()),
+            bit_zero: Constant::new(1u64.into()),
             scan_wrap: Constant::new(scan_wrap.into()),
             scan: Default::default(),
             scan_onehot: Default::default(),
@@ -248,11 +245,9 @@ impl PacketStore {
             read1_valid: Default::default(),
             read1_kind: Default::default(),
             read1_last: Default::default(),
-            read1_bank: Default::default(),
             read2_valid: Default::default(),
             read2_kind: Default::default(),
             read2_last: Default::default(),
-            read2_bank: Default::default(),
             read_word: Default::default(),
             arrival: Default::default(),
             fifo_0: Default::default(),
@@ -286,11 +281,9 @@ impl Logic for PacketStore {
             read1_valid,
             read1_kind,
             read1_last,
-            read1_bank,
             read2_valid,
             read2_kind,
             read2_last,
-            read2_bank,
             fifo_0,
             fifo_1,
             fifo_2,
@@ -313,7 +306,7 @@ impl Logic for PacketStore {
             & ((bit_cast::<3, 1>(self.read1_valid.q.val().into())
                 + bit_cast::<3, 1>(self.read2_valid.q.val().into())
                 + self.fifo_count.q.val())
-                < 4);
+                < self.fifo_depth.val());
         self.finishing.next =
             self.issue.val() & (self.issue_index.q.val() == self.last_issue.val());
         self.hit.d.next = false;
@@ -334,7 +327,7 @@ impl Logic for PacketStore {
                 self.hit_slot.d.next = self.hit_slot_term.val();
                 if (self.scan_onehot.q.val() & self.scan_wrap.val()) != 0 {
                     self.scan.d.next = 0.into();
-                    self.scan_onehot.d.next = self.scan_first.val();
+                    self.scan_onehot.d.next = self.bit_zero.val();
                 } else {
                     self.scan.d.next = self.scan.q.val() + 1;
                     self.scan_onehot.d.next = self.scan_onehot.q.val() << 1;
@@ -365,16 +358,15 @@ impl Logic for PacketStore {
             self.read1_kind.d.next = 1.into();
         }
         self.read1_last.d.next = self.finishing.val();
-        self.read1_bank.d.next = self.port.q.val().get_bit(5);
         self.read2_valid.d.next = self.read1_valid.q.val();
         self.read2_kind.d.next = self.read1_kind.q.val();
         self.read2_last.d.next = self.read1_last.q.val();
-        self.read2_bank.d.next = self.read1_bank.q.val();
 
-        // the word arriving from the RAM, and the beat it makes
+        // the word arriving from the RAM, and the beat it makes (`port` still holds the
+        // record's port: the next grant comes after its last read arrived)
         self.read_word.next = self.memories[0].read_data.val();
         for b in 1..self.memories.len() {
-            if self.read2_bank.q.val() {
+            if self.port.q.val().get_bit(5) {
                 self.read_word.next = self.memories[b].read_data.val();
             }
         }
@@ -426,7 +418,7 @@ impl Logic for PacketStore {
         // ---- write side: the ring, each port's state, the bank write registers ----
         self.visit_next.next = (self.visit.q.val() & self.ring_keep.val()) << 1;
         if (self.visit.q.val() & self.ring_wrap_low.val()) != 0 {
-            self.visit_next.next = self.visit_next.val() | self.ring_low.val();
+            self.visit_next.next = self.visit_next.val() | self.bit_zero.val();
         }
         if (self.visit.q.val() & self.ring_wrap_high.val()) != 0 {
             self.visit_next.next = self.visit_next.val() | self.ring_high.val();
@@ -543,7 +535,7 @@ impl Logic for PacketStore {
             }
             self.used[i].d.next = self.used_next[i].val();
             self.occupied[i].d.next = self.used_next[i].val() != 0;
-            self.full[i].d.next = self.used_next[i].val() == 2;
+            self.full[i].d.next = self.used_next[i].val() == self.slots.val();
             self.events[i].next = 0.into();
             if self.dropped_pulse[i].q.val() {
                 self.events[i].next = self.dropped_event.val();
@@ -564,7 +556,7 @@ impl Logic for PacketStore {
         }
         if self.reset.val() {
             self.scan.d.next = 0.into();
-            self.scan_onehot.d.next = self.scan_first.val();
+            self.scan_onehot.d.next = self.bit_zero.val();
             self.hit.d.next = false;
             self.reading.d.next = false;
             self.freeing.d.next = false;

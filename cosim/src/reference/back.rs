@@ -74,7 +74,7 @@ struct Stored {
 
 /// A record beat in the store's read pipeline or output FIFO: its port and packet.
 #[derive(Debug, Clone)]
-struct SliceBeat {
+struct RecordBeat {
     port: u8,
     slot: Stored,
 }
@@ -137,9 +137,9 @@ pub(super) struct Back<'a> {
     /// The port whose slot is freed this cycle (a clock after its record's last issue).
     freeing: Option<usize>,
     issue_index: u8,
-    read1: Option<SliceBeat>,
-    read2: Option<SliceBeat>,
-    fifo: VecDeque<SliceBeat>,
+    read1: Option<RecordBeat>,
+    read2: Option<RecordBeat>,
+    fifo: VecDeque<RecordBeat>,
     // framer
     beat: u8,
     offset_left: u8,
@@ -397,7 +397,7 @@ impl<'a> Back<'a> {
         let mut issued = None;
         if let Some(p) = self.reading {
             if issue {
-                issued = self.buffers[p].slots.front().map(|s| SliceBeat {
+                issued = self.buffers[p].slots.front().map(|s| RecordBeat {
                     port: p as u8,
                     slot: s.clone(),
                 });
