@@ -7,8 +7,11 @@
 //! (truncation), or when the 20th byte is wrong; it then hunts again from the next byte.
 //!
 //! Output: one stream packet per header seen, 24 beats when complete: the packet's start
-//! tick (the UART start tick of its header byte, low 32 bits, most significant byte
-//! first), then the 20 cell bytes. A rejected packet ends early or on its 20th byte with
+//! tick (the box time at the receiver's `start` of its header byte, low 32 bits, most
+//! significant byte first), then the 20 cell bytes. The deframer keeps the one time
+//! register of its port: outside a packet it takes the time at every start edge, so when a
+//! header arrives it holds the header's; inside a packet it is left alone (and shifted out
+//! as the tick beats). A rejected packet ends early or on its 20th byte with
 //! `last` and `error`, so a buffer that stored its beats discards them. The sink must take
 //! each beat within one byte time (the [`crate::packet_store::PacketStore`] takes one
 //! every round of its write ring, at most 32 clocks); the deframer has no room for more.
@@ -27,9 +30,9 @@ use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 /// Beats of the packet stream before the cell bytes: the 32-bit start tick.
 pub const TICK_BEATS: usize = 4;
 
-/// Clocks between the receiver's outputs and the deframer's logic: its input register,
-/// which lets the two sit apart on the chip (the start tick is read unregistered; it holds
-/// until the next start edge, half a bit after the strobe at the earliest).
+/// Clocks between the receiver's byte outputs and the deframer's logic: its input register,
+/// which lets the two sit apart on the chip (the start edge is taken unregistered, with the
+/// box time of the same clock).
 pub const INPUT_REGISTER_CLOCKS: u64 = 1;
 
 /// Packet finder for one port.
@@ -45,8 +48,11 @@ pub struct CellDeframer {
     pub byte_strobe: Signal<In, Bit>,
     /// With `byte_strobe`: its stop bit was low.
     pub byte_framing_error: Signal<In, Bit>,
-    /// With `byte_strobe`: tick of its start edge.
-    pub byte_start_tick: Signal<In, Bits<32>>,
+    /// The receiver detected a start edge (one clock, `UartRx::start`).
+    pub byte_start: Signal<In, Bit>,
+    /// Box time of the previous clock, low 32 bits (`TimestampCounter::previous`): with
+    /// `byte_start`, the tick of the first edge that sampled the start bit low.
+    pub tick: Signal<In, Bits<32>>,
     /// The UART is receiving a byte (the line is not idle).
     pub uart_busy: Signal<In, Bit>,
     /// Packets: 4 tick bytes and 20 cell bytes, `error` on `last` when rejected.
@@ -101,7 +107,8 @@ impl CellDeframer {
             byte_data: Default::default(),
             byte_strobe: Default::default(),
             byte_framing_error: Default::default(),
-            byte_start_tick: Default::default(),
+            byte_start: Default::default(),
+            tick: Default::default(),
             uart_busy: Default::default(),
             packets: Default::default(),
             events: Default::default(),
@@ -187,6 +194,11 @@ impl Logic for CellDeframer {
         } else if self.pending.q.val() & self.packets.ready.val() {
             self.pending_next.next = false;
         }
+        // the time of every start edge outside a packet: the header's when it comes (the
+        // tick beats of the previous packet went out a byte time before its end)
+        if self.byte_start.val() & !self.in_packet.q.val() {
+            self.tick_shift.d.next = self.tick.val();
+        }
 
         // Idle-gap timer: counts clocks of idle line inside a packet.
         if self.in_packet.q.val() & !self.input_busy.q.val() & !self.input_strobe.q.val() {
@@ -203,7 +215,6 @@ impl Logic for CellDeframer {
                 if self.input_is_header.q.val() {
                     self.in_packet.d.next = true;
                     self.index.d.next = 1.into();
-                    self.tick_shift.d.next = self.byte_start_tick.val();
                     self.tick_beats_next.next = 4.into();
                     self.pending_next.next = true;
                     self.pending_data.d.next = self.input_data.q.val();
@@ -314,65 +325,76 @@ mod tests {
         bench.uut.reset.next = false;
         let mut counts = Counts::default();
         let mut beats: Vec<(u8, bool, bool)> = vec![];
-        let mut step =
-            |bench: &mut Bench<CellDeframer>, strobe: Option<(u8, bool, u32)>, busy: bool| {
-                let ready = ready_pattern[bench.cycles as usize % ready_pattern.len()];
-                let u = &mut bench.uut;
-                u.packets.ready.next = ready;
-                u.byte_strobe.next = strobe.is_some();
-                u.uart_busy.next = busy;
-                if let Some((byte, broken, tick)) = strobe {
-                    u.byte_data.next = u64::from(byte).into();
-                    u.byte_framing_error.next = broken;
-                    u.byte_start_tick.next = u64::from(tick).into();
-                }
-                bench.settle();
-                let u = &bench.uut;
-                if u.packets.valid.val() && ready {
-                    beats.push((
-                        u.packets.data.val().to_u8(),
-                        u.packets.last.val(),
-                        u.packets.error.val(),
-                    ));
-                }
-                let events = u.events.val().to_u8();
-                for (bit, count) in [
-                    (0, &mut counts.good),
-                    (2, &mut counts.end_byte),
-                    (3, &mut counts.framing),
-                    (4, &mut counts.truncated),
-                    (5, &mut counts.garbage),
-                    (6, &mut counts.any_framing),
-                    (7, &mut counts.resync),
-                ] {
-                    *count += u32::from(events >> bit & 1);
-                }
-                assert_eq!(events & 2, 0, "the deframer drops nothing");
-                bench.cycle();
-            };
+        // one clock of the receiver's outputs: a start edge with the box time, a byte
+        let mut step = |bench: &mut Bench<CellDeframer>,
+                        start: Option<u32>,
+                        strobe: Option<(u8, bool)>,
+                        busy: bool| {
+            let ready = ready_pattern[bench.cycles as usize % ready_pattern.len()];
+            let u = &mut bench.uut;
+            u.packets.ready.next = ready;
+            u.byte_start.next = start.is_some();
+            // the box time runs on; only its value at a start edge matters
+            u.tick.next = u64::from(start.unwrap_or(0xDEAD_BEEF)).into();
+            u.byte_strobe.next = strobe.is_some();
+            u.uart_busy.next = busy;
+            if let Some((byte, broken)) = strobe {
+                u.byte_data.next = u64::from(byte).into();
+                u.byte_framing_error.next = broken;
+            }
+            bench.settle();
+            let u = &bench.uut;
+            if u.packets.valid.val() && ready {
+                beats.push((
+                    u.packets.data.val().to_u8(),
+                    u.packets.last.val(),
+                    u.packets.error.val(),
+                ));
+            }
+            let events = u.events.val().to_u8();
+            for (bit, count) in [
+                (0, &mut counts.good),
+                (2, &mut counts.end_byte),
+                (3, &mut counts.framing),
+                (4, &mut counts.truncated),
+                (5, &mut counts.garbage),
+                (6, &mut counts.any_framing),
+                (7, &mut counts.resync),
+            ] {
+                *count += u32::from(events >> bit & 1);
+            }
+            assert_eq!(events & 2, 0, "the deframer drops nothing");
+            bench.cycle();
+        };
         for input in inputs {
+            // a byte: its start edge, 20 clocks of reception, the byte at the middle of the
+            // stop bit, and the rest of the stop bit (the next start edge comes no earlier)
+            let byte = match *input {
+                Input::Byte(b, tick) => Some((tick, b, false)),
+                Input::Broken(b) => Some((0, b, true)),
+                Input::Idle(_) => None,
+            };
             match *input {
-                Input::Byte(b, tick) => {
-                    step(&mut bench, Some((b, false, tick)), false);
+                Input::Byte(..) | Input::Broken(_) => {
+                    let (tick, b, broken) = byte.expect("a byte");
+                    step(&mut bench, Some(tick), None, false);
                     for _ in 0..20 {
-                        step(&mut bench, None, true);
+                        step(&mut bench, None, None, true);
                     }
-                }
-                Input::Broken(b) => {
-                    step(&mut bench, Some((b, true, 0)), false);
-                    for _ in 0..20 {
-                        step(&mut bench, None, true);
+                    step(&mut bench, None, Some((b, broken)), false);
+                    for _ in 0..15 {
+                        step(&mut bench, None, None, false);
                     }
                 }
                 Input::Idle(clocks) => {
                     for _ in 0..clocks {
-                        step(&mut bench, None, false);
+                        step(&mut bench, None, None, false);
                     }
                 }
             }
         }
         for _ in 0..40 {
-            step(&mut bench, None, true);
+            step(&mut bench, None, None, true);
         }
         let mut packets = vec![];
         let mut current: Vec<u8> = vec![];

@@ -219,13 +219,13 @@ impl Logic for InterfaceBox {
             self.uarts[i].clock.next = self.clock.val();
             self.uarts[i].reset.next = self.port_reset.q.val();
             self.uarts[i].rx.next = self.uart_rx[i].val();
-            self.uarts[i].tick.next = self.timestamp.previous.val();
             self.deframers[i].clock.next = self.clock.val();
             self.deframers[i].reset.next = self.port_reset.q.val();
             self.deframers[i].byte_data.next = self.uarts[i].data.val();
             self.deframers[i].byte_strobe.next = self.uarts[i].strobe.val();
             self.deframers[i].byte_framing_error.next = self.uarts[i].framing_error.val();
-            self.deframers[i].byte_start_tick.next = self.uarts[i].start_tick.val();
+            self.deframers[i].byte_start.next = self.uarts[i].start.val();
+            self.deframers[i].tick.next = self.timestamp.previous.val();
             self.deframers[i].uart_busy.next = self.uarts[i].busy.val();
             self.store.ports[i].data.next = self.deframers[i].packets.data.val();
             self.store.ports[i].valid.next = self.deframers[i].packets.valid.val();

@@ -11,17 +11,19 @@
 //! - Stop-bit check: a low stop bit sets `framing_error` with the byte.
 //!
 //! Outputs: `data` with a one-clock `strobe` at the middle of the stop bit, `framing_error`
-//! with it, and `start_tick`: the tick of the first clock edge that sampled the start bit
-//! low, so the true falling edge lies within the tick before it. Baud tolerance measured by
-//! the tests: +-4.75 % (8N1 with mid-bit sampling allows about 5 %).
+//! with it, and a one-clock `start` when a start edge is detected: a register that takes
+//! the box time (`TimestampCounter::previous`) on `start` holds the tick of the first clock
+//! edge that sampled the start bit low, so the true falling edge lies within the tick before
+//! it. The receiver keeps no time itself: the deframer captures it, once per packet. Baud
+//! tolerance measured by the tests: +-4.75 % (8N1 with mid-bit sampling allows about 5 %).
 
 use rust_hdl::prelude::*;
 
 /// Fraction bits of the baud phase accumulator.
 pub const PHASE_BITS: usize = 16;
 
-/// Ticks from the first edge that samples the pin low to the detection of the edge: the
-/// synchroniser's second flop.
+/// Ticks from the first edge that samples the pin low to the detection of the edge (`start`):
+/// the synchroniser's second flop.
 pub const START_LATENCY_TICKS: u64 = 1;
 
 /// Phase accumulator value right after a start edge is detected: half a bit, so the
@@ -45,18 +47,17 @@ pub struct UartRx {
     pub reset: Signal<In, Bit>,
     /// The UART pin, asynchronous, idle high.
     pub rx: Signal<In, Bit>,
-    /// Box time of the previous clock, low 32 bits (`TimestampCounter::previous`): the
-    /// tick of the edge before the current one, which is the first edge that sampled a
-    /// start bit low when the edge is detected ([`START_LATENCY_TICKS`] earlier).
-    pub tick: Signal<In, Bits<32>>,
-    /// Received byte, valid with `strobe`.
+    /// Received byte, valid with `strobe` (the shift register, which holds it until the
+    /// next byte's first data bit).
     pub data: Signal<Out, Bits<8>>,
     /// High for one clock when a byte is complete.
     pub strobe: Signal<Out, Bit>,
     /// With `strobe`: the stop bit was low.
     pub framing_error: Signal<Out, Bit>,
-    /// With `strobe`: tick of the first edge that sampled this byte's start bit low.
-    pub start_tick: Signal<Out, Bits<32>>,
+    /// High for one clock when a start edge is detected, [`START_LATENCY_TICKS`] after
+    /// the first edge that sampled the pin low: the box time of the previous clock
+    /// (`TimestampCounter::previous`) is then that edge's tick.
+    pub start: Signal<Out, Bit>,
     /// A byte is being received.
     pub busy: Signal<Out, Bit>,
     phase_increment: Constant<Bits<17>>,
@@ -69,10 +70,9 @@ pub struct UartRx {
     phase: DFF<Bits<16>>,
     bit_index: DFF<Bits<4>>,
     shift: DFF<Bits<8>>,
-    start_edge_tick: DFF<Bits<32>>,
-    data_out: DFF<Bits<8>>,
     strobe_out: DFF<Bit>,
     framing_error_out: DFF<Bit>,
+    start_edge: Signal<Local, Bit>,
     phase_sum: Signal<Local, Bits<17>>,
     majority: Signal<Local, Bit>,
     bit_middle: Signal<Local, Bit>,
@@ -92,11 +92,10 @@ impl UartRx {
             clock: Default::default(),
             reset: Default::default(),
             rx: Default::default(),
-            tick: Default::default(),
             data: Default::default(),
             strobe: Default::default(),
             framing_error: Default::default(),
-            start_tick: Default::default(),
+            start: Default::default(),
             busy: Default::default(),
             phase_increment: Constant::new(increment.into()),
             phase_start: Constant::new(start.into()),
@@ -108,10 +107,9 @@ impl UartRx {
             phase: Default::default(),
             bit_index: Default::default(),
             shift: Default::default(),
-            start_edge_tick: Default::default(),
-            data_out: Default::default(),
             strobe_out: Default::default(),
             framing_error_out: Default::default(),
+            start_edge: Default::default(),
             phase_sum: Default::default(),
             majority: Default::default(),
             bit_middle: Default::default(),
@@ -133,8 +131,6 @@ impl Logic for UartRx {
             phase,
             bit_index,
             shift,
-            start_edge_tick,
-            data_out,
             strobe_out,
             framing_error_out
         );
@@ -152,11 +148,12 @@ impl Logic for UartRx {
         if self.receiving.q.val() {
             self.phase.d.next = self.phase_sum.val().get_bits::<16>(0);
         }
-        if !self.receiving.q.val() & self.sync_previous.q.val() & !self.sync_stable.q.val() {
+        self.start_edge.next =
+            !self.receiving.q.val() & self.sync_previous.q.val() & !self.sync_stable.q.val();
+        if self.start_edge.val() {
             self.receiving.d.next = true;
             self.phase.d.next = self.phase_start.val();
             self.bit_index.d.next = 0.into();
-            self.start_edge_tick.d.next = self.tick.val();
         }
         if self.bit_middle.val() {
             self.bit_index.d.next = self.bit_index.q.val() + 1;
@@ -168,7 +165,6 @@ impl Logic for UartRx {
             } else if self.bit_index.q.val() == 9 {
                 self.receiving.d.next = false;
                 self.strobe_out.d.next = true;
-                self.data_out.d.next = self.shift.q.val();
                 self.framing_error_out.d.next = !self.majority.val();
             } else {
                 self.shift.d.next = (self.shift.q.val() >> 1).replace_bit(7, self.majority.val());
@@ -181,11 +177,10 @@ impl Logic for UartRx {
             self.sync_stable.d.next = true;
             self.sync_previous.d.next = true;
         }
-        self.data.next = self.data_out.q.val();
+        self.data.next = self.shift.q.val();
         self.strobe.next = self.strobe_out.q.val();
         self.framing_error.next = self.framing_error_out.q.val();
-        // stable until the next start edge is detected, which is after the strobe
-        self.start_tick.next = self.start_edge_tick.q.val();
+        self.start.next = self.start_edge.val();
         self.busy.next = self.receiving.q.val();
     }
 }
@@ -209,17 +204,22 @@ mod tests {
         // from here on edge e of the line is the bench's edge number e
         let first = bench.cycles;
         let levels = line.levels(line.end().ceil() as u64 + 100);
+        // the register a deframer keeps: the previous clock's tick (the timestamp
+        // counter's `previous`), taken at the edge where `start` is high
+        let mut start_tick = None;
         for e in 1..levels.len() as u64 {
             bench.uut.rx.next = levels[e as usize];
-            // the previous clock's tick, as the timestamp counter's `previous` gives it
-            bench.uut.tick.next = (e.wrapping_sub(1 + START_LATENCY_TICKS) & 0xFFFF_FFFF).into();
+            if bench.uut.start.val() {
+                start_tick = Some(e.wrapping_sub(1 + START_LATENCY_TICKS) & 0xFFFF_FFFF);
+            }
             bench.cycle();
             assert_eq!(bench.cycles - first, e);
             if bench.uut.strobe.val() {
+                let tick = start_tick.take().expect("a byte without a start edge");
                 out.push((
                     bench.uut.data.val().to_u8(),
                     bench.uut.framing_error.val(),
-                    bench.uut.start_tick.val().to_u64(),
+                    tick,
                 ));
             }
         }
