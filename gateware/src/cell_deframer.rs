@@ -30,9 +30,9 @@ use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 /// Beats of the packet stream before the cell bytes: the 32-bit start tick.
 pub const TICK_BEATS: usize = 4;
 
-/// Clocks between the receiver's byte outputs and the deframer's logic: its input register,
-/// which lets the two sit apart on the chip (the start edge is taken unregistered, with the
-/// box time of the same clock).
+/// Clocks between the receiver's outputs and the deframer's logic: its input register,
+/// which lets the two sit apart on the chip (the start edge too: the box time it takes is
+/// `TimestampCounter::start_stamp`, which lags by this and the receiver's latency).
 pub const INPUT_REGISTER_CLOCKS: u64 = 1;
 
 /// Packet finder for one port.
@@ -50,8 +50,9 @@ pub struct CellDeframer {
     pub byte_framing_error: Signal<In, Bit>,
     /// The receiver detected a start edge (one clock, `UartRx::start`).
     pub byte_start: Signal<In, Bit>,
-    /// Box time of the previous clock, low 32 bits (`TimestampCounter::previous`): with
-    /// `byte_start`, the tick of the first edge that sampled the start bit low.
+    /// Box time, low 32 bits, lagging by the receiver's latency and the input register
+    /// (`TimestampCounter::start_stamp`): a clock after `byte_start`, the tick of the first
+    /// edge that sampled the start bit low.
     pub tick: Signal<In, Bits<32>>,
     /// The UART is receiving a byte (the line is not idle).
     pub uart_busy: Signal<In, Bit>,
@@ -70,6 +71,7 @@ pub struct CellDeframer {
     input_strobe: DFF<Bit>,
     input_framing_error: DFF<Bit>,
     input_busy: DFF<Bit>,
+    input_start: DFF<Bit>,
     input_is_header: DFF<Bit>,
     out_valid: DFF<Bit>,
     in_packet: DFF<Bit>,
@@ -121,6 +123,7 @@ impl CellDeframer {
             input_strobe: Default::default(),
             input_framing_error: Default::default(),
             input_busy: Default::default(),
+            input_start: Default::default(),
             input_is_header: Default::default(),
             out_valid: Default::default(),
             in_packet: Default::default(),
@@ -151,6 +154,7 @@ impl Logic for CellDeframer {
             input_strobe,
             input_framing_error,
             input_busy,
+            input_start,
             input_is_header,
             out_valid,
             in_packet,
@@ -169,6 +173,7 @@ impl Logic for CellDeframer {
         self.input_strobe.d.next = self.byte_strobe.val();
         self.input_framing_error.d.next = self.byte_framing_error.val();
         self.input_busy.d.next = self.uart_busy.val();
+        self.input_start.d.next = self.byte_start.val();
         self.events_now.next = 0.into();
         // the header test on the receiver's outputs, registered with the byte
         self.input_is_header.d.next = !self.byte_framing_error.val()
@@ -196,7 +201,7 @@ impl Logic for CellDeframer {
         }
         // the time of every start edge outside a packet: the header's when it comes (the
         // tick beats of the previous packet went out a byte time before its end)
-        if self.byte_start.val() & !self.in_packet.q.val() {
+        if self.input_start.q.val() & !self.in_packet.q.val() {
             self.tick_shift.d.next = self.tick.val();
         }
 
@@ -271,6 +276,7 @@ impl Logic for CellDeframer {
             self.events_now.next = 0.into();
             self.input_strobe.d.next = false;
             self.input_busy.d.next = false;
+            self.input_start.d.next = false;
             self.in_packet.d.next = false;
             self.aligned.d.next = false;
             self.tick_beats_next.next = 0.into();
@@ -326,6 +332,8 @@ mod tests {
         let mut counts = Counts::default();
         let mut beats: Vec<(u8, bool, bool)> = vec![];
         // one clock of the receiver's outputs: a start edge with the box time, a byte
+        // the box time a clock after a start edge (the deframer registers the edge)
+        let mut stamp_due: Option<u32> = None;
         let mut step = |bench: &mut Bench<CellDeframer>,
                         start: Option<u32>,
                         strobe: Option<(u8, bool)>,
@@ -334,8 +342,9 @@ mod tests {
             let u = &mut bench.uut;
             u.packets.ready.next = ready;
             u.byte_start.next = start.is_some();
-            // the box time runs on; only its value at a start edge matters
-            u.tick.next = u64::from(start.unwrap_or(0xDEAD_BEEF)).into();
+            // the box time runs on; only its value a clock after a start edge matters
+            u.tick.next = u64::from(stamp_due.take().unwrap_or(0xDEAD_BEEF)).into();
+            stamp_due = start;
             u.byte_strobe.next = strobe.is_some();
             u.uart_busy.next = busy;
             if let Some((byte, broken)) = strobe {

@@ -225,7 +225,7 @@ impl Logic for InterfaceBox {
             self.deframers[i].byte_strobe.next = self.uarts[i].strobe.val();
             self.deframers[i].byte_framing_error.next = self.uarts[i].framing_error.val();
             self.deframers[i].byte_start.next = self.uarts[i].start.val();
-            self.deframers[i].tick.next = self.timestamp.previous.val();
+            self.deframers[i].tick.next = self.timestamp.start_stamp.val();
             self.deframers[i].uart_busy.next = self.uarts[i].busy.val();
             self.store.ports[i].data.next = self.deframers[i].packets.data.val();
             self.store.ports[i].valid.next = self.deframers[i].packets.valid.val();

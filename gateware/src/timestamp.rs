@@ -1,10 +1,16 @@
 //! TimestampCounter: the box time, a free-running 64-bit count of 8 ns ticks.
 //!
 //! At 125 MHz it wraps after 4,677 years. Latency: the count after a rising edge is the
-//! number of edges since reset went low. Cost: one 64-bit incrementer and a 32-bit copy of
-//! the previous count (shared by every UART receiver instead of a subtractor each).
+//! number of edges since reset went low. Cost: one 64-bit incrementer and two 32-bit copies
+//! of earlier counts (the start stamp, shared by every deframer instead of a subtractor
+//! each).
 
 use rust_hdl::prelude::*;
+
+/// Ticks `start_stamp` lags `tick`: the receiver's synchroniser
+/// ([`crate::uart_rx::START_LATENCY_TICKS`]) and the deframer's input register
+/// ([`crate::cell_deframer::INPUT_REGISTER_CLOCKS`]).
+pub const START_STAMP_LAG: u64 = 2;
 
 /// Free-running 64-bit tick counter.
 #[derive(LogicBlock, Default)]
@@ -15,25 +21,29 @@ pub struct TimestampCounter {
     pub reset: Signal<In, Bit>,
     /// The current tick.
     pub tick: Signal<Out, Bits<64>>,
-    /// The low 32 bits of the tick before the current one (`tick - 1`, from a register),
-    /// for the UART receivers' start stamps.
-    pub previous: Signal<Out, Bits<32>>,
+    /// The low 32 bits of `tick - START_STAMP_LAG`, from registers: when a deframer
+    /// takes its registered start edge, the tick of the first edge that sampled the start
+    /// bit low.
+    pub start_stamp: Signal<Out, Bits<32>>,
     count: DFF<Bits<64>>,
     previous_low: DFF<Bits<32>>,
+    stamp_low: DFF<Bits<32>>,
 }
 
 impl Logic for TimestampCounter {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, count, previous_low);
+        dff_setup!(self, clock, count, previous_low, stamp_low);
         self.count.d.next = self.count.q.val() + 1;
         self.previous_low.d.next = self.count.q.val().get_bits::<32>(0);
+        self.stamp_low.d.next = self.previous_low.q.val();
         if self.reset.val() {
             self.count.d.next = 0.into();
             self.previous_low.d.next = 0xFFFF_FFFF_u64.into();
+            self.stamp_low.d.next = 0xFFFF_FFFE_u64.into();
         }
         self.tick.next = self.count.q.val();
-        self.previous.next = self.previous_low.q.val();
+        self.start_stamp.next = self.stamp_low.q.val();
     }
 }
 
@@ -41,6 +51,12 @@ impl Logic for TimestampCounter {
 mod tests {
     use super::*;
     use crate::testbench::Bench;
+
+    #[test]
+    fn start_stamp_lag_is_the_latency_from_pin_to_deframer() {
+        use crate::{cell_deframer::INPUT_REGISTER_CLOCKS, uart_rx::START_LATENCY_TICKS};
+        assert_eq!(START_STAMP_LAG, START_LATENCY_TICKS + INPUT_REGISTER_CLOCKS);
+    }
 
     #[test]
     fn counts_clock_edges_from_reset() {
@@ -52,6 +68,8 @@ mod tests {
         for expected in 1..=1000u64 {
             bench.cycle();
             assert_eq!(bench.uut.tick.val(), expected);
+            let stamp = expected.wrapping_sub(START_STAMP_LAG) & 0xFFFF_FFFF;
+            assert_eq!(bench.uut.start_stamp.val(), stamp, "tick {expected}");
         }
     }
 

@@ -11,10 +11,10 @@
 //! - Stop-bit check: a low stop bit sets `framing_error` with the byte.
 //!
 //! Outputs: `data` with a one-clock `strobe` at the middle of the stop bit, `framing_error`
-//! with it, and a one-clock `start` when a start edge is detected: a register that takes
-//! the box time (`TimestampCounter::previous`) on `start` holds the tick of the first clock
-//! edge that sampled the start bit low, so the true falling edge lies within the tick before
-//! it. The receiver keeps no time itself: the deframer captures it, once per packet. Baud
+//! with it, and a one-clock `start` when a start edge is detected, [`START_LATENCY_TICKS`]
+//! after the first clock edge that sampled the start bit low (the true falling edge lies
+//! within the tick before that edge): the deframer stamps its packets with that edge's tick
+//! (`TimestampCounter::start_stamp`). The receiver keeps no time itself: the deframer captures it, once per packet. Baud
 //! tolerance measured by the tests: +-4.75 % (8N1 with mid-bit sampling allows about 5 %).
 
 use rust_hdl::prelude::*;
@@ -55,8 +55,7 @@ pub struct UartRx {
     /// With `strobe`: the stop bit was low.
     pub framing_error: Signal<Out, Bit>,
     /// High for one clock when a start edge is detected, [`START_LATENCY_TICKS`] after
-    /// the first edge that sampled the pin low: the box time of the previous clock
-    /// (`TimestampCounter::previous`) is then that edge's tick.
+    /// the first edge that sampled the pin low.
     pub start: Signal<Out, Bit>,
     /// A byte is being received.
     pub busy: Signal<Out, Bit>,
@@ -204,8 +203,8 @@ mod tests {
         // from here on edge e of the line is the bench's edge number e
         let first = bench.cycles;
         let levels = line.levels(line.end().ceil() as u64 + 100);
-        // the register a deframer keeps: the previous clock's tick (the timestamp
-        // counter's `previous`), taken at the edge where `start` is high
+        // the stamp a deframer keeps: `start` is high after edge e - 1, which is
+        // START_LATENCY_TICKS after the first edge that sampled the start bit low
         let mut start_tick = None;
         for e in 1..levels.len() as u64 {
             bench.uut.rx.next = levels[e as usize];
