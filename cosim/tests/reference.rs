@@ -136,6 +136,41 @@ fn eight_ports_at_line_rate_with_jitter() {
     assert_eq!(records(&frames), ports * per_port);
 }
 
+/// The idle gap's edge, clock by clock: on each port a packet stops after 11 bytes and the
+/// next one starts after an idle line of about the gap, 4 ns longer from port to port. Where
+/// the gap is reached first, the stopped packet is truncated and the next one stored; where
+/// its header comes first, the header continues the stopped packet, which then fails.
+/// Both models must draw the line at the same clock.
+#[test]
+fn truncation_at_the_idle_gap_clock_by_clock() {
+    let ports = 24;
+    let config = BoxConfig {
+        ports,
+        flush_timeout_ticks: 2_000,
+        ..BoxConfig::default()
+    };
+    let bit_ns = 250.0;
+    // the gap (10 bit times) is counted from the middle of the last stop bit
+    let idle_at_edge = (config.idle_gap_bits as f64 - 0.5) * bit_ns;
+    let lines: Vec<Vec<Transition>> = (0..ports)
+        .map(|port| {
+            let first = 5_000.0 + port as f64 * 101.0;
+            let mut bytes = back_to_back(&data(2 * port as u16 + 1, 5)[..11], first, bit_ns);
+            let idle = idle_at_edge + (port as f64 - 12.0) * 4.0;
+            let next = bytes.last().unwrap().end_ns() + idle;
+            bytes.extend(back_to_back(&data(2 * port as u16 + 2, 6), next, bit_ns));
+            transitions(&bytes)
+        })
+        .collect();
+    // the last packet ends by about 90 us; then the flush timeout (16 us)
+    let frames = agree(&config, &lines, 120_000 / 8);
+    let stored = records(&frames);
+    assert!(
+        0 < stored && stored < ports,
+        "{stored} of {ports} ports truncated in time: the sweep misses the edge"
+    );
+}
+
 /// A scene's packets through the 4-bus box: the default job's traffic, shortened.
 #[test]
 fn stroking_scene() {

@@ -24,11 +24,15 @@
 //! packet that is rejected too.
 
 use crate::stream::ByteStreamSource;
+use crate::uart_rx::{BIT_COUNT_AFTER_STOP, BIT_COUNT_MAX};
 use rust_hdl::prelude::*;
 use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 
 /// Beats of the packet stream before the cell bytes: the 32-bit start tick.
 pub const TICK_BEATS: usize = 4;
+
+/// Longest idle gap: the receiver's bit count reaches it before it wraps.
+pub const MAX_IDLE_GAP_BITS: u64 = BIT_COUNT_MAX - BIT_COUNT_AFTER_STOP;
 
 /// Clocks between the receiver's outputs and the deframer's logic: its input register,
 /// which lets the two sit apart on the chip (the start edge too: the box time it takes is
@@ -54,8 +58,9 @@ pub struct CellDeframer {
     /// (`TimestampCounter::start_stamp`): a clock after `byte_start`, the tick of the first
     /// edge that sampled the start bit low.
     pub tick: Signal<In, Bits<32>>,
-    /// The UART is receiving a byte (the line is not idle).
-    pub uart_busy: Signal<In, Bit>,
+    /// The receiver's bit middles since its last start edge (`UartRx::bit_count`): it
+    /// counts idle bit times after a byte.
+    pub byte_bit_count: Signal<In, Bits<5>>,
     /// Packets: 4 tick bytes and 20 cell bytes, `error` on `last` when rejected.
     pub packets: ByteStreamSource,
     /// Counter events this clock, bit i = `skinbox_protocol::PortCounter` i: good (0),
@@ -66,18 +71,18 @@ pub struct CellDeframer {
     event_header: Constant<Bits<8>>,
     end_of_packet: Constant<Bits<8>>,
     last_index: Constant<Bits<5>>,
-    idle_gap_clocks: Constant<Bits<16>>,
+    gap_end: Constant<Bits<5>>,
     input_data: DFF<Bits<8>>,
     input_strobe: DFF<Bit>,
     input_framing_error: DFF<Bit>,
-    input_busy: DFF<Bit>,
+    // the receiver's bit count says the idle gap is over
+    input_gap: DFF<Bit>,
     input_start: DFF<Bit>,
     input_is_header: DFF<Bit>,
     out_valid: DFF<Bit>,
     in_packet: DFF<Bit>,
     aligned: DFF<Bit>,
     index: DFF<Bits<5>>,
-    idle_clocks: DFF<Bits<16>>,
     tick_shift: DFF<Bits<32>>,
     tick_beats: DFF<Bits<3>>,
     pending: DFF<Bit>,
@@ -92,16 +97,16 @@ pub struct CellDeframer {
 }
 
 impl CellDeframer {
-    /// A deframer for `framing`; a packet is truncated after `idle_gap_clocks` clocks of
-    /// idle line (the box uses 10 bit times).
-    pub fn new(framing: CellFraming, idle_gap_clocks: u64) -> Self {
+    /// A deframer for `framing`; a packet is truncated after `idle_gap_bits` bit times of
+    /// idle line (the box uses 10), 1 to [`MAX_IDLE_GAP_BITS`].
+    pub fn new(framing: CellFraming, idle_gap_bits: u64) -> Self {
         assert!(
             framing.data_header != framing.event_header,
             "CellDeframer: data and event headers must differ"
         );
         assert!(
-            (1..1 << 16).contains(&idle_gap_clocks),
-            "CellDeframer: idle gap of {idle_gap_clocks} clocks must be 1..65535"
+            (1..=MAX_IDLE_GAP_BITS).contains(&idle_gap_bits),
+            "CellDeframer: idle gap of {idle_gap_bits} bits must be 1 to {MAX_IDLE_GAP_BITS}"
         );
         Self {
             clock: Default::default(),
@@ -111,25 +116,24 @@ impl CellDeframer {
             byte_framing_error: Default::default(),
             byte_start: Default::default(),
             tick: Default::default(),
-            uart_busy: Default::default(),
+            byte_bit_count: Default::default(),
             packets: Default::default(),
             events: Default::default(),
             data_header: Constant::new(u64::from(framing.data_header).into()),
             event_header: Constant::new(u64::from(framing.event_header).into()),
             end_of_packet: Constant::new(u64::from(framing.end_of_packet).into()),
             last_index: Constant::new((PACKET_LEN as u64 - 1).into()),
-            idle_gap_clocks: Constant::new(idle_gap_clocks.into()),
+            gap_end: Constant::new((BIT_COUNT_AFTER_STOP + idle_gap_bits).into()),
             input_data: Default::default(),
             input_strobe: Default::default(),
             input_framing_error: Default::default(),
-            input_busy: Default::default(),
+            input_gap: Default::default(),
             input_start: Default::default(),
             input_is_header: Default::default(),
             out_valid: Default::default(),
             in_packet: Default::default(),
             aligned: Default::default(),
             index: Default::default(),
-            idle_clocks: Default::default(),
             tick_shift: Default::default(),
             tick_beats: Default::default(),
             pending: Default::default(),
@@ -153,14 +157,13 @@ impl Logic for CellDeframer {
             input_data,
             input_strobe,
             input_framing_error,
-            input_busy,
+            input_gap,
             input_start,
             input_is_header,
             out_valid,
             in_packet,
             aligned,
             index,
-            idle_clocks,
             tick_shift,
             tick_beats,
             pending,
@@ -172,7 +175,7 @@ impl Logic for CellDeframer {
         self.input_data.d.next = self.byte_data.val();
         self.input_strobe.d.next = self.byte_strobe.val();
         self.input_framing_error.d.next = self.byte_framing_error.val();
-        self.input_busy.d.next = self.uart_busy.val();
+        self.input_gap.d.next = self.byte_bit_count.val() == self.gap_end.val();
         self.input_start.d.next = self.byte_start.val();
         self.events_now.next = 0.into();
         // the header test on the receiver's outputs, registered with the byte
@@ -200,16 +203,11 @@ impl Logic for CellDeframer {
             self.pending_next.next = false;
         }
         // the time of every start edge outside a packet: the header's when it comes (the
-        // tick beats of the previous packet went out a byte time before its end)
-        if self.input_start.q.val() & !self.in_packet.q.val() {
+        // tick beats of the previous packet went out a byte time before its end). A packet
+        // truncated in this very clock is over too: its idle gap was reached before this
+        // start edge restarted the receiver's bit count.
+        if self.input_start.q.val() & (!self.in_packet.q.val() | self.input_gap.q.val()) {
             self.tick_shift.d.next = self.tick.val();
-        }
-
-        // Idle-gap timer: counts clocks of idle line inside a packet.
-        if self.in_packet.q.val() & !self.input_busy.q.val() & !self.input_strobe.q.val() {
-            self.idle_clocks.d.next = self.idle_clocks.q.val() + 1;
-        } else {
-            self.idle_clocks.d.next = 0.into();
         }
 
         if self.input_strobe.q.val() {
@@ -259,8 +257,7 @@ impl Logic for CellDeframer {
                     }
                 }
             }
-        } else if self.in_packet.q.val() & (self.idle_clocks.q.val() == self.idle_gap_clocks.val())
-        {
+        } else if self.in_packet.q.val() & self.input_gap.q.val() {
             // truncated: close the packet with an error beat
             self.in_packet.d.next = false;
             self.aligned.d.next = false;
@@ -275,7 +272,7 @@ impl Logic for CellDeframer {
         if self.reset.val() {
             self.events_now.next = 0.into();
             self.input_strobe.d.next = false;
-            self.input_busy.d.next = false;
+            self.input_gap.d.next = false;
             self.input_start.d.next = false;
             self.in_packet.d.next = false;
             self.aligned.d.next = false;
@@ -296,7 +293,10 @@ mod tests {
     use crate::testbench::Bench;
     use skinbox_protocol::{Channel, DataRepr, EventRepr};
 
-    const GAP: u64 = 300;
+    /// Idle gap of the tests, in bit times.
+    const GAP_BITS: u64 = 10;
+    /// Clocks per bit of the modelled receiver.
+    const BIT: u64 = 31;
 
     /// What the test line delivers to the deframer.
     #[derive(Clone, Copy)]
@@ -325,56 +325,65 @@ mod tests {
 
     fn run(inputs: &[Input], ready_pattern: &[bool]) -> (Vec<Out>, Counts) {
         let framing = CellFraming::DEFAULT;
-        let mut bench = Bench::new(CellDeframer::new(framing, GAP), |b| &mut b.clock);
+        let mut bench = Bench::new(CellDeframer::new(framing, GAP_BITS), |b| &mut b.clock);
         bench.uut.reset.next = true;
         bench.cycles(2);
         bench.uut.reset.next = false;
         let mut counts = Counts::default();
         let mut beats: Vec<(u8, bool, bool)> = vec![];
-        // one clock of the receiver's outputs: a start edge with the box time, a byte
         // the box time a clock after a start edge (the deframer registers the edge)
         let mut stamp_due: Option<u32> = None;
-        let mut step = |bench: &mut Bench<CellDeframer>,
-                        start: Option<u32>,
-                        strobe: Option<(u8, bool)>,
-                        busy: bool| {
-            let ready = ready_pattern[bench.cycles as usize % ready_pattern.len()];
-            let u = &mut bench.uut;
-            u.packets.ready.next = ready;
-            u.byte_start.next = start.is_some();
-            // the box time runs on; only its value a clock after a start edge matters
-            u.tick.next = u64::from(stamp_due.take().unwrap_or(0xDEAD_BEEF)).into();
-            stamp_due = start;
-            u.byte_strobe.next = strobe.is_some();
-            u.uart_busy.next = busy;
-            if let Some((byte, broken)) = strobe {
-                u.byte_data.next = u64::from(byte).into();
-                u.byte_framing_error.next = broken;
-            }
-            bench.settle();
-            let u = &bench.uut;
-            if u.packets.valid.val() && ready {
-                beats.push((
-                    u.packets.data.val().to_u8(),
-                    u.packets.last.val(),
-                    u.packets.error.val(),
-                ));
-            }
-            let events = u.events.val().to_u8();
-            for (bit, count) in [
-                (0, &mut counts.good),
-                (2, &mut counts.end_byte),
-                (3, &mut counts.framing),
-                (4, &mut counts.truncated),
-                (5, &mut counts.garbage),
-                (6, &mut counts.any_framing),
-                (7, &mut counts.resync),
-            ] {
-                *count += u32::from(events >> bit & 1);
-            }
-            assert_eq!(events & 2, 0, "the deframer drops nothing");
-            bench.cycle();
-        };
+        // the receiver's bit count: 0 from a start edge, 10 at the stop bit's middle, one
+        // more every BIT clocks after it
+        let (mut bit_count, mut since_middle) = (0u64, 0u64);
+        // one clock of the receiver's outputs: a start edge (and its stamp), a byte
+        let mut step =
+            |bench: &mut Bench<CellDeframer>, start: Option<u32>, strobe: Option<(u8, bool)>| {
+                let ready = ready_pattern[bench.cycles as usize % ready_pattern.len()];
+                since_middle += 1;
+                if start.is_some() {
+                    bit_count = 0;
+                } else if strobe.is_some() {
+                    (bit_count, since_middle) = (BIT_COUNT_AFTER_STOP, 0);
+                } else if since_middle == BIT {
+                    (bit_count, since_middle) = ((bit_count + 1) % (BIT_COUNT_MAX + 1), 0);
+                }
+                let u = &mut bench.uut;
+                u.packets.ready.next = ready;
+                u.byte_start.next = start.is_some();
+                // the box time runs on; only its value a clock after a start edge matters
+                u.tick.next = u64::from(stamp_due.take().unwrap_or(0xDEAD_BEEF)).into();
+                stamp_due = start;
+                u.byte_strobe.next = strobe.is_some();
+                u.byte_bit_count.next = bit_count.into();
+                if let Some((byte, broken)) = strobe {
+                    u.byte_data.next = u64::from(byte).into();
+                    u.byte_framing_error.next = broken;
+                }
+                bench.settle();
+                let u = &bench.uut;
+                if u.packets.valid.val() && ready {
+                    beats.push((
+                        u.packets.data.val().to_u8(),
+                        u.packets.last.val(),
+                        u.packets.error.val(),
+                    ));
+                }
+                let events = u.events.val().to_u8();
+                for (bit, count) in [
+                    (0, &mut counts.good),
+                    (2, &mut counts.end_byte),
+                    (3, &mut counts.framing),
+                    (4, &mut counts.truncated),
+                    (5, &mut counts.garbage),
+                    (6, &mut counts.any_framing),
+                    (7, &mut counts.resync),
+                ] {
+                    *count += u32::from(events >> bit & 1);
+                }
+                assert_eq!(events & 2, 0, "the deframer drops nothing");
+                bench.cycle();
+            };
         for input in inputs {
             // a byte: its start edge, 20 clocks of reception, the byte at the middle of the
             // stop bit, and the rest of the stop bit (the next start edge comes no earlier)
@@ -386,24 +395,24 @@ mod tests {
             match *input {
                 Input::Byte(..) | Input::Broken(_) => {
                     let (tick, b, broken) = byte.expect("a byte");
-                    step(&mut bench, Some(tick), None, false);
+                    step(&mut bench, Some(tick), None);
                     for _ in 0..20 {
-                        step(&mut bench, None, None, true);
+                        step(&mut bench, None, None);
                     }
-                    step(&mut bench, None, Some((b, broken)), false);
+                    step(&mut bench, None, Some((b, broken)));
                     for _ in 0..15 {
-                        step(&mut bench, None, None, false);
+                        step(&mut bench, None, None);
                     }
                 }
                 Input::Idle(clocks) => {
                     for _ in 0..clocks {
-                        step(&mut bench, None, None, false);
+                        step(&mut bench, None, None);
                     }
                 }
             }
         }
         for _ in 0..40 {
-            step(&mut bench, None, None, true);
+            step(&mut bench, None, None);
         }
         let mut packets = vec![];
         let mut current: Vec<u8> = vec![];
@@ -494,7 +503,8 @@ mod tests {
     #[test]
     fn truncated_packet_is_rejected_on_an_idle_gap() {
         let mut inputs = bytes(&data_packet(4)[..11], 100);
-        inputs.push(Input::Idle(GAP + 5));
+        // with the rest of the stop bit: one bit time over the gap
+        inputs.push(Input::Idle((GAP_BITS + 1) * BIT));
         inputs.extend(bytes(&data_packet(5), 20_000));
         let (packets, counts) = run(&inputs, &[true]);
         assert_eq!(packets.len(), 2);
@@ -517,7 +527,8 @@ mod tests {
     fn idle_shorter_than_the_gap_keeps_the_packet() {
         let p = data_packet(6);
         let mut inputs = bytes(&p[..5], 100);
-        inputs.push(Input::Idle(GAP - 30));
+        // with the rest of the stop bit: more than one bit time short of the gap
+        inputs.push(Input::Idle((GAP_BITS - 2) * BIT));
         inputs.extend(bytes(&p[5..], 5000));
         let (packets, counts) = run(&inputs, &[true]);
         assert_eq!(packets, vec![(100, p.to_vec(), false)]);

@@ -8,7 +8,7 @@
 //! Timestamps: a record's tick is the tick of the first clock edge that sampled its
 //! packet's first start bit low at the pin (the true falling edge lies in the tick before).
 
-use crate::cell_deframer::CellDeframer;
+use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
 use crate::counter_file::CounterFile;
 use crate::packet_store::{PacketStore, MAX_PORTS};
 use crate::status_reporter::StatusReporter;
@@ -80,11 +80,6 @@ impl BoxConfig {
         self.clock_hz as f64 / self.baud as f64
     }
 
-    /// Idle-gap timeout in clocks.
-    pub fn idle_gap_clocks(&self) -> u64 {
-        (self.idle_gap_bits as f64 * self.clocks_per_bit()).round() as u64
-    }
-
     /// Checks every parameter; the message says which and why.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let fail = |m: String| Err(ConfigError(m));
@@ -120,9 +115,9 @@ impl BoxConfig {
                 self.status_period_ticks
             ));
         }
-        if self.idle_gap_bits < 2 || self.idle_gap_clocks() >= 1 << 16 {
+        if !(2..=MAX_IDLE_GAP_BITS).contains(&self.idle_gap_bits) {
             return fail(format!(
-                "idle gap {} bits: must be at least 2 bit times and below 65536 clocks",
+                "idle gap {} bits: must be 2 to {MAX_IDLE_GAP_BITS} bit times",
                 self.idle_gap_bits
             ));
         }
@@ -180,7 +175,7 @@ impl InterfaceBox {
                 .map(|_| UartRx::new(config.clock_hz, config.baud))
                 .collect(),
             deframers: (0..n)
-                .map(|_| CellDeframer::new(config.framing, config.idle_gap_clocks()))
+                .map(|_| CellDeframer::new(config.framing, config.idle_gap_bits))
                 .collect(),
             store: PacketStore::new(n),
             counters: CounterFile::new(n),
@@ -226,7 +221,7 @@ impl Logic for InterfaceBox {
             self.deframers[i].byte_framing_error.next = self.uarts[i].framing_error.val();
             self.deframers[i].byte_start.next = self.uarts[i].start.val();
             self.deframers[i].tick.next = self.timestamp.start_stamp.val();
-            self.deframers[i].uart_busy.next = self.uarts[i].busy.val();
+            self.deframers[i].byte_bit_count.next = self.uarts[i].bit_count.val();
             self.store.ports[i].data.next = self.deframers[i].packets.data.val();
             self.store.ports[i].valid.next = self.deframers[i].packets.valid.val();
             self.store.ports[i].last.next = self.deframers[i].packets.last.val();
@@ -360,6 +355,13 @@ mod tests {
             (
                 BoxConfig {
                     idle_gap_bits: 1,
+                    ..Default::default()
+                },
+                "idle gap",
+            ),
+            (
+                BoxConfig {
+                    idle_gap_bits: 22,
                     ..Default::default()
                 },
                 "idle gap",

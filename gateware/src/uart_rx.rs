@@ -3,7 +3,10 @@
 //! - Two-flop synchroniser, then a falling-edge detector.
 //! - Fractional baud generator: a 16-bit phase accumulator adds `2^16 * baud / clock` per
 //!   clock (2097 for 4 Mbit/s at 125 MHz, 31.25 clocks per bit: an integer divider would
-//!   be 0.8 % off before any cell clock error). Its carry marks the middle of each bit.
+//!   be 0.8 % off before any cell clock error). Its carry marks the middle of each bit. It
+//!   runs on while the line is idle, and `bit_count` counts the bit middles since the last
+//!   start edge: 10 after the stop bit's, one more per idle bit time (so the deframer needs
+//!   no idle timer of its own).
 //! - At each bit middle, the majority of the last three synchronised samples is taken, so a
 //!   single-sample spike inside a bit is absorbed.
 //! - Start-bit validation: if the middle of the start bit reads high, the falling edge was a
@@ -38,6 +41,13 @@ pub fn phase_increment(clock_hz: u64, baud: u64) -> u64 {
     ((1u64 << PHASE_BITS) as f64 * baud as f64 / clock_hz as f64).round() as u64
 }
 
+/// `bit_count` after the stop bit's middle, and after a glitch's start-bit middle: idle bit
+/// times count on from here.
+pub const BIT_COUNT_AFTER_STOP: u64 = 10;
+
+/// Largest `bit_count` (it wraps to 0 after it).
+pub const BIT_COUNT_MAX: u64 = 31;
+
 /// UART receiver for one pin.
 #[derive(LogicBlock)]
 pub struct UartRx {
@@ -57,24 +67,26 @@ pub struct UartRx {
     /// High for one clock when a start edge is detected, [`START_LATENCY_TICKS`] after
     /// the first edge that sampled the pin low.
     pub start: Signal<Out, Bit>,
-    /// A byte is being received.
-    pub busy: Signal<Out, Bit>,
+    /// Bit middles since the last start edge: [`BIT_COUNT_AFTER_STOP`] after the stop bit
+    /// (or a glitch), then one more per idle bit time, wrapping after [`BIT_COUNT_MAX`].
+    pub bit_count: Signal<Out, Bits<5>>,
     phase_increment: Constant<Bits<17>>,
     phase_start: Constant<Bits<16>>,
+    after_stop: Constant<Bits<5>>,
     sync_meta: DFF<Bit>,
     sync_stable: DFF<Bit>,
     sync_previous: DFF<Bit>,
     history: DFF<Bits<2>>,
     receiving: DFF<Bit>,
     phase: DFF<Bits<16>>,
-    bit_index: DFF<Bits<4>>,
+    bit_index: DFF<Bits<5>>,
     shift: DFF<Bits<8>>,
     strobe_out: DFF<Bit>,
     framing_error_out: DFF<Bit>,
     start_edge: Signal<Local, Bit>,
     phase_sum: Signal<Local, Bits<17>>,
     majority: Signal<Local, Bit>,
-    bit_middle: Signal<Local, Bit>,
+    middle: Signal<Local, Bit>,
 }
 
 impl UartRx {
@@ -95,9 +107,10 @@ impl UartRx {
             strobe: Default::default(),
             framing_error: Default::default(),
             start: Default::default(),
-            busy: Default::default(),
+            bit_count: Default::default(),
             phase_increment: Constant::new(increment.into()),
             phase_start: Constant::new(start.into()),
+            after_stop: Constant::new(BIT_COUNT_AFTER_STOP.into()),
             sync_meta: Default::default(),
             sync_stable: Default::default(),
             sync_previous: Default::default(),
@@ -111,7 +124,7 @@ impl UartRx {
             start_edge: Default::default(),
             phase_sum: Default::default(),
             majority: Default::default(),
-            bit_middle: Default::default(),
+            middle: Default::default(),
         }
     }
 }
@@ -142,10 +155,12 @@ impl Logic for UartRx {
             | (self.sync_stable.q.val() & self.history.q.val().get_bit(1))
             | (self.history.q.val().get_bit(0) & self.history.q.val().get_bit(1));
         self.phase_sum.next = bit_cast::<17, 16>(self.phase.q.val()) + self.phase_increment.val();
-        self.bit_middle.next = self.receiving.q.val() & self.phase_sum.val().get_bit(16);
+        // the accumulator runs on when idle: its carries count idle bit times
+        self.middle.next = self.phase_sum.val().get_bit(16);
         self.strobe_out.d.next = false;
-        if self.receiving.q.val() {
-            self.phase.d.next = self.phase_sum.val().get_bits::<16>(0);
+        self.phase.d.next = self.phase_sum.val().get_bits::<16>(0);
+        if self.middle.val() {
+            self.bit_index.d.next = self.bit_index.q.val() + 1;
         }
         self.start_edge.next =
             !self.receiving.q.val() & self.sync_previous.q.val() & !self.sync_stable.q.val();
@@ -154,12 +169,12 @@ impl Logic for UartRx {
             self.phase.d.next = self.phase_start.val();
             self.bit_index.d.next = 0.into();
         }
-        if self.bit_middle.val() {
-            self.bit_index.d.next = self.bit_index.q.val() + 1;
+        if self.middle.val() & self.receiving.q.val() {
             if self.bit_index.q.val() == 0 {
-                // a start bit that reads high in its middle was a glitch
+                // a start bit that reads high in its middle was a glitch: idle from here
                 if self.majority.val() {
                     self.receiving.d.next = false;
+                    self.bit_index.d.next = self.after_stop.val();
                 }
             } else if self.bit_index.q.val() == 9 {
                 self.receiving.d.next = false;
@@ -180,7 +195,7 @@ impl Logic for UartRx {
         self.strobe.next = self.strobe_out.q.val();
         self.framing_error.next = self.framing_error_out.q.val();
         self.start.next = self.start_edge.val();
-        self.busy.next = self.receiving.q.val();
+        self.bit_count.next = self.bit_index.q.val();
     }
 }
 
@@ -300,6 +315,71 @@ mod tests {
         let (_, rx) = stream(&[0x00; 64], -8e4, 10.0);
         let flagged = rx.iter().filter(|r| r.1).count();
         assert!(flagged * 2 > rx.len(), "{flagged} of {} flagged", rx.len());
+    }
+
+    #[test]
+    fn bit_count_counts_idle_bit_times_after_the_stop_bit_and_a_glitch() {
+        let p = bit_period(0.0);
+        let mut line = UartLine::default();
+        let end = line.bytes(&[0x5A], 20.0, p);
+        // a glitch (high again before the start bit's middle) long after the byte
+        let glitch = end + 40.0 * p;
+        line.force(glitch, glitch + 5.0, false);
+        let mut bench = Bench::new(UartRx::new(CLOCK_HZ, CELL_BAUD), |b| &mut b.clock);
+        bench.uut.reset.next = true;
+        bench.uut.rx.next = true;
+        bench.cycles(4);
+        bench.uut.reset.next = false;
+        let first = bench.cycles;
+        let levels = line.levels((glitch + 20.0 * p) as u64);
+        // (edge, bit count) at every change of the count
+        let mut changes = vec![];
+        let mut count = bench.uut.bit_count.val().to_u64();
+        for (e, level) in levels.iter().enumerate().skip(1) {
+            bench.uut.rx.next = *level;
+            bench.cycle();
+            assert_eq!(bench.cycles - first, e as u64);
+            let now = bench.uut.bit_count.val().to_u64();
+            if now != count {
+                changes.push((e as f64, now));
+                count = now;
+            }
+        }
+        let stop = changes
+            .iter()
+            .position(|c| c.1 == BIT_COUNT_AFTER_STOP)
+            .expect("the stop bit's middle");
+        // 9.5 bits after the start edge, then one more per bit time, wrapping after 31
+        assert!(
+            (changes[stop].0 - (20.0 + 9.5 * p)).abs() < 3.0,
+            "{changes:?}"
+        );
+        for (k, c) in changes[stop + 1..].iter().take(30).enumerate() {
+            let k = k as u64 + 1;
+            assert_eq!(
+                c.1,
+                (BIT_COUNT_AFTER_STOP + k) % (BIT_COUNT_MAX + 1),
+                "{changes:?}"
+            );
+            let at = 20.0 + (9.5 + k as f64) * p;
+            assert!(
+                (c.0 - at).abs() < 3.0,
+                "idle bit {k} at {}: {changes:?}",
+                c.0
+            );
+        }
+        // the glitch restarts the count (0 at its edge), then sets it to the stop value at
+        // its start bit's middle, from where idle bit times count on
+        let restart = changes.iter().rposition(|c| c.1 == 0).expect("restart");
+        assert!((changes[restart].0 - glitch).abs() < 4.0, "{changes:?}");
+        assert_eq!(changes[restart + 1].1, BIT_COUNT_AFTER_STOP, "{changes:?}");
+        assert!((changes[restart + 1].0 - (glitch + 0.5 * p)).abs() < 3.0);
+        assert_eq!(
+            changes[restart + 2].1,
+            BIT_COUNT_AFTER_STOP + 1,
+            "{changes:?}"
+        );
+        assert!((changes[restart + 2].0 - (glitch + 1.5 * p)).abs() < 3.0);
     }
 
     #[test]

@@ -19,8 +19,8 @@ pub(super) struct FrontTiming {
     pub phase_increment: u64,
     /// Accumulator value after a start edge.
     pub phase_start: u64,
-    /// Idle clocks inside a packet that truncate it.
-    pub idle_gap_clocks: u64,
+    /// Idle bit times inside a packet that truncate it.
+    pub idle_gap_bits: u64,
     /// Header and end bytes.
     pub framing: CellFraming,
     /// Last cycle the ports are held in reset: the synchroniser reads high up to its edge.
@@ -31,8 +31,8 @@ pub(super) struct FrontTiming {
 
 impl FrontTiming {
     /// Cycles from the start detection's reference (the first low sample) to the middle
-    /// of bit `b` (0 start, 1..=8 data, 9 stop): the accumulator, loaded two clocks after
-    /// the first low sample, carries there.
+    /// of bit `b` (0 start, 1..=8 data, 9 stop, then idle bit times: the accumulator runs
+    /// on): the accumulator, loaded two clocks after the first low sample, carries there.
     fn middle(&self, b: u64) -> u64 {
         let target = (b + 1) << crate::reference::PHASE_BITS;
         2 + (target - self.phase_start).div_ceil(self.phase_increment) - 1
@@ -134,17 +134,22 @@ struct Byte {
     stamp: u64,
 }
 
-/// A busy stretch of the receiver: from `busy_from` (first cycle busy) to the cycle after
-/// which the idle timer may count again (`count_from`), and the byte, if one came.
+/// A busy stretch of the receiver: from `busy_from` (the first cycle the deframer sees
+/// its bit count restarted), the cycle the deframer sees the idle gap after it when no
+/// reception comes first (`gap_at`), and the byte, if one came.
 struct Reception {
     busy_from: u64,
-    count_from: u64,
+    gap_at: u64,
     byte: Option<Byte>,
 }
 
 /// Everything the receiver does on this pin, in order, up to `end`.
 fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Reception> {
     let middles: Vec<u64> = (0..10).map(|b| t.middle(b)).collect();
+    // the bit count reaches the gap's end this many middles after the stop bit's (or a
+    // glitch's start bit's) middle; the deframer's register sees it a clock after it
+    let gap_after_stop = t.middle(9 + t.idle_gap_bits) + 1;
+    let gap_after_glitch = t.middle(t.idle_gap_bits) + 1;
     let mut out = vec![];
     let mut from = 0;
     while let Some(m) = pin.next_fall(from) {
@@ -159,7 +164,7 @@ fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Reception> {
             // a glitch: back to idle after the start bit's middle
             out.push(Reception {
                 busy_from,
-                count_from: k0 + 1 + seen,
+                gap_at: m + gap_after_glitch + seen,
                 byte: None,
             });
             from = k0;
@@ -172,7 +177,7 @@ fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Reception> {
         let k9 = m + middles[9];
         out.push(Reception {
             busy_from,
-            count_from: k9 + 2 + seen,
+            gap_at: m + gap_after_stop + seen,
             byte: Some(Byte {
                 value,
                 framing_error: !pin.majority(k9),
@@ -205,13 +210,13 @@ pub(super) fn port_front(transitions: &[Transition], t: &FrontTiming, end: u64) 
     let mut aligned = false;
     // the packet being collected: its bytes so far
     let mut current: Option<(StartedPacket, usize)> = None;
-    // the idle timer counts from here while a packet is open
-    let mut count_from = 0u64;
+    // the deframer sees the idle gap here unless a reception restarts the bit count first
+    let mut gap_at = 0u64;
     for r in &receptions {
-        // truncation: the idle timer reached the gap before this reception reset it
+        // truncation: the bit count reached the gap before this reception restarted it
         if current.is_some() {
-            let fire = count_from + t.idle_gap_clocks;
-            if fire <= r.busy_from {
+            let fire = gap_at;
+            if fire < r.busy_from {
                 let (mut p, _) = current.take().expect("checked");
                 p.last_beat = fire + 1;
                 out.packets.push(p);
@@ -220,7 +225,7 @@ pub(super) fn port_front(transitions: &[Transition], t: &FrontTiming, end: u64) 
             }
         }
         let Some(byte) = &r.byte else {
-            count_from = r.count_from;
+            gap_at = r.gap_at;
             continue;
         };
         let at = byte.strobe + 1;
@@ -272,10 +277,10 @@ pub(super) fn port_front(transitions: &[Transition], t: &FrontTiming, end: u64) 
         if events != 0 {
             out.events.push((at, events));
         }
-        count_from = r.count_from;
+        gap_at = r.gap_at;
     }
     if let Some((mut p, _)) = current {
-        let fire = count_from + t.idle_gap_clocks;
+        let fire = gap_at;
         if fire + 1 < end {
             p.last_beat = fire + 1;
             out.packets.push(p);

@@ -4,7 +4,7 @@
 //! - Front end, per port ([`front`]): the UART receiver's decisions are arithmetic on the
 //!   transition list: the first low sample of a start bit, the accumulator's carries at the
 //!   ten bit middles, the majority of the three samples there; the deframer follows the
-//!   bytes, the idle timer and its rejections. Out come the packets with their stamps and the
+//!   bytes, the idle gap (counted in receiver bit times) and its rejections. Out come the packets with their stamps and the
 //!   cycles their first and last beats are offered to the packet store, and the counter
 //!   events.
 //! - Back end ([`back`]): packet store (write ring, slots, reader), framer, transmitter,
@@ -86,7 +86,7 @@ fn predict_frames_with_progress(
     let front_timing = FrontTiming {
         phase_increment: phase_increment(config.clock_hz, config.baud),
         phase_start: PHASE_START,
-        idle_gap_clocks: config.idle_gap_clocks(),
+        idle_gap_bits: config.idle_gap_bits,
         framing: config.framing,
         port_reset_until: counters_ready_from + 1,
         tick_offset: TICK_ZERO_CYCLE,
