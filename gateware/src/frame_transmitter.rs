@@ -7,9 +7,11 @@
 //! sequence number, the body read from the payload memory, the FCS, and then at least 12
 //! idle clocks. (The headers alone exceed the 60-byte minimum frame: no padding is needed.)
 //!
-//! The checksums are finished while the preamble goes out: the UDP sum starts from the
-//! constant words (addresses, ports, magic, box id) plus the body sum, and adds one
-//! variable header word per clock. The body memory is read two clocks ahead
+//! The checksums are finished long before they are sent: the UDP sum starts from the
+//! constant words (addresses, ports, magic, box id) plus the body sum, and adds the UDP
+//! length, the kind and then the 16 bytes of the header fields ring (flags, sequence, base
+//! tick, entry count, a zero) one per clock as the ring turns, each at its place in its word
+//! (no multiplexer over the fields); the sum is folded by byte 21. The body memory is read two clocks ahead
 //! (`payload_address`; `payload_data` must be that byte two clocks later: a block RAM read
 //! and a register after it).
 //! Output: the selected byte goes into a register, the CRC is computed from that register,
@@ -112,9 +114,10 @@ pub struct FrameTransmitter {
     gap_done: DFF<Bit>,
     kind_held: DFF<Bits<8>>,
     // the 15 header bytes (flags, sequence, base tick, entry count), most significant
-    // first, as one 120-bit shift register cut in two (no word over 64 bits to simulate)
-    fields_head: DFF<Bits<56>>,
-    fields_tail: DFF<Bits<64>>,
+    // first, and a zero byte: one 128-bit ring of bytes cut in two (no word over 64 bits
+    // to simulate), rotated a byte per clock to sum its words and to send its bytes
+    fields_high: DFF<Bits<64>>,
+    fields_low: DFF<Bits<64>>,
     checksum: DFF<Bits<32>>,
     crc_register: DFF<Bits<32>>,
     next_sequence: DFF<Bits<32>>,
@@ -154,7 +157,8 @@ impl FrameTransmitter {
         let t = template(link, box_id, port_count);
         // Constant words of the UDP checksum: pseudo header (addresses, protocol), UDP
         // ports, and the constant words of the datagram header (magic, version, box id,
-        // port count). Variable words are added while the preamble goes out.
+        // port count). Variable words are added while the preamble and the Ethernet header
+        // go out.
         let pseudo = word_sum(&link.box_ip) + word_sum(&link.host_ip) + 17;
         let udp_constant = pseudo
             + word_sum(&t[UDP_AT..UDP_AT + 4])
@@ -191,8 +195,8 @@ impl FrameTransmitter {
             gap: Default::default(),
             gap_done: Default::default(),
             kind_held: Default::default(),
-            fields_head: Default::default(),
-            fields_tail: Default::default(),
+            fields_high: Default::default(),
+            fields_low: Default::default(),
             checksum: Default::default(),
             crc_register: Default::default(),
             next_sequence: Default::default(),
@@ -240,8 +244,8 @@ impl Logic for FrameTransmitter {
             gap,
             gap_done,
             kind_held,
-            fields_head,
-            fields_tail,
+            fields_high,
+            fields_low,
             checksum,
             crc_register,
             next_sequence,
@@ -275,35 +279,20 @@ impl Logic for FrameTransmitter {
             self.udp_checksum.next = 0xFFFF.into();
         }
 
-        // One variable word of the UDP checksum per clock while the preamble goes out.
+        // The variable words of the UDP checksum, one per clock from byte 0: the UDP length
+        // (counted twice: header and pseudo header), the kind, then the 16 bytes of the
+        // fields ring one per clock as it rotates, alternately the low and the high byte
+        // of a word (flags is the low byte of its word).
         self.checksum_word.next = 0.into();
         if self.index.q.val() == 0 {
             self.checksum_word.next = bit_cast::<32, 16>(self.udp_len.q.val()) << 1;
         } else if self.index.q.val() == 1 {
             self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
-        } else if self.index.q.val() == 2 {
-            self.checksum_word.next = bit_cast::<32, 8>(self.fields_head.q.val().get_bits::<8>(48));
-        } else if self.index.q.val() == 3 {
-            self.checksum_word.next =
-                bit_cast::<32, 16>(self.fields_head.q.val().get_bits::<16>(32));
-        } else if self.index.q.val() == 4 {
-            self.checksum_word.next =
-                bit_cast::<32, 16>(self.fields_head.q.val().get_bits::<16>(16));
-        } else if self.index.q.val() == 5 {
-            self.checksum_word.next =
-                bit_cast::<32, 16>(self.fields_head.q.val().get_bits::<16>(0));
-        } else if self.index.q.val() == 6 {
-            self.checksum_word.next =
-                bit_cast::<32, 16>(self.fields_tail.q.val().get_bits::<16>(48));
-        } else if self.index.q.val() == 7 {
-            self.checksum_word.next =
-                bit_cast::<32, 16>(self.fields_tail.q.val().get_bits::<16>(32));
-        } else if self.index.q.val() == 8 {
-            self.checksum_word.next =
-                bit_cast::<32, 16>(self.fields_tail.q.val().get_bits::<16>(16));
-        } else if self.index.q.val() == 9 {
-            self.checksum_word.next =
-                bit_cast::<32, 16>(self.fields_tail.q.val().get_bits::<16>(0));
+        } else if (self.index.q.val() >= 2) & (self.index.q.val() < 18) {
+            self.checksum_word.next = bit_cast::<32, 8>(self.fields_high.q.val().get_bits::<8>(56));
+            if self.index.q.val().get_bit(0) {
+                self.checksum_word.next = self.checksum_word.val() << 8;
+            }
         }
         self.checksum_term.d.next = self.checksum_word.val();
 
@@ -341,7 +330,7 @@ impl Logic for FrameTransmitter {
             }
         }
         self.byte_source.d.next = self.source_ahead.val();
-        // (final long before byte 48: the sum is done by byte 13)
+        // (final long before byte 48: the sum is done by byte 21)
         self.udp_checksum_held.d.next = self.udp_checksum.val();
         self.tx_byte.next = 0.into();
         if self.byte_source.q.val().get_bit(0) {
@@ -377,7 +366,7 @@ impl Logic for FrameTransmitter {
             self.tx_byte.next = self.tx_byte.val() | self.kind_held.q.val();
         }
         if self.byte_source.q.val().get_bit(10) {
-            self.tx_byte.next = self.tx_byte.val() | self.fields_head.q.val().get_bits::<8>(48);
+            self.tx_byte.next = self.tx_byte.val() | self.fields_high.q.val().get_bits::<8>(56);
         }
         if self.byte_source.q.val().get_bit(11) {
             self.tx_byte.next = self.tx_byte.val() | self.payload_data.val();
@@ -411,16 +400,21 @@ impl Logic for FrameTransmitter {
         if self.sending.q.val() {
             self.index.d.next = self.index.q.val() + 1;
             // the word chosen at byte i is added at byte i + 1 (from a register)
-            if (self.index.q.val() >= 1) & (self.index.q.val() <= 10) {
+            if (self.index.q.val() >= 1) & (self.index.q.val() <= 18) {
                 self.checksum.d.next = self.checksum.q.val() + self.checksum_term.q.val();
-            } else if (self.index.q.val() >= 11) & (self.index.q.val() < 13) {
+            } else if (self.index.q.val() >= 19) & (self.index.q.val() < 21) {
                 self.checksum.d.next =
                     (self.checksum.q.val() & 0xFFFF) + (self.checksum.q.val() >> 16);
             }
-            if (self.index.q.val() >= 57) & (self.index.q.val() < 72) {
-                self.fields_head.d.next = (self.fields_head.q.val() << 8)
-                    | bit_cast::<56, 8>(self.fields_tail.q.val().get_bits::<8>(56));
-                self.fields_tail.d.next = self.fields_tail.q.val() << 8;
+            // the ring turns once round for the checksum (it is back in place after 16
+            // bytes) and then sends its first 15 bytes
+            if ((self.index.q.val() >= 2) & (self.index.q.val() < 18))
+                | ((self.index.q.val() >= 57) & (self.index.q.val() < 72))
+            {
+                self.fields_high.d.next = (self.fields_high.q.val() << 8)
+                    | bit_cast::<64, 8>(self.fields_low.q.val().get_bits::<8>(56));
+                self.fields_low.d.next = (self.fields_low.q.val() << 8)
+                    | bit_cast::<64, 8>(self.fields_high.q.val().get_bits::<8>(56));
             }
             if self.crc_starts.q.val() {
                 // index 7: the SFD is in the output stage now: the CRC starts with the next byte
@@ -448,12 +442,12 @@ impl Logic for FrameTransmitter {
             self.total_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 52;
             self.udp_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 32;
             self.checksum.d.next = self.udp_constant_sum.val() + self.body_sum.val();
-            self.fields_head.d.next = (bit_cast::<56, 8>(self.flags.val()) << 48)
-                | (bit_cast::<56, 32>(self.next_sequence.q.val()) << 16)
-                | bit_cast::<56, 16>(self.base_tick.val().get_bits::<16>(48));
-            self.fields_tail.d.next = (bit_cast::<64, 48>(self.base_tick.val().get_bits::<48>(0))
-                << 16)
-                | bit_cast::<64, 16>(self.entry_count.val());
+            self.fields_high.d.next = (bit_cast::<64, 8>(self.flags.val()) << 56)
+                | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
+                | bit_cast::<64, 24>(self.base_tick.val().get_bits::<24>(40));
+            self.fields_low.d.next = (bit_cast::<64, 40>(self.base_tick.val().get_bits::<40>(0))
+                << 24)
+                | (bit_cast::<64, 16>(self.entry_count.val()) << 8);
         }
         if self.reset.val() {
             self.sending.d.next = false;
