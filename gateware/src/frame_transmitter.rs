@@ -19,6 +19,7 @@
 //! follow the byte counter by two clocks, and no path runs from byte selection through the
 //! CRC. The frame geometry (lengths, IPv4 checksum) is registered at the start.
 
+use crate::block_rom::BlockRom;
 use crate::crc32::Crc32Byte;
 use rust_hdl::prelude::*;
 use skinbox_protocol::datagram::{self, HEADER_LEN};
@@ -57,6 +58,26 @@ fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
     t.extend([0, 0]); // reserved
     assert_eq!(t.len(), BODY_START);
     t
+}
+
+/// Address of the template table read between frames: it holds the first byte, which the
+/// first two bytes of a frame are (the preamble), read before the frame's own addresses.
+const TEMPLATE_IDLE: usize = 127;
+
+/// The template as the transmitter's table: byte i + 2 at address i (the block RAM read
+/// takes two clocks), the first byte at [`TEMPLATE_IDLE`].
+fn template_table(t: &[u8]) -> Vec<u64> {
+    assert_eq!(t[0], t[1], "the frame starts with two equal bytes");
+    assert!(
+        t.len() - 2 <= TEMPLATE_IDLE,
+        "the template fits below the idle address"
+    );
+    let mut table = vec![0; TEMPLATE_IDLE + 1];
+    for (a, &b) in t.iter().skip(2).enumerate() {
+        table[a] = u64::from(b);
+    }
+    table[TEMPLATE_IDLE] = u64::from(t[0]);
+    table
 }
 
 /// Sum of the big-endian 16-bit words of `bytes` (odd length padded with 0), not folded.
@@ -101,9 +122,9 @@ pub struct FrameTransmitter {
     pub gmii_tx_en: Signal<Out, Bit>,
     /// GMII transmit error (never set).
     pub gmii_tx_er: Signal<Out, Bit>,
-    // the template shifted by one: byte i + 1 at address i (the lookup runs a clock ahead)
-    template_ahead: ROM<Bits<8>, 7>,
-    first_template_byte: Constant<Bits<8>>,
+    // the template in block RAM, read two clocks ahead: byte i + 2 at address i, and at
+    // `TEMPLATE_IDLE` the first byte (the preamble's, also the second), read between frames
+    template: BlockRom<8, 7>,
     udp_constant_sum: Constant<Bits<32>>,
     ip_constant_sum: Constant<Bits<32>>,
     crc: Crc32Byte,
@@ -141,7 +162,6 @@ pub struct FrameTransmitter {
     // up a clock ahead: bit 0 template, 1/2 IPv4 total length high/low, 3/4 IPv4
     // checksum, 5/6 UDP length, 7/8 UDP checksum, 9 kind, 10 header fields, 11 body
     byte_source: DFF<Bits<12>>,
-    template_byte: DFF<Bits<8>>,
     udp_checksum_held: DFF<Bits<16>>,
     source_ahead: Signal<Local, Bits<12>>,
     tx_byte: Signal<Local, Bits<8>>,
@@ -180,13 +200,7 @@ impl FrameTransmitter {
             gmii_txd: Default::default(),
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
-            first_template_byte: Constant::new(u64::from(t[0]).into()),
-            template_ahead: t
-                .iter()
-                .skip(1)
-                .chain(std::iter::once(&0))
-                .map(|&b| u64::from(b).into())
-                .into(),
+            template: BlockRom::new(&template_table(&t)),
             udp_constant_sum: Constant::new(udp_constant.into()),
             ip_constant_sum: Constant::new(ip_constant.into()),
             crc: Default::default(),
@@ -215,7 +229,6 @@ impl FrameTransmitter {
             stage_crc: Default::default(),
             stage_fcs: Default::default(),
             byte_source: Default::default(),
-            template_byte: Default::default(),
             udp_checksum_held: Default::default(),
             source_ahead: Default::default(),
             tx_byte: Default::default(),
@@ -264,7 +277,6 @@ impl Logic for FrameTransmitter {
             stage_crc,
             stage_fcs,
             byte_source,
-            template_byte,
             udp_checksum_held
         );
         // Frame geometry: registered at the start from the body length (lengths), one clock
@@ -296,14 +308,15 @@ impl Logic for FrameTransmitter {
         }
         self.checksum_term.d.next = self.checksum_word.val();
 
-        // The byte at `index`, from a multiplexer whose select is a register: its source
-        // and the template byte are looked up a clock ahead, for the index that follows
-        // (`index + 1` while sending, 0 for a start).
-        self.template_ahead.address.next = self.index.q.val().get_bits::<7>(0);
-        self.template_byte.d.next = self.first_template_byte.val();
+        // The byte at `index`, from a multiplexer whose select is a register: its source is
+        // looked up a clock ahead, for the index that follows (`index + 1` while sending, 0
+        // for a start); the template byte comes from its table two clocks ahead (127 is
+        // TEMPLATE_IDLE, read between frames).
+        self.template.clock.next = self.clock.val();
+        self.template.read_address.next = 127.into();
         self.source_ahead.next = 1.into();
         if self.sending.q.val() {
-            self.template_byte.d.next = self.template_ahead.data.val();
+            self.template.read_address.next = self.index.q.val().get_bits::<7>(0);
             if self.index.q.val() == 23 {
                 self.source_ahead.next = 2.into();
             } else if self.index.q.val() == 24 {
@@ -334,7 +347,7 @@ impl Logic for FrameTransmitter {
         self.udp_checksum_held.d.next = self.udp_checksum.val();
         self.tx_byte.next = 0.into();
         if self.byte_source.q.val().get_bit(0) {
-            self.tx_byte.next = self.tx_byte.val() | self.template_byte.q.val();
+            self.tx_byte.next = self.tx_byte.val() | self.template.read_data.val();
         }
         if self.byte_source.q.val().get_bit(1) {
             self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(8);
@@ -485,6 +498,7 @@ mod tests {
         assert_eq!((IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_AT), (24, 32, 42));
         assert_eq!((BOX_HEADER_AT + 3, FIELDS_AT, FIELDS_AT + 15), (53, 57, 72));
         assert_eq!(INTER_FRAME_GAP, 12);
+        assert_eq!(TEMPLATE_IDLE, 127, "the kernel's literal");
         let t = template(&LinkConfig::DEFAULT, 7, 8);
         assert_eq!(
             &t[FIELDS_AT + 15..BODY_START],
