@@ -39,6 +39,11 @@ pub struct CounterFile {
     pending: Vec<DFF<Bits<8>>>,
     last_port: Constant<Bits<6>>,
     port: DFF<Bits<6>>,
+    // `port` and `visited` one-hot (bit i: port i), for OR-of-terms selects, not mux chains
+    port_onehot: DFF<Bits<64>>,
+    visited_onehot: DFF<Bits<64>>,
+    // the ports' bits of a one-hot word
+    onehot_keep: Constant<Bits<64>>,
     clearing: DFF<Bit>,
     clear_address: DFF<Bits<9>>,
     sampled: DFF<Bits<8>>,
@@ -55,6 +60,7 @@ pub struct CounterFile {
     counting_memory: BlockRam<32, 9>,
     reading_memory: BlockRam<32, 9>,
     current: Signal<Local, Bits<8>>,
+    current_term: Signal<Local, Bits<8>>,
     lowest: Signal<Local, Bits<3>>,
     clear_mask: Signal<Local, Bits<8>>,
     write_address: Signal<Local, Bits<9>>,
@@ -79,6 +85,13 @@ impl CounterFile {
             pending: (0..ports).map(|_| Default::default()).collect(),
             last_port: Constant::new((ports as u64 - 1).into()),
             port: Default::default(),
+            port_onehot: Default::default(),
+            visited_onehot: Default::default(),
+            onehot_keep: Constant::new(if ports == 64 {
+                u64::MAX.into()
+            } else {
+                ((1u64 << ports) - 1).into()
+            }),
             clearing: Default::default(),
             clear_address: Default::default(),
             sampled: Default::default(),
@@ -93,6 +106,7 @@ impl CounterFile {
             counting_memory: Default::default(),
             reading_memory: Default::default(),
             current: Default::default(),
+            current_term: Default::default(),
             lowest: Default::default(),
             clear_mask: Default::default(),
             write_address: Default::default(),
@@ -109,6 +123,8 @@ impl Logic for CounterFile {
             self,
             clock,
             port,
+            port_onehot,
+            visited_onehot,
             clearing,
             clear_address,
             sampled,
@@ -129,9 +145,11 @@ impl Logic for CounterFile {
         self.current.next = 0.into();
         for i in 0..self.pending.len() {
             self.pending[i].clock.next = self.clock.val();
-            if self.port.q.val().index() == i {
-                self.current.next = self.pending[i].q.val();
+            self.current_term.next = 0.into();
+            if self.port_onehot.q.val().get_bit(i) {
+                self.current_term.next = self.pending[i].q.val();
             }
+            self.current.next = self.current.val() | self.current_term.val();
         }
         // Stage 2: the lowest pending bit of the port visited a clock ago.
         self.lowest.next = 0.into();
@@ -170,9 +188,10 @@ impl Logic for CounterFile {
             self.sampled.d.next = self.current.val() & !self.clear_mask.val();
         }
         self.visited.d.next = self.port.q.val();
+        self.visited_onehot.d.next = self.port_onehot.q.val();
         for i in 0..self.pending.len() {
             self.pending[i].d.next = self.pending[i].q.val() | self.events[i].val();
-            if self.visited.q.val().index() == i {
+            if self.visited_onehot.q.val().get_bit(i) {
                 self.pending[i].d.next =
                     (self.pending[i].q.val() & !self.clear_mask.val()) | self.events[i].val();
             }
@@ -217,11 +236,14 @@ impl Logic for CounterFile {
 
         if self.port.q.val() == self.last_port.val() {
             self.port.d.next = 0.into();
+            self.port_onehot.d.next = 1.into();
         } else {
             self.port.d.next = self.port.q.val() + 1;
+            self.port_onehot.d.next = (self.port_onehot.q.val() << 1) & self.onehot_keep.val();
         }
         if self.reset.val() {
             self.port.d.next = 0.into();
+            self.port_onehot.d.next = 1.into();
             self.clearing.d.next = true;
             self.clear_address.d.next = 0.into();
             self.update.d.next = false;
