@@ -7,10 +7,11 @@
 //! at most 32); a port's `ready` is its ring bit, so a deframer beat waits at most one round
 //! and the RAM needs one write port. The deframer's burst of five beats after a header
 //! (four tick bytes and the header) takes five rounds: 160 clocks at most, well inside a
-//! byte time (about 300 clocks at 4 Mbit/s). The beat taken is written a clock later. A
-//! packet becomes visible when its `last` beat is taken without `error`; a packet with
-//! `error` is forgotten; when both slots of the port are full as a packet starts, the whole
-//! packet is dropped and `dropped` pulses for the port when it ends. The loss flag (bit 8 of
+//! byte time (about 300 clocks at 4 Mbit/s). The beat taken is written two clocks later,
+//! through the register of its group of eight ports and then its bank's. A packet becomes
+//! visible when its `last` beat is taken without `error`; a packet with `error` is
+//! forgotten; when both slots of the port are full as a packet starts, the whole packet is
+//! dropped and `dropped` pulses for the port when it ends. The loss flag (bit 8 of
 //! every stored word) is set when packets of the port were rejected or dropped since its
 //! previous stored packet.
 //!
@@ -39,6 +40,10 @@ use skinbox_protocol::PortCounter;
 pub const MAX_PORTS: usize = 64;
 /// Ports per bank: one block RAM and one write ring each.
 pub const BANK_PORTS: usize = 32;
+/// Ports per write group: their taken words meet in a group register first, the groups of
+/// a bank in the bank's write register a clock later (two short OR trees, not one across
+/// the chip).
+pub const GROUP_PORTS: usize = 8;
 /// Packets a port holds.
 pub const SLOTS: usize = 2;
 /// Stored words of a packet: tick and cell bytes.
@@ -86,7 +91,10 @@ pub struct PacketStore {
     // per port
     port_address: Vec<Constant<Bits<BANK_ADDRESS_BITS>>>,
     port_number: Vec<Constant<Bits<6>>>,
-    port_bank: Vec<Constant<Bit>>,
+    // the port's write group, one-hot
+    port_group: Vec<Constant<Bits<8>>>,
+    // the group's bank
+    group_bank: Vec<Constant<Bit>>,
     store_word: Signal<Local, Bit>,
     term_slot: Signal<Local, Bit>,
     term_index: Signal<Local, Bits<5>>,
@@ -107,6 +115,13 @@ pub struct PacketStore {
     commit: Vec<Signal<Local, Bit>>,
     free: Vec<Signal<Local, Bit>>,
     used_next: Vec<Signal<Local, Bits<2>>>,
+    // per write group: the OR of its ports' taken words
+    group_write: Vec<DFF<Bit>>,
+    group_address: Vec<DFF<Bits<BANK_ADDRESS_BITS>>>,
+    group_data: Vec<DFF<Bits<9>>>,
+    group_write_term: Vec<Signal<Local, Bit>>,
+    group_address_term: Vec<Signal<Local, Bits<BANK_ADDRESS_BITS>>>,
+    group_data_term: Vec<Signal<Local, Bits<9>>>,
     // per bank (two, the second unused with 32 ports or fewer): the write register
     bank_write: Vec<DFF<Bit>>,
     bank_address: Vec<DFF<Bits<BANK_ADDRESS_BITS>>>,
@@ -171,6 +186,7 @@ impl PacketStore {
         let wrap_low = 1u64 << (period - 1);
         let wrap_high = if two_banks { 1u64 << 63 } else { 0 };
         let high = if two_banks { 1u64 << 32 } else { 0 };
+        let groups = ports.div_ceil(GROUP_PORTS);
         let scan_wrap = 1u64 << (ports - 1);
         Self {
             clock: Default::default(),
@@ -194,7 +210,12 @@ impl PacketStore {
             port_number: (0..ports)
                 .map(|i| Constant::new((i as u64).into()))
                 .collect(),
-            port_bank: (0..ports).map(|i| Constant::new(i >= BANK_PORTS)).collect(),
+            port_group: (0..ports)
+                .map(|i| Constant::new((1u64 << (i / GROUP_PORTS)).into()))
+                .collect(),
+            group_bank: (0..groups)
+                .map(|g| Constant::new(g * GROUP_PORTS >= BANK_PORTS))
+                .collect(),
             store_word: Default::default(),
             term_slot: Default::default(),
             term_index: Default::default(),
@@ -215,6 +236,12 @@ impl PacketStore {
             commit: (0..ports).map(|_| Default::default()).collect(),
             free: (0..ports).map(|_| Default::default()).collect(),
             used_next: (0..ports).map(|_| Default::default()).collect(),
+            group_write: (0..groups).map(|_| Default::default()).collect(),
+            group_address: (0..groups).map(|_| Default::default()).collect(),
+            group_data: (0..groups).map(|_| Default::default()).collect(),
+            group_write_term: (0..groups).map(|_| Default::default()).collect(),
+            group_address_term: (0..groups).map(|_| Default::default()).collect(),
+            group_data_term: (0..groups).map(|_| Default::default()).collect(),
             bank_write: (0..2).map(|_| Default::default()).collect(),
             bank_address: (0..2).map(|_| Default::default()).collect(),
             bank_data: (0..2).map(|_| Default::default()).collect(),
@@ -432,6 +459,14 @@ impl Logic for PacketStore {
             self.bank_address_term[b].next = 0.into();
             self.bank_data_term[b].next = 0.into();
         }
+        for g in 0..self.group_write.len() {
+            self.group_write[g].clock.next = self.clock.val();
+            self.group_address[g].clock.next = self.clock.val();
+            self.group_data[g].clock.next = self.clock.val();
+            self.group_write_term[g].next = false;
+            self.group_address_term[g].next = 0.into();
+            self.group_data_term[g].next = 0.into();
+        }
         for i in 0..self.ports.len() {
             self.write_index[i].clock.next = self.clock.val();
             self.write_slot[i].clock.next = self.clock.val();
@@ -496,20 +531,17 @@ impl Logic for PacketStore {
                     }
                 }
             }
-            // the bank's write register takes the OR of its ports' words, each zero unless
-            // taken (an OR tree, not a chain of multiplexers)
-            if self.port_bank[i].val() {
-                self.bank_write_term[1].next =
-                    self.bank_write_term[1].val() | self.store_word.val();
-                self.bank_address_term[1].next =
-                    self.bank_address_term[1].val() | self.word_address.val();
-                self.bank_data_term[1].next = self.bank_data_term[1].val() | self.word_data.val();
-            } else {
-                self.bank_write_term[0].next =
-                    self.bank_write_term[0].val() | self.store_word.val();
-                self.bank_address_term[0].next =
-                    self.bank_address_term[0].val() | self.word_address.val();
-                self.bank_data_term[0].next = self.bank_data_term[0].val() | self.word_data.val();
+            // the group's register takes the OR of its ports' words, each zero unless taken
+            // (an OR tree, not a chain of multiplexers)
+            for g in 0..self.group_write.len() {
+                if self.port_group[i].val().get_bit(g) {
+                    self.group_write_term[g].next =
+                        self.group_write_term[g].val() | self.store_word.val();
+                    self.group_address_term[g].next =
+                        self.group_address_term[g].val() | self.word_address.val();
+                    self.group_data_term[g].next =
+                        self.group_data_term[g].val() | self.word_data.val();
+                }
             }
             // occupancy: +1 on commit, -1 when the reader finishes this port's record
             // (`port` still holds the freed port: the next grant comes two clocks later)
@@ -539,6 +571,27 @@ impl Logic for PacketStore {
             self.events[i].next = 0.into();
             if self.dropped_pulse[i].q.val() {
                 self.events[i].next = self.dropped_event.val();
+            }
+        }
+        // a clock later, the bank's write register takes the OR of its groups' registers
+        for g in 0..self.group_write.len() {
+            self.group_write[g].d.next = self.group_write_term[g].val();
+            self.group_address[g].d.next = self.group_address_term[g].val();
+            self.group_data[g].d.next = self.group_data_term[g].val();
+            if self.group_bank[g].val() {
+                self.bank_write_term[1].next =
+                    self.bank_write_term[1].val() | self.group_write[g].q.val();
+                self.bank_address_term[1].next =
+                    self.bank_address_term[1].val() | self.group_address[g].q.val();
+                self.bank_data_term[1].next =
+                    self.bank_data_term[1].val() | self.group_data[g].q.val();
+            } else {
+                self.bank_write_term[0].next =
+                    self.bank_write_term[0].val() | self.group_write[g].q.val();
+                self.bank_address_term[0].next =
+                    self.bank_address_term[0].val() | self.group_address[g].q.val();
+                self.bank_data_term[0].next =
+                    self.bank_data_term[0].val() | self.group_data[g].q.val();
             }
         }
         for b in 0..self.bank_write.len() {
