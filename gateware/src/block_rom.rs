@@ -1,4 +1,5 @@
-//! BlockRom: a read-only table in block RAM, with the read timing of [`crate::block_ram`].
+//! BlockRom: a read-only table in block RAM, with the read timing of [`crate::block_ram`]
+//! ([`crate::block_ram::READ_LATENCY`]).
 //!
 //! A read takes two clocks: the address is taken at one edge, the word appears after the
 //! next. The Verilog is a memory with its contents in an `initial` block and two output
@@ -7,9 +8,6 @@
 //! text. The contents live in the Verilog itself: no file beside it to lose.
 
 use rust_hdl::prelude::*;
-
-/// Read latency in clocks: address at edge k, data valid after edge k + 2.
-pub const READ_LATENCY: u64 = 2;
 
 /// A table of 2^N words of W bits, read through two registers.
 #[derive(LogicBlock)]

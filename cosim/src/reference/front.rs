@@ -146,10 +146,12 @@ struct Reception {
 /// Everything the receiver does on this pin, in order, up to `end`.
 fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Reception> {
     let middles: Vec<u64> = (0..10).map(|b| t.middle(b)).collect();
-    // the bit count reaches the gap's end this many middles after the stop bit's (or a
-    // glitch's start bit's) middle; the deframer's register sees it a clock after it
-    let gap_after_stop = t.middle(9 + t.idle_gap_bits) + 1;
-    let gap_after_glitch = t.middle(t.idle_gap_bits) + 1;
+    // the bit count is BIT_COUNT_AFTER_STOP from the stop bit's middle (9) or a glitch's
+    // start-bit middle (0) on and reaches the gap's end `idle_gap_bits` middles later; the
+    // deframer's register sees it a clock after that middle
+    let gap_middle = |from: u64| t.middle(from + t.idle_gap_bits) + 1;
+    let gap_after_stop = gap_middle(9);
+    let gap_after_glitch = gap_middle(0);
     let mut out = vec![];
     let mut from = 0;
     while let Some(m) = pin.next_fall(from) {
