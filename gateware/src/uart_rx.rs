@@ -3,7 +3,9 @@
 //! - Two-flop synchroniser, then a falling-edge detector.
 //! - Fractional baud generator: a 16-bit phase accumulator adds `2^16 * baud / clock` per
 //!   clock (2097 for 4 Mbit/s at 125 MHz, 31.25 clocks per bit: an integer divider would
-//!   be 0.8 % off before any cell clock error). Its carry marks the middle of each bit. It
+//!   be 0.8 % off before any cell clock error). Its carry marks the middle of each bit; the
+//!   accumulator is kept a clock ahead with that carry in a register, so no carry chain
+//!   feeds the receiver's decisions. It
 //!   runs on while the line is idle, and `bit_count` counts the bit middles since the last
 //!   start edge: 10 after the stop bit's, one more per idle bit time (so the deframer needs
 //!   no idle timer of its own).
@@ -71,14 +73,16 @@ pub struct UartRx {
     /// (or a glitch), then one more per idle bit time, wrapping after [`BIT_COUNT_MAX`].
     pub bit_count: Signal<Out, Bits<5>>,
     phase_increment: Constant<Bits<17>>,
-    phase_start: Constant<Bits<16>>,
+    phase_start_ahead: Constant<Bits<17>>,
     after_stop: Constant<Bits<5>>,
     sync_meta: DFF<Bit>,
     sync_stable: DFF<Bit>,
     sync_previous: DFF<Bit>,
     history: DFF<Bits<2>>,
     receiving: DFF<Bit>,
-    phase: DFF<Bits<16>>,
+    /// The accumulator one clock ahead, with that addition's carry on top: bit 16 is the
+    /// bit middle, straight from a register.
+    phase_ahead: DFF<Bits<17>>,
     bit_index: DFF<Bits<5>>,
     shift: DFF<Bits<8>>,
     strobe_out: DFF<Bit>,
@@ -109,14 +113,14 @@ impl UartRx {
             start: Default::default(),
             bit_count: Default::default(),
             phase_increment: Constant::new(increment.into()),
-            phase_start: Constant::new(start.into()),
+            phase_start_ahead: Constant::new((start + increment).into()),
             after_stop: Constant::new(BIT_COUNT_AFTER_STOP.into()),
             sync_meta: Default::default(),
             sync_stable: Default::default(),
             sync_previous: Default::default(),
             history: Default::default(),
             receiving: Default::default(),
-            phase: Default::default(),
+            phase_ahead: Default::default(),
             bit_index: Default::default(),
             shift: Default::default(),
             strobe_out: Default::default(),
@@ -140,7 +144,7 @@ impl Logic for UartRx {
             sync_previous,
             history,
             receiving,
-            phase,
+            phase_ahead,
             bit_index,
             shift,
             strobe_out,
@@ -154,11 +158,12 @@ impl Logic for UartRx {
         self.majority.next = (self.sync_stable.q.val() & self.history.q.val().get_bit(0))
             | (self.sync_stable.q.val() & self.history.q.val().get_bit(1))
             | (self.history.q.val().get_bit(0) & self.history.q.val().get_bit(1));
-        self.phase_sum.next = bit_cast::<17, 16>(self.phase.q.val()) + self.phase_increment.val();
         // the accumulator runs on when idle: its carries count idle bit times
-        self.middle.next = self.phase_sum.val().get_bit(16);
+        self.middle.next = self.phase_ahead.q.val().get_bit(16);
+        self.phase_sum.next = bit_cast::<17, 16>(self.phase_ahead.q.val().get_bits::<16>(0))
+            + self.phase_increment.val();
         self.strobe_out.d.next = false;
-        self.phase.d.next = self.phase_sum.val().get_bits::<16>(0);
+        self.phase_ahead.d.next = self.phase_sum.val();
         if self.middle.val() {
             self.bit_index.d.next = self.bit_index.q.val() + 1;
         }
@@ -166,7 +171,7 @@ impl Logic for UartRx {
             !self.receiving.q.val() & self.sync_previous.q.val() & !self.sync_stable.q.val();
         if self.start_edge.val() {
             self.receiving.d.next = true;
-            self.phase.d.next = self.phase_start.val();
+            self.phase_ahead.d.next = self.phase_start_ahead.val();
             self.bit_index.d.next = 0.into();
         }
         if self.middle.val() & self.receiving.q.val() {
