@@ -10,7 +10,8 @@
 
 use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
 use crate::counter_file::CounterFile;
-use crate::packet_store::{PacketStore, MAX_PORTS};
+use crate::packet_store::{PacketStore, GROUP_PORTS, MAX_PORTS};
+use crate::replica_register::ReplicaRegister;
 use crate::status_reporter::StatusReporter;
 use crate::timestamp::TimestampCounter;
 use crate::uart_rx::UartRx;
@@ -155,7 +156,15 @@ pub struct InterfaceBox {
     status: StatusReporter,
     framer: UdpFramer,
     core_reset: DFF<Bit>,
-    port_reset: DFF<Bit>,
+    /// The ports' reset before its copies.
+    port_reset: Signal<Local, Bit>,
+    /// The ports' reset, one register per group of [`GROUP_PORTS`] ports (one net across
+    /// the chip to every port's flip-flops would be the slowest path at 64 ports).
+    group_resets: Vec<ReplicaRegister>,
+    /// The ports' reset for the packet store's per-port state.
+    store_port_reset: ReplicaRegister,
+    /// Port i's group, one-hot.
+    port_group: Vec<Constant<Bits<8>>>,
 }
 
 impl InterfaceBox {
@@ -188,6 +197,13 @@ impl InterfaceBox {
             }),
             core_reset: Default::default(),
             port_reset: Default::default(),
+            group_resets: (0..n.div_ceil(GROUP_PORTS))
+                .map(|_| Default::default())
+                .collect(),
+            store_port_reset: Default::default(),
+            port_group: (0..n)
+                .map(|i| Constant::new((1u64 << (i / GROUP_PORTS)).into()))
+                .collect(),
         })
     }
 
@@ -202,20 +218,32 @@ impl InterfaceBox {
 impl Logic for InterfaceBox {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, core_reset, port_reset);
+        dff_setup!(self, clock, core_reset);
         // the reset pin drives one register, which drives the blocks: no combinational
         // path from a pin into the core
         self.core_reset.d.next = self.reset.val();
-        self.port_reset.d.next = self.core_reset.q.val() | !self.counters.ready.val();
+        self.port_reset.next = self.core_reset.q.val() | !self.counters.ready.val();
+        for g in 0..self.group_resets.len() {
+            self.group_resets[g].clock.next = self.clock.val();
+            self.group_resets[g].d.next = self.port_reset.val();
+        }
+        self.store_port_reset.clock.next = self.clock.val();
+        self.store_port_reset.d.next = self.port_reset.val();
         self.timestamp.clock.next = self.clock.val();
         self.timestamp.reset.next = self.core_reset.q.val();
         for i in 0..self.uarts.len() {
             // pin -> UART -> deframer -> packet store
             self.uarts[i].clock.next = self.clock.val();
-            self.uarts[i].reset.next = self.port_reset.q.val();
+            self.uarts[i].reset.next = false;
+            self.deframers[i].reset.next = false;
+            for g in 0..self.group_resets.len() {
+                if self.port_group[i].val().get_bit(g) {
+                    self.uarts[i].reset.next = self.group_resets[g].q.val();
+                    self.deframers[i].reset.next = self.group_resets[g].q.val();
+                }
+            }
             self.uarts[i].rx.next = self.uart_rx[i].val();
             self.deframers[i].clock.next = self.clock.val();
-            self.deframers[i].reset.next = self.port_reset.q.val();
             self.deframers[i].byte_data.next = self.uarts[i].data.val();
             self.deframers[i].byte_strobe.next = self.uarts[i].strobe.val();
             self.deframers[i].byte_framing_error.next = self.uarts[i].framing_error.val();
@@ -233,7 +261,7 @@ impl Logic for InterfaceBox {
         }
         self.store.clock.next = self.clock.val();
         self.store.reset.next = self.core_reset.q.val();
-        self.store.port_reset.next = self.port_reset.q.val();
+        self.store.port_reset.next = self.store_port_reset.q.val();
         self.counters.clock.next = self.clock.val();
         self.counters.reset.next = self.core_reset.q.val();
         self.counters.read_address.next = self.status.counter_address.val();

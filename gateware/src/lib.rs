@@ -25,6 +25,7 @@ pub mod frame_transmitter;
 pub mod interface_box;
 pub mod lut_ram;
 pub mod packet_store;
+pub mod replica_register;
 pub mod status_reporter;
 pub mod stream;
 pub mod timestamp;
