@@ -18,6 +18,13 @@ use std::time::Instant;
 /// Instance name of the box in the board top (gateware/src/board.rs).
 const BOX_INSTANCE: &str = "interface_box";
 
+/// nextpnr's HeAP legaliser tries up to `max(10000, cells^2 / N)` positions for a cell
+/// before it stops with an error naming the cell. With its default N = 8 a design that
+/// fills two thirds of the LFE5U-25F (64 ports, about 25,000 cells) may search for hours;
+/// N = 100000 bounds the search at 10000 tries per cell, which is within what the smaller
+/// designs ever need and places 64 ports in minutes.
+const PLACER_CELL_TIMEOUT_DIVISOR: u64 = 100_000;
+
 /// What to synthesise and where.
 #[derive(Debug, Clone)]
 pub struct FlowOptions {
@@ -190,6 +197,10 @@ pub fn run(
         .args(["--textcfg", &format!("{top}.config")])
         .args(["--report", "nextpnr-report.json"])
         .args(["--seed", &options.seed.to_string()])
+        .args([
+            "--placer-heap-cell-placement-timeout",
+            &PLACER_CELL_TIMEOUT_DIVISOR.to_string(),
+        ])
         .arg("--timing-allow-fail");
     // nextpnr goes on placing a design that cannot fit for a long time: stop it as soon as
     // its utilisation table shows a resource over capacity.
