@@ -150,6 +150,13 @@ pub struct FrameTransmitter {
     // registered index tests, true at index 7 (the CRC starts) and at the last index
     crc_starts: DFF<Bit>,
     frame_ends: DFF<Bit>,
+    // registered index ranges, like `crc_starts`: the checksum's term is a ring byte
+    // (2..18), the checksum adds its term (1..=18), folds its carries (19..21), the ring
+    // turns (2..18 and 57..72)
+    term_from_ring: DFF<Bit>,
+    checksum_adds: DFF<Bit>,
+    checksum_folds: DFF<Bit>,
+    ring_turns: DFF<Bit>,
     total_len: DFF<Bits<16>>,
     udp_len: DFF<Bits<16>>,
     ip_checksum: DFF<Bits<16>>,
@@ -219,6 +226,10 @@ impl FrameTransmitter {
             body_end: Default::default(),
             end_minus_one: Default::default(),
             crc_starts: Default::default(),
+            term_from_ring: Default::default(),
+            checksum_adds: Default::default(),
+            checksum_folds: Default::default(),
+            ring_turns: Default::default(),
             frame_ends: Default::default(),
             total_len: Default::default(),
             udp_len: Default::default(),
@@ -267,6 +278,10 @@ impl Logic for FrameTransmitter {
             body_end,
             end_minus_one,
             crc_starts,
+            term_from_ring,
+            checksum_adds,
+            checksum_folds,
+            ring_turns,
             frame_ends,
             total_len,
             udp_len,
@@ -300,7 +315,7 @@ impl Logic for FrameTransmitter {
             self.checksum_word.next = bit_cast::<32, 16>(self.udp_len.q.val()) << 1;
         } else if self.index.q.val() == 1 {
             self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
-        } else if (self.index.q.val() >= 2) & (self.index.q.val() < 18) {
+        } else if self.term_from_ring.q.val() {
             self.checksum_word.next = bit_cast::<32, 8>(self.fields_high.q.val().get_bits::<8>(56));
             if self.index.q.val().get_bit(0) {
                 self.checksum_word.next = self.checksum_word.val() << 8;
@@ -408,22 +423,28 @@ impl Logic for FrameTransmitter {
         // the index tests of the next clock, from this clock's index (it counts up by one
         // while sending)
         self.crc_starts.d.next = self.sending.q.val() & (self.index.q.val() == 6);
+        self.term_from_ring.d.next =
+            self.sending.q.val() & (self.index.q.val() >= 1) & (self.index.q.val() < 17);
+        self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 18);
+        self.checksum_folds.d.next =
+            self.sending.q.val() & (self.index.q.val() >= 18) & (self.index.q.val() < 20);
+        self.ring_turns.d.next = self.sending.q.val()
+            & (((self.index.q.val() >= 1) & (self.index.q.val() < 17))
+                | ((self.index.q.val() >= 56) & (self.index.q.val() < 71)));
         self.frame_ends.d.next =
             self.sending.q.val() & (self.index.q.val() == self.end_minus_one.q.val());
         if self.sending.q.val() {
             self.index.d.next = self.index.q.val() + 1;
             // the word chosen at byte i is added at byte i + 1 (from a register)
-            if (self.index.q.val() >= 1) & (self.index.q.val() <= 18) {
+            if self.checksum_adds.q.val() {
                 self.checksum.d.next = self.checksum.q.val() + self.checksum_term.q.val();
-            } else if (self.index.q.val() >= 19) & (self.index.q.val() < 21) {
+            } else if self.checksum_folds.q.val() {
                 self.checksum.d.next =
                     (self.checksum.q.val() & 0xFFFF) + (self.checksum.q.val() >> 16);
             }
             // the ring turns once round for the checksum (it is back in place after 16
             // bytes) and then sends its first 15 bytes
-            if ((self.index.q.val() >= 2) & (self.index.q.val() < 18))
-                | ((self.index.q.val() >= 57) & (self.index.q.val() < 72))
-            {
+            if self.ring_turns.q.val() {
                 self.fields_high.d.next = (self.fields_high.q.val() << 8)
                     | bit_cast::<64, 8>(self.fields_low.q.val().get_bits::<8>(56));
                 self.fields_low.d.next = (self.fields_low.q.val() << 8)
@@ -467,6 +488,10 @@ impl Logic for FrameTransmitter {
             self.stage_valid.d.next = false;
             self.crc_starts.d.next = false;
             self.frame_ends.d.next = false;
+            self.term_from_ring.d.next = false;
+            self.checksum_adds.d.next = false;
+            self.checksum_folds.d.next = false;
+            self.ring_turns.d.next = false;
             self.gap.d.next = 0.into();
             self.gap_done.d.next = true;
             self.tx_en.d.next = false;
