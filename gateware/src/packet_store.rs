@@ -9,7 +9,8 @@
 //! (four tick bytes and the header) takes five rounds: 160 clocks at most, well inside a
 //! byte time (about 300 clocks at 4 Mbit/s). The beat taken is written two clocks later,
 //! through the register of its group of eight ports and then its bank's. A packet becomes
-//! visible when its `last` beat is taken without `error`; a packet with `error` is
+//! visible when its `last` beat is taken without `error` (counted a clock later, so the
+//! scan sees it two clocks after the beat); a packet with `error` is
 //! forgotten; when both slots of the port are full as a packet starts, the whole packet is
 //! dropped and `dropped` pulses for the port when it ends. The loss flag (bit 8 of
 //! every stored word) is set when packets of the port were rejected or dropped since its
@@ -112,7 +113,8 @@ pub struct PacketStore {
     full: Vec<DFF<Bit>>,
     read_slot: Vec<DFF<Bit>>,
     take: Vec<Signal<Local, Bit>>,
-    commit: Vec<Signal<Local, Bit>>,
+    // a packet of the port was stored whole (registered: it counts a clock later)
+    commit: Vec<DFF<Bit>>,
     free: Vec<Signal<Local, Bit>>,
     used_next: Vec<Signal<Local, Bits<2>>>,
     // per write group: the OR of its ports' taken words
@@ -477,6 +479,7 @@ impl Logic for PacketStore {
             self.occupied[i].clock.next = self.clock.val();
             self.full[i].clock.next = self.clock.val();
             self.read_slot[i].clock.next = self.clock.val();
+            self.commit[i].clock.next = self.clock.val();
             self.write_index[i].d.next = self.write_index[i].q.val();
             self.write_slot[i].d.next = self.write_slot[i].q.val();
             self.dropping[i].d.next = self.dropping[i].q.val();
@@ -486,7 +489,7 @@ impl Logic for PacketStore {
 
             self.ports[i].ready.next = self.visit.q.val().get_bit(i);
             self.take[i].next = self.ports[i].valid.val() & self.visit.q.val().get_bit(i);
-            self.commit[i].next = false;
+            self.commit[i].d.next = false;
             self.store_word.next = false;
             self.term_slot.next = false;
             self.term_index.next = 0.into();
@@ -525,7 +528,7 @@ impl Logic for PacketStore {
                         self.loss_pending[i].d.next = true;
                         self.dropped_pulse[i].d.next = true;
                     } else {
-                        self.commit[i].next = true;
+                        self.commit[i].d.next = true;
                         self.loss_pending[i].d.next = false;
                         self.write_slot[i].d.next = !self.write_slot[i].q.val();
                     }
@@ -551,13 +554,14 @@ impl Logic for PacketStore {
                 self.read_slot[i].d.next = !self.read_slot[i].q.val();
             }
             self.used_next[i].next = self.used[i].q.val();
-            if self.commit[i].val() & !self.free[i].val() {
+            if self.commit[i].q.val() & !self.free[i].val() {
                 self.used_next[i].next = self.used[i].q.val() + 1;
-            } else if !self.commit[i].val() & self.free[i].val() {
+            } else if !self.commit[i].q.val() & self.free[i].val() {
                 self.used_next[i].next = self.used[i].q.val() - 1;
             }
             if self.port_reset.val() {
                 self.used_next[i].next = 0.into();
+                self.commit[i].d.next = false;
                 self.write_slot[i].d.next = false;
                 self.write_index[i].d.next = 0.into();
                 self.dropping[i].d.next = false;

@@ -8,8 +8,9 @@
 //! grows with every byte. A datagram closes when it holds 55 records (1454 bytes) or when
 //! its first record has waited `flush_timeout_ticks` (one clock later, as the deadline test
 //! is registered, and after a record on its way in is complete); it then goes to the
-//! [`FrameTransmitter`] while the other buffer fills (double buffering). When both
-//! buffers are busy the input is not ready: records wait upstream, none is lost here.
+//! [`FrameTransmitter`] while the other buffer fills (double buffering). A datagram due to
+//! close takes no more records: while the other buffer is still busy the input is not
+//! ready and records wait upstream, none is lost here.
 //!
 //! Status datagrams come from the status block's own memory through the `status_*`
 //! ports and share the transmitter; a waiting records datagram goes first.
@@ -267,11 +268,11 @@ impl Logic for UdpFramer {
             & self.offset_idle.q.val()
             & (self.fill_full.q.val() | (self.fill_nonzero.q.val() & self.deadline_passed.q.val()));
         self.can_close.next = !self.pending.q.val() & !self.sending_records.q.val();
-        // No beat moves while a datagram closes (it would land in the old buffer) or while a
-        // full datagram waits for a free buffer.
-        self.accept.next = self.offset_idle.q.val()
-            & !(self.close_due.val() & self.can_close.val())
-            & !(self.beat_zero.q.val() & self.fill_full.q.val());
+        // No beat moves while a datagram is due to close: in the clock it closes (the beat
+        // would land in the old buffer) and while it waits for the other buffer (a full one
+        // and one whose time is up alike). Whether the other buffer is free stays off the
+        // input's ready.
+        self.accept.next = self.offset_idle.q.val() & !self.close_due.val();
         self.records.ready.next = self.accept.val();
 
         // Write one byte per clock: offset bytes while they are pending, else stream beats.

@@ -82,6 +82,9 @@ struct RecordBeat {
 #[derive(Debug, Default)]
 struct Buffer {
     slots: VecDeque<Stored>,
+    /// A packet stored whole in the previous cycle: the store counts it a clock after its
+    /// last beat, so it joins `slots` at the end of this cycle.
+    committed: Option<Stored>,
     dropping: bool,
     loss_pending: bool,
     /// Loss flag captured with the first beat of the packet being written.
@@ -297,7 +300,10 @@ impl<'a> Back<'a> {
             && self.read1.is_none()
             && self.read2.is_none()
             && self.fifo.is_empty()
-            && self.buffers.iter().all(|b| b.slots.is_empty())
+            && self
+                .buffers
+                .iter()
+                .all(|b| b.slots.is_empty() && b.committed.is_none())
             && self.offset_left == 0
             && self.beat == 0
             && !self.close_now()
@@ -383,9 +389,7 @@ impl<'a> Back<'a> {
 
         // framer input control
         let closing = self.close_now();
-        let accept = self.offset_left == 0
-            && !closing
-            && !(self.beat == 0 && self.fill.len() == MAX_RECORDS);
+        let accept = self.offset_left == 0 && !self.close_due();
 
         // store reader: scan, grant, issue (on the registers as they are)
         let in_flight = usize::from(self.read1.is_some()) + usize::from(self.read2.is_some());
@@ -530,6 +534,12 @@ impl<'a> Back<'a> {
         }
 
         // store write side: the deframers' first and last beats taken this cycle
+        let counted_now: Vec<(usize, Stored)> = self
+            .buffers
+            .iter_mut()
+            .enumerate()
+            .filter_map(|(port, b)| b.committed.take().map(|s| (port, s)))
+            .collect();
         while let Some(b) = self.beats.get(self.next_beat).filter(|b| b.cycle == c) {
             let (port, packet, first) = (b.port, b.packet, b.first);
             self.next_beat += 1;
@@ -547,13 +557,16 @@ impl<'a> Back<'a> {
             } else {
                 // (a port's first and last beats never share a cycle, so `used` above
                 // is not changed by this)
-                buffer.slots.push_back(Stored {
+                buffer.committed = Some(Stored {
                     flags: u8::from(buffer.flag_of_writing),
                     stamp: p.stamp as u32,
                     bytes: p.bytes,
                 });
                 buffer.loss_pending = false;
             }
+        }
+        for (port, stored) in counted_now {
+            self.buffers[port].slots.push_back(stored);
         }
 
         self.deadline_passed = next_deadline_passed;
