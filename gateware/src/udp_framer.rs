@@ -94,6 +94,8 @@ pub struct UdpFramer {
     deadline_passed: DFF<Bit>,
     // beat == 0, offset_left == 0, fill_count == max and != 0, kept in registers
     beat_zero: DFF<Bit>,
+    // beat == 5 (the record's last tick byte), set and cleared as the beat moves
+    beat_five: DFF<Bit>,
     offset_idle: DFF<Bit>,
     fill_full: DFF<Bit>,
     fill_nonzero: DFF<Bit>,
@@ -119,6 +121,7 @@ pub struct UdpFramer {
     memory_write_address: DFF<Bits<12>>,
     memory_write_data: DFF<Bits<8>>,
     write_data: Signal<Local, Bits<8>>,
+    fill_sum_next: Signal<Local, Bits<32>>,
     close_due: Signal<Local, Bit>,
     can_close: Signal<Local, Bit>,
     accept: Signal<Local, Bit>,
@@ -169,6 +172,7 @@ impl UdpFramer {
             first_seen: Default::default(),
             deadline_passed: Default::default(),
             beat_zero: Default::default(),
+            beat_five: Default::default(),
             offset_idle: Default::default(),
             fill_full: Default::default(),
             fill_nonzero: Default::default(),
@@ -193,6 +197,7 @@ impl UdpFramer {
             memory_write_address: Default::default(),
             memory_write_data: Default::default(),
             write_data: Default::default(),
+            fill_sum_next: Default::default(),
             close_due: Default::default(),
             can_close: Default::default(),
             accept: Default::default(),
@@ -221,6 +226,7 @@ impl Logic for UdpFramer {
             first_seen,
             deadline_passed,
             beat_zero,
+            beat_five,
             offset_idle,
             fill_full,
             fill_nonzero,
@@ -289,6 +295,7 @@ impl Logic for UdpFramer {
         } else if self.records.valid.val() & self.accept.val() {
             self.beat.d.next = self.beat.q.val() + 1;
             self.beat_zero.d.next = false;
+            self.beat_five.d.next = self.beat.q.val() == 4;
             if self.beat.q.val() == 25 {
                 self.beat.d.next = 0.into();
                 self.beat_zero.d.next = true;
@@ -314,8 +321,8 @@ impl Logic for UdpFramer {
         // every clock in which beat 5 is offered, not only when it moves, so the value of
         // the clock it moves is the last one taken and `accept` stays off the enables of
         // the two 32-bit subtractions.
-        if self.offset_idle.q.val() & self.records.valid.val() & (self.beat.q.val() == 5) {
-            if self.fill_count.q.val() == 0 {
+        if self.offset_idle.q.val() & self.records.valid.val() & self.beat_five.q.val() {
+            if !self.fill_nonzero.q.val() {
                 self.offset_bytes.d.next = 0.into();
                 self.first_age.d.next = self.tick.val().get_bits::<32>(0) - self.record_tick.val();
             } else {
@@ -335,21 +342,27 @@ impl Logic for UdpFramer {
         self.memory.write_address.next = self.memory_write_address.q.val();
         if self.write.val() {
             self.fill_offset.d.next = self.fill_offset.q.val() + 1;
-            if self.fill_offset.q.val().get_bit(0) {
-                self.fill_sum.d.next =
-                    self.fill_sum.q.val() + bit_cast::<32, 8>(self.write_data.val());
+        }
+        // the body's sum grows with the write register's byte (a clock after the decision,
+        // from registers only); a datagram closing now takes the byte still on its way
+        self.fill_sum_next.next = self.fill_sum.q.val();
+        if self.memory_write.q.val() {
+            if self.memory_write_address.q.val().get_bit(0) {
+                self.fill_sum_next.next =
+                    self.fill_sum.q.val() + bit_cast::<32, 8>(self.memory_write_data.q.val());
             } else {
-                self.fill_sum.d.next =
-                    self.fill_sum.q.val() + (bit_cast::<32, 8>(self.write_data.val()) << 8);
+                self.fill_sum_next.next = self.fill_sum.q.val()
+                    + (bit_cast::<32, 8>(self.memory_write_data.q.val()) << 8);
             }
         }
+        self.fill_sum.d.next = self.fill_sum_next.val();
 
         // Hand the full buffer over, start filling the other.
         if self.close_due.val() & self.can_close.val() {
             self.pending.d.next = true;
             self.pending_count.d.next = self.fill_count.q.val();
             self.pending_len.d.next = self.fill_offset.q.val();
-            self.pending_sum.d.next = self.fill_sum.q.val();
+            self.pending_sum.d.next = self.fill_sum_next.val();
             self.pending_base_tick.d.next = self.fill_base_tick.q.val();
             self.pending_flags.d.next = 0.into();
             if self.fill_count.q.val() != self.max_records.val() {
@@ -423,6 +436,7 @@ impl Logic for UdpFramer {
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
             self.beat.d.next = 0.into();
+            self.beat_five.d.next = false;
             self.offset_left.d.next = 0.into();
             self.pending.d.next = false;
             self.sending_records.d.next = false;
