@@ -19,9 +19,10 @@ use rust_hdl::prelude::*;
 /// the word into the shift register, four bytes out.
 pub const CLOCKS_PER_WORD: u64 = 7;
 
-/// Clock of a word (from its first) in which its value is taken: counters and the framer's
-/// counts alike.
-pub const WORD_VALUE_CLOCK: u64 = 2;
+/// Clock of a word (from its first) in which the framer's counts are taken (into a register
+/// the word's value is loaded from a clock later); counters come from the memory, read at
+/// the address of the word's first clock.
+pub const WORD_VALUE_CLOCK: u64 = 1;
 
 /// Ports per status datagram.
 pub const PORTS_PER_STATUS: usize = 32;
@@ -81,6 +82,10 @@ pub struct StatusReporter {
     tick_held: DFF<Bits<64>>,
     resets: DFF<Bits<32>>,
     reset_seen: DFF<Bit>,
+    // the value of word 0 to 3 for the current word, and whether it is a counter instead
+    // (both registered: the shift register loads from registers only)
+    header_word: DFF<Bits<32>>,
+    word_from_memory: DFF<Bit>,
     remaining: Signal<Local, Bits<7>>,
     word_value: Signal<Local, Bits<32>>,
     tx_byte: Signal<Local, Bits<8>>,
@@ -150,6 +155,8 @@ impl StatusReporter {
             tick_held: Default::default(),
             resets: Default::default(),
             reset_seen: Default::default(),
+            header_word: Default::default(),
+            word_from_memory: Default::default(),
             remaining: Default::default(),
             word_value: Default::default(),
             tx_byte: Default::default(),
@@ -165,8 +172,23 @@ impl Logic for StatusReporter {
     #[hdl_gen]
     fn update(&mut self) {
         dff_setup!(
-            self, clock, timer, due, state, first_port, page_ports, word, phase, shift, offset,
-            sum, tick_held, resets, reset_seen
+            self,
+            clock,
+            timer,
+            due,
+            state,
+            first_port,
+            page_ports,
+            word,
+            phase,
+            shift,
+            offset,
+            sum,
+            tick_held,
+            resets,
+            reset_seen,
+            header_word,
+            word_from_memory
         );
         self.memory.clock.next = self.clock.val();
         self.memory.read_address.next = self.read_address.val();
@@ -185,15 +207,20 @@ impl Logic for StatusReporter {
         self.counter_address.next =
             (bit_cast::<9, 7>(self.first_port.q.val()) << 3) + (self.word.q.val() - 4);
         // the counter memory answers two clocks after the address (its output register)
-        self.word_value.next = self.counter_data.val();
+        self.header_word.d.next = 0.into();
         if self.word.q.val() == 0 {
-            self.word_value.next = self.boot_seed.val() + self.resets.q.val();
+            self.header_word.d.next = self.boot_seed.val() + self.resets.q.val();
         } else if self.word.q.val() == 1 {
-            self.word_value.next = self.datagrams_sent.val();
+            self.header_word.d.next = self.datagrams_sent.val();
         } else if self.word.q.val() == 2 {
-            self.word_value.next = self.records_sent.val();
+            self.header_word.d.next = self.records_sent.val();
         } else if self.word.q.val() == 3 {
-            self.word_value.next = bit_cast::<32, 7>(self.first_port.q.val()) << 24;
+            self.header_word.d.next = bit_cast::<32, 7>(self.first_port.q.val()) << 24;
+        }
+        self.word_from_memory.d.next = self.word.q.val() >= 4;
+        self.word_value.next = self.header_word.q.val();
+        if self.word_from_memory.q.val() {
+            self.word_value.next = self.counter_data.val();
         }
         self.tx_byte.next = self.shift.q.val().get_bits::<8>(24);
 
