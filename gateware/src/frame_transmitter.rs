@@ -9,15 +9,16 @@
 //!
 //! The checksums are finished long before they are sent: the UDP sum starts from the
 //! constant words (addresses, ports, magic, box id) plus the body sum, and adds the UDP
-//! length, the kind and then the 16 bytes of the header fields ring (flags, sequence, base
-//! tick, entry count, a zero) one per clock as the ring turns, each at its place in its word
-//! (no multiplexer over the fields); the sum is folded by byte 21. The body memory is read two clocks ahead
+//! length, the kind and then the 16 bytes of the header fields (flags, sequence, base tick,
+//! entry count, a zero) one per clock, each at its place in its word (a byte multiplexer
+//! stepped by a counter, no word multiplexer); the sum is folded by byte 21. The body memory is read two clocks ahead
 //! (`payload_address`; `payload_data` must be that byte two clocks later: a block RAM read
 //! and a register after it).
 //! Output: the selected byte goes into a register, the CRC is computed from that register,
 //! and the output register takes the byte or, at the end, the FCS: `gmii_txd`/`gmii_tx_en`
 //! follow the byte counter by two clocks, and no path runs from byte selection through the
-//! CRC. The frame geometry (lengths, IPv4 checksum) is registered at the start.
+//! CRC. The frame geometry (lengths, IPv4 checksum) is computed from the body length held
+//! at the start, a clock later (no adder after the descriptor).
 
 use crate::block_ram::BlockRam;
 use crate::crc32::Crc32Byte;
@@ -134,11 +135,17 @@ pub struct FrameTransmitter {
     // gap == 0, kept in a register (`idle` is one gate from registers)
     gap_done: DFF<Bit>,
     kind_held: DFF<Bits<8>>,
+    body_len_held: DFF<Bits<11>>,
     // the 15 header bytes (flags, sequence, base tick, entry count), most significant
-    // first, and a zero byte: one 128-bit ring of bytes cut in two (no word over 64 bits
-    // to simulate), rotated a byte per clock to sum its words and to send its bytes
+    // first, and a zero byte, held while the frame goes out (cut in two: no word over 64
+    // bits to simulate); `field_position` steps through them, once to sum their words and
+    // once to send them
     fields_high: DFF<Bits<64>>,
     fields_low: DFF<Bits<64>>,
+    field_position: DFF<Bits<4>>,
+    field_word: Signal<Local, Bits<64>>,
+    field_word_shifted: Signal<Local, Bits<64>>,
+    field_byte: Signal<Local, Bits<8>>,
     checksum: DFF<Bits<32>>,
     crc_register: DFF<Bits<32>>,
     next_sequence: DFF<Bits<32>>,
@@ -150,13 +157,13 @@ pub struct FrameTransmitter {
     // registered index tests, true at index 7 (the CRC starts) and at the last index
     crc_starts: DFF<Bit>,
     frame_ends: DFF<Bit>,
-    // registered index ranges, like `crc_starts`: the checksum's term is a ring byte
-    // (2..18), the checksum adds its term (1..=18), folds its carries (19..21), the ring
-    // turns (2..18 and 57..72)
-    term_from_ring: DFF<Bit>,
+    // registered index ranges, like `crc_starts`: the checksum's term is a field byte
+    // (2..18), the checksum adds its term (1..=18), folds its carries (19..21), the field
+    // position steps (2..18 and 57..72)
+    term_from_fields: DFF<Bit>,
     checksum_adds: DFF<Bit>,
     checksum_folds: DFF<Bit>,
-    ring_turns: DFF<Bit>,
+    field_steps: DFF<Bit>,
     // index >= 73 (the body and the FCS), registered a clock ahead
     past_header: DFF<Bit>,
     header_index: Signal<Local, Bits<7>>,
@@ -219,8 +226,13 @@ impl FrameTransmitter {
             gap: Default::default(),
             gap_done: Default::default(),
             kind_held: Default::default(),
+            body_len_held: Default::default(),
             fields_high: Default::default(),
             fields_low: Default::default(),
+            field_position: Default::default(),
+            field_word: Default::default(),
+            field_word_shifted: Default::default(),
+            field_byte: Default::default(),
             checksum: Default::default(),
             crc_register: Default::default(),
             next_sequence: Default::default(),
@@ -229,10 +241,10 @@ impl FrameTransmitter {
             body_end: Default::default(),
             end_minus_one: Default::default(),
             crc_starts: Default::default(),
-            term_from_ring: Default::default(),
+            term_from_fields: Default::default(),
             checksum_adds: Default::default(),
             checksum_folds: Default::default(),
-            ring_turns: Default::default(),
+            field_steps: Default::default(),
             past_header: Default::default(),
             header_index: Default::default(),
             frame_ends: Default::default(),
@@ -273,8 +285,10 @@ impl Logic for FrameTransmitter {
             gap,
             gap_done,
             kind_held,
+            body_len_held,
             fields_high,
             fields_low,
+            field_position,
             checksum,
             crc_register,
             next_sequence,
@@ -283,10 +297,10 @@ impl Logic for FrameTransmitter {
             body_end,
             end_minus_one,
             crc_starts,
-            term_from_ring,
+            term_from_fields,
             checksum_adds,
             checksum_folds,
-            ring_turns,
+            field_steps,
             past_header,
             frame_ends,
             total_len,
@@ -312,20 +326,28 @@ impl Logic for FrameTransmitter {
             self.udp_checksum.next = 0xFFFF.into();
         }
 
-        // The variable words of the UDP checksum, one per clock from byte 0: the UDP length
-        // (counted twice: header and pseudo header) with the constant words' sum (the
-        // checksum starts from the body's sum alone, no adder after the descriptor), the
-        // kind, then the 16 bytes of the
-        // fields ring one per clock as it rotates, alternately the low and the high byte
+        // The variable words of the UDP checksum, one per clock from byte 0: the kind, the
+        // UDP length (counted twice: header and pseudo header; valid from byte 1) with the
+        // constant words' sum (the checksum starts from the body's sum alone, no adder after
+        // the descriptor), then the 16 bytes of the
+        // fields one per clock as the position steps, alternately the low and the high byte
         // of a word (flags is the low byte of its word).
+        // the field byte at the position: byte 0 is the top byte of `fields_high`
+        self.field_word.next = self.fields_high.q.val();
+        if self.field_position.q.val().get_bit(3) {
+            self.field_word.next = self.fields_low.q.val();
+        }
+        self.field_word_shifted.next = self.field_word.val()
+            << (bit_cast::<64, 3>(self.field_position.q.val().get_bits::<3>(0)) << 3);
+        self.field_byte.next = self.field_word_shifted.val().get_bits::<8>(56);
         self.checksum_word.next = 0.into();
         if self.index.q.val() == 0 {
+            self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
+        } else if self.index.q.val() == 1 {
             self.checksum_word.next =
                 (bit_cast::<32, 16>(self.udp_len.q.val()) << 1) + self.udp_constant_sum.val();
-        } else if self.index.q.val() == 1 {
-            self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
-        } else if self.term_from_ring.q.val() {
-            self.checksum_word.next = bit_cast::<32, 8>(self.fields_high.q.val().get_bits::<8>(56));
+        } else if self.term_from_fields.q.val() {
+            self.checksum_word.next = bit_cast::<32, 8>(self.field_byte.val());
             if self.index.q.val().get_bit(0) {
                 self.checksum_word.next = self.checksum_word.val() << 8;
             }
@@ -409,7 +431,7 @@ impl Logic for FrameTransmitter {
             self.tx_byte.next = self.tx_byte.val() | self.kind_held.q.val();
         }
         if self.byte_source.q.val().get_bit(10) {
-            self.tx_byte.next = self.tx_byte.val() | self.fields_high.q.val().get_bits::<8>(56);
+            self.tx_byte.next = self.tx_byte.val() | self.field_byte.val();
         }
         if self.byte_source.q.val().get_bit(11) {
             self.tx_byte.next = self.tx_byte.val() | self.payload_data.val();
@@ -438,13 +460,13 @@ impl Logic for FrameTransmitter {
         // the index tests of the next clock, from this clock's index (it counts up by one
         // while sending)
         self.crc_starts.d.next = self.sending.q.val() & (self.index.q.val() == 6);
-        self.term_from_ring.d.next =
+        self.term_from_fields.d.next =
             self.sending.q.val() & (self.index.q.val() >= 1) & (self.index.q.val() < 17);
         self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 18);
         self.checksum_folds.d.next =
             self.sending.q.val() & (self.index.q.val() >= 18) & (self.index.q.val() < 20);
         self.past_header.d.next = self.sending.q.val() & (self.index.q.val() >= 72);
-        self.ring_turns.d.next = self.sending.q.val()
+        self.field_steps.d.next = self.sending.q.val()
             & (((self.index.q.val() >= 1) & (self.index.q.val() < 17))
                 | ((self.index.q.val() >= 56) & (self.index.q.val() < 71)));
         self.frame_ends.d.next =
@@ -458,13 +480,10 @@ impl Logic for FrameTransmitter {
                 self.checksum.d.next =
                     (self.checksum.q.val() & 0xFFFF) + (self.checksum.q.val() >> 16);
             }
-            // the ring turns once round for the checksum (it is back in place after 16
-            // bytes) and then sends its first 15 bytes
-            if self.ring_turns.q.val() {
-                self.fields_high.d.next = (self.fields_high.q.val() << 8)
-                    | bit_cast::<64, 8>(self.fields_low.q.val().get_bits::<8>(56));
-                self.fields_low.d.next = (self.fields_low.q.val() << 8)
-                    | bit_cast::<64, 8>(self.fields_high.q.val().get_bits::<8>(56));
+            // the position goes once round for the checksum (back at 0 after 16 bytes)
+            // and then through the first 15 bytes to send them
+            if self.field_steps.q.val() {
+                self.field_position.d.next = self.field_position.q.val() + 1;
             }
             if self.crc_starts.q.val() {
                 // index 7: the SFD is in the output stage now: the CRC starts with the next byte
@@ -483,14 +502,18 @@ impl Logic for FrameTransmitter {
             self.index.d.next = 0.into();
             self.next_sequence.d.next = self.next_sequence.q.val() + 1;
         }
+        // The frame geometry follows the held body length a clock later: it is valid from
+        // index 1 on (nothing reads it at index 0).
+        self.body_end.d.next = self.body_len_held.q.val() + 74;
+        self.end_minus_one.d.next = self.body_len_held.q.val() + 76;
+        self.total_len.d.next = bit_cast::<16, 11>(self.body_len_held.q.val()) + 52;
+        self.udp_len.d.next = bit_cast::<16, 11>(self.body_len_held.q.val()) + 32;
         // The descriptor is taken in every clock without a frame going out, so `start` only
         // has to set `sending` (the descriptor must be valid in the clock of `start`).
         if !self.sending.q.val() {
+            self.field_position.d.next = 0.into();
             self.kind_held.d.next = self.kind.val();
-            self.body_end.d.next = self.body_len.val() + 74;
-            self.end_minus_one.d.next = self.body_len.val() + 76;
-            self.total_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 52;
-            self.udp_len.d.next = bit_cast::<16, 11>(self.body_len.val()) + 32;
+            self.body_len_held.d.next = self.body_len.val();
             self.checksum.d.next = self.body_sum.val();
             self.fields_high.d.next = (bit_cast::<64, 8>(self.flags.val()) << 56)
                 | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
@@ -504,10 +527,10 @@ impl Logic for FrameTransmitter {
             self.stage_valid.d.next = false;
             self.crc_starts.d.next = false;
             self.frame_ends.d.next = false;
-            self.term_from_ring.d.next = false;
+            self.term_from_fields.d.next = false;
             self.checksum_adds.d.next = false;
             self.checksum_folds.d.next = false;
-            self.ring_turns.d.next = false;
+            self.field_steps.d.next = false;
             self.past_header.d.next = false;
             self.gap.d.next = 0.into();
             self.gap_done.d.next = true;
