@@ -78,7 +78,6 @@ pub struct UdpFramer {
     pub gmii_tx_er: Signal<Out, Bit>,
     transmitter: FrameTransmitter,
     memory: BlockRam<8, 12>,
-    max_records: Constant<Bits<6>>,
     last_fill: Constant<Bits<6>>,
     flush_timeout_less_one: Constant<Bits<32>>,
     fill_buffer: DFF<Bit>,
@@ -159,7 +158,6 @@ impl UdpFramer {
             gmii_tx_er: Default::default(),
             transmitter: FrameTransmitter::new(&config.link, config.box_id, config.port_count),
             memory: Default::default(),
-            max_records: Constant::new((MAX_RECORDS as u64).into()),
             last_fill: Constant::new((MAX_RECORDS as u64 - 1).into()),
             flush_timeout_less_one: Constant::new((config.flush_timeout_ticks - 1).into()),
             fill_buffer: Default::default(),
@@ -311,7 +309,7 @@ impl Logic for UdpFramer {
             if self.beat.q.val() == 5 {
                 self.offset_left.d.next = 4.into();
                 self.offset_idle.d.next = false;
-                if self.fill_count.q.val() == 0 {
+                if !self.fill_nonzero.q.val() {
                     self.first_seen.d.next = true;
                 }
             }
@@ -365,7 +363,7 @@ impl Logic for UdpFramer {
             self.pending_sum.d.next = self.fill_sum_next.val();
             self.pending_base_tick.d.next = self.fill_base_tick.q.val();
             self.pending_flags.d.next = 0.into();
-            if self.fill_count.q.val() != self.max_records.val() {
+            if !self.fill_full.q.val() {
                 self.pending_flags.d.next = 1.into();
             }
             self.fill_buffer.d.next = !self.fill_buffer.q.val();
