@@ -20,9 +20,10 @@ const BOX_INSTANCE: &str = "interface_box";
 
 /// nextpnr's HeAP legaliser tries up to `max(10000, cells^2 / N)` positions for a cell
 /// before it stops with an error naming the cell. With its default N = 8 a design that
-/// fills two thirds of the LFE5U-25F (64 ports, about 25,000 cells) may search for hours;
-/// N = 100000 bounds the search at 10000 tries per cell, which is within what the smaller
-/// designs ever need and places 64 ports in minutes.
+/// fills two thirds of the LFE5U-25F (64 ports, about 14,500 cells after packing) may
+/// search for hours; N = 100000 bounds the search at 10000 tries per cell, far more than
+/// the smaller designs need, so a design that cannot be legalised fails in minutes with
+/// the cell named.
 const PLACER_CELL_TIMEOUT_DIVISOR: u64 = 100_000;
 
 /// What to synthesise and where.
