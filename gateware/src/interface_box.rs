@@ -10,7 +10,7 @@
 
 use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
 use crate::counter_file::CounterFile;
-use crate::packet_store::{PacketStore, GROUP_PORTS, MAX_PORTS};
+use crate::packet_store::{group_onehot, PacketStore, GROUP_PORTS, MAX_PORTS};
 use crate::replica_register::ReplicaRegister;
 use crate::status_reporter::StatusReporter;
 use crate::timestamp::TimestampCounter;
@@ -201,9 +201,7 @@ impl InterfaceBox {
                 .map(|_| Default::default())
                 .collect(),
             store_port_reset: Default::default(),
-            port_group: (0..n)
-                .map(|i| Constant::new((1u64 << (i / GROUP_PORTS)).into()))
-                .collect(),
+            port_group: (0..n).map(group_onehot).collect(),
         })
     }
 

@@ -45,6 +45,11 @@ pub const BANK_PORTS: usize = 32;
 /// a bank in the bank's write register a clock later (two short OR trees, not one across
 /// the chip).
 pub const GROUP_PORTS: usize = 8;
+
+/// Port `port`'s write group, one-hot (a bit of a `Bits<8>`: at most eight groups).
+pub fn group_onehot(port: usize) -> Constant<Bits<8>> {
+    Constant::new((1u64 << (port / GROUP_PORTS)).into())
+}
 /// Packets a port holds.
 pub const SLOTS: usize = 2;
 /// Stored words of a packet: tick and cell bytes.
@@ -212,9 +217,7 @@ impl PacketStore {
             port_number: (0..ports)
                 .map(|i| Constant::new((i as u64).into()))
                 .collect(),
-            port_group: (0..ports)
-                .map(|i| Constant::new((1u64 << (i / GROUP_PORTS)).into()))
-                .collect(),
+            port_group: (0..ports).map(group_onehot).collect(),
             group_bank: (0..groups)
                 .map(|g| Constant::new(g * GROUP_PORTS >= BANK_PORTS))
                 .collect(),
