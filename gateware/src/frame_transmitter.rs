@@ -126,7 +126,9 @@ pub struct FrameTransmitter {
     // the template in block RAM, read two clocks ahead: byte i + 2 at address i, and at
     // `TEMPLATE_IDLE` the first byte (the preamble's, also the second), read between frames
     template: BlockRam<8, 7>,
-    udp_constant_sum: Constant<Bits<32>>,
+    // the UDP checksum's constant words with the UDP length's constant part (the UDP and
+    // datagram headers), counted twice like the length
+    udp_term_constant: Constant<Bits<32>>,
     ip_constant_sum: Constant<Bits<32>>,
     crc: Crc32Byte,
     sending: DFF<Bit>,
@@ -138,14 +140,16 @@ pub struct FrameTransmitter {
     body_len_held: DFF<Bits<11>>,
     // the 15 header bytes (flags, sequence, base tick, entry count), most significant
     // first, and a zero byte, held while the frame goes out (cut in two: no word over 64
-    // bits to simulate); `field_position` steps through them, once to sum their words and
+    // bits to simulate); `field_byte` steps through them, once to sum their words and
     // once to send them
     fields_high: DFF<Bits<64>>,
     fields_low: DFF<Bits<64>>,
-    field_position: DFF<Bits<4>>,
+    // the position of the next clock's field byte, and the field byte, a register read
+    // from the fields at that position (no multiplexer between the position and its use)
+    next_field_position: DFF<Bits<4>>,
     field_word: Signal<Local, Bits<64>>,
     field_word_shifted: Signal<Local, Bits<64>>,
-    field_byte: Signal<Local, Bits<8>>,
+    field_byte: DFF<Bits<8>>,
     checksum: DFF<Bits<32>>,
     crc_register: DFF<Bits<32>>,
     next_sequence: DFF<Bits<32>>,
@@ -158,12 +162,13 @@ pub struct FrameTransmitter {
     crc_starts: DFF<Bit>,
     frame_ends: DFF<Bit>,
     // registered index ranges, like `crc_starts`: the checksum's term is a field byte
-    // (2..18), the checksum adds its term (1..=18), folds its carries (19..21), the field
-    // position steps (2..18 and 57..72)
+    // (2..18), the checksum adds its term (1..=18), folds its carries (19..21); the field
+    // position steps from the next clock's to the one after it (the field byte steps at
+    // 2..18 and 57..72), registered two clocks ahead
     term_from_fields: DFF<Bit>,
     checksum_adds: DFF<Bit>,
     checksum_folds: DFF<Bit>,
-    field_steps: DFF<Bit>,
+    next_field_steps: DFF<Bit>,
     // index >= 73 (the body and the FCS), registered a clock ahead
     past_header: DFF<Bit>,
     header_index: Signal<Local, Bits<7>>,
@@ -171,16 +176,30 @@ pub struct FrameTransmitter {
     udp_len: DFF<Bits<16>>,
     ip_checksum: DFF<Bits<16>>,
     checksum_term: DFF<Bits<32>>,
+    // the checksum's term at this index: the kind (index 0), the UDP length words with the
+    // constant words (index 1), registered a clock ahead like `term_from_fields`
+    term_is_kind: DFF<Bit>,
+    term_is_udp_len: DFF<Bit>,
+    // the UDP length term (twice the UDP length plus the constant words), from the held
+    // body length like `udp_len`
+    udp_term: DFF<Bits<32>>,
     stage_byte: DFF<Bits<8>>,
     stage_valid: DFF<Bit>,
     stage_crc: DFF<Bit>,
     stage_fcs: DFF<Bit>,
-    // where the byte at `index` comes from, one-hot, and the template byte, both looked
-    // up a clock ahead: bit 0 template, 1/2 IPv4 total length high/low, 3/4 IPv4
-    // checksum, 5/6 UDP length, 7/8 UDP checksum, 9 kind, 10 header fields, 11 body
+    // where the byte at `index` comes from, and the template byte, both looked up ahead:
+    // bit 0 template (all through the header: it is 0 at the other sources' bytes), 1/2
+    // IPv4 total length high/low, 3/4 IPv4 checksum, 5/6 UDP length, 7/8 UDP checksum,
+    // 9 kind, 10 header fields, 11 body
     byte_source: DFF<Bits<12>>,
+    // `byte_source` of the next clock, looked up a clock earlier still
+    source_ahead: DFF<Bits<12>>,
+    // the index is 72 or more: the next index's following byte is in the body
+    body_follows: Signal<Local, Bit>,
+    // sending, and the next index is this one + 1
+    frame_goes_on: Signal<Local, Bit>,
+    source_next: Signal<Local, Bits<12>>,
     udp_checksum_held: DFF<Bits<16>>,
-    source_ahead: Signal<Local, Bits<12>>,
     tx_byte: Signal<Local, Bits<8>>,
     ip_sum: Signal<Local, Bits<32>>,
     ip_fold: Signal<Local, Bits<32>>,
@@ -218,7 +237,9 @@ impl FrameTransmitter {
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
             template: BlockRam::with_contents(&template_table(&t)),
-            udp_constant_sum: Constant::new(udp_constant.into()),
+            udp_term_constant: Constant::new(
+                (udp_constant + 2 * (BODY_START - UDP_AT) as u64).into(),
+            ),
             ip_constant_sum: Constant::new(ip_constant.into()),
             crc: Default::default(),
             sending: Default::default(),
@@ -229,7 +250,7 @@ impl FrameTransmitter {
             body_len_held: Default::default(),
             fields_high: Default::default(),
             fields_low: Default::default(),
-            field_position: Default::default(),
+            next_field_position: Default::default(),
             field_word: Default::default(),
             field_word_shifted: Default::default(),
             field_byte: Default::default(),
@@ -244,7 +265,7 @@ impl FrameTransmitter {
             term_from_fields: Default::default(),
             checksum_adds: Default::default(),
             checksum_folds: Default::default(),
-            field_steps: Default::default(),
+            next_field_steps: Default::default(),
             past_header: Default::default(),
             header_index: Default::default(),
             frame_ends: Default::default(),
@@ -252,13 +273,19 @@ impl FrameTransmitter {
             udp_len: Default::default(),
             ip_checksum: Default::default(),
             checksum_term: Default::default(),
+            term_is_kind: Default::default(),
+            term_is_udp_len: Default::default(),
+            udp_term: Default::default(),
             stage_byte: Default::default(),
             stage_valid: Default::default(),
             stage_crc: Default::default(),
             stage_fcs: Default::default(),
             byte_source: Default::default(),
-            udp_checksum_held: Default::default(),
             source_ahead: Default::default(),
+            body_follows: Default::default(),
+            frame_goes_on: Default::default(),
+            source_next: Default::default(),
+            udp_checksum_held: Default::default(),
             tx_byte: Default::default(),
             ip_sum: Default::default(),
             ip_fold: Default::default(),
@@ -288,7 +315,8 @@ impl Logic for FrameTransmitter {
             body_len_held,
             fields_high,
             fields_low,
-            field_position,
+            next_field_position,
+            field_byte,
             checksum,
             crc_register,
             next_sequence,
@@ -300,7 +328,7 @@ impl Logic for FrameTransmitter {
             term_from_fields,
             checksum_adds,
             checksum_folds,
-            field_steps,
+            next_field_steps,
             past_header,
             frame_ends,
             total_len,
@@ -312,7 +340,11 @@ impl Logic for FrameTransmitter {
             stage_crc,
             stage_fcs,
             byte_source,
-            udp_checksum_held
+            source_ahead,
+            udp_checksum_held,
+            term_is_kind,
+            term_is_udp_len,
+            udp_term
         );
         // Frame geometry: registered at the start from the body length (lengths), one clock
         // later the IPv4 checksum (needed from byte 32 on).
@@ -332,69 +364,97 @@ impl Logic for FrameTransmitter {
         // the descriptor), then the 16 bytes of the
         // fields one per clock as the position steps, alternately the low and the high byte
         // of a word (flags is the low byte of its word).
-        // the field byte at the position: byte 0 is the top byte of `fields_high`
+        // the field byte of the next clock: byte 0 is the top byte of `fields_high` (the
+        // fields are held from index 0 on; the byte is read from index 2 on)
         self.field_word.next = self.fields_high.q.val();
-        if self.field_position.q.val().get_bit(3) {
+        if self.next_field_position.q.val().get_bit(3) {
             self.field_word.next = self.fields_low.q.val();
         }
         self.field_word_shifted.next = self.field_word.val()
-            << (bit_cast::<64, 3>(self.field_position.q.val().get_bits::<3>(0)) << 3);
-        self.field_byte.next = self.field_word_shifted.val().get_bits::<8>(56);
+            << (bit_cast::<64, 3>(self.next_field_position.q.val().get_bits::<3>(0)) << 3);
+        self.field_byte.d.next = self.field_word_shifted.val().get_bits::<8>(56);
+        // (the three selects are registers and exclusive: the terms are ORed)
         self.checksum_word.next = 0.into();
-        if self.index.q.val() == 0 {
+        if self.term_is_kind.q.val() {
             self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
-        } else if self.index.q.val() == 1 {
-            self.checksum_word.next =
-                (bit_cast::<32, 16>(self.udp_len.q.val()) << 1) + self.udp_constant_sum.val();
-        } else if self.term_from_fields.q.val() {
-            self.checksum_word.next = bit_cast::<32, 8>(self.field_byte.val());
+        }
+        if self.term_is_udp_len.q.val() {
+            self.checksum_word.next = self.checksum_word.val() | self.udp_term.q.val();
+        }
+        if self.term_from_fields.q.val() {
             if self.index.q.val().get_bit(0) {
-                self.checksum_word.next = self.checksum_word.val() << 8;
+                self.checksum_word.next =
+                    self.checksum_word.val() | (bit_cast::<32, 8>(self.field_byte.q.val()) << 8);
+            } else {
+                self.checksum_word.next =
+                    self.checksum_word.val() | bit_cast::<32, 8>(self.field_byte.q.val());
             }
         }
         self.checksum_term.d.next = self.checksum_word.val();
 
-        // The byte at `index`, from a multiplexer whose select is a register: its source is
-        // looked up a clock ahead, for the index that follows (`index + 1` while sending, 0
-        // for a start); the template byte comes from its table two clocks ahead (127 is
-        // TEMPLATE_IDLE, read between frames).
+        // The byte at `index`, from a multiplexer whose select is a register: the source of
+        // byte `k + 1` is looked up at index `k - 1`, two clocks ahead (for the next index:
+        // `index + 1` while the frame goes on, 0 otherwise, whose byte 1 is the template's;
+        // so the header positions below are spelled two lower than the bytes they name);
+        // the template byte comes from its table two clocks ahead (127 is TEMPLATE_IDLE,
+        // read between frames).
         self.template.clock.next = self.clock.val();
         self.template.write_enable.next = false;
         self.template.write_address.next = 0.into();
         self.template.write_data.next = 0.into();
-        self.template.read_address.next = 127.into();
-        self.source_ahead.next = 1.into();
         // (past the header only the body follows: the header's tests need the index's low
         // seven bits only)
         self.header_index.next = self.index.q.val().get_bits::<7>(0);
+        self.template.read_address.next = 127.into();
         if self.sending.q.val() {
             self.template.read_address.next = self.header_index.val();
-            if self.past_header.q.val() {
-                // the body (the FCS replaces what follows it at the output)
-                self.source_ahead.next = 2048.into();
-            } else if self.header_index.val() == 23 {
-                self.source_ahead.next = 2.into();
-            } else if self.header_index.val() == 24 {
-                self.source_ahead.next = 4.into();
-            } else if self.header_index.val() == 31 {
-                self.source_ahead.next = 8.into();
-            } else if self.header_index.val() == 32 {
-                self.source_ahead.next = 16.into();
-            } else if self.header_index.val() == 45 {
-                self.source_ahead.next = 32.into();
-            } else if self.header_index.val() == 46 {
-                self.source_ahead.next = 64.into();
-            } else if self.header_index.val() == 47 {
-                self.source_ahead.next = 128.into();
-            } else if self.header_index.val() == 48 {
-                self.source_ahead.next = 256.into();
-            } else if self.header_index.val() == 52 {
-                self.source_ahead.next = 512.into();
-            } else if (self.header_index.val() >= 56) & (self.header_index.val() < 71) {
-                self.source_ahead.next = 1024.into();
+        }
+        // index >= 72, from its bits: 72 is 0b100_1000
+        self.body_follows.next = (self.index.q.val().get_bits::<4>(7) != 0)
+            | (self.header_index.val().get_bit(6)
+                & (self.header_index.val().get_bits::<3>(3) != 0));
+        // The template holds 0 at every variable byte, so it is ORed in all through the
+        // header (bit 0 is "not the body") and the header's sources are independent tests.
+        self.frame_goes_on.next = self.sending.q.val() & !self.frame_ends.q.val();
+        self.source_next.next = 1.into();
+        if self.frame_goes_on.val() & self.body_follows.val() {
+            // the body (the FCS replaces what follows it at the output)
+            self.source_next.next = 2048.into();
+        }
+        if self.frame_goes_on.val() & !self.body_follows.val() {
+            if self.header_index.val() == 22 {
+                self.source_next.next = self.source_next.val() | 2;
+            }
+            if self.header_index.val() == 23 {
+                self.source_next.next = self.source_next.val() | 4;
+            }
+            if self.header_index.val() == 30 {
+                self.source_next.next = self.source_next.val() | 8;
+            }
+            if self.header_index.val() == 31 {
+                self.source_next.next = self.source_next.val() | 16;
+            }
+            if self.header_index.val() == 44 {
+                self.source_next.next = self.source_next.val() | 32;
+            }
+            if self.header_index.val() == 45 {
+                self.source_next.next = self.source_next.val() | 64;
+            }
+            if self.header_index.val() == 46 {
+                self.source_next.next = self.source_next.val() | 128;
+            }
+            if self.header_index.val() == 47 {
+                self.source_next.next = self.source_next.val() | 256;
+            }
+            if self.header_index.val() == 51 {
+                self.source_next.next = self.source_next.val() | 512;
+            }
+            if (self.header_index.val() >= 55) & (self.header_index.val() < 70) {
+                self.source_next.next = self.source_next.val() | 1024;
             }
         }
-        self.byte_source.d.next = self.source_ahead.val();
+        self.source_ahead.d.next = self.source_next.val();
+        self.byte_source.d.next = self.source_ahead.q.val();
         // (final long before byte 48: the sum is done by byte 21)
         self.udp_checksum_held.d.next = self.udp_checksum.val();
         self.tx_byte.next = 0.into();
@@ -431,7 +491,7 @@ impl Logic for FrameTransmitter {
             self.tx_byte.next = self.tx_byte.val() | self.kind_held.q.val();
         }
         if self.byte_source.q.val().get_bit(10) {
-            self.tx_byte.next = self.tx_byte.val() | self.field_byte.val();
+            self.tx_byte.next = self.tx_byte.val() | self.field_byte.q.val();
         }
         if self.byte_source.q.val().get_bit(11) {
             self.tx_byte.next = self.tx_byte.val() | self.payload_data.val();
@@ -465,10 +525,25 @@ impl Logic for FrameTransmitter {
         self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 18);
         self.checksum_folds.d.next =
             self.sending.q.val() & (self.index.q.val() >= 18) & (self.index.q.val() < 20);
-        self.past_header.d.next = self.sending.q.val() & (self.index.q.val() >= 72);
-        self.field_steps.d.next = self.sending.q.val()
-            & (((self.index.q.val() >= 1) & (self.index.q.val() < 17))
-                | ((self.index.q.val() >= 56) & (self.index.q.val() < 71)));
+        self.past_header.d.next = self.sending.q.val() & self.body_follows.val();
+        // the next index is 0 unless the frame goes on, 1 after 0
+        self.term_is_kind.d.next = !self.sending.q.val() | self.frame_ends.q.val();
+        self.term_is_udp_len.d.next =
+            self.sending.q.val() & !self.frame_ends.q.val() & self.term_is_kind.q.val();
+        // (the index after the next is this one + 2 while the frame goes on)
+        self.next_field_steps.d.next = self.sending.q.val()
+            & !self.frame_ends.q.val()
+            & ((self.index.q.val() < 16)
+                | ((self.index.q.val() >= 55) & (self.index.q.val() < 70)));
+        // the position goes once round for the checksum (back at 0 after 16 bytes) and
+        // then through the first 15 bytes to send them; 0 between frames
+        self.next_field_position.d.next = 0.into();
+        if self.sending.q.val() & !self.frame_ends.q.val() {
+            self.next_field_position.d.next = self.next_field_position.q.val();
+            if self.next_field_steps.q.val() {
+                self.next_field_position.d.next = self.next_field_position.q.val() + 1;
+            }
+        }
         self.frame_ends.d.next =
             self.sending.q.val() & (self.index.q.val() == self.end_minus_one.q.val());
         if self.sending.q.val() {
@@ -480,17 +555,17 @@ impl Logic for FrameTransmitter {
                 self.checksum.d.next =
                     (self.checksum.q.val() & 0xFFFF) + (self.checksum.q.val() >> 16);
             }
-            // the position goes once round for the checksum (back at 0 after 16 bytes)
-            // and then through the first 15 bytes to send them
-            if self.field_steps.q.val() {
-                self.field_position.d.next = self.field_position.q.val() + 1;
-            }
             if self.crc_starts.q.val() {
                 // index 7: the SFD is in the output stage now: the CRC starts with the next byte
                 self.crc_register.d.next = 0xFFFF_FFFF_u64.into();
             }
+            // the frame's last clock: the index is back at 0 for the next frame and the
+            // sequence steps (the next descriptor is taken with it), so `start` only sets
+            // `sending`
             if self.frame_ends.q.val() {
                 self.sending.d.next = false;
+                self.index.d.next = 0.into();
+                self.next_sequence.d.next = self.next_sequence.q.val() + 1;
                 self.gap.d.next = 11.into();
                 self.gap_done.d.next = false;
             }
@@ -499,8 +574,6 @@ impl Logic for FrameTransmitter {
             self.gap_done.d.next = self.gap.q.val() == 1;
         } else if self.start.val() {
             self.sending.d.next = true;
-            self.index.d.next = 0.into();
-            self.next_sequence.d.next = self.next_sequence.q.val() + 1;
         }
         // The frame geometry follows the held body length a clock later: it is valid from
         // index 1 on (nothing reads it at index 0).
@@ -508,10 +581,11 @@ impl Logic for FrameTransmitter {
         self.end_minus_one.d.next = self.body_len_held.q.val() + 76;
         self.total_len.d.next = bit_cast::<16, 11>(self.body_len_held.q.val()) + 52;
         self.udp_len.d.next = bit_cast::<16, 11>(self.body_len_held.q.val()) + 32;
+        self.udp_term.d.next =
+            (bit_cast::<32, 11>(self.body_len_held.q.val()) << 1) + self.udp_term_constant.val();
         // The descriptor is taken in every clock without a frame going out, so `start` only
         // has to set `sending` (the descriptor must be valid in the clock of `start`).
         if !self.sending.q.val() {
-            self.field_position.d.next = 0.into();
             self.kind_held.d.next = self.kind.val();
             self.body_len_held.d.next = self.body_len.val();
             self.checksum.d.next = self.body_sum.val();
@@ -530,12 +604,17 @@ impl Logic for FrameTransmitter {
             self.term_from_fields.d.next = false;
             self.checksum_adds.d.next = false;
             self.checksum_folds.d.next = false;
-            self.field_steps.d.next = false;
+            self.next_field_steps.d.next = false;
+            self.next_field_position.d.next = 0.into();
             self.past_header.d.next = false;
             self.gap.d.next = 0.into();
             self.gap_done.d.next = true;
             self.tx_en.d.next = false;
             self.next_sequence.d.next = 0.into();
+            self.index.d.next = 0.into();
+            self.term_is_kind.d.next = true;
+            self.term_is_udp_len.d.next = false;
+            self.source_ahead.d.next = 1.into();
         }
         self.idle.next = !self.sending.q.val() & self.gap_done.q.val();
         self.gmii_txd.next = self.txd.q.val();
@@ -565,6 +644,15 @@ mod tests {
         assert_eq!(INTER_FRAME_GAP, 12);
         assert_eq!(TEMPLATE_IDLE, 127, "the kernel's literal");
         let t = template(&LinkConfig::DEFAULT, 7, 8);
+        // the template byte is ORed in all through the header: 0 at every variable byte
+        let variable = [IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_AT + 4, UDP_AT + 6]
+            .iter()
+            .flat_map(|&at| [at, at + 1])
+            .chain([BOX_HEADER_AT + 3])
+            .chain(FIELDS_AT..FIELDS_AT + 15);
+        for at in variable {
+            assert_eq!(t[at], 0, "template byte {at}");
+        }
         assert_eq!(
             &t[FIELDS_AT + 15..BODY_START],
             &[0, 0],
