@@ -70,8 +70,12 @@ pub struct StatusReporter {
     ports_per_page: Constant<Bits<7>>,
     boot_seed: Constant<Bits<32>>,
     timer: DFF<Bits<32>>,
+    // timer == 0, kept in a register
+    timer_zero: DFF<Bit>,
     due: DFF<Bit>,
     state: DFF<ReportState>,
+    // state == Request, kept in a register (`request` selects the framer's descriptor)
+    requesting: DFF<Bit>,
     first_port: DFF<Bits<7>>,
     page_ports: DFF<Bits<7>>,
     word: DFF<Bits<9>>,
@@ -143,8 +147,10 @@ impl StatusReporter {
             ports_per_page: Constant::new((PORTS_PER_STATUS as u64).into()),
             boot_seed: Constant::new(u64::from(boot_seed).into()),
             timer: Default::default(),
+            timer_zero: Default::default(),
             due: Default::default(),
             state: Default::default(),
+            requesting: Default::default(),
             first_port: Default::default(),
             page_ports: Default::default(),
             word: Default::default(),
@@ -175,8 +181,10 @@ impl Logic for StatusReporter {
             self,
             clock,
             timer,
+            timer_zero,
             due,
             state,
+            requesting,
             first_port,
             page_ports,
             word,
@@ -196,26 +204,27 @@ impl Logic for StatusReporter {
 
         // A report is due every period, counted from report start to report start; one
         // that comes due while the previous is still going starts right after it.
-        if self.timer.q.val() == 0 {
+        if self.timer_zero.q.val() {
             self.timer.d.next = self.period.val() - 1;
+            self.timer_zero.d.next = self.period.val() == 1;
             self.due.d.next = true;
         } else {
             self.timer.d.next = self.timer.q.val() - 1;
+            self.timer_zero.d.next = self.timer.q.val() == 1;
         }
         self.remaining.next = self.ports.val() - self.first_port.q.val();
         self.write.next = false;
         self.counter_address.next =
             (bit_cast::<9, 7>(self.first_port.q.val()) << 3) + (self.word.q.val() - 4);
         // the counter memory answers two clocks after the address (its output register)
-        self.header_word.d.next = 0.into();
-        if self.word.q.val() == 0 {
+        // (by the word's low two bits alone: from word 4 on the counter is taken instead)
+        self.header_word.d.next = bit_cast::<32, 7>(self.first_port.q.val()) << 24;
+        if self.word.q.val().get_bits::<2>(0) == 0 {
             self.header_word.d.next = self.boot_seed.val() + self.resets.q.val();
-        } else if self.word.q.val() == 1 {
+        } else if self.word.q.val().get_bits::<2>(0) == 1 {
             self.header_word.d.next = self.datagrams_sent.val();
-        } else if self.word.q.val() == 2 {
+        } else if self.word.q.val().get_bits::<2>(0) == 2 {
             self.header_word.d.next = self.records_sent.val();
-        } else if self.word.q.val() == 3 {
-            self.header_word.d.next = bit_cast::<32, 7>(self.first_port.q.val()) << 24;
         }
         self.word_from_memory.d.next = self.word.q.val() >= 4;
         self.word_value.next = self.header_word.q.val();
@@ -257,12 +266,14 @@ impl Logic for StatusReporter {
                     self.word.d.next = self.word.q.val() + 1;
                     if self.word.q.val() == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + 3 {
                         self.state.d.next = ReportState::Request;
+                        self.requesting.d.next = true;
                     }
                 }
             }
             ReportState::Request => {
                 if self.taken.val() {
                     self.state.d.next = ReportState::Sending;
+                    self.requesting.d.next = false;
                 }
             }
             ReportState::Sending => {
@@ -290,7 +301,7 @@ impl Logic for StatusReporter {
             }
         }
 
-        self.request.next = self.state.q.val() == ReportState::Request;
+        self.request.next = self.requesting.q.val();
         self.entry_count.next = bit_cast::<16, 7>(self.page_ports.q.val());
         self.body_len.next = self.offset.q.val();
         self.body_sum.next = self.sum.q.val();
@@ -299,7 +310,9 @@ impl Logic for StatusReporter {
         self.reset_seen.d.next = self.reset.val();
         if self.reset.val() {
             self.state.d.next = ReportState::Wait;
+            self.requesting.d.next = false;
             self.timer.d.next = 0.into();
+            self.timer_zero.d.next = true;
             self.due.d.next = false;
             if !self.reset_seen.q.val() {
                 self.resets.d.next = self.resets.q.val() + 1;
