@@ -121,7 +121,9 @@ pub struct UdpFramer {
     memory_write_data: DFF<Bits<8>>,
     write_data: Signal<Local, Bits<8>>,
     fill_sum_next: Signal<Local, Bits<32>>,
-    close_due: Signal<Local, Bit>,
+    // a datagram is due to close (full, or its time is up) at a record boundary: a
+    // register, computed from the next values of the registers it tests
+    close_due: DFF<Bit>,
     can_close: Signal<Local, Bit>,
     accept: Signal<Local, Bit>,
     start_records: Signal<Local, Bit>,
@@ -215,6 +217,7 @@ impl Logic for UdpFramer {
             self,
             clock,
             fill_buffer,
+            close_due,
             fill_count,
             fill_offset,
             fill_sum,
@@ -265,18 +268,15 @@ impl Logic for UdpFramer {
         }
         self.deadline_delta.next = self.tick.val().get_bits::<32>(0) - self.fill_deadline.q.val();
         self.deadline_passed.d.next = !self.deadline_delta.val().get_bit(31);
-        // Close the filling datagram at a record boundary when full or due.
-        // (the tests of beat, offset_left and fill_count come from registers)
-        // (each test is set and cleared by the events that change its counter, below)
-        self.close_due.next = self.beat_zero.q.val()
-            & self.offset_idle.q.val()
-            & (self.fill_full.q.val() | (self.fill_nonzero.q.val() & self.deadline_passed.q.val()));
+        // Close the filling datagram at a record boundary when full or due (`close_due`,
+        // set at the end from the tests of beat, offset_left, fill_count and the deadline,
+        // each set and cleared by the events that change its counter, below).
         self.can_close.next = !self.pending.q.val() & !self.sending_records.q.val();
         // No beat moves while a datagram is due to close: in the clock it closes (the beat
         // would land in the old buffer) and while it waits for the other buffer (a full one
         // and one whose time is up alike). Whether the other buffer is free stays off the
         // input's ready.
-        self.accept.next = self.offset_idle.q.val() & !self.close_due.val();
+        self.accept.next = self.offset_idle.q.val() & !self.close_due.q.val();
         self.records.ready.next = self.accept.val();
 
         // Write one byte per clock: offset bytes while they are pending, else stream beats.
@@ -301,7 +301,10 @@ impl Logic for UdpFramer {
                 self.fill_full.d.next = self.fill_count.q.val() == self.last_fill.val();
                 self.fill_nonzero.d.next = true;
             }
-            if (self.beat.q.val() >= 2) & (self.beat.q.val() <= 5) {
+            // beats 2..=5 (the tick bytes), from the beat's bits: 0b000_1x or 0b001_0x
+            if (self.beat.q.val().get_bits::<2>(3) == 0)
+                & (self.beat.q.val().get_bit(2) != self.beat.q.val().get_bit(1))
+            {
                 self.tick_low.d.next = self.record_tick.val();
             } else {
                 self.write.next = true;
@@ -356,7 +359,7 @@ impl Logic for UdpFramer {
         self.fill_sum.d.next = self.fill_sum_next.val();
 
         // Hand the full buffer over, start filling the other.
-        if self.close_due.val() & self.can_close.val() {
+        if self.close_due.q.val() & self.can_close.val() {
             self.pending.d.next = true;
             self.pending_count.d.next = self.fill_count.q.val();
             self.pending_len.d.next = self.fill_offset.q.val();
@@ -443,6 +446,10 @@ impl Logic for UdpFramer {
             self.datagram_count.d.next = 0.into();
             self.record_count.d.next = 0.into();
         }
+        // (last: from the next values of the registers it tests, reset included)
+        self.close_due.d.next = self.beat_zero.d.val()
+            & self.offset_idle.d.val()
+            & (self.fill_full.d.val() | (self.fill_nonzero.d.val() & self.deadline_passed.d.val()));
         self.status_taken.next = self.status_taken_pulse.q.val();
         self.status_sending.next = self.sending_status.q.val();
         self.datagrams_sent.next = self.datagram_count.q.val();
