@@ -89,9 +89,17 @@ pub struct CellDeframer {
     pending_data: DFF<Bits<8>>,
     pending_last: DFF<Bit>,
     pending_error: DFF<Bit>,
-    // the counter events of this clock, one bit each (`events`), from a register
+    // the counter events of this clock, one bit each (`events`), from a register, each
+    // set by its own test (no chain through the branches of the packet logic)
     event_bits: DFF<Bits<8>>,
     events_now: Signal<Local, Bits<8>>,
+    // a packet's last byte arrives (no framing error), a framing error inside a packet,
+    // a byte outside a packet that is not a header, a packet truncated at the idle gap
+    packet_end: Signal<Local, Bit>,
+    packet_framing_error: Signal<Local, Bit>,
+    garbage: Signal<Local, Bit>,
+    truncated: Signal<Local, Bit>,
+    end_byte_good: Signal<Local, Bit>,
     tick_beats_next: Signal<Local, Bits<3>>,
     pending_next: Signal<Local, Bit>,
 }
@@ -142,6 +150,11 @@ impl CellDeframer {
             pending_error: Default::default(),
             event_bits: Default::default(),
             events_now: Default::default(),
+            packet_end: Default::default(),
+            packet_framing_error: Default::default(),
+            garbage: Default::default(),
+            truncated: Default::default(),
+            end_byte_good: Default::default(),
             tick_beats_next: Default::default(),
             pending_next: Default::default(),
         }
@@ -177,7 +190,6 @@ impl Logic for CellDeframer {
         self.input_framing_error.d.next = self.byte_framing_error.val();
         self.input_gap.d.next = self.byte_bit_count.val() == self.gap_end.val();
         self.input_start.d.next = self.byte_start.val();
-        self.events_now.next = 0.into();
         // the header test on the receiver's outputs, registered with the byte
         self.input_is_header.d.next = !self.byte_framing_error.val()
             & ((self.byte_data.val() == self.data_header.val())
@@ -211,9 +223,6 @@ impl Logic for CellDeframer {
         }
 
         if self.input_strobe.q.val() {
-            if self.input_framing_error.q.val() {
-                self.events_now.next = self.events_now.val() | 64;
-            }
             if !self.in_packet.q.val() {
                 if self.input_is_header.q.val() {
                     self.in_packet.d.next = true;
@@ -224,10 +233,8 @@ impl Logic for CellDeframer {
                     self.pending_last.d.next = false;
                     self.pending_error.d.next = false;
                 } else {
-                    self.events_now.next = self.events_now.val() | 32;
                     if self.aligned.q.val() {
                         self.aligned.d.next = false;
-                        self.events_now.next = self.events_now.val() | 128;
                     }
                 }
             } else {
@@ -241,19 +248,14 @@ impl Logic for CellDeframer {
                     self.aligned.d.next = false;
                     self.pending_last.d.next = true;
                     self.pending_error.d.next = true;
-                    self.events_now.next = self.events_now.val() | 8;
-                    self.events_now.next = self.events_now.val() | 128;
                 } else if self.index.q.val() == self.last_index.val() {
                     self.in_packet.d.next = false;
                     self.pending_last.d.next = true;
                     if self.input_data.q.val() == self.end_of_packet.val() {
                         self.aligned.d.next = true;
-                        self.events_now.next = self.events_now.val() | 1;
                     } else {
                         self.aligned.d.next = false;
                         self.pending_error.d.next = true;
-                        self.events_now.next = self.events_now.val() | 4;
-                        self.events_now.next = self.events_now.val() | 128;
                     }
                 }
             }
@@ -265,12 +267,9 @@ impl Logic for CellDeframer {
             self.pending_data.d.next = 0.into();
             self.pending_last.d.next = true;
             self.pending_error.d.next = true;
-            self.events_now.next = self.events_now.val() | 16;
-            self.events_now.next = self.events_now.val() | 128;
         }
 
         if self.reset.val() {
-            self.events_now.next = 0.into();
             self.input_strobe.d.next = false;
             self.input_gap.d.next = false;
             self.input_start.d.next = false;
@@ -282,7 +281,39 @@ impl Logic for CellDeframer {
         self.tick_beats.d.next = self.tick_beats_next.val();
         self.pending.d.next = self.pending_next.val();
         self.out_valid.d.next = (self.tick_beats_next.val() != 0) | self.pending_next.val();
+        // the events (bit i = PortCounter i), as the branches above count them
+        self.packet_end.next = self.input_strobe.q.val()
+            & self.in_packet.q.val()
+            & !self.input_framing_error.q.val()
+            & (self.index.q.val() == self.last_index.val());
+        self.end_byte_good.next = self.input_data.q.val() == self.end_of_packet.val();
+        self.packet_framing_error.next =
+            self.input_strobe.q.val() & self.in_packet.q.val() & self.input_framing_error.q.val();
+        self.garbage.next =
+            self.input_strobe.q.val() & !self.in_packet.q.val() & !self.input_is_header.q.val();
+        self.truncated.next =
+            !self.input_strobe.q.val() & self.in_packet.q.val() & self.input_gap.q.val();
+        self.events_now.next =
+            bit_cast::<8, 1>((self.packet_end.val() & self.end_byte_good.val()).into())
+                | (bit_cast::<8, 1>((self.packet_end.val() & !self.end_byte_good.val()).into())
+                    << 2)
+                | (bit_cast::<8, 1>(self.packet_framing_error.val().into()) << 3)
+                | (bit_cast::<8, 1>(self.truncated.val().into()) << 4)
+                | (bit_cast::<8, 1>(self.garbage.val().into()) << 5)
+                | (bit_cast::<8, 1>(
+                    (self.input_strobe.q.val() & self.input_framing_error.q.val()).into(),
+                ) << 6)
+                | (bit_cast::<8, 1>(
+                    ((self.garbage.val() & self.aligned.q.val())
+                        | self.packet_framing_error.val()
+                        | (self.packet_end.val() & !self.end_byte_good.val())
+                        | self.truncated.val())
+                    .into(),
+                ) << 7);
         self.event_bits.d.next = self.events_now.val();
+        if self.reset.val() {
+            self.event_bits.d.next = 0.into();
+        }
         self.events.next = self.event_bits.q.val();
     }
 }
