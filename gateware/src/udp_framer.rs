@@ -79,18 +79,23 @@ pub struct UdpFramer {
     transmitter: FrameTransmitter,
     memory: BlockRam<8, 12>,
     last_fill: Constant<Bits<6>>,
-    flush_timeout_less_one: Constant<Bits<32>>,
+    flush_timeout_less_two: Constant<Bits<32>>,
+    // a timeout of 1 or 2 ticks has passed a clock after the deadline is set
+    short_timeout: Constant<Bit>,
     fill_buffer: DFF<Bit>,
     fill_count: DFF<Bits<6>>,
     fill_offset: DFF<Bits<11>>,
     fill_sum: DFF<Bits<32>>,
     fill_base_tick: DFF<Bits<64>>,
-    fill_deadline: DFF<Bits<32>>,
+    // the flush deadline less one (low 32 bits of the tick)
+    fill_deadline_less_one: DFF<Bits<32>>,
     // the first record's age (now - its tick, low 32 bits), for the base tick and the
     // deadline, which are set a clock later (off the accept path)
     first_age: DFF<Bits<32>>,
     first_seen: DFF<Bit>,
-    deadline_passed: DFF<Bit>,
+    // the next clock's tick is at or past the deadline: the deadline test a clock ahead
+    // (the tick counts one per clock), so `close_due` takes no carry chain
+    deadline_passed_next: DFF<Bit>,
     // beat == 0, offset_left == 0, fill_count == max and != 0, kept in registers
     beat_zero: DFF<Bit>,
     // beat == 5 (the record's last tick byte), set and cleared as the beat moves
@@ -161,16 +166,19 @@ impl UdpFramer {
             transmitter: FrameTransmitter::new(&config.link, config.box_id, config.port_count),
             memory: Default::default(),
             last_fill: Constant::new((MAX_RECORDS as u64 - 1).into()),
-            flush_timeout_less_one: Constant::new((config.flush_timeout_ticks - 1).into()),
+            flush_timeout_less_two: Constant::new(
+                (config.flush_timeout_ticks.wrapping_sub(2) & 0xFFFF_FFFF).into(),
+            ),
+            short_timeout: Constant::new(config.flush_timeout_ticks <= 2),
             fill_buffer: Default::default(),
             fill_count: Default::default(),
             fill_offset: Default::default(),
             fill_sum: Default::default(),
             fill_base_tick: Default::default(),
-            fill_deadline: Default::default(),
+            fill_deadline_less_one: Default::default(),
             first_age: Default::default(),
             first_seen: Default::default(),
-            deadline_passed: Default::default(),
+            deadline_passed_next: Default::default(),
             beat_zero: Default::default(),
             beat_five: Default::default(),
             offset_idle: Default::default(),
@@ -222,10 +230,10 @@ impl Logic for UdpFramer {
             fill_offset,
             fill_sum,
             fill_base_tick,
-            fill_deadline,
+            fill_deadline_less_one,
             first_age,
             first_seen,
-            deadline_passed,
+            deadline_passed_next,
             beat_zero,
             beat_five,
             offset_idle,
@@ -255,19 +263,23 @@ impl Logic for UdpFramer {
         self.memory.clock.next = self.clock.val();
 
         // The flush deadline passed: a registered, wrap-safe 32-bit test (the timeout is far
-        // below 2^31 ticks), kept off the accept path's timing.
+        // below 2^31 ticks), taken a clock ahead: the next tick (now + 1) against the
+        // deadline is now against the deadline less one.
         // (a bit of an expression is not Verilog: the difference gets its own signal)
         // The first record's base tick and deadline, a clock after its tick was complete:
-        // base = (now - 1) - age = now + !age (sign-extended), deadline = its tick + timeout.
+        // base = (now - 1) - age = now + !age (sign-extended), deadline = now + timeout - 1.
         self.first_seen.d.next = false;
+        self.deadline_delta.next =
+            self.tick.val().get_bits::<32>(0) - self.fill_deadline_less_one.q.val();
+        self.deadline_passed_next.d.next = !self.deadline_delta.val().get_bit(31);
         if self.first_seen.q.val() {
             self.fill_base_tick.d.next = self.tick.val()
                 + (bit_cast::<64, 32>(!self.first_age.q.val()) | 0xFFFF_FFFF_0000_0000_u64);
-            self.fill_deadline.d.next =
-                self.tick.val().get_bits::<32>(0) + self.flush_timeout_less_one.val();
+            self.fill_deadline_less_one.d.next =
+                self.tick.val().get_bits::<32>(0) + self.flush_timeout_less_two.val();
+            // (the next tick is now + 1: the deadline has passed if timeout - 1 <= 1)
+            self.deadline_passed_next.d.next = self.short_timeout.val();
         }
-        self.deadline_delta.next = self.tick.val().get_bits::<32>(0) - self.fill_deadline.q.val();
-        self.deadline_passed.d.next = !self.deadline_delta.val().get_bit(31);
         // Close the filling datagram at a record boundary when full or due (`close_due`,
         // set at the end from the tests of beat, offset_left, fill_count and the deadline,
         // each set and cleared by the events that change its counter, below).
@@ -449,7 +461,8 @@ impl Logic for UdpFramer {
         // (last: from the next values of the registers it tests, reset included)
         self.close_due.d.next = self.beat_zero.d.val()
             & self.offset_idle.d.val()
-            & (self.fill_full.d.val() | (self.fill_nonzero.d.val() & self.deadline_passed.d.val()));
+            & (self.fill_full.d.val()
+                | (self.fill_nonzero.d.val() & self.deadline_passed_next.q.val()));
         self.status_taken.next = self.status_taken_pulse.q.val();
         self.status_sending.next = self.sending_status.q.val();
         self.datagrams_sent.next = self.datagram_count.q.val();
