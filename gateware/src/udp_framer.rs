@@ -78,7 +78,7 @@ pub struct UdpFramer {
     pub gmii_tx_er: Signal<Out, Bit>,
     transmitter: FrameTransmitter,
     memory: BlockRam<8, 12>,
-    last_fill: Constant<Bits<6>>,
+    last_fill_less_one: Constant<Bits<6>>,
     flush_timeout_less_two: Constant<Bits<32>>,
     // a timeout of 1 or 2 ticks has passed a clock after the deadline is set
     short_timeout: Constant<Bit>,
@@ -100,6 +100,9 @@ pub struct UdpFramer {
     beat_zero: DFF<Bit>,
     // beat == 5 (the record's last tick byte), set and cleared as the beat moves
     beat_five: DFF<Bit>,
+    // beat == 25 (the record's last beat), and fill_count == the last record's index
+    beat_last: DFF<Bit>,
+    fill_at_last: DFF<Bit>,
     offset_idle: DFF<Bit>,
     fill_full: DFF<Bit>,
     fill_nonzero: DFF<Bit>,
@@ -165,7 +168,7 @@ impl UdpFramer {
             gmii_tx_er: Default::default(),
             transmitter: FrameTransmitter::new(&config.link, config.box_id, config.port_count),
             memory: Default::default(),
-            last_fill: Constant::new((MAX_RECORDS as u64 - 1).into()),
+            last_fill_less_one: Constant::new((MAX_RECORDS as u64 - 2).into()),
             flush_timeout_less_two: Constant::new(
                 (config.flush_timeout_ticks.wrapping_sub(2) & 0xFFFF_FFFF).into(),
             ),
@@ -181,6 +184,8 @@ impl UdpFramer {
             deadline_passed_next: Default::default(),
             beat_zero: Default::default(),
             beat_five: Default::default(),
+            beat_last: Default::default(),
+            fill_at_last: Default::default(),
             offset_idle: Default::default(),
             fill_full: Default::default(),
             fill_nonzero: Default::default(),
@@ -236,6 +241,8 @@ impl Logic for UdpFramer {
             deadline_passed_next,
             beat_zero,
             beat_five,
+            beat_last,
+            fill_at_last,
             offset_idle,
             fill_full,
             fill_nonzero,
@@ -306,11 +313,13 @@ impl Logic for UdpFramer {
             self.beat.d.next = self.beat.q.val() + 1;
             self.beat_zero.d.next = false;
             self.beat_five.d.next = self.beat.q.val() == 4;
+            self.beat_last.d.next = self.beat.q.val() == 24;
             if self.beat.q.val() == 25 {
                 self.beat.d.next = 0.into();
                 self.beat_zero.d.next = true;
                 self.fill_count.d.next = self.fill_count.q.val() + 1;
-                self.fill_full.d.next = self.fill_count.q.val() == self.last_fill.val();
+                self.fill_full.d.next = self.fill_at_last.q.val();
+                self.fill_at_last.d.next = self.fill_count.q.val() == self.last_fill_less_one.val();
                 self.fill_nonzero.d.next = true;
             }
             // beats 2..=5 (the tick bytes), from the beat's bits: 0b000_1x or 0b001_0x
@@ -384,6 +393,7 @@ impl Logic for UdpFramer {
             self.fill_buffer.d.next = !self.fill_buffer.q.val();
             self.fill_count.d.next = 0.into();
             self.fill_full.d.next = false;
+            self.fill_at_last.d.next = false;
             self.fill_nonzero.d.next = false;
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
@@ -445,11 +455,13 @@ impl Logic for UdpFramer {
             self.beat_zero.d.next = true;
             self.offset_idle.d.next = true;
             self.fill_full.d.next = false;
+            self.fill_at_last.d.next = false;
             self.fill_nonzero.d.next = false;
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
             self.beat.d.next = 0.into();
             self.beat_five.d.next = false;
+            self.beat_last.d.next = false;
             self.offset_left.d.next = 0.into();
             self.pending.d.next = false;
             self.sending_records.d.next = false;
@@ -458,11 +470,26 @@ impl Logic for UdpFramer {
             self.datagram_count.d.next = 0.into();
             self.record_count.d.next = 0.into();
         }
-        // (last: from the next values of the registers it tests, reset included)
-        self.close_due.d.next = self.beat_zero.d.val()
-            & self.offset_idle.d.val()
-            & (self.fill_full.d.val()
-                | (self.fill_nonzero.d.val() & self.deadline_passed_next.q.val()));
+        // The next value of `close_due`, from registers: a datagram due to close stays due
+        // until it closes (nothing moves meanwhile); otherwise it is due at the next record
+        // boundary: at the end of this clock's beat if it is a record's last (full, or its
+        // time up), or now already (at a boundary, full or time up). (Between a record's
+        // beats 6 and 10, `offset_idle` low, no boundary is near.)
+        if self.close_due.q.val() {
+            self.close_due.d.next = !self.can_close.val();
+        } else if self.records.valid.val() {
+            self.close_due.d.next = self.offset_idle.q.val()
+                & self.beat_last.q.val()
+                & (self.fill_at_last.q.val() | self.deadline_passed_next.q.val());
+        } else {
+            self.close_due.d.next = self.offset_idle.q.val()
+                & self.beat_zero.q.val()
+                & (self.fill_full.q.val()
+                    | (self.fill_nonzero.q.val() & self.deadline_passed_next.q.val()));
+        }
+        if self.reset.val() {
+            self.close_due.d.next = false;
+        }
         self.status_taken.next = self.status_taken_pulse.q.val();
         self.status_sending.next = self.sending_status.q.val();
         self.datagrams_sent.next = self.datagram_count.q.val();
