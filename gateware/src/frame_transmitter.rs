@@ -162,12 +162,15 @@ pub struct FrameTransmitter {
     crc_starts: DFF<Bit>,
     frame_ends: DFF<Bit>,
     // registered index ranges, like `crc_starts`: the checksum's term is a field byte
-    // (2..18), the checksum adds its term (1..=18), folds its carries (19..21); the field
+    // (2..18), the checksum adds its term (1..=18); the field
     // position steps from the next clock's to the one after it (the field byte steps at
     // 2..18 and 57..72), registered two clocks ahead
     term_from_fields: DFF<Bit>,
     checksum_adds: DFF<Bit>,
-    checksum_folds: DFF<Bit>,
+    // the checksum's carries folded in, twice, a clock each (the sum is complete at byte
+    // 19, its folded value is sent at byte 48)
+    checksum_fold: DFF<Bits<17>>,
+    checksum_folded: DFF<Bits<16>>,
     next_field_steps: DFF<Bit>,
     // index >= 73 (the body and the FCS), registered a clock ahead
     past_header: DFF<Bit>,
@@ -264,7 +267,8 @@ impl FrameTransmitter {
             crc_starts: Default::default(),
             term_from_fields: Default::default(),
             checksum_adds: Default::default(),
-            checksum_folds: Default::default(),
+            checksum_fold: Default::default(),
+            checksum_folded: Default::default(),
             next_field_steps: Default::default(),
             past_header: Default::default(),
             header_index: Default::default(),
@@ -327,7 +331,8 @@ impl Logic for FrameTransmitter {
             crc_starts,
             term_from_fields,
             checksum_adds,
-            checksum_folds,
+            checksum_fold,
+            checksum_folded,
             next_field_steps,
             past_header,
             frame_ends,
@@ -352,8 +357,13 @@ impl Logic for FrameTransmitter {
         self.ip_fold.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
         self.ip_checksum.d.next =
             !bit_cast::<16, 32>((self.ip_fold.val() & 0xFFFF) + (self.ip_fold.val() >> 16));
-        self.udp_checksum.next = !bit_cast::<16, 32>(self.checksum.q.val());
-        if self.checksum.q.val().get_bits::<16>(0) == 0xFFFF {
+        self.checksum_fold.d.next = bit_cast::<17, 16>(self.checksum.q.val().get_bits::<16>(0))
+            + bit_cast::<17, 16>(self.checksum.q.val().get_bits::<16>(16));
+        // (at most 0x1FFFE: adding its carry bit cannot carry again)
+        self.checksum_folded.d.next = self.checksum_fold.q.val().get_bits::<16>(0)
+            + bit_cast::<16, 1>(self.checksum_fold.q.val().get_bits::<1>(16));
+        self.udp_checksum.next = !self.checksum_folded.q.val();
+        if self.checksum_folded.q.val() == 0xFFFF {
             // a computed 0 is sent as 0xFFFF (RFC 768)
             self.udp_checksum.next = 0xFFFF.into();
         }
@@ -523,8 +533,6 @@ impl Logic for FrameTransmitter {
         self.term_from_fields.d.next =
             self.sending.q.val() & (self.index.q.val() >= 1) & (self.index.q.val() < 17);
         self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 18);
-        self.checksum_folds.d.next =
-            self.sending.q.val() & (self.index.q.val() >= 18) & (self.index.q.val() < 20);
         self.past_header.d.next = self.sending.q.val() & self.body_follows.val();
         // the next index is 0 unless the frame goes on, 1 after 0
         self.term_is_kind.d.next = !self.sending.q.val() | self.frame_ends.q.val();
@@ -551,9 +559,6 @@ impl Logic for FrameTransmitter {
             // the word chosen at byte i is added at byte i + 1 (from a register)
             if self.checksum_adds.q.val() {
                 self.checksum.d.next = self.checksum.q.val() + self.checksum_term.q.val();
-            } else if self.checksum_folds.q.val() {
-                self.checksum.d.next =
-                    (self.checksum.q.val() & 0xFFFF) + (self.checksum.q.val() >> 16);
             }
             if self.crc_starts.q.val() {
                 // index 7: the SFD is in the output stage now: the CRC starts with the next byte
@@ -603,7 +608,6 @@ impl Logic for FrameTransmitter {
             self.frame_ends.d.next = false;
             self.term_from_fields.d.next = false;
             self.checksum_adds.d.next = false;
-            self.checksum_folds.d.next = false;
             self.next_field_steps.d.next = false;
             self.next_field_position.d.next = 0.into();
             self.past_header.d.next = false;
