@@ -93,7 +93,8 @@ pub struct StatusReporter {
     remaining: Signal<Local, Bits<7>>,
     word_value: Signal<Local, Bits<32>>,
     tx_byte: Signal<Local, Bits<8>>,
-    write: Signal<Local, Bit>,
+    // a byte of the page is written (Build, phases 3 to 6), registered a clock ahead
+    write: DFF<Bit>,
 }
 
 /// What the reporter is doing.
@@ -181,6 +182,7 @@ impl Logic for StatusReporter {
             self,
             clock,
             timer,
+            write,
             timer_zero,
             due,
             state,
@@ -213,7 +215,9 @@ impl Logic for StatusReporter {
             self.timer_zero.d.next = self.timer.q.val() == 1;
         }
         self.remaining.next = self.ports.val() - self.first_port.q.val();
-        self.write.next = false;
+        // (in Build the phase steps from 2..=5 to 3..=6 and the state stays)
+        self.write.d.next = (self.state.q.val() == ReportState::Build)
+            & (self.phase.q.val().get_bit(2) != self.phase.q.val().get_bit(1));
         self.counter_address.next =
             (bit_cast::<9, 7>(self.first_port.q.val()) << 3) + (self.word.q.val() - 4);
         // the counter memory answers two clocks after the address (its output register)
@@ -258,7 +262,6 @@ impl Logic for StatusReporter {
                 if self.phase.q.val() == 2 {
                     self.shift.d.next = self.word_value.val();
                 } else if self.phase.q.val() >= 3 {
-                    self.write.next = true;
                     self.shift.d.next = self.shift.q.val() << 8;
                 }
                 if self.phase.q.val() == 6 {
@@ -289,10 +292,10 @@ impl Logic for StatusReporter {
             }
         }
 
-        self.memory.write_enable.next = self.write.val();
+        self.memory.write_enable.next = self.write.q.val();
         self.memory.write_address.next = self.offset.q.val();
         self.memory.write_data.next = self.tx_byte.val();
-        if self.write.val() {
+        if self.write.q.val() {
             self.offset.d.next = self.offset.q.val() + 1;
             if self.offset.q.val().get_bit(0) {
                 self.sum.d.next = self.sum.q.val() + bit_cast::<32, 8>(self.tx_byte.val());
@@ -311,6 +314,7 @@ impl Logic for StatusReporter {
         if self.reset.val() {
             self.state.d.next = ReportState::Wait;
             self.requesting.d.next = false;
+            self.write.d.next = false;
             self.timer.d.next = 0.into();
             self.timer_zero.d.next = true;
             self.due.d.next = false;
