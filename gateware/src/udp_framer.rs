@@ -130,7 +130,7 @@ pub struct UdpFramer {
     write_data: Signal<Local, Bits<8>>,
     fill_sum_next: Signal<Local, Bits<32>>,
     // a datagram is due to close (full, or its time is up) at a record boundary: a
-    // register, computed from the next values of the registers it tests
+    // register, its next value from registers (at the end of the kernel)
     close_due: DFF<Bit>,
     can_close: Signal<Local, Bit>,
     accept: Signal<Local, Bit>,
@@ -289,7 +289,7 @@ impl Logic for UdpFramer {
         }
         // Close the filling datagram at a record boundary when full or due (`close_due`,
         // set at the end from the tests of beat, offset_left, fill_count and the deadline,
-        // each set and cleared by the events that change its counter, below).
+        // each set and cleared by the events that change what it tests, below).
         self.can_close.next = !self.pending.q.val() & !self.sending_records.q.val();
         // No beat moves while a datagram is due to close: in the clock it closes (the beat
         // would land in the old buffer) and while it waits for the other buffer (a full one
