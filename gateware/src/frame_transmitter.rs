@@ -162,9 +162,9 @@ pub struct FrameTransmitter {
     crc_starts: DFF<Bit>,
     frame_ends: DFF<Bit>,
     // registered index ranges, like `crc_starts`: the checksum's term is a field byte
-    // (2..18), the checksum adds its term (1..=18); the field
+    // (2..18), the checksum adds its term (1..=18); registered two clocks ahead, the field
     // position steps from the next clock's to the one after it (the field byte steps at
-    // 2..18 and 57..72), registered two clocks ahead
+    // 2..18 and 57..72)
     term_from_fields: DFF<Bit>,
     checksum_adds: DFF<Bit>,
     // the checksum's carries folded in, twice, a clock each (the sum is complete at byte
@@ -172,8 +172,6 @@ pub struct FrameTransmitter {
     checksum_fold: DFF<Bits<17>>,
     checksum_folded: DFF<Bits<16>>,
     next_field_steps: DFF<Bit>,
-    // index >= 73 (the body and the FCS), registered a clock ahead
-    past_header: DFF<Bit>,
     header_index: Signal<Local, Bits<7>>,
     total_len: DFF<Bits<16>>,
     udp_len: DFF<Bits<16>>,
@@ -199,7 +197,7 @@ pub struct FrameTransmitter {
     source_ahead: DFF<Bits<12>>,
     // the index is 72 or more: the next index's following byte is in the body
     body_follows: Signal<Local, Bit>,
-    // sending, and the next index is this one + 1
+    // sending, and the next index is this one + 1 (otherwise it is 0)
     frame_goes_on: Signal<Local, Bit>,
     source_next: Signal<Local, Bits<12>>,
     udp_checksum_held: DFF<Bits<16>>,
@@ -270,7 +268,6 @@ impl FrameTransmitter {
             checksum_fold: Default::default(),
             checksum_folded: Default::default(),
             next_field_steps: Default::default(),
-            past_header: Default::default(),
             header_index: Default::default(),
             frame_ends: Default::default(),
             total_len: Default::default(),
@@ -334,7 +331,6 @@ impl Logic for FrameTransmitter {
             checksum_fold,
             checksum_folded,
             next_field_steps,
-            past_header,
             frame_ends,
             total_len,
             udp_len,
@@ -371,9 +367,9 @@ impl Logic for FrameTransmitter {
         // The variable words of the UDP checksum, one per clock from byte 0: the kind, the
         // UDP length (counted twice: header and pseudo header; valid from byte 1) with the
         // constant words' sum (the checksum starts from the body's sum alone, no adder after
-        // the descriptor), then the 16 bytes of the
-        // fields one per clock as the position steps, alternately the low and the high byte
-        // of a word (flags is the low byte of its word).
+        // the descriptor), then the 16 field bytes one per clock as the position steps,
+        // alternately the low and the high byte of a word (flags is the low byte of its
+        // word).
         // the field byte of the next clock: byte 0 is the top byte of `fields_high` (the
         // fields are held from index 0 on; the byte is read from index 2 on)
         self.field_word.next = self.fields_high.q.val();
@@ -533,20 +529,17 @@ impl Logic for FrameTransmitter {
         self.term_from_fields.d.next =
             self.sending.q.val() & (self.index.q.val() >= 1) & (self.index.q.val() < 17);
         self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 18);
-        self.past_header.d.next = self.sending.q.val() & self.body_follows.val();
         // the next index is 0 unless the frame goes on, 1 after 0
-        self.term_is_kind.d.next = !self.sending.q.val() | self.frame_ends.q.val();
-        self.term_is_udp_len.d.next =
-            self.sending.q.val() & !self.frame_ends.q.val() & self.term_is_kind.q.val();
+        self.term_is_kind.d.next = !self.frame_goes_on.val();
+        self.term_is_udp_len.d.next = self.frame_goes_on.val() & self.term_is_kind.q.val();
         // (the index after the next is this one + 2 while the frame goes on)
-        self.next_field_steps.d.next = self.sending.q.val()
-            & !self.frame_ends.q.val()
+        self.next_field_steps.d.next = self.frame_goes_on.val()
             & ((self.index.q.val() < 16)
                 | ((self.index.q.val() >= 55) & (self.index.q.val() < 70)));
         // the position goes once round for the checksum (back at 0 after 16 bytes) and
         // then through the first 15 bytes to send them; 0 between frames
         self.next_field_position.d.next = 0.into();
-        if self.sending.q.val() & !self.frame_ends.q.val() {
+        if self.frame_goes_on.val() {
             self.next_field_position.d.next = self.next_field_position.q.val();
             if self.next_field_steps.q.val() {
                 self.next_field_position.d.next = self.next_field_position.q.val() + 1;
@@ -610,7 +603,6 @@ impl Logic for FrameTransmitter {
             self.checksum_adds.d.next = false;
             self.next_field_steps.d.next = false;
             self.next_field_position.d.next = 0.into();
-            self.past_header.d.next = false;
             self.gap.d.next = 0.into();
             self.gap_done.d.next = true;
             self.tx_en.d.next = false;
