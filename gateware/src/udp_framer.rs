@@ -340,10 +340,11 @@ impl Logic for UdpFramer {
         }
         // The tick of a record is complete at its beat 5: the first record's age (its tick
         // is the base, rebuilt to 64 bits from now) or a later record's offset is taken in
-        // every clock in which beat 5 is offered, not only when it moves, so the value of
-        // the clock it moves is the last one taken and `accept` stays off the enables of
-        // the two 32-bit subtractions.
-        if self.offset_idle.q.val() & self.records.valid.val() & self.beat_five.q.val() {
+        // every clock in which beat 5 is the next beat, offered or not, not only when it
+        // moves, so the value of the clock it moves is the last one taken and neither
+        // `valid` nor `accept` reaches the enables of the two 32-bit subtractions (both
+        // are read only after beat 5 moved).
+        if self.offset_idle.q.val() & self.beat_five.q.val() {
             if !self.fill_nonzero.q.val() {
                 self.offset_bytes.d.next = 0.into();
                 self.first_age.d.next = self.tick.val().get_bits::<32>(0) - self.record_tick.val();
