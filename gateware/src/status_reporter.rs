@@ -79,6 +79,11 @@ pub struct StatusReporter {
     first_port: DFF<Bits<7>>,
     page_ports: DFF<Bits<7>>,
     word: DFF<Bits<9>>,
+    // `word` is the page's last (registered: a word holds for seven clocks)
+    last_word: DFF<Bit>,
+    // the counter of word `word` (from word 4 on): first_port * 8 + word - 4, stepped with
+    // `word` (no adder in front of the memory's address)
+    counter_word: DFF<Bits<9>>,
     phase: DFF<Bits<3>>,
     shift: DFF<Bits<32>>,
     offset: DFF<Bits<11>>,
@@ -155,6 +160,8 @@ impl StatusReporter {
             first_port: Default::default(),
             page_ports: Default::default(),
             word: Default::default(),
+            last_word: Default::default(),
+            counter_word: Default::default(),
             phase: Default::default(),
             shift: Default::default(),
             offset: Default::default(),
@@ -190,6 +197,8 @@ impl Logic for StatusReporter {
             first_port,
             page_ports,
             word,
+            last_word,
+            counter_word,
             phase,
             shift,
             offset,
@@ -218,8 +227,7 @@ impl Logic for StatusReporter {
         // (in Build the phase steps from 2..=5 to 3..=6 and the state stays)
         self.write.d.next = (self.state.q.val() == ReportState::Build)
             & (self.phase.q.val().get_bit(2) != self.phase.q.val().get_bit(1));
-        self.counter_address.next =
-            (bit_cast::<9, 7>(self.first_port.q.val()) << 3) + (self.word.q.val() - 4);
+        self.counter_address.next = self.counter_word.q.val();
         // the counter memory answers two clocks after the address (its output register)
         // (by the word's low two bits alone: from word 4 on the counter is taken instead)
         self.header_word.d.next = bit_cast::<32, 7>(self.first_port.q.val()) << 24;
@@ -231,6 +239,8 @@ impl Logic for StatusReporter {
             self.header_word.d.next = self.records_sent.val();
         }
         self.word_from_memory.d.next = self.word.q.val() >= 4;
+        self.last_word.d.next =
+            self.word.q.val() == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + 3;
         self.word_value.next = self.header_word.q.val();
         if self.word_from_memory.q.val() {
             self.word_value.next = self.counter_data.val();
@@ -248,6 +258,7 @@ impl Logic for StatusReporter {
             ReportState::Start => {
                 self.state.d.next = ReportState::Build;
                 self.word.d.next = 0.into();
+                self.counter_word.d.next = (bit_cast::<9, 7>(self.first_port.q.val()) << 3) - 4;
                 self.phase.d.next = 0.into();
                 self.offset.d.next = 0.into();
                 self.sum.d.next = 0.into();
@@ -267,7 +278,8 @@ impl Logic for StatusReporter {
                 if self.phase.q.val() == 6 {
                     self.phase.d.next = 0.into();
                     self.word.d.next = self.word.q.val() + 1;
-                    if self.word.q.val() == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + 3 {
+                    self.counter_word.d.next = self.counter_word.q.val() + 1;
+                    if self.last_word.q.val() {
                         self.state.d.next = ReportState::Request;
                         self.requesting.d.next = true;
                     }
