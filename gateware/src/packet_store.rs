@@ -8,10 +8,11 @@
 //! and the RAM needs one write port. The deframer's burst of five beats after a header
 //! (four tick bytes and the header) takes five rounds: 160 clocks at most, well inside a
 //! byte time (about 300 clocks at 4 Mbit/s). The beat taken is written two clocks later,
-//! through the register of its group of eight ports and then its bank's. A packet becomes
-//! visible when its `last` beat is taken without `error` (counted a clock later, so the
-//! scan sees it two clocks after the beat); a packet with `error` is
-//! forgotten; when both slots of the port are full as a packet starts, the whole packet is
+//! through the register of its group of eight ports and then its bank's (the visited
+//! port's address and data pass whether taken or not; only the write enable depends on
+//! `valid`). A packet becomes visible when its `last` beat is taken without `error`
+//! (counted a clock later, so the scan sees it two clocks after the beat); a packet with
+//! `error` is forgotten; when both slots of the port are full as a packet starts, the whole packet is
 //! dropped and `dropped` pulses for the port when it ends. The loss flag (bit 8 of
 //! every stored word) is set when packets of the port were rejected or dropped since its
 //! previous stored packet.
@@ -106,6 +107,10 @@ pub struct PacketStore {
     term_index: Signal<Local, Bits<5>>,
     term_byte: Signal<Local, Bits<8>>,
     term_loss: Signal<Local, Bit>,
+    // the port's packet ends this clock (its `last` beat taken without `error`), and a
+    // packet ending now is dropped (both slots were full as it started)
+    packet_ends: Signal<Local, Bit>,
+    packet_refused: Signal<Local, Bit>,
     word_address: Signal<Local, Bits<BANK_ADDRESS_BITS>>,
     word_data: Signal<Local, Bits<9>>,
     write_index: Vec<DFF<Bits<5>>>,
@@ -226,6 +231,8 @@ impl PacketStore {
             term_index: Default::default(),
             term_byte: Default::default(),
             term_loss: Default::default(),
+            packet_ends: Default::default(),
+            packet_refused: Default::default(),
             word_address: Default::default(),
             word_data: Default::default(),
             write_index: (0..ports).map(|_| Default::default()).collect(),
@@ -487,12 +494,21 @@ impl Logic for PacketStore {
             self.write_slot[i].d.next = self.write_slot[i].q.val();
             self.dropping[i].d.next = self.dropping[i].q.val();
             self.loss_pending[i].d.next = self.loss_pending[i].q.val();
-            self.dropped_pulse[i].d.next = false;
             self.read_slot[i].d.next = self.read_slot[i].q.val();
 
             self.ports[i].ready.next = self.visit.q.val().get_bit(i);
             self.take[i].next = self.ports[i].valid.val() & self.visit.q.val().get_bit(i);
-            self.commit[i].d.next = false;
+            self.packet_ends.next =
+                self.take[i].val() & self.ports[i].last.val() & !self.ports[i].error.val();
+            self.packet_refused.next = self.dropping[i].q.val()
+                | ((self.write_index[i].q.val() == 0) & self.full[i].q.val());
+            // the commit and drop pulses as one expression each: set and cleared in the
+            // branches below, each flip-flop would get its own reset net (one per port),
+            // which crowds the placement of a 64-port box
+            self.commit[i].d.next =
+                self.packet_ends.val() & !self.packet_refused.val() & !self.port_reset.val();
+            self.dropped_pulse[i].d.next =
+                self.packet_ends.val() & self.packet_refused.val() & !self.port_reset.val();
             self.store_word.next = false;
             self.term_slot.next = false;
             self.term_index.next = 0.into();
@@ -500,14 +516,10 @@ impl Logic for PacketStore {
             self.term_loss.next = false;
             self.word_address.next = 0.into();
             self.word_data.next = 0.into();
-            if self.take[i].val() {
-                // this port's word for its bank's write register
-                self.store_word.next = !self.dropping[i].q.val()
-                    & (self.write_index[i].q.val() < self.stored_beats.val());
-                if self.write_index[i].q.val() == 0 {
-                    self.dropping[i].d.next = self.full[i].q.val();
-                    self.store_word.next = !self.full[i].q.val();
-                }
+            if self.visit.q.val().get_bit(i) {
+                // the visited port's address and data for its bank's write register, taken
+                // or not (only the write enable depends on `valid`: the data path is one
+                // AND with the ring bit)
                 // (rust-hdl cannot pass an indexed signal to a function: copy it first)
                 self.term_slot.next = self.write_slot[i].q.val();
                 self.term_index.next = self.write_index[i].q.val();
@@ -518,26 +530,30 @@ impl Logic for PacketStore {
                     | bit_cast::<11, 5>(self.term_index.val());
                 self.word_data.next = bit_cast::<9, 8>(self.term_byte.val())
                     | (bit_cast::<9, 1>(self.term_loss.val().into()) << 8);
+            }
+            if self.take[i].val() {
+                // the write enable of this port's word
+                self.store_word.next = !self.dropping[i].q.val()
+                    & (self.write_index[i].q.val() < self.stored_beats.val());
+                if self.write_index[i].q.val() == 0 {
+                    self.dropping[i].d.next = self.full[i].q.val();
+                    self.store_word.next = !self.full[i].q.val();
+                }
                 if self.write_index[i].q.val() < self.stored_beats.val() {
                     self.write_index[i].d.next = self.write_index[i].q.val() + 1;
                 }
                 if self.ports[i].last.val() {
                     self.write_index[i].d.next = 0.into();
-                    if self.ports[i].error.val() {
+                    if self.ports[i].error.val() | self.packet_refused.val() {
                         self.loss_pending[i].d.next = true;
-                    } else if self.dropping[i].q.val()
-                        | ((self.write_index[i].q.val() == 0) & self.full[i].q.val())
-                    {
-                        self.loss_pending[i].d.next = true;
-                        self.dropped_pulse[i].d.next = true;
                     } else {
-                        self.commit[i].d.next = true;
                         self.loss_pending[i].d.next = false;
                         self.write_slot[i].d.next = !self.write_slot[i].q.val();
                     }
                 }
             }
-            // the group's register takes the OR of its ports' words, each zero unless taken
+            // the group's register takes the OR of its ports' words, each zero unless its port
+            // is visited (the write enable: unless taken)
             // (an OR tree, not a chain of multiplexers)
             for g in 0..self.group_write.len() {
                 if self.port_group[i].val().get_bit(g) {
@@ -564,12 +580,10 @@ impl Logic for PacketStore {
             }
             if self.port_reset.val() {
                 self.used_next[i].next = 0.into();
-                self.commit[i].d.next = false;
                 self.write_slot[i].d.next = false;
                 self.write_index[i].d.next = 0.into();
                 self.dropping[i].d.next = false;
                 self.loss_pending[i].d.next = false;
-                self.dropped_pulse[i].d.next = false;
                 self.read_slot[i].d.next = false;
             }
             self.used[i].d.next = self.used_next[i].val();

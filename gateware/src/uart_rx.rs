@@ -162,7 +162,6 @@ impl Logic for UartRx {
         self.middle.next = self.phase_ahead.q.val().get_bit(16);
         self.phase_sum.next = bit_cast::<17, 16>(self.phase_ahead.q.val().get_bits::<16>(0))
             + self.phase_increment.val();
-        self.strobe_out.d.next = false;
         self.phase_ahead.d.next = self.phase_sum.val();
         if self.middle.val() {
             self.bit_index.d.next = self.bit_index.q.val() + 1;
@@ -183,7 +182,6 @@ impl Logic for UartRx {
                 }
             } else if self.bit_index.q.val() == 9 {
                 self.receiving.d.next = false;
-                self.strobe_out.d.next = true;
                 self.framing_error_out.d.next = !self.majority.val();
             } else {
                 self.shift.d.next = (self.shift.q.val() >> 1).replace_bit(7, self.majority.val());
@@ -191,11 +189,17 @@ impl Logic for UartRx {
         }
         if self.reset.val() {
             self.receiving.d.next = false;
-            self.strobe_out.d.next = false;
             self.sync_meta.d.next = true;
             self.sync_stable.d.next = true;
             self.sync_previous.d.next = true;
         }
+        // the stop bit's middle, as one expression: a chain of ifs setting and clearing the
+        // bit maps to a flip-flop with its own reset net (one per port), which crowds the
+        // placement of a 64-port box
+        self.strobe_out.d.next = self.middle.val()
+            & self.receiving.q.val()
+            & (self.bit_index.q.val() == 9)
+            & !self.reset.val();
         self.data.next = self.shift.q.val();
         self.strobe.next = self.strobe_out.q.val();
         self.framing_error.next = self.framing_error_out.q.val();
