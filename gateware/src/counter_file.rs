@@ -6,13 +6,21 @@
 //! clears the bit. A second RAM receives the same writes and serves `read_address` for
 //! the status reporter, so reading never delays counting.
 //!
-//! Limit: a port is visited every N clocks, so an event is counted within 8 N clocks, and
+//! The scan is a pipeline: the visited port's pending bits go into the register of its
+//! group of eight ports, the groups' registers into `sampled` a clock later, and the lowest
+//! bit is cleared a clock after that. The scan's period is the port count but at least
+//! three (positions past the last port are empty), so a port is never sampled again before
+//! its bit is cleared.
+//!
+//! Limit: a port is visited every N clocks (at least 3), so an event is counted within
+//! 8 N clocks, and
 //! no event is lost while a port raises at most three events per N x 3 clocks. The
 //! deframer raises at most three per received byte (297 clocks at the fastest line the
 //! UART accepts), which holds for N <= 64. After reset the scanner first clears both RAMs
 //! (512 clocks) with `ready` low; the box holds its ports in reset until then.
 
 use crate::block_ram::BlockRam;
+use crate::packet_store::{group_onehot, GROUP_PORTS};
 use rust_hdl::prelude::*;
 
 /// Clocks the counter file spends clearing its memories after reset (`ready` low).
@@ -20,6 +28,12 @@ pub const CLEAR_CLOCKS: u64 = 512;
 
 /// Counters per port (`skinbox_protocol::PortCounter`).
 pub const COUNTERS: usize = 8;
+
+/// Clocks between two visits of a port by the scanner: the port count, at least three
+/// (the pipeline from a port's sample to the clear of its bit).
+pub fn scan_period(ports: usize) -> usize {
+    ports.max(3)
+}
 
 /// Event-driven counter memory of N ports.
 #[derive(LogicBlock)]
@@ -37,11 +51,21 @@ pub struct CounterFile {
     /// Counting: the clearing after reset is over.
     pub ready: Signal<Out, Bit>,
     pending: Vec<DFF<Bits<8>>>,
+    // the scan's last position (scan_period - 1)
     last_port: Constant<Bits<6>>,
     port: DFF<Bits<6>>,
-    // `port` and `visited` one-hot (bit i: port i), for OR-of-terms selects, not mux chains
+    // `port`, `scanned` and `visited` one-hot (bit i: port i), for OR-of-terms selects,
+    // not mux chains
     port_onehot: DFF<Bits<64>>,
+    scanned_onehot: DFF<Bits<64>>,
     visited_onehot: DFF<Bits<64>>,
+    // the port whose bits are in the group registers (a clock after `port`)
+    scanned: DFF<Bits<6>>,
+    // the port's write group, one-hot
+    port_group: Vec<Constant<Bits<8>>>,
+    // the scanned port's pending bits, in the register of its group (zero in the others)
+    group_bits: Vec<DFF<Bits<8>>>,
+    group_term: Vec<Signal<Local, Bits<8>>>,
     // the ports' bits of a one-hot word
     onehot_keep: Constant<Bits<64>>,
     clearing: DFF<Bit>,
@@ -83,14 +107,23 @@ impl CounterFile {
             read_data: Default::default(),
             ready: Default::default(),
             pending: (0..ports).map(|_| Default::default()).collect(),
-            last_port: Constant::new((ports as u64 - 1).into()),
+            last_port: Constant::new((scan_period(ports) as u64 - 1).into()),
             port: Default::default(),
             port_onehot: Default::default(),
+            scanned_onehot: Default::default(),
             visited_onehot: Default::default(),
+            scanned: Default::default(),
+            port_group: (0..ports).map(group_onehot).collect(),
+            group_bits: (0..ports.div_ceil(GROUP_PORTS))
+                .map(|_| Default::default())
+                .collect(),
+            group_term: (0..ports.div_ceil(GROUP_PORTS))
+                .map(|_| Default::default())
+                .collect(),
             onehot_keep: Constant::new(if ports == 64 {
                 u64::MAX.into()
             } else {
-                ((1u64 << ports) - 1).into()
+                ((1u64 << scan_period(ports)) - 1).into()
             }),
             clearing: Default::default(),
             clear_address: Default::default(),
@@ -124,7 +157,9 @@ impl Logic for CounterFile {
             clock,
             port,
             port_onehot,
+            scanned_onehot,
             visited_onehot,
+            scanned,
             clearing,
             clear_address,
             sampled,
@@ -140,18 +175,36 @@ impl Logic for CounterFile {
         self.counting_memory.clock.next = self.clock.val();
         self.reading_memory.clock.next = self.clock.val();
 
-        // Stage 1: the visited port's pending bits into a register (without the bit stage 2
-        // clears this clock, should it be the same port: a one-port box).
-        self.current.next = 0.into();
+        // Stage 1: the visited port's pending bits into its group's register.
+        for g in 0..self.group_bits.len() {
+            self.group_bits[g].clock.next = self.clock.val();
+            self.group_term[g].next = 0.into();
+        }
         for i in 0..self.pending.len() {
             self.pending[i].clock.next = self.clock.val();
             self.current_term.next = 0.into();
             if self.port_onehot.q.val().get_bit(i) {
                 self.current_term.next = self.pending[i].q.val();
             }
-            self.current.next = self.current.val() | self.current_term.val();
+            for g in 0..self.group_bits.len() {
+                if self.port_group[i].val().get_bit(g) {
+                    self.group_term[g].next = self.group_term[g].val() | self.current_term.val();
+                }
+            }
         }
-        // Stage 2: the lowest pending bit of the port visited a clock ago.
+        // Stage 2: the groups' registers into `sampled`.
+        self.current.next = 0.into();
+        for g in 0..self.group_bits.len() {
+            self.group_bits[g].d.next = self.group_term[g].val();
+            self.current.next = self.current.val() | self.group_bits[g].q.val();
+            if self.reset.val() {
+                self.group_bits[g].d.next = 0.into();
+            }
+        }
+        self.sampled.d.next = self.current.val();
+        self.scanned.d.next = self.port.q.val();
+        self.scanned_onehot.d.next = self.port_onehot.q.val();
+        // Stage 3: the lowest pending bit of the port sampled two clocks ago.
         self.lowest.next = 0.into();
         self.clear_mask.next = 0.into();
         if self.sampled.q.val().get_bit(0) {
@@ -182,13 +235,8 @@ impl Logic for CounterFile {
         if self.clearing.q.val() {
             self.clear_mask.next = 0.into();
         }
-        // (stage 1's register, now that stage 2's clear is known)
-        self.sampled.d.next = self.current.val();
-        if self.port.q.val() == self.visited.q.val() {
-            self.sampled.d.next = self.current.val() & !self.clear_mask.val();
-        }
-        self.visited.d.next = self.port.q.val();
-        self.visited_onehot.d.next = self.port_onehot.q.val();
+        self.visited.d.next = self.scanned.q.val();
+        self.visited_onehot.d.next = self.scanned_onehot.q.val();
         for i in 0..self.pending.len() {
             self.pending[i].d.next = self.pending[i].q.val() | self.events[i].val();
             if self.visited_onehot.q.val().get_bit(i) {

@@ -5,6 +5,7 @@
 
 use super::front::{PortFront, StartedPacket};
 use skinbox_gateware::cell_deframer::TICK_BEATS;
+use skinbox_gateware::counter_file::scan_period;
 use skinbox_gateware::packet_store::{FIFO_DEPTH, RECORD_BEATS};
 use skinbox_gateware::status_reporter::{CLOCKS_PER_WORD, WORD_VALUE_CLOCK};
 use skinbox_protocol::cell::PACKET_LEN;
@@ -650,7 +651,12 @@ impl<'a> Back<'a> {
             let port = self.first_port + i;
             let first_word = 4 + 8 * i as u64;
             let last_read = word_read(first_word + 7);
-            self.counting[port].advance(port, self.t.ports, self.t.tick_offset, last_read + 1);
+            self.counting[port].advance(
+                port,
+                scan_period(self.t.ports),
+                self.t.tick_offset,
+                last_read + 1,
+            );
             let mut counters = PortCounters::default();
             for (k, counter) in PortCounter::ALL.iter().enumerate() {
                 let read = word_read(first_word + k as u64);
@@ -684,13 +690,14 @@ impl PortCounting {
         self.events.insert(at, (cycle, bits));
     }
 
-    /// Serves pending bits at the scanner visits of `port` before cycle `until`.
-    fn advance(&mut self, port: usize, ports: usize, visit_offset: u64, until: u64) {
-        let ports = ports as i128;
-        // first visit of this port at or after cycle c: the scanner is at (c - offset) mod N
+    /// Serves pending bits at the scanner visits of `port` before cycle `until`; the
+    /// scanner steps through `period` positions, one per clock.
+    fn advance(&mut self, port: usize, period: usize, visit_offset: u64, until: u64) {
+        let period = period as i128;
+        // first visit of this port at or after cycle c: the scanner is at (c - offset) mod P
         let visit = |c: u64| {
-            let phase = (c as i128 - visit_offset as i128 - port as i128).rem_euclid(ports);
-            c + ((ports - phase) % ports) as u64
+            let phase = (c as i128 - visit_offset as i128 - port as i128).rem_euclid(period);
+            c + ((period - phase) % period) as u64
         };
         let mut c = self.done_until;
         while c < until {
@@ -720,9 +727,10 @@ impl PortCounting {
             }
             let lowest = self.pending.trailing_zeros() as usize;
             self.pending &= !(1 << lowest);
-            // pending bits sampled at the visit, the address a clock later, the memory's
-            // output registered, the increment registered, written the edge after that
-            self.writes[lowest].push(v + 5);
+            // pending bits sampled at the visit into the group register, `sampled` a clock
+            // later, the address a clock after that, the memory's output registered, the
+            // increment registered, written the edge after that
+            self.writes[lowest].push(v + 6);
             c = v + 1;
         }
         self.done_until = c.min(until).max(self.done_until);
