@@ -85,6 +85,8 @@ pub struct CellDeframer {
     index: DFF<Bits<5>>,
     tick_shift: DFF<Bits<32>>,
     tick_beats: DFF<Bits<3>>,
+    // tick_beats != 0, kept in a register (the output byte's select)
+    tick_out: DFF<Bit>,
     pending: DFF<Bit>,
     pending_data: DFF<Bits<8>>,
     pending_last: DFF<Bit>,
@@ -144,6 +146,7 @@ impl CellDeframer {
             index: Default::default(),
             tick_shift: Default::default(),
             tick_beats: Default::default(),
+            tick_out: Default::default(),
             pending: Default::default(),
             pending_data: Default::default(),
             pending_last: Default::default(),
@@ -179,6 +182,7 @@ impl Logic for CellDeframer {
             index,
             tick_shift,
             tick_beats,
+            tick_out,
             pending,
             pending_data,
             pending_last,
@@ -203,7 +207,7 @@ impl Logic for CellDeframer {
         self.packets.data.next = self.pending_data.q.val();
         self.packets.last.next = self.pending_last.q.val();
         self.packets.error.next = self.pending_error.q.val();
-        if self.tick_beats.q.val() != 0 {
+        if self.tick_out.q.val() {
             self.packets.data.next = self.tick_shift.q.val().get_bits::<8>(24);
             self.packets.last.next = false;
             self.packets.error.next = false;
@@ -279,6 +283,7 @@ impl Logic for CellDeframer {
             self.pending_next.next = false;
         }
         self.tick_beats.d.next = self.tick_beats_next.val();
+        self.tick_out.d.next = self.tick_beats_next.val() != 0;
         self.pending.d.next = self.pending_next.val();
         self.out_valid.d.next = (self.tick_beats_next.val() != 0) | self.pending_next.val();
         // the events (bit i = PortCounter i), as the branches above count them

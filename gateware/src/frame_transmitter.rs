@@ -203,7 +203,8 @@ pub struct FrameTransmitter {
     udp_checksum_held: DFF<Bits<16>>,
     tx_byte: Signal<Local, Bits<8>>,
     ip_sum: Signal<Local, Bits<32>>,
-    ip_fold: Signal<Local, Bits<32>>,
+    // the IPv4 header sum folded once, a register (the checksum's second fold a clock later)
+    ip_fold: DFF<Bits<32>>,
     udp_checksum: Signal<Local, Bits<16>>,
     checksum_word: Signal<Local, Bits<32>>,
 }
@@ -345,14 +346,15 @@ impl Logic for FrameTransmitter {
             udp_checksum_held,
             term_is_kind,
             term_is_udp_len,
-            udp_term
+            udp_term,
+            ip_fold
         );
-        // Frame geometry: registered at the start from the body length (lengths), one clock
-        // later the IPv4 checksum (needed from byte 32 on).
+        // Frame geometry: registered at the start from the body length (lengths), two clocks
+        // later the IPv4 checksum (needed from byte 32 on), through its first fold.
         self.ip_sum.next = self.ip_constant_sum.val() + bit_cast::<32, 16>(self.total_len.q.val());
-        self.ip_fold.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
+        self.ip_fold.d.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
         self.ip_checksum.d.next =
-            !bit_cast::<16, 32>((self.ip_fold.val() & 0xFFFF) + (self.ip_fold.val() >> 16));
+            !bit_cast::<16, 32>((self.ip_fold.q.val() & 0xFFFF) + (self.ip_fold.q.val() >> 16));
         self.checksum_fold.d.next = bit_cast::<17, 16>(self.checksum.q.val().get_bits::<16>(0))
             + bit_cast::<17, 16>(self.checksum.q.val().get_bits::<16>(16));
         // (at most 0x1FFFE: adding its carry bit cannot carry again)

@@ -275,7 +275,6 @@ impl Logic for UdpFramer {
         // (a bit of an expression is not Verilog: the difference gets its own signal)
         // The first record's base tick and deadline, a clock after its tick was complete:
         // base = (now - 1) - age = now + !age (sign-extended), deadline = now + timeout - 1.
-        self.first_seen.d.next = false;
         self.deadline_delta.next =
             self.tick.val().get_bits::<32>(0) - self.fill_deadline_less_one.q.val();
         self.deadline_passed_next.d.next = !self.deadline_delta.val().get_bit(31);
@@ -330,12 +329,9 @@ impl Logic for UdpFramer {
             } else {
                 self.write.next = true;
             }
-            if self.beat.q.val() == 5 {
+            if self.beat_five.q.val() {
                 self.offset_left.d.next = 4.into();
                 self.offset_idle.d.next = false;
-                if !self.fill_nonzero.q.val() {
-                    self.first_seen.d.next = true;
-                }
             }
         }
         // The tick of a record is complete at its beat 5: the first record's age (its tick
@@ -344,6 +340,14 @@ impl Logic for UdpFramer {
         // moves, so the value of the clock it moves is the last one taken and neither
         // `valid` nor `accept` reaches the enables of the two 32-bit subtractions (both
         // are read only after beat 5 moved).
+        // The first record's beat 5 moved: one expression (set and cleared in branches, the
+        // flip-flop would get a reset net of its own, a LUT level on the path)
+        self.first_seen.d.next = self.offset_idle.q.val()
+            & self.records.valid.val()
+            & self.accept.val()
+            & self.beat_five.q.val()
+            & !self.fill_nonzero.q.val()
+            & !self.reset.val();
         if self.offset_idle.q.val() & self.beat_five.q.val() {
             if !self.fill_nonzero.q.val() {
                 self.offset_bytes.d.next = 0.into();
@@ -450,7 +454,6 @@ impl Logic for UdpFramer {
 
         if self.reset.val() {
             self.memory_write.d.next = false;
-            self.first_seen.d.next = false;
             self.fill_buffer.d.next = false;
             self.fill_count.d.next = 0.into();
             self.beat_zero.d.next = true;
