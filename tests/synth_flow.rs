@@ -24,6 +24,8 @@ fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
             "--json",
             "--ports",
             &PORTS.to_string(),
+            "--seeds",
+            "2",
             "--out-dir",
         ])
         .arg(&dir)
@@ -55,6 +57,33 @@ fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
     let fmax = report["fmax_mhz"].as_f64().expect("fmax_mhz");
     assert!(fmax > 1.0 && fmax < 1000.0, "{fmax}");
     assert!(!report["critical_paths"].as_array().unwrap().is_empty());
+
+    // Two placements tried (seeds 1 and 2), each from its own nextpnr report; the fastest is
+    // the one reported and packed.
+    let tried = report["seeds"].as_array().expect("seeds");
+    let seeds: Vec<u64> = tried.iter().map(|t| t["seed"].as_u64().unwrap()).collect();
+    assert_eq!(seeds, [1, 2]);
+    let mut fastest = (0, 0.0);
+    for t in tried {
+        let (seed, mhz) = (t["seed"].as_u64().unwrap(), t["fmax_mhz"].as_f64().unwrap());
+        let own: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(dir.join(format!("nextpnr-seed{seed}.report.json")))
+                .expect("the seed's nextpnr report"),
+        )
+        .expect("nextpnr report JSON");
+        let achieved = own["fmax"]
+            .as_object()
+            .expect("fmax")
+            .values()
+            .map(|c| c["achieved"].as_f64().unwrap())
+            .find(|a| (a - mhz).abs() < 1e-6);
+        assert!(achieved.is_some(), "seed {seed}: {mhz} MHz not in {own:#}");
+        if mhz > fastest.1 {
+            fastest = (seed, mhz);
+        }
+    }
+    assert_eq!(report["seed"], fastest.0);
+    assert_eq!(fmax, fastest.1);
 
     // The bitstream is an ECP5 bitstream: a comment block, then the preamble.
     let bitstream = report["bitstream"].as_str().expect("bitstream path");

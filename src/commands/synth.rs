@@ -15,9 +15,13 @@ pub struct Args {
     /// UART ports of the box (1 to 64).
     #[arg(long, default_value_t = BoxConfig::default().ports)]
     ports: usize,
-    /// nextpnr placer seed.
+    /// nextpnr placer seed (the first, with --seeds).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Place and route with this many seeds (--seed and up) and keep the fastest
+    /// placement; every seed's Fmax is reported.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
+    seeds: u64,
     /// Directory for the run's files (default: build/synth/BOARD-Np).
     #[arg(long)]
     out_dir: Option<PathBuf>,
@@ -61,6 +65,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
                 .join(format!("{}-{}p", args.board.name(), args.ports))
         }),
         seed: args.seed,
+        seeds: args.seeds,
     };
 
     let bar = indicatif::ProgressBar::new_spinner();
@@ -160,6 +165,14 @@ fn print_report(r: &SynthReport) {
             path.to_clock,
             path.blocks.join(" -> ")
         );
+    }
+    if r.seeds.len() > 1 {
+        let each: Vec<String> = r
+            .seeds
+            .iter()
+            .map(|s| format!("{}: {:.1}", s.seed, s.fmax_mhz))
+            .collect();
+        println!("  seeds   {} MHz; kept seed {}", each.join(", "), r.seed);
     }
     println!("  bits    {}", r.bitstream.display());
     println!(

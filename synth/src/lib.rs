@@ -11,7 +11,7 @@ pub mod toolchain;
 
 use std::path::PathBuf;
 
-pub use flow::{run, Event, FlowOptions, Stage, SynthReport};
+pub use flow::{run, Event, FlowOptions, SeedResult, Stage, SynthReport};
 pub use toolchain::Toolchain;
 
 /// Why the flow stopped.
