@@ -7,12 +7,13 @@
 //! the status reporter, so reading never delays counting.
 //!
 //! The scan is a pipeline: the visited port's pending bits go into the register of its
-//! group of eight ports, the groups' registers into `sampled` a clock later, and the lowest
-//! bit is cleared a clock after that. The scan's period is the port count but at least
-//! three (positions past the last port are empty), so a port is never sampled again before
-//! its bit is cleared.
+//! group of eight ports, the groups' registers into `sampled` a clock later; the lowest
+//! bit's counter is read a clock after that, and the bit cleared through a register (the
+//! clear reaches every port's pending bits) a clock later still. The scan's period is the
+//! port count but at least four (positions past the last port are empty), so a port is
+//! never sampled again before its bit is cleared.
 //!
-//! Limit: a port is visited every N clocks (at least 3), so an event is counted within
+//! Limit: a port is visited every N clocks (at least 4), so an event is counted within
 //! 8 N clocks, and
 //! no event is lost while a port raises at most three events per N x 3 clocks. The
 //! deframer raises at most three per received byte (297 clocks at the fastest line the
@@ -29,10 +30,10 @@ pub const CLEAR_CLOCKS: u64 = 512;
 /// Counters per port (`skinbox_protocol::PortCounter`).
 pub const COUNTERS: usize = 8;
 
-/// Clocks between two visits of a port by the scanner: the port count, at least three
+/// Clocks between two visits of a port by the scanner: the port count, at least four
 /// (the pipeline from a port's sample to the clear of its bit).
 pub fn scan_period(ports: usize) -> usize {
-    ports.max(3)
+    ports.max(4)
 }
 
 /// Event-driven counter memory of N ports.
@@ -54,11 +55,14 @@ pub struct CounterFile {
     // the scan's last position (scan_period - 1)
     last_port: Constant<Bits<6>>,
     port: DFF<Bits<6>>,
-    // `port`, `scanned` and `visited` one-hot (bit i: port i), for OR-of-terms selects,
-    // not mux chains
+    // `port`, `scanned`, `visited` and the port being cleared one-hot (bit i: port i), for
+    // OR-of-terms selects, not mux chains
     port_onehot: DFF<Bits<64>>,
     scanned_onehot: DFF<Bits<64>>,
     visited_onehot: DFF<Bits<64>>,
+    clear_onehot: DFF<Bits<64>>,
+    // the bit to clear in that port's pending bits
+    clear_bits: DFF<Bits<8>>,
     // the port whose bits are in the group registers (a clock after `port`)
     scanned: DFF<Bits<6>>,
     // the port's write group, one-hot
@@ -112,6 +116,8 @@ impl CounterFile {
             port_onehot: Default::default(),
             scanned_onehot: Default::default(),
             visited_onehot: Default::default(),
+            clear_onehot: Default::default(),
+            clear_bits: Default::default(),
             scanned: Default::default(),
             port_group: (0..ports).map(group_onehot).collect(),
             group_bits: (0..ports.div_ceil(GROUP_PORTS))
@@ -159,6 +165,8 @@ impl Logic for CounterFile {
             port_onehot,
             scanned_onehot,
             visited_onehot,
+            clear_onehot,
+            clear_bits,
             scanned,
             clearing,
             clear_address,
@@ -237,11 +245,14 @@ impl Logic for CounterFile {
         }
         self.visited.d.next = self.scanned.q.val();
         self.visited_onehot.d.next = self.scanned_onehot.q.val();
+        // Stage 4: the clear, from registers.
+        self.clear_onehot.d.next = self.visited_onehot.q.val();
+        self.clear_bits.d.next = self.clear_mask.val();
         for i in 0..self.pending.len() {
             self.pending[i].d.next = self.pending[i].q.val() | self.events[i].val();
-            if self.visited_onehot.q.val().get_bit(i) {
+            if self.clear_onehot.q.val().get_bit(i) {
                 self.pending[i].d.next =
-                    (self.pending[i].q.val() & !self.clear_mask.val()) | self.events[i].val();
+                    (self.pending[i].q.val() & !self.clear_bits.q.val()) | self.events[i].val();
             }
             if self.reset.val() {
                 self.pending[i].d.next = 0.into();
