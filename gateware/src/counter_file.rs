@@ -13,12 +13,12 @@
 //! port count but at least four (positions past the last port are empty), so a port is
 //! never sampled again before its bit is cleared.
 //!
-//! Limit: a port is visited every N clocks (at least 4), so an event is counted within
-//! 8 N clocks, and
-//! no event is lost while a port raises at most three events per N x 3 clocks. The
-//! deframer raises at most three per received byte (297 clocks at the fastest line the
-//! UART accepts), which holds for N <= 64. After reset the scanner first clears both RAMs
-//! (512 clocks) with `ready` low; the box holds its ports in reset until then.
+//! Limit: a port is visited every N clocks (N: the port count, at least 4), so an event is
+//! counted within 8 N clocks, and no event is lost while a port raises at most three
+//! events per N x 3 clocks. The deframer raises at most three per received byte (297
+//! clocks at the fastest line the UART accepts), which holds for N <= 64. After reset the
+//! scanner first clears both RAMs (512 clocks) with `ready` low; the box holds its ports
+//! in reset until then.
 
 use crate::block_ram::BlockRam;
 use crate::packet_store::{group_onehot, GROUP_PORTS};
