@@ -313,7 +313,7 @@ impl Logic for UdpFramer {
             self.beat_zero.d.next = false;
             self.beat_five.d.next = self.beat.q.val() == 4;
             self.beat_last.d.next = self.beat.q.val() == 24;
-            if self.beat.q.val() == 25 {
+            if self.beat_last.q.val() {
                 self.beat.d.next = 0.into();
                 self.beat_zero.d.next = true;
                 self.fill_count.d.next = self.fill_count.q.val() + 1;
@@ -342,8 +342,7 @@ impl Logic for UdpFramer {
         // are read only after beat 5 moved).
         // The first record's beat 5 moved: one expression (set and cleared in branches, the
         // flip-flop would get a reset net of its own, a LUT level on the path)
-        self.first_seen.d.next = self.offset_idle.q.val()
-            & self.records.valid.val()
+        self.first_seen.d.next = self.records.valid.val()
             & self.accept.val()
             & self.beat_five.q.val()
             & !self.fill_nonzero.q.val()
