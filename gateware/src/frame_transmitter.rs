@@ -22,8 +22,8 @@
 
 use crate::block_ram::BlockRam;
 use crate::crc32::Crc32Byte;
-use rust_hdl::prelude::*;
-use skinbox_protocol::datagram::{self, HEADER_LEN};
+use crate::hdl::*;
+use skinbox_protocol::datagram::{self, field, HEADER_LEN};
 use skinbox_protocol::link::*;
 
 /// Frame byte where the datagram body starts (preamble, Ethernet, IPv4, UDP, box header).
@@ -33,8 +33,24 @@ pub const BODY_START: usize =
 // A datagram with an empty body still makes a minimum-size frame: no padding is ever needed.
 const _: () = assert!(BODY_START >= PREAMBLE_LEN + MIN_FRAME_LEN);
 
-const UDP_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN + IPV4_HEADER_LEN;
+const IP_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN;
+const IP_TOTAL_LEN_AT: usize = IP_AT + IPV4_TOTAL_LEN.start;
+const IP_CHECKSUM_AT: usize = IP_AT + IPV4_CHECKSUM.start;
+const UDP_AT: usize = IP_AT + IPV4_HEADER_LEN;
+const UDP_LEN_AT: usize = UDP_AT + UDP_LEN.start;
+const UDP_CHECKSUM_AT: usize = UDP_AT + UDP_CHECKSUM.start;
 const BOX_HEADER_AT: usize = UDP_AT + UDP_HEADER_LEN;
+const KIND_AT: usize = BOX_HEADER_AT + field::KIND;
+/// First of the header bytes sent from the `fields` shift registers: flags, sequence, base
+/// tick, entry count.
+const FIELDS_AT: usize = BOX_HEADER_AT + field::FLAGS;
+const FIELDS_LEN: usize = field::ENTRY_COUNT.end - field::FLAGS;
+
+/// A frame position (or length) as a kernel constant; panics if it does not fit.
+fn position<const N: usize>(at: usize) -> Constant<Bits<N>> {
+    assert!(at < 1 << N, "position {at} does not fit {N} bits");
+    Constant::new((at as u64).into())
+}
 
 /// The constant bytes of a frame up to the body; variable fields are 0 here.
 fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
@@ -130,6 +146,36 @@ pub struct FrameTransmitter {
     // datagram headers), counted twice like the length
     udp_term_constant: Constant<Bits<32>>,
     ip_constant_sum: Constant<Bits<32>>,
+    // Frame positions from the format constants. The byte at `index` is chosen two clocks
+    // ahead (see the kernel), so the positions the byte-source tests name are "ahead": two
+    // lower than the bytes.
+    // the SFD's position minus one (the CRC starts after it), and the first byte in the CRC
+    sfd_ahead: Constant<Bits<11>>,
+    crc_from: Constant<Bits<11>>,
+    // the body's first byte; the frame's last byte minus one, less the body length (from it
+    // `end_minus_one`); the body's first byte - 2 (the payload is read two clocks ahead)
+    body_start: Constant<Bits<11>>,
+    frame_end_over_body: Constant<Bits<11>>,
+    body_ahead: Constant<Bits<11>>,
+    // IPv4 total length and UDP length minus the body length
+    ip_len_over_body: Constant<Bits<16>>,
+    udp_len_over_body: Constant<Bits<16>>,
+    // clocks of the inter-frame gap after the frame's last clock
+    gap_clocks: Constant<Bits<4>>,
+    // the byte-source tests: first byte of the IPv4 total length, of the IPv4 checksum, of
+    // the UDP length, of the UDP checksum, the datagram kind, the first field byte and the
+    // byte after the fields, each two lower
+    ip_len_ahead: Constant<Bits<7>>,
+    ip_checksum_ahead: Constant<Bits<7>>,
+    udp_len_ahead: Constant<Bits<7>>,
+    udp_checksum_ahead: Constant<Bits<7>>,
+    kind_ahead: Constant<Bits<7>>,
+    fields_ahead: Constant<Bits<7>>,
+    fields_end_ahead: Constant<Bits<7>>,
+    // the same two on the whole index: the field position steps there
+    field_steps_from: Constant<Bits<11>>,
+    field_steps_until: Constant<Bits<11>>,
+    template_idle: Constant<Bits<7>>,
     crc: Crc32Byte,
     sending: DFF<Bit>,
     index: DFF<Bits<11>>,
@@ -243,6 +289,24 @@ impl FrameTransmitter {
                 (udp_constant + 2 * (BODY_START - UDP_AT) as u64).into(),
             ),
             ip_constant_sum: Constant::new(ip_constant.into()),
+            sfd_ahead: position(PREAMBLE_LEN - 2),
+            crc_from: position(PREAMBLE_LEN),
+            body_start: position(BODY_START),
+            frame_end_over_body: position(BODY_START + FCS_LEN - 2),
+            body_ahead: position(BODY_START - 2),
+            ip_len_over_body: position(BODY_START - PREAMBLE_LEN - ETHERNET_HEADER_LEN),
+            udp_len_over_body: position(BODY_START - UDP_AT),
+            gap_clocks: position(INTER_FRAME_GAP - 1),
+            ip_len_ahead: position(IP_TOTAL_LEN_AT - 2),
+            ip_checksum_ahead: position(IP_CHECKSUM_AT - 2),
+            udp_len_ahead: position(UDP_LEN_AT - 2),
+            udp_checksum_ahead: position(UDP_CHECKSUM_AT - 2),
+            kind_ahead: position(KIND_AT - 2),
+            fields_ahead: position(FIELDS_AT - 2),
+            fields_end_ahead: position(FIELDS_AT + FIELDS_LEN - 2),
+            field_steps_from: position(FIELDS_AT - 2),
+            field_steps_until: position(FIELDS_AT + FIELDS_LEN - 2),
+            template_idle: position(TEMPLATE_IDLE),
             crc: Default::default(),
             sending: Default::default(),
             index: Default::default(),
@@ -297,12 +361,12 @@ impl FrameTransmitter {
     }
 }
 
-// The kernel below cannot name Rust constants, so it spells the frame positions as
-// literals: 7 SFD, 8 first CRC byte, 24 IPv4 total length, 32 IPv4 checksum, 46 UDP length,
-// 48 UDP checksum, 53 datagram kind, 57..72 flags/sequence/base tick/entry count,
-// 74 body, 11 = inter-frame gap - 1. A frame is never below the 60-byte minimum (the
-// headers alone end at 74 = 8 + 66), so it never needs padding.
-// `frame_positions_match_the_formats` checks them against the format constants.
+// The kernel cannot name Rust constants: the frame positions are `Constant` signals made
+// in `new()` from the format constants. Two tests are written from the index's bits (the
+// body from byte 74, the field bytes' checksum terms over the 16 bytes of `fields_high`
+// and `fields_low`); `frame_positions_match_the_formats` holds them to the formats. A frame
+// is never below the 60-byte minimum (the headers alone end at 74 = 8 + 66), so it never
+// needs padding.
 impl Logic for FrameTransmitter {
     #[hdl_gen]
     fn update(&mut self) {
@@ -413,7 +477,7 @@ impl Logic for FrameTransmitter {
         // (past the header only the body follows: the header's tests need the index's low
         // seven bits only)
         self.header_index.next = self.index.q.val().get_bits::<7>(0);
-        self.template.read_address.next = 127.into();
+        self.template.read_address.next = self.template_idle.val();
         if self.sending.q.val() {
             self.template.read_address.next = self.header_index.val();
         }
@@ -430,34 +494,36 @@ impl Logic for FrameTransmitter {
             self.source_next.next = 2048.into();
         }
         if self.frame_goes_on.val() & !self.body_follows.val() {
-            if self.header_index.val() == 22 {
+            if self.header_index.val() == self.ip_len_ahead.val() {
                 self.source_next.next = self.source_next.val() | 2;
             }
-            if self.header_index.val() == 23 {
+            if self.header_index.val() == self.ip_len_ahead.val() + 1 {
                 self.source_next.next = self.source_next.val() | 4;
             }
-            if self.header_index.val() == 30 {
+            if self.header_index.val() == self.ip_checksum_ahead.val() {
                 self.source_next.next = self.source_next.val() | 8;
             }
-            if self.header_index.val() == 31 {
+            if self.header_index.val() == self.ip_checksum_ahead.val() + 1 {
                 self.source_next.next = self.source_next.val() | 16;
             }
-            if self.header_index.val() == 44 {
+            if self.header_index.val() == self.udp_len_ahead.val() {
                 self.source_next.next = self.source_next.val() | 32;
             }
-            if self.header_index.val() == 45 {
+            if self.header_index.val() == self.udp_len_ahead.val() + 1 {
                 self.source_next.next = self.source_next.val() | 64;
             }
-            if self.header_index.val() == 46 {
+            if self.header_index.val() == self.udp_checksum_ahead.val() {
                 self.source_next.next = self.source_next.val() | 128;
             }
-            if self.header_index.val() == 47 {
+            if self.header_index.val() == self.udp_checksum_ahead.val() + 1 {
                 self.source_next.next = self.source_next.val() | 256;
             }
-            if self.header_index.val() == 51 {
+            if self.header_index.val() == self.kind_ahead.val() {
                 self.source_next.next = self.source_next.val() | 512;
             }
-            if (self.header_index.val() >= 55) & (self.header_index.val() < 70) {
+            if (self.header_index.val() >= self.fields_ahead.val())
+                & (self.header_index.val() < self.fields_end_ahead.val())
+            {
                 self.source_next.next = self.source_next.val() | 1024;
             }
         }
@@ -504,15 +570,15 @@ impl Logic for FrameTransmitter {
         if self.byte_source.q.val().get_bit(11) {
             self.tx_byte.next = self.tx_byte.val() | self.payload_data.val();
         }
-        self.payload_address.next = self.index.q.val() + 2 - 74;
+        self.payload_address.next = self.index.q.val() - self.body_ahead.val();
 
         // Output stage: the byte goes through a register, the CRC is computed from that
         // register, and the FCS is put in at the output, so no path runs from the byte
         // selection through the CRC.
         self.stage_valid.d.next = self.sending.q.val();
         self.stage_byte.d.next = self.tx_byte.val();
-        self.stage_crc.d.next =
-            (self.index.q.val() >= 8) & (self.index.q.val() < self.body_end.q.val());
+        self.stage_crc.d.next = (self.index.q.val() >= self.crc_from.val())
+            & (self.index.q.val() < self.body_end.q.val());
         self.stage_fcs.d.next = self.index.q.val() >= self.body_end.q.val();
         self.crc.register.next = self.crc_register.q.val();
         self.crc.data.next = self.stage_byte.q.val();
@@ -527,7 +593,8 @@ impl Logic for FrameTransmitter {
 
         // the index tests of the next clock, from this clock's index (it counts up by one
         // while sending)
-        self.crc_starts.d.next = self.sending.q.val() & (self.index.q.val() == 6);
+        self.crc_starts.d.next =
+            self.sending.q.val() & (self.index.q.val() == self.sfd_ahead.val());
         self.term_from_fields.d.next =
             self.sending.q.val() & (self.index.q.val() >= 1) & (self.index.q.val() < 17);
         self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 18);
@@ -537,7 +604,8 @@ impl Logic for FrameTransmitter {
         // (the index after the next is this one + 2 while the frame goes on)
         self.next_field_steps.d.next = self.frame_goes_on.val()
             & ((self.index.q.val() < 16)
-                | ((self.index.q.val() >= 55) & (self.index.q.val() < 70)));
+                | ((self.index.q.val() >= self.field_steps_from.val())
+                    & (self.index.q.val() < self.field_steps_until.val())));
         // the position goes once round for the checksum (back at 0 after 16 bytes) and
         // then through the first 15 bytes to send them; 0 between frames
         self.next_field_position.d.next = 0.into();
@@ -566,7 +634,7 @@ impl Logic for FrameTransmitter {
                 self.sending.d.next = false;
                 self.index.d.next = 0.into();
                 self.next_sequence.d.next = self.next_sequence.q.val() + 1;
-                self.gap.d.next = 11.into();
+                self.gap.d.next = self.gap_clocks.val();
                 self.gap_done.d.next = false;
             }
         } else if !self.gap_done.q.val() {
@@ -577,10 +645,12 @@ impl Logic for FrameTransmitter {
         }
         // The frame geometry follows the held body length a clock later: it is valid from
         // index 1 on (nothing reads it at index 0).
-        self.body_end.d.next = self.body_len_held.q.val() + 74;
-        self.end_minus_one.d.next = self.body_len_held.q.val() + 76;
-        self.total_len.d.next = bit_cast::<16, 11>(self.body_len_held.q.val()) + 52;
-        self.udp_len.d.next = bit_cast::<16, 11>(self.body_len_held.q.val()) + 32;
+        self.body_end.d.next = self.body_len_held.q.val() + self.body_start.val();
+        self.end_minus_one.d.next = self.body_len_held.q.val() + self.frame_end_over_body.val();
+        self.total_len.d.next =
+            bit_cast::<16, 11>(self.body_len_held.q.val()) + self.ip_len_over_body.val();
+        self.udp_len.d.next =
+            bit_cast::<16, 11>(self.body_len_held.q.val()) + self.udp_len_over_body.val();
         self.udp_term.d.next =
             (bit_cast::<32, 11>(self.body_len_held.q.val()) << 1) + self.udp_term_constant.val();
         // The descriptor is taken in every clock without a frame going out, so `start` only
@@ -628,31 +698,30 @@ mod tests {
     use skinbox_protocol::datagram::DatagramBody;
     use skinbox_protocol::{DataRepr, DatagramRepr, PortCounters, RecordRepr, StatusRepr};
 
-    const IP_TOTAL_LEN_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN + 2;
-    const IP_CHECKSUM_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN + 10;
-    /// First of the 15 header bytes sent from the `fields` shift register: flags,
-    /// sequence, base tick, entry count.
-    const FIELDS_AT: usize = BOX_HEADER_AT + 7;
-
     #[test]
     fn frame_positions_match_the_formats() {
-        assert_eq!(BODY_START, 74);
+        // the positions of RFC 791 / RFC 768 fields behind an 8-byte preamble and a
+        // 14-byte Ethernet header, and the datagram header's table (protocol::datagram)
         assert_eq!((IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_AT), (24, 32, 42));
-        assert_eq!((BOX_HEADER_AT + 3, FIELDS_AT, FIELDS_AT + 15), (53, 57, 72));
-        assert_eq!(INTER_FRAME_GAP, 12);
-        assert_eq!(TEMPLATE_IDLE, 127, "the kernel's literal");
+        assert_eq!((UDP_LEN_AT, UDP_CHECKSUM_AT, BOX_HEADER_AT), (46, 48, 50));
+        assert_eq!((KIND_AT, FIELDS_AT, FIELDS_AT + FIELDS_LEN), (53, 57, 72));
+        // the kernel's tests from the index's bits: the body from 74 (`body_follows` tests
+        // 72, two ahead), 16 field bytes for the checksum (the 15 fields and the first
+        // reserved byte: `fields_high` and `fields_low`)
+        assert_eq!(BODY_START, 74);
+        assert_eq!(FIELDS_LEN + 1, 16);
         let t = template(&LinkConfig::DEFAULT, 7, 8);
         // the template byte is ORed in all through the header: 0 at every variable byte
-        let variable = [IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_AT + 4, UDP_AT + 6]
+        let variable = [IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_LEN_AT, UDP_CHECKSUM_AT]
             .iter()
             .flat_map(|&at| [at, at + 1])
-            .chain([BOX_HEADER_AT + 3])
-            .chain(FIELDS_AT..FIELDS_AT + 15);
+            .chain([KIND_AT])
+            .chain(FIELDS_AT..FIELDS_AT + FIELDS_LEN);
         for at in variable {
             assert_eq!(t[at], 0, "template byte {at}");
         }
         assert_eq!(
-            &t[FIELDS_AT + 15..BODY_START],
+            &t[FIELDS_AT + FIELDS_LEN..BODY_START],
             &[0, 0],
             "reserved header bytes"
         );

@@ -22,7 +22,8 @@ use crate::status::{StatusRepr, PORT_COUNTERS_LEN, STATUS_FIXED_LEN};
 use crate::{check_len, get_u16, get_u32, get_u64, Error, Format, LayoutRow, Result};
 use core::fmt;
 
-mod field {
+/// Byte ranges and positions of the header's fields (the table above).
+pub mod field {
     use crate::Field;
     pub const MAGIC: Field = 0..2;
     pub const VERSION: usize = 2;

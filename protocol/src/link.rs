@@ -48,6 +48,14 @@ pub const ETHERNET_HEADER_LEN: usize = 14;
 pub const IPV4_HEADER_LEN: usize = 20;
 /// UDP header length.
 pub const UDP_HEADER_LEN: usize = 8;
+/// IPv4 total length field, from the start of the IPv4 header (RFC 791).
+pub const IPV4_TOTAL_LEN: crate::Field = 2..4;
+/// IPv4 header checksum field, from the start of the IPv4 header (RFC 791).
+pub const IPV4_CHECKSUM: crate::Field = 10..12;
+/// UDP length field, from the start of the UDP header (RFC 768).
+pub const UDP_LEN: crate::Field = 4..6;
+/// UDP checksum field, from the start of the UDP header (RFC 768).
+pub const UDP_CHECKSUM: crate::Field = 6..8;
 /// Preamble and start-of-frame delimiter on the wire.
 pub const PREAMBLE_LEN: usize = 8;
 /// Frame check sequence length.
