@@ -19,7 +19,7 @@
 //! carry them in their `INITVAL_xx` parameters (in the 1024 x 18 mode: 16 words of 18 bits
 //! per parameter, each in 20 bits, as yosys lays out the block RAMs it infers).
 
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// Verilog macro selecting the DP16KD instances.
 pub const ECP5_MACRO: &str = "SKINBOX_ECP5_BRAM";

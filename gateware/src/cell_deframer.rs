@@ -23,9 +23,9 @@
 //! framing error a header value inside the rest of the broken packet can start a false
 //! packet that is rejected too.
 
+use crate::hdl::*;
 use crate::stream::ByteStreamSource;
 use crate::uart_rx::{BIT_COUNT_AFTER_STOP, BIT_COUNT_MAX};
-use rust_hdl::prelude::*;
 use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 
 /// Beats of the packet stream before the cell bytes: the 32-bit start tick.

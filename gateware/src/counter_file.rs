@@ -21,8 +21,8 @@
 //! in reset until then.
 
 use crate::block_ram::BlockRam;
+use crate::hdl::*;
 use crate::packet_store::{group_onehot, GROUP_PORTS};
-use rust_hdl::prelude::*;
 
 /// Clocks the counter file spends clearing its memories after reset (`ready` low).
 pub const CLEAR_CLOCKS: u64 = 512;

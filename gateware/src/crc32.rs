@@ -7,7 +7,7 @@
 //! significant byte first. Cost: about 100 LUT4 of XOR; depth 8 XOR levels, which the
 //! synthesis tool flattens.
 
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// The reflected CRC-32 polynomial of IEEE 802.3.
 pub const POLYNOMIAL_REFLECTED: u64 = 0xEDB8_8320_u64;

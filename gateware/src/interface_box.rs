@@ -10,13 +10,13 @@
 
 use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
 use crate::counter_file::CounterFile;
+use crate::hdl::*;
 use crate::packet_store::{group_onehot, PacketStore, GROUP_PORTS, MAX_PORTS};
 use crate::replica_register::ReplicaRegister;
 use crate::status_reporter::StatusReporter;
 use crate::timestamp::TimestampCounter;
 use crate::uart_rx::UartRx;
 use crate::udp_framer::{FramerConfig, UdpFramer};
-use rust_hdl::prelude::*;
 use skinbox_protocol::{CellFraming, LinkConfig};
 use std::fmt;
 

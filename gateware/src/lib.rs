@@ -21,6 +21,7 @@ pub mod cell_deframer;
 pub mod counter_file;
 pub mod crc32;
 pub mod frame_transmitter;
+pub mod hdl;
 pub mod interface_box;
 pub mod lut_ram;
 pub mod packet_store;

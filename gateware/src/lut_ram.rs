@@ -6,7 +6,7 @@
 //! TRELLIS_DPR16X4) and a flip-flop whose clock enable is `read_enable`, so a read stall
 //! costs no multiplexer in front of the RAM's address.
 
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// RAM of 2^N words of W bits, read through an enabled register.
 #[derive(LogicBlock)]

@@ -33,8 +33,8 @@
 
 use crate::block_ram::BlockRam;
 use crate::cell_deframer::TICK_BEATS;
+use crate::hdl::*;
 use crate::stream::{ByteStreamSink, ByteStreamSource};
-use rust_hdl::prelude::*;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::PortCounter;
 

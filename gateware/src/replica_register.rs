@@ -7,7 +7,7 @@
 //! `always` block, which yosys carries to the flip-flop and `opt_merge` respects; simulators
 //! ignore the attribute. The output follows the input one clock later, like a `DFF`.
 
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// A register of one bit that is never merged with another register of the same input.
 #[derive(LogicBlock, Default)]

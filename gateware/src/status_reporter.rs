@@ -13,7 +13,7 @@
 //! sequence number restart at 0).
 
 use crate::block_ram::BlockRam;
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// Clocks per 32-bit word of the status body: the address, the memory read, its register,
 /// the word into the shift register, four bytes out.

@@ -5,7 +5,7 @@
 //! bad, so a receiver that stores packets can discard it. A source never interleaves two
 //! packets and never takes `valid` back before the beat moved.
 
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// The sending side of a byte stream.
 #[derive(LogicInterface, Default)]

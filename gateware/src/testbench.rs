@@ -1,7 +1,7 @@
 //! Clock stepping for block tests: drives `simulate()` directly, one edge at a time, which
 //! is far faster than rust-hdl's threaded `simple_sim!`.
 
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// A block under test with its clock input.
 pub struct Bench<B: Block> {

@@ -5,7 +5,7 @@
 //! of earlier counts (the start stamp, shared by every deframer instead of a subtractor
 //! each).
 
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// Ticks `start_stamp` lags `tick`: the receiver's synchroniser
 /// ([`crate::uart_rx::START_LATENCY_TICKS`]) and the deframer's input register

@@ -22,7 +22,7 @@
 //! (`TimestampCounter::start_stamp`). The receiver keeps no time itself: the deframer captures it, once per packet. Baud
 //! tolerance measured by the tests: +-4.75 % (8N1 with mid-bit sampling allows about 5 %).
 
-use rust_hdl::prelude::*;
+use crate::hdl::*;
 
 /// Fraction bits of the baud phase accumulator.
 pub const PHASE_BITS: usize = 16;

@@ -17,8 +17,8 @@
 
 use crate::block_ram::BlockRam;
 use crate::frame_transmitter::FrameTransmitter;
+use crate::hdl::*;
 use crate::stream::ByteStreamSink;
-use rust_hdl::prelude::*;
 use skinbox_protocol::datagram::MAX_RECORDS;
 use skinbox_protocol::LinkConfig;
 
