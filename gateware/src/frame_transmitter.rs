@@ -294,7 +294,7 @@ impl FrameTransmitter {
             body_start: position(BODY_START),
             frame_end_over_body: position(BODY_START + FCS_LEN - 2),
             body_ahead: position(BODY_START - 2),
-            ip_len_over_body: position(BODY_START - PREAMBLE_LEN - ETHERNET_HEADER_LEN),
+            ip_len_over_body: position(BODY_START - IP_AT),
             udp_len_over_body: position(BODY_START - UDP_AT),
             gap_clocks: position(INTER_FRAME_GAP - 1),
             ip_len_ahead: position(IP_TOTAL_LEN_AT - 2),
