@@ -164,7 +164,7 @@ pub struct FrameTransmitter {
     gap_clocks: Constant<Bits<4>>,
     // the byte-source tests: first byte of the IPv4 total length, of the IPv4 checksum, of
     // the UDP length, of the UDP checksum, the datagram kind, the first field byte and the
-    // byte after the fields, each two lower
+    // byte after the fields, each two lower (the field position steps there too)
     ip_len_ahead: Constant<Bits<7>>,
     ip_checksum_ahead: Constant<Bits<7>>,
     udp_len_ahead: Constant<Bits<7>>,
@@ -172,9 +172,6 @@ pub struct FrameTransmitter {
     kind_ahead: Constant<Bits<7>>,
     fields_ahead: Constant<Bits<7>>,
     fields_end_ahead: Constant<Bits<7>>,
-    // the same two on the whole index: the field position steps there
-    field_steps_from: Constant<Bits<11>>,
-    field_steps_until: Constant<Bits<11>>,
     template_idle: Constant<Bits<7>>,
     crc: Crc32Byte,
     sending: DFF<Bit>,
@@ -304,8 +301,6 @@ impl FrameTransmitter {
             kind_ahead: position(KIND_AT - 2),
             fields_ahead: position(FIELDS_AT - 2),
             fields_end_ahead: position(FIELDS_AT + FIELDS_LEN - 2),
-            field_steps_from: position(FIELDS_AT - 2),
-            field_steps_until: position(FIELDS_AT + FIELDS_LEN - 2),
             template_idle: position(TEMPLATE_IDLE),
             crc: Default::default(),
             sending: Default::default(),
@@ -604,8 +599,8 @@ impl Logic for FrameTransmitter {
         // (the index after the next is this one + 2 while the frame goes on)
         self.next_field_steps.d.next = self.frame_goes_on.val()
             & ((self.index.q.val() < 16)
-                | ((self.index.q.val() >= self.field_steps_from.val())
-                    & (self.index.q.val() < self.field_steps_until.val())));
+                | ((self.index.q.val() >= bit_cast::<11, 7>(self.fields_ahead.val()))
+                    & (self.index.q.val() < bit_cast::<11, 7>(self.fields_end_ahead.val()))));
         // the position goes once round for the checksum (back at 0 after 16 bytes) and
         // then through the first 15 bytes to send them; 0 between frames
         self.next_field_position.d.next = 0.into();
