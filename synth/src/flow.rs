@@ -209,7 +209,7 @@ pub fn run(
     let mut best: Option<(SeedResult, NextpnrReport)> = None;
     for seed in options.seed..options.seed + options.seeds.max(1) {
         progress(Event::Line(&format!("seed {seed}")));
-        place_and_route(toolchain, options, seed, progress)?;
+        place_and_route(toolchain, options, &lpf, seed, progress)?;
         let pnr = NextpnrReport::parse(&read(dir, &seed_file(seed, "report.json"))?, BOX_INSTANCE)?;
         let (_, fmax) = box_clock(&pnr, target_mhz)?;
         let result = SeedResult {
@@ -298,10 +298,12 @@ fn seed_file(seed: u64, what: &str) -> String {
     format!("nextpnr-seed{seed}.{what}")
 }
 
-/// Places and routes the synthesised netlist with `seed`, into that seed's files.
+/// Places and routes the synthesised netlist with the constraints file `lpf` and `seed`,
+/// into that seed's files.
 fn place_and_route(
     toolchain: &Toolchain,
     options: &FlowOptions,
+    lpf: &str,
     seed: u64,
     progress: &mut dyn FnMut(Event<'_>),
 ) -> Result<(), SynthError> {
@@ -313,7 +315,7 @@ fn place_and_route(
         .current_dir(dir)
         .args(board.nextpnr_device_args())
         .args(["--json", &format!("{top}.json")])
-        .args(["--lpf", &format!("{}.lpf", board.name())])
+        .args(["--lpf", lpf])
         .args(["--textcfg", &seed_file(seed, "config")])
         .args(["--report", &seed_file(seed, "report.json")])
         .args(["--seed", &seed.to_string()])
