@@ -70,7 +70,13 @@ fn tshark_accepts_the_pcap_and_the_host_decodes_what_was_sent() {
     }
     pcap.finish().unwrap();
 
+    // with the project's dissector, which claims the datagrams before Wireshark's ADwin
+    // heuristic (which, without it, takes some payload lengths on any port)
+    let plugin = dir.join(skinbox_host::wireshark::PLUGIN_FILE);
+    std::fs::write(&plugin, skinbox_host::wireshark::dissector_lua()).unwrap();
     let tshark = Command::new("tshark")
+        .arg("-X")
+        .arg(format!("lua_script:{}", plugin.display()))
         .args(["-n", "-r"])
         .arg(&path)
         .args([
@@ -79,14 +85,17 @@ fn tshark_accepts_the_pcap_and_the_host_decodes_what_was_sent() {
             "-o",
             "udp.check_checksum:TRUE",
         ])
-        // Wireshark's ADwin heuristic claims UDP payloads of some lengths on any port and
-        // then reports the rest as stray bytes; our payload is not ADwin
-        .args(["--disable-heuristic", "adwin_config_udp"])
         .args([
             "-T",
             "fields",
             "-e",
             "frame.number",
+            "-e",
+            "frame.protocols",
+            "-e",
+            "skinbox.entry_count",
+            "-e",
+            "skinbox.kind",
             "-e",
             "ip.checksum.status",
             "-e",
@@ -106,16 +115,22 @@ fn tshark_accepts_the_pcap_and_the_host_decodes_what_was_sent() {
     let text = String::from_utf8(tshark.stdout).unwrap();
     let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split('\t').collect()).collect();
     assert_eq!(rows.len(), frames.len(), "{text}");
+    let mut records_dissected = 0;
     for row in &rows {
-        // checksum status 1 = good (0 bad, 2 unverified); no malformed flag, no expert
-        // info of any severity
-        assert_eq!((row[1], row[2]), ("1", "1"), "frame {}: {text}", row[0]);
+        // every frame a skinbox datagram; checksum status 1 = good (0 bad, 2 unverified);
+        // no malformed flag, no expert info of any severity
+        assert_eq!(row[1], "eth:ethertype:ip:udp:skinbox", "frame {}", row[0]);
+        if row[3] == "1" {
+            records_dissected += row[2].parse::<usize>().unwrap();
+        }
+        assert_eq!((row[4], row[5]), ("1", "1"), "frame {}: {text}", row[0]);
         assert!(
-            row[3..].iter().all(|f| f.is_empty()),
+            row[6..].iter().all(|f| f.is_empty()),
             "frame {}: {row:?}",
             row[0]
         );
     }
+    assert_eq!(records_dissected, sent.iter().map(Vec::len).sum::<usize>());
 
     let decoded = skinbox_host::decode_pcap_file(&path, &Default::default()).unwrap();
     for (port, sent) in sent.iter().enumerate() {

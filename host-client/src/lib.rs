@@ -35,6 +35,7 @@ pub mod replay;
 pub mod report;
 pub mod sequence;
 pub mod synth;
+pub mod wireshark;
 
 pub use bad_input::BadInput;
 pub use convert::{EventToData, Sample};

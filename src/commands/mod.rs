@@ -11,6 +11,7 @@ mod sim;
 mod stats;
 mod synth;
 mod verilog;
+mod wireshark;
 
 use clap::{Parser, Subcommand};
 
@@ -51,6 +52,8 @@ pub enum Command {
     Report(report::Args),
     /// Synthesise the box for an ECP5 board: resources, Fmax and a bitstream.
     Synth(synth::Args),
+    /// Write the Wireshark dissector of every skinbox datagram (Lua), or install it.
+    Wireshark(wireshark::Args),
 }
 
 /// Runs one parsed command line.
@@ -67,6 +70,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Calibrate(args) => calibrate::run(args, cli.json),
         Command::Report(args) => report::run_report(&args, cli.json),
         Command::Synth(args) => synth::run(&args, cli.json),
+        Command::Wireshark(args) => wireshark::run(&args, cli.json),
     }
 }
 
