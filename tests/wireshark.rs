@@ -268,6 +268,14 @@ fn frames_with(plugin: &Path, pcap: &Path, filter: &str, field: &str) -> Vec<(u6
         .collect()
 }
 
+/// Frame numbers that match a display filter.
+fn frame_numbers(plugin: &Path, pcap: &Path, filter: &str) -> Vec<u64> {
+    frames_with(plugin, pcap, filter, "frame.number")
+        .into_iter()
+        .map(|(n, _)| n)
+        .collect()
+}
+
 #[test]
 fn reference_box_pcap_dissects_like_the_host_decodes() {
     let dir = temp_dir("reference");
@@ -588,22 +596,18 @@ fn malformed_datagrams_are_flagged_not_misread() {
     assert_eq!(text.lines().count(), payloads.len());
     for (i, (_, expert)) in cases.iter().enumerate() {
         let frame = (i + 1).to_string();
-        let found = frames_with(&plugin, &pcap, expert, "frame.number");
+        let found = frame_numbers(&plugin, &pcap, expert);
         assert!(
-            found.iter().any(|(n, _)| n.to_string() == frame),
+            found.iter().any(|n| n.to_string() == frame),
             "case {i}: {expert} not on frame {frame}: {found:?}"
         );
     }
     // only the malformed frames carry malformed-group expert infos
-    let flagged: Vec<u64> = frames_with(
+    let flagged = frame_numbers(
         &plugin,
         &pcap,
         "skinbox.expert.malformed || skinbox.expert.unknown_version || skinbox.expert.bad_end_byte",
-        "frame.number",
-    )
-    .into_iter()
-    .map(|(n, _)| n)
-    .collect();
+    );
     assert_eq!(flagged, (1..=cases.len() as u64).collect::<Vec<_>>());
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -688,18 +692,27 @@ fn expert_infos_mark_exactly_the_injected_gaps() {
     let got: Vec<u64> = dissected.iter().map(|r| r.missing_before).collect();
     assert_eq!(got, expected_missing);
     assert!(got.iter().filter(|&&m| m > 0).count() >= 10);
-    let event_gap_frames = frames_with(&plugin, &pcap, "skinbox.expert.event_gap", "frame.number");
-    assert!(!event_gap_frames.is_empty());
+    let event_gap_frames = frame_numbers(&plugin, &pcap, "skinbox.expert.event_gap");
+    // ...and the expert sits on exactly the frames holding such a record
+    let mut record = 0;
+    let mut expected_frames = vec![];
+    for (i, l) in layers.iter().enumerate() {
+        let n = many(&l["skinbox.record"]).len();
+        if expected_missing[record..record + n].iter().any(|&m| m > 0) {
+            expected_frames.push(i as u64 + 1);
+        }
+        record += n;
+    }
+    assert_eq!(event_gap_frames, expected_frames);
     assert_rows_equal(&dissected, &decoded_rows(&pcap));
     // nothing else: no restart, reset, late or duplicate datagram
     assert_eq!(
-        frames_with(
+        frame_numbers(
             &plugin,
             &pcap,
             "skinbox.expert.sequence_restart || skinbox.expert.box_reset || skinbox.expert.sequence_late || skinbox.expert.sequence_duplicate",
-            "frame.number"
         ),
-        vec![]
+        Vec::<u64>::new()
     );
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -741,12 +754,7 @@ fn expert_infos_mark_a_box_reset_a_late_and_a_duplicate_datagram() {
     let pcap = dir.join("reset.pcap");
     let (src, dst) = box_addresses();
     write_pcap(&pcap, &payloads, src, dst);
-    let frames = |filter: &str| -> Vec<u64> {
-        frames_with(&plugin, &pcap, filter, "frame.number")
-            .into_iter()
-            .map(|(n, _)| n)
-            .collect()
-    };
+    let frames = |filter: &str| frame_numbers(&plugin, &pcap, filter);
     assert_eq!(frames("skinbox.expert.sequence_late"), [4]);
     assert_eq!(frames("skinbox.expert.sequence_duplicate"), [6]);
     assert_eq!(frames("skinbox.expert.sequence_restart"), [restart_frame]);
