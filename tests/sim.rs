@@ -56,6 +56,7 @@ fn idle_scene_through_the_box_to_a_decoded_pcap() {
     // everything on the pins arrived, the box counted it, the host decoded it
     assert_eq!(r["packets_delivered"].as_u64(), Some(sent));
     assert_eq!(r["records_corrupted"].as_u64(), Some(0));
+    assert_eq!(r["records_mistimed"].as_u64(), Some(0));
     assert_eq!(r["box_packets_good"].as_u64(), Some(sent));
     assert_eq!(r["host"]["records"].as_u64(), Some(sent));
     assert!(r["ts_error_max_ticks"].as_f64().unwrap() < 1.0);

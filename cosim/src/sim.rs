@@ -67,6 +67,9 @@ pub struct SimReport {
     pub packets_delivered: u64,
     /// Records whose cell bytes match no packet sent on their port (must be 0).
     pub records_corrupted: u64,
+    /// Packets delivered with their bytes intact but a stamp more than one tick from their
+    /// true start edge (must be 0): a wrong time the packet checks cannot see.
+    pub records_mistimed: u64,
     /// Packets sent but not delivered (the box's counters must explain them).
     pub dropped: u64,
     /// Good packets the box counted, from the last status report, summed over ports.
@@ -231,6 +234,9 @@ pub(crate) fn analyse(
                             let stamp_ns = (r.tick(datagram.base_tick) + TICK_ZERO_CYCLE) as f64
                                 * TICK_NS as f64;
                             let error = (stamp_ns - true_start_ns) / TICK_NS as f64;
+                            if error.abs() > 1.0 {
+                                report.records_mistimed += 1;
+                            }
                             report.ts_error_max_ticks = report.ts_error_max_ticks.max(error);
                             error_sum += error;
                             error_count += 1;

@@ -9,9 +9,10 @@
 //! Output: one stream packet per header seen, 24 beats when complete: the packet's start
 //! tick (the box time at the receiver's `start` of its header byte, low 32 bits, most
 //! significant byte first), then the 20 cell bytes. The deframer keeps the one time
-//! register of its port: outside a packet it takes the time at every start edge, so when a
-//! header arrives it holds the header's; inside a packet it is left alone (and shifted out
-//! as the tick beats). A rejected packet ends early or on its 20th byte with
+//! register of its port: it takes the time at every start edge while no tick beats go out,
+//! so when a header arrives it holds the header's, even when that header started before
+//! the previous packet's last byte was taken (a fast line); then it is shifted out as the
+//! tick beats. A rejected packet ends early or on its 20th byte with
 //! `last` and `error`, so a buffer that stored its beats discards them. The sink must take
 //! each beat within one byte time (the [`crate::packet_store::PacketStore`] takes one
 //! every round of its write ring, at most 32 clocks); the deframer has no room for more.
@@ -103,6 +104,7 @@ pub struct CellDeframer {
     truncated: Signal<Local, Bit>,
     end_byte_good: Signal<Local, Bit>,
     tick_beats_next: Signal<Local, Bits<3>>,
+    header_taken: Signal<Local, Bit>,
     pending_next: Signal<Local, Bit>,
 }
 
@@ -159,6 +161,7 @@ impl CellDeframer {
             truncated: Default::default(),
             end_byte_good: Default::default(),
             tick_beats_next: Default::default(),
+            header_taken: Default::default(),
             pending_next: Default::default(),
         }
     }
@@ -218,11 +221,14 @@ impl Logic for CellDeframer {
         } else if self.pending.q.val() & self.packets.ready.val() {
             self.pending_next.next = false;
         }
-        // the time of every start edge outside a packet: the header's when it comes (the
-        // tick beats of the previous packet went out a byte time before its end). A packet
-        // truncated in this very clock is over too: its idle gap was reached before this
-        // start edge restarted the receiver's bit count.
-        if self.input_start.q.val() & (!self.in_packet.q.val() | self.input_gap.q.val()) {
+        // the time of every start edge while no tick beats go out: when a header's strobe
+        // comes, it holds that header's start, since no start edge falls between a byte's
+        // start and its strobe. Inside a packet or not: on a fast line the next packet's
+        // header can start before the previous packet's last strobe has closed it. Not in
+        // the clock a header is taken (the next start edge can come that very clock).
+        self.header_taken.next =
+            self.input_strobe.q.val() & !self.in_packet.q.val() & self.input_is_header.q.val();
+        if self.input_start.q.val() & !self.tick_out.q.val() & !self.header_taken.val() {
             self.tick_shift.d.next = self.tick.val();
         }
 
@@ -360,6 +366,13 @@ mod tests {
     type Out = (u32, Vec<u8>, bool);
 
     fn run(inputs: &[Input], ready_pattern: &[bool]) -> (Vec<Out>, Counts) {
+        run_with_tail(inputs, ready_pattern, 16)
+    }
+
+    /// `tail`: clocks from a byte's strobe to the next start edge the receiver can report
+    /// (16 on a line at the nominal rate; 0, the same clock, on a line near the receiver's
+    /// fast limit, where the stop bit's middle is sampled just before the next start edge).
+    fn run_with_tail(inputs: &[Input], ready_pattern: &[bool], tail: u64) -> (Vec<Out>, Counts) {
         let framing = CellFraming::DEFAULT;
         let mut bench = Bench::new(CellDeframer::new(framing, GAP_BITS), |b| &mut b.clock);
         bench.uut.reset.next = true;
@@ -420,6 +433,8 @@ mod tests {
                 assert_eq!(events & 2, 0, "the deframer drops nothing");
                 bench.cycle();
             };
+        // a strobe that falls in the clock of the next start edge (tail 0)
+        let mut deferred: Option<(u8, bool)> = None;
         for input in inputs {
             // a byte: its start edge, 20 clocks of reception, the byte at the middle of the
             // stop bit, and the rest of the stop bit (the next start edge comes no earlier)
@@ -431,21 +446,31 @@ mod tests {
             match *input {
                 Input::Byte(..) | Input::Broken(_) => {
                     let (tick, b, broken) = byte.expect("a byte");
-                    step(&mut bench, Some(tick), None);
+                    step(&mut bench, Some(tick), deferred.take());
                     for _ in 0..20 {
                         step(&mut bench, None, None);
                     }
-                    step(&mut bench, None, Some((b, broken)));
-                    for _ in 0..15 {
-                        step(&mut bench, None, None);
+                    if tail == 0 {
+                        deferred = Some((b, broken));
+                    } else {
+                        step(&mut bench, None, Some((b, broken)));
+                        for _ in 1..tail {
+                            step(&mut bench, None, None);
+                        }
                     }
                 }
                 Input::Idle(clocks) => {
+                    if let Some(strobe) = deferred.take() {
+                        step(&mut bench, None, Some(strobe));
+                    }
                     for _ in 0..clocks {
                         step(&mut bench, None, None);
                     }
                 }
             }
+        }
+        if let Some(strobe) = deferred.take() {
+            step(&mut bench, None, Some(strobe));
         }
         for _ in 0..40 {
             step(&mut bench, None, None);
@@ -507,6 +532,30 @@ mod tests {
                     ..Default::default()
                 }
             );
+        }
+    }
+
+    /// On a fast line the next header's start edge comes right at the previous packet's
+    /// last strobe, before that strobe has closed the packet: the header keeps its own tick.
+    #[test]
+    fn a_header_starting_at_the_last_strobe_keeps_its_tick() {
+        let mut inputs = bytes(&data_packet(1), 1000);
+        inputs.extend(bytes(&event_packet(2), 7000));
+        inputs.extend(bytes(&data_packet(3), 13000));
+        for tail in [0, 1, 2, 3, 4] {
+            for ready in [&[true][..], &[true, true, false], &[false, true]] {
+                let (packets, counts) = run_with_tail(&inputs, ready, tail);
+                assert_eq!(
+                    packets,
+                    vec![
+                        (1000, data_packet(1).to_vec(), false),
+                        (7000, event_packet(2).to_vec(), false),
+                        (13000, data_packet(3).to_vec(), false),
+                    ],
+                    "tail {tail}, ready {ready:?}"
+                );
+                assert_eq!(counts.good, 3);
+            }
         }
     }
 

@@ -197,8 +197,8 @@ fn print_summary(o: &Output) {
         o.packets_offered_by_cells, o.packets_dropped_at_bus_roots, s.packets_sent
     );
     println!(
-        "box:    {} frames ({} records, {} status), {} records; {} of {} packets delivered, {} corrupted",
-        s.frames, s.record_datagrams, s.status_datagrams, s.records, s.packets_delivered, s.packets_sent, s.records_corrupted
+        "box:    {} frames ({} records, {} status), {} records; {} of {} packets delivered, {} corrupted, {} mistimed",
+        s.frames, s.record_datagrams, s.status_datagrams, s.records, s.packets_delivered, s.packets_sent, s.records_corrupted, s.records_mistimed
     );
     let losses: Vec<String> = s
         .losses_by_cause
