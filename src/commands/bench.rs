@@ -68,6 +68,10 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 100.0 * r.harness_fraction_of_bare
             );
             println!(
+                "line rate: every port's UART busy (clock errors -1 .. +1 %): {} packets sent, {} delivered in the run",
+                r.packets_sent, r.packets_delivered
+            );
+            println!(
                 "reference model on the same line-rate traffic: {:.0} M cycles/s, {:.0} x the harness",
                 r.line_rate_reference_cycles_per_second / 1e6,
                 r.line_rate_reference_speedup,
