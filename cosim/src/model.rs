@@ -39,7 +39,7 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CosimError + '_ {
     }
 }
 
-/// Verilator flags for every model (DESIGN.md section 6); `--threads 1` because more threads
+/// Verilator flags for every model (docs/design.md section 6); `--threads 1` because more threads
 /// slow a design this small down.
 pub const VERILATOR_FLAGS: &[&str] = &[
     "--cc",

@@ -14,7 +14,7 @@
 //!   the sampling edge inside the data eye (see `constraints/colorlight_i5.lpf` for the
 //!   source). A PHY without that delay would need the clock shifted by 90 degrees (2 ns).
 //! - PHY reset: `eth_rst_n` stays low until the PLL has been locked for [`PHY_RESET_CLOCKS`]
-//!   clocks (16.8 ms, more than the 10 ms the design brief asks for), and the box stays in
+//!   clocks (16.8 ms, more than the 10 ms of docs/design.md section 9), and the box stays in
 //!   reset until then too, so its first status datagram is not sent into a PHY in reset.
 //!   Losing lock starts the sequence again.
 //! - one status LED (active low): dark until the PHY reset ends; then a 1 Hz heartbeat (bit 26

@@ -208,7 +208,7 @@ fn baud(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             })
             .chain([-4.0, 4.0].map(|x| chart::Series {
                 label: if x < 0.0 {
-                    "+-4 % (DESIGN.md requirement)".into()
+                    "+-4 % (requirement, docs/design.md section 4)".into()
                 } else {
                     String::new()
                 },

@@ -1,4 +1,4 @@
-//! The closed-form rate model: the third fidelity level of DESIGN.md section 6. Rates and
+//! The closed-form rate model: the third fidelity level of docs/design.md section 6. Rates and
 //! loads of a whole skin from a handful of numbers, with no time loop, for sweeps over
 //! millions of cells.
 //!
@@ -144,10 +144,10 @@ mod tests {
 
     #[test]
     fn wire_sizes_match_the_design_figures() {
-        // DESIGN.md section 5: 55 records, 1520 bytes on the wire with preamble and gap.
+        // docs/design.md section 5: 55 records, 1520 bytes on the wire with preamble and gap.
         assert_eq!(MAX_RECORDS, 55);
         assert_eq!(records_frame_wire_bytes(55.0), 1520.0);
-        // The original box: a minimum frame, 1.45 M datagrams/s (DESIGN.md section 2).
+        // The original box: a minimum frame, 1.45 M datagrams/s (docs/design.md section 2).
         assert_eq!(original_frame_wire_bytes(), 86.0);
         let original = original_capacity_records_per_s();
         assert!((1.44e6..1.5e6).contains(&original), "{original}");

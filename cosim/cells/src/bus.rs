@@ -1,6 +1,6 @@
 //! A bus: a chain of up to 66 cells relaying their packets to one UART port of the box.
 //!
-//! Model (DESIGN.md section 7): a packet sampled at `sample_time` is ready in its cell after
+//! Model (docs/design.md section 7): a packet sampled at `sample_time` is ready in its cell after
 //! a processing latency, then needs one hop latency per relaying cell to reach the root cell
 //! (the one wired to the box). The root holds a FIFO and sends back to back on its UART:
 //! 8N1, 10 bits per byte, 200 bits per 20-byte packet, 50 us at 4 Mbit/s, so at most 20,000
