@@ -323,23 +323,28 @@ impl DatagramRepr {
         }
     }
 
-    fn entries(&self) -> usize {
-        match &self.body {
+    /// Entries [`DatagramRepr::emit`] writes: those of the body, at most
+    /// [`DatagramKind::max_entries`].
+    pub fn written_entries(&self) -> usize {
+        let entries = match &self.body {
             DatagramBody::Records(r) => r.len(),
             DatagramBody::Status(s) => s.ports.len(),
-        }
+        };
+        entries.min(self.kind().max_entries())
     }
 
-    /// Bytes [`DatagramRepr::emit`] writes.
+    /// Bytes [`DatagramRepr::emit`] writes: the header and the written entries.
     pub fn buffer_len(&self) -> usize {
-        self.kind().payload_len(self.entries())
+        self.kind().payload_len(self.written_entries())
     }
 
     /// Writes the datagram into `buffer[..buffer_len()]`. Entries past the most one
-    /// datagram holds are not written (and not counted), so the output always parses.
+    /// datagram holds are neither written nor counted (see [`DatagramRepr::written_entries`]),
+    /// so the output parses whenever every port is below `port_count`, to this datagram
+    /// without the entries left out.
     pub fn emit(&self, buffer: &mut [u8]) {
         let kind = self.kind();
-        let entries = self.entries().min(kind.max_entries());
+        let entries = self.written_entries();
         let b = &mut buffer[..kind.payload_len(entries)];
         b[field::MAGIC].copy_from_slice(&MAGIC);
         b[field::VERSION] = VERSION;
