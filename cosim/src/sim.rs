@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 #[derive(Debug, Clone, PartialEq)]
 pub struct SentPacket {
     /// The 20 bytes.
-    pub bytes: [u8; 20],
+    pub bytes: [u8; PACKET_LEN],
     /// Falling edge of the first start bit at the box pin, ns from the simulation start.
     pub start_ns: f64,
     /// Bit length of the sending UART, ns.

@@ -11,6 +11,7 @@ use skinbox_cosim::sim::RESET_CYCLES;
 use skinbox_cosim::traffic::random_data_packets;
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::DatagramRepr;
@@ -40,7 +41,7 @@ fn run(error_percent: f64) -> (usize, usize, u32) {
         predict_frames(&config, &[line], cycles).unwrap() == frames,
         "reference and RTL differ at {error_percent} %"
     );
-    let sent: HashSet<[u8; 20]> = sent.into_iter().collect();
+    let sent: HashSet<[u8; PACKET_LEN]> = sent.into_iter().collect();
     let (mut intact, mut corrupted, mut rejected) = (0, 0, 0);
     for f in &frames {
         let (_, payload) = check(&f.bytes).unwrap();

@@ -36,7 +36,7 @@ pub mod verilog;
 #[cfg(test)]
 pub(crate) mod testbench;
 
-/// Clock of the box: the GMII transmit clock.
-pub const CLOCK_HZ: u64 = 125_000_000;
+/// Clock of the box: the GMII transmit clock, one tick of the box time per clock.
+pub const CLOCK_HZ: u64 = skinbox_protocol::TICKS_PER_SECOND;
 /// UART rate of the skin cells.
-pub const CELL_BAUD: u64 = 4_000_000;
+pub const CELL_BAUD: u64 = skinbox_protocol::cell::UART_BAUD;

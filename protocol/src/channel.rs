@@ -70,7 +70,7 @@ impl Channel {
     ];
 
     /// Position in mask-bit order (0..9).
-    pub fn index(self) -> usize {
+    pub const fn index(self) -> usize {
         self as usize
     }
 

@@ -43,8 +43,9 @@ pub const MAGIC: [u8; 2] = *b"SK";
 pub const VERSION: u8 = 1;
 /// Length of the datagram header.
 pub const HEADER_LEN: usize = field::RESERVED.end;
-/// Largest UDP payload of a 1500-byte IPv4 packet.
-pub const MAX_PAYLOAD_LEN: usize = 1500 - 20 - 8;
+/// Largest UDP payload of an IPv4 packet of [`MTU`](crate::link::MTU) bytes: 1472.
+pub const MAX_PAYLOAD_LEN: usize =
+    crate::link::MTU - crate::link::IPV4_HEADER_LEN - crate::link::UDP_HEADER_LEN;
 /// Most records in one datagram.
 pub const MAX_RECORDS: usize = (MAX_PAYLOAD_LEN - HEADER_LEN) / RECORD_LEN;
 /// Most port counter blocks in one status datagram.

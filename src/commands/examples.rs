@@ -78,7 +78,7 @@ fn examples() -> anyhow::Result<Vec<Example>> {
             cell_packet: *cell,
         })
         .collect();
-    let base_tick = 125_000_000 * 12 + 4_321;
+    let base_tick = TICKS_PER_SECOND * 12 + 4_321;
     let datagram = DatagramRepr {
         box_id: 1,
         port_count: 8,

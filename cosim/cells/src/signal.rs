@@ -13,10 +13,10 @@ use crate::scene::{ForceStandConfig, HammerConfig, MotionConfig, SceneConfig, St
 use core::f64::consts::{PI, TAU};
 use skinbox_protocol::Channel;
 
-const AX: usize = 0;
-const F1: usize = 3;
-const PROX: usize = 6;
-const T1: usize = 7;
+const AX: usize = Channel::AccelX.index();
+const F1: usize = Channel::Force1.index();
+const PROX: usize = Channel::Proximity.index();
+const T1: usize = Channel::Temperature1.index();
 
 /// Where a cell sits on the limb.
 #[derive(Debug, Clone, Copy)]
