@@ -23,7 +23,6 @@ pub mod crc32;
 pub mod frame_transmitter;
 pub mod hdl;
 pub mod interface_box;
-pub mod lut_ram;
 pub mod packet_store;
 pub mod replica_register;
 pub mod status_reporter;
