@@ -124,13 +124,7 @@ struct SceneSpeeds {
 
 /// RTL and reference on [`SCENE`], fastest of `rounds`.
 fn scene_speeds(rounds: u32) -> Result<SceneSpeeds, CosimError> {
-    let spec =
-        crate::scene::builtin_spec(SCENE, 1_000_000_000, 20_000_000, 625_000).map_err(|e| {
-            CosimError::Tool {
-                step: "generating the bench scene",
-                output: e.to_string(),
-            }
-        })?;
+    let spec = crate::scene::builtin_spec(SCENE, 1_000_000_000, 20_000_000, 625_000)?;
     let (lines, _) = crate::sim::lines(&spec);
     let cycles = crate::sim::cycles(&spec);
     let model = Model::build(&spec.config, false, &default_cache_dir())?;

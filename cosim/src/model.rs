@@ -20,6 +20,21 @@ pub enum CosimError {
     /// Verilator, the C++ compiler or the linker failed.
     #[error("{step} failed:\n{output}")]
     Tool { step: &'static str, output: String },
+    /// A frame failed the independent checks, or a predicted frame could not be encoded.
+    #[error("{step}: {source}")]
+    Frame {
+        step: &'static str,
+        source: skinbox_frame_check::FrameError,
+    },
+    /// A frame's UDP payload is not a box datagram.
+    #[error("parsing a datagram: {0}")]
+    Datagram(#[from] skinbox_protocol::Error),
+    /// Writing the pcap file failed.
+    #[error("writing the pcap: {0}")]
+    Pcap(String),
+    /// A scene could not be loaded or generated.
+    #[error(transparent)]
+    Scene(#[from] skinbox_cells::scene::SceneError),
     /// Reading or writing the cache.
     #[error("{path}: {source}")]
     Io {

@@ -195,7 +195,7 @@ pub(crate) fn analyse(
                     source,
                 },
             )?)
-            .map_err(|e| tool("writing the pcap", e))?,
+            .map_err(pcap_error)?,
         ),
         None => None,
     };
@@ -210,12 +210,15 @@ pub(crate) fn analyse(
     let (mut error_sum, mut error_count) = (0.0, 0u64);
     let mut datagrams = Vec::with_capacity(frames.len());
     for frame in frames {
-        let (ethernet, payload) = check(&frame.bytes).map_err(|e| tool("checking a frame", e))?;
+        let (ethernet, payload) = check(&frame.bytes).map_err(|source| CosimError::Frame {
+            step: "checking a frame",
+            source,
+        })?;
         if let Some(pcap) = &mut pcap {
             pcap.write_frame(Duration::from_nanos(frame.first_cycle * TICK_NS), ethernet)
-                .map_err(|e| tool("writing the pcap", e))?;
+                .map_err(pcap_error)?;
         }
-        let datagram = DatagramRepr::parse(payload).map_err(|e| tool("parsing a datagram", e))?;
+        let datagram = DatagramRepr::parse(payload)?;
         match &datagram.body {
             DatagramBody::Records(records) => {
                 report.record_datagrams += 1;
@@ -249,7 +252,7 @@ pub(crate) fn analyse(
         datagrams.push(datagram);
     }
     if let Some(pcap) = pcap {
-        pcap.finish().map_err(|e| tool("writing the pcap", e))?;
+        pcap.finish().map_err(pcap_error)?;
     }
     report.ts_error_mean_ticks = if error_count > 0 {
         error_sum / error_count as f64
@@ -278,9 +281,77 @@ pub(crate) fn analyse(
     })
 }
 
-fn tool(step: &'static str, e: impl std::fmt::Display) -> CosimError {
-    CosimError::Tool {
-        step,
-        output: e.to_string(),
+fn pcap_error(e: impl std::fmt::Display) -> CosimError {
+    CosimError::Pcap(e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinbox_frame_check::{encode, UdpAddresses};
+
+    fn spec() -> SimSpec {
+        SimSpec {
+            config: BoxConfig::default(),
+            ports: vec![Vec::new(); 8],
+            duration_ns: 1_000,
+            pcap: None,
+            vcd: None,
+            jitter: Jitter::NONE,
+        }
+    }
+
+    /// A frame as the box would send it, built by frame-check's encoder.
+    fn frame(payload: &[u8]) -> Frame {
+        let link = BoxConfig::default().link;
+        let addresses = UdpAddresses {
+            source_mac: link.box_mac,
+            destination_mac: link.host_mac,
+            source_ip: link.box_ip,
+            destination_ip: link.host_ip,
+            source_port: link.box_port,
+            destination_port: link.host_port,
+        };
+        Frame {
+            first_cycle: 10,
+            bytes: encode(&addresses, payload).unwrap(),
+        }
+    }
+
+    #[test]
+    fn analysis_names_a_bad_frame_and_a_payload_that_is_no_datagram() {
+        let status = DatagramRepr {
+            box_id: 1,
+            port_count: 8,
+            flags: 0,
+            sequence: 0,
+            base_tick: 0,
+            body: DatagramBody::Status(skinbox_protocol::StatusRepr {
+                boot_id: 1,
+                datagrams_sent: 0,
+                records_sent: 0,
+                first_port: 0,
+                ports: vec![PortCounters::default(); 8],
+            }),
+        };
+        let good = frame(&status.to_bytes());
+        let run = analyse(&spec(), std::slice::from_ref(&good), &[], 0.0).unwrap();
+        assert_eq!(run.report.status_datagrams, 1);
+
+        let mut bad_fcs = good.clone();
+        *bad_fcs.bytes.last_mut().unwrap() ^= 1;
+        assert!(matches!(
+            analyse(&spec(), &[bad_fcs], &[], 0.0),
+            Err(CosimError::Frame {
+                step: "checking a frame",
+                ..
+            })
+        ));
+        assert!(matches!(
+            analyse(&spec(), &[frame(&[0; 40])], &[], 0.0),
+            Err(CosimError::Datagram(
+                skinbox_protocol::Error::BadMagic { .. }
+            ))
+        ));
     }
 }

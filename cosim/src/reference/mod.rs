@@ -22,7 +22,7 @@
 mod back;
 mod front;
 
-use crate::frames::{Frame, FrameError};
+use crate::frames::Frame;
 use crate::line::Transition;
 use crate::model::CosimError;
 use crate::sim::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
@@ -135,12 +135,11 @@ fn predict_frames_with_progress(
     };
     let mut frames = Vec::with_capacity(back.frames.len());
     for f in &back.frames {
-        let mut bytes = encode(&addresses, &f.datagram.to_bytes()).map_err(|e: FrameError| {
-            CosimError::Tool {
+        let mut bytes =
+            encode(&addresses, &f.datagram.to_bytes()).map_err(|source| CosimError::Frame {
                 step: "encoding a predicted frame",
-                output: e.to_string(),
-            }
-        })?;
+                source,
+            })?;
         // the run ends at cycle `end`: a frame still going is cut there, as on the pins
         let room = (end + 1).saturating_sub(f.first_cycle) as usize;
         bytes.truncate(room);
