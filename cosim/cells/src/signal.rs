@@ -8,8 +8,8 @@
 //! The cells lie on the limb as a grid: `columns` cells around it, rows along it, `pitch`
 //! apart. A region is a range of row fractions (0 = shoulder, 1 = end effector).
 
+use crate::config::{ForceStandConfig, HammerConfig, MotionConfig, SceneConfig, StrokeConfig};
 use crate::rng::Rng;
-use crate::scene::{ForceStandConfig, HammerConfig, MotionConfig, SceneConfig, StrokeConfig};
 use core::f64::consts::{PI, TAU};
 use skinbox_protocol::Channel;
 
