@@ -1,10 +1,11 @@
 //! Speed of the co-simulation: the full harness against the bare model loop and the
 //! reference model, same design and traffic, measured in one run.
 
+use crate::error::CosimError;
 use crate::frames::assemble;
 use crate::harness::play;
 use crate::line::{back_to_back, transitions};
-use crate::model::{default_cache_dir, CosimError, Model};
+use crate::model::{default_cache_dir, Model};
 use crate::reference::predict_frames;
 use crate::sim::RESET_CYCLES;
 use crate::Dut;

@@ -15,6 +15,7 @@
 pub mod bench;
 mod binding;
 pub mod dut;
+pub mod error;
 pub mod frames;
 pub mod harness;
 pub mod line;
@@ -25,4 +26,5 @@ pub mod sim;
 pub mod traffic;
 
 pub use dut::{Dut, GmiiByte};
-pub use model::{CosimError, Model};
+pub use error::CosimError;
+pub use model::Model;

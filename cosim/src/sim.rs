@@ -1,9 +1,10 @@
 //! One co-simulation run: packets on the box's UART pins, frames out, everything checked.
 
+use crate::error::CosimError;
 use crate::frames::{assemble, check, min_gap, Frame};
 use crate::harness::play_with_progress;
 use crate::line::{back_to_back, jittered_transitions, Jitter, Transition, UartByte};
-use crate::model::{default_cache_dir, CosimError, Model};
+use crate::model::{default_cache_dir, Model};
 use crate::Dut;
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::cell::PACKET_LEN;

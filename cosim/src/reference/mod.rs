@@ -22,9 +22,9 @@
 mod back;
 mod front;
 
+use crate::error::CosimError;
 use crate::frames::Frame;
 use crate::line::Transition;
-use crate::model::CosimError;
 use crate::sim::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
 use back::{Back, BackTiming};
 use front::{port_front, FrontTiming, PortFront};
