@@ -7,7 +7,7 @@ use crate::harness::play;
 use crate::line::{back_to_back, transitions};
 use crate::model::{default_cache_dir, Model};
 use crate::reference::predict_frames;
-use crate::sim::RESET_CYCLES;
+use crate::run::RESET_CYCLES;
 use crate::Dut;
 use skinbox_gateware::interface_box::BoxConfig;
 use std::time::Instant;
@@ -126,8 +126,8 @@ struct SceneSpeeds {
 /// RTL and reference on [`SCENE`], fastest of `rounds`.
 fn scene_speeds(rounds: u32) -> Result<SceneSpeeds, CosimError> {
     let spec = crate::scene::builtin_spec(SCENE, 1_000_000_000, 20_000_000, 625_000)?;
-    let (lines, _) = crate::sim::lines(&spec);
-    let cycles = crate::sim::cycles(&spec);
+    let (lines, _) = crate::run::lines(&spec);
+    let cycles = crate::run::cycles(&spec);
     let model = Model::build(&spec.config, false, &default_cache_dir())?;
     let (mut rtl, mut reference, mut agrees) = (0.0f64, 0.0f64, true);
     for _ in 0..rounds.max(1) {

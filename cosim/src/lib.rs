@@ -21,6 +21,7 @@ pub mod harness;
 pub mod line;
 pub mod model;
 pub mod reference;
+pub mod run;
 pub mod scene;
 pub mod sim;
 pub mod traffic;

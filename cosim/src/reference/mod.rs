@@ -25,7 +25,7 @@ mod front;
 use crate::error::CosimError;
 use crate::frames::Frame;
 use crate::line::Transition;
-use crate::sim::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
+use crate::run::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
 use back::{Back, BackTiming};
 use front::{port_front, FrontTiming, PortFront};
 use skinbox_frame_check::{encode, UdpAddresses};
@@ -63,7 +63,7 @@ pub fn run_reference_with_progress(
 }
 
 /// The frames the box sends when its pins carry `lines` (one transition list per port, as
-/// the RTL harness plays them, after [`crate::sim::RESET_CYCLES`] of reset) for `cycles` clocks: each
+/// the RTL harness plays them, after [`crate::run::RESET_CYCLES`] of reset) for `cycles` clocks: each
 /// frame preamble to FCS with the cycle of its first byte, cut where the run ends.
 pub fn predict_frames(
     config: &BoxConfig,
