@@ -203,7 +203,11 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
     assert_eq!(finding(&c4a[0], "every packet delivered"), "-4.0 .. +4.0");
     assert_eq!(finding(&c4a[0], "largest share corrupted"), "0.0");
     for r in &c4a[1] {
-        assert_eq!(num(r, "corrupted or mistimed but delivered (%)"), 0.0, "{r:?}");
+        assert_eq!(
+            num(r, "corrupted or mistimed but delivered (%)"),
+            0.0,
+            "{r:?}"
+        );
         let e = num(r, "baud error (%)");
         if e.abs() <= 4.0 {
             assert_eq!(num(r, "good (%)"), 100.0, "{r:?}");

@@ -1,12 +1,13 @@
 //! Speed of the co-simulation: the full harness against the bare model loop and the
 //! reference model, same design and traffic, measured in one run.
 
+use crate::error::CosimError;
 use crate::frames::assemble;
 use crate::harness::play;
 use crate::line::{back_to_back, transitions};
-use crate::model::{default_cache_dir, CosimError, Model};
+use crate::model::{default_cache_dir, Model};
 use crate::reference::predict_frames;
-use crate::sim::RESET_CYCLES;
+use crate::run::RESET_CYCLES;
 use crate::Dut;
 use skinbox_gateware::interface_box::BoxConfig;
 use std::time::Instant;
@@ -146,18 +147,14 @@ fn records_in(frames: &[crate::frames::Frame]) -> Result<u64, CosimError> {
         let payload = match crate::frames::check(&f.bytes) {
             Ok((_, payload)) => payload,
             Err(_) if i + 1 == frames.len() => break,
-            Err(e) => {
-                return Err(CosimError::Tool {
+            Err(source) => {
+                return Err(CosimError::Frame {
                     step: "checking a bench frame",
-                    output: e.to_string(),
+                    source,
                 })
             }
         };
-        let datagram =
-            skinbox_protocol::DatagramRepr::parse(payload).map_err(|e| CosimError::Tool {
-                step: "parsing a bench datagram",
-                output: e.to_string(),
-            })?;
+        let datagram = skinbox_protocol::DatagramRepr::parse(payload)?;
         if let skinbox_protocol::datagram::DatagramBody::Records(r) = datagram.body {
             records += r.len() as u64;
         }
@@ -175,15 +172,9 @@ struct SceneSpeeds {
 
 /// RTL and reference on [`SCENE`], fastest of `rounds`.
 fn scene_speeds(rounds: u32) -> Result<SceneSpeeds, CosimError> {
-    let spec =
-        crate::scene::builtin_spec(SCENE, 1_000_000_000, 20_000_000, 625_000).map_err(|e| {
-            CosimError::Tool {
-                step: "generating the bench scene",
-                output: e.to_string(),
-            }
-        })?;
-    let (lines, _) = crate::sim::lines(&spec);
-    let cycles = crate::sim::cycles(&spec);
+    let spec = crate::scene::builtin_spec(SCENE, 1_000_000_000, 20_000_000, 625_000)?;
+    let (lines, _) = crate::run::lines(&spec);
+    let cycles = crate::run::cycles(&spec);
     let model = Model::build(&spec.config, false, &default_cache_dir())?;
     let (mut rtl, mut reference, mut agrees) = (0.0f64, 0.0f64, true);
     for _ in 0..rounds.max(1) {

@@ -5,7 +5,7 @@
 //! time (it is not `Sync`), and freed once, on drop; buffers passed to `run` are checked
 //! for length here.
 
-use crate::model::CosimError;
+use crate::error::CosimError;
 use std::ffi::{c_char, c_void, CString};
 use std::path::Path;
 

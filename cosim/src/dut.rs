@@ -1,7 +1,8 @@
 //! A safe handle to one simulated box.
 
 use crate::binding::Instance;
-use crate::model::{CosimError, Model};
+use crate::error::CosimError;
+use crate::model::Model;
 use std::path::Path;
 use std::sync::Arc;
 

@@ -15,14 +15,17 @@
 pub mod bench;
 mod binding;
 pub mod dut;
+pub mod error;
 pub mod frames;
 pub mod harness;
 pub mod line;
 pub mod model;
 pub mod reference;
+pub mod run;
 pub mod scene;
 pub mod sim;
 pub mod traffic;
 
 pub use dut::{Dut, GmiiByte};
-pub use model::{CosimError, Model};
+pub use error::CosimError;
+pub use model::Model;

@@ -1,36 +1,13 @@
 //! Building, caching and loading verilated models of the box.
 
 use crate::binding::Library;
-use skinbox_gateware::interface_box::{verilog, BoxConfig, ConfigError};
+use crate::error::CosimError;
+use sha2::{Digest, Sha256};
+use skinbox_gateware::interface_box::{verilog, BoxConfig};
 use skinbox_gateware::verilog::LINT_WAIVERS;
-use std::collections::hash_map::DefaultHasher;
-use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Arc, Mutex};
-
-/// Why a model could not be built or loaded.
-#[derive(Debug, thiserror::Error)]
-pub enum CosimError {
-    /// The box parameters are impossible.
-    #[error(transparent)]
-    Config(#[from] ConfigError),
-    /// Verilator is not installed.
-    #[error("verilator not found ({0}): install it with 'apt-get install -y verilator' (scripts/test and scripts/run do)")]
-    NoVerilator(std::io::Error),
-    /// Verilator, the C++ compiler or the linker failed.
-    #[error("{step} failed:\n{output}")]
-    Tool { step: &'static str, output: String },
-    /// Reading or writing the cache.
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    /// The shared library could not be loaded.
-    #[error("loading {path}: {message}")]
-    Load { path: PathBuf, message: String },
-}
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CosimError + '_ {
     move |source| CosimError::Io {
@@ -39,7 +16,7 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CosimError + '_ {
     }
 }
 
-/// Verilator flags for every model (DESIGN.md section 6); `--threads 1` because more threads
+/// Verilator flags for every model (docs/design.md section 6); `--threads 1` because more threads
 /// slow a design this small down.
 pub const VERILATOR_FLAGS: &[&str] = &[
     "--cc",
@@ -93,17 +70,25 @@ impl Model {
         trace: bool,
         cache_dir: &Path,
     ) -> Result<Arc<Model>, CosimError> {
-        let text = verilog(config)?;
-        let version = verilator_version()?;
-        let mut hasher = DefaultHasher::new();
-        (&text, trace, &version, SHIM_VERSION).hash(&mut hasher);
-        let dir = cache_dir.join(format!("box{}-{:016x}", config.ports, hasher.finish()));
+        let verilog = verilog(config)?;
+        let shim = shim_source(config.ports, trace);
+        let runtime = RuntimeInputs::of_this_machine(trace)?;
+        let runtime_key = runtime.key();
+        let key = ModelInputs {
+            verilog: &verilog,
+            shim: &shim,
+            verilator_args: &verilator_args(trace),
+            runtime_key: &runtime_key,
+        }
+        .key();
+        let dir = cache_dir.join(format!("box{}-{key}", config.ports));
         let library_path = dir.join("libbox.so");
         {
             let _guard = BUILD_LOCK.lock().unwrap_or_else(|e| e.into_inner());
             if !library_path.exists() {
-                let runtime = build_runtime(cache_dir, &version, trace)?;
-                let built = build_model(&text, config.ports, trace, &dir, &runtime);
+                let objects =
+                    build_runtime(&cache_dir.join(format!("runtime-{runtime_key}")), trace)?;
+                let built = build_model(&verilog, &shim, trace, &dir, &objects);
                 // a failed build leaves no scratch directory behind
                 std::fs::remove_dir_all(dir.with_extension(format!("tmp{}", std::process::id())))
                     .ok();
@@ -130,8 +115,136 @@ impl Model {
     }
 }
 
-/// Bumped when the shim changes, so cached models are rebuilt.
-const SHIM_VERSION: u32 = 1;
+/// A cache key: SHA-256 over named parts, each written as its name, a zero byte, its length
+/// (u64, little-endian) and its bytes, so that different inputs never hash the same bytes;
+/// the first 16 bytes of the digest in hex. Stable across Rust releases and machines.
+pub fn cache_key(parts: &[(&str, &[u8])]) -> String {
+    let mut hash = Sha256::new();
+    for (name, bytes) in parts {
+        hash.update(name.as_bytes());
+        hash.update([0]);
+        hash.update((bytes.len() as u64).to_le_bytes());
+        hash.update(bytes);
+    }
+    hash.finalize()[..16]
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Everything a model build reads: its cache key covers all of it.
+#[derive(Debug, Clone, Copy)]
+pub struct ModelInputs<'a> {
+    /// The box's Verilog.
+    pub verilog: &'a str,
+    /// The C++ shim's source.
+    pub shim: &'a str,
+    /// Verilator's arguments (flags and lint waivers).
+    pub verilator_args: &'a [String],
+    /// The key of the Verilator runtime it links ([`RuntimeInputs::key`]), which covers
+    /// Verilator's version and the C++ compiler.
+    pub runtime_key: &'a str,
+}
+
+impl ModelInputs<'_> {
+    /// The cache key of the model.
+    pub fn key(&self) -> String {
+        cache_key(&[
+            ("verilog", self.verilog.as_bytes()),
+            ("shim", self.shim.as_bytes()),
+            (
+                "verilator arguments",
+                self.verilator_args.join("\0").as_bytes(),
+            ),
+            ("runtime", self.runtime_key.as_bytes()),
+        ])
+    }
+}
+
+/// Everything a build of Verilator's runtime reads.
+#[derive(Debug, Clone)]
+pub struct RuntimeInputs {
+    /// `verilator --version`.
+    pub verilator_version: String,
+    /// The C++ compiler: its path, arguments and `--version`.
+    pub compiler: String,
+    /// Whether VCD tracing is compiled in.
+    pub trace: bool,
+    /// The runtime's source files (name, text).
+    pub sources: Vec<(String, Vec<u8>)>,
+}
+
+impl RuntimeInputs {
+    /// The inputs as found on this machine.
+    pub fn of_this_machine(trace: bool) -> Result<RuntimeInputs, CosimError> {
+        let compiler = compiler(Path::new(".")).get_compiler();
+        let version = compiler
+            .to_command()
+            .arg("--version")
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+            .unwrap_or_default();
+        let args: Vec<String> = compiler
+            .args()
+            .iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        let sources = runtime_sources(trace)
+            .into_iter()
+            .map(|path| {
+                let text = std::fs::read(&path).map_err(io(&path))?;
+                Ok((path.display().to_string(), text))
+            })
+            .collect::<Result<_, CosimError>>()?;
+        Ok(RuntimeInputs {
+            verilator_version: verilator_version()?,
+            compiler: format!(
+                "{}\n{}\n{}",
+                compiler.path().display(),
+                args.join(" "),
+                version
+            ),
+            trace,
+            sources,
+        })
+    }
+
+    /// The cache key of the runtime objects.
+    pub fn key(&self) -> String {
+        let mut parts: Vec<(&str, &[u8])> = vec![
+            ("verilator version", self.verilator_version.as_bytes()),
+            ("compiler", self.compiler.as_bytes()),
+            ("trace", if self.trace { b"1" } else { b"0" }),
+        ];
+        for (name, text) in &self.sources {
+            parts.push((name, text));
+        }
+        cache_key(&parts)
+    }
+}
+
+/// Verilator's runtime sources a model links.
+fn runtime_sources(trace: bool) -> Vec<PathBuf> {
+    let include = verilator_include();
+    let mut files = vec![
+        include.join("verilated.cpp"),
+        include.join("verilated_threads.cpp"),
+    ];
+    if trace {
+        files.push(include.join("verilated_vcd_c.cpp"));
+    }
+    files
+}
+
+/// Verilator's arguments besides the output directory and the source.
+fn verilator_args(trace: bool) -> Vec<String> {
+    let mut args: Vec<String> = VERILATOR_FLAGS.iter().map(|f| f.to_string()).collect();
+    args.extend(LINT_WAIVERS.iter().map(|w| format!("-Wno-{w}")));
+    if trace {
+        args.push("--trace".into());
+    }
+    args
+}
 
 fn verilator_version() -> Result<String, CosimError> {
     let out = Command::new("verilator")
@@ -174,25 +287,17 @@ fn tool_error(step: &'static str) -> impl FnOnce(cc::Error) -> CosimError {
     }
 }
 
-/// Verilator's runtime objects, compiled once per Verilator version and trace option.
-fn build_runtime(cache_dir: &Path, version: &str, trace: bool) -> Result<Vec<PathBuf>, CosimError> {
-    let mut hasher = DefaultHasher::new();
-    (version, trace).hash(&mut hasher);
-    let dir = cache_dir.join(format!("runtime-{:016x}", hasher.finish()));
+/// Verilator's runtime objects in `dir`, compiled once per [`RuntimeInputs::key`].
+fn build_runtime(dir: &Path, trace: bool) -> Result<Vec<PathBuf>, CosimError> {
     let list = dir.join("objects.txt");
     if let Ok(text) = std::fs::read_to_string(&list) {
         return Ok(text.lines().map(PathBuf::from).collect());
     }
-    std::fs::create_dir_all(&dir).map_err(io(&dir))?;
-    let include = verilator_include();
-    let mut build = compiler(&dir);
-    build
-        .file(include.join("verilated.cpp"))
-        .file(include.join("verilated_threads.cpp"));
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let mut build = compiler(dir);
+    build.files(runtime_sources(trace));
     if trace {
-        build
-            .file(include.join("verilated_vcd_c.cpp"))
-            .define("VM_TRACE", "1");
+        build.define("VM_TRACE", "1");
     }
     let objects = build
         .try_compile_intermediates()
@@ -205,7 +310,7 @@ fn build_runtime(cache_dir: &Path, version: &str, trace: bool) -> Result<Vec<Pat
 /// Verilates `verilog`, compiles it with the shim and links `dir/libbox.so`.
 fn build_model(
     verilog: &str,
-    ports: usize,
+    shim_text: &str,
     trace: bool,
     dir: &Path,
     runtime: &[PathBuf],
@@ -220,13 +325,7 @@ fn build_model(
     std::fs::write(&source, verilog).map_err(io(&source))?;
 
     let mut command = Command::new("verilator");
-    command.args(VERILATOR_FLAGS);
-    for waiver in LINT_WAIVERS {
-        command.arg(format!("-Wno-{waiver}"));
-    }
-    if trace {
-        command.arg("--trace");
-    }
+    command.args(verilator_args(trace));
     command.arg("-Mdir").arg(&obj).arg(&source);
     let out = command.output().map_err(CosimError::NoVerilator)?;
     if !out.status.success() {
@@ -237,7 +336,7 @@ fn build_model(
     }
 
     let shim = work.join("shim.cpp");
-    std::fs::write(&shim, shim_source(ports, trace)).map_err(io(&shim))?;
+    std::fs::write(&shim, shim_text).map_err(io(&shim))?;
     let mut build = compiler(&work);
     build.include(&obj).file(&shim);
     if trace {
@@ -388,4 +487,90 @@ uint64_t skinbox_run(void* p, uint64_t cycles, uint32_t* offsets, uint8_t* bytes
         vcd_member = if trace { "VerilatedVcdC* vcd;" } else { "" },
         vcd_init = if trace { "d->vcd = nullptr;" } else { "" },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cache_key_is_sha256_of_the_framed_parts() {
+        // Python's hashlib over the same framing: name, 0, length as u64 little-endian, bytes.
+        // sha256(b"verilog\0" + pack("<Q", 21) + b"module top; endmodule"
+        //        + b"trace\0" + pack("<Q", 1) + b"1")
+        assert_eq!(
+            cache_key(&[("verilog", b"module top; endmodule"), ("trace", b"1")]),
+            "611d621afb6a824a8a7c3ef66ca35191"
+        );
+        // No parts: the hash of nothing.
+        assert_eq!(cache_key(&[]), "e3b0c44298fc1c149afbf4c8996fb924");
+    }
+
+    #[test]
+    fn the_framing_keeps_parts_apart() {
+        let key = |a: &str, b: &str| cache_key(&[("a", a.as_bytes()), ("b", b.as_bytes())]);
+        assert_eq!(key("xy", "z"), key("xy", "z"));
+        assert_ne!(key("xy", "z"), key("x", "yz"));
+        assert_ne!(
+            cache_key(&[("a", b"1")]),
+            cache_key(&[("b", b"1")]),
+            "names count"
+        );
+    }
+
+    #[test]
+    fn every_input_changes_the_keys() {
+        let args = verilator_args(false);
+        let base = ModelInputs {
+            verilog: "module top; endmodule",
+            shim: "shim",
+            verilator_args: &args,
+            runtime_key: "runtime",
+        };
+        let traced = verilator_args(true);
+        let changed = [
+            ModelInputs {
+                verilog: "module top ; endmodule",
+                ..base
+            },
+            ModelInputs {
+                shim: "shim2",
+                ..base
+            },
+            ModelInputs {
+                verilator_args: &traced,
+                ..base
+            },
+            ModelInputs {
+                runtime_key: "runtime2",
+                ..base
+            },
+        ];
+        for other in changed {
+            assert_ne!(other.key(), base.key(), "{other:?}");
+        }
+        assert_eq!(ModelInputs { ..base }.key(), base.key());
+
+        let runtime = RuntimeInputs {
+            verilator_version: "Verilator 5.006".into(),
+            compiler: "c++ -O2".into(),
+            trace: false,
+            sources: vec![("verilated.cpp".into(), b"int x;".to_vec())],
+        };
+        let mut changed = vec![runtime.clone(); 4];
+        changed[0].verilator_version = "Verilator 5.048".into();
+        changed[1].compiler = "c++ -O3".into();
+        changed[2].trace = true;
+        changed[3].sources[0].1 = b"int y;".to_vec();
+        for other in changed {
+            assert_ne!(other.key(), runtime.key(), "{other:?}");
+        }
+    }
+
+    #[test]
+    fn the_shim_differs_with_ports_and_trace() {
+        // The shim is hashed as text, so its ports and trace option reach the key.
+        assert_ne!(shim_source(1, false), shim_source(2, false));
+        assert_ne!(shim_source(1, false), shim_source(1, true));
+    }
 }

@@ -1,7 +1,7 @@
 //! A scene of the cell models on the box's pins: one bus per port.
 
 use crate::line::Jitter;
-use crate::sim::{SentPacket, SimSpec};
+use crate::run::{SentPacket, SimSpec};
 use skinbox_cells::scene::{GenerateOptions, Generated, Scene};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::TICK_NS;

@@ -1,105 +1,17 @@
 //! One co-simulation run: packets on the box's UART pins, frames out, everything checked.
+//! The spec and the analysis are in [`crate::run`] (re-exported here); this module runs the
+//! verilated box and chooses between it and the reference model.
 
-use crate::frames::{assemble, check, min_gap, Frame};
+use crate::error::CosimError;
+use crate::frames::assemble;
 use crate::harness::play_with_progress;
-use crate::line::{back_to_back, jittered_transitions, Jitter, Transition, UartByte};
-use crate::model::{default_cache_dir, CosimError, Model};
+use crate::model::{default_cache_dir, Model};
+use crate::run::analyse;
+pub use crate::run::{
+    cycles, lines, SentPacket, SimReport, SimRun, SimSpec, RESET_CYCLES, TICK_ZERO_CYCLE,
+};
 use crate::Dut;
-use skinbox_gateware::interface_box::BoxConfig;
-use skinbox_protocol::cell::PACKET_LEN;
-use skinbox_protocol::datagram::DatagramBody;
-use skinbox_protocol::status::PortCounter;
-use skinbox_protocol::{DatagramRepr, PortCounters, TICK_NS};
-use std::collections::VecDeque;
-use std::path::PathBuf;
-use std::time::{Duration, Instant};
-
-/// One cell packet as it leaves the bus root on its way to a box pin.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SentPacket {
-    /// The 20 bytes.
-    pub bytes: [u8; 20],
-    /// Falling edge of the first start bit at the box pin, ns from the simulation start.
-    pub start_ns: f64,
-    /// Bit length of the sending UART, ns.
-    pub bit_ns: f64,
-}
-
-/// What to simulate.
-#[derive(Debug, Clone)]
-pub struct SimSpec {
-    /// Box parameters.
-    pub config: BoxConfig,
-    /// Packets per port, each port's in time order and not overlapping.
-    pub ports: Vec<Vec<SentPacket>>,
-    /// Simulated time, ns (the box also needs time to flush after the last packet).
-    pub duration_ns: u64,
-    /// Write the frames here.
-    pub pcap: Option<PathBuf>,
-    /// Write a VCD trace here (builds a traced model).
-    pub vcd: Option<PathBuf>,
-    /// Edge jitter of every line (seeded per port from `jitter.seed`).
-    pub jitter: Jitter,
-}
-
-/// Clock cycles the box is held in reset at the start.
-pub const RESET_CYCLES: u64 = 4;
-
-/// Cycles before box tick 0: the reset and the box's reset register
-/// ([`skinbox_gateware::interface_box::RESET_LATENCY`]). A stamp of tick `t` means the
-/// edge of cycle `t + TICK_ZERO_CYCLE`.
-pub const TICK_ZERO_CYCLE: u64 = RESET_CYCLES + skinbox_gateware::interface_box::RESET_LATENCY;
-
-/// What came out, checked.
-#[derive(Debug, Clone, Default, serde::Serialize)]
-pub struct SimReport {
-    /// Frames the box sent; every one passed the independent checks.
-    pub frames: u64,
-    /// Records datagrams.
-    pub record_datagrams: u64,
-    /// Status datagrams.
-    pub status_datagrams: u64,
-    /// Records received.
-    pub records: u64,
-    /// Packets put on the pins.
-    pub packets_sent: u64,
-    /// Packets sent that came back in a record unchanged.
-    pub packets_delivered: u64,
-    /// Records whose cell bytes match no packet sent on their port (must be 0).
-    pub records_corrupted: u64,
-    /// Packets delivered with their bytes intact but a stamp more than one tick from their
-    /// true start edge (must be 0): a wrong time the packet checks cannot see.
-    pub records_mistimed: u64,
-    /// Packets sent but not delivered (the box's counters must explain them).
-    pub dropped: u64,
-    /// Good packets the box counted, from the last status report, summed over ports.
-    pub box_packets_good: u64,
-    /// Losses by cause from the last status report, summed over ports.
-    pub losses_by_cause: Vec<(String, u64)>,
-    /// Largest stamp minus true start edge, in ticks (must be below 1).
-    pub ts_error_max_ticks: f64,
-    /// Mean stamp minus true start edge, in ticks.
-    pub ts_error_mean_ticks: f64,
-    /// Smallest gap between frames, clocks.
-    pub min_inter_frame_gap: Option<u64>,
-    /// Simulated seconds.
-    pub sim_seconds: f64,
-    /// Wall-clock seconds of the clock loop (model build excluded).
-    pub wall_seconds: f64,
-    /// Simulated clock cycles per wall second.
-    pub cycles_per_second: f64,
-}
-
-/// A finished run: the report and every datagram the box sent, in order.
-#[derive(Debug, Clone)]
-pub struct SimRun {
-    /// What came out, checked.
-    pub report: SimReport,
-    /// The box's datagrams (every frame passed the independent checks).
-    pub datagrams: Vec<DatagramRepr>,
-    /// The frames as sent, preamble to FCS, with the cycle of their first byte.
-    pub frames: Vec<Frame>,
-}
+use std::time::Instant;
 
 /// Runs `spec` on the verilated box.
 pub fn run_rtl(spec: &SimSpec) -> Result<SimRun, CosimError> {
@@ -129,32 +41,6 @@ pub fn run_with_progress(
     }
 }
 
-/// Every port's pin transitions (each line with its own seeded jitter) and the true,
-/// jittered start edge of every packet, ns.
-pub fn lines(spec: &SimSpec) -> (Vec<Vec<Transition>>, Vec<Vec<f64>>) {
-    spec.ports
-        .iter()
-        .enumerate()
-        .map(|(port, packets)| {
-            let bytes: Vec<UartByte> = packets
-                .iter()
-                .flat_map(|p| back_to_back(&p.bytes, p.start_ns, p.bit_ns))
-                .collect();
-            let jitter = Jitter {
-                seed: spec.jitter.seed.wrapping_add(port as u64),
-                ..spec.jitter
-            };
-            let (line, starts) = jittered_transitions(&bytes, &jitter);
-            (line, starts.iter().step_by(PACKET_LEN).copied().collect())
-        })
-        .unzip()
-}
-
-/// Clock cycles a spec runs for.
-pub fn cycles(spec: &SimSpec) -> u64 {
-    spec.duration_ns / TICK_NS
-}
-
 /// As [`run_rtl`], calling `progress(cycles done, cycles in all)` as it goes.
 pub fn run_rtl_with_progress(
     spec: &SimSpec,
@@ -171,122 +57,4 @@ pub fn run_rtl_with_progress(
     let wall = started.elapsed().as_secs_f64();
     let (frames, _) = assemble(&out);
     analyse(spec, &frames, &true_starts, wall)
-}
-
-/// Checks every frame, writes the pcap and measures what the frames delivered.
-pub(crate) fn analyse(
-    spec: &SimSpec,
-    frames: &[Frame],
-    true_starts: &[Vec<f64>],
-    wall: f64,
-) -> Result<SimRun, CosimError> {
-    let cycles = cycles(spec);
-    let mut report = SimReport {
-        frames: frames.len() as u64,
-        packets_sent: spec.ports.iter().map(|p| p.len() as u64).sum(),
-        min_inter_frame_gap: min_gap(frames),
-        sim_seconds: cycles as f64 * TICK_NS as f64 * 1e-9,
-        wall_seconds: wall,
-        cycles_per_second: cycles as f64 / wall.max(1e-9),
-        ..Default::default()
-    };
-    let mut pcap = match &spec.pcap {
-        Some(path) => Some(
-            skinbox_host::pcap::PcapFrameWriter::new(std::fs::File::create(path).map_err(
-                |source| CosimError::Io {
-                    path: path.clone(),
-                    source,
-                },
-            )?)
-            .map_err(|e| tool("writing the pcap", e))?,
-        ),
-        None => None,
-    };
-    // each port's packets with their true start edges, to be matched in order
-    let mut pending: Vec<VecDeque<(&SentPacket, f64)>> = spec
-        .ports
-        .iter()
-        .zip(true_starts)
-        .map(|(p, t)| p.iter().zip(t.iter().copied()).collect())
-        .collect();
-    let mut last_status: Vec<PortCounters> = vec![PortCounters::default(); spec.config.ports];
-    let (mut error_sum, mut error_count) = (0.0, 0u64);
-    let mut datagrams = Vec::with_capacity(frames.len());
-    for frame in frames {
-        let (ethernet, payload) = check(&frame.bytes).map_err(|e| tool("checking a frame", e))?;
-        if let Some(pcap) = &mut pcap {
-            pcap.write_frame(Duration::from_nanos(frame.first_cycle * TICK_NS), ethernet)
-                .map_err(|e| tool("writing the pcap", e))?;
-        }
-        let datagram = DatagramRepr::parse(payload).map_err(|e| tool("parsing a datagram", e))?;
-        match &datagram.body {
-            DatagramBody::Records(records) => {
-                report.record_datagrams += 1;
-                for r in records {
-                    report.records += 1;
-                    let queue = &mut pending[usize::from(r.port)];
-                    // packets before this one on the port were lost
-                    match queue.iter().position(|p| p.0.bytes == r.cell_packet) {
-                        Some(k) => {
-                            queue.drain(..k);
-                            let (_, true_start_ns) = queue.pop_front().expect("found above");
-                            report.packets_delivered += 1;
-                            let stamp_ns = (r.tick(datagram.base_tick) + TICK_ZERO_CYCLE) as f64
-                                * TICK_NS as f64;
-                            let error = (stamp_ns - true_start_ns) / TICK_NS as f64;
-                            if error.abs() > 1.0 {
-                                report.records_mistimed += 1;
-                            }
-                            report.ts_error_max_ticks = report.ts_error_max_ticks.max(error);
-                            error_sum += error;
-                            error_count += 1;
-                        }
-                        None => report.records_corrupted += 1,
-                    }
-                }
-            }
-            DatagramBody::Status(status) => {
-                report.status_datagrams += 1;
-                for (i, counters) in status.ports.iter().enumerate() {
-                    last_status[usize::from(status.first_port) + i] = *counters;
-                }
-            }
-        }
-        datagrams.push(datagram);
-    }
-    if let Some(pcap) = pcap {
-        pcap.finish().map_err(|e| tool("writing the pcap", e))?;
-    }
-    report.ts_error_mean_ticks = if error_count > 0 {
-        error_sum / error_count as f64
-    } else {
-        0.0
-    };
-    report.dropped = report.packets_sent - report.packets_delivered;
-    report.box_packets_good = last_status
-        .iter()
-        .map(|p| u64::from(p.get(PortCounter::PacketsGood)))
-        .sum();
-    report.losses_by_cause = PortCounter::ALL
-        .iter()
-        .filter(|c| c.is_packet_loss() || **c == PortCounter::GarbageBytes)
-        .map(|c| {
-            (
-                c.name().to_string(),
-                last_status.iter().map(|p| u64::from(p.get(*c))).sum(),
-            )
-        })
-        .collect();
-    Ok(SimRun {
-        report,
-        datagrams,
-        frames: frames.to_vec(),
-    })
-}
-
-fn tool(step: &'static str, e: impl std::fmt::Display) -> CosimError {
-    CosimError::Tool {
-        step,
-        output: e.to_string(),
-    }
 }

@@ -1,11 +1,12 @@
 //! Seeded test traffic shared by the tests, benchmarks and studies.
 
 use skinbox_cells::rng::Rng;
+use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::{Channel, DataRepr};
 
 /// `n` data packets (cell ids 1..=n) with every channel drawn over its full range, always
 /// the same for the same `n`.
-pub fn random_data_packets(n: usize) -> Vec<[u8; 20]> {
+pub fn random_data_packets(n: usize) -> Vec<[u8; PACKET_LEN]> {
     let mut random = Rng::new(0x2545_F491_4F6C_DD1D);
     (0..n)
         .map(|i| {

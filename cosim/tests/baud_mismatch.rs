@@ -1,6 +1,6 @@
 //! The receiver's failure point under UART clock mismatch, through the verilated box:
-//! within +-4.7 % every packet arrives intact with the tick of its start edge; beyond the point where bytes break, the box
-//! rejects packets but delivers none corrupted, and the status counters show the loss:
+//! within +-4.7 % every packet arrives intact with the tick of its start edge; beyond the
+//! point where bytes break, the box rejects packets but delivers none corrupted, and the status counters show the loss:
 //! rejected packets, or, where not even a header byte survives, garbage bytes.
 
 use skinbox_cosim::frames::{assemble, check};
@@ -12,7 +12,7 @@ use skinbox_cosim::sim::TICK_ZERO_CYCLE;
 use skinbox_cosim::traffic::random_data_packets;
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
-use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::cell::{PACKET_LEN, UART_BITS_PER_PACKET};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::DatagramRepr;
@@ -54,11 +54,16 @@ fn run(error_percent: f64) -> Outcome {
         predict_frames(&config, &[line], cycles).unwrap() == frames,
         "reference and RTL differ at {error_percent} %"
     );
-    // each packet's true start edge: 20 bytes of 10 bits after the previous one
-    let true_start_ns: HashMap<[u8; 20], f64> = sent
+    // each packet's true start edge: a packet's bits after the previous one
+    let true_start_ns: HashMap<[u8; PACKET_LEN], f64> = sent
         .into_iter()
         .enumerate()
-        .map(|(i, p)| (p, 10_000.0 + (i * PACKET_LEN * 10) as f64 * bit_ns))
+        .map(|(i, p)| {
+            (
+                p,
+                10_000.0 + (i as u64 * UART_BITS_PER_PACKET) as f64 * bit_ns,
+            )
+        })
         .collect();
     let (mut intact, mut corrupted, mut rejected) = (0, 0, 0);
     let mut stamp_errors = vec![];

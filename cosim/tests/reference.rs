@@ -11,6 +11,7 @@ use skinbox_cosim::reference::predict_frames;
 use skinbox_cosim::sim::RESET_CYCLES;
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{Channel, DataRepr, DatagramRepr, EventRepr};
 
@@ -54,7 +55,7 @@ fn agree(config: &BoxConfig, lines: &[Vec<Transition>], cycles: u64) -> Vec<Fram
     rtl
 }
 
-fn data(id: u16, k: i32) -> [u8; 20] {
+fn data(id: u16, k: i32) -> [u8; PACKET_LEN] {
     DataRepr::from_raw(id, [k, -7, 250, 1, 2, 3, 4000, 61, 0])
         .unwrap()
         .to_bytes()

@@ -8,11 +8,12 @@ use skinbox_cosim::reference::{predict_frames, run_reference};
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec, RESET_CYCLES};
 use skinbox_cosim::{Dut, Model};
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, MAX_RECORDS};
 use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::{DataRepr, DatagramRepr};
 
-fn packet(id: u16) -> [u8; 20] {
+fn packet(id: u16) -> [u8; PACKET_LEN] {
     DataRepr::from_raw(id, [1, 2, 3, 4, 5, 6, 7, 8, 9])
         .unwrap()
         .to_bytes()
@@ -133,7 +134,7 @@ fn status_counters_match_injected_faults() {
         .iter()
         .map(|f| DatagramRepr::parse(check(&f.bytes).unwrap().1).unwrap())
         .collect();
-    let delivered: Vec<[u8; 20]> = datagrams
+    let delivered: Vec<[u8; PACKET_LEN]> = datagrams
         .iter()
         .filter_map(|d| match &d.body {
             DatagramBody::Records(r) => Some(r.iter().map(|r| r.cell_packet).collect::<Vec<_>>()),

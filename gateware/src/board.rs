@@ -14,7 +14,7 @@
 //!   the sampling edge inside the data eye (see `constraints/colorlight_i5.lpf` for the
 //!   source). A PHY without that delay would need the clock shifted by 90 degrees (2 ns).
 //! - PHY reset: `eth_rst_n` stays low until the PLL has been locked for [`PHY_RESET_CLOCKS`]
-//!   clocks (16.8 ms, more than the 10 ms the design brief asks for), and the box stays in
+//!   clocks (16.8 ms, more than the 10 ms of docs/design.md section 9), and the box stays in
 //!   reset until then too, so its first status datagram is not sent into a PHY in reset.
 //!   Losing lock starts the sequence again.
 //! - one status LED (active low): dark until the PHY reset ends; then a 1 Hz heartbeat (bit 26
@@ -115,19 +115,15 @@ impl Board {
     /// [`Board::top_module`].
     pub fn verilog(self, config: &BoxConfig) -> Result<String, ConfigError> {
         if config.ports > self.uart_pins() {
-            return Err(ConfigError(format!(
-                "{} ports, but the {} constraints have {} UART pins",
-                config.ports,
-                self.name(),
-                self.uart_pins()
-            )));
+            return Err(ConfigError::BoardPins {
+                ports: config.ports,
+                board: self.name(),
+                pins: self.uart_pins(),
+            });
         }
-        let pll = Pll::new(self.oscillator_hz(), config.clock_hz).ok_or_else(|| {
-            ConfigError(format!(
-                "the ECP5 PLL cannot make {} Hz from the {} Hz oscillator",
-                config.clock_hz,
-                self.oscillator_hz()
-            ))
+        let pll = Pll::new(self.oscillator_hz(), config.clock_hz).ok_or(ConfigError::Pll {
+            clock_hz: config.clock_hz,
+            oscillator_hz: self.oscillator_hz(),
         })?;
         let box_verilog = verilog(config)?;
         Ok(format!(
@@ -453,13 +449,23 @@ mod tests {
             ports: 65,
             ..BoxConfig::default()
         };
-        assert!(Board::ColorlightI5.verilog(&too_many).is_err());
+        assert!(matches!(
+            Board::ColorlightI5.verilog(&too_many),
+            Err(ConfigError::BoardPins { ports: 65, .. })
+        ));
         let odd_clock = BoxConfig {
             clock_hz: 124_999_999,
             ..BoxConfig::default()
         };
         let err = Board::ColorlightI5.verilog(&odd_clock).unwrap_err();
-        assert!(err.0.contains("PLL"), "{err}");
+        assert_eq!(
+            err,
+            ConfigError::Pll {
+                clock_hz: 124_999_999,
+                oscillator_hz: 25_000_000
+            },
+            "{err}"
+        );
     }
 
     /// Behavioural stand-ins for the two ECP5 primitives, only for Verilator's lint.

@@ -18,7 +18,6 @@ use crate::timestamp::TimestampCounter;
 use crate::uart_rx::UartRx;
 use crate::udp_framer::{FramerConfig, UdpFramer};
 use skinbox_protocol::{CellFraming, LinkConfig};
-use std::fmt;
 
 /// Parameters of the box.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
@@ -63,17 +62,75 @@ impl Default for BoxConfig {
     }
 }
 
-/// A parameter set the box cannot be built with.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ConfigError(pub String);
-
-impl fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "invalid box parameters: {}", self.0)
-    }
+/// A parameter set the box (or its board top) cannot be built with.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ConfigError {
+    /// `ports` outside 1 to [`MAX_PORTS`].
+    #[error("invalid box parameters: ports = {ports}: the box has 1 to {MAX_PORTS} ports")]
+    Ports {
+        /// The port count asked for.
+        ports: usize,
+    },
+    /// The clock is below 4 x the baud rate (or the baud rate is 0).
+    #[error("invalid box parameters: clock {clock_hz} Hz must be at least 4 x the baud rate {baud} (the UART samples 3 times per bit middle)")]
+    ClockBelowBaud {
+        /// Box clock, Hz.
+        clock_hz: u64,
+        /// UART rate.
+        baud: u64,
+    },
+    /// The counter file cannot visit every port once per received byte.
+    #[error("invalid box parameters: {ports} ports at {byte_clocks} clocks per byte: the counters need 3 clocks per port per byte")]
+    PortsForCounters {
+        /// The port count asked for.
+        ports: usize,
+        /// Clocks in the shortest byte (5 % fast).
+        byte_clocks: u64,
+    },
+    /// `flush_timeout_ticks` outside 1 to 2^31 - 1.
+    #[error("invalid box parameters: flush timeout {ticks} ticks: must be 1 to 2^31 - 1")]
+    FlushTimeout {
+        /// The timeout asked for.
+        ticks: u64,
+    },
+    /// `status_period_ticks` outside 1 to 2^32 - 1.
+    #[error("invalid box parameters: status period {ticks} ticks: must be 1 to 2^32 - 1 (34 s)")]
+    StatusPeriod {
+        /// The period asked for.
+        ticks: u64,
+    },
+    /// `idle_gap_bits` outside 2 to [`MAX_IDLE_GAP_BITS`].
+    #[error(
+        "invalid box parameters: idle gap {bits} bits: must be 2 to {MAX_IDLE_GAP_BITS} bit times"
+    )]
+    IdleGap {
+        /// The gap asked for.
+        bits: u64,
+    },
+    /// The data and event header bytes are equal.
+    #[error("invalid box parameters: data and event headers must differ")]
+    SameHeaders,
+    /// The board's constraints have fewer UART pins than the box has ports.
+    #[error(
+        "invalid box parameters: {ports} ports, but the {board} constraints have {pins} UART pins"
+    )]
+    BoardPins {
+        /// The port count asked for.
+        ports: usize,
+        /// The board.
+        board: &'static str,
+        /// UART pins in its constraints.
+        pins: usize,
+    },
+    /// The board's PLL cannot make the clock from its oscillator.
+    #[error("invalid box parameters: the ECP5 PLL cannot make {clock_hz} Hz from the {oscillator_hz} Hz oscillator")]
+    Pll {
+        /// Box clock asked for, Hz.
+        clock_hz: u64,
+        /// The board's oscillator, Hz.
+        oscillator_hz: u64,
+    },
 }
-
-impl std::error::Error for ConfigError {}
 
 impl BoxConfig {
     /// Clocks in one UART bit (31.25 by default).
@@ -81,49 +138,42 @@ impl BoxConfig {
         self.clock_hz as f64 / self.baud as f64
     }
 
-    /// Checks every parameter; the message says which and why.
+    /// Checks every parameter: the first that is wrong, and why.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let fail = |m: String| Err(ConfigError(m));
         if !(1..=MAX_PORTS).contains(&self.ports) {
-            return fail(format!(
-                "ports = {}: the box has 1 to {MAX_PORTS} ports",
-                self.ports
-            ));
+            return Err(ConfigError::Ports { ports: self.ports });
         }
         if self.baud == 0 || self.clock_hz < 4 * self.baud {
-            return fail(format!(
-                "clock {} Hz must be at least 4 x the baud rate {} (the UART samples 3 times per bit middle)",
-                self.clock_hz, self.baud
-            ));
+            return Err(ConfigError::ClockBelowBaud {
+                clock_hz: self.clock_hz,
+                baud: self.baud,
+            });
         }
         // The counter file needs three clocks per port between a port's event bursts.
         let byte_clocks = 10.0 * self.clocks_per_bit() * 0.95;
         if (3 * self.ports) as f64 > byte_clocks {
-            return fail(format!(
-                "{} ports at {} clocks per byte: the counters need 3 clocks per port per byte",
-                self.ports, byte_clocks as u64
-            ));
+            return Err(ConfigError::PortsForCounters {
+                ports: self.ports,
+                byte_clocks: byte_clocks as u64,
+            });
         }
         if !(1..1 << 31).contains(&self.flush_timeout_ticks) {
-            return fail(format!(
-                "flush timeout {} ticks: must be 1 to 2^31 - 1",
-                self.flush_timeout_ticks
-            ));
+            return Err(ConfigError::FlushTimeout {
+                ticks: self.flush_timeout_ticks,
+            });
         }
         if !(1..1 << 32).contains(&self.status_period_ticks) {
-            return fail(format!(
-                "status period {} ticks: must be 1 to 2^32 - 1 (34 s)",
-                self.status_period_ticks
-            ));
+            return Err(ConfigError::StatusPeriod {
+                ticks: self.status_period_ticks,
+            });
         }
         if !(2..=MAX_IDLE_GAP_BITS).contains(&self.idle_gap_bits) {
-            return fail(format!(
-                "idle gap {} bits: must be 2 to {MAX_IDLE_GAP_BITS} bit times",
-                self.idle_gap_bits
-            ));
+            return Err(ConfigError::IdleGap {
+                bits: self.idle_gap_bits,
+            });
         }
         if self.framing.data_header == self.framing.event_header {
-            return fail("data and event headers must differ".into());
+            return Err(ConfigError::SameHeaders);
         }
         Ok(())
     }
@@ -307,6 +357,78 @@ pub fn verilog(config: &BoxConfig) -> Result<String, ConfigError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_parameter_is_refused_with_its_own_error_and_its_limits_are_accepted() {
+        let with = |change: fn(&mut BoxConfig)| {
+            let mut c = BoxConfig::default();
+            change(&mut c);
+            c.validate()
+        };
+        assert_eq!(BoxConfig::default().validate(), Ok(()));
+        // Limits: accepted.
+        for ok in [
+            with(|c| c.ports = 1),
+            with(|c| c.ports = 64),
+            with(|c| c.clock_hz = 4 * c.baud),
+            with(|c| c.flush_timeout_ticks = 1),
+            with(|c| c.flush_timeout_ticks = (1 << 31) - 1),
+            with(|c| c.status_period_ticks = 1),
+            with(|c| c.status_period_ticks = (1 << 32) - 1),
+            with(|c| c.idle_gap_bits = 2),
+            with(|c| c.idle_gap_bits = 21),
+        ] {
+            assert_eq!(ok, Ok(()));
+        }
+        // One past them: refused, each with its variant.
+        assert_eq!(with(|c| c.ports = 0), Err(ConfigError::Ports { ports: 0 }));
+        assert_eq!(
+            with(|c| c.ports = 65),
+            Err(ConfigError::Ports { ports: 65 })
+        );
+        assert_eq!(
+            with(|c| c.clock_hz = 4 * c.baud - 1),
+            Err(ConfigError::ClockBelowBaud {
+                clock_hz: 15_999_999,
+                baud: 4_000_000
+            })
+        );
+        // 8 ports at 4 clocks per bit: 38 clocks in a fast byte, 24 needed; 16 ports need 48.
+        assert_eq!(
+            with(|c| {
+                c.clock_hz = 4 * c.baud;
+                c.ports = 16
+            }),
+            Err(ConfigError::PortsForCounters {
+                ports: 16,
+                byte_clocks: 38
+            })
+        );
+        assert_eq!(
+            with(|c| c.flush_timeout_ticks = 0),
+            Err(ConfigError::FlushTimeout { ticks: 0 })
+        );
+        assert_eq!(
+            with(|c| c.flush_timeout_ticks = 1 << 31),
+            Err(ConfigError::FlushTimeout { ticks: 1 << 31 })
+        );
+        assert_eq!(
+            with(|c| c.status_period_ticks = 1 << 32),
+            Err(ConfigError::StatusPeriod { ticks: 1 << 32 })
+        );
+        assert_eq!(
+            with(|c| c.idle_gap_bits = 22),
+            Err(ConfigError::IdleGap { bits: 22 })
+        );
+        assert_eq!(
+            with(|c| c.framing.event_header = c.framing.data_header),
+            Err(ConfigError::SameHeaders)
+        );
+        assert_eq!(
+            ConfigError::Ports { ports: 65 }.to_string(),
+            "invalid box parameters: ports = 65: the box has 1 to 64 ports"
+        );
+    }
     use crate::testbench::{bit_period, check_frame, Bench, GmiiCapture, UartLine};
     use skinbox_protocol::datagram::DatagramBody;
     use skinbox_protocol::status::PortCounter;

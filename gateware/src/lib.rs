@@ -23,7 +23,6 @@ pub mod crc32;
 pub mod frame_transmitter;
 pub mod hdl;
 pub mod interface_box;
-pub mod lut_ram;
 pub mod packet_store;
 pub mod replica_register;
 pub mod status_reporter;
@@ -36,7 +35,7 @@ pub mod verilog;
 #[cfg(test)]
 pub(crate) mod testbench;
 
-/// Clock of the box: the GMII transmit clock.
-pub const CLOCK_HZ: u64 = 125_000_000;
+/// Clock of the box: the GMII transmit clock, one tick of the box time per clock.
+pub const CLOCK_HZ: u64 = skinbox_protocol::TICKS_PER_SECOND;
 /// UART rate of the skin cells.
-pub const CELL_BAUD: u64 = 4_000_000;
+pub const CELL_BAUD: u64 = skinbox_protocol::cell::UART_BAUD;

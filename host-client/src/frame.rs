@@ -1,6 +1,6 @@
 //! From a captured frame to the UDP payload that may hold a box datagram.
 //!
-//! The box sends Ethernet II / IPv4 (no options) / UDP frames (DESIGN.md section 4). Its
+//! The box sends Ethernet II / IPv4 (no options) / UDP frames (docs/design.md section 4). Its
 //! source port and addresses are parameters, so box datagrams are found by their payload
 //! magic "SK" on any UDP port, or only on one port when a filter is given. Parsing is
 //! etherparse's; this module only says why a frame is not a box datagram.

@@ -1,6 +1,6 @@
 //! Live capture on a tokio UDP socket: the thin async shell around [`Decoder`].
 //!
-//! A full 1 Gbit/s link carries about 82,000 datagrams/s (4.5 M records/s, DESIGN.md
+//! A full 1 Gbit/s link carries about 82,000 datagrams/s (4.5 M records/s, docs/design.md
 //! section 5). The socket gets a large receive buffer so bursts wait in the kernel, and
 //! after each wake-up the loop drains every queued datagram with `try_recv_from` before it
 //! sleeps again, so the cost per datagram is one system call and the decoding.

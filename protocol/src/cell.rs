@@ -23,6 +23,12 @@ pub(crate) mod field {
 
 /// Length of every cell packet.
 pub const PACKET_LEN: usize = field::END_OF_PACKET + 1;
+/// UART bit rate of the cell buses (8N1).
+pub const UART_BAUD: u64 = 4_000_000;
+/// UART bits per byte on the line: start bit, 8 data bits, stop bit (8N1).
+pub const UART_BITS_PER_BYTE: u64 = 10;
+/// UART bits of one packet on the line.
+pub const UART_BITS_PER_PACKET: u64 = PACKET_LEN as u64 * UART_BITS_PER_BYTE;
 /// Default header byte of a data packet.
 pub const DATA_HEADER: u8 = 0xA1;
 /// Default header byte of an event packet.

@@ -1,6 +1,6 @@
 //! The nine sensor channels of a skin cell, their raw units and conversions.
 //!
-//! Raw steps come from the values the original skin driver reports (DESIGN.md section 2):
+//! Raw steps come from the values the original skin driver reports (docs/design.md section 2):
 //! acceleration 1/256 g (10-bit signed, +-2 g), force 1/1024 of the normalised force,
 //! proximity 1/65536 (16-bit count), temperature 0.5 C from 0 C.
 
@@ -70,7 +70,7 @@ impl Channel {
     ];
 
     /// Position in mask-bit order (0..9).
-    pub fn index(self) -> usize {
+    pub const fn index(self) -> usize {
         self as usize
     }
 

@@ -22,6 +22,11 @@ mod field {
     pub const TEMPERATURE: [usize; 2] = [17, 18];
 }
 
+/// The channels of [`DataRepr::accel`], [`DataRepr::force`] and [`DataRepr::temperature`].
+const ACCEL: [Channel; 3] = [Channel::AccelX, Channel::AccelY, Channel::AccelZ];
+const FORCE: [Channel; 3] = [Channel::Force1, Channel::Force2, Channel::Force3];
+const TEMPERATURE: [Channel; 2] = [Channel::Temperature1, Channel::Temperature2];
+
 /// Published layout of the data packet.
 pub fn layout() -> Vec<LayoutRow> {
     let mut rows = cell::layout();
@@ -39,11 +44,15 @@ pub fn layout() -> Vec<LayoutRow> {
 
 fn channel_field(c: Channel) -> crate::Field {
     match c {
-        Channel::AccelX | Channel::AccelY | Channel::AccelZ => field::ACCEL[c.index()].clone(),
-        Channel::Force1 | Channel::Force2 | Channel::Force3 => field::FORCE[c.index() - 3].clone(),
+        Channel::AccelX | Channel::AccelY | Channel::AccelZ => {
+            field::ACCEL[c.index() - Channel::AccelX.index()].clone()
+        }
+        Channel::Force1 | Channel::Force2 | Channel::Force3 => {
+            field::FORCE[c.index() - Channel::Force1.index()].clone()
+        }
         Channel::Proximity => field::PROXIMITY,
         Channel::Temperature1 | Channel::Temperature2 => {
-            let at = field::TEMPERATURE[c.index() - 7];
+            let at = field::TEMPERATURE[c.index() - Channel::Temperature1.index()];
             at..at + 1
         }
     }
@@ -148,10 +157,10 @@ impl DataRepr {
     fn from_packet(cell_id: u16, p: &DataPacket<&[u8]>) -> DataRepr {
         DataRepr {
             cell_id,
-            accel: [0, 1, 2].map(|i| p.raw(Channel::ALL[i]) as i16),
-            force: [3, 4, 5].map(|i| p.raw(Channel::ALL[i]) as u16),
+            accel: ACCEL.map(|c| p.raw(c) as i16),
+            force: FORCE.map(|c| p.raw(c) as u16),
             proximity: p.raw(Channel::Proximity) as u16,
-            temperature: [7, 8].map(|i| p.raw(Channel::ALL[i]) as u8),
+            temperature: TEMPERATURE.map(|c| p.raw(c) as u8),
         }
     }
 
@@ -159,14 +168,14 @@ impl DataRepr {
     pub fn raw(&self, channel: Channel) -> i32 {
         match channel {
             Channel::AccelX | Channel::AccelY | Channel::AccelZ => {
-                i32::from(self.accel[channel.index()])
+                i32::from(self.accel[channel.index() - Channel::AccelX.index()])
             }
             Channel::Force1 | Channel::Force2 | Channel::Force3 => {
-                i32::from(self.force[channel.index() - 3])
+                i32::from(self.force[channel.index() - Channel::Force1.index()])
             }
             Channel::Proximity => i32::from(self.proximity),
             Channel::Temperature1 | Channel::Temperature2 => {
-                i32::from(self.temperature[channel.index() - 7])
+                i32::from(self.temperature[channel.index() - Channel::Temperature1.index()])
             }
         }
     }

@@ -43,8 +43,9 @@ pub const MAGIC: [u8; 2] = *b"SK";
 pub const VERSION: u8 = 1;
 /// Length of the datagram header.
 pub const HEADER_LEN: usize = field::RESERVED.end;
-/// Largest UDP payload of a 1500-byte IPv4 packet.
-pub const MAX_PAYLOAD_LEN: usize = 1500 - 20 - 8;
+/// Largest UDP payload of an IPv4 packet of [`MTU`](crate::link::MTU) bytes: 1472.
+pub const MAX_PAYLOAD_LEN: usize =
+    crate::link::MTU - crate::link::IPV4_HEADER_LEN - crate::link::UDP_HEADER_LEN;
 /// Most records in one datagram.
 pub const MAX_RECORDS: usize = (MAX_PAYLOAD_LEN - HEADER_LEN) / RECORD_LEN;
 /// Most port counter blocks in one status datagram.
@@ -323,23 +324,28 @@ impl DatagramRepr {
         }
     }
 
-    fn entries(&self) -> usize {
-        match &self.body {
+    /// Entries [`DatagramRepr::emit`] writes: those of the body, at most
+    /// [`DatagramKind::max_entries`].
+    pub fn written_entries(&self) -> usize {
+        let entries = match &self.body {
             DatagramBody::Records(r) => r.len(),
             DatagramBody::Status(s) => s.ports.len(),
-        }
+        };
+        entries.min(self.kind().max_entries())
     }
 
-    /// Bytes [`DatagramRepr::emit`] writes.
+    /// Bytes [`DatagramRepr::emit`] writes: the header and the written entries.
     pub fn buffer_len(&self) -> usize {
-        self.kind().payload_len(self.entries())
+        self.kind().payload_len(self.written_entries())
     }
 
     /// Writes the datagram into `buffer[..buffer_len()]`. Entries past the most one
-    /// datagram holds are not written (and not counted), so the output always parses.
+    /// datagram holds are neither written nor counted (see [`DatagramRepr::written_entries`]),
+    /// so the output parses whenever every port is below `port_count`, to this datagram
+    /// without the entries left out.
     pub fn emit(&self, buffer: &mut [u8]) {
         let kind = self.kind();
-        let entries = self.entries().min(kind.max_entries());
+        let entries = self.written_entries();
         let b = &mut buffer[..kind.payload_len(entries)];
         b[field::MAGIC].copy_from_slice(&MAGIC);
         b[field::VERSION] = VERSION;

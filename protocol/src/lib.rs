@@ -52,7 +52,8 @@ pub struct LayoutRow {
     pub bytes: Field,
 }
 
-/// Duration of one box tick: the box counts its 125 MHz clock.
+/// Duration of one box tick: the box counts its 125 MHz clock, so this is also its clock
+/// period.
 pub const TICK_NS: u64 = 8;
 
 /// Box ticks per second.

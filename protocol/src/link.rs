@@ -42,6 +42,10 @@ impl Default for LinkConfig {
     }
 }
 
+/// Bit rate of the link (Gigabit Ethernet).
+pub const LINK_BITS_PER_S: u64 = 1_000_000_000;
+/// Largest IPv4 packet on the link (the Ethernet MTU).
+pub const MTU: usize = 1500;
 /// Ethernet II header length.
 pub const ETHERNET_HEADER_LEN: usize = 14;
 /// IPv4 header length (no options).

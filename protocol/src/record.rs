@@ -15,7 +15,8 @@ use crate::cell::PACKET_LEN;
 use crate::{check_len, get_u32, Format, LayoutRow, Result};
 use core::fmt;
 
-mod field {
+/// Byte ranges and positions of the record's fields.
+pub mod field {
     use crate::Field;
     pub const PORT: usize = 0;
     pub const FLAGS: usize = 1;

@@ -57,14 +57,14 @@ fn datagram_repr() -> impl Strategy<Value = DatagramRepr> {
     );
     let records = proptest::collection::vec(
         (any::<u8>(), any::<u8>(), any::<i32>(), cell_bytes()),
-        0..=datagram::MAX_RECORDS,
+        0..=datagram::MAX_RECORDS + 5,
     );
     let status = (
         any::<u32>(),
         any::<u32>(),
         any::<u32>(),
         any::<u8>(),
-        proptest::collection::vec(any::<[u32; 8]>(), 0..=datagram::MAX_STATUS_PORTS),
+        proptest::collection::vec(any::<[u32; 8]>(), 0..=datagram::MAX_STATUS_PORTS + 5),
     );
     (header, any::<bool>(), records, status).prop_map(
         |((box_id, port_count, flags, sequence, base_tick), is_status, records, status)| {
@@ -104,6 +104,16 @@ fn datagram_repr() -> impl Strategy<Value = DatagramRepr> {
     )
 }
 
+/// `repr` with the entries past the most one datagram holds taken off: the oracle for what
+/// an over-full datagram emits, counted from the format's limits, not from the emitter.
+fn capped(mut repr: DatagramRepr) -> DatagramRepr {
+    match &mut repr.body {
+        DatagramBody::Records(records) => records.truncate(55),
+        DatagramBody::Status(status) => status.ports.truncate(44),
+    }
+    repr
+}
+
 proptest! {
     #[test]
     fn data_roundtrip(repr in data_repr()) {
@@ -140,7 +150,8 @@ proptest! {
         let bytes = repr.to_bytes();
         prop_assert_eq!(bytes.len(), repr.buffer_len());
         prop_assert!(bytes.len() <= datagram::MAX_PAYLOAD_LEN);
-        prop_assert_eq!(DatagramRepr::parse(&bytes), Ok(repr));
+        // An over-full body is written up to the most one datagram holds.
+        prop_assert_eq!(DatagramRepr::parse(&bytes), Ok(capped(repr)));
     }
 
     #[test]
@@ -164,5 +175,46 @@ proptest! {
         if let Ok(d) = DatagramRepr::parse(&bytes) {
             prop_assert_eq!(DatagramRepr::parse(&d.to_bytes()), Ok(d));
         }
+    }
+}
+
+/// An over-full datagram: 56 records or 45 port blocks. The bytes are the header and the
+/// first 55 records (24 + 55 x 26 = 1454) or the first 44 blocks (24 + 16 + 44 x 32 = 1448),
+/// the entry count says so, and they parse.
+#[test]
+fn over_full_datagrams_are_written_up_to_the_limit() {
+    let record = |i: usize| RecordRepr {
+        port: (i % 8) as u8,
+        flags: 0,
+        tick_offset: i as i32,
+        cell_packet: [i as u8; 20],
+    };
+    let records = DatagramRepr {
+        box_id: 1,
+        port_count: 8,
+        flags: 0,
+        sequence: 7,
+        base_tick: 1000,
+        body: DatagramBody::Records((0..56).map(record).collect()),
+    };
+    let status = DatagramRepr {
+        port_count: 64,
+        body: DatagramBody::Status(StatusRepr {
+            boot_id: 5,
+            datagrams_sent: 1,
+            records_sent: 2,
+            first_port: 0,
+            ports: (0..45).map(|p| PortCounters([p; 8])).collect(),
+        }),
+        ..records.clone()
+    };
+    for (repr, len, count) in [(records, 1454, 55u16), (status, 1448, 44)] {
+        let bytes = repr.to_bytes();
+        assert_eq!(repr.buffer_len(), len);
+        assert_eq!(bytes.len(), len);
+        assert_eq!(bytes[20..22], count.to_be_bytes());
+        assert_eq!(repr.written_entries(), usize::from(count));
+        let parsed = DatagramRepr::parse(&bytes).expect("an over-full datagram parses");
+        assert_eq!(parsed, capped(repr));
     }
 }

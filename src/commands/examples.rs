@@ -40,7 +40,7 @@ fn example<T: Serialize + std::fmt::Display>(
 /// datagram carrying them and a status datagram.
 fn examples() -> anyhow::Result<Vec<Example>> {
     let framing = CellFraming::DEFAULT;
-    // A cell at rest: 1 g on z, a little proximity, 30.5 C (DESIGN.md section 2).
+    // A cell at rest: 1 g on z, a little proximity, 30.5 C (docs/design.md section 2).
     let rest = DataRepr::from_raw(17, [2, -3, 258, 1, 0, 2, 310, 61, 0])?;
     // A touch: force and proximity fire together.
     let touch = EventRepr::new(
@@ -78,7 +78,7 @@ fn examples() -> anyhow::Result<Vec<Example>> {
             cell_packet: *cell,
         })
         .collect();
-    let base_tick = 125_000_000 * 12 + 4_321;
+    let base_tick = TICKS_PER_SECOND * 12 + 4_321;
     let datagram = DatagramRepr {
         box_id: 1,
         port_count: 8,

@@ -14,6 +14,7 @@ use skinbox_cosim::line::Jitter;
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec};
 use skinbox_cosim::traffic::random_data_packets;
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_protocol::cell::PACKET_LEN;
 
 fn baud_errors_pct(quick: bool) -> Vec<f64> {
     if quick {
@@ -92,7 +93,7 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Vec<Section
 
 /// (good, rejected, corrupted) fractions of `packets` sent back to back on one port whose
 /// UART runs `error_pct` fast, through the verilated box.
-fn baud_point(error_pct: f64, packets: &[[u8; 20]]) -> anyhow::Result<[f64; 3]> {
+fn baud_point(error_pct: f64, packets: &[[u8; PACKET_LEN]]) -> anyhow::Result<[f64; 3]> {
     // The configuration of cosim/tests/baud_mismatch.rs: one verilated model serves both.
     let config = BoxConfig {
         ports: 1,
@@ -213,7 +214,7 @@ fn baud(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             })
             .chain([-4.0, 4.0].map(|x| chart::Series {
                 label: if x < 0.0 {
-                    "+-4 % (DESIGN.md requirement)".into()
+                    "+-4 % (requirement, docs/design.md section 4)".into()
                 } else {
                     String::new()
                 },

@@ -1,5 +1,5 @@
 //! C2, simulation fidelity: wall time per simulated second against the error relative to
-//! the RTL, for each level of DESIGN.md section 6 that is here, across skin sizes from one
+//! the RTL, for each level of docs/design.md section 6 that is here, across skin sizes from one
 //! bus to 5,742 cells:
 //! 1. RTL: the verilated box, every clock, UART pins driven bit by bit (the truth);
 //! 2. the packet-level reference model (`skinbox_cosim::reference`), compared frame by

@@ -1,5 +1,5 @@
 //! The studies of `skinbox report`: speed against accuracy, and the point where each method
-//! fails (issue 8; DESIGN.md sections 4, 6 and 7).
+//! fails (issue 8; docs/design.md sections 4, 6 and 7).
 //!
 //! - C1 [`send_on_delta`]: per scene, packet rate against reconstruction error over a sweep
 //!   of thresholds around the papers' Table I.

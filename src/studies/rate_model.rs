@@ -1,4 +1,4 @@
-//! The closed-form rate model: the third fidelity level of DESIGN.md section 6. Rates and
+//! The closed-form rate model: the third fidelity level of docs/design.md section 6. Rates and
 //! loads of a whole skin from a handful of numbers, with no time loop, for sweeps over
 //! millions of cells.
 //!
@@ -19,21 +19,32 @@
 //! and the framer closing a datagram late while the link is busy (which packs more records
 //! under load). The fidelity study (C2) measures what that costs against the RTL.
 
-use skinbox_cells::bus::{BITS_PER_PACKET, UART_BAUD};
+use skinbox_protocol::cell::{PACKET_LEN, UART_BAUD, UART_BITS_PER_PACKET};
 use skinbox_protocol::datagram::{HEADER_LEN, MAX_RECORDS, MAX_STATUS_PORTS};
-use skinbox_protocol::record::RECORD_LEN;
+use skinbox_protocol::link::{
+    ETHERNET_HEADER_LEN, FCS_LEN, INTER_FRAME_GAP, IPV4_HEADER_LEN, LINK_BITS_PER_S, MIN_FRAME_LEN,
+    PREAMBLE_LEN, UDP_HEADER_LEN,
+};
+use skinbox_protocol::record::{self, RECORD_LEN};
 
 /// Packets per second one bus's root UART carries (4 Mbit/s, 8N1, 20 bytes).
-pub const BUS_PACKETS_PER_S: f64 = (UART_BAUD / BITS_PER_PACKET) as f64;
+pub const BUS_PACKETS_PER_S: f64 = (UART_BAUD / UART_BITS_PER_PACKET) as f64;
 /// Bytes per second of Gigabit Ethernet.
-pub const LINK_BYTES_PER_S: f64 = 125e6;
+pub const LINK_BYTES_PER_S: f64 = (LINK_BITS_PER_S / 8) as f64;
 /// Box clock, Hz.
-pub const CLOCK_HZ: f64 = 125e6;
-/// Clocks the framer takes to write one record (26 bytes, then 4 for the tick offset).
-pub const RECORD_WRITE_CLOCKS: f64 = RECORD_LEN as f64 + 4.0;
+pub const CLOCK_HZ: f64 = skinbox_gateware::CLOCK_HZ as f64;
+/// Clocks the framer takes to write one record (26 bytes, then one per tick offset byte,
+/// 4, while it rewrites the tick).
+pub const RECORD_WRITE_CLOCKS: f64 =
+    (RECORD_LEN + record::field::TICK_OFFSET.end - record::field::TICK_OFFSET.start) as f64;
 /// Wire bytes of an Ethernet frame besides its UDP payload: preamble and SFD (8), Ethernet
 /// header (14), IPv4 (20), UDP (8), FCS (4), inter-frame gap (12).
-pub const FRAME_OVERHEAD_BYTES: f64 = 8.0 + 14.0 + 20.0 + 8.0 + 4.0 + 12.0;
+pub const FRAME_OVERHEAD_BYTES: f64 = (PREAMBLE_LEN
+    + ETHERNET_HEADER_LEN
+    + IPV4_HEADER_LEN
+    + UDP_HEADER_LEN
+    + FCS_LEN
+    + INTER_FRAME_GAP) as f64;
 
 /// Wire bytes of a records datagram with `records` records (padding to the 60-byte
 /// minimum frame never applies: the 24-byte header and one record make 50 payload bytes).
@@ -44,8 +55,9 @@ pub fn records_frame_wire_bytes(records: f64) -> f64 {
 /// Wire bytes of one datagram of the original box: one 20-byte cell packet as the UDP
 /// payload, padded to the 60-byte minimum frame: 86 bytes.
 pub fn original_frame_wire_bytes() -> f64 {
-    let frame = (14.0 + 20.0 + 8.0 + 20.0f64).max(60.0);
-    8.0 + frame + 4.0 + 12.0
+    let frame =
+        (ETHERNET_HEADER_LEN + IPV4_HEADER_LEN + UDP_HEADER_LEN + PACKET_LEN).max(MIN_FRAME_LEN);
+    (PREAMBLE_LEN + frame + FCS_LEN + INTER_FRAME_GAP) as f64
 }
 
 /// Records a datagram holds at a steady `records_per_s` with `flush_timeout_s`: the first
@@ -144,10 +156,10 @@ mod tests {
 
     #[test]
     fn wire_sizes_match_the_design_figures() {
-        // DESIGN.md section 5: 55 records, 1520 bytes on the wire with preamble and gap.
+        // docs/design.md section 5: 55 records, 1520 bytes on the wire with preamble and gap.
         assert_eq!(MAX_RECORDS, 55);
         assert_eq!(records_frame_wire_bytes(55.0), 1520.0);
-        // The original box: a minimum frame, 1.45 M datagrams/s (DESIGN.md section 2).
+        // The original box: a minimum frame, 1.45 M datagrams/s (docs/design.md section 2).
         assert_eq!(original_frame_wire_bytes(), 86.0);
         let original = original_capacity_records_per_s();
         assert!((1.44e6..1.5e6).contains(&original), "{original}");

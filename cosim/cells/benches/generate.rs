@@ -1,5 +1,5 @@
 //! Generation speed: the packet streams of a 5,742-cell scene (the original box's limit,
-//! DESIGN.md section 2) for 1 simulated second at 250 Hz, on one core.
+//! docs/design.md section 2) for 1 simulated second at 250 Hz, on one core.
 //!
 //! `cargo bench -p skinbox-cells --bench generate` prints one JSON object per run; the goal
 //! is at most 1 s of wall time per simulated second.

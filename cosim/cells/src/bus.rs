@@ -1,6 +1,6 @@
 //! A bus: a chain of up to 66 cells relaying their packets to one UART port of the box.
 //!
-//! Model (DESIGN.md section 7): a packet sampled at `sample_time` is ready in its cell after
+//! Model (docs/design.md section 7): a packet sampled at `sample_time` is ready in its cell after
 //! a processing latency, then needs one hop latency per relaying cell to reach the root cell
 //! (the one wired to the box). The root holds a FIFO and sends back to back on its UART:
 //! 8N1, 10 bits per byte, 200 bits per 20-byte packet, 50 us at 4 Mbit/s, so at most 20,000
@@ -14,9 +14,9 @@ use skinbox_protocol::cell::PACKET_LEN;
 use std::collections::VecDeque;
 
 /// Nominal UART bit rate of the cell buses.
-pub const UART_BAUD: u64 = 4_000_000;
+pub const UART_BAUD: u64 = skinbox_protocol::cell::UART_BAUD;
 /// UART bits on the wire per 20-byte packet (8N1: start, 8 data, stop per byte).
-pub const BITS_PER_PACKET: u64 = PACKET_LEN as u64 * 10;
+pub const BITS_PER_PACKET: u64 = skinbox_protocol::cell::UART_BITS_PER_PACKET;
 /// Nominal bit period in picoseconds (250 ns).
 pub const NOMINAL_BIT_PERIOD_PS: u64 = 1_000_000_000_000 / UART_BAUD;
 /// Most cells on one bus (Bergner et al.).

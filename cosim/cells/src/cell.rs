@@ -29,7 +29,7 @@ pub enum Mode {
     Event,
 }
 
-/// Raw values the cell's sensors produce (DESIGN.md section 2): acceleration 10-bit signed
+/// Raw values the cell's sensors produce (docs/design.md section 2): acceleration 10-bit signed
 /// (+-2 g), force 10-bit (0..1 of the normalised force), proximity a 16-bit count,
 /// temperature 8-bit in 0.5 C steps.
 pub fn sensor_range_raw(channel: Channel) -> core::ops::RangeInclusive<i32> {

@@ -34,6 +34,7 @@
 pub mod bus;
 pub mod calibration;
 pub mod cell;
+pub mod config;
 pub mod rng;
 pub mod scene;
 pub mod signal;

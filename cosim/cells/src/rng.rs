@@ -141,14 +141,92 @@ fn ziggurat() -> &'static Ziggurat {
 mod tests {
     use super::*;
 
+    use rand_xoshiro::rand_core::{RngCore, SeedableRng};
+    use rand_xoshiro::{SplitMix64, Xoshiro256PlusPlus};
+
+    /// Seeds across the range, including the all-zero and all-one words.
+    const SEEDS: [u64; 5] = [0, 1, 7, 0x5EED_0000_1234_5678, u64::MAX];
+
     #[test]
-    fn streams_are_deterministic_and_distinct() {
-        let a: Vec<u64> = (0..4).map(|_| Rng::for_stream(7, 1).next_u64()).collect();
-        assert!(a.windows(2).all(|w| w[0] == w[1]));
+    fn integer_stream_is_rand_xoshiro_xoshiro256plusplus() {
+        // rand_xoshiro seeds its Xoshiro256PlusPlus from SplitMix64, as `Rng::new` does.
+        for seed in SEEDS {
+            let (mut ours, mut oracle) = (Rng::new(seed), Xoshiro256PlusPlus::seed_from_u64(seed));
+            for n in 0..10_000 {
+                assert_eq!(ours.next_u64(), oracle.next_u64(), "seed {seed}, draw {n}");
+            }
+        }
+    }
+
+    #[test]
+    fn stream_seed_is_one_splitmix64_step_of_the_mixed_seed() {
+        for (seed, stream) in SEEDS.iter().flat_map(|s| [(*s, 0u64), (*s, 1), (*s, 259)]) {
+            let mixed = seed ^ stream.wrapping_mul(0xD1B5_4A32_D192_ED03);
+            let start = SplitMix64::seed_from_u64(mixed).next_u64();
+            let mut oracle = Xoshiro256PlusPlus::seed_from_u64(start);
+            let mut ours = Rng::for_stream(seed, stream);
+            for _ in 0..1000 {
+                assert_eq!(
+                    ours.next_u64(),
+                    oracle.next_u64(),
+                    "seed {seed}, stream {stream}"
+                );
+            }
+        }
         assert_ne!(
             Rng::for_stream(7, 1).next_u64(),
             Rng::for_stream(7, 2).next_u64()
         );
+    }
+
+    // Known answers from a second implementation in Python (`cosim/cells/tests/
+    // rng_reference.py`: xoshiro256++ and SplitMix64 from their authors' description, the
+    // ziggurat from Marsaglia and Tsang's paper), so a change of the generator, the seeding
+    // or the normal sampler shows even if the oracle crate changed as well.
+
+    #[test]
+    fn known_integers_and_uniforms() {
+        let mut r = Rng::new(0);
+        let want = [
+            0x5317_5d61_490b_23df,
+            0x61da_6f3d_c380_d507,
+            0x5c0f_df91_ec9a_7bfc,
+            0x02ee_bf8c_3bbe_5e1a,
+        ];
+        assert_eq!([0; 4].map(|_| r.next_u64()), want);
+        let mut r = Rng::for_stream(7, 1);
+        let want = [
+            0x8e60_88b4_a236_0dbf,
+            0xa86c_ae1e_0b40_a68b,
+            0x6b9c_5c13_b577_a2ef,
+            0x0c55_af50_d7ef_c349,
+        ];
+        assert_eq!([0; 4].map(|_| r.next_u64()), want);
+        let mut r = Rng::new(5);
+        let want = [0.29202287154046747, 0.6114394140810253, 0.09796325663560501];
+        assert_eq!([0; 3].map(|_| r.uniform()), want);
+    }
+
+    #[test]
+    fn known_normals_on_all_three_paths() {
+        // Draws 0..8 take the rectangle (fast path), draw 264 a wedge, draw 1264 the tail.
+        let mut r = Rng::new(3);
+        let draws: Vec<f64> = (0..1265).map(|_| r.normal()).collect();
+        let want = [
+            (0, -2.0383025271143813),
+            (1, 0.6916613067062005),
+            (2, 0.9743258773657404),
+            (3, 1.457693184877974),
+            (4, 0.49990356977087963),
+            (5, -1.3072254598915467),
+            (6, -1.3389839934226815),
+            (7, 0.343925304769259),
+            (264, -0.12698252380193806),
+            (1264, -3.903778740403747),
+        ];
+        for (n, value) in want {
+            assert_eq!(draws[n], value, "draw {n}");
+        }
     }
 
     #[test]

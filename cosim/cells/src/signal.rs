@@ -1,22 +1,22 @@
 //! Minimal signal models: the true physical value of each channel of each cell over time,
 //! and the sensor noise added on top of it.
 //!
-//! Each scene switches on only the components it needs (DESIGN.md section 7); `docs/scenes.md`
+//! Each scene switches on only the components it needs (docs/design.md section 7); `docs/scenes.md`
 //! says per scene what is modelled and why that is enough. Everything is a function of the
 //! scene seed, the cell's index and time, so cells are generated one after the other.
 //!
 //! The cells lie on the limb as a grid: `columns` cells around it, rows along it, `pitch`
 //! apart. A region is a range of row fractions (0 = shoulder, 1 = end effector).
 
+use crate::config::{ForceStandConfig, HammerConfig, MotionConfig, SceneConfig, StrokeConfig};
 use crate::rng::Rng;
-use crate::scene::{ForceStandConfig, HammerConfig, MotionConfig, SceneConfig, StrokeConfig};
 use core::f64::consts::{PI, TAU};
 use skinbox_protocol::Channel;
 
-const AX: usize = 0;
-const F1: usize = 3;
-const PROX: usize = 6;
-const T1: usize = 7;
+const AX: usize = Channel::AccelX.index();
+const F1: usize = Channel::Force1.index();
+const PROX: usize = Channel::Proximity.index();
+const T1: usize = Channel::Temperature1.index();
 
 /// Where a cell sits on the limb.
 #[derive(Debug, Clone, Copy)]
@@ -180,7 +180,7 @@ impl SignalModel {
             row_fraction: (row as f64 + 0.5) / self.rows as f64,
         };
         let mut rng = Rng::for_stream(s.seed, index as u64);
-        // Resting values seen from the real driver (DESIGN.md section 2): accel z
+        // Resting values seen from the real driver (docs/design.md section 2): accel z
         // 0.996..1.074 g, force 0..2 steps, proximity 0..450 counts, temperature 29..32 C;
         // the second temperature channel reads 0.
         let mut rest = [0.0; Channel::COUNT];

@@ -22,10 +22,10 @@
 mod back;
 mod front;
 
-use crate::frames::{Frame, FrameError};
+use crate::error::CosimError;
+use crate::frames::Frame;
 use crate::line::Transition;
-use crate::model::CosimError;
-use crate::sim::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
+use crate::run::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
 use back::{Back, BackTiming};
 use front::{port_front, FrontTiming, PortFront};
 use skinbox_frame_check::{encode, UdpAddresses};
@@ -63,7 +63,7 @@ pub fn run_reference_with_progress(
 }
 
 /// The frames the box sends when its pins carry `lines` (one transition list per port, as
-/// the RTL harness plays them, after [`crate::sim::RESET_CYCLES`] of reset) for `cycles` clocks: each
+/// the RTL harness plays them, after [`crate::run::RESET_CYCLES`] of reset) for `cycles` clocks: each
 /// frame preamble to FCS with the cycle of its first byte, cut where the run ends.
 pub fn predict_frames(
     config: &BoxConfig,
@@ -135,12 +135,11 @@ fn predict_frames_with_progress(
     };
     let mut frames = Vec::with_capacity(back.frames.len());
     for f in &back.frames {
-        let mut bytes = encode(&addresses, &f.datagram.to_bytes()).map_err(|e: FrameError| {
-            CosimError::Tool {
+        let mut bytes =
+            encode(&addresses, &f.datagram.to_bytes()).map_err(|source| CosimError::Frame {
                 step: "encoding a predicted frame",
-                output: e.to_string(),
-            }
-        })?;
+                source,
+            })?;
         // the run ends at cycle `end`: a frame still going is cut there, as on the pins
         let room = (end + 1).saturating_sub(f.first_cycle) as usize;
         bytes.truncate(room);
