@@ -3,19 +3,66 @@
 //! and both checksums with etherparse, zero padding, minimum size. Used by the gateware's
 //! block tests and by the co-simulation.
 
-use std::fmt;
-
 /// What is wrong with a frame.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct FrameError(pub String);
-
-impl fmt::Display for FrameError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FrameError {
+    /// Shorter than the preamble and the 64-byte minimum frame.
+    #[error("{len} bytes: shorter than preamble + 64-byte minimum frame")]
+    TooShort {
+        /// The frame's length, preamble to FCS.
+        len: usize,
+    },
+    /// The preamble and SFD are not 7 x 0x55 and 0xD5.
+    #[error("preamble/SFD {0:02x?}")]
+    Preamble([u8; 8]),
+    /// The FCS does not match the frame (little-endian bytes as on the wire).
+    #[error("FCS {found:02x?}, computed {computed:02x?}")]
+    Fcs {
+        /// FCS bytes of the frame.
+        found: [u8; 4],
+        /// FCS computed over the frame.
+        computed: [u8; 4],
+    },
+    /// etherparse could not read the Ethernet, IPv4 or UDP headers.
+    #[error("headers: {0}")]
+    Headers(String),
+    /// Not an IPv4 packet.
+    #[error("not IPv4")]
+    NotIpv4,
+    /// The IPv4 header checksum is wrong.
+    #[error("IPv4 checksum {found:#06x}, computed {computed:#06x}")]
+    Ipv4Checksum {
+        /// Checksum in the header.
+        found: u16,
+        /// Checksum computed over the header.
+        computed: u16,
+    },
+    /// Not a UDP datagram.
+    #[error("not UDP")]
+    NotUdp,
+    /// The IPv4 and UDP lengths do not agree with each other or the frame.
+    #[error("lengths: IPv4 total {ipv4_total}, UDP {udp}")]
+    Lengths {
+        /// IPv4 total length.
+        ipv4_total: u16,
+        /// UDP length.
+        udp: u16,
+    },
+    /// The UDP checksum is wrong.
+    #[error("UDP checksum {found:#06x}, computed {computed:#06x}")]
+    UdpChecksum {
+        /// Checksum in the header.
+        found: u16,
+        /// Checksum computed over header and payload.
+        computed: u16,
+    },
+    /// Bytes after the IPv4 packet that are not zero.
+    #[error("non-zero padding after the IPv4 packet")]
+    Padding,
+    /// [`encode`] could not build the frame (the payload does not fit one IPv4 packet).
+    #[error("encoding: {0}")]
+    Encode(String),
 }
-
-impl std::error::Error for FrameError {}
 
 /// Checks a frame with code that is not the box's: preamble and SFD, FCS with the crc
 /// crate, Ethernet II / IPv4 / UDP with etherparse (both checksums, lengths), zero
@@ -23,56 +70,55 @@ impl std::error::Error for FrameError {}
 /// UDP payload.
 pub fn check(frame: &[u8]) -> Result<(&[u8], &[u8]), FrameError> {
     use etherparse::{NetHeaders, PacketHeaders, TransportHeader};
-    let fail = |m: String| Err(FrameError(m));
     if frame.len() < 8 + 64 {
-        return fail(format!(
-            "{} bytes: shorter than preamble + 64-byte minimum frame",
-            frame.len()
-        ));
+        return Err(FrameError::TooShort { len: frame.len() });
     }
     if frame[..7] != [0x55; 7] || frame[7] != 0xD5 {
-        return fail(format!("preamble/SFD {:02x?}", &frame[..8]));
+        let mut preamble = [0; 8];
+        preamble.copy_from_slice(&frame[..8]);
+        return Err(FrameError::Preamble(preamble));
     }
     let (ethernet, fcs) = frame[8..].split_at(frame.len() - 12);
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(ethernet);
     if fcs != crc.to_le_bytes() {
-        return fail(format!(
-            "FCS {fcs:02x?}, computed {:02x?}",
-            crc.to_le_bytes()
-        ));
+        let mut found = [0; 4];
+        found.copy_from_slice(fcs);
+        return Err(FrameError::Fcs {
+            found,
+            computed: crc.to_le_bytes(),
+        });
     }
-    let headers =
-        PacketHeaders::from_ethernet_slice(ethernet).map_err(|e| FrameError(e.to_string()))?;
+    let headers = PacketHeaders::from_ethernet_slice(ethernet)
+        .map_err(|e| FrameError::Headers(e.to_string()))?;
     let Some(NetHeaders::Ipv4(ip, _)) = &headers.net else {
-        return fail("not IPv4".into());
+        return Err(FrameError::NotIpv4);
     };
     if ip.header_checksum != ip.calc_header_checksum() {
-        return fail(format!(
-            "IPv4 checksum {:#06x}, computed {:#06x}",
-            ip.header_checksum,
-            ip.calc_header_checksum()
-        ));
+        return Err(FrameError::Ipv4Checksum {
+            found: ip.header_checksum,
+            computed: ip.calc_header_checksum(),
+        });
     }
     let Some(TransportHeader::Udp(udp)) = &headers.transport else {
-        return fail("not UDP".into());
+        return Err(FrameError::NotUdp);
     };
     let rest = headers.payload.slice();
     let udp_len = usize::from(udp.length);
     if udp_len < 8 || udp_len - 8 > rest.len() || usize::from(ip.total_len) != 20 + udp_len {
-        return fail(format!(
-            "lengths: IPv4 total {}, UDP {}",
-            ip.total_len, udp.length
-        ));
+        return Err(FrameError::Lengths {
+            ipv4_total: ip.total_len,
+            udp: udp.length,
+        });
     }
     let payload = &rest[..udp_len - 8];
     let sum = udp
         .calc_checksum_ipv4(ip, payload)
-        .map_err(|e| FrameError(e.to_string()))?;
+        .map_err(|e| FrameError::Headers(e.to_string()))?;
     if udp.checksum != sum {
-        return fail(format!(
-            "UDP checksum {:#06x}, computed {sum:#06x}",
-            udp.checksum
-        ));
+        return Err(FrameError::UdpChecksum {
+            found: udp.checksum,
+            computed: sum,
+        });
     }
     // padding: the bytes after the IPv4 packet (etherparse's payload stops at its end)
     let packet_end = 14 + usize::from(ip.total_len);
@@ -80,7 +126,7 @@ pub fn check(frame: &[u8]) -> Result<(&[u8], &[u8]), FrameError> {
         .get(packet_end..)
         .is_some_and(|pad| pad.iter().any(|b| *b != 0))
     {
-        return fail("non-zero padding after the IPv4 packet".into());
+        return Err(FrameError::Padding);
     }
     Ok((ethernet, payload))
 }
@@ -115,7 +161,7 @@ pub fn encode(addresses: &UdpAddresses, payload: &[u8]) -> Result<Vec<u8>, Frame
         a.source_ip,
         a.destination_ip,
     )
-    .map_err(|e| FrameError(e.to_string()))?;
+    .map_err(|e| FrameError::Encode(e.to_string()))?;
     ip.dont_fragment = true;
     let builder = etherparse::PacketBuilder::ethernet2(a.source_mac, a.destination_mac)
         .ip(etherparse::IpHeaders::Ipv4(ip, Default::default()))
@@ -123,7 +169,7 @@ pub fn encode(addresses: &UdpAddresses, payload: &[u8]) -> Result<Vec<u8>, Frame
     let mut ethernet = Vec::with_capacity(builder.size(payload.len()).max(60));
     builder
         .write(&mut ethernet, payload)
-        .map_err(|e| FrameError(e.to_string()))?;
+        .map_err(|e| FrameError::Encode(e.to_string()))?;
     ethernet.resize(ethernet.len().max(60), 0);
     let mut frame = vec![0x55; 7];
     frame.push(0xD5);
@@ -214,15 +260,22 @@ mod tests {
 
     #[test]
     fn every_kind_of_damage_is_named() {
+        use FrameError as E;
         let good = frame(b"sixteen bytes...");
-        let cases: Vec<(Vec<u8>, &str)> = vec![
-            (good[..70].to_vec(), "shorter than"),
+        type Is = fn(&FrameError) -> bool;
+        let cases: Vec<(Vec<u8>, Is, &str)> = vec![
+            (
+                good[..70].to_vec(),
+                |e| matches!(e, E::TooShort { len: 70 }),
+                "shorter than",
+            ),
             (
                 [
                     &[0x55, 0x55, 0x55, 0x55, 0x55, 0x55, 0x55, 0xD4][..],
                     &good[8..],
                 ]
                 .concat(),
+                |e| matches!(e, E::Preamble(p) if p[7] == 0xD4),
                 "preamble",
             ),
             (
@@ -231,23 +284,56 @@ mod tests {
                     *f.last_mut().unwrap() ^= 1;
                     f
                 },
+                |e| matches!(e, E::Fcs { found, computed } if found != computed),
                 "FCS",
             ),
-            (corrupt(&good, 14 + 8), "IPv4 checksum"), // TTL
-            (corrupt(&good, 14 + 20 + 8), "UDP checksum"), // first payload byte
-            (corrupt(&good, 12), "not IPv4"),          // EtherType
+            // TTL
+            (
+                corrupt(&good, 14 + 8),
+                |e| matches!(e, E::Ipv4Checksum { .. }),
+                "IPv4 checksum",
+            ),
+            // first payload byte
+            (
+                corrupt(&good, 14 + 20 + 8),
+                |e| matches!(e, E::UdpChecksum { .. }),
+                "UDP checksum",
+            ),
+            // EtherType
+            (corrupt(&good, 12), |e| *e == E::NotIpv4, "not IPv4"),
             // IP protocol: the header checksum is then stale, and caught first
-            (corrupt(&good, 14 + 9), "IPv4 checksum"),
-            (tcp_frame(), "not UDP"),
+            (
+                corrupt(&good, 14 + 9),
+                |e| matches!(e, E::Ipv4Checksum { .. }),
+                "IPv4 checksum",
+            ),
+            (tcp_frame(), |e| *e == E::NotUdp, "not UDP"),
         ];
-        for (frame, expected) in cases {
+        for (frame, is, expected) in cases {
             let err = check(&frame).expect_err(expected);
+            assert!(is(&err), "{expected}: got {err:?}");
             assert!(err.to_string().contains(expected), "{expected}: got {err}");
         }
         // non-zero padding after a short payload
         let mut ethernet = good[8..good.len() - 4].to_vec();
         *ethernet.last_mut().unwrap() = 7;
         let err = check(&with_fcs(&ethernet)).unwrap_err();
+        assert_eq!(err, E::Padding);
         assert!(err.to_string().contains("padding"), "{err}");
+        // too big for one IPv4 packet
+        assert!(matches!(
+            encode(
+                &UdpAddresses {
+                    source_mac: [0; 6],
+                    destination_mac: [0; 6],
+                    source_ip: [0; 4],
+                    destination_ip: [0; 4],
+                    source_port: 0,
+                    destination_port: 0,
+                },
+                &[0; 65_508]
+            ),
+            Err(E::Encode(_))
+        ));
     }
 }
