@@ -96,3 +96,77 @@ fn reference_fidelity_writes_the_rtl_pcap() {
     assert!(rtl_pcap == reference_pcap, "the pcaps differ");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A built-in scene by name with its rate, buses and mode overridden: the overloaded moving
+/// arm at 500 Hz on 4 buses says so, and splits its bus-root drops at the window's start;
+/// the same skin on 16 buses loses nothing in the window.
+#[test]
+fn scene_by_name_with_rate_buses_and_mode_and_bus_root_losses_reported() {
+    let dir = std::env::temp_dir().join(format!("skinbox-sim-overrides-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let pcap = dir.join("arm.pcap");
+    let common = ["--fidelity", "reference", "--duration-ms", "100"];
+    let mut args = vec!["moving_arm", "--sample-rate-hz", "500"];
+    args.extend(common);
+    let r = sim_json(&args, &pcap);
+    assert_eq!(r["scene"], "moving_arm");
+    assert_eq!(r["sample_rate_hz"].as_f64(), Some(500.0));
+    assert_eq!(r["buses"].as_u64(), Some(4));
+    let total = r["packets_dropped_at_bus_roots"].as_u64().unwrap();
+    let warmup = r["packets_dropped_at_bus_roots_warmup"].as_u64().unwrap();
+    let window = r["packets_dropped_at_bus_roots_window"].as_u64().unwrap();
+    assert_eq!(warmup + window, total);
+    assert!(window > 0 && warmup > 0, "{r}");
+    let warning = r["bus_root_loss_warning"].as_str().unwrap();
+    assert!(
+        warning.contains(&format!("{window} packets")) && warning.contains("500 Hz"),
+        "{warning}"
+    );
+
+    let mut args = vec!["moving_arm", "--sample-rate-hz", "500", "--buses", "16"];
+    args.extend(common);
+    let r = sim_json(&args, &pcap);
+    assert_eq!(r["buses"].as_u64(), Some(16));
+    assert_eq!(r["packets_dropped_at_bus_roots_window"].as_u64(), Some(0));
+    assert!(r["bus_root_loss_warning"].is_null());
+
+    let mut args = vec!["idle", "--mode", "data"];
+    args.extend(common);
+    let r = sim_json(&args, &pcap);
+    assert_eq!(r["mode"], "data");
+    let records = r["host"]["records"].as_u64().unwrap();
+    let data = r["host"]["data_packets"].as_u64().unwrap();
+    assert!(records > 0 && data == records, "{}", r["host"]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn unknown_scenes_and_durations_beyond_the_fidelity_are_refused() {
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+            .arg("sim")
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = run(&["no_such_scene"]);
+    assert!(
+        err.contains("no_such_scene") && err.contains("moving_arm"),
+        "{err}"
+    );
+    let err = run(&["idle", "--duration-ms", "20000"]);
+    assert!(
+        err.contains("at most 10000") && err.contains("rtl"),
+        "{err}"
+    );
+    let err = run(&[
+        "idle",
+        "--sample-rate-hz",
+        "20000",
+        "--fidelity",
+        "reference",
+    ]);
+    assert!(err.contains("sample_rate_hz"), "{err}");
+}

@@ -4,6 +4,7 @@
 use anyhow::Context;
 use serde::Serialize;
 use skinbox_cells::scene::Scene;
+use skinbox_cells::Mode;
 use skinbox_cosim::sim::{run_with_progress, Fidelity, SimReport};
 use skinbox_gateware::interface_box::BoxConfig;
 use std::path::PathBuf;
@@ -11,18 +12,29 @@ use std::path::PathBuf;
 /// Arguments of `skinbox sim`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Scene file (TOML); the built-in default is the stroking-upper-arm scene.
-    scene: Option<PathBuf>,
+    /// Scene: a built-in scene's name (`moving_arm`, ... : the files of cosim/scenes) or a
+    /// scene file (TOML); the default is stroking_upper_arm.
+    scene: Option<String>,
     /// Scene time at which the box starts to listen, ms: the default skips the scenes'
     /// one-second warm-up, where every cell's first sample sends all nine channels.
     #[arg(long, default_value_t = 1000.0)]
     from_ms: f64,
-    /// Simulated time of the scene, ms (then one status period and 2 ms to flush).
+    /// Simulated time of the scene, ms (then one status period and 2 ms to flush); at most
+    /// 10,000 through the RTL, 3,600,000 through the reference model.
     #[arg(long, default_value_t = 100.0)]
     duration_ms: f64,
     /// Number of cells (overrides the scene).
     #[arg(long)]
     cells: Option<usize>,
+    /// The cells' sample rate, Hz (overrides the scene).
+    #[arg(long)]
+    sample_rate_hz: Option<f64>,
+    /// Number of buses, one box port each (overrides the scene).
+    #[arg(long)]
+    buses: Option<usize>,
+    /// What the cells send: every sample, or send-on-delta events (overrides the scene).
+    #[arg(long, value_enum)]
+    mode: Option<ModeArg>,
     /// Flush timeout of the box, us.
     #[arg(long, default_value_t = 100.0)]
     flush_timeout_us: f64,
@@ -42,6 +54,46 @@ pub struct Args {
     /// (same frames, orders of magnitude faster).
     #[arg(long, value_enum, default_value_t = FidelityArg::Rtl)]
     fidelity: FidelityArg,
+}
+
+/// `--mode` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ModeArg {
+    /// One data packet per sample.
+    Data,
+    /// Send-on-delta event packets.
+    Event,
+}
+
+/// The scene `name_or_path`: a file, or a built-in scene's name.
+pub(crate) fn load_scene(name_or_path: Option<&str>) -> anyhow::Result<Scene> {
+    let dir = skinbox_cells::scenes_dir();
+    let name = name_or_path.unwrap_or("stroking_upper_arm");
+    let path = PathBuf::from(name);
+    if path.is_file() {
+        return Ok(Scene::load(&path)?);
+    }
+    let builtin = dir.join(format!("{name}.toml"));
+    if !name.contains(['/', '.']) && builtin.is_file() {
+        return Ok(Scene::load(&builtin)?);
+    }
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .filter_map(|e| {
+                    let p = e.path();
+                    (p.extension()? == "toml")
+                        .then(|| p.file_stem()?.to_str().map(str::to_string))?
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    anyhow::bail!(
+        "no scene file {name} and no built-in scene of that name (built in: {})",
+        names.join(", ")
+    )
 }
 
 /// `--fidelity` values.
@@ -70,8 +122,16 @@ struct Output {
     from_ms: f64,
     fidelity: Fidelity,
     mode: String,
+    sample_rate_hz: f64,
     packets_offered_by_cells: u64,
+    /// Every drop at the bus roots since the scene start.
     packets_dropped_at_bus_roots: u64,
+    /// Of them, packets sampled before the box listens (the warm-up).
+    packets_dropped_at_bus_roots_warmup: u64,
+    /// Of them, packets sampled in the window the box listens to.
+    packets_dropped_at_bus_roots_window: u64,
+    /// Set when the window lost packets at the bus roots: the buses are overloaded.
+    bus_root_loss_warning: Option<String>,
     #[serde(flatten)]
     sim: SimReport,
     pcap: PathBuf,
@@ -80,18 +140,36 @@ struct Output {
 
 /// Runs the scene.
 pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
-    let path = args
-        .scene
-        .clone()
-        .unwrap_or_else(|| skinbox_cells::scenes_dir().join("stroking_upper_arm.toml"));
-    let mut scene = Scene::load(&path)?;
+    let mut scene = load_scene(args.scene.as_deref())?;
     if let Some(cells) = args.cells {
         scene.config.scene.cells = cells;
     }
+    if let Some(rate) = args.sample_rate_hz {
+        scene.config.scene.sample_rate_hz = rate;
+    }
+    if let Some(buses) = args.buses {
+        scene.config.scene.buses = buses;
+    }
+    if let Some(mode) = args.mode {
+        scene.config.scene.mode = match mode {
+            ModeArg::Data => Mode::Data,
+            ModeArg::Event => Mode::Event,
+        };
+    }
+    scene.check()?;
+    let fidelity = Fidelity::from(args.fidelity);
+    let max_ms = match fidelity {
+        Fidelity::Rtl => 10_000.0,
+        Fidelity::Reference => 3_600_000.0,
+    };
     anyhow::ensure!(
-        args.duration_ms > 0.0 && args.duration_ms <= 10_000.0,
-        "--duration-ms {} must be above 0 and at most 10,000 (the RTL runs about 2 M cycles/s)",
-        args.duration_ms
+        args.duration_ms > 0.0 && args.duration_ms <= max_ms,
+        "--duration-ms {} must be above 0 and at most {max_ms} with --fidelity {} (the RTL runs about 2 M cycles/s)",
+        args.duration_ms,
+        match fidelity {
+            Fidelity::Rtl => "rtl",
+            Fidelity::Reference => "reference",
+        }
     );
     anyhow::ensure!(
         args.from_ms >= 0.0,
@@ -142,7 +220,6 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         .progress_chars("=> "),
     );
     bar.set_message("building the model");
-    let fidelity = Fidelity::from(args.fidelity);
     anyhow::ensure!(
         fidelity == Fidelity::Rtl || args.vcd.is_none(),
         "--vcd traces the RTL; it needs --fidelity rtl"
@@ -154,9 +231,34 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     .report;
     bar.finish_and_clear();
 
-    let host = skinbox_host::decode_pcap_file(&pcap, &Default::default())
+    // the host told the scene's true sample rate, so its "% of data mode" is right
+    let options = skinbox_host::pcap::PcapOptions {
+        decoder: skinbox_host::DecoderConfig {
+            sample_rate_hz: scene.config.scene.sample_rate_hz,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let host = skinbox_host::decode_pcap_file(&pcap, &options)
         .with_context(|| format!("decoding {}", pcap.display()))?
         .report;
+    let from_ns = (args.from_ms * 1e6) as u64;
+    let dropped: u64 = generated.buses.iter().map(|b| b.stats.dropped).sum();
+    let dropped_window: u64 = generated
+        .buses
+        .iter()
+        .map(|b| b.dropped_from(from_ns))
+        .sum();
+    let bus_root_loss_warning = (dropped_window > 0).then(|| {
+        let offered = report.packets_sent + dropped_window;
+        format!(
+            "{dropped_window} packets sampled in the window were dropped at the bus roots (FIFO full), against {} that reached the box pins ({:.1} % lost): the buses are overloaded at {} cells on {buses} buses, {} Hz; use more buses or a lower sample rate",
+            report.packets_sent,
+            100.0 * dropped_window as f64 / offered.max(1) as f64,
+            scene.config.scene.cells,
+            scene.config.scene.sample_rate_hz
+        )
+    });
     let out = Output {
         scene: scene.name().to_string(),
         cells: scene.config.scene.cells,
@@ -164,8 +266,12 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         from_ms: args.from_ms,
         fidelity,
         mode: format!("{:?}", scene.config.scene.mode).to_lowercase(),
+        sample_rate_hz: scene.config.scene.sample_rate_hz,
         packets_offered_by_cells: generated.buses.iter().map(|b| b.stats.offered).sum(),
-        packets_dropped_at_bus_roots: generated.buses.iter().map(|b| b.stats.dropped).sum(),
+        packets_dropped_at_bus_roots: dropped,
+        packets_dropped_at_bus_roots_warmup: dropped - dropped_window,
+        packets_dropped_at_bus_roots_window: dropped_window,
+        bus_root_loss_warning,
         sim: report,
         pcap,
         host,
@@ -180,11 +286,12 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
 fn print_summary(o: &Output) {
     let s = &o.sim;
     println!(
-        "scene {}: {} cells on {} buses, {} mode, {:.1} ms simulated from {:.0} ms on ({} model)",
+        "scene {}: {} cells on {} buses, {} mode, {} Hz, {:.1} ms simulated from {:.0} ms on ({} model)",
         o.scene,
         o.cells,
         o.buses,
         o.mode,
+        o.sample_rate_hz,
         s.sim_seconds * 1e3,
         o.from_ms,
         match o.fidelity {
@@ -193,9 +300,16 @@ fn print_summary(o: &Output) {
         }
     );
     println!(
-        "cells:  {} packets offered since the scene start, {} dropped at the bus roots (FIFO full); {} on the box pins in the window",
-        o.packets_offered_by_cells, o.packets_dropped_at_bus_roots, s.packets_sent
+        "cells:  {} packets offered since the scene start, {} dropped at the bus roots (FIFO full: {} in the warm-up, {} in the window); {} on the box pins in the window",
+        o.packets_offered_by_cells,
+        o.packets_dropped_at_bus_roots,
+        o.packets_dropped_at_bus_roots_warmup,
+        o.packets_dropped_at_bus_roots_window,
+        s.packets_sent
     );
+    if let Some(w) = &o.bus_root_loss_warning {
+        println!("warning: {w}");
+    }
     println!(
         "box:    {} frames ({} records, {} status), {} records; {} of {} packets delivered, {} corrupted, {} mistimed",
         s.frames, s.record_datagrams, s.status_datagrams, s.records, s.packets_delivered, s.packets_sent, s.records_corrupted, s.records_mistimed

@@ -502,12 +502,14 @@ impl Scene {
             let bit_period = bit_period_ps(root_error_ppm);
             let mut fifo = RootFifo::new(c.bus.fifo_packets, bit_period);
             let mut dropped_per_cell = vec![0u64; cells.len()];
+            let mut dropped_sample_time_ns = vec![];
             let packets = to_pin(
                 &mut fifo,
                 &pending,
                 &ready_ps,
                 &run_ends,
                 &mut dropped_per_cell,
+                &mut dropped_sample_time_ns,
             );
             if options.keep_packets {
                 stats.offered += pending.len() as u64;
@@ -520,6 +522,7 @@ impl Scene {
                 packets,
                 stats: fifo.stats().clone(),
                 dropped_per_cell,
+                dropped_sample_time_ns,
             });
         }
         Generated {
@@ -560,6 +563,7 @@ fn to_pin(
     ready_ps: &[u64],
     run_ends: &[usize],
     dropped_per_cell: &mut [u64],
+    dropped_sample_time_ns: &mut Vec<u64>,
 ) -> Vec<BusPacket> {
     let mut packets = Vec::with_capacity(pending.len());
     let mut heap = std::collections::BinaryHeap::with_capacity(run_ends.len());
@@ -583,7 +587,10 @@ fn to_pin(
                 pin_edge_ps,
                 bit_period_ps: fifo.bit_period_ps(),
             }),
-            None => dropped_per_cell[run] += 1,
+            None => {
+                dropped_per_cell[run] += 1;
+                dropped_sample_time_ns.push(p.sample_time_ns);
+            }
         }
     }
     packets
@@ -647,6 +654,19 @@ pub struct BusStream {
     pub stats: BusStats,
     /// Packets dropped per cell, in chain order.
     pub dropped_per_cell: Vec<u64>,
+    /// Sample times of the dropped packets, ns, in order of their arrival at the root (to
+    /// tell a warm-up's drops from a measurement window's).
+    pub dropped_sample_time_ns: Vec<u64>,
+}
+
+impl BusStream {
+    /// Packets dropped at the root whose sample was taken at or after `from_ns`.
+    pub fn dropped_from(&self, from_ns: u64) -> u64 {
+        self.dropped_sample_time_ns
+            .iter()
+            .filter(|&&t| t >= from_ns)
+            .count() as u64
+    }
 }
 
 /// The true signals of one cell, sample by sample.
