@@ -3,7 +3,7 @@
 use std::process::Command;
 
 #[test]
-fn calibrate_json_gives_30_seed_figures_within_the_factor_and_the_rms_errors() {
+fn calibrate_json_gives_30_seed_figures_within_3_percent_and_the_rms_errors() {
     let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
         .args(["calibrate", "--json"])
         .output()
@@ -13,13 +13,18 @@ fn calibrate_json_gives_30_seed_figures_within_the_factor_and_the_rms_errors() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let rows: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let rows = rows.as_array().unwrap();
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["pass"], true);
+    assert_eq!(doc["compared"].as_u64(), Some(30));
+    assert_eq!(doc["outside"].as_u64(), Some(0));
+    let rows = doc["figures"].as_array().unwrap();
     let seeded: Vec<_> = rows.iter().filter(|r| !r["seed"].is_null()).collect();
     assert_eq!(seeded.len(), 30);
     for r in &seeded {
         let ratio = r["model"].as_f64().unwrap() / r["seed"].as_f64().unwrap();
-        assert!((0.8..=1.25).contains(&ratio), "{r}");
+        assert!((0.97..=1.03).contains(&ratio), "{r}");
+        assert!((r["ratio"].as_f64().unwrap() - ratio).abs() < 1e-12, "{r}");
+        assert_eq!(r["pass"], true);
     }
     let idle_prox = seeded
         .iter()
@@ -45,4 +50,82 @@ fn calibrate_json_gives_30_seed_figures_within_the_factor_and_the_rms_errors() {
     assert!(!text.status.success());
     let err = String::from_utf8_lossy(&text.stderr);
     assert!(err.contains("no/such/dir/idle.toml: cannot read"), "{err}");
+}
+
+/// A copy of the scenes with `edit` applied to one file.
+fn scenes_with(name: &str, edit: impl Fn(String) -> String) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("skinbox-calibrate-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let source = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("cosim/scenes");
+    for entry in std::fs::read_dir(&source).unwrap() {
+        let path = entry.unwrap().path();
+        let mut text = std::fs::read_to_string(&path).unwrap();
+        if path.file_stem().unwrap() == "idle" {
+            text = edit(text);
+        }
+        std::fs::write(dir.join(path.file_name().unwrap()), text).unwrap();
+    }
+    dir
+}
+
+fn calibrate_in(dir: &std::path::Path) -> (bool, serde_json::Value, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args(["calibrate", "--json", "--scenes"])
+        .arg(dir)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        serde_json::from_slice(&out.stdout).unwrap_or_default(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_scene_pushed_outside_its_band_fails_and_one_at_another_rate_is_refused() {
+    // the same files pass
+    let same = scenes_with("same", |t| t);
+    let (ok, doc, err) = calibrate_in(&same);
+    assert!(ok && doc["pass"] == true, "{err}");
+    // idle's proximity threshold halved: its proximity events and packets rise
+    let pushed = scenes_with("pushed", |t| {
+        t.replace("proximity = 0.0001", "proximity = 0.00005")
+    });
+    let (ok, doc, err) = calibrate_in(&pushed);
+    assert!(!ok, "a scene outside its band must fail");
+    assert_eq!(doc["pass"], false);
+    assert!(err.contains("outside 3 % of Fig. 8"), "{err}");
+    let failed: Vec<&str> = doc["figures"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["pass"] == false)
+        .map(|f| f["quantity"].as_str().unwrap())
+        .collect();
+    assert!(
+        failed.contains(&"events_per_cell_s_proximity"),
+        "{failed:?}"
+    );
+    assert!(
+        doc["figures"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|f| f["pass"] == false)
+            .all(|f| f["scene"] == "idle"),
+        "{doc}"
+    );
+    // a scene at 250 Hz cannot be compared with the 125 Hz table
+    let fast = scenes_with("fast", |t| {
+        t.replace("sample_rate_hz = 125.0", "sample_rate_hz = 250.0")
+    });
+    let (ok, _, err) = calibrate_in(&fast);
+    assert!(!ok);
+    assert!(
+        err.contains("idle runs at 250 Hz") && err.contains("125 Hz, event mode, 260 cells"),
+        "{err}"
+    );
+    for dir in [same, pushed, fast] {
+        std::fs::remove_dir_all(dir).ok();
+    }
 }

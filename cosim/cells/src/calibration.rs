@@ -51,8 +51,16 @@ pub const SEED_TABLE: [SeedRow; 6] = [
     },
 ];
 
-/// Largest allowed ratio between model and seed (either way).
+/// Largest allowed ratio between model and seed (either way) of the scenes' own tests.
 pub const FACTOR: f64 = 1.25;
+
+/// How far a calibrated figure may be from the table, relative: `skinbox calibrate`'s limit.
+pub const TOLERANCE: f64 = 0.03;
+
+/// The conditions of the seed table (Fig. 8): sample rate, cells and mode of every scene.
+pub const TABLE_SAMPLE_RATE_HZ: f64 = 125.0;
+/// Cells of the papers' Fig. 8 skin.
+pub const TABLE_CELLS: usize = 260;
 
 /// One figure: the seed's value and the model's.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -72,6 +80,33 @@ impl Figure {
     pub fn ratio(&self) -> Option<f64> {
         self.seed.map(|s| self.model / s)
     }
+
+    /// Within [`TOLERANCE`] of the seed; `None` without a seed value.
+    pub fn pass(&self) -> Option<bool> {
+        self.ratio().map(|r| (r - 1.0).abs() <= TOLERANCE)
+    }
+}
+
+/// Why a scene cannot be compared with the table.
+pub fn table_mismatch(scene: &Scene) -> Option<String> {
+    let s = &scene.config.scene;
+    let mut wrong = vec![];
+    if s.sample_rate_hz != TABLE_SAMPLE_RATE_HZ {
+        wrong.push(format!("{} Hz", s.sample_rate_hz));
+    }
+    if s.mode != crate::Mode::Event {
+        wrong.push("data mode".to_string());
+    }
+    if s.cells != TABLE_CELLS {
+        wrong.push(format!("{} cells", s.cells));
+    }
+    (!wrong.is_empty()).then(|| {
+        format!(
+            "scene {} runs at {}; Fig. 8's table is {TABLE_SAMPLE_RATE_HZ} Hz, event mode, {TABLE_CELLS} cells",
+            scene.name(),
+            wrong.join(", ")
+        )
+    })
 }
 
 /// The figures of one generated scene: the 5 rate figures against `row`, then the RMS
@@ -108,6 +143,16 @@ pub fn calibrate(dir: &std::path::Path) -> Result<Vec<Figure>, SceneError> {
     let mut out = Vec::new();
     for row in &SEED_TABLE {
         let scene = Scene::load(&dir.join(format!("{}.toml", row.scene)))?;
+        if let Some(why) = table_mismatch(&scene) {
+            return Err(SceneError {
+                file: dir
+                    .join(format!("{}.toml", row.scene))
+                    .display()
+                    .to_string(),
+                line: None,
+                message: why,
+            });
+        }
         let generated = scene.generate(&GenerateOptions {
             keep_packets: false,
             truth_cells: Vec::new(),
