@@ -51,6 +51,68 @@ pub const SEED_TABLE: [SeedRow; 6] = [
     },
 ];
 
+/// The papers' fit of the event packet rate against the sample rate (2nd paper, Fig. 11):
+/// `a * ln(b * x + 1)` packets per second at `x` Hz, per cell, or for the whole skin of
+/// `per_cells` cells (the moving arm's fit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RateFit {
+    /// Scene file stem.
+    pub scene: &'static str,
+    /// Scale, packets per second.
+    pub a: f64,
+    /// Rate coefficient, per Hz.
+    pub b: f64,
+    /// Cells the fitted rate is for (1: per cell).
+    pub per_cells: f64,
+}
+
+impl RateFit {
+    /// Packets per cell per second the fit gives at `sample_rate_hz`.
+    pub fn packets_per_cell_s(&self, sample_rate_hz: f64) -> f64 {
+        self.a * (self.b * sample_rate_hz + 1.0).ln() / self.per_cells
+    }
+}
+
+/// Fig. 11's fits, fitted by the papers from 62.5 to 500 Hz (docs/design.md section 2).
+pub const FIG11_FITS: [RateFit; 5] = [
+    RateFit {
+        scene: "idle",
+        a: 243.8846,
+        b: 2.248e-4,
+        per_cells: 1.0,
+    },
+    RateFit {
+        scene: "stroking_upper_arm",
+        a: 85.0385,
+        b: 3.215e-3,
+        per_cells: 1.0,
+    },
+    RateFit {
+        scene: "stroking_arm",
+        a: 74.2308,
+        b: 6.154e-3,
+        per_cells: 1.0,
+    },
+    RateFit {
+        scene: "hammering_end_effector",
+        a: 330.2692,
+        b: 2.512e-3,
+        per_cells: 1.0,
+    },
+    RateFit {
+        scene: "moving_arm",
+        a: 1.214e7,
+        b: 1.687e-5,
+        per_cells: 260.0,
+    },
+];
+
+/// The sample rates Fig. 11 spans, Hz.
+pub const FIG11_RATES_HZ: [f64; 4] = [62.5, 125.0, 250.0, 500.0];
+
+/// Largest ratio between a scene's packet rate and its Fig. 11 fit (either way).
+pub const FIG11_FACTOR: f64 = 1.2;
+
 /// Largest allowed ratio between model and seed (either way) of the scenes' own tests.
 pub const FACTOR: f64 = 1.25;
 

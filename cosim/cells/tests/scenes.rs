@@ -449,3 +449,47 @@ fn mangled_scene_files_give_errors_not_panics() {
     }
     assert_eq!(rejected, 300);
 }
+
+/// The papers' Fig. 11: each scene's packet rate follows its fit within a factor 1.2 from
+/// 62.5 to 500 Hz (30 s windows here; docs/scenes.md gives the 60 s figures).
+#[test]
+fn packet_rates_follow_fig_11_across_sample_rates() {
+    use skinbox_cells::calibration::{FIG11_FACTOR, FIG11_FITS, FIG11_RATES_HZ};
+    let mut worst = (1.0f64, "", 0.0);
+    for fit in FIG11_FITS {
+        for rate in FIG11_RATES_HZ {
+            let mut scene = load(fit.scene);
+            scene.config.scene.sample_rate_hz = rate;
+            scene.config.scene.duration_s = 31.0;
+            scene.check().unwrap();
+            let g = scene.generate(&GenerateOptions {
+                keep_packets: false,
+                ..Default::default()
+            });
+            let st = &g.stats;
+            let model = st.packets as f64 / (st.cells as f64 * st.window_s);
+            let ratio = model / fit.packets_per_cell_s(rate);
+            if (ratio.ln()).abs() > worst.0.ln().abs() {
+                worst = (ratio, fit.scene, rate);
+            }
+            assert!(
+                (1.0 / FIG11_FACTOR..=FIG11_FACTOR).contains(&ratio),
+                "{} at {rate} Hz: {model:.2} packets per cell per second, {ratio:.3} of the fit",
+                fit.scene
+            );
+        }
+    }
+    eprintln!("worst: {worst:?}");
+}
+
+#[test]
+fn fig_11_fits_give_the_papers_numbers() {
+    use skinbox_cells::calibration::FIG11_FITS;
+    // the papers: idle's fit gives 6.76 packets per cell per second at 125 Hz
+    let idle = FIG11_FITS.iter().find(|f| f.scene == "idle").unwrap();
+    assert!((idle.packets_per_cell_s(125.0) - 6.76).abs() < 0.01);
+    // the moving arm's fit is for all 260 cells: 392 per cell at 500 Hz
+    let arm = FIG11_FITS.iter().find(|f| f.scene == "moving_arm").unwrap();
+    let whole = 1.214e7 * (1.687e-5f64 * 500.0 + 1.0).ln();
+    assert!((arm.packets_per_cell_s(500.0) * 260.0 - whole).abs() < 1e-6 * whole);
+}
