@@ -1,6 +1,7 @@
 //! Building, caching and loading verilated models of the box.
 
 use crate::binding::Library;
+use crate::cache_lock::CacheLock;
 use skinbox_gateware::interface_box::{verilog, BoxConfig, ConfigError};
 use skinbox_gateware::verilog::LINT_WAIVERS;
 use std::collections::hash_map::DefaultHasher;
@@ -70,6 +71,7 @@ pub struct Model {
     config: BoxConfig,
     trace: bool,
     path: PathBuf,
+    built: bool,
 }
 
 impl std::fmt::Debug for Model {
@@ -82,7 +84,7 @@ impl std::fmt::Debug for Model {
     }
 }
 
-// Builds of the same cache entry from several threads wait for each other.
+// Builds from several threads wait for each other (and, by `CacheLock`, for other processes).
 static BUILD_LOCK: Mutex<()> = Mutex::new(());
 
 impl Model {
@@ -99,9 +101,13 @@ impl Model {
         (&text, trace, &version, SHIM_VERSION).hash(&mut hasher);
         let dir = cache_dir.join(format!("box{}-{:016x}", config.ports, hasher.finish()));
         let library_path = dir.join("libbox.so");
-        {
+        let mut built_here = false;
+        if !library_path.exists() {
             let _guard = BUILD_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+            // other processes wait here too; the first builds, the rest find its model
+            let _cache_lock = CacheLock::acquire(&dir)?;
             if !library_path.exists() {
+                built_here = true;
                 let runtime = build_runtime(cache_dir, &version, trace)?;
                 let built = build_model(&text, config.ports, trace, &dir, &runtime);
                 // a failed build leaves no scratch directory behind
@@ -116,7 +122,19 @@ impl Model {
             config: config.clone(),
             trace,
             path: library_path,
+            built: built_here,
         }))
+    }
+
+    /// The shared library loaded.
+    pub fn library_path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Whether this call built the model (false: it was in the cache, perhaps built by
+    /// another process that this one waited for).
+    pub fn was_built(&self) -> bool {
+        self.built
     }
 
     /// The box parameters.
@@ -180,6 +198,7 @@ fn build_runtime(cache_dir: &Path, version: &str, trace: bool) -> Result<Vec<Pat
     (version, trace).hash(&mut hasher);
     let dir = cache_dir.join(format!("runtime-{:016x}", hasher.finish()));
     let list = dir.join("objects.txt");
+    let _lock = CacheLock::acquire(&dir)?;
     if let Ok(text) = std::fs::read_to_string(&list) {
         return Ok(text.lines().map(PathBuf::from).collect());
     }
