@@ -89,6 +89,9 @@ pub struct Row {
     pub key: String,
     /// The result.
     pub value: serde_json::Value,
+    /// Wall time of its computation, s.
+    #[serde(default)]
+    pub seconds: f64,
 }
 
 /// What a shard writes: `points-K-of-N.jsonl`, a header line and then one [`Row`] a line.
@@ -375,12 +378,14 @@ impl Points {
         let value = match &self.mode {
             Mode::Shard(shard) if !shard.owns(index) => return Ok(T::default()),
             Mode::All | Mode::Shard(_) => {
+                let started = std::time::Instant::now();
                 let value = serde_json::to_value(compute()?)
                     .with_context(|| format!("point {key}: result does not serialise"))?;
                 self.rows.push(Row {
                     index,
                     key: key.clone(),
                     value: value.clone(),
+                    seconds: started.elapsed().as_secs_f64(),
                 });
                 value
             }
