@@ -246,3 +246,210 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The summary with the measured wall times masked: the first line (how and in how long
+/// it was written), C2's "wall time per simulated s (s)" column and the C2 findings made
+/// from those times (speed-ups, wall times, the extrapolation). A merged report keeps the
+/// times each shard measured, which differ from run to run; every other number must agree.
+fn masked(summary: &str) -> String {
+    const TIMING_COLUMN: &str = "wall time per simulated s (s)";
+    const TIMING_FINDINGS: [&str; 3] = [
+        "reference model wall time per simulated s",
+        "RTL wall time per simulated s",
+        "RTL at 5,742 cells",
+    ];
+    let mut out = Vec::new();
+    let mut section = "";
+    let mut masked_column = None;
+    let mut in_table = false;
+    for line in summary.lines() {
+        if let Some(heading) = line.strip_prefix("## ") {
+            section = heading.split(' ').next().unwrap_or("");
+        }
+        if line.starts_with("Written by `skinbox report") {
+            out.push("(written by)".to_string());
+            continue;
+        }
+        if !line.starts_with('|') {
+            in_table = false;
+            out.push(line.to_string());
+            continue;
+        }
+        let mut cells: Vec<String> = line
+            .trim_matches('|')
+            .split(" | ")
+            .map(|c| c.trim().to_string())
+            .collect();
+        if !in_table {
+            in_table = true;
+            masked_column = cells.iter().position(|c| c == TIMING_COLUMN);
+        } else if section == "C2" && cells.len() > 1 {
+            if let Some(k) = masked_column.filter(|&k| k < cells.len()) {
+                cells[k] = "(time)".into();
+            }
+            if TIMING_FINDINGS.iter().any(|f| cells[0].starts_with(f)) {
+                cells[1] = "(time)".into();
+            }
+            if let Some((frames, _)) = cells[1]
+                .split_once("; ")
+                .filter(|(_, x)| x.ends_with(" x faster"))
+            {
+                cells[1] = format!("{frames}; (time) x faster");
+            }
+        }
+        out.push(cells.join(" | "));
+    }
+    out.join("\n")
+}
+
+fn skinbox_report(args: &[&str], out: &Path) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .arg("report")
+        .args(args)
+        .args(["--json", "--out"])
+        .arg(out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run skinbox")
+}
+
+fn finished(child: std::process::Child) -> serde_json::Value {
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `report --quick` as three shards, run at once (as on three machines, here sharing the
+/// model cache) and merged, equals the unsharded `--quick` run number for number; only the
+/// measured wall times (see [`masked`]) and the two C2 charts drawn from them may differ.
+/// Every other chart is the same file byte for byte.
+#[test]
+fn quick_report_in_three_shards_merges_into_the_unsharded_report() {
+    let dir = std::env::temp_dir().join(format!("skinbox-report-shards-{}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    let whole = skinbox_report(&["--quick"], &dir.join("whole"));
+    let shards: Vec<_> = (1..=3)
+        .map(|k| {
+            skinbox_report(
+                &["--quick", "--shard", &format!("{k}/3")],
+                &dir.join(format!("shard{k}")),
+            )
+        })
+        .collect();
+    let whole = finished(whole);
+    let mut computed = 0;
+    for (k, shard) in shards.into_iter().enumerate() {
+        let written = finished(shard);
+        assert!(written["summary"].is_null(), "{written}");
+        assert!(written["charts"].as_array().unwrap().is_empty());
+        let file = written["shard_file"].as_str().unwrap();
+        assert!(
+            file.ends_with(&format!("points-{}-of-3.jsonl", k + 1)),
+            "{file}"
+        );
+        assert_eq!(written["points"], whole["points"]);
+        computed += written["points_computed"].as_u64().unwrap();
+    }
+    assert_eq!(
+        computed,
+        whole["points"].as_u64().unwrap(),
+        "every point once"
+    );
+    assert!(computed > 50, "{computed} points");
+
+    let shard_dirs: Vec<_> = (1..=3).map(|k| dir.join(format!("shard{k}"))).collect();
+    let merge = |dirs: &[std::path::PathBuf], out: &str| {
+        Command::new(env!("CARGO_BIN_EXE_skinbox"))
+            .args(["report", "--json", "--out"])
+            .arg(dir.join(out))
+            .arg("--merge")
+            .args(dirs)
+            .output()
+            .unwrap()
+    };
+    let out = merge(&shard_dirs, "merged");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let merged: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(merged["points_computed"], 0, "a merge computes nothing");
+
+    let summary = |d: &str| std::fs::read_to_string(dir.join(d).join("summary.md")).unwrap();
+    let (whole_summary, merged_summary) = (summary("whole"), summary("merged"));
+    assert!(merged_summary.contains("merged from 3 shards"));
+    assert_eq!(masked(&merged_summary), masked(&whole_summary));
+    // the mask hides the times and nothing else: the column in the 10 rows of the quick
+    // C2 table (RTL, cell models, reference, rate model at 7 sizes) and 4 findings
+    assert_eq!(masked(&whole_summary).matches("(time)").count(), 10 + 4);
+
+    let names = |v: &serde_json::Value| -> Vec<String> {
+        v["charts"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| {
+                Path::new(p.as_str().unwrap())
+                    .file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .collect()
+    };
+    assert_eq!(names(&merged), names(&whole));
+    for name in names(&whole).iter().filter(|n| !n.starts_with("c2_")) {
+        let read = |d: &str| std::fs::read(dir.join(d).join(name)).unwrap();
+        assert!(read("merged") == read("whole"), "{name} differs");
+    }
+
+    // an incomplete or doubled set of shards is refused, saying what is wrong
+    let out = merge(&shard_dirs[..2], "incomplete");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("shard 3/3 missing"), "{stderr}");
+    let doubled = [shard_dirs.clone(), vec![shard_dirs[1].clone()]].concat();
+    let out = merge(&doubled, "doubled");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("shard 2/3 given twice"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_shard_arguments_say_what_is_wrong() {
+    let dir = std::env::temp_dir().join(format!("skinbox-report-bad-{}", std::process::id()));
+    for (shard, says) in [
+        ("0/3", "K is 0, outside 1 to 3 (shards count from 1)"),
+        ("4/3", "K is 4, outside 1 to 3"),
+        ("3", "expected K/N"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+            .args(["report", "--quick", "--shard", shard, "--out"])
+            .arg(&dir)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{shard}");
+        assert!(stderr.contains(says), "{shard}: {stderr}");
+    }
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args(["report", "--merge"])
+        .arg(&dir)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("no shard file (points-K-of-N.jsonl)"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

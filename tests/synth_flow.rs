@@ -102,6 +102,65 @@ fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
     );
     assert!(bits.len() > 100_000, "{} bytes", bits.len());
 
+    // The same sweep in two shards (one seed each, run at once as on two machines) and
+    // merged keeps the same seed, with the same Fmax for every seed.
+    let shard = |k: u32| {
+        Command::new(env!("CARGO_BIN_EXE_skinbox"))
+            .args([
+                "synth",
+                "--json",
+                "--ports",
+                &PORTS.to_string(),
+                "--seeds",
+                "2",
+            ])
+            .args(["--shard", &format!("{k}/2"), "--out-dir"])
+            .arg(dir.join(format!("shard{k}")))
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("run skinbox synth --shard")
+    };
+    let shards = [shard(1), shard(2)];
+    for (k, child) in shards.into_iter().enumerate() {
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "shard {}: {stderr}", k + 1);
+        let written: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let placed: Vec<u64> = written["tried"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| t["seed"].as_u64().unwrap())
+            .collect();
+        assert_eq!(
+            placed,
+            [k as u64 + 1],
+            "shard {} places its seed only",
+            k + 1
+        );
+    }
+    let merged = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args(["synth", "--json", "--merge"])
+        .arg(dir.join("shard1"))
+        .arg(dir.join("shard2"))
+        .arg("--out-dir")
+        .arg(dir.join("merged"))
+        .output()
+        .expect("run skinbox synth --merge");
+    let merged: serde_json::Value = serde_json::from_slice(&merged.stdout).unwrap_or_else(|e| {
+        panic!(
+            "no merged report ({e}): {}",
+            String::from_utf8_lossy(&merged.stderr)
+        )
+    });
+    assert_eq!(merged["seed"], report["seed"], "the same seed kept");
+    assert_eq!(merged["fmax_mhz"], report["fmax_mhz"]);
+    assert_eq!(merged["seeds"], report["seeds"], "every seed's Fmax");
+    assert_eq!(merged["lut4"], report["lut4"]);
+    let merged_bits = std::fs::read(merged["bitstream"].as_str().unwrap()).unwrap();
+    assert!(merged_bits.windows(4).take(4096).any(|w| w == preamble));
+
     // The target: 125 MHz met, and the command says so with its exit status.
     assert!(
         report["timing_met"] == true && fmax >= 125.0,

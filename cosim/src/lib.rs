@@ -14,6 +14,7 @@
 
 pub mod bench;
 mod binding;
+pub mod cache_lock;
 pub mod dut;
 pub mod error;
 pub mod frames;

@@ -1,6 +1,7 @@
 //! Building, caching and loading verilated models of the box.
 
 use crate::binding::Library;
+use crate::cache_lock::CacheLock;
 use crate::error::CosimError;
 use sha2::{Digest, Sha256};
 use skinbox_gateware::interface_box::{verilog, BoxConfig};
@@ -47,6 +48,7 @@ pub struct Model {
     config: BoxConfig,
     trace: bool,
     path: PathBuf,
+    built: bool,
 }
 
 impl std::fmt::Debug for Model {
@@ -59,7 +61,7 @@ impl std::fmt::Debug for Model {
     }
 }
 
-// Builds of the same cache entry from several threads wait for each other.
+// Builds from several threads wait for each other (and, by `CacheLock`, for other processes).
 static BUILD_LOCK: Mutex<()> = Mutex::new(());
 
 impl Model {
@@ -83,9 +85,13 @@ impl Model {
         .key();
         let dir = cache_dir.join(format!("box{}-{key}", config.ports));
         let library_path = dir.join("libbox.so");
-        {
+        let mut built_here = false;
+        if !library_path.exists() {
             let _guard = BUILD_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+            // other processes wait here too; the first builds, the rest find its model
+            let _cache_lock = CacheLock::acquire(&dir)?;
             if !library_path.exists() {
+                built_here = true;
                 let objects =
                     build_runtime(&cache_dir.join(format!("runtime-{runtime_key}")), trace)?;
                 let built = build_model(&verilog, &shim, trace, &dir, &objects);
@@ -101,7 +107,19 @@ impl Model {
             config: config.clone(),
             trace,
             path: library_path,
+            built: built_here,
         }))
+    }
+
+    /// The shared library loaded.
+    pub fn library_path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Whether this call built the model (false: it was in the cache, perhaps built by
+    /// another process that this one waited for).
+    pub fn was_built(&self) -> bool {
+        self.built
     }
 
     /// The box parameters.
@@ -290,6 +308,7 @@ fn tool_error(step: &'static str) -> impl FnOnce(cc::Error) -> CosimError {
 /// Verilator's runtime objects in `dir`, compiled once per [`RuntimeInputs::key`].
 fn build_runtime(dir: &Path, trace: bool) -> Result<Vec<PathBuf>, CosimError> {
     let list = dir.join("objects.txt");
+    let _lock = CacheLock::acquire(dir)?;
     if let Ok(text) = std::fs::read_to_string(&list) {
         return Ok(text.lines().map(PathBuf::from).collect());
     }

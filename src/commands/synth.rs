@@ -1,8 +1,9 @@
 //! `skinbox synth`: the box with its board top through yosys, nextpnr-ecp5 and ecppack.
 
+use skinbox::studies::Shard;
 use skinbox_gateware::board::Board;
 use skinbox_gateware::interface_box::BoxConfig;
-use skinbox_synth::{Event, FlowOptions, Stage, SynthReport, Toolchain};
+use skinbox_synth::{Event, FlowOptions, SeedShard, Stage, SynthReport, Toolchain};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -31,6 +32,15 @@ pub struct Args {
     /// Python interpreter that creates the venv.
     #[arg(long, default_value = "python3")]
     python: String,
+    /// Place and route only share K of N of the --seeds sweep (seeds --seed + i with
+    /// i % N = K - 1) and write their Fmax to OUT_DIR/seeds-K-of-N.json, for --merge.
+    #[arg(long, value_name = "K/N", conflicts_with = "merge")]
+    shard: Option<Shard>,
+    /// Merge the shards of a seed sweep from these directories (each a shard's --out-dir):
+    /// the fastest placement is packed and reported, with every seed's Fmax.
+    #[arg(long, value_name = "DIR", num_args = 1..,
+          conflicts_with_all = ["board", "ports", "seed", "seeds"])]
+    merge: Vec<PathBuf>,
 }
 
 fn parse_board(name: &str) -> Result<Board, String> {
@@ -56,17 +66,35 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     config.validate().map_err(anyhow::Error::msg)?;
     let build = build_dir();
     let toolchain = Toolchain::at(args.venv.clone().unwrap_or(build.join("synth-venv")));
+    let default_out =
+        |board: &str, ports: usize| build.join("synth").join(format!("{board}-{ports}p"));
+    let shards = if args.merge.is_empty() {
+        Vec::new()
+    } else {
+        skinbox_synth::read_seed_shards(&args.merge)?
+    };
     let options = FlowOptions {
         board: args.board,
         config,
-        out_dir: args.out_dir.clone().unwrap_or_else(|| {
-            build
-                .join("synth")
-                .join(format!("{}-{}p", args.board.name(), args.ports))
-        }),
+        out_dir: args
+            .out_dir
+            .clone()
+            .unwrap_or_else(|| match shards.first() {
+                Some((_, s)) => default_out(&s.board, s.ports),
+                None => default_out(args.board.name(), args.ports),
+            }),
         seed: args.seed,
         seeds: args.seeds,
     };
+    if let Some(shard) = args.shard {
+        if u64::from(shard.count) > args.seeds {
+            anyhow::bail!(
+                "--shard {shard} of --seeds {}: at most {} shards, one seed each",
+                args.seeds,
+                args.seeds
+            );
+        }
+    }
 
     let bar = indicatif::ProgressBar::new_spinner();
     bar.set_style(
@@ -101,7 +129,23 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             )
         });
     }
-    let report = skinbox_synth::run(&toolchain, &options, &mut progress);
+    let report = match args.shard {
+        Some(shard) => {
+            let result = skinbox_synth::run_shard(
+                &toolchain,
+                &options,
+                shard.index,
+                shard.count,
+                &mut progress,
+            );
+            bar.finish_and_clear();
+            return print_shard(&result?, &options.out_dir, json);
+        }
+        None if !shards.is_empty() => {
+            skinbox_synth::merge(&toolchain, &shards, &options.out_dir, &mut progress)
+        }
+        None => skinbox_synth::run(&toolchain, &options, &mut progress),
+    };
     bar.finish_and_clear();
     let report = report.map_err(anyhow::Error::new)?;
 
@@ -119,6 +163,28 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             report.out_dir.join("report.json").display()
         );
     }
+    Ok(())
+}
+
+fn print_shard(shard: &SeedShard, dir: &Path, json: bool) -> anyhow::Result<()> {
+    if json {
+        return super::print_json(shard);
+    }
+    let each: Vec<String> = shard
+        .tried
+        .iter()
+        .map(|s| format!("{}: {:.1}", s.seed, s.fmax_mhz))
+        .collect();
+    println!(
+        "shard {}/{} of seeds {} to {}: {} MHz; wrote {} (merge with --merge)",
+        shard.shard,
+        shard.shards,
+        shard.first_seed,
+        shard.first_seed + shard.seeds - 1,
+        each.join(", "),
+        dir.join(SeedShard::file_name(shard.shard, shard.shards))
+            .display()
+    );
     Ok(())
 }
 

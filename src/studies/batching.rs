@@ -17,7 +17,8 @@ use super::rate_model::{
     capacity_records_per_s, original_capacity_records_per_s, original_frame_wire_bytes,
     records_frame_wire_bytes, CLOCK_HZ, LINK_BYTES_PER_S, RECORD_WRITE_CLOCKS,
 };
-use super::{chart, Progress, Section, Table};
+use super::{chart, Points, Progress, Section, Table};
+use serde::{Deserialize, Serialize};
 use skinbox_cells::{scenes_dir, GenerateOptions, Mode, Scene};
 use skinbox_protocol::datagram::MAX_RECORDS;
 
@@ -117,9 +118,14 @@ pub fn quantile(values: &[f64], q: f64) -> f64 {
     v[rank - 1]
 }
 
-/// A load: name and the times its records reach the box (end of each packet at a pin), ns.
+/// The loads' names, in the order [`loads`] returns them.
+const LOAD_NAMES: [&str; 2] = [
+    "260 cells, stroking upper arm, event mode",
+    "1,260 cells (humanoid), data mode, 250 Hz",
+];
+
+/// A load: the times its records reach the box (end of each packet at a pin), ns.
 struct Load {
-    name: &'static str,
     ready_ns: Vec<f64>,
     window_s: f64,
 }
@@ -142,7 +148,8 @@ fn load_from(scene: &Scene, from_s: f64, window_s: f64) -> Vec<f64> {
     ready
 }
 
-fn loads(quick: bool) -> anyhow::Result<Vec<Load>> {
+/// The loads of [`LOAD_NAMES`].
+fn loads(quick: bool) -> anyhow::Result<[Load; 2]> {
     let window = if quick { 0.1 } else { 0.5 };
     let light = Scene::load(&scenes_dir().join("stroking_upper_arm.toml"))?;
     let mut heavy = Scene::load(&scenes_dir().join("idle.toml"))?;
@@ -152,18 +159,41 @@ fn loads(quick: bool) -> anyhow::Result<Vec<Load>> {
     s.mode = Mode::Data;
     s.sample_rate_hz = 250.0;
     heavy.check()?;
-    Ok(vec![
+    Ok([
         Load {
-            name: "260 cells, stroking upper arm, event mode",
             ready_ns: load_from(&light, 1.0, window * 2.0),
             window_s: window * 2.0,
         },
         Load {
-            name: "1,260 cells (humanoid), data mode, 250 Hz",
             ready_ns: load_from(&heavy, 0.1, window),
             window_s: window,
         },
     ])
+}
+
+/// What one load through one box (or framer setting) gives: a row of the table.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+struct Outcome {
+    records_per_s: f64,
+    records_per_datagram: f64,
+    datagrams_per_s: f64,
+    /// Latency quantiles p50, p99 and max, us.
+    latency_us: [f64; 3],
+    /// Capacity, cells at 250 Hz per link.
+    capacity_cells: f64,
+}
+
+impl Outcome {
+    fn new(load: &Load, b: &Batched, capacity_cells: f64) -> Outcome {
+        let q = |x| quantile(&b.latency_ns, x) / 1000.0;
+        Outcome {
+            records_per_s: load.ready_ns.len() as f64 / load.window_s,
+            records_per_datagram: b.records_per_datagram(),
+            datagrams_per_s: b.datagrams as f64 / load.window_s,
+            latency_us: [q(0.5), q(0.99), q(1.0)],
+            capacity_cells,
+        }
+    }
 }
 
 /// Flush timeouts swept, us.
@@ -189,9 +219,16 @@ fn cells_250(records_per_s: f64) -> f64 {
 
 /// The study: per load and flush timeout, latency quantiles and the capacity at the
 /// packing reached.
-pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
+pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
     progress.step("C3: generating the loads");
-    let loads = loads(quick)?;
+    // generated once, by the first point this run computes (none in a merge)
+    let mut generated: Option<[Load; 2]> = None;
+    let mut with_loads = |f: &dyn Fn(&[Load; 2]) -> [Outcome; 2]| -> anyhow::Result<[Outcome; 2]> {
+        if generated.is_none() {
+            generated = Some(loads(quick)?);
+        }
+        Ok(f(generated.as_ref().expect("generated")))
+    };
     let mut table = Table::new(&[
         "load",
         "box",
@@ -204,55 +241,65 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
         "latency max (us)",
         "capacity (cells at 250 Hz per link)",
     ]);
-    let mut curves: Vec<Vec<[f64; 4]>> = vec![Vec::new(); loads.len()];
-    let add_row = |table: &mut Table, load: &Load, what: &str, t: &str, b: &Batched, cap| {
-        let q = |x| quantile(&b.latency_ns, x) / 1000.0;
-        let row = [q(0.5), q(0.99), q(1.0)];
+    let mut curves: Vec<Vec<[f64; 4]>> = vec![Vec::new(); LOAD_NAMES.len()];
+    let add_row = |table: &mut Table, load: &str, what: &str, t: &str, o: &Outcome| {
         table.row(vec![
-            load.name.to_string(),
+            load.to_string(),
             what.to_string(),
             t.to_string(),
-            format!("{:.0}", load.ready_ns.len() as f64 / load.window_s),
-            format!("{:.2}", b.records_per_datagram()),
-            format!("{:.0}", b.datagrams as f64 / load.window_s),
-            format!("{:.2}", row[0]),
-            format!("{:.2}", row[1]),
-            format!("{:.2}", row[2]),
-            format!("{cap:.0}"),
+            format!("{:.0}", o.records_per_s),
+            format!("{:.2}", o.records_per_datagram),
+            format!("{:.0}", o.datagrams_per_s),
+            format!("{:.2}", o.latency_us[0]),
+            format!("{:.2}", o.latency_us[1]),
+            format!("{:.2}", o.latency_us[2]),
+            format!("{:.0}", o.capacity_cells),
         ]);
-        row
     };
     for t_us in timeouts_us(quick) {
         progress.step(&format!("C3: flush timeout {t_us} us"));
         let model = FramerModel {
             flush_timeout_ns: t_us * 1000.0,
         };
-        for (l, load) in loads.iter().enumerate() {
-            let b = model.run(&load.ready_ns);
-            let cap = cells_250(capacity_records_per_s(b.records_per_datagram()));
-            let [p50, p99, max] = add_row(
+        let outcomes = grid.run(format!("C3/flush timeout {t_us} us"), || {
+            with_loads(&|loads| {
+                loads.each_ref().map(|load| {
+                    let b = model.run(&load.ready_ns);
+                    let cap = cells_250(capacity_records_per_s(b.records_per_datagram()));
+                    Outcome::new(load, &b, cap)
+                })
+            })
+        })?;
+        for (l, o) in outcomes.iter().enumerate() {
+            add_row(
                 &mut table,
-                load,
+                LOAD_NAMES[l],
                 "batching",
                 &chart::tick_label(t_us),
-                &b,
-                cap,
+                o,
             );
-            curves[l].push([cap, p50, p99, max]);
+            let [p50, p99, max] = o.latency_us;
+            curves[l].push([o.capacity_cells, p50, p99, max]);
         }
     }
+    let originals = grid.run("C3/original box", || {
+        with_loads(&|loads| {
+            loads.each_ref().map(|load| {
+                let cap = cells_250(original_capacity_records_per_s());
+                Outcome::new(load, &original_box(&load.ready_ns), cap)
+            })
+        })
+    })?;
     let mut original = Vec::new();
-    for load in &loads {
-        let b = original_box(&load.ready_ns);
-        let cap = cells_250(original_capacity_records_per_s());
-        original.push(add_row(
+    for (l, o) in originals.iter().enumerate() {
+        add_row(
             &mut table,
-            load,
+            LOAD_NAMES[l],
             "original (one packet per datagram)",
             "-",
-            &b,
-            cap,
-        ));
+            o,
+        );
+        original.push(o.latency_us);
     }
     let heavy = &curves[1];
     let light = &curves[0];

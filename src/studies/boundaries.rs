@@ -8,7 +8,7 @@
 //!
 //! The tests of C4b-d are in `cosim/cells/tests/boundaries.rs`.
 
-use super::{chart, mean_error_pct, scene, Progress, Section, Table};
+use super::{chart, mean_error_pct, scene, Points, Progress, Section, Table};
 use skinbox_cells::{GenerateOptions, Mode, Scene};
 use skinbox_cosim::line::Jitter;
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec};
@@ -82,12 +82,16 @@ pub fn steps(quick: bool) -> u64 {
 }
 
 /// The four studies.
-pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Vec<Section>> {
+pub fn study(
+    quick: bool,
+    progress: &mut Progress,
+    grid: &mut Points,
+) -> anyhow::Result<Vec<Section>> {
     Ok(vec![
-        baud(quick, progress)?,
-        bus(quick, progress)?,
-        noise(quick, progress)?,
-        loss(quick, progress)?,
+        baud(quick, progress, grid)?,
+        bus(quick, progress, grid)?,
+        noise(quick, progress, grid)?,
+        loss(quick, progress, grid)?,
     ])
 }
 
@@ -130,7 +134,7 @@ fn baud_point(error_pct: f64, packets: &[[u8; PACKET_LEN]]) -> anyhow::Result<[f
     ])
 }
 
-fn baud(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
+fn baud(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
     let packets = random_data_packets(if quick { 40 } else { 150 });
     let mut table = Table::new(&[
         "baud error (%)",
@@ -141,7 +145,7 @@ fn baud(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
     let mut pts = [Vec::new(), Vec::new(), Vec::new()];
     for e in baud_errors_pct(quick) {
         progress.step(&format!("C4a: baud error {e:+} % through the RTL"));
-        let f = baud_point(e, &packets)?;
+        let f: [f64; 3] = grid.run(format!("C4a/{e:+}"), || baud_point(e, &packets))?;
         table.row(vec![
             format!("{e:+.1}"),
             format!("{:.1}", 100.0 * f[0]),
@@ -246,7 +250,7 @@ fn baud(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
     })
 }
 
-fn bus(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
+fn bus(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
     let mut table = Table::new(&[
         "series",
         "cells on the bus",
@@ -277,10 +281,13 @@ fn bus(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             sc.config.bus.max_cells = cells;
             sc.config.bus.uart_error_ppm = 0.0;
             sc.check()?;
-            let g = sc.generate(&GenerateOptions::default());
-            let b = &g.buses[0].stats;
-            let loss = 100.0 * b.dropped as f64 / b.offered.max(1) as f64;
-            let offered_per_s = b.offered as f64 / duration_s;
+            let (offered, dropped): (u64, u64) = grid.run(format!("C4b/{name}/{cells}"), || {
+                let g = sc.generate(&GenerateOptions::default());
+                let b = &g.buses[0].stats;
+                Ok((b.offered, b.dropped))
+            })?;
+            let loss = 100.0 * dropped as f64 / offered.max(1) as f64;
+            let offered_per_s = offered as f64 / duration_s;
             let closed =
                 100.0 * (1.0 - super::rate_model::BUS_PACKETS_PER_S / offered_per_s).max(0.0);
             table.row(vec![
@@ -290,7 +297,7 @@ fn bus(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                 format!("{loss:.2}"),
                 format!("{closed:.2}"),
             ]);
-            if b.dropped == 0 {
+            if dropped == 0 {
                 last_lossless = Some(cells);
             }
             points.push((cells as f64, loss));
@@ -338,7 +345,7 @@ fn bus(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
     })
 }
 
-fn noise(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
+fn noise(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
     let (cells, duration_s) = if quick { (40, 3.0) } else { (260, 6.0) };
     let mut table = Table::new(&["scene", "noise (x calibrated)", "packets (% of data mode)"]);
     let mut series = Vec::new();
@@ -354,11 +361,13 @@ fn noise(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
             sc.config.scene.duration_s = duration_s;
             sc.config.noise = sc.config.noise.scaled(f);
             sc.check()?;
-            let g = sc.generate(&GenerateOptions {
-                keep_packets: false,
-                ..Default::default()
-            });
-            let rate = g.stats.packet_rate_pct();
+            let rate: f64 = grid.run(format!("C4c/{name}/{f}"), || {
+                let g = sc.generate(&GenerateOptions {
+                    keep_packets: false,
+                    ..Default::default()
+                });
+                Ok(g.stats.packet_rate_pct())
+            })?;
             table.row(vec![name.to_string(), format!("{f}"), format!("{rate:.2}")]);
             points.push((f, rate));
         }
@@ -431,7 +440,7 @@ fn loss_run(base: &Scene, quick: bool, loss: f64, refresh_s: f64) -> anyhow::Res
     Ok((mean_error_pct(&g.stats), g.stats.packet_rate_pct()))
 }
 
-fn loss(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
+fn loss(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
     let mut table = Table::new(&[
         "scene",
         "full refresh every (s)",
@@ -449,7 +458,9 @@ fn loss(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
         for (s, name) in LOSS_SCENES.iter().enumerate() {
             let base = scene(name)?;
             progress.step(&format!("C4d: {name}, refresh {refresh} s, no loss"));
-            let (lossless, rate) = loss_run(&base, quick, 0.0, refresh)?;
+            let (lossless, rate) = grid.run(format!("C4d/{name}/{refresh}/0"), || {
+                loss_run(&base, quick, 0.0, refresh)
+            })?;
             let refresh_label = if refresh > 0.0 {
                 format!("{refresh}")
             } else {
@@ -463,13 +474,18 @@ fn loss(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                 format!("{rate:.2}"),
             ]);
             if refresh > 0.0 {
-                let (_, without) = loss_run(&base, quick, 0.0, 0.0)?;
+                let (_, without) = grid
+                    .run(format!("C4d/{name}/{refresh}/0 without refresh"), || {
+                        loss_run(&base, quick, 0.0, 0.0)
+                    })?;
                 extra = extra.max(rate - without);
             }
             let mut points = Vec::new();
             for (k, &loss) in losses.iter().enumerate() {
                 progress.step(&format!("C4d: {name}, refresh {refresh} s, loss {loss}"));
-                let (error, rate) = loss_run(&base, quick, loss, refresh)?;
+                let (error, rate) = grid.run(format!("C4d/{name}/{refresh}/{loss}"), || {
+                    loss_run(&base, quick, loss, refresh)
+                })?;
                 table.row(vec![
                     name.to_string(),
                     refresh_label.clone(),

@@ -12,7 +12,8 @@
 //! window, in percent of the RTL's count.
 
 use super::rate_model::{predict, RateInputs};
-use super::{chart, scene, Progress, Section, Table};
+use super::{chart, scene, Points, Progress, Section, Table};
+use serde::{Deserialize, Serialize};
 use skinbox_cells::calibration::SEED_TABLE;
 use skinbox_cosim::reference::run_reference;
 use skinbox_cosim::sim::{run_rtl, SimSpec};
@@ -61,6 +62,7 @@ pub fn steps(quick: bool) -> u64 {
     (rtl_buses(quick).len() + reference_only_buses(quick).len() + 1) as u64
 }
 
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct ReferencePoint {
     buses: usize,
     wall_per_sim_s: f64,
@@ -100,6 +102,7 @@ fn skin_spec(
     Ok((spec, generate_s / (from_s + window)))
 }
 
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct RtlPoint {
     buses: usize,
     wall_per_sim_s: f64,
@@ -140,7 +143,7 @@ fn rate_model_wall_s(buses: usize) -> f64 {
 }
 
 /// The study.
-pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
+pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
     let base = scene(SCENE)?;
     let window = window_s(quick);
     let mut rtl = Vec::new();
@@ -149,51 +152,59 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
         progress.step(&format!(
             "C2: RTL co-simulation and reference model, {buses} buses"
         ));
-        let (spec, generate_per_sim_s) = skin_spec(&base, buses, window)?;
-        let run = run_rtl(&spec)?;
-        let r = &run.report;
-        anyhow::ensure!(
-            r.records_corrupted == 0 && r.packets_delivered == r.packets_sent,
-            "the RTL lost or corrupted packets of the stroking scene: {r:?}"
-        );
-        rtl.push(RtlPoint {
-            buses,
-            wall_per_sim_s: r.wall_seconds / r.sim_seconds,
-            generate_per_sim_s,
-            records: r.records,
-            datagrams: r.frames,
-            sim_s: r.sim_seconds,
-            ts_max_ticks: r.ts_error_max_ticks,
-        });
-        let m = run_reference(&spec)?;
-        let differing = run
-            .frames
-            .iter()
-            .zip(&m.frames)
-            .filter(|(a, b)| a != b)
-            .count()
-            + run.frames.len().abs_diff(m.frames.len());
-        reference.push(ReferencePoint {
-            buses,
-            wall_per_sim_s: m.report.wall_seconds / m.report.sim_seconds,
-            records: m.report.records,
-            datagrams: m.report.frames,
-            frames_differing: Some(differing),
-            ts_max_ticks: m.report.ts_error_max_ticks,
-        });
+        let (rtl_point, reference_point) =
+            grid.run(format!("C2/RTL and reference/{buses}"), || {
+                let (spec, generate_per_sim_s) = skin_spec(&base, buses, window)?;
+                let run = run_rtl(&spec)?;
+                let r = &run.report;
+                anyhow::ensure!(
+                    r.records_corrupted == 0 && r.packets_delivered == r.packets_sent,
+                    "the RTL lost or corrupted packets of the stroking scene: {r:?}"
+                );
+                let rtl = RtlPoint {
+                    buses,
+                    wall_per_sim_s: r.wall_seconds / r.sim_seconds,
+                    generate_per_sim_s,
+                    records: r.records,
+                    datagrams: r.frames,
+                    sim_s: r.sim_seconds,
+                    ts_max_ticks: r.ts_error_max_ticks,
+                };
+                let m = run_reference(&spec)?;
+                let differing = run
+                    .frames
+                    .iter()
+                    .zip(&m.frames)
+                    .filter(|(a, b)| a != b)
+                    .count()
+                    + run.frames.len().abs_diff(m.frames.len());
+                let reference = ReferencePoint {
+                    buses,
+                    wall_per_sim_s: m.report.wall_seconds / m.report.sim_seconds,
+                    records: m.report.records,
+                    datagrams: m.report.frames,
+                    frames_differing: Some(differing),
+                    ts_max_ticks: m.report.ts_error_max_ticks,
+                };
+                Ok((rtl, reference))
+            })?;
+        rtl.push(rtl_point);
+        reference.push(reference_point);
     }
     for buses in reference_only_buses(quick) {
         progress.step(&format!("C2: reference model, {buses} buses"));
-        let (spec, _) = skin_spec(&base, buses, window)?;
-        let m = run_reference(&spec)?;
-        reference.push(ReferencePoint {
-            buses,
-            wall_per_sim_s: m.report.wall_seconds / m.report.sim_seconds,
-            records: m.report.records,
-            datagrams: m.report.frames,
-            frames_differing: None,
-            ts_max_ticks: m.report.ts_error_max_ticks,
-        });
+        reference.push(grid.run(format!("C2/reference/{buses}"), || {
+            let (spec, _) = skin_spec(&base, buses, window)?;
+            let m = run_reference(&spec)?;
+            Ok(ReferencePoint {
+                buses,
+                wall_per_sim_s: m.report.wall_seconds / m.report.sim_seconds,
+                records: m.report.records,
+                datagrams: m.report.frames,
+                frames_differing: None,
+                ts_max_ticks: m.report.ts_error_max_ticks,
+            })
+        })?);
     }
     progress.step("C2: rate model");
     let mut table = Table::new(&[
@@ -283,7 +294,9 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
         ));
     }
     for buses in sizes() {
-        let wall = rate_model_wall_s(buses);
+        let wall: f64 = grid.run(format!("C2/rate model wall time/{buses}"), || {
+            Ok(rate_model_wall_s(buses))
+        })?;
         let pred = predict(&rate_inputs(buses));
         let cells = buses * CELLS_PER_BUS;
         speed_rate.push((cells as f64, wall));

@@ -10,16 +10,19 @@
 //!
 //! [`run`] runs them and writes `summary.md` (every number behind every chart, as tables)
 //! and each chart as PNG and SVG into one directory. `quick` runs reduced sweeps (the test
-//! suite runs them).
+//! suite runs them). Every point of every grid goes through [`points::Points`], so a run can
+//! be split into shards on several machines and merged ([`points`]).
 
 pub mod batching;
 pub mod boundaries;
 pub mod chart;
 pub mod fidelity;
+pub mod points;
 pub mod rate_model;
 pub mod send_on_delta;
 
 use anyhow::Context;
+pub use points::{Merged, Points, Shard, ShardFile};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -31,6 +34,10 @@ pub struct Options {
     pub out: PathBuf,
     /// Reduced sweeps.
     pub quick: bool,
+    /// Compute only this share of the points and write them, no summary or charts.
+    pub shard: Option<Shard>,
+    /// Compute nothing: take every point from these merged shards (their `quick` wins).
+    pub merged: Option<Merged>,
 }
 
 /// Reports progress: one call per finished step.
@@ -112,10 +119,16 @@ pub struct Section {
 /// What [`run`] wrote.
 #[derive(Debug, Clone)]
 pub struct Written {
-    /// The summary.
-    pub summary: PathBuf,
-    /// Every chart file (PNG and SVG).
+    /// The summary (not for a shard).
+    pub summary: Option<PathBuf>,
+    /// Every chart file, PNG and SVG (none for a shard).
     pub charts: Vec<PathBuf>,
+    /// A shard's points file.
+    pub shard_file: Option<PathBuf>,
+    /// Points this run computed (none for a merge).
+    pub computed: usize,
+    /// Points of the whole grid.
+    pub points: usize,
     /// Wall time of the whole run, s.
     pub wall_s: f64,
 }
@@ -129,16 +142,39 @@ pub fn steps(quick: bool) -> u64 {
         + 1
 }
 
-/// Runs every study and writes the summary and charts.
+/// Runs every study and writes the summary and charts; or, for a shard, its points.
 pub fn run(options: &Options, progress: &mut Progress) -> anyhow::Result<Written> {
     let started = Instant::now();
     std::fs::create_dir_all(&options.out)
         .with_context(|| format!("creating {}", options.out.display()))?;
-    let q = options.quick;
-    let mut sections = vec![send_on_delta::study(q, progress)?];
-    sections.push(fidelity::study(q, progress)?);
-    sections.push(batching::study(q, progress)?);
-    sections.extend(boundaries::study(q, progress)?);
+    let (mut grid, q) = match (&options.merged, options.shard) {
+        (Some(_), Some(_)) => anyhow::bail!("a run is either a shard or a merge, not both"),
+        (Some(merged), None) => (Points::replay(merged.clone()), merged.quick),
+        (None, Some(shard)) => (Points::shard(shard), options.quick),
+        (None, None) => (Points::all(), options.quick),
+    };
+    let mut sections = vec![send_on_delta::study(q, progress, &mut grid)?];
+    sections.push(fidelity::study(q, progress, &mut grid)?);
+    sections.push(batching::study(q, progress, &mut grid)?);
+    sections.extend(boundaries::study(q, progress, &mut grid)?);
+    let points = grid.len();
+    if grid.shard_of().is_some() {
+        progress.step("writing the shard's points");
+        let file = grid
+            .finish(q, started.elapsed().as_secs_f64())?
+            .expect("a shard's file");
+        let path = file.write(&options.out)?;
+        return Ok(Written {
+            summary: None,
+            charts: Vec::new(),
+            shard_file: Some(path),
+            computed: file.rows.len(),
+            points,
+            wall_s: started.elapsed().as_secs_f64(),
+        });
+    }
+    let computed = if options.merged.is_some() { 0 } else { points };
+    grid.finish(q, 0.0)?;
     progress.step("writing the charts");
     let mut charts = Vec::new();
     for s in &sections {
@@ -148,20 +184,30 @@ pub fn run(options: &Options, progress: &mut Progress) -> anyhow::Result<Written
     }
     let wall_s = started.elapsed().as_secs_f64();
     let summary = options.out.join("summary.md");
-    std::fs::write(&summary, summary_markdown(&sections, q, wall_s))
+    let origin = match &options.merged {
+        Some(m) => format!(
+            ", merged from {} shards (the longest ran {:.1} s of wall time).",
+            m.shards, m.longest_shard_s
+        ),
+        None => format!(" in {wall_s:.1} s of wall time."),
+    };
+    std::fs::write(&summary, summary_markdown(&sections, q, &origin))
         .with_context(|| format!("writing {}", summary.display()))?;
     Ok(Written {
-        summary,
+        summary: Some(summary),
         charts,
+        shard_file: None,
+        computed,
+        points,
         wall_s,
     })
 }
 
-fn summary_markdown(sections: &[Section], quick: bool, wall_s: f64) -> String {
+fn summary_markdown(sections: &[Section], quick: bool, origin: &str) -> String {
     let mut s = String::from("# skinbox report\n\n");
     let _ = writeln!(
         s,
-        "Written by `skinbox report{}` in {wall_s:.1} s of wall time. Every number behind \
+        "Written by `skinbox report{}`{origin} Every number behind \
          every chart is in the tables below; the charts are beside this file as PNG and SVG.\n",
         if quick { " --quick" } else { "" }
     );

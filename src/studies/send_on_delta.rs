@@ -2,7 +2,7 @@
 //! error, sweeping every threshold from 0.25 to 4 times the papers' Table I (rounded down to
 //! whole raw steps, as the cells do), with data mode as the zero-threshold end.
 
-use super::{chart, mean_error_pct, scene, Progress, Section, Table};
+use super::{chart, mean_error_pct, scene, Points, Progress, Section, Table};
 use skinbox_cells::calibration::SEED_TABLE;
 use skinbox_cells::{GenerateOptions, Mode};
 use skinbox_protocol::{Channel, Modality};
@@ -30,7 +30,7 @@ pub fn steps(quick: bool) -> u64 {
 }
 
 /// The study.
-pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
+pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
     let (cells, duration_s) = size(quick);
     let mut table = Table::new(&[
         "scene",
@@ -66,21 +66,35 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                 None => sc.config.scene.mode = Mode::Data,
             }
             sc.check()?;
-            let g = sc.generate(&GenerateOptions {
-                keep_packets: false,
-                ..Default::default()
-            });
-            let st = &g.stats;
-            let modality_error = |m: Modality| {
-                let chans: Vec<_> = Channel::ALL[..8]
-                    .iter()
-                    .filter(|c| c.modality() == m)
-                    .collect();
-                chans.iter().map(|&&c| st.rms_error_pct(c)).sum::<f64>() / chans.len() as f64
-            };
+            let key = format!(
+                "C1/{}/{}",
+                row.scene,
+                scale.map_or("data mode".to_string(), |s| s.to_string())
+            );
+            // rate, mean error, then the error per modality
+            let [rate, error, accel, force, prox, temp]: [f64; 6] = grid.run(key, || {
+                let g = sc.generate(&GenerateOptions {
+                    keep_packets: false,
+                    ..Default::default()
+                });
+                let st = &g.stats;
+                let modality_error = |m: Modality| {
+                    let chans: Vec<_> = Channel::ALL[..8]
+                        .iter()
+                        .filter(|c| c.modality() == m)
+                        .collect();
+                    chans.iter().map(|&&c| st.rms_error_pct(c)).sum::<f64>() / chans.len() as f64
+                };
+                Ok([
+                    st.packet_rate_pct(),
+                    mean_error_pct(st),
+                    modality_error(Modality::Acceleration),
+                    modality_error(Modality::Force),
+                    modality_error(Modality::Proximity),
+                    modality_error(Modality::Temperature),
+                ])
+            })?;
             let raw = sc.thresholds().raw;
-            let error = mean_error_pct(st);
-            let rate = st.packet_rate_pct();
             y_max = y_max.max(rate);
             table.row(vec![
                 row.scene.to_string(),
@@ -90,10 +104,10 @@ pub fn study(quick: bool, progress: &mut Progress) -> anyhow::Result<Section> {
                 }),
                 format!("{rate:.2}"),
                 format!("{error:.4}"),
-                format!("{:.4}", modality_error(Modality::Acceleration)),
-                format!("{:.4}", modality_error(Modality::Force)),
-                format!("{:.4}", modality_error(Modality::Proximity)),
-                format!("{:.4}", modality_error(Modality::Temperature)),
+                format!("{accel:.4}"),
+                format!("{force:.4}"),
+                format!("{prox:.4}"),
+                format!("{temp:.4}"),
             ]);
             points.push((error, rate));
             if scale == Some(1.0) {

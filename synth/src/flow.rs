@@ -8,7 +8,7 @@
 use crate::report::{utilisation_line, ClockFmax, CriticalPath, NextpnrReport, YosysStats};
 use crate::toolchain::{run_logged, Toolchain, PACKAGES};
 use crate::SynthError;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use skinbox_gateware::board::Board;
 use skinbox_gateware::interface_box::BoxConfig;
 use std::path::{Path, PathBuf};
@@ -44,7 +44,7 @@ pub struct FlowOptions {
 }
 
 /// One placement tried.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SeedResult {
     /// nextpnr's placer seed.
     pub seed: u64,
@@ -90,7 +90,7 @@ pub enum Event<'a> {
 }
 
 /// Wall time of each stage, seconds.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageSeconds {
     /// yosys.
     pub yosys: f64,
@@ -169,18 +169,35 @@ pub fn run(
     progress: &mut dyn FnMut(Event<'_>),
 ) -> Result<SynthReport, SynthError> {
     let started = Instant::now();
+    let yosys_seconds = synthesise(toolchain, options, progress)?;
+    let seeds: Vec<u64> = (options.seed..options.seed + options.seeds.max(1)).collect();
+    let stage_started = Instant::now();
+    let tried = place_seeds(toolchain, options, &seeds, progress)?;
+    let seconds = StageSeconds {
+        yosys: yosys_seconds,
+        nextpnr: stage_started.elapsed().as_secs_f64(),
+        ..StageSeconds::default()
+    };
+    finish(toolchain, options, tried, seconds, started, progress)
+}
+
+/// Steps 1 and 2: the Verilog, the constraints and yosys `synth_ecp5`; returns yosys' wall
+/// time, s.
+fn synthesise(
+    toolchain: &Toolchain,
+    options: &FlowOptions,
+    progress: &mut dyn FnMut(Event<'_>),
+) -> Result<f64, SynthError> {
     let board = options.board;
     let top = board.top_module();
     let dir = &options.out_dir;
-    let target_mhz = options.config.clock_hz as f64 / 1e6;
 
     progress(Event::Stage(Stage::Verilog));
     std::fs::create_dir_all(dir)
         .map_err(|e| SynthError::io(format!("creating {}", dir.display()), e))?;
     let verilog = board.verilog(&options.config)?;
-    let lpf = format!("{}.lpf", board.name());
     write(dir, &format!("{top}.v"), &verilog)?;
-    write(dir, &lpf, &board.lpf())?;
+    write(dir, &lpf_name(board), &board.lpf())?;
     write(
         dir,
         "synth.ys",
@@ -200,31 +217,67 @@ pub fn run(
         progress(Event::Line(l));
         Ok(())
     })?;
-    let yosys_seconds = stage_started.elapsed().as_secs_f64();
+    Ok(stage_started.elapsed().as_secs_f64())
+}
 
+fn lpf_name(board: Board) -> String {
+    format!("{}.lpf", board.name())
+}
+
+/// Step 3 for each of `seeds`: each placement in its own files (`nextpnr-seedS.*`).
+fn place_seeds(
+    toolchain: &Toolchain,
+    options: &FlowOptions,
+    seeds: &[u64],
+    progress: &mut dyn FnMut(Event<'_>),
+) -> Result<Vec<SeedResult>, SynthError> {
+    let target_mhz = options.config.clock_hz as f64 / 1e6;
+    let dir = &options.out_dir;
     progress(Event::Stage(Stage::Nextpnr));
-    let stage_started = Instant::now();
-    // Each seed's placement in its own files; the fastest is copied to the run's names.
     let mut tried = Vec::new();
-    let mut best: Option<(SeedResult, NextpnrReport)> = None;
-    for seed in options.seed..options.seed + options.seeds.max(1) {
+    for &seed in seeds {
         progress(Event::Line(&format!("seed {seed}")));
-        place_and_route(toolchain, options, &lpf, seed, progress)?;
+        place_and_route(toolchain, options, &lpf_name(options.board), seed, progress)?;
         let pnr = NextpnrReport::parse(&read(dir, &seed_file(seed, "report.json"))?, BOX_INSTANCE)?;
         let (_, fmax) = box_clock(&pnr, target_mhz)?;
-        let result = SeedResult {
+        tried.push(SeedResult {
             seed,
             fmax_mhz: fmax.achieved,
-        };
-        tried.push(result);
-        if best
-            .as_ref()
-            .is_none_or(|(b, _)| result.fmax_mhz > b.fmax_mhz)
-        {
-            best = Some((result, pnr));
-        }
+        });
     }
-    let (chosen, pnr) = best.expect("at least one seed");
+    Ok(tried)
+}
+
+/// The placement kept from `tried`: the fastest, the lowest seed of equally fast ones.
+pub fn fastest(tried: &[SeedResult]) -> Option<SeedResult> {
+    tried
+        .iter()
+        .fold(None, |best: Option<SeedResult>, &t| match best {
+            Some(b) if t.fmax_mhz <= b.fmax_mhz => Some(b),
+            _ => Some(t),
+        })
+}
+
+/// Steps 3 (the fastest of `tried` copied to the run's names), 4 and 5, with every file of
+/// steps 1 to 3 in the run's directory.
+fn finish(
+    toolchain: &Toolchain,
+    options: &FlowOptions,
+    mut tried: Vec<SeedResult>,
+    mut seconds: StageSeconds,
+    started: Instant,
+    progress: &mut dyn FnMut(Event<'_>),
+) -> Result<SynthReport, SynthError> {
+    let board = options.board;
+    let top = board.top_module();
+    let dir = &options.out_dir;
+    let target_mhz = options.config.clock_hz as f64 / 1e6;
+    tried.sort_by_key(|t| t.seed);
+    let chosen = fastest(&tried).expect("at least one seed");
+    let pnr = NextpnrReport::parse(
+        &read(dir, &seed_file(chosen.seed, "report.json"))?,
+        BOX_INSTANCE,
+    )?;
     for (from, to) in [
         ("config", format!("{top}.config")),
         ("report.json", "nextpnr-report.json".to_string()),
@@ -234,7 +287,6 @@ pub fn run(
         std::fs::copy(&from, dir.join(&to))
             .map_err(|e| SynthError::io(format!("copying {} to {to}", from.display()), e))?;
     }
-    let nextpnr_seconds = stage_started.elapsed().as_secs_f64();
 
     progress(Event::Stage(Stage::Ecppack));
     let stage_started = Instant::now();
@@ -250,10 +302,11 @@ pub fn run(
         progress(Event::Line(l));
         Ok(())
     })?;
-    let ecppack_seconds = stage_started.elapsed().as_secs_f64();
+    seconds.ecppack = stage_started.elapsed().as_secs_f64();
 
     let stats = YosysStats::parse(&read(dir, "yosys-stat.json")?)?;
     let (clock_net, fmax) = box_clock(&pnr, target_mhz)?;
+    seconds.total += started.elapsed().as_secs_f64();
     let report = SynthReport {
         board: board.name().to_string(),
         part: board.part().to_string(),
@@ -280,17 +333,284 @@ pub fn run(
         out_dir: dir.clone(),
         seed: chosen.seed,
         seeds: tried,
-        seconds: StageSeconds {
-            yosys: yosys_seconds,
-            nextpnr: nextpnr_seconds,
-            ecppack: ecppack_seconds,
-            total: started.elapsed().as_secs_f64(),
-        },
+        seconds,
         tools: PACKAGES.iter().map(|p| p.to_string()).collect(),
     };
     let json = serde_json::to_string_pretty(&report).expect("a report serialises");
     write(dir, "report.json", &json)?;
     Ok(report)
+}
+
+/// What a shard of a seed sweep writes (`seeds-K-of-N.json` in its directory): which
+/// sweep, which share, and the Fmax of each of its seeds; the placements are beside it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SeedShard {
+    /// [`SeedShard::KIND`].
+    pub kind: String,
+    /// Board name.
+    pub board: String,
+    /// UART ports of the box.
+    pub ports: usize,
+    /// The sweep's first seed.
+    pub first_seed: u64,
+    /// Seeds of the whole sweep.
+    pub seeds: u64,
+    /// This shard, from 1.
+    pub shard: u32,
+    /// Shards in all.
+    pub shards: u32,
+    /// The placements of this shard, in seed order.
+    pub tried: Vec<SeedResult>,
+    /// Wall times of this shard (no ecppack: the merge packs the kept placement).
+    pub seconds: StageSeconds,
+}
+
+impl SeedShard {
+    /// The `kind` of a seed shard file.
+    pub const KIND: &'static str = "skinbox synth seed shard";
+
+    /// Its file name: `seeds-K-of-N.json`.
+    pub fn file_name(shard: u32, shards: u32) -> String {
+        format!("seeds-{shard}-of-{shards}.json")
+    }
+}
+
+/// Shard `shard` of `shards` of the seed sweep of `options`: synthesises, places and
+/// routes the seeds `options.seed + i` with `i % shards == shard - 1`, and writes their
+/// results as [`SeedShard`] into the run's directory. Fails when the share is empty.
+pub fn run_shard(
+    toolchain: &Toolchain,
+    options: &FlowOptions,
+    shard: u32,
+    shards: u32,
+    progress: &mut dyn FnMut(Event<'_>),
+) -> Result<SeedShard, SynthError> {
+    let started = Instant::now();
+    let all: Vec<u64> = (options.seed..options.seed + options.seeds.max(1)).collect();
+    let mine: Vec<u64> = all
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| shard >= 1 && i % shards as usize == (shard - 1) as usize)
+        .map(|(_, s)| *s)
+        .collect();
+    if mine.is_empty() {
+        return Err(SynthError::Merge(format!(
+            "shard {shard}/{shards} of {} seeds has no seed to place: use at most {} shards",
+            all.len(),
+            all.len()
+        )));
+    }
+    let yosys = synthesise(toolchain, options, progress)?;
+    let stage_started = Instant::now();
+    let tried = place_seeds(toolchain, options, &mine, progress)?;
+    let result = SeedShard {
+        kind: SeedShard::KIND.into(),
+        board: options.board.name().into(),
+        ports: options.config.ports,
+        first_seed: options.seed,
+        seeds: all.len() as u64,
+        shard,
+        shards,
+        tried,
+        seconds: StageSeconds {
+            yosys,
+            nextpnr: stage_started.elapsed().as_secs_f64(),
+            ecppack: 0.0,
+            total: started.elapsed().as_secs_f64(),
+        },
+    };
+    let json = serde_json::to_string_pretty(&result).expect("a shard serialises");
+    write(
+        &options.out_dir,
+        &SeedShard::file_name(shard, shards),
+        &json,
+    )?;
+    Ok(result)
+}
+
+/// Every seed shard file (`seeds-K-of-N.json`) in `dirs`, with its directory.
+pub fn read_seed_shards(dirs: &[PathBuf]) -> Result<Vec<(PathBuf, SeedShard)>, SynthError> {
+    let mut out = Vec::new();
+    for dir in dirs {
+        let entries = std::fs::read_dir(dir)
+            .map_err(|e| SynthError::io(format!("reading {}", dir.display()), e))?;
+        let mut names: Vec<String> = entries
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("seeds-") && n.ends_with(".json") && n.contains("-of-"))
+            .collect();
+        names.sort();
+        if names.is_empty() {
+            return Err(SynthError::Merge(format!(
+                "{}: no seed shard file (seeds-K-of-N.json) of `skinbox synth --shard`",
+                dir.display()
+            )));
+        }
+        for name in names {
+            let text = read(dir, &name)?;
+            let shard: SeedShard = serde_json::from_str(&text)
+                .ok()
+                .filter(|s: &SeedShard| s.kind == SeedShard::KIND)
+                .ok_or_else(|| {
+                    SynthError::Merge(format!(
+                        "{}: not a seed shard file of skinbox synth",
+                        dir.join(&name).display()
+                    ))
+                })?;
+            out.push((dir.clone(), shard));
+        }
+    }
+    Ok(out)
+}
+
+/// Checks that `shards` are one complete split of one sweep (same board, ports, seeds and
+/// netlist input; every shard and every seed once) and returns every seed's result, in
+/// seed order.
+pub fn check_seed_shards(shards: &[(PathBuf, SeedShard)]) -> Result<Vec<SeedResult>, SynthError> {
+    let (first_dir, first) = shards
+        .first()
+        .ok_or_else(|| SynthError::Merge("no seed shards".into()))?;
+    let mut have = std::collections::BTreeMap::new();
+    for (dir, s) in shards {
+        let same = (&s.board, s.ports, s.first_seed, s.seeds, s.shards)
+            == (
+                &first.board,
+                first.ports,
+                first.first_seed,
+                first.seeds,
+                first.shards,
+            );
+        if !same {
+            return Err(SynthError::Merge(format!(
+                "{} ({}, {} ports, seeds {} to {}, {} shards) and {} ({}, {} ports, seeds {} to \
+                 {}, {} shards) are not shards of one sweep",
+                first_dir.display(),
+                first.board,
+                first.ports,
+                first.first_seed,
+                first.first_seed + first.seeds - 1,
+                first.shards,
+                dir.display(),
+                s.board,
+                s.ports,
+                s.first_seed,
+                s.first_seed + s.seeds - 1,
+                s.shards
+            )));
+        }
+        if let Some(other) = have.insert(s.shard, dir) {
+            return Err(SynthError::Merge(format!(
+                "shard {}/{} given twice: {} and {}",
+                s.shard,
+                s.shards,
+                other.display(),
+                dir.display()
+            )));
+        }
+    }
+    let missing: Vec<String> = (1..=first.shards)
+        .filter(|k| !have.contains_key(k))
+        .map(|k| format!("{k}/{}", first.shards))
+        .collect();
+    if !missing.is_empty() {
+        return Err(SynthError::Merge(format!(
+            "shard {} of the seed sweep missing",
+            missing.join(", ")
+        )));
+    }
+    let mut tried: Vec<SeedResult> = shards.iter().flat_map(|(_, s)| s.tried.clone()).collect();
+    tried.sort_by_key(|t| t.seed);
+    let expected: Vec<u64> = (first.first_seed..first.first_seed + first.seeds).collect();
+    let got: Vec<u64> = tried.iter().map(|t| t.seed).collect();
+    if got != expected {
+        return Err(SynthError::Merge(format!(
+            "the shards placed seeds {got:?}, the sweep is {expected:?}"
+        )));
+    }
+    // one netlist input: the shards synthesised the same Verilog
+    let verilog = |dir: &Path| read(dir, &format!("{}.v", top_of(&first.board)));
+    let reference = verilog(first_dir)?;
+    for (dir, _) in shards {
+        if verilog(dir)? != reference {
+            return Err(SynthError::Merge(format!(
+                "{} and {} synthesised different Verilog: run every shard with one version",
+                first_dir.display(),
+                dir.display()
+            )));
+        }
+    }
+    Ok(tried)
+}
+
+fn top_of(board: &str) -> &'static str {
+    Board::from_name(board).map_or("", |b| b.top_module())
+}
+
+/// Merges the shards of a seed sweep (see [`run_shard`]) into `out_dir`: the synthesis
+/// files of the first shard, every seed's placement, and then, as a serial sweep, the
+/// fastest placement packed into the bitstream and the report with every seed's Fmax.
+pub fn merge(
+    toolchain: &Toolchain,
+    shards: &[(PathBuf, SeedShard)],
+    out_dir: &Path,
+    progress: &mut dyn FnMut(Event<'_>),
+) -> Result<SynthReport, SynthError> {
+    let started = Instant::now();
+    let tried = check_seed_shards(shards)?;
+    let (first_dir, first) = &shards[0];
+    let board = Board::from_name(&first.board)
+        .ok_or_else(|| SynthError::Merge(format!("unknown board {}", first.board)))?;
+    let options = FlowOptions {
+        board,
+        config: BoxConfig {
+            ports: first.ports,
+            ..BoxConfig::default()
+        },
+        out_dir: out_dir.to_path_buf(),
+        seed: first.first_seed,
+        seeds: first.seeds,
+    };
+    std::fs::create_dir_all(out_dir)
+        .map_err(|e| SynthError::io(format!("creating {}", out_dir.display()), e))?;
+    let top = board.top_module();
+    let copy = |from_dir: &Path, name: &str| -> Result<(), SynthError> {
+        let from = from_dir.join(name);
+        let to = out_dir.join(name);
+        if from == to {
+            return Ok(());
+        }
+        std::fs::copy(&from, &to).map(|_| ()).map_err(|e| {
+            SynthError::io(format!("copying {} to {}", from.display(), to.display()), e)
+        })
+    };
+    for name in [
+        format!("{top}.v"),
+        lpf_name(board),
+        "synth.ys".into(),
+        format!("{top}.json"),
+        "yosys-stat.json".into(),
+        "yosys.log".into(),
+    ] {
+        copy(first_dir, &name)?;
+    }
+    for (dir, s) in shards {
+        for t in &s.tried {
+            for what in ["config", "report.json", "log"] {
+                copy(dir, &seed_file(t.seed, what))?;
+            }
+        }
+    }
+    let seconds = StageSeconds {
+        yosys: first.seconds.yosys,
+        // the placements' wall time summed over the shards, the longest shard's in total
+        nextpnr: shards.iter().map(|(_, s)| s.seconds.nextpnr).sum(),
+        ecppack: 0.0,
+        total: shards
+            .iter()
+            .map(|(_, s)| s.seconds.total)
+            .fold(0.0, f64::max),
+    };
+    finish(toolchain, &options, tried, seconds, started, progress)
 }
 
 /// A file of the placement with `seed`: `nextpnr-seed{seed}.{what}`.
@@ -371,4 +691,118 @@ fn read(dir: &Path, name: &str) -> Result<String, SynthError> {
     let path = dir.join(name);
     std::fs::read_to_string(&path)
         .map_err(|e| SynthError::io(format!("reading {}", path.display()), e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn seed(seed: u64, fmax_mhz: f64) -> SeedResult {
+        SeedResult { seed, fmax_mhz }
+    }
+
+    #[test]
+    fn the_fastest_seed_is_kept_the_lowest_of_a_tie() {
+        let tried = [
+            seed(1, 130.0),
+            seed(2, 136.4),
+            seed(3, 136.4),
+            seed(4, 120.0),
+        ];
+        assert_eq!(fastest(&tried), Some(seed(2, 136.4)));
+        assert_eq!(fastest(&[]), None);
+    }
+
+    /// Two shards of a 4-seed sweep, written as `run_shard` does, in temporary directories.
+    fn shard_dirs(test: &str) -> Vec<(PathBuf, SeedShard)> {
+        let top = Board::ColorlightI5.top_module();
+        (1..=2u32)
+            .map(|k| {
+                let dir = std::env::temp_dir().join(format!(
+                    "skinbox-seed-shards-{}-{test}-{k}",
+                    std::process::id()
+                ));
+                std::fs::create_dir_all(&dir).unwrap();
+                std::fs::write(dir.join(format!("{top}.v")), "module top; endmodule\n").unwrap();
+                let s = SeedShard {
+                    kind: SeedShard::KIND.into(),
+                    board: "colorlight-i5".into(),
+                    ports: 2,
+                    first_seed: 1,
+                    seeds: 4,
+                    shard: k,
+                    shards: 2,
+                    tried: vec![
+                        seed(u64::from(k), 120.0 + f64::from(k)),
+                        seed(u64::from(k) + 2, 130.0 - f64::from(k)),
+                    ],
+                    seconds: StageSeconds::default(),
+                };
+                std::fs::write(
+                    dir.join(SeedShard::file_name(k, 2)),
+                    serde_json::to_string(&s).unwrap(),
+                )
+                .unwrap();
+                (dir, s)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn seed_shards_merge_into_every_seed_once() {
+        let shards = shard_dirs("ok");
+        let dirs: Vec<PathBuf> = shards.iter().map(|(d, _)| d.clone()).collect();
+        let read = read_seed_shards(&dirs).unwrap();
+        assert_eq!(read, shards);
+        let tried = check_seed_shards(&read).unwrap();
+        assert_eq!(
+            tried,
+            [
+                seed(1, 121.0),
+                seed(2, 122.0),
+                seed(3, 129.0),
+                seed(4, 128.0)
+            ]
+        );
+        assert_eq!(fastest(&tried), Some(seed(3, 129.0)));
+        for d in dirs {
+            std::fs::remove_dir_all(d).ok();
+        }
+    }
+
+    #[test]
+    fn incomplete_doubled_or_mixed_seed_shards_are_refused() {
+        let shards = shard_dirs("bad");
+        let error = |s: &[(PathBuf, SeedShard)]| check_seed_shards(s).unwrap_err().to_string();
+        assert!(
+            error(&shards[..1]).contains("shard 2/2 of the seed sweep missing"),
+            "{}",
+            error(&shards[..1])
+        );
+        let doubled = [shards.clone(), vec![shards[0].clone()]].concat();
+        assert!(error(&doubled).contains("shard 1/2 given twice"));
+        let mut other = shards.clone();
+        other[1].1.ports = 8;
+        assert!(error(&other).contains("are not shards of one sweep"));
+        let mut lost = shards.clone();
+        lost[1].1.tried.pop();
+        assert!(error(&lost).contains("the shards placed seeds [1, 2, 3]"));
+        std::fs::write(
+            shards[1]
+                .0
+                .join(format!("{}.v", Board::ColorlightI5.top_module())),
+            "module top(); endmodule\n",
+        )
+        .unwrap();
+        assert!(error(&shards).contains("synthesised different Verilog"));
+        let empty = std::env::temp_dir().join(format!("skinbox-seed-none-{}", std::process::id()));
+        std::fs::create_dir_all(&empty).unwrap();
+        let e = read_seed_shards(std::slice::from_ref(&empty))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no seed shard file (seeds-K-of-N.json)"), "{e}");
+        for d in shards.iter().map(|(d, _)| d).chain([&empty]) {
+            std::fs::remove_dir_all(d).ok();
+        }
+    }
 }

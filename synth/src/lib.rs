@@ -11,7 +11,10 @@ pub mod toolchain;
 
 use std::path::PathBuf;
 
-pub use flow::{run, Event, FlowOptions, SeedResult, Stage, SynthReport};
+pub use flow::{
+    merge, read_seed_shards, run, run_shard, Event, FlowOptions, SeedResult, SeedShard, Stage,
+    SynthReport,
+};
 pub use toolchain::Toolchain;
 
 /// Why the flow stopped.
@@ -82,6 +85,9 @@ pub enum SynthError {
         /// On the device.
         available: u64,
     },
+    /// Shards of a seed sweep that do not make one complete sweep, or an empty shard.
+    #[error("{0}")]
+    Merge(String),
     /// A tool's report did not parse.
     #[error(transparent)]
     Report(#[from] report::ReportError),

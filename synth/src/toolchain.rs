@@ -64,6 +64,21 @@ impl Toolchain {
                 python: python.to_string(),
             });
         }
+        // another process (a test under cargo-nextest, a second shard) may be installing
+        // into the same venv: wait for it, then use what it installed
+        let mut lock_name = self.venv.as_os_str().to_owned();
+        lock_name.push(".lock");
+        let lock_path = PathBuf::from(lock_name);
+        if let Some(parent) = lock_path.parent() {
+            std::fs::create_dir_all(parent)
+                .map_err(|e| SynthError::io(format!("creating {}", parent.display()), e))?;
+        }
+        let lock = std::fs::File::create(&lock_path)
+            .and_then(|f| f.lock().map(|()| f))
+            .map_err(|e| SynthError::io(format!("locking {}", lock_path.display()), e))?;
+        if self.is_installed() {
+            return Ok(());
+        }
         if !self.tool("python").is_file() {
             on_line(&format!(
                 "creating a Python venv at {}",
@@ -105,6 +120,7 @@ impl Toolchain {
         )?;
         std::fs::write(self.venv.join(STAMP), PACKAGES.join("\n"))
             .map_err(|e| SynthError::io(format!("writing {}", self.venv.display()), e))?;
+        drop(lock);
         Ok(())
     }
 }
