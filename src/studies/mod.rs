@@ -1,5 +1,5 @@
 //! The studies of `skinbox report`: speed against accuracy, and the point where each method
-//! fails (issue 8; docs/design.md sections 4, 6 and 7).
+//! fails (docs/design.md sections 2, 4, 6 and 7).
 //!
 //! - C1 [`send_on_delta`]: per scene, packet rate against reconstruction error over a sweep
 //!   of thresholds around the papers' Table I.
@@ -7,6 +7,8 @@
 //!   the RTL co-simulation and the closed-form [`rate_model`], across skin sizes.
 //! - C3 [`batching`]: the flush timeout's latency against the link capacity it reaches.
 //! - C4 [`boundaries`]: UART baud mismatch (RTL), cells per bus, sensor noise, event loss.
+//! - C6 [`sample_rate`]: the scenes' packet rate against sample rate, beside the papers'
+//!   Fig. 11 fits.
 //!
 //! [`run`] runs them and writes `summary.md` (every number behind every chart, as tables)
 //! and each chart as PNG and SVG into one directory. `quick` runs reduced sweeps (the test
@@ -19,6 +21,7 @@ pub mod chart;
 pub mod fidelity;
 pub mod points;
 pub mod rate_model;
+pub mod sample_rate;
 pub mod send_on_delta;
 
 use anyhow::Context;
@@ -139,6 +142,7 @@ pub fn steps(quick: bool) -> u64 {
         + fidelity::steps(quick)
         + batching::steps(quick)
         + boundaries::steps(quick)
+        + sample_rate::steps(quick)
         + 1
 }
 
@@ -157,6 +161,7 @@ pub fn run(options: &Options, progress: &mut Progress) -> anyhow::Result<Written
     sections.push(fidelity::study(q, progress, &mut grid)?);
     sections.push(batching::study(q, progress, &mut grid)?);
     sections.extend(boundaries::study(q, progress, &mut grid)?);
+    sections.push(sample_rate::study(q, progress, &mut grid)?);
     let points = grid.len();
     if grid.shard_of().is_some() {
         progress.step("writing the shard's points");
