@@ -107,6 +107,7 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
         ("c4b_cells_per_bus", "C4b Cells per bus"),
         ("c4c_sensor_noise", "C4c Sensor noise"),
         ("c4d_event_loss", "C4d Event loss"),
+        ("c6_sample_rate", "C6 Packet rate against sample rate"),
     ];
     assert_eq!(
         written["charts"].as_array().unwrap().len(),
@@ -244,6 +245,38 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
             assert!(e < 0.5, "{r:?}");
         }
     }
+
+    // C6: the five scenes of Fig. 11 at its four rates; the model against the papers' fit,
+    // recomputed here from the fit's constants (docs/design.md section 2)
+    let c6 = &tables(&summary, "C6")[1];
+    assert_eq!(c6.len(), 5 * 4);
+    let fits = [
+        ("idle", 243.8846, 2.248e-4, 1.0),
+        ("stroking_upper_arm", 85.0385, 3.215e-3, 1.0),
+        ("stroking_arm", 74.2308, 6.154e-3, 1.0),
+        ("hammering_end_effector", 330.2692, 2.512e-3, 1.0),
+        ("moving_arm", 1.214e7, 1.687e-5, 260.0),
+    ];
+    for r in c6 {
+        let (_, a, b, per) = fits.iter().find(|f| f.0 == r["scene"]).unwrap();
+        let x = num(r, "sample rate (Hz)");
+        let fit = a * (b * x + 1.0f64).ln() / per;
+        assert!((num(r, "Fig. 11 fit") - fit).abs() < 0.006, "{r:?}");
+        let ratio = num(r, "packets per cell per s") / num(r, "Fig. 11 fit");
+        assert!((num(r, "model / fit") - ratio).abs() < 0.002, "{r:?}");
+        // the quick run's 2 s windows are noisy: a looser band than the full run's 1.2
+        assert!((0.7..1.4).contains(&ratio), "{r:?}");
+    }
+    // data mode is 100 %; faster sampling sends a smaller share of it for the stroking scenes
+    let share = |scene: &str, rate: &str| {
+        num(
+            c6.iter()
+                .find(|r| r["scene"] == scene && r["sample rate (Hz)"] == rate)
+                .unwrap(),
+            "packets (% of data mode)",
+        )
+    };
+    assert!(share("stroking_arm", "500") < share("stroking_arm", "62.5"));
     std::fs::remove_dir_all(&dir).ok();
 }
 
