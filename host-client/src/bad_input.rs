@@ -74,5 +74,8 @@ pub fn error_reason(error: &Error) -> &'static str {
         Error::BadPort { .. } => "port out of range",
         Error::ValueOutOfRange { .. } => "value out of range",
         Error::BadEvents { .. } => "bad events",
+        Error::BadPortCount { .. } => "port count out of range",
+        Error::BadFlags { .. } => "undefined flag bits",
+        Error::UnusedValueSet { .. } => "unused event value slot not 0",
     }
 }

@@ -125,7 +125,7 @@ where
      -> Result<(), CaptureError> {
         stats.datagrams += 1;
         stats.bytes += n as u64;
-        decoder.push_datagram(&buf[..n], sink);
+        decoder.push_datagram_from(Some(peer), &buf[..n], sink);
         if let Some(w) = recorder.as_deref_mut() {
             let now = SystemTime::now()
                 .duration_since(SystemTime::UNIX_EPOCH)

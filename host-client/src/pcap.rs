@@ -126,7 +126,7 @@ pub fn decode_pcap_with<S: RecordSink + ?Sized>(
     let cpu = crate::thread_cpu_ns();
     let mut decoder = Decoder::new(options.decoder);
     let scan = for_each_udp_payload(bytes, options.udp_port, |_, udp| {
-        decoder.push_datagram(udp.payload, sink);
+        decoder.push_datagram_from(Some(udp.source), udp.payload, sink);
     })?;
     let cpu_ns = crate::thread_cpu_ns().saturating_sub(cpu);
     decoder.bad_input_mut().merge(&scan.bad);

@@ -129,11 +129,11 @@ impl Channel {
         f64::from(raw) * self.units_per_lsb()
     }
 
-    /// Range of raw values the channel's 16-bit event word holds (i16 for acceleration,
-    /// u16 otherwise).
+    /// Range of raw values the channel's 16-bit event word may carry: acceleration is
+    /// 10-bit signed (-512..=511, sign-extended in an i16 word), the others u16.
     pub fn word_range(self) -> core::ops::RangeInclusive<i32> {
         match self.modality() {
-            Modality::Acceleration => i32::from(i16::MIN)..=i32::from(i16::MAX),
+            Modality::Acceleration => ACCEL_MIN..=ACCEL_MAX,
             _ => 0..=i32::from(u16::MAX),
         }
     }
@@ -182,6 +182,11 @@ impl fmt::Display for Channel {
         f.write_str(self.name())
     }
 }
+
+/// Smallest raw acceleration: -2 g in 1/256 g (10-bit signed).
+pub const ACCEL_MIN: i32 = -512;
+/// Largest raw acceleration: 2 g - 1/256 g (10-bit signed).
+pub const ACCEL_MAX: i32 = 511;
 
 /// A set of channels, as the 9 low bits of an event packet's mask field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
@@ -274,6 +279,10 @@ mod tests {
         assert_eq!(Channel::Force1.decode_word(0xFFFF), 65535);
         assert_eq!(Channel::AccelX.encode_word(-1), Some(0xFFFF));
         assert_eq!(Channel::AccelX.encode_word(40000), None);
+        assert_eq!(Channel::AccelX.encode_word(511), Some(0x01FF));
+        assert_eq!(Channel::AccelX.encode_word(512), None);
+        assert_eq!(Channel::AccelX.encode_word(-512), Some(0xFE00));
+        assert_eq!(Channel::AccelX.encode_word(-513), None);
         assert_eq!(Channel::Proximity.encode_word(-1), None);
     }
 

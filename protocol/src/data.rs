@@ -66,13 +66,30 @@ impl<T: AsRef<[u8]>> DataPacket<T> {
         Self::new_checked_with(buffer, &CellFraming::DEFAULT)
     }
 
-    /// Wraps untrusted bytes: length, data header, end-of-packet byte, 14-bit cell id.
+    /// Wraps untrusted bytes: length, data header, end-of-packet byte, 14-bit cell id,
+    /// accelerations in their 10-bit signed range.
     pub fn new_checked_with(buffer: T, framing: &CellFraming) -> Result<Self> {
         let cell = CellPacket::new_unchecked(buffer);
         match cell.check(Format::DataPacket, framing)? {
-            CellKind::Data => Ok(DataPacket {
-                buffer: cell.into_inner(),
-            }),
+            CellKind::Data => {
+                let p = DataPacket {
+                    buffer: cell.into_inner(),
+                };
+                for channel in [Channel::AccelX, Channel::AccelY, Channel::AccelZ] {
+                    let value = p.raw(channel);
+                    let range = channel.data_range();
+                    if !range.contains(&value) {
+                        return Err(Error::ValueOutOfRange {
+                            format: Format::DataPacket,
+                            channel,
+                            value,
+                            min: *range.start(),
+                            max: *range.end(),
+                        });
+                    }
+                }
+                Ok(p)
+            }
             CellKind::Event => Err(Error::BadHeader {
                 format: Format::DataPacket,
                 found: framing.event_header,
@@ -106,6 +123,8 @@ impl<T: AsRef<[u8]> + AsMut<[u8]>> DataPacket<T> {
                 format: Format::DataPacket,
                 channel,
                 value: raw,
+                min: *channel.data_range().start(),
+                max: *channel.data_range().end(),
             });
         }
         let at = channel_field(channel);

@@ -94,9 +94,37 @@ impl<T: AsRef<[u8]>> EventPacket<T> {
         } else if p.channels().len() > MAX_EVENTS {
             "more than six channels"
         } else {
+            p.check_values()?;
             return Ok(p);
         };
         Err(Error::BadEventMask { mask, reason })
+    }
+
+    /// Values of the mask's channels in their range (acceleration 10-bit signed), unused
+    /// slots 0.
+    fn check_values(&self) -> Result<()> {
+        let channels = self.channels();
+        let used = channels.len();
+        for (slot, channel) in channels.iter().enumerate() {
+            let value = channel.decode_word(self.value_word(slot));
+            let range = channel.word_range();
+            if !range.contains(&value) {
+                return Err(Error::ValueOutOfRange {
+                    format: Format::EventPacket,
+                    channel,
+                    value,
+                    min: *range.start(),
+                    max: *range.end(),
+                });
+            }
+        }
+        for slot in used..MAX_EVENTS {
+            let word = self.value_word(slot);
+            if word != 0 {
+                return Err(Error::UnusedValueSet { slot, used, word });
+            }
+        }
+        Ok(())
     }
 
     /// Cell id.
@@ -176,6 +204,8 @@ impl EventRepr {
                     format: Format::EventPacket,
                     channel,
                     value,
+                    min: *channel.word_range().start(),
+                    max: *channel.word_range().end(),
                 });
             }
             previous = Some(channel);
