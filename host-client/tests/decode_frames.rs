@@ -260,3 +260,51 @@ fn datagram_repr_roundtrip_through_frames() {
         vec![1, 0, 0, 0, 0, 0]
     );
 }
+
+#[test]
+fn corrupted_payload_with_stale_checksum_is_refused_and_counted() {
+    let capture = synth::generate(&SynthConfig {
+        cells: 40,
+        samples_per_cell: 10,
+        status_every: 0,
+        ..SynthConfig::default()
+    });
+    let payloads = capture.payloads();
+    assert!(payloads.len() >= 4);
+    let mut frames: Vec<Vec<u8>> = payloads
+        .iter()
+        .map(|p| udp_frame(BOX_PORT, 6_000, p))
+        .collect();
+    // Frame 1: a bit of a record's cell value flipped after the checksum was computed.
+    // The datagram still parses (its value is in range), so only the checksum can tell.
+    let at = 14 + 20 + 8 + 24 + 6 + 9; // force_1 low byte of the first record
+    frames[1][at] ^= 0x01;
+    let corrupted = frames[1][34 + 8..].to_vec();
+    assert!(DatagramRepr::parse(&corrupted).is_ok());
+    // Frame 2: the IPv4 header's TTL changed, its checksum stale.
+    frames[2][22] ^= 0x20;
+    let decoded = decode_pcap_bytes(&pcap_of(&frames), &PcapOptions::default()).unwrap();
+    let bad = &decoded.report.bad_input;
+    assert_eq!(bad.get("frame: bad UDP checksum"), 1, "{bad:?}");
+    assert_eq!(bad.get("frame: bad IPv4 header checksum"), 1, "{bad:?}");
+    assert_eq!(bad.total, 2);
+    // Nothing of either frame was decoded: the records are those of the other frames.
+    let records_in = |p: &[u8]| match DatagramRepr::parse(p).unwrap().body {
+        DatagramBody::Records(r) => r.len(),
+        DatagramBody::Status(_) => 0,
+    };
+    let expected: usize = payloads
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != 1 && *i != 2)
+        .map(|(_, p)| records_in(p))
+        .sum();
+    assert_eq!(decoded.records.len(), expected);
+    let sequences: Vec<u32> = decoded
+        .records
+        .iter()
+        .map(|r| r.datagram_sequence)
+        .collect();
+    assert!(!sequences.contains(&1) && !sequences.contains(&2));
+    assert_eq!(decoded.report.losses.datagrams_missing, 2);
+}
