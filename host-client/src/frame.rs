@@ -21,6 +21,8 @@ pub enum LinkType {
     Ethernet,
     /// A bare IPv4 or IPv6 packet (pcap link types 101 and 228/229).
     RawIp,
+    /// Linux cooked capture v1 (link type 113: `tcpdump -i any` on older systems).
+    LinuxSll,
 }
 
 /// A UDP datagram found in a frame.
@@ -102,6 +104,7 @@ pub fn udp_payload(
     let sliced = match link {
         LinkType::Ethernet => SlicedPacket::from_ethernet(frame),
         LinkType::RawIp => SlicedPacket::from_ip(frame),
+        LinkType::LinuxSll => SlicedPacket::from_linux_sll(frame),
     }
     .map_err(|e| FrameReject::Malformed(e.to_string()))?;
     let (source_ip, destination_ip) = match &sliced.net {
