@@ -94,8 +94,11 @@ fn decode_writes_one_row_per_packet() {
     let text = ok(&out);
     let mut lines = text.lines();
     let header = lines.next().unwrap();
-    assert!(header.starts_with("time_s,tick,cell_id,"), "{header}");
-    assert_eq!(header.split(',').count(), 6 + 9);
+    assert!(
+        header.starts_with("time_s,tick,box_id,cell_id,"),
+        "{header}"
+    );
+    assert_eq!(header.split(',').count(), 7 + 9);
     assert_eq!(lines.count(), records);
 }
 
@@ -112,7 +115,7 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
         .args(["capture", "--listen", "127.0.0.1:0", "--json"])
         .args(["--count", &datagrams.to_string()])
         // Only a fallback if datagrams were lost: the comparison below then fails.
-        .args(["--duration", "30"])
+        .args(["--duration-ms", "30000"])
         .arg("--pcap")
         .arg(&recorded)
         .stdout(Stdio::piped())
@@ -141,9 +144,51 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
 
     let original = decode_pcap_file(&path, &PcapOptions::default()).unwrap();
     let captured = decode_pcap_file(&recorded, &PcapOptions::default()).unwrap();
+    // The recording keeps each datagram's receive time (the kernel's, SO_TIMESTAMPNS):
+    // within this test's run, in arrival order.
+    let (frames, _) =
+        skinbox_host::pcap::udp_payloads(&std::fs::read(&recorded).unwrap(), None).unwrap();
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap();
+    assert!(frames
+        .iter()
+        .all(|f| f.timestamp <= now && now - f.timestamp < std::time::Duration::from_secs(120)));
+    assert!(frames.windows(2).all(|w| w[0].timestamp <= w[1].timestamp));
     assert_eq!(captured.records.len(), original.records.len());
     for (a, b) in captured.records.iter().zip(&original.records) {
         assert_eq!(a, b);
     }
     assert_eq!(captured.report.losses, original.report.losses);
+}
+
+#[test]
+fn capture_stops_after_its_duration_in_milliseconds() {
+    let start = std::time::Instant::now();
+    let out = skinbox()
+        .args([
+            "capture",
+            "--listen",
+            "127.0.0.1:0",
+            "--json",
+            "--duration-ms",
+            "300",
+        ])
+        .output()
+        .unwrap();
+    let elapsed = start.elapsed();
+    let summary: serde_json::Value = serde_json::from_str(&ok(&out)).unwrap();
+    assert_eq!(summary["capture"]["datagrams"], 0);
+    let wall = summary["capture"]["wall_s"].as_f64().unwrap();
+    assert!((0.29..5.0).contains(&wall), "{wall}");
+    assert!(
+        elapsed >= std::time::Duration::from_millis(300),
+        "{elapsed:?}"
+    );
+    let bad = skinbox()
+        .args(["capture", "--listen", "127.0.0.1:0", "--duration-ms", "0"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--duration-ms"));
 }
