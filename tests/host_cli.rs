@@ -67,6 +67,11 @@ fn stats_json_reports_the_scene() {
     assert!(report["events_per_cell_per_second"]["acceleration"]
         .as_f64()
         .is_some());
+    assert_eq!(report["boxes"].as_array().unwrap().len(), 1);
+    assert_eq!(report["boxes"][0]["records"], records as u64);
+    // The text report ends its last line.
+    let text = ok(&skinbox().arg("stats").arg(&path).output().unwrap());
+    assert!(text.ends_with('\n') && !text.ends_with("\n\n"), "{text:?}");
 }
 
 #[test]
@@ -191,4 +196,18 @@ fn capture_stops_after_its_duration_in_milliseconds() {
         .unwrap();
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--duration-ms"));
+}
+
+#[test]
+fn a_missing_file_is_named_once_with_its_os_error() {
+    for command in ["stats", "decode"] {
+        let out = skinbox()
+            .args([command, "/nonexistent/skinbox-missing.pcap"])
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.matches("(os error 2)").count(), 1, "{err}");
+        assert!(err.contains("/nonexistent/skinbox-missing.pcap"), "{err}");
+    }
 }

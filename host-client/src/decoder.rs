@@ -16,10 +16,10 @@
 //! A datagram whose header or length is wrong is rejected whole; a record whose port,
 //! flags or cell packet is wrong rejects only that record (docs/wire-format.md).
 
+use crate::bad_input::{BadInput, Reason};
 use crate::convert::{EventToData, Sample, CELL_IDS};
 use crate::report::{self, BoxReport, BoxStatusReport, CellReport, LossReport, Report};
 use crate::sequence::{SequenceEvent, SequenceTracker};
-use crate::BadInput;
 use serde::Serialize;
 use skinbox_protocol::datagram::{Datagram, DatagramKind};
 use skinbox_protocol::record::FLAG_LOSS_BEFORE;
@@ -428,7 +428,7 @@ impl Decoder {
         let d = match Datagram::new_checked(payload) {
             Ok(d) => d,
             Err(e) => {
-                self.bad.count_error("datagram", &e);
+                self.bad.count_error(Reason::Datagram, &e);
                 return DatagramOutcome::Rejected;
             }
         };
@@ -437,7 +437,7 @@ impl Decoder {
             source,
         };
         let Some(index) = self.box_index(key) else {
-            self.bad.count("datagram: too many boxes", || {
+            self.bad.count(Reason::TooManyBoxes, || {
                 format!(
                     "datagram: box {} from {:?}: more than {MAX_BOXES} boxes, not decoded",
                     key.box_id, key.source
@@ -462,7 +462,7 @@ impl Decoder {
                     }
                     Ok(_) => DatagramOutcome::Rejected,
                     Err(e) => {
-                        self.bad.count_error("status", &e);
+                        self.bad.count_error(Reason::Status, &e);
                         DatagramOutcome::Rejected
                     }
                 }
@@ -505,13 +505,13 @@ impl Decoder {
             n += 1;
             // A bad record rejects only itself: its port and flags, then its cell packet.
             if let Err(e) = r.check(port_count) {
-                self.bad.count_error("record", &e);
+                self.bad.count_error(Reason::Record, &e);
                 continue;
             }
             let cell = match CellRepr::parse(r.cell_packet(), &framing) {
                 Ok(cell) => cell,
                 Err(e) => {
-                    self.bad.count_error("record", &e);
+                    self.bad.count_error(Reason::Record, &e);
                     continue;
                 }
             };

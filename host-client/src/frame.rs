@@ -10,7 +10,7 @@
 //! "not computed"; over IPv6 it is mandatory, RFC 8200). A frame with a wrong checksum gives
 //! nothing to the decoder.
 
-use crate::BadInput;
+use crate::bad_input::{BadInput, FrameFault, Reason};
 use etherparse::{NetSlice, SlicedPacket, TransportSlice};
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
 
@@ -66,17 +66,17 @@ pub enum FrameReject {
 }
 
 impl FrameReject {
-    /// A short counting key.
-    pub fn reason(&self) -> &'static str {
-        match self {
-            FrameReject::Malformed(_) => "frame: malformed",
-            FrameReject::NotIp => "frame: not IP",
-            FrameReject::Fragment => "frame: IP fragment",
-            FrameReject::NotUdp => "frame: not UDP",
-            FrameReject::OtherPort(_) => "frame: other UDP port",
-            FrameReject::BadIpv4Checksum { .. } => "frame: bad IPv4 header checksum",
-            FrameReject::BadUdpChecksum { .. } => "frame: bad UDP checksum",
-        }
+    /// The counting key.
+    pub fn reason(&self) -> Reason {
+        Reason::Frame(match self {
+            FrameReject::Malformed(_) => FrameFault::Malformed,
+            FrameReject::NotIp => FrameFault::NotIp,
+            FrameReject::Fragment => FrameFault::Fragment,
+            FrameReject::NotUdp => FrameFault::NotUdp,
+            FrameReject::OtherPort(_) => FrameFault::OtherPort,
+            FrameReject::BadIpv4Checksum { .. } => FrameFault::BadIpv4Checksum,
+            FrameReject::BadUdpChecksum { .. } => FrameFault::BadUdpChecksum,
+        })
     }
 
     /// Counts this rejection.

@@ -422,7 +422,7 @@ where
                         if got.truncated {
                             stats.truncated += 1;
                             decoder.bad_input_mut().count(
-                                "live: datagram longer than the receive slot",
+                                crate::bad_input::Reason::LiveTruncated,
                                 || format!("live: datagram from {:?} longer than {SLOT_BYTES} bytes, not decoded", got.peer),
                             );
                             continue;

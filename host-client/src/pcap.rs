@@ -7,10 +7,10 @@
 //! several sections and interfaces, each with its own link type and timestamp resolution
 //! (`if_tsresol`, `if_tsoffset`), as Wireshark and dumpcap write them.
 
+use crate::bad_input::{BadInput, Reason};
 use crate::decoder::{DecodedRecord, Decoder, DecoderConfig, RecordSink};
 use crate::frame::{self, FrameReject, LinkType, UdpDatagram};
 use crate::report::{FrameCounts, HostCost, Report};
-use crate::BadInput;
 use pcap_file::pcap::PcapParseError;
 use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
 use pcap_file::pcapng::{Block, PcapNgParseError, PcapNgParser};
@@ -23,13 +23,14 @@ use std::time::Duration;
 /// Why a pcap cannot be read at all.
 #[derive(Debug, thiserror::Error)]
 pub enum PcapError {
-    /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    /// The file could not be read or written. (The I/O error is part of the message, not a
+    /// separate cause, so a printed chain says it once.)
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: String,
         /// What failed.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file starts with neither a pcap header nor a pcapng section header.
     #[error("not a pcap or pcapng file: {0}")]
@@ -123,14 +124,14 @@ fn for_each_pcapng<'a>(
         let (next, block) = match parser.next_block(rest) {
             Ok(x) => x,
             Err(PcapNgParseError::IncompleteBuffer(needed, have)) => {
-                scan.bad.count("pcap: truncated at end of file", || {
+                scan.bad.count(Reason::PcapTruncated, || {
                     format!("pcapng: truncated at end of file: the last block needs {needed} bytes, {have} remain")
                 });
                 break;
             }
             Err(e) => {
                 let left = rest.len();
-                scan.bad.count("pcap: corrupt packet record", || {
+                scan.bad.count(Reason::PcapCorrupt, || {
                     format!("pcapng: corrupt block, {left} bytes left unread: {e}")
                 });
                 break;
@@ -150,7 +151,7 @@ fn for_each_pcapng<'a>(
             .map(|i| i.linktype);
         let Some(link) = datalink.and_then(link_type) else {
             scan.frames.frames += 1;
-            scan.bad.count("pcap: unsupported link type", || {
+            scan.bad.count(Reason::PcapLinkType, || {
                 format!("pcapng: interface {interface} has link type {datalink:?}, not read (Ethernet, raw IPv4/IPv6, Linux cooked v1 are)")
             });
             continue;
@@ -191,14 +192,14 @@ fn for_each_pcap<'a>(
                 take_frame(&mut scan, &mut span, ts, data, link, udp_port, &mut f);
             }
             Err(PcapParseError::IncompleteBuffer(needed, have)) => {
-                scan.bad.count("pcap: truncated at end of file", || {
+                scan.bad.count(Reason::PcapTruncated, || {
                     format!("pcap: truncated at end of file: the last record needs {needed} bytes, {have} remain")
                 });
                 break;
             }
             Err(e) => {
                 let left = rest.len();
-                scan.bad.count("pcap: corrupt packet record", || {
+                scan.bad.count(Reason::PcapCorrupt, || {
                     format!("pcap: corrupt packet record, {left} bytes left unread: {e}")
                 });
                 break;
@@ -267,9 +268,9 @@ pub fn decode_pcap_file(
 
 /// Reads a whole file, with its name in the error.
 pub fn read_file(path: &Path) -> Result<Vec<u8>, PcapError> {
-    std::fs::read(path).map_err(|source| PcapError::Io {
+    std::fs::read(path).map_err(|error| PcapError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })
 }
 

@@ -302,11 +302,7 @@ impl Report {
                 );
             }
         }
-        let _ = writeln!(
-            s,
-            "bad input: {} ({:?})",
-            self.bad_input.total, self.bad_input.by_reason
-        );
+        let _ = writeln!(s, "bad input: {}", self.bad_input);
         if let Some(h) = &self.host {
             let _ = writeln!(
                 s,

@@ -3,6 +3,7 @@
 
 use etherparse::PacketBuilder;
 use pcap_file::pcap::{PcapPacket, PcapWriter};
+use skinbox_host::bad_input::{FormatFault, FrameFault, Reason};
 use skinbox_host::pcap::{decode_pcap_bytes, PcapOptions};
 use skinbox_host::synth::{self, SynthConfig};
 use skinbox_protocol::datagram::DatagramBody;
@@ -132,15 +133,19 @@ fn bad_input_is_counted_by_reason() {
 
     let d = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
     let b = &d.report.bad_input;
-    let by = |reason: &str| b.get(reason);
-    assert_eq!(by("datagram: bad magic"), 1, "{b:?}");
-    assert_eq!(by("datagram: unsupported version"), 1, "{b:?}");
-    assert_eq!(by("datagram: unknown kind"), 1, "{b:?}");
-    assert_eq!(by("datagram: truncated"), 2, "{b:?}"); // cut one, empty one
-    assert_eq!(by("record: bad end-of-packet byte"), 1, "{b:?}");
-    assert_eq!(by("frame: not UDP"), 1, "{b:?}");
-    assert_eq!(by("frame: malformed"), 1, "{b:?}");
-    assert_eq!(by("pcap: truncated at end of file"), 1, "{b:?}");
+    let by = |reason: Reason| b.get(reason);
+    assert_eq!(by(Reason::Datagram(FormatFault::BadMagic)), 1, "{b:?}");
+    assert_eq!(
+        by(Reason::Datagram(FormatFault::UnsupportedVersion)),
+        1,
+        "{b:?}"
+    );
+    assert_eq!(by(Reason::Datagram(FormatFault::UnknownKind)), 1, "{b:?}");
+    assert_eq!(by(Reason::Datagram(FormatFault::Truncated)), 2, "{b:?}"); // cut one, empty one
+    assert_eq!(by(Reason::Record(FormatFault::BadEndOfPacket)), 1, "{b:?}");
+    assert_eq!(by(Reason::Frame(FrameFault::NotUdp)), 1, "{b:?}");
+    assert_eq!(by(Reason::Frame(FrameFault::Malformed)), 1, "{b:?}");
+    assert_eq!(by(Reason::PcapTruncated), 1, "{b:?}");
     assert_eq!(b.total, 9);
     // The good records all arrived, plus the bad datagram's other records.
     let bad_cell_records = capture.datagrams[0].to_bytes().len() / 26 - 1;
@@ -177,7 +182,12 @@ fn port_filter_skips_other_traffic() {
     assert_eq!(d.records.len(), capture.truth.len());
     // Without the filter, the DNS-looking payload is a datagram with a bad magic.
     let d = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
-    assert_eq!(d.report.bad_input.get("datagram: bad magic"), 1);
+    assert_eq!(
+        d.report
+            .bad_input
+            .get(Reason::Datagram(FormatFault::BadMagic)),
+        1
+    );
 }
 
 #[test]
@@ -285,8 +295,16 @@ fn corrupted_payload_with_stale_checksum_is_refused_and_counted() {
     frames[2][22] ^= 0x20;
     let decoded = decode_pcap_bytes(&pcap_of(&frames), &PcapOptions::default()).unwrap();
     let bad = &decoded.report.bad_input;
-    assert_eq!(bad.get("frame: bad UDP checksum"), 1, "{bad:?}");
-    assert_eq!(bad.get("frame: bad IPv4 header checksum"), 1, "{bad:?}");
+    assert_eq!(
+        bad.get(Reason::Frame(FrameFault::BadUdpChecksum)),
+        1,
+        "{bad:?}"
+    );
+    assert_eq!(
+        bad.get(Reason::Frame(FrameFault::BadIpv4Checksum)),
+        1,
+        "{bad:?}"
+    );
     assert_eq!(bad.total, 2);
     // Nothing of either frame was decoded: the records are those of the other frames.
     let records_in = |p: &[u8]| match DatagramRepr::parse(p).unwrap().body {
