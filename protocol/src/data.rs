@@ -206,6 +206,34 @@ impl DataRepr {
         Ok(Self::from_packet(p.cell_id(), &p))
     }
 
+    /// The body of a data packet whose 20 bytes, header, end byte and cell id were checked:
+    /// every field read once, accelerations checked against their 10-bit range. The
+    /// decoder's path ([`crate::CellRepr::parse`]).
+    pub(crate) fn from_checked_frame(b: &[u8]) -> Result<DataRepr> {
+        let word = |at: usize| u16::from_be_bytes([b[at], b[at + 1]]);
+        let accel = field::ACCEL.map(|f| word(f.start) as i16);
+        let range = Channel::AccelX.data_range();
+        for (i, a) in accel.iter().enumerate() {
+            let value = i32::from(*a);
+            if !range.contains(&value) {
+                return Err(Error::ValueOutOfRange {
+                    format: Format::DataPacket,
+                    channel: Channel::ALL[i],
+                    value,
+                    min: *range.start(),
+                    max: *range.end(),
+                });
+            }
+        }
+        Ok(DataRepr {
+            cell_id: word(cell::field::CELL_ID.start),
+            accel,
+            force: field::FORCE.map(|f| word(f.start)),
+            proximity: word(field::PROXIMITY.start),
+            temperature: [b[field::TEMPERATURE[0]], b[field::TEMPERATURE[1]]],
+        })
+    }
+
     /// Bytes [`DataRepr::emit`] writes.
     pub const fn buffer_len(&self) -> usize {
         PACKET_LEN

@@ -142,6 +142,37 @@ proptest! {
     }
 
     #[test]
+    fn cell_parse_agrees_with_the_packet_views(
+        bytes in cell_bytes(),
+        at in 0usize..20,
+        value in any::<u8>(),
+        mutate in any::<bool>(),
+    ) {
+        let mut bytes = bytes;
+        if mutate {
+            bytes[at] = value;
+        }
+        // The decoder's one-pass parse against the checked views, which check the same
+        // rules their own way.
+        match CellRepr::parse(&bytes, &CellFraming::DEFAULT) {
+            Ok(CellRepr::Data(d)) => {
+                prop_assert_eq!(DataRepr::parse(&bytes), Ok(d));
+                prop_assert!(data::DataPacket::new_checked(&bytes[..]).is_ok());
+            }
+            Ok(CellRepr::Event(e)) => {
+                prop_assert_eq!(EventRepr::parse(&bytes), Ok(e));
+                prop_assert!(event::EventPacket::new_checked(&bytes[..]).is_ok());
+            }
+            Err(_) => {
+                prop_assert!(DataRepr::parse(&bytes).is_err());
+                prop_assert!(EventRepr::parse(&bytes).is_err());
+                prop_assert!(data::DataPacket::new_checked(&bytes[..]).is_err());
+                prop_assert!(event::EventPacket::new_checked(&bytes[..]).is_err());
+            }
+        }
+    }
+
+    #[test]
     fn parsers_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..1600)) {
         let _ = DatagramRepr::parse(&bytes);
         let _ = CellRepr::parse(&bytes, &CellFraming::DEFAULT);

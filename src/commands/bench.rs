@@ -49,10 +49,14 @@ pub struct LiveBenchArgs {
     /// Seconds per rate step.
     #[arg(long, default_value_t = 1.0)]
     pub step_s: f64,
-    /// Receivers to compare side by side, as datagrams per receive call (1: one call per
-    /// datagram, as a plain recv loop).
+    /// Receivers to compare side by side: datagrams per receive call of each (1: one call
+    /// per datagram, as a plain recv loop).
     #[arg(long, value_delimiter = ',', default_values_t = [1, skinbox_host::live::DEFAULT_BATCH])]
     pub batches: Vec<usize>,
+    /// Each receiver's wait after draining the socket, in microseconds (0: wake for every
+    /// datagram); as many as --batches.
+    #[arg(long, value_delimiter = ',', default_values_t = [0, 1000])]
+    pub coalesce_us: Vec<u64>,
     /// Receive buffer to ask for in the rate steps, in bytes.
     #[arg(long, default_value_t = skinbox_host::live::DEFAULT_RECV_BUFFER_BYTES)]
     pub recv_buffer: usize,
@@ -128,10 +132,22 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 a.batches.iter().all(|b| *b >= 1),
                 "--batches: each receiver takes at least 1 datagram per call"
             );
+            anyhow::ensure!(
+                a.batches.len() == a.coalesce_us.len(),
+                "--coalesce-us needs one value per --batches value ({} and {})",
+                a.coalesce_us.len(),
+                a.batches.len()
+            );
+            let receivers = a
+                .batches
+                .iter()
+                .zip(&a.coalesce_us)
+                .map(|(b, us)| (*b, std::time::Duration::from_micros(*us)))
+                .collect();
             let r = skinbox_host::bench::bench_live(&skinbox_host::bench::LiveBenchConfig {
                 rates: a.rates,
                 step_s: a.step_s,
-                batches: a.batches,
+                receivers,
                 recv_buffer_bytes: a.recv_buffer,
                 recv_buffers: a.recv_buffers,
                 buffer_rate: a.buffer_rate,
@@ -141,8 +157,9 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
             }
             let line = |s: &skinbox_host::bench::LiveStep| {
                 println!(
-                    "batch {:3}, buffer {:9}: {:9.0} records/s asked, {:9.0} sent: {} of {} datagrams received in {} calls, {} missing; receiver CPU {:.0} ns per datagram, {:.1} ns per record{}",
+                    "batch {:3}, coalesce {:4} us, buffer {:9}: {:9.0} records/s asked, {:9.0} sent: {} of {} datagrams received in {} calls, {} missing; receiver CPU {:.0} ns per datagram, {:.1} ns per record{}",
                     s.batch,
+                    s.coalesce_us,
                     skinbox_host::live::usable_recv_buffer(s.recv_buffer_bytes),
                     s.target_records_per_second,
                     s.sent_records_per_second,
@@ -156,9 +173,9 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 )
             };
             r.steps.iter().for_each(line);
-            for (batch, best) in &r.max_lossless_records_per_second {
+            for (receiver, best) in &r.max_lossless_records_per_second {
                 println!(
-                    "batch {batch:3}: max lossless {:.2} M records/s (goal 4.5 M, at most {} ns CPU per record)",
+                    "receiver {receiver} (batch/coalesce us): max lossless {:.2} M records/s (goal 4.5 M, at most {} ns CPU per record)",
                     best / 1e6,
                     r.goal_cpu_ns_per_record
                 );

@@ -33,6 +33,10 @@ pub struct CaptureArgs {
     /// Datagrams taken per receive call.
     #[arg(long, default_value_t = live::DEFAULT_BATCH)]
     pub batch: usize,
+    /// Wait after draining the socket before waiting again, in microseconds, so one
+    /// wake-up takes many datagrams (0: wake for every datagram).
+    #[arg(long, default_value_t = live::DEFAULT_COALESCE.as_micros() as u64)]
+    pub coalesce_us: u64,
     /// The cells' sample rate, for rates in % of data mode.
     #[arg(long, default_value_t = 125.0)]
     pub sample_rate_hz: f64,
@@ -94,6 +98,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 max_datagrams: args.count,
                 progress_every: Duration::from_secs(1),
                 batch: args.batch,
+                coalesce: Duration::from_micros(args.coalesce_us),
             },
             shutdown,
             &mut |s, d| {
