@@ -304,10 +304,7 @@ impl Default for LiveBenchConfig {
         LiveBenchConfig {
             rates: vec![500e3, 1e6, 2e6, 3e6, 4.5e6, 6e6, 7e6, 8e6],
             step_s: 1.0,
-            receivers: vec![
-                (1, Duration::ZERO),
-                (live::DEFAULT_BATCH, live::DEFAULT_COALESCE),
-            ],
+            receivers: vec![(1, Duration::ZERO), (live::DEFAULT_BATCH, Duration::ZERO)],
             recv_buffer_bytes: live::DEFAULT_RECV_BUFFER_BYTES,
             recv_buffers: Vec::new(),
             buffer_rate: 4.5e6,

@@ -181,6 +181,7 @@ pub enum CellRepr {
 
 impl CellRepr {
     /// Parses untrusted bytes of either kind.
+    #[inline]
     pub fn parse(bytes: &[u8], framing: &CellFraming) -> Result<CellRepr> {
         match CellPacket::new_unchecked(bytes).check(Format::CellPacket, framing)? {
             CellKind::Data => DataRepr::from_checked_frame(bytes).map(CellRepr::Data),

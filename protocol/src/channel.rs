@@ -70,6 +70,7 @@ impl Channel {
     ];
 
     /// Position in mask-bit order (0..9).
+    #[inline]
     pub fn index(self) -> usize {
         self as usize
     }
@@ -95,6 +96,7 @@ impl Channel {
     }
 
     /// The modality this channel measures.
+    #[inline]
     pub fn modality(self) -> Modality {
         match self {
             Channel::AccelX | Channel::AccelY | Channel::AccelZ => Modality::Acceleration,
@@ -131,6 +133,7 @@ impl Channel {
 
     /// Range of raw values the channel's 16-bit event word may carry: acceleration is
     /// 10-bit signed (-512..=511, sign-extended in an i16 word), the others u16.
+    #[inline]
     pub fn word_range(self) -> core::ops::RangeInclusive<i32> {
         match self.modality() {
             Modality::Acceleration => ACCEL_MIN..=ACCEL_MAX,
@@ -139,6 +142,7 @@ impl Channel {
     }
 
     /// Range of raw values the channel's data-packet field holds (temperatures are u8 there).
+    #[inline]
     pub fn data_range(self) -> core::ops::RangeInclusive<i32> {
         match self.modality() {
             Modality::Temperature => 0..=i32::from(u8::MAX),
@@ -147,6 +151,7 @@ impl Channel {
     }
 
     /// Decodes a 16-bit event word to a raw value (sign-extends acceleration).
+    #[inline]
     pub fn decode_word(self, word: u16) -> i32 {
         match self.modality() {
             Modality::Acceleration => i32::from(word as i16),
@@ -201,6 +206,7 @@ impl ChannelMask {
     pub const ALL: ChannelMask = ChannelMask(Self::CHANNEL_BITS);
 
     /// The mask of these bits, or `None` when a bit above channel 8 is set.
+    #[inline]
     pub fn from_bits(bits: u16) -> Option<ChannelMask> {
         if bits & !Self::CHANNEL_BITS == 0 {
             Some(ChannelMask(bits))

@@ -211,7 +211,11 @@ impl DataRepr {
     /// decoder's path ([`crate::CellRepr::parse`]).
     pub(crate) fn from_checked_frame(b: &[u8]) -> Result<DataRepr> {
         let word = |at: usize| u16::from_be_bytes([b[at], b[at + 1]]);
-        let accel = field::ACCEL.map(|f| word(f.start) as i16);
+        let accel = [
+            word(field::ACCEL[0].start) as i16,
+            word(field::ACCEL[1].start) as i16,
+            word(field::ACCEL[2].start) as i16,
+        ];
         let range = Channel::AccelX.data_range();
         for (i, a) in accel.iter().enumerate() {
             let value = i32::from(*a);
@@ -228,7 +232,11 @@ impl DataRepr {
         Ok(DataRepr {
             cell_id: word(cell::field::CELL_ID.start),
             accel,
-            force: field::FORCE.map(|f| word(f.start)),
+            force: [
+                word(field::FORCE[0].start),
+                word(field::FORCE[1].start),
+                word(field::FORCE[2].start),
+            ],
             proximity: word(field::PROXIMITY.start),
             temperature: [b[field::TEMPERATURE[0]], b[field::TEMPERATURE[1]]],
         })

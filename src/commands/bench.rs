@@ -55,7 +55,7 @@ pub struct LiveBenchArgs {
     pub batches: Vec<usize>,
     /// Each receiver's wait after draining the socket, in microseconds (0: wake for every
     /// datagram); as many as --batches.
-    #[arg(long, value_delimiter = ',', default_values_t = [0, 1000])]
+    #[arg(long, value_delimiter = ',', default_values_t = [0, 0])]
     pub coalesce_us: Vec<u64>,
     /// Receive buffer to ask for in the rate steps, in bytes.
     #[arg(long, default_value_t = skinbox_host::live::DEFAULT_RECV_BUFFER_BYTES)]
