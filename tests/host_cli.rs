@@ -211,3 +211,41 @@ fn a_missing_file_is_named_once_with_its_os_error() {
         assert!(err.contains("/nonexistent/skinbox-missing.pcap"), "{err}");
     }
 }
+
+#[test]
+fn capture_warns_once_when_the_kernel_grants_less_buffer() {
+    let rmem_max: usize = std::fs::read_to_string("/proc/sys/net/core/rmem_max")
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    let asked = (4 * rmem_max).to_string();
+    let args = [
+        "capture",
+        "--listen",
+        "127.0.0.1:0",
+        "--duration-ms",
+        "100",
+        "--recv-buffer",
+        &asked,
+    ];
+    // Root passes the limit with SO_RCVBUFFORCE (CAP_NET_ADMIN): drop that capability.
+    let root = String::from_utf8(Command::new("id").arg("-u").output().unwrap().stdout)
+        .unwrap()
+        .trim()
+        == "0";
+    let out = if root {
+        Command::new("setpriv")
+            .args(["--inh-caps=-net_admin", "--bounding-set=-net_admin"])
+            .arg(env!("CARGO_BIN_EXE_skinbox"))
+            .args(args)
+            .output()
+            .unwrap()
+    } else {
+        skinbox().args(args).output().unwrap()
+    };
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("warning: asked for").count(), 1, "{err}");
+    assert!(err.contains(&format!("net.core.rmem_max={asked}")), "{err}");
+}
