@@ -326,3 +326,41 @@ fn corrupted_payload_with_stale_checksum_is_refused_and_counted() {
     assert!(!sequences.contains(&1) && !sequences.contains(&2));
     assert_eq!(decoded.report.losses.datagrams_missing, 2);
 }
+
+#[test]
+fn linux_cooked_captures_decode_like_ethernet() {
+    // `tcpdump -i any` on older systems: Linux cooked capture v1 (link type 113), a
+    // 16-byte header in place of the Ethernet header.
+    let capture = synth::generate(&SynthConfig {
+        cells: 10,
+        samples_per_cell: 10,
+        ..SynthConfig::default()
+    });
+    let ethernet: Vec<Vec<u8>> = capture
+        .payloads()
+        .iter()
+        .map(|p| udp_frame(BOX_PORT, 6_000, p))
+        .collect();
+    let header = pcap_file::pcap::PcapHeader {
+        datalink: pcap_file::DataLink::LINUX_SLL,
+        ..pcap_file::pcap::PcapHeader::default()
+    };
+    let mut w = PcapWriter::with_header(Vec::new(), header).unwrap();
+    for (i, f) in ethernet.iter().enumerate() {
+        // packet type 1 (broadcast), ARPHRD_ETHER, 6-byte address padded to 8, IPv4.
+        let mut sll = vec![0, 1, 0, 1, 0, 6, 2, 0, 0, 0, 0, 2, 0, 0, 0x08, 0x00];
+        sll.extend_from_slice(&f[14..]);
+        let p =
+            PcapPacket::new(Duration::from_micros(i as u64), sll.len() as u32, &sll[..]).unwrap();
+        w.write_packet(&p).unwrap();
+    }
+    let cooked = decode_pcap_bytes(&w.into_inner(), &PcapOptions::default()).unwrap();
+    let plain = decode_pcap_bytes(&pcap_of(&ethernet), &PcapOptions::default()).unwrap();
+    assert_eq!(
+        cooked.report.bad_input.total, 0,
+        "{:?}",
+        cooked.report.bad_input
+    );
+    assert_eq!(cooked.records.len(), capture.truth.len());
+    assert_eq!(cooked.records, plain.records);
+}
