@@ -67,6 +67,11 @@ fn stats_json_reports_the_scene() {
     assert!(report["events_per_cell_per_second"]["acceleration"]
         .as_f64()
         .is_some());
+    assert_eq!(report["boxes"].as_array().unwrap().len(), 1);
+    assert_eq!(report["boxes"][0]["records"], records as u64);
+    // The text report ends its last line.
+    let text = ok(&skinbox().arg("stats").arg(&path).output().unwrap());
+    assert!(text.ends_with('\n') && !text.ends_with("\n\n"), "{text:?}");
 }
 
 #[test]
@@ -94,8 +99,11 @@ fn decode_writes_one_row_per_packet() {
     let text = ok(&out);
     let mut lines = text.lines();
     let header = lines.next().unwrap();
-    assert!(header.starts_with("time_s,tick,cell_id,"), "{header}");
-    assert_eq!(header.split(',').count(), 6 + 9);
+    assert!(
+        header.starts_with("time_s,tick,box_id,cell_id,"),
+        "{header}"
+    );
+    assert_eq!(header.split(',').count(), 7 + 9);
     assert_eq!(lines.count(), records);
 }
 
@@ -112,7 +120,7 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
         .args(["capture", "--listen", "127.0.0.1:0", "--json"])
         .args(["--count", &datagrams.to_string()])
         // Only a fallback if datagrams were lost: the comparison below then fails.
-        .args(["--duration", "30"])
+        .args(["--duration-ms", "30000"])
         .arg("--pcap")
         .arg(&recorded)
         .stdout(Stdio::piped())
@@ -141,9 +149,103 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
 
     let original = decode_pcap_file(&path, &PcapOptions::default()).unwrap();
     let captured = decode_pcap_file(&recorded, &PcapOptions::default()).unwrap();
+    // The recording keeps each datagram's receive time (the kernel's, SO_TIMESTAMPNS):
+    // within this test's run, in arrival order.
+    let (frames, _) =
+        skinbox_host::pcap::udp_payloads(&std::fs::read(&recorded).unwrap(), None).unwrap();
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap();
+    assert!(frames
+        .iter()
+        .all(|f| f.timestamp <= now && now - f.timestamp < std::time::Duration::from_secs(120)));
+    assert!(frames.windows(2).all(|w| w[0].timestamp <= w[1].timestamp));
     assert_eq!(captured.records.len(), original.records.len());
     for (a, b) in captured.records.iter().zip(&original.records) {
         assert_eq!(a, b);
     }
     assert_eq!(captured.report.losses, original.report.losses);
+}
+
+#[test]
+fn capture_stops_after_its_duration_in_milliseconds() {
+    let start = std::time::Instant::now();
+    let out = skinbox()
+        .args([
+            "capture",
+            "--listen",
+            "127.0.0.1:0",
+            "--json",
+            "--duration-ms",
+            "300",
+        ])
+        .output()
+        .unwrap();
+    let elapsed = start.elapsed();
+    let summary: serde_json::Value = serde_json::from_str(&ok(&out)).unwrap();
+    assert_eq!(summary["capture"]["datagrams"], 0);
+    let wall = summary["capture"]["wall_s"].as_f64().unwrap();
+    assert!((0.29..5.0).contains(&wall), "{wall}");
+    assert!(
+        elapsed >= std::time::Duration::from_millis(300),
+        "{elapsed:?}"
+    );
+    let bad = skinbox()
+        .args(["capture", "--listen", "127.0.0.1:0", "--duration-ms", "0"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--duration-ms"));
+}
+
+#[test]
+fn a_missing_file_is_named_once_with_its_os_error() {
+    for command in ["stats", "decode"] {
+        let out = skinbox()
+            .args([command, "/nonexistent/skinbox-missing.pcap"])
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.matches("(os error 2)").count(), 1, "{err}");
+        assert!(err.contains("/nonexistent/skinbox-missing.pcap"), "{err}");
+    }
+}
+
+#[test]
+fn capture_warns_once_when_the_kernel_grants_less_buffer() {
+    let rmem_max: usize = std::fs::read_to_string("/proc/sys/net/core/rmem_max")
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    let asked = (4 * rmem_max).to_string();
+    let args = [
+        "capture",
+        "--listen",
+        "127.0.0.1:0",
+        "--duration-ms",
+        "100",
+        "--recv-buffer",
+        &asked,
+    ];
+    // Root passes the limit with SO_RCVBUFFORCE (CAP_NET_ADMIN): drop that capability.
+    let root = String::from_utf8(Command::new("id").arg("-u").output().unwrap().stdout)
+        .unwrap()
+        .trim()
+        == "0";
+    let out = if root {
+        Command::new("setpriv")
+            .args(["--inh-caps=-net_admin", "--bounding-set=-net_admin"])
+            .arg(env!("CARGO_BIN_EXE_skinbox"))
+            .args(args)
+            .output()
+            .unwrap()
+    } else {
+        skinbox().args(args).output().unwrap()
+    };
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("warning: asked for").count(), 1, "{err}");
+    assert!(err.contains(&format!("net.core.rmem_max={asked}")), "{err}");
 }

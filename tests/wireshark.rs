@@ -731,12 +731,25 @@ fn expert_infos_mark_a_box_reset_a_late_and_a_duplicate_datagram() {
     // the box restarts: a new boot id, the numbering from 0, ticks from near 0
     let after = synth::generate(&SynthConfig {
         cells: 20,
-        samples_per_cell: 20,
+        samples_per_cell: 150,
         status_every: 4,
         first_sequence: 0,
         boot_id: 0x5eed_0002,
         start_tick: 1000,
         seed: 2,
+        ..SynthConfig::default()
+    });
+    // then its clock alone restarts: numbering goes on, base ticks fall 1.2 s back (a box
+    // whose status reports were lost); its boot id stays the same
+    let last = after.datagrams.last().unwrap().sequence;
+    let again = synth::generate(&SynthConfig {
+        cells: 20,
+        samples_per_cell: 5,
+        status_every: 0,
+        first_sequence: last.wrapping_add(1),
+        boot_id: 0x5eed_0002,
+        start_tick: 1000,
+        seed: 3,
         ..SynthConfig::default()
     });
     let mut payloads = before.payloads();
@@ -751,16 +764,30 @@ fn expert_infos_mark_a_box_reset_a_late_and_a_duplicate_datagram() {
         .unwrap() as u64
         + restart_frame;
     payloads.extend(after.payloads());
+    let clock_restart_frame = payloads.len() as u64 + 1;
+    payloads.extend(again.payloads());
     let pcap = dir.join("reset.pcap");
     let (src, dst) = box_addresses();
     write_pcap(&pcap, &payloads, src, dst);
     let frames = |filter: &str| frame_numbers(&plugin, &pcap, filter);
     assert_eq!(frames("skinbox.expert.sequence_late"), [4]);
     assert_eq!(frames("skinbox.expert.sequence_duplicate"), [6]);
-    assert_eq!(frames("skinbox.expert.sequence_restart"), [restart_frame]);
+    assert_eq!(
+        frames("skinbox.expert.sequence_restart"),
+        [restart_frame, clock_restart_frame]
+    );
     assert_eq!(frames("skinbox.expert.box_reset"), [first_status_after]);
     // the late datagram closed the gap it opened: one gap expert, at the fourth datagram
     assert_eq!(frames("skinbox.expert.sequence_gap"), [3]);
+    // the host decoder counts the same restarts and resets
+    let decoded = skinbox_host::decode_pcap_file(&pcap, &Default::default()).unwrap();
+    let report = serde_json::to_value(&decoded.report).unwrap();
+    let losses = &report["losses"];
+    assert_eq!(losses["sequence_restarts"].as_u64(), Some(2), "{losses}");
+    assert_eq!(losses["box_resets"].as_u64(), Some(1), "{losses}");
+    assert_eq!(losses["datagrams_duplicate"].as_u64(), Some(1), "{losses}");
+    assert_eq!(losses["datagrams_reordered"].as_u64(), Some(1), "{losses}");
+    assert_eq!(losses["datagrams_missing"].as_u64(), Some(0), "{losses}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -199,7 +199,8 @@ fn random_line(r: &mut Rng, port: usize, end_ns: f64) -> Vec<Transition> {
     let mut id = (port as u16) << 10;
     while t < end_ns {
         id += 1;
-        let mut packet = data(id, r.below(1000) as i32);
+        // accel_x within its 10-bit range (docs/wire-format.md), 1,000 values as before.
+        let mut packet = data(id, r.below(1000) as i32 - 500);
         let fault = r.below(40);
         let b0 = match fault {
             0 => back_to_back(&[0x11, 0x22, 0x33][..1 + r.below(3) as usize], t, bit),

@@ -1,54 +1,208 @@
 //! Bad input, counted by reason: what was wrong, how often, and the first few messages.
+//!
+//! The counting key is a [`Reason`], an enum callers can match; in JSON and in text it is a
+//! short stable string such as `frame: bad UDP checksum` or `record: port out of range`.
 
-use serde::Serialize;
+use serde::{Serialize, Serializer};
 use skinbox_protocol::Error;
 use std::collections::BTreeMap;
+use std::fmt;
 
 /// How many full messages [`BadInput`] keeps as examples.
 pub const MAX_EXAMPLES: usize = 16;
+
+/// What kind of format error the protocol crate found (its [`Error`] without the details).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[allow(missing_docs)] // each is its `Error` variant of the same name
+pub enum FormatFault {
+    Truncated,
+    LengthMismatch,
+    BadHeader,
+    BadEndOfPacket,
+    BadCellId,
+    BadEventMask,
+    BadMagic,
+    UnsupportedVersion,
+    UnknownKind,
+    TooManyEntries,
+    BadPort,
+    ValueOutOfRange,
+    BadEvents,
+    BadPortCount,
+    BadFlags,
+    UnusedValueSet,
+}
+
+impl FormatFault {
+    /// The kind of `error`.
+    pub fn of(error: &Error) -> FormatFault {
+        match error {
+            Error::Truncated { .. } => FormatFault::Truncated,
+            Error::LengthMismatch { .. } => FormatFault::LengthMismatch,
+            Error::BadHeader { .. } => FormatFault::BadHeader,
+            Error::BadEndOfPacket { .. } => FormatFault::BadEndOfPacket,
+            Error::BadCellId { .. } => FormatFault::BadCellId,
+            Error::BadEventMask { .. } => FormatFault::BadEventMask,
+            Error::BadMagic { .. } => FormatFault::BadMagic,
+            Error::UnsupportedVersion { .. } => FormatFault::UnsupportedVersion,
+            Error::UnknownKind { .. } => FormatFault::UnknownKind,
+            Error::TooManyEntries { .. } => FormatFault::TooManyEntries,
+            Error::BadPort { .. } => FormatFault::BadPort,
+            Error::ValueOutOfRange { .. } => FormatFault::ValueOutOfRange,
+            Error::BadEvents { .. } => FormatFault::BadEvents,
+            Error::BadPortCount { .. } => FormatFault::BadPortCount,
+            Error::BadFlags { .. } => FormatFault::BadFlags,
+            Error::UnusedValueSet { .. } => FormatFault::UnusedValueSet,
+        }
+    }
+
+    /// A short, stable name.
+    pub fn name(self) -> &'static str {
+        match self {
+            FormatFault::Truncated => "truncated",
+            FormatFault::LengthMismatch => "length mismatch",
+            FormatFault::BadHeader => "bad cell packet header",
+            FormatFault::BadEndOfPacket => "bad end-of-packet byte",
+            FormatFault::BadCellId => "bad cell id",
+            FormatFault::BadEventMask => "bad event mask",
+            FormatFault::BadMagic => "bad magic",
+            FormatFault::UnsupportedVersion => "unsupported version",
+            FormatFault::UnknownKind => "unknown kind",
+            FormatFault::TooManyEntries => "too many entries",
+            FormatFault::BadPort => "port out of range",
+            FormatFault::ValueOutOfRange => "value out of range",
+            FormatFault::BadEvents => "bad events",
+            FormatFault::BadPortCount => "port count out of range",
+            FormatFault::BadFlags => "undefined flag bits",
+            FormatFault::UnusedValueSet => "unused event value slot not 0",
+        }
+    }
+}
+
+/// Why a captured frame gave no box datagram (the kind of a `frame::FrameReject`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum FrameFault {
+    /// etherparse could not slice it.
+    Malformed,
+    /// Not IP.
+    NotIp,
+    /// An IP fragment.
+    Fragment,
+    /// IP but not UDP.
+    NotUdp,
+    /// UDP on another port than the filter.
+    OtherPort,
+    /// Wrong IPv4 header checksum.
+    BadIpv4Checksum,
+    /// Wrong UDP checksum.
+    BadUdpChecksum,
+}
+
+impl FrameFault {
+    /// A short, stable name.
+    pub fn name(self) -> &'static str {
+        match self {
+            FrameFault::Malformed => "malformed",
+            FrameFault::NotIp => "not IP",
+            FrameFault::Fragment => "IP fragment",
+            FrameFault::NotUdp => "not UDP",
+            FrameFault::OtherPort => "other UDP port",
+            FrameFault::BadIpv4Checksum => "bad IPv4 header checksum",
+            FrameFault::BadUdpChecksum => "bad UDP checksum",
+        }
+    }
+}
+
+/// Why input was rejected: the counting key of [`BadInput`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Reason {
+    /// A captured frame (`frame: ...`).
+    Frame(FrameFault),
+    /// A datagram's header or length: the whole datagram (`datagram: ...`).
+    Datagram(FormatFault),
+    /// A status datagram's body (`status: ...`).
+    Status(FormatFault),
+    /// One record: its port, flags or cell packet (`record: ...`).
+    Record(FormatFault),
+    /// A datagram of a box past `decoder::MAX_BOXES` (`datagram: too many boxes`).
+    TooManyBoxes,
+    /// The capture file ends inside a packet (`pcap: truncated at end of file`).
+    PcapTruncated,
+    /// A capture file record or block that cannot be parsed (`pcap: corrupt packet record`).
+    PcapCorrupt,
+    /// A pcapng interface whose link type is not read (`pcap: unsupported link type`).
+    PcapLinkType,
+    /// A live datagram longer than the receive slot (`live: datagram longer than the
+    /// receive slot`).
+    LiveTruncated,
+}
+
+impl fmt::Display for Reason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Reason::Frame(k) => write!(f, "frame: {}", k.name()),
+            Reason::Datagram(k) => write!(f, "datagram: {}", k.name()),
+            Reason::Status(k) => write!(f, "status: {}", k.name()),
+            Reason::Record(k) => write!(f, "record: {}", k.name()),
+            Reason::TooManyBoxes => f.write_str("datagram: too many boxes"),
+            Reason::PcapTruncated => f.write_str("pcap: truncated at end of file"),
+            Reason::PcapCorrupt => f.write_str("pcap: corrupt packet record"),
+            Reason::PcapLinkType => f.write_str("pcap: unsupported link type"),
+            Reason::LiveTruncated => f.write_str("live: datagram longer than the receive slot"),
+        }
+    }
+}
+
+/// In JSON a reason is its text (a map key).
+impl Serialize for Reason {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
 
 /// Rejected input, counted by reason.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct BadInput {
     /// Everything rejected.
     pub total: u64,
-    /// Count per reason, e.g. `datagram: bad magic`.
-    pub by_reason: BTreeMap<String, u64>,
+    /// Count per reason.
+    pub by_reason: BTreeMap<Reason, u64>,
     /// The first [`MAX_EXAMPLES`] rejections with their full messages.
     pub examples: Vec<String>,
 }
 
 impl BadInput {
-    /// Counts one rejection with a short `reason` and the full `message`.
-    pub fn count(&mut self, reason: &str, message: impl FnOnce() -> String) {
+    /// Counts one rejection for `reason` with its full `message`.
+    pub fn count(&mut self, reason: Reason, message: impl FnOnce() -> String) {
         self.total += 1;
-        match self.by_reason.get_mut(reason) {
-            Some(n) => *n += 1,
-            None => {
-                self.by_reason.insert(reason.to_string(), 1);
-            }
-        }
+        *self.by_reason.entry(reason).or_insert(0) += 1;
         if self.examples.len() < MAX_EXAMPLES {
             self.examples.push(message());
         }
     }
 
-    /// Counts one format error of the protocol crate under `layer` (`datagram`, `record`).
-    pub fn count_error(&mut self, layer: &str, error: &Error) {
-        let reason = format!("{layer}: {}", error_reason(error));
-        self.count(&reason, || format!("{layer}: {error}"));
+    /// Counts one format error of the protocol crate; `reason` places it (e.g.
+    /// `Reason::Record`).
+    pub fn count_error(&mut self, reason: fn(FormatFault) -> Reason, error: &Error) {
+        let reason = reason(FormatFault::of(error));
+        let layer = match reason {
+            Reason::Record(_) => "record",
+            Reason::Status(_) => "status",
+            _ => "datagram",
+        };
+        self.count(reason, || format!("{layer}: {error}"));
     }
 
     /// Count for one reason (0 when never seen).
-    pub fn get(&self, reason: &str) -> u64 {
-        self.by_reason.get(reason).copied().unwrap_or(0)
+    pub fn get(&self, reason: Reason) -> u64 {
+        self.by_reason.get(&reason).copied().unwrap_or(0)
     }
 
     /// Adds another tally into this one.
     pub fn merge(&mut self, other: &BadInput) {
         self.total += other.total;
         for (k, v) in &other.by_reason {
-            *self.by_reason.entry(k.clone()).or_insert(0) += v;
+            *self.by_reason.entry(*k).or_insert(0) += v;
         }
         for e in &other.examples {
             if self.examples.len() < MAX_EXAMPLES {
@@ -58,21 +212,39 @@ impl BadInput {
     }
 }
 
-/// A short, stable name for a format error, used as the counting key.
-pub fn error_reason(error: &Error) -> &'static str {
-    match error {
-        Error::Truncated { .. } => "truncated",
-        Error::LengthMismatch { .. } => "length mismatch",
-        Error::BadHeader { .. } => "bad cell packet header",
-        Error::BadEndOfPacket { .. } => "bad end-of-packet byte",
-        Error::BadCellId { .. } => "bad cell id",
-        Error::BadEventMask { .. } => "bad event mask",
-        Error::BadMagic { .. } => "bad magic",
-        Error::UnsupportedVersion { .. } => "unsupported version",
-        Error::UnknownKind { .. } => "unknown kind",
-        Error::TooManyEntries { .. } => "too many entries",
-        Error::BadPort { .. } => "port out of range",
-        Error::ValueOutOfRange { .. } => "value out of range",
-        Error::BadEvents { .. } => "bad events",
+impl fmt::Display for BadInput {
+    /// `N` and each reason with its count, e.g. `2 (frame: bad UDP checksum 1, ...)`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.total)?;
+        if !self.by_reason.is_empty() {
+            let parts: Vec<String> = self
+                .by_reason
+                .iter()
+                .map(|(r, n)| format!("{r} {n}"))
+                .collect();
+            write!(f, " ({})", parts.join(", "))?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reasons_print_and_serialise_as_their_text() {
+        let mut b = BadInput::default();
+        b.count(Reason::Frame(FrameFault::BadUdpChecksum), || "x".into());
+        b.count(Reason::Record(FormatFault::BadPort), || "y".into());
+        b.count(Reason::Record(FormatFault::BadPort), || "z".into());
+        let json = serde_json::to_value(&b).unwrap();
+        assert_eq!(json["by_reason"]["frame: bad UDP checksum"], 1);
+        assert_eq!(json["by_reason"]["record: port out of range"], 2);
+        assert_eq!(b.get(Reason::Record(FormatFault::BadPort)), 2);
+        assert_eq!(
+            b.to_string(),
+            "3 (frame: bad UDP checksum 1, record: port out of range 2)"
+        );
     }
 }

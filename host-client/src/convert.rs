@@ -20,6 +20,8 @@ pub const CELL_IDS: usize = 1 << 14;
 /// One full sample of a cell, as the converter knows it after a packet.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct Sample {
+    /// The box the cell is on (set by the decoder; 0 from a bare converter).
+    pub box_id: u16,
     /// The cell.
     pub cell_id: u16,
     /// Box tick of the packet that produced the sample.
@@ -114,6 +116,7 @@ impl EventToData {
         s.stale &= !updated;
         s.stale &= s.known;
         Sample {
+            box_id: 0,
             cell_id,
             tick,
             raw: s.raw,

@@ -7,19 +7,39 @@
 //! - datagram sequence gaps, duplicates and reordering ([`crate::sequence`]);
 //! - per-cell event packet sequence gaps (a lost event packet, wherever it was lost);
 //! - box resets: the boot id of the status datagrams changes.
+//!
+//! Everything that follows one box's numbering (sequence numbers, boot ids, status reports,
+//! counters, cells' event sequences) is kept per box, keyed by [`BoxKey`]: the box id and,
+//! where the shell knows it, the datagram's source address. Two boxes on one capture are
+//! two independent streams.
+//!
+//! A datagram whose header or length is wrong is rejected whole; a record whose port,
+//! flags or cell packet is wrong rejects only that record (docs/wire-format.md).
 
+use crate::bad_input::{BadInput, Reason};
 use crate::convert::{EventToData, Sample, CELL_IDS};
-use crate::report::{self, BoxStatusReport, CellReport, LossReport, Report};
+use crate::report::{self, BoxReport, BoxStatusReport, CellReport, LossReport, Report};
 use crate::sequence::{SequenceEvent, SequenceTracker};
-use crate::BadInput;
+use serde::Serialize;
 use skinbox_protocol::datagram::{Datagram, DatagramKind};
 use skinbox_protocol::record::FLAG_LOSS_BEFORE;
 use skinbox_protocol::status::{PortCounter, StatusRepr};
 use skinbox_protocol::{CellFraming, CellRepr, Channel, DatagramRepr, Modality};
 use std::collections::BTreeMap;
+use std::net::SocketAddr;
 
-/// How many distinct box ids a report lists.
-pub const MAX_BOX_IDS: usize = 16;
+/// How many boxes one decoder follows; datagrams of further boxes are counted as bad input
+/// (`datagram: too many boxes`) and not decoded.
+pub const MAX_BOXES: usize = 64;
+
+/// Which box a datagram came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+pub struct BoxKey {
+    /// Box id of the datagram header.
+    pub box_id: u16,
+    /// Source address of the datagram, where the shell knows it.
+    pub source: Option<SocketAddr>,
+}
 
 /// Settings of a decoder.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -127,34 +147,203 @@ struct BoxState {
     records_sent: Option<u32>,
 }
 
-/// The decoder. Feed it UDP payloads with [`Decoder::push_datagram`].
+/// Everything the decoder follows of one box.
 #[derive(Debug, Clone)]
-pub struct Decoder {
-    config: DecoderConfig,
+struct BoxTrack {
+    key: BoxKey,
     sequence: SequenceTracker,
     cells: Vec<CellCounters>,
     converter: Option<EventToData>,
-    bad: BadInput,
-    records_datagrams: u64,
+    state: BoxState,
+    boot_ids: Vec<u32>,
+    box_resets: u64,
     status_datagrams: u64,
+    status_reports: u64,
+    /// Boot id and base tick of the last status report (one report may span datagrams).
+    last_report: Option<(u32, u64)>,
+    records_datagrams: u64,
     records: u64,
-    data_packets: u64,
-    event_packets: u64,
-    events_per_packet: [u64; 7],
-    first_tick: Option<u64>,
-    last_tick: u64,
     min_tick: u64,
     max_tick: u64,
     records_flagged_loss_before: BTreeMap<u8, u64>,
-    box_state: BoxState,
-    box_ids: Vec<u16>,
-    boot_ids: Vec<u32>,
-    box_resets: u64,
-    status_reports: u64,
     counter_deltas: BTreeMap<u8, [u64; PortCounter::ALL.len()]>,
     last_counters: BTreeMap<u8, [u32; PortCounter::ALL.len()]>,
     datagrams_sent_delta: u64,
     records_sent_delta: u64,
+}
+
+impl BoxTrack {
+    fn new(key: BoxKey) -> Self {
+        BoxTrack {
+            key,
+            sequence: SequenceTracker::new(),
+            cells: Vec::new(),
+            converter: None,
+            state: BoxState::default(),
+            boot_ids: Vec::new(),
+            box_resets: 0,
+            status_datagrams: 0,
+            status_reports: 0,
+            last_report: None,
+            records_datagrams: 0,
+            records: 0,
+            min_tick: u64::MAX,
+            max_tick: 0,
+            records_flagged_loss_before: BTreeMap::new(),
+            counter_deltas: BTreeMap::new(),
+            last_counters: BTreeMap::new(),
+            datagrams_sent_delta: 0,
+            records_sent_delta: 0,
+        }
+    }
+
+    /// Span of this box's record ticks plus one sample period (0 without records).
+    fn duration_s(&self, sample_rate_hz: f64) -> f64 {
+        if self.records == 0 {
+            return 0.0;
+        }
+        crate::ticks_to_seconds(self.max_tick - self.min_tick) + 1.0 / sample_rate_hz
+    }
+
+    /// Takes a status datagram; false when it is a duplicate.
+    fn take_status(&mut self, sequence: u32, base_tick: u64, status: &StatusRepr) -> bool {
+        if self.state.boot_id != Some(status.boot_id) {
+            if self.state.boot_id.is_some() {
+                self.box_resets += 1;
+                // The box numbers datagrams from its reset on: go on from this status
+                // datagram, unless the numbering already restarted just before it.
+                let continues = self.sequence.highest().is_some_and(|h| {
+                    (1..crate::sequence::WINDOW).contains(&sequence.wrapping_sub(h))
+                });
+                if continues {
+                    self.sequence.push_tagged(sequence, Some(base_tick));
+                } else {
+                    self.sequence.begin_at(sequence, base_tick);
+                }
+            } else {
+                self.sequence.push_tagged(sequence, Some(base_tick));
+            }
+            self.boot_ids.push(status.boot_id);
+            self.state = BoxState {
+                boot_id: Some(status.boot_id),
+                ..BoxState::default()
+            };
+        } else if self.sequence.push_tagged(sequence, Some(base_tick)) == SequenceEvent::Duplicate {
+            return false;
+        }
+        self.status_datagrams += 1;
+        // A report with more ports than one datagram holds spans several datagrams of
+        // one base tick: it counts once.
+        if self.last_report != Some((status.boot_id, base_tick)) {
+            self.status_reports += 1;
+            self.last_report = Some((status.boot_id, base_tick));
+        }
+        if let Some(before) = self.state.datagrams_sent {
+            self.datagrams_sent_delta += wrapping_delta(status.datagrams_sent, before);
+        }
+        if let Some(before) = self.state.records_sent {
+            self.records_sent_delta += wrapping_delta(status.records_sent, before);
+        }
+        self.state.datagrams_sent = Some(status.datagrams_sent);
+        self.state.records_sent = Some(status.records_sent);
+        for (i, counters) in status.ports.iter().enumerate() {
+            let port = status.first_port.wrapping_add(i as u8);
+            let now = counters.0;
+            if let Some(before) = self.state.ports.get(&port) {
+                let deltas = self.counter_deltas.entry(port).or_default();
+                for c in PortCounter::ALL {
+                    deltas[c.index()] += wrapping_delta(now[c.index()], before[c.index()]);
+                }
+            } else {
+                self.counter_deltas.entry(port).or_default();
+            }
+            self.state.ports.insert(port, now);
+            self.last_counters.insert(port, now);
+        }
+        true
+    }
+
+    /// This box's losses.
+    fn losses(&self) -> LossReport {
+        let mut losses = LossReport::default();
+        for c in &self.cells {
+            losses.event_sequence_gaps += c.event_sequence_gaps;
+            losses.event_packets_missing += c.event_packets_missing;
+            losses.event_packets_repeated += c.event_packets_repeated;
+        }
+        let seq = self.sequence.counts();
+        losses.datagrams_missing = seq.missing;
+        losses.datagrams_duplicate = seq.duplicate;
+        losses.datagrams_reordered = seq.reordered;
+        losses.datagram_sequence_gaps = seq.gaps;
+        losses.sequence_restarts = seq.restarts;
+        losses.box_resets = self.box_resets;
+        losses.records_flagged_loss_before = self.records_flagged_loss_before.clone();
+        losses.box_packets_lost = self
+            .counter_deltas
+            .values()
+            .map(|d| {
+                PortCounter::ALL
+                    .iter()
+                    .filter(|c| c.is_packet_loss())
+                    .map(|c| d[c.index()])
+                    .sum::<u64>()
+            })
+            .sum();
+        losses
+    }
+
+    /// What this box's status datagrams said.
+    fn box_status(&self) -> BoxStatusReport {
+        BoxStatusReport {
+            status_reports: self.status_reports,
+            status_datagrams: self.status_datagrams,
+            boot_ids: self.boot_ids.clone(),
+            datagrams_sent_delta: self.datagrams_sent_delta,
+            records_sent_delta: self.records_sent_delta,
+            counter_deltas: self
+                .counter_deltas
+                .iter()
+                .map(|(port, d)| {
+                    (
+                        *port,
+                        PortCounter::ALL
+                            .iter()
+                            .map(|c| (c.name(), d[c.index()]))
+                            .collect(),
+                    )
+                })
+                .collect(),
+            last_counters: self
+                .last_counters
+                .iter()
+                .map(|(port, v)| {
+                    (
+                        *port,
+                        PortCounter::ALL
+                            .iter()
+                            .map(|c| (c.name(), v[c.index()]))
+                            .collect(),
+                    )
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The decoder. Feed it UDP payloads with [`Decoder::push_datagram`] (or
+/// [`Decoder::push_datagram_from`] where the source address is known).
+#[derive(Debug, Clone)]
+pub struct Decoder {
+    config: DecoderConfig,
+    boxes: Vec<BoxTrack>,
+    /// Index of the box of the previous datagram (most datagrams come from the same box).
+    current: usize,
+    bad: BadInput,
+    records: u64,
+    data_packets: u64,
+    event_packets: u64,
+    events_per_packet: [u64; 7],
 }
 
 impl Default for Decoder {
@@ -172,30 +361,13 @@ impl Decoder {
     pub fn new(config: DecoderConfig) -> Self {
         Decoder {
             config,
-            sequence: SequenceTracker::new(),
-            cells: Vec::new(),
-            converter: None,
+            boxes: Vec::new(),
+            current: 0,
             bad: BadInput::default(),
-            records_datagrams: 0,
-            status_datagrams: 0,
             records: 0,
             data_packets: 0,
             event_packets: 0,
             events_per_packet: [0; 7],
-            first_tick: None,
-            last_tick: 0,
-            min_tick: u64::MAX,
-            max_tick: 0,
-            records_flagged_loss_before: BTreeMap::new(),
-            box_state: BoxState::default(),
-            box_ids: Vec::new(),
-            boot_ids: Vec::new(),
-            box_resets: 0,
-            status_reports: 0,
-            counter_deltas: BTreeMap::new(),
-            last_counters: BTreeMap::new(),
-            datagrams_sent_delta: 0,
-            records_sent_delta: 0,
         }
     }
 
@@ -214,24 +386,65 @@ impl Decoder {
         self.records
     }
 
-    /// Takes one UDP payload that should be a box datagram.
+    /// The boxes seen so far, in order of their first datagram.
+    pub fn boxes(&self) -> impl Iterator<Item = BoxKey> + '_ {
+        self.boxes.iter().map(|b| b.key)
+    }
+
+    /// Index of the box of `key`, added when new; `None` past [`MAX_BOXES`].
+    fn box_index(&mut self, key: BoxKey) -> Option<usize> {
+        if self.boxes.get(self.current).is_some_and(|b| b.key == key) {
+            return Some(self.current);
+        }
+        let i = match self.boxes.iter().position(|b| b.key == key) {
+            Some(i) => i,
+            None if self.boxes.len() < MAX_BOXES => {
+                self.boxes.push(BoxTrack::new(key));
+                self.boxes.len() - 1
+            }
+            None => return None,
+        };
+        self.current = i;
+        Some(i)
+    }
+
+    /// Takes one UDP payload that should be a box datagram, source unknown.
     pub fn push_datagram<S: RecordSink + ?Sized>(
         &mut self,
+        payload: &[u8],
+        sink: &mut S,
+    ) -> DatagramOutcome {
+        self.push_datagram_from(None, payload, sink)
+    }
+
+    /// Takes one UDP payload that should be a box datagram, from `source` (the box is
+    /// told by its box id and this address).
+    pub fn push_datagram_from<S: RecordSink + ?Sized>(
+        &mut self,
+        source: Option<SocketAddr>,
         payload: &[u8],
         sink: &mut S,
     ) -> DatagramOutcome {
         let d = match Datagram::new_checked(payload) {
             Ok(d) => d,
             Err(e) => {
-                self.bad.count_error("datagram", &e);
+                self.bad.count_error(Reason::Datagram, &e);
                 return DatagramOutcome::Rejected;
             }
         };
-        // One decoder follows one box; other box ids are listed (a few) so a mixed
-        // capture shows in the report instead of as spurious sequence losses only.
-        if self.box_ids.len() < MAX_BOX_IDS && !self.box_ids.contains(&d.box_id()) {
-            self.box_ids.push(d.box_id());
-        }
+        let key = BoxKey {
+            box_id: d.box_id(),
+            source,
+        };
+        let Some(index) = self.box_index(key) else {
+            self.bad.count(Reason::TooManyBoxes, || {
+                format!(
+                    "datagram: box {} from {:?}: more than {MAX_BOXES} boxes, not decoded",
+                    key.box_id, key.source
+                )
+            });
+            return DatagramOutcome::Rejected;
+        };
         match d.kind() {
             DatagramKind::Status => {
                 // A status datagram is small and rare: parse it whole.
@@ -242,101 +455,63 @@ impl Decoder {
                         body: skinbox_protocol::datagram::DatagramBody::Status(status),
                         ..
                     }) => {
-                        if !self.take_status(sequence, base_tick, &status) {
+                        if !self.boxes[index].take_status(sequence, base_tick, &status) {
                             return DatagramOutcome::Duplicate;
                         }
-                        self.status_datagrams += 1;
                         DatagramOutcome::Status
                     }
                     Ok(_) => DatagramOutcome::Rejected,
                     Err(e) => {
-                        self.bad.count_error("status", &e);
+                        self.bad.count_error(Reason::Status, &e);
                         DatagramOutcome::Rejected
                     }
                 }
             }
             DatagramKind::Records => {
                 // The base tick tells a copy from a new datagram of a restarted box.
-                if self.sequence.push_tagged(d.sequence(), Some(d.base_tick()))
+                let track = &mut self.boxes[index];
+                if track
+                    .sequence
+                    .push_tagged(d.sequence(), Some(d.base_tick()))
                     == SequenceEvent::Duplicate
                 {
                     return DatagramOutcome::Duplicate;
                 }
-                self.records_datagrams += 1;
-                let n = self.take_records(&d, sink);
+                track.records_datagrams += 1;
+                let n = self.take_records(index, &d, sink);
                 DatagramOutcome::Records { records: n }
             }
         }
     }
 
-    /// Takes a status report; false when it is a duplicate.
-    fn take_status(&mut self, sequence: u32, base_tick: u64, status: &StatusRepr) -> bool {
-        if self.box_state.boot_id != Some(status.boot_id) {
-            if self.box_state.boot_id.is_some() {
-                self.box_resets += 1;
-                // The box numbers datagrams from its reset on: go on from this status
-                // datagram, unless the numbering already restarted just before it.
-                let continues = self.sequence.highest().is_some_and(|h| {
-                    (1..crate::sequence::WINDOW).contains(&sequence.wrapping_sub(h))
-                });
-                if continues {
-                    self.sequence.push_tagged(sequence, Some(base_tick));
-                } else {
-                    self.sequence.begin_at(sequence, base_tick);
-                }
-            } else {
-                self.sequence.push_tagged(sequence, Some(base_tick));
-            }
-            self.boot_ids.push(status.boot_id);
-            self.box_state = BoxState {
-                boot_id: Some(status.boot_id),
-                ..BoxState::default()
-            };
-        } else if self.sequence.push_tagged(sequence, Some(base_tick)) == SequenceEvent::Duplicate {
-            return false;
-        }
-        self.status_reports += 1;
-        if let Some(before) = self.box_state.datagrams_sent {
-            self.datagrams_sent_delta += wrapping_delta(status.datagrams_sent, before);
-        }
-        if let Some(before) = self.box_state.records_sent {
-            self.records_sent_delta += wrapping_delta(status.records_sent, before);
-        }
-        self.box_state.datagrams_sent = Some(status.datagrams_sent);
-        self.box_state.records_sent = Some(status.records_sent);
-        for (i, counters) in status.ports.iter().enumerate() {
-            let port = status.first_port.wrapping_add(i as u8);
-            let now = counters.0;
-            if let Some(before) = self.box_state.ports.get(&port) {
-                let deltas = self.counter_deltas.entry(port).or_default();
-                for c in PortCounter::ALL {
-                    deltas[c.index()] += wrapping_delta(now[c.index()], before[c.index()]);
-                }
-            } else {
-                self.counter_deltas.entry(port).or_default();
-            }
-            self.box_state.ports.insert(port, now);
-            self.last_counters.insert(port, now);
-        }
-        true
-    }
-
-    fn take_records<S: RecordSink + ?Sized>(&mut self, d: &Datagram<&[u8]>, sink: &mut S) -> usize {
+    fn take_records<S: RecordSink + ?Sized>(
+        &mut self,
+        index: usize,
+        d: &Datagram<&[u8]>,
+        sink: &mut S,
+    ) -> usize {
         let base = d.base_tick();
         let box_id = d.box_id();
+        let port_count = d.port_count();
         let datagram_sequence = d.sequence();
         let framing = self.config.framing;
         let wants_samples = sink.wants_samples();
-        if wants_samples && self.converter.is_none() {
-            self.converter = Some(EventToData::new());
+        let track = &mut self.boxes[index];
+        if wants_samples && track.converter.is_none() {
+            track.converter = Some(EventToData::new());
         }
         let mut n = 0;
         for r in d.records() {
             n += 1;
+            // A bad record rejects only itself: its port and flags, then its cell packet.
+            if let Err(e) = r.check(port_count) {
+                self.bad.count_error(Reason::Record, &e);
+                continue;
+            }
             let cell = match CellRepr::parse(r.cell_packet(), &framing) {
                 Ok(cell) => cell,
                 Err(e) => {
-                    self.bad.count_error("record", &e);
+                    self.bad.count_error(Reason::Record, &e);
                     continue;
                 }
             };
@@ -344,21 +519,18 @@ impl Decoder {
             let port = r.port();
             let flags = r.flags();
             if flags & FLAG_LOSS_BEFORE != 0 {
-                *self.records_flagged_loss_before.entry(port).or_insert(0) += 1;
+                *track.records_flagged_loss_before.entry(port).or_insert(0) += 1;
             }
             self.records += 1;
-            if self.first_tick.is_none() {
-                self.first_tick = Some(tick);
-            }
-            self.last_tick = tick;
-            self.min_tick = self.min_tick.min(tick);
-            self.max_tick = self.max_tick.max(tick);
+            track.records += 1;
+            track.min_tick = track.min_tick.min(tick);
+            track.max_tick = track.max_tick.max(tick);
             // The table grows to the highest cell id seen (ids are 14 bits).
-            let index = usize::from(cell.cell_id()) % CELL_IDS;
-            if index >= self.cells.len() {
-                self.cells.resize(index + 1, CellCounters::default());
+            let cell_index = usize::from(cell.cell_id()) % CELL_IDS;
+            if cell_index >= track.cells.len() {
+                track.cells.resize(cell_index + 1, CellCounters::default());
             }
-            let c = &mut self.cells[index];
+            let c = &mut track.cells[cell_index];
             c.port = port;
             let mut missing_before = 0u16;
             match &cell {
@@ -405,8 +577,9 @@ impl Decoder {
             };
             sink.record(&record);
             if wants_samples {
-                if let Some(conv) = self.converter.as_mut() {
-                    let sample = conv.push(tick, &cell, missing_before > 0);
+                if let Some(conv) = track.converter.as_mut() {
+                    let mut sample = conv.push(tick, &cell, missing_before > 0);
+                    sample.box_id = box_id;
                     sink.sample(&sample);
                 }
             }
@@ -415,16 +588,19 @@ impl Decoder {
     }
 
     /// Duration the records span, plus one sample period: N samples per cell at the
-    /// sample rate make exactly N / rate seconds, so data mode reads 100 %.
+    /// sample rate make exactly N / rate seconds, so data mode reads 100 %. With several
+    /// boxes (each its own clock), the longest box's.
     pub fn duration_s(&self) -> f64 {
-        if self.records == 0 {
-            return 0.0;
-        }
-        crate::ticks_to_seconds(self.max_tick - self.min_tick) + 1.0 / self.config.sample_rate_hz
+        self.boxes
+            .iter()
+            .map(|b| b.duration_s(self.config.sample_rate_hz))
+            .fold(0.0, f64::max)
     }
 
-    /// Everything so far, as the papers report it.
+    /// Everything so far, as the papers report it: totals over every box, and each box
+    /// on its own in `boxes`.
     pub fn report(&self) -> Report {
+        let rate = self.config.sample_rate_hz;
         let duration_s = self.duration_s();
         let per_s = |n: u64| {
             if duration_s > 0.0 {
@@ -433,40 +609,77 @@ impl Decoder {
                 0.0
             }
         };
-        let expected_per_cell = self.config.sample_rate_hz * duration_s;
         let mut cells = Vec::new();
         let mut modality_events: BTreeMap<Modality, u64> =
             Modality::ALL.iter().map(|m| (*m, 0)).collect();
         let mut losses = LossReport::default();
-        for (id, c) in self.cells.iter().enumerate() {
-            let packets = c.data_packets + c.event_packets;
-            if packets == 0 {
-                continue;
+        let mut box_status = BoxStatusReport::default();
+        let mut boxes = Vec::new();
+        let mut expected_all = 0.0;
+        for b in &self.boxes {
+            let box_duration = b.duration_s(rate);
+            let expected_per_cell = rate * box_duration;
+            let box_per_s = |n: u64| {
+                if box_duration > 0.0 {
+                    n as f64 / box_duration
+                } else {
+                    0.0
+                }
+            };
+            let mut box_cells = 0u64;
+            for (id, c) in b.cells.iter().enumerate() {
+                let packets = c.data_packets + c.event_packets;
+                if packets == 0 {
+                    continue;
+                }
+                box_cells += 1;
+                let mut by_modality: BTreeMap<Modality, u64> =
+                    Modality::ALL.iter().map(|m| (*m, 0)).collect();
+                for ch in Channel::ALL {
+                    *by_modality.entry(ch.modality()).or_insert(0) += c.channel_events[ch.index()];
+                }
+                for (m, n) in &by_modality {
+                    *modality_events.entry(*m).or_insert(0) += n;
+                }
+                cells.push(CellReport {
+                    box_id: b.key.box_id,
+                    cell_id: id as u16,
+                    port: c.port,
+                    data_packets: c.data_packets,
+                    event_packets: c.event_packets,
+                    packet_rate_percent_of_data_mode: report::percent(
+                        packets as f64,
+                        expected_per_cell,
+                    ),
+                    events_per_second: by_modality
+                        .iter()
+                        .map(|(m, n)| (*m, box_per_s(*n)))
+                        .collect(),
+                    event_sequence_gaps: c.event_sequence_gaps,
+                    event_packets_missing: c.event_packets_missing,
+                });
             }
-            let mut by_modality: BTreeMap<Modality, u64> =
-                Modality::ALL.iter().map(|m| (*m, 0)).collect();
-            for ch in Channel::ALL {
-                *by_modality.entry(ch.modality()).or_insert(0) += c.channel_events[ch.index()];
-            }
-            for (m, n) in &by_modality {
-                *modality_events.entry(*m).or_insert(0) += n;
-            }
-            losses.event_sequence_gaps += c.event_sequence_gaps;
-            losses.event_packets_missing += c.event_packets_missing;
-            losses.event_packets_repeated += c.event_packets_repeated;
-            cells.push(CellReport {
-                cell_id: id as u16,
-                port: c.port,
-                data_packets: c.data_packets,
-                event_packets: c.event_packets,
-                packet_rate_percent_of_data_mode: report::percent(
-                    packets as f64,
-                    expected_per_cell,
-                ),
-                events_per_second: by_modality.iter().map(|(m, n)| (*m, per_s(*n))).collect(),
-                event_sequence_gaps: c.event_sequence_gaps,
-                event_packets_missing: c.event_packets_missing,
+            expected_all += expected_per_cell * box_cells as f64;
+            let box_losses = b.losses();
+            losses.add(&box_losses);
+            let status = b.box_status();
+            box_status.add(&status);
+            boxes.push(BoxReport {
+                box_id: b.key.box_id,
+                source: b.key.source,
+                records_datagrams: b.records_datagrams,
+                records: b.records,
+                cells_active: box_cells,
+                first_tick: if b.records > 0 { b.min_tick } else { 0 },
+                last_tick: b.max_tick,
+                duration_s: box_duration,
+                losses: box_losses,
+                box_status: status,
             });
+        }
+        // Counters by port mean something only for one box.
+        if self.boxes.len() == 1 {
+            box_status.last_counters = self.boxes[0].box_status().last_counters;
         }
         let cells_active = cells.len() as u64;
         let per_cell_s = |n: u64| {
@@ -476,56 +689,34 @@ impl Decoder {
                 n as f64 / cells_active as f64 / duration_s
             }
         };
-        let seq = self.sequence.counts();
-        losses.datagrams_missing = seq.missing;
-        losses.datagrams_duplicate = seq.duplicate;
-        losses.datagrams_reordered = seq.reordered;
-        losses.datagram_sequence_gaps = seq.gaps;
-        losses.sequence_restarts = seq.restarts;
-        losses.box_resets = self.box_resets;
-        losses.records_flagged_loss_before = self.records_flagged_loss_before.clone();
-        let mut box_packets_lost = 0;
-        let counter_deltas: BTreeMap<u8, BTreeMap<&'static str, u64>> = self
-            .counter_deltas
-            .iter()
-            .map(|(port, d)| {
-                for c in PortCounter::ALL {
-                    if c.is_packet_loss() {
-                        box_packets_lost += d[c.index()];
-                    }
-                }
-                (
-                    *port,
-                    PortCounter::ALL
-                        .iter()
-                        .map(|c| (c.name(), d[c.index()]))
-                        .collect(),
-                )
-            })
-            .collect();
-        losses.box_packets_lost = box_packets_lost;
+        let with_records = self.boxes.iter().filter(|b| b.records > 0);
+        let first_tick = with_records.clone().map(|b| b.min_tick).min().unwrap_or(0);
+        let last_tick = with_records.map(|b| b.max_tick).max().unwrap_or(0);
+        let mut box_ids: Vec<u16> = Vec::new();
+        for b in &self.boxes {
+            if !box_ids.contains(&b.key.box_id) {
+                box_ids.push(b.key.box_id);
+            }
+        }
         Report {
-            sample_rate_hz: self.config.sample_rate_hz,
-            box_ids: self.box_ids.clone(),
-            records_datagrams: self.records_datagrams,
-            status_datagrams: self.status_datagrams,
+            sample_rate_hz: rate,
+            box_ids,
+            records_datagrams: boxes.iter().map(|b| b.records_datagrams).sum(),
+            status_datagrams: box_status.status_datagrams,
             records: self.records,
             data_packets: self.data_packets,
             event_packets: self.event_packets,
-            first_tick: self.first_tick.unwrap_or(0),
-            last_tick: self.last_tick,
-            first_time_s: crate::ticks_to_seconds(self.first_tick.unwrap_or(0)),
-            last_time_s: crate::ticks_to_seconds(self.last_tick),
+            first_tick,
+            last_tick,
+            first_time_s: crate::ticks_to_seconds(first_tick),
+            last_time_s: crate::ticks_to_seconds(last_tick),
             duration_s,
             cells_active,
             packets_per_second: per_s(self.records),
-            packet_rate_percent_of_data_mode: report::percent(
-                self.records as f64,
-                expected_per_cell * cells_active as f64,
-            ),
+            packet_rate_percent_of_data_mode: report::percent(self.records as f64, expected_all),
             event_packet_rate_percent_of_data_mode: report::percent(
                 self.event_packets as f64,
-                expected_per_cell * cells_active as f64,
+                expected_all,
             ),
             events_per_cell_per_second: modality_events
                 .iter()
@@ -533,26 +724,8 @@ impl Decoder {
                 .collect(),
             events_per_packet_histogram: self.events_per_packet[1..].to_vec(),
             losses,
-            box_status: BoxStatusReport {
-                status_reports: self.status_reports,
-                boot_ids: self.boot_ids.clone(),
-                datagrams_sent_delta: self.datagrams_sent_delta,
-                records_sent_delta: self.records_sent_delta,
-                counter_deltas,
-                last_counters: self
-                    .last_counters
-                    .iter()
-                    .map(|(port, v)| {
-                        (
-                            *port,
-                            PortCounter::ALL
-                                .iter()
-                                .map(|c| (c.name(), v[c.index()]))
-                                .collect(),
-                        )
-                    })
-                    .collect(),
-            },
+            box_status,
+            boxes,
             bad_input: self.bad.clone(),
             frames: Default::default(),
             host: None,

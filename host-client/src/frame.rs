@@ -4,8 +4,13 @@
 //! source port and addresses are parameters, so box datagrams are found by their payload
 //! magic "SK" on any UDP port, or only on one port when a filter is given. Parsing is
 //! etherparse's; this module only says why a frame is not a box datagram.
+//!
+//! Checksums are verified with etherparse's own computation (independent of the gateware's):
+//! the IPv4 header checksum always, the UDP checksum unless it is 0 over IPv4 (RFC 768:
+//! "not computed"; over IPv6 it is mandatory, RFC 8200). A frame with a wrong checksum gives
+//! nothing to the decoder.
 
-use crate::BadInput;
+use crate::bad_input::{BadInput, FrameFault, Reason};
 use etherparse::{NetSlice, SlicedPacket, TransportSlice};
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
 
@@ -16,6 +21,8 @@ pub enum LinkType {
     Ethernet,
     /// A bare IPv4 or IPv6 packet (pcap link types 101 and 228/229).
     RawIp,
+    /// Linux cooked capture v1 (link type 113: `tcpdump -i any` on older systems).
+    LinuxSll,
 }
 
 /// A UDP datagram found in a frame.
@@ -42,18 +49,34 @@ pub enum FrameReject {
     NotUdp,
     /// UDP on another port than the filter.
     OtherPort(u16),
+    /// The IPv4 header checksum does not match the header.
+    BadIpv4Checksum {
+        /// Checksum in the header.
+        found: u16,
+        /// Checksum of the header's bytes.
+        computed: u16,
+    },
+    /// The UDP checksum does not match the pseudo header, UDP header and payload.
+    BadUdpChecksum {
+        /// Checksum in the UDP header.
+        found: u16,
+        /// Checksum of the datagram as captured.
+        computed: u16,
+    },
 }
 
 impl FrameReject {
-    /// A short counting key.
-    pub fn reason(&self) -> &'static str {
-        match self {
-            FrameReject::Malformed(_) => "frame: malformed",
-            FrameReject::NotIp => "frame: not IP",
-            FrameReject::Fragment => "frame: IP fragment",
-            FrameReject::NotUdp => "frame: not UDP",
-            FrameReject::OtherPort(_) => "frame: other UDP port",
-        }
+    /// The counting key.
+    pub fn reason(&self) -> Reason {
+        Reason::Frame(match self {
+            FrameReject::Malformed(_) => FrameFault::Malformed,
+            FrameReject::NotIp => FrameFault::NotIp,
+            FrameReject::Fragment => FrameFault::Fragment,
+            FrameReject::NotUdp => FrameFault::NotUdp,
+            FrameReject::OtherPort(_) => FrameFault::OtherPort,
+            FrameReject::BadIpv4Checksum { .. } => FrameFault::BadIpv4Checksum,
+            FrameReject::BadUdpChecksum { .. } => FrameFault::BadUdpChecksum,
+        })
     }
 
     /// Counts this rejection.
@@ -61,6 +84,12 @@ impl FrameReject {
         bad.count(self.reason(), || match self {
             FrameReject::Malformed(m) => format!("frame: malformed: {m}"),
             FrameReject::OtherPort(p) => format!("frame: UDP port {p} is not the filter's"),
+            FrameReject::BadIpv4Checksum { found, computed } => format!(
+                "frame: IPv4 header checksum 0x{found:04X}, the header's bytes give 0x{computed:04X}"
+            ),
+            FrameReject::BadUdpChecksum { found, computed } => format!(
+                "frame: UDP checksum 0x{found:04X}, the datagram as captured gives 0x{computed:04X}"
+            ),
             other => other.reason().to_string(),
         });
     }
@@ -75,14 +104,22 @@ pub fn udp_payload(
     let sliced = match link {
         LinkType::Ethernet => SlicedPacket::from_ethernet(frame),
         LinkType::RawIp => SlicedPacket::from_ip(frame),
+        LinkType::LinuxSll => SlicedPacket::from_linux_sll(frame),
     }
     .map_err(|e| FrameReject::Malformed(e.to_string()))?;
     let (source_ip, destination_ip) = match &sliced.net {
         Some(NetSlice::Ipv4(ip)) => {
+            let h = ip.header();
+            let computed = h.to_header().calc_header_checksum();
+            if computed != h.header_checksum() {
+                return Err(FrameReject::BadIpv4Checksum {
+                    found: h.header_checksum(),
+                    computed,
+                });
+            }
             if ip.is_payload_fragmented() {
                 return Err(FrameReject::Fragment);
             }
-            let h = ip.header();
             (
                 std::net::IpAddr::V4(h.source_addr()),
                 std::net::IpAddr::V4(h.destination_addr()),
@@ -104,6 +141,23 @@ pub fn udp_payload(
         Some(TransportSlice::Udp(udp)) => udp,
         _ => return Err(FrameReject::NotUdp),
     };
+    let found = udp.checksum();
+    let computed = match (source_ip, destination_ip) {
+        // RFC 768: a zero checksum over IPv4 means the sender computed none.
+        (std::net::IpAddr::V4(_), _) if found == 0 => None,
+        (std::net::IpAddr::V4(s), std::net::IpAddr::V4(d)) => udp
+            .to_header()
+            .calc_checksum_ipv4_raw(s.octets(), d.octets(), udp.payload())
+            .ok(),
+        (std::net::IpAddr::V6(s), std::net::IpAddr::V6(d)) => udp
+            .to_header()
+            .calc_checksum_ipv6_raw(s.octets(), d.octets(), udp.payload())
+            .ok(),
+        _ => None,
+    };
+    if let Some(computed) = computed.filter(|c| *c != found) {
+        return Err(FrameReject::BadUdpChecksum { found, computed });
+    }
     let (sp, dp) = (udp.source_port(), udp.destination_port());
     if let Some(p) = port {
         if sp != p && dp != p {
@@ -165,5 +219,56 @@ mod tests {
             Err(FrameReject::Malformed(_))
         ));
         assert!(udp_payload(&frame[14..], LinkType::RawIp, None).is_ok());
+    }
+
+    /// Internet checksum (RFC 1071) written here on its own, as the oracle.
+    fn ones_complement(chunks: &[&[u8]]) -> u16 {
+        let bytes: Vec<u8> = chunks.concat();
+        let mut sum: u32 = bytes
+            .chunks(2)
+            .map(|c| u32::from(u16::from_be_bytes([c[0], *c.get(1).unwrap_or(&0)])))
+            .sum();
+        while sum > 0xFFFF {
+            sum = (sum & 0xFFFF) + (sum >> 16);
+        }
+        !(sum as u16)
+    }
+
+    #[test]
+    fn checksums_are_verified() {
+        let src: SocketAddr = "192.0.2.10:54091".parse().unwrap();
+        let dst: SocketAddr = "192.0.2.1:54091".parse().unwrap();
+        let good = build_udp_frame(src, dst, b"SK payload");
+        // The builder's checksums agree with the oracle: every sum folds to zero.
+        assert_eq!(ones_complement(&[&good[14..34]]), 0);
+        let udp_len = (good.len() - 34) as u16;
+        let pseudo = [&good[26..34], &[0, 17], &udp_len.to_be_bytes()[..]].concat();
+        assert_eq!(ones_complement(&[&pseudo, &good[34..]]), 0);
+        assert!(udp_payload(&good, LinkType::Ethernet, None).is_ok());
+
+        // A payload byte changed, the UDP checksum left as it was.
+        let mut stale = good.clone();
+        *stale.last_mut().unwrap() ^= 0x01;
+        assert!(matches!(
+            udp_payload(&stale, LinkType::Ethernet, None),
+            Err(FrameReject::BadUdpChecksum { .. })
+        ));
+        // The same with the checksum zeroed: "not computed", accepted over IPv4.
+        stale[40..42].copy_from_slice(&[0, 0]);
+        assert!(udp_payload(&stale, LinkType::Ethernet, None).is_ok());
+
+        // A TTL changed, the IPv4 header checksum left as it was.
+        let mut ip = good.clone();
+        ip[22] = 63;
+        let err = udp_payload(&ip, LinkType::Ethernet, None).unwrap_err();
+        assert!(
+            matches!(err, FrameReject::BadIpv4Checksum { .. }),
+            "{err:?}"
+        );
+        // Fixed with the oracle's checksum, it is accepted again.
+        ip[24..26].copy_from_slice(&[0, 0]);
+        let fixed = ones_complement(&[&ip[14..34]]);
+        ip[24..26].copy_from_slice(&fixed.to_be_bytes());
+        assert!(udp_payload(&ip, LinkType::Ethernet, None).is_ok());
     }
 }

@@ -74,7 +74,7 @@ impl<W: Write> RowWriter<W> {
             ),
             RowKind::Samples => writeln!(
                 self.out,
-                "time_s,tick,cell_id,updated_mask,stale_mask,known_mask,{}",
+                "time_s,tick,box_id,cell_id,updated_mask,stale_mask,known_mask,{}",
                 channels.join(",")
             ),
         }
@@ -157,9 +157,10 @@ impl<W: Write> RowWriter<W> {
                 }
                 write!(
                     self.out,
-                    "{:.9},{},{},{},{},{}",
+                    "{:.9},{},{},{},{},{},{}",
                     s.time_s(),
                     s.tick,
+                    s.box_id,
                     s.cell_id,
                     s.updated.bits(),
                     s.stale.bits(),
@@ -178,6 +179,7 @@ impl<W: Write> RowWriter<W> {
                 let row = serde_json::json!({
                     "time_s": s.time_s(),
                     "tick": s.tick,
+                    "box_id": s.box_id,
                     "cell_id": s.cell_id,
                     "updated": s.updated.iter().map(|c| c.name()).collect::<Vec<_>>(),
                     "stale": s.stale.iter().map(|c| c.name()).collect::<Vec<_>>(),

@@ -1,15 +1,19 @@
-//! Reading and writing pcap files (pcap-file's parser and writer, etherparse's slicer and
-//! builder), and decoding a pcap into a [`Report`] in one call.
+//! Reading pcap and pcapng files and writing pcap files (pcap-file's parsers and writer,
+//! etherparse's slicer and builder), and decoding a capture into a [`Report`] in one call.
 //!
-//! A pcap is read whole into memory and parsed with `pcap_file::pcap::PcapParser`, so a
-//! truncated last packet is told apart from a corrupt record and counted, not fatal.
+//! A capture is read whole into memory and parsed with `pcap_file::pcap::PcapParser` or
+//! `pcap_file::pcapng::PcapNgParser` (told apart by the first four bytes), so a truncated
+//! last packet is told apart from a corrupt record and counted, not fatal. A pcapng may hold
+//! several sections and interfaces, each with its own link type and timestamp resolution
+//! (`if_tsresol`, `if_tsoffset`), as Wireshark and dumpcap write them.
 
+use crate::bad_input::{BadInput, Reason};
 use crate::decoder::{DecodedRecord, Decoder, DecoderConfig, RecordSink};
 use crate::frame::{self, FrameReject, LinkType, UdpDatagram};
 use crate::report::{FrameCounts, HostCost, Report};
-use crate::BadInput;
 use pcap_file::pcap::PcapParseError;
 use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
+use pcap_file::pcapng::{Block, PcapNgParseError, PcapNgParser};
 use pcap_file::{DataLink, Endianness};
 use std::io::Write;
 use std::net::SocketAddr;
@@ -19,16 +23,17 @@ use std::time::Duration;
 /// Why a pcap cannot be read at all.
 #[derive(Debug, thiserror::Error)]
 pub enum PcapError {
-    /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    /// The file could not be read or written. (The I/O error is part of the message, not a
+    /// separate cause, so a printed chain says it once.)
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: String,
         /// What failed.
-        source: std::io::Error,
+        error: std::io::Error,
     },
-    /// The global header is not a pcap header.
-    #[error("not a pcap file: {0}")]
+    /// The file starts with neither a pcap header nor a pcapng section header.
+    #[error("not a pcap or pcapng file: {0}")]
     NotPcap(String),
     /// A link type this decoder does not read.
     #[error("unsupported pcap link type {0:?} (Ethernet, raw IPv4/IPv6 are read)")]
@@ -56,61 +61,153 @@ pub struct PcapScan {
     pub bad: BadInput,
 }
 
-/// Calls `f` with the timestamp and UDP datagram of every frame of a pcap that carries one;
-/// counts every other frame by reason.
+/// Block type of a pcapng section header, as the file's first four bytes.
+const PCAPNG_MAGIC: [u8; 4] = [0x0A, 0x0D, 0x0D, 0x0A];
+
+/// The frame format of a capture link type, or `None` when the decoder does not read it.
+fn link_type(datalink: DataLink) -> Option<LinkType> {
+    match datalink {
+        DataLink::ETHERNET => Some(LinkType::Ethernet),
+        DataLink::RAW | DataLink::IPV4 | DataLink::IPV6 => Some(LinkType::RawIp),
+        DataLink::LINUX_SLL => Some(LinkType::LinuxSll),
+        _ => None,
+    }
+}
+
+/// Takes one captured frame: counts it, finds its UDP datagram or counts why not.
+fn take_frame<'a>(
+    scan: &mut PcapScan,
+    span: &mut (Option<Duration>, Duration),
+    ts: Duration,
+    data: &'a [u8],
+    link: LinkType,
+    udp_port: Option<u16>,
+    f: &mut impl FnMut(Duration, UdpDatagram<'a>),
+) {
+    scan.frames.frames += 1;
+    span.0.get_or_insert(ts);
+    span.1 = span.1.max(ts);
+    match frame::udp_payload(data, link, udp_port) {
+        Ok(udp) => {
+            scan.frames.udp_payloads += 1;
+            f(ts, udp);
+        }
+        Err(FrameReject::OtherPort(_)) => scan.frames.other_port += 1,
+        Err(reject) => reject.count_in(&mut scan.bad),
+    }
+}
+
+/// Calls `f` with the timestamp and UDP datagram of every frame of a pcap or pcapng that
+/// carries one; counts every other frame by reason.
 pub fn for_each_udp_payload<'a>(
+    bytes: &'a [u8],
+    udp_port: Option<u16>,
+    f: impl FnMut(Duration, UdpDatagram<'a>),
+) -> Result<PcapScan, PcapError> {
+    if bytes.starts_with(&PCAPNG_MAGIC) {
+        for_each_pcapng(bytes, udp_port, f)
+    } else {
+        for_each_pcap(bytes, udp_port, f)
+    }
+}
+
+fn for_each_pcapng<'a>(
+    bytes: &'a [u8],
+    udp_port: Option<u16>,
+    mut f: impl FnMut(Duration, UdpDatagram<'a>),
+) -> Result<PcapScan, PcapError> {
+    let (mut rest, mut parser) = PcapNgParser::new(bytes)
+        .map_err(|e| PcapError::NotPcap(format!("pcapng section header: {e}")))?;
+    let mut scan = PcapScan::default();
+    let mut span = (None, Duration::ZERO);
+    while !rest.is_empty() {
+        let (next, block) = match parser.next_block(rest) {
+            Ok(x) => x,
+            Err(PcapNgParseError::IncompleteBuffer(needed, have)) => {
+                scan.bad.count(Reason::PcapTruncated, || {
+                    format!("pcapng: truncated at end of file: the last block needs {needed} bytes, {have} remain")
+                });
+                break;
+            }
+            Err(e) => {
+                let left = rest.len();
+                scan.bad.count(Reason::PcapCorrupt, || {
+                    format!("pcapng: corrupt block, {left} bytes left unread: {e}")
+                });
+                break;
+            }
+        };
+        rest = next;
+        // Timestamps come decoded with the interface's if_tsresol and if_tsoffset.
+        let (interface, ts, data) = match block {
+            Block::EnhancedPacket(p) => (p.interface_id, p.timestamp, p.data),
+            Block::Packet(p) => (u32::from(p.interface_id), p.timestamp, p.data),
+            Block::SimplePacket(p) => (0, Duration::ZERO, p.data),
+            _ => continue,
+        };
+        let datalink = parser
+            .interfaces()
+            .get(interface as usize)
+            .map(|i| i.linktype);
+        let Some(link) = datalink.and_then(link_type) else {
+            scan.frames.frames += 1;
+            scan.bad.count(Reason::PcapLinkType, || {
+                format!("pcapng: interface {interface} has link type {datalink:?}, not read (Ethernet, raw IPv4/IPv6, Linux cooked v1 are)")
+            });
+            continue;
+        };
+        // The parser borrows packet data from `bytes`.
+        let std::borrow::Cow::Borrowed(data) = data else {
+            continue;
+        };
+        take_frame(&mut scan, &mut span, ts, data, link, udp_port, &mut f);
+    }
+    if let Some(first) = span.0 {
+        scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
+    }
+    Ok(scan)
+}
+
+fn for_each_pcap<'a>(
     bytes: &'a [u8],
     udp_port: Option<u16>,
     mut f: impl FnMut(Duration, UdpDatagram<'a>),
 ) -> Result<PcapScan, PcapError> {
     let (mut rest, parser) =
         PcapParser::new(bytes).map_err(|e| PcapError::NotPcap(e.to_string()))?;
-    let link = match parser.header().datalink {
-        DataLink::ETHERNET => LinkType::Ethernet,
-        DataLink::RAW | DataLink::IPV4 | DataLink::IPV6 => LinkType::RawIp,
-        other => return Err(PcapError::LinkType(other)),
-    };
+    let link =
+        link_type(parser.header().datalink).ok_or(PcapError::LinkType(parser.header().datalink))?;
     let mut scan = PcapScan::default();
-    let (mut first_ts, mut last_ts) = (None, Duration::ZERO);
+    let mut span = (None, Duration::ZERO);
     while !rest.is_empty() {
         match parser.next_packet(rest) {
             Ok((next, packet)) => {
                 rest = next;
-                scan.frames.frames += 1;
                 let ts = packet.timestamp();
-                first_ts.get_or_insert(ts);
-                last_ts = ts;
                 // `next_packet` borrows from `bytes`: the data is a borrowed Cow.
                 let data: &'a [u8] = match packet.into_data() {
                     std::borrow::Cow::Borrowed(d) => d,
                     std::borrow::Cow::Owned(_) => continue,
                 };
-                match frame::udp_payload(data, link, udp_port) {
-                    Ok(udp) => {
-                        scan.frames.udp_payloads += 1;
-                        f(ts, udp);
-                    }
-                    Err(FrameReject::OtherPort(_)) => scan.frames.other_port += 1,
-                    Err(reject) => reject.count_in(&mut scan.bad),
-                }
+                take_frame(&mut scan, &mut span, ts, data, link, udp_port, &mut f);
             }
             Err(PcapParseError::IncompleteBuffer(needed, have)) => {
-                scan.bad.count("pcap: truncated at end of file", || {
+                scan.bad.count(Reason::PcapTruncated, || {
                     format!("pcap: truncated at end of file: the last record needs {needed} bytes, {have} remain")
                 });
                 break;
             }
             Err(e) => {
                 let left = rest.len();
-                scan.bad.count("pcap: corrupt packet record", || {
+                scan.bad.count(Reason::PcapCorrupt, || {
                     format!("pcap: corrupt packet record, {left} bytes left unread: {e}")
                 });
                 break;
             }
         }
     }
-    if let Some(first) = first_ts {
-        scan.frames.capture_span_s = last_ts.saturating_sub(first).as_secs_f64();
+    if let Some(first) = span.0 {
+        scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
     }
     Ok(scan)
 }
@@ -126,7 +223,7 @@ pub fn decode_pcap_with<S: RecordSink + ?Sized>(
     let cpu = crate::thread_cpu_ns();
     let mut decoder = Decoder::new(options.decoder);
     let scan = for_each_udp_payload(bytes, options.udp_port, |_, udp| {
-        decoder.push_datagram(udp.payload, sink);
+        decoder.push_datagram_from(Some(udp.source), udp.payload, sink);
     })?;
     let cpu_ns = crate::thread_cpu_ns().saturating_sub(cpu);
     decoder.bad_input_mut().merge(&scan.bad);
@@ -171,9 +268,9 @@ pub fn decode_pcap_file(
 
 /// Reads a whole file, with its name in the error.
 pub fn read_file(path: &Path) -> Result<Vec<u8>, PcapError> {
-    std::fs::read(path).map_err(|source| PcapError::Io {
+    std::fs::read(path).map_err(|error| PcapError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })
 }
 

@@ -19,6 +19,15 @@ pub enum Pacing {
         /// Datagrams per second.
         datagrams_per_second: f64,
     },
+    /// At this many datagrams per second on average, sent `burst` at a time back to back
+    /// (as a NIC hands a busy link's frames to the host), sleeping between bursts: the
+    /// sender then needs little CPU, unlike [`Pacing::Rate`]'s even spacing.
+    Bursts {
+        /// Datagrams per second on average.
+        datagrams_per_second: f64,
+        /// Datagrams per burst.
+        burst: usize,
+    },
     /// As fast as the socket takes them.
     Unpaced,
 }
@@ -61,13 +70,25 @@ pub fn replay<'a>(
             } => Some(Duration::from_secs_f64(
                 i as f64 / datagrams_per_second.max(1e-9),
             )),
+            Pacing::Bursts {
+                datagrams_per_second,
+                burst,
+            } => {
+                let burst = burst.max(1);
+                (i % burst == 0)
+                    .then(|| Duration::from_secs_f64(i as f64 / datagrams_per_second.max(1e-9)))
+            }
             Pacing::AsRecorded { speed } => {
                 let first = *first_ts.get_or_insert(ts);
                 Some(ts.saturating_sub(first).div_f64(speed.max(1e-9)))
             }
         };
         if let Some(due) = due {
-            wait_until(start, due);
+            if matches!(pacing, Pacing::Bursts { .. }) {
+                sleep_until(start, due);
+            } else {
+                wait_until(start, due);
+            }
         }
         match socket.send_to(payload, to) {
             Ok(n) => {
@@ -82,6 +103,14 @@ pub fn replay<'a>(
         summary.datagrams_per_second = summary.datagrams as f64 / summary.wall_s;
     }
     summary
+}
+
+/// Sleeps until `due` (to the scheduler's precision, tens of microseconds).
+fn sleep_until(start: Instant, due: Duration) {
+    let now = start.elapsed();
+    if now < due {
+        std::thread::sleep(due - now);
+    }
 }
 
 /// Sleeps while far from `due`, then yields: accurate to a few microseconds without

@@ -18,6 +18,8 @@ pub fn percent(part: f64, whole: f64) -> f64 {
 /// One cell's share.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CellReport {
+    /// Box the cell is on.
+    pub box_id: u16,
     /// Cell id.
     pub cell_id: u16,
     /// Port of its last record.
@@ -63,11 +65,32 @@ pub struct LossReport {
     pub box_packets_lost: u64,
 }
 
+impl LossReport {
+    /// Adds another box's losses into these.
+    pub fn add(&mut self, other: &LossReport) {
+        self.datagrams_missing += other.datagrams_missing;
+        self.datagram_sequence_gaps += other.datagram_sequence_gaps;
+        self.datagrams_duplicate += other.datagrams_duplicate;
+        self.datagrams_reordered += other.datagrams_reordered;
+        self.sequence_restarts += other.sequence_restarts;
+        self.box_resets += other.box_resets;
+        self.event_sequence_gaps += other.event_sequence_gaps;
+        self.event_packets_missing += other.event_packets_missing;
+        self.event_packets_repeated += other.event_packets_repeated;
+        for (port, n) in &other.records_flagged_loss_before {
+            *self.records_flagged_loss_before.entry(*port).or_insert(0) += n;
+        }
+        self.box_packets_lost += other.box_packets_lost;
+    }
+}
+
 /// What the box's status datagrams said.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct BoxStatusReport {
-    /// Status datagrams taken (duplicates skipped).
+    /// Status reports taken: one per report, however many datagrams it spans.
     pub status_reports: u64,
+    /// Status datagrams taken (duplicates skipped).
+    pub status_datagrams: u64,
     /// Boot ids seen, in order.
     pub boot_ids: Vec<u32>,
     /// Records datagrams the box sent between its first and last report (per boot, summed).
@@ -76,8 +99,50 @@ pub struct BoxStatusReport {
     pub records_sent_delta: u64,
     /// Per port, each counter's growth (by `PortCounter::name`) between successive reports of one boot, summed.
     pub counter_deltas: BTreeMap<u8, BTreeMap<&'static str, u64>>,
-    /// Per port, the counters of the last report.
+    /// Per port, the counters of the last report (in a total over several boxes: empty).
     pub last_counters: BTreeMap<u8, BTreeMap<&'static str, u32>>,
+}
+
+impl BoxStatusReport {
+    /// Adds another box's counts into these (`last_counters` is left alone).
+    pub fn add(&mut self, other: &BoxStatusReport) {
+        self.status_reports += other.status_reports;
+        self.status_datagrams += other.status_datagrams;
+        self.boot_ids.extend(&other.boot_ids);
+        self.datagrams_sent_delta += other.datagrams_sent_delta;
+        self.records_sent_delta += other.records_sent_delta;
+        for (port, counters) in &other.counter_deltas {
+            let sum = self.counter_deltas.entry(*port).or_default();
+            for (name, n) in counters {
+                *sum.entry(name).or_insert(0) += n;
+            }
+        }
+    }
+}
+
+/// One box of a capture: its datagrams, losses and status on their own.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BoxReport {
+    /// Box id.
+    pub box_id: u16,
+    /// Source address of its datagrams, where known.
+    pub source: Option<std::net::SocketAddr>,
+    /// Records datagrams decoded (duplicates skipped).
+    pub records_datagrams: u64,
+    /// Records with a valid cell packet.
+    pub records: u64,
+    /// Cells that sent at least one packet.
+    pub cells_active: u64,
+    /// Box tick of its earliest record.
+    pub first_tick: u64,
+    /// Box tick of its latest record.
+    pub last_tick: u64,
+    /// Span of its record ticks plus one sample period, in seconds.
+    pub duration_s: f64,
+    /// Its losses.
+    pub losses: LossReport,
+    /// Its status reports.
+    pub box_status: BoxStatusReport,
 }
 
 /// Frames of a pcap or a live socket, before the box datagram decoder.
@@ -121,13 +186,13 @@ pub struct Report {
     pub data_packets: u64,
     /// Cell event packets.
     pub event_packets: u64,
-    /// Box tick of the first record.
+    /// Box tick of the earliest record (whatever the capture order).
     pub first_tick: u64,
-    /// Box tick of the last record.
+    /// Box tick of the latest record.
     pub last_tick: u64,
-    /// Box time of the first record, in seconds.
+    /// Box time of the earliest record, in seconds.
     pub first_time_s: f64,
-    /// Box time of the last record, in seconds.
+    /// Box time of the latest record, in seconds.
     pub last_time_s: f64,
     /// Span of the record ticks plus one sample period, in seconds.
     pub duration_s: f64,
@@ -143,10 +208,12 @@ pub struct Report {
     pub events_per_cell_per_second: BTreeMap<Modality, f64>,
     /// Event packets carrying 1, 2, ... 6 channels.
     pub events_per_packet_histogram: Vec<u64>,
-    /// Every loss.
+    /// Every loss, summed over the boxes.
     pub losses: LossReport,
-    /// The box's own counters.
+    /// The boxes' own counters, summed.
     pub box_status: BoxStatusReport,
+    /// Each box (box id and source address) on its own, in order of its first datagram.
+    pub boxes: Vec<BoxReport>,
     /// Rejected input by reason.
     pub bad_input: BadInput,
     /// Frames before the datagram decoder.
@@ -215,11 +282,27 @@ impl Report {
             self.box_status.datagrams_sent_delta,
             self.box_status.records_sent_delta
         );
-        let _ = writeln!(
-            s,
-            "bad input: {} ({:?})",
-            self.bad_input.total, self.bad_input.by_reason
-        );
+        if self.boxes.len() > 1 {
+            for b in &self.boxes {
+                let l = &b.losses;
+                let _ = writeln!(
+                    s,
+                    "box {}{}: {} records in {} datagrams, {} status reports; {} datagrams missing, \
+                     {} duplicate, {} reordered, {} restarts, {} box resets",
+                    b.box_id,
+                    b.source.map(|a| format!(" from {a}")).unwrap_or_default(),
+                    b.records,
+                    b.records_datagrams,
+                    b.box_status.status_reports,
+                    l.datagrams_missing,
+                    l.datagrams_duplicate,
+                    l.datagrams_reordered,
+                    l.sequence_restarts,
+                    l.box_resets
+                );
+            }
+        }
+        let _ = writeln!(s, "bad input: {}", self.bad_input);
         if let Some(h) = &self.host {
             let _ = writeln!(
                 s,

@@ -8,7 +8,9 @@
 //!
 //! Each number can carry a tag (the decoder uses the datagram's base tick): a number seen
 //! before with a different tag is not a copy but a new datagram of a numbering that started
-//! again, so it is taken as a restart, never dropped as a duplicate.
+//! again, so it is taken as a restart, never dropped as a duplicate. A tag more than
+//! [`RESTART_TAG_DROP`] below the highest tag since the (re)start is a restart too: the box's
+//! clock started again (a box reset), whatever its sequence number says.
 
 use serde::Serialize;
 
@@ -16,6 +18,11 @@ use serde::Serialize;
 /// link (82,000 datagrams/s); a LAN does not reorder further than that.
 pub const WINDOW: u32 = 1 << 14;
 const WORDS: usize = (WINDOW / 64) as usize;
+
+/// How far a tag (the datagram's base tick, 8 ns) may fall below the highest one before it
+/// is taken as a restarted clock: 1 s, far more than a LAN reorders and far less than a
+/// box runs between resets.
+pub const RESTART_TAG_DROP: u64 = skinbox_protocol::TICKS_PER_SECOND;
 
 /// What one sequence number was.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -62,6 +69,8 @@ pub struct SequenceTracker {
     span: u64,
     seen: Box<[u64; WORDS]>,
     tags: Vec<u64>,
+    /// Highest tag since the (re)start.
+    top_tag: Option<u64>,
     counts: SequenceCounts,
 }
 
@@ -79,6 +88,7 @@ impl SequenceTracker {
             span: 0,
             seen: Box::new([0; WORDS]),
             tags: vec![0; WINDOW as usize],
+            top_tag: None,
             counts: SequenceCounts::default(),
         }
     }
@@ -97,7 +107,9 @@ impl SequenceTracker {
         }
     }
 
-    fn start(&mut self, seq: u32, tag: u64) {
+    fn start(&mut self, seq: u32, tag: Option<u64>) {
+        self.top_tag = tag;
+        let tag = tag.unwrap_or(0);
         self.seen.fill(0);
         self.highest = Some(seq);
         self.span = 0;
@@ -111,7 +123,7 @@ impl SequenceTracker {
         match tag {
             Some(t) if self.tags[(seq % WINDOW) as usize] != t => {
                 self.counts.restarts += 1;
-                self.start(seq, t);
+                self.start(seq, Some(t));
                 SequenceEvent::Restart
             }
             _ => {
@@ -124,12 +136,12 @@ impl SequenceTracker {
     /// Starts the numbering again at `seq` (a box reset), forgetting the window.
     pub fn restart_at(&mut self, seq: u32) {
         self.counts.restarts += 1;
-        self.start(seq, 0);
+        self.start(seq, None);
     }
 
     /// Starts the numbering at `seq` without counting a restart (the caller knows why).
     pub fn begin_at(&mut self, seq: u32, tag: u64) {
-        self.start(seq, tag);
+        self.start(seq, Some(tag));
     }
 
     /// Takes one sequence number.
@@ -140,9 +152,19 @@ impl SequenceTracker {
     /// Takes one sequence number with a tag that tells a copy from a new datagram.
     pub fn push_tagged(&mut self, seq: u32, tag: Option<u64>) -> SequenceEvent {
         let Some(highest) = self.highest else {
-            self.start(seq, tag.unwrap_or(0));
+            self.start(seq, tag);
             return SequenceEvent::First;
         };
+        if let (Some(t), Some(top)) = (tag, self.top_tag) {
+            if top.saturating_sub(t) > RESTART_TAG_DROP {
+                self.counts.restarts += 1;
+                self.start(seq, tag);
+                return SequenceEvent::Restart;
+            }
+            self.top_tag = Some(top.max(t));
+        } else if tag.is_some() {
+            self.top_tag = tag;
+        }
         let ahead = seq.wrapping_sub(highest);
         if ahead == 0 {
             return self.seen_again(seq, tag);
@@ -241,6 +263,27 @@ mod tests {
             (c.duplicate, c.restarts, c.missing, c.received),
             (1, 1, 0, 12)
         );
+    }
+
+    #[test]
+    fn tag_far_below_restarts_even_on_a_missing_number() {
+        let mut t = SequenceTracker::new();
+        let second = skinbox_protocol::TICKS_PER_SECOND;
+        for s in 0..10u32 {
+            if s != 2 {
+                t.push_tagged(s, Some(5 * second + u64::from(s)));
+            }
+        }
+        // Number 2 never arrived; the restarted box's number 2 is no late arrival.
+        assert_eq!(t.push_tagged(2, Some(1_000)), SequenceEvent::Restart);
+        assert_eq!(t.push_tagged(3, Some(2_000)), SequenceEvent::InOrder);
+        // A late datagram within the tolerance is still late.
+        let mut u = SequenceTracker::new();
+        u.push_tagged(0, Some(2 * second));
+        u.push_tagged(2, Some(2 * second + 10));
+        assert_eq!(u.push_tagged(1, Some(second + 20)), SequenceEvent::Late);
+        let c = t.counts();
+        assert_eq!((c.restarts, c.missing, c.received), (1, 1, 11));
     }
 
     #[test]

@@ -3,6 +3,7 @@
 
 use etherparse::PacketBuilder;
 use pcap_file::pcap::{PcapPacket, PcapWriter};
+use skinbox_host::bad_input::{FormatFault, FrameFault, Reason};
 use skinbox_host::pcap::{decode_pcap_bytes, PcapOptions};
 use skinbox_host::synth::{self, SynthConfig};
 use skinbox_protocol::datagram::DatagramBody;
@@ -132,15 +133,19 @@ fn bad_input_is_counted_by_reason() {
 
     let d = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
     let b = &d.report.bad_input;
-    let by = |reason: &str| b.get(reason);
-    assert_eq!(by("datagram: bad magic"), 1, "{b:?}");
-    assert_eq!(by("datagram: unsupported version"), 1, "{b:?}");
-    assert_eq!(by("datagram: unknown kind"), 1, "{b:?}");
-    assert_eq!(by("datagram: truncated"), 2, "{b:?}"); // cut one, empty one
-    assert_eq!(by("record: bad end-of-packet byte"), 1, "{b:?}");
-    assert_eq!(by("frame: not UDP"), 1, "{b:?}");
-    assert_eq!(by("frame: malformed"), 1, "{b:?}");
-    assert_eq!(by("pcap: truncated at end of file"), 1, "{b:?}");
+    let by = |reason: Reason| b.get(reason);
+    assert_eq!(by(Reason::Datagram(FormatFault::BadMagic)), 1, "{b:?}");
+    assert_eq!(
+        by(Reason::Datagram(FormatFault::UnsupportedVersion)),
+        1,
+        "{b:?}"
+    );
+    assert_eq!(by(Reason::Datagram(FormatFault::UnknownKind)), 1, "{b:?}");
+    assert_eq!(by(Reason::Datagram(FormatFault::Truncated)), 2, "{b:?}"); // cut one, empty one
+    assert_eq!(by(Reason::Record(FormatFault::BadEndOfPacket)), 1, "{b:?}");
+    assert_eq!(by(Reason::Frame(FrameFault::NotUdp)), 1, "{b:?}");
+    assert_eq!(by(Reason::Frame(FrameFault::Malformed)), 1, "{b:?}");
+    assert_eq!(by(Reason::PcapTruncated), 1, "{b:?}");
     assert_eq!(b.total, 9);
     // The good records all arrived, plus the bad datagram's other records.
     let bad_cell_records = capture.datagrams[0].to_bytes().len() / 26 - 1;
@@ -177,7 +182,12 @@ fn port_filter_skips_other_traffic() {
     assert_eq!(d.records.len(), capture.truth.len());
     // Without the filter, the DNS-looking payload is a datagram with a bad magic.
     let d = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
-    assert_eq!(d.report.bad_input.get("datagram: bad magic"), 1);
+    assert_eq!(
+        d.report
+            .bad_input
+            .get(Reason::Datagram(FormatFault::BadMagic)),
+        1
+    );
 }
 
 #[test]
@@ -259,4 +269,98 @@ fn datagram_repr_roundtrip_through_frames() {
         out.report.events_per_packet_histogram,
         vec![1, 0, 0, 0, 0, 0]
     );
+}
+
+#[test]
+fn corrupted_payload_with_stale_checksum_is_refused_and_counted() {
+    let capture = synth::generate(&SynthConfig {
+        cells: 40,
+        samples_per_cell: 10,
+        status_every: 0,
+        ..SynthConfig::default()
+    });
+    let payloads = capture.payloads();
+    assert!(payloads.len() >= 4);
+    let mut frames: Vec<Vec<u8>> = payloads
+        .iter()
+        .map(|p| udp_frame(BOX_PORT, 6_000, p))
+        .collect();
+    // Frame 1: a bit of a record's cell value flipped after the checksum was computed.
+    // The datagram still parses (its value is in range), so only the checksum can tell.
+    let at = 14 + 20 + 8 + 24 + 6 + 9; // force_1 low byte of the first record
+    frames[1][at] ^= 0x01;
+    let corrupted = frames[1][34 + 8..].to_vec();
+    assert!(DatagramRepr::parse(&corrupted).is_ok());
+    // Frame 2: the IPv4 header's TTL changed, its checksum stale.
+    frames[2][22] ^= 0x20;
+    let decoded = decode_pcap_bytes(&pcap_of(&frames), &PcapOptions::default()).unwrap();
+    let bad = &decoded.report.bad_input;
+    assert_eq!(
+        bad.get(Reason::Frame(FrameFault::BadUdpChecksum)),
+        1,
+        "{bad:?}"
+    );
+    assert_eq!(
+        bad.get(Reason::Frame(FrameFault::BadIpv4Checksum)),
+        1,
+        "{bad:?}"
+    );
+    assert_eq!(bad.total, 2);
+    // Nothing of either frame was decoded: the records are those of the other frames.
+    let records_in = |p: &[u8]| match DatagramRepr::parse(p).unwrap().body {
+        DatagramBody::Records(r) => r.len(),
+        DatagramBody::Status(_) => 0,
+    };
+    let expected: usize = payloads
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != 1 && *i != 2)
+        .map(|(_, p)| records_in(p))
+        .sum();
+    assert_eq!(decoded.records.len(), expected);
+    let sequences: Vec<u32> = decoded
+        .records
+        .iter()
+        .map(|r| r.datagram_sequence)
+        .collect();
+    assert!(!sequences.contains(&1) && !sequences.contains(&2));
+    assert_eq!(decoded.report.losses.datagrams_missing, 2);
+}
+
+#[test]
+fn linux_cooked_captures_decode_like_ethernet() {
+    // `tcpdump -i any` on older systems: Linux cooked capture v1 (link type 113), a
+    // 16-byte header in place of the Ethernet header.
+    let capture = synth::generate(&SynthConfig {
+        cells: 10,
+        samples_per_cell: 10,
+        ..SynthConfig::default()
+    });
+    let ethernet: Vec<Vec<u8>> = capture
+        .payloads()
+        .iter()
+        .map(|p| udp_frame(BOX_PORT, 6_000, p))
+        .collect();
+    let header = pcap_file::pcap::PcapHeader {
+        datalink: pcap_file::DataLink::LINUX_SLL,
+        ..pcap_file::pcap::PcapHeader::default()
+    };
+    let mut w = PcapWriter::with_header(Vec::new(), header).unwrap();
+    for (i, f) in ethernet.iter().enumerate() {
+        // packet type 1 (broadcast), ARPHRD_ETHER, 6-byte address padded to 8, IPv4.
+        let mut sll = vec![0, 1, 0, 1, 0, 6, 2, 0, 0, 0, 0, 2, 0, 0, 0x08, 0x00];
+        sll.extend_from_slice(&f[14..]);
+        let p =
+            PcapPacket::new(Duration::from_micros(i as u64), sll.len() as u32, &sll[..]).unwrap();
+        w.write_packet(&p).unwrap();
+    }
+    let cooked = decode_pcap_bytes(&w.into_inner(), &PcapOptions::default()).unwrap();
+    let plain = decode_pcap_bytes(&pcap_of(&ethernet), &PcapOptions::default()).unwrap();
+    assert_eq!(
+        cooked.report.bad_input.total, 0,
+        "{:?}",
+        cooked.report.bad_input
+    );
+    assert_eq!(cooked.records.len(), capture.truth.len());
+    assert_eq!(cooked.records, plain.records);
 }

@@ -52,3 +52,81 @@ fn replayed_pcap_arrives_record_by_record() {
     assert_eq!(run.report.records, from_file.report.records);
     assert_eq!(run.report.cells, from_file.report.cells);
 }
+
+#[test]
+fn one_socket_follows_several_boxes() {
+    use skinbox_host::live::{self, CaptureLimits};
+    use skinbox_host::{Decoder, DecoderConfig};
+    let boxes: Vec<Vec<Vec<u8>>> = [1u16, 2]
+        .iter()
+        .map(|&box_id| {
+            synth::generate(&SynthConfig {
+                cells: 30,
+                samples_per_cell: 20,
+                box_id,
+                seed: u64::from(box_id),
+                ..SynthConfig::default()
+            })
+            .payloads()
+        })
+        .collect();
+    let total: usize = boxes.iter().map(|b| b.len()).sum();
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let (report, stats, senders) = rt.block_on(async {
+        let (socket, _) = live::bind_udp("127.0.0.1:0".parse().unwrap(), 1 << 20).unwrap();
+        let to = socket.local_addr().unwrap();
+        // Both boxes send from their own socket, interleaved datagram by datagram.
+        let senders: Vec<std::net::UdpSocket> = (0..2)
+            .map(|_| std::net::UdpSocket::bind("127.0.0.1:0").unwrap())
+            .collect();
+        let addrs: Vec<SocketAddr> = senders.iter().map(|s| s.local_addr().unwrap()).collect();
+        let payloads = boxes.clone();
+        let thread = std::thread::spawn(move || {
+            for i in 0..payloads[0].len().max(payloads[1].len()) {
+                for (s, p) in senders.iter().zip(&payloads) {
+                    if let Some(p) = p.get(i) {
+                        s.send_to(p, to).unwrap();
+                    }
+                }
+                std::thread::sleep(Duration::from_micros(50));
+            }
+        });
+        let mut decoder = Decoder::new(DecoderConfig::default());
+        let stats = live::run_capture(
+            &socket,
+            &mut decoder,
+            &mut (),
+            None::<&mut PcapFrameWriter<Vec<u8>>>,
+            CaptureLimits {
+                max_datagrams: Some(total as u64),
+                ..CaptureLimits::default()
+            },
+            tokio::time::sleep(Duration::from_secs(20)),
+            &mut |_, _| {},
+        )
+        .await
+        .unwrap();
+        thread.join().unwrap();
+        (decoder.report(), stats, addrs)
+    });
+    assert_eq!(stats.datagrams, total as u64);
+    assert!(stats.receive_calls >= 1 && stats.receive_calls <= stats.datagrams);
+    assert_eq!(report.boxes.len(), 2);
+    for (b, (payloads, source)) in report.boxes.iter().zip(boxes.iter().zip(&senders)) {
+        let alone = pcap_free_report(payloads);
+        assert_eq!(b.source, Some(*source));
+        assert_eq!(b.records, alone.records);
+        assert_eq!(b.losses.datagrams_missing, 0);
+    }
+}
+
+fn pcap_free_report(payloads: &[Vec<u8>]) -> skinbox_host::Report {
+    let mut d = skinbox_host::Decoder::new(skinbox_host::DecoderConfig::default());
+    for p in payloads {
+        d.push_datagram(p, &mut ());
+    }
+    d.report()
+}

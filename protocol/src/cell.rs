@@ -187,10 +187,11 @@ pub enum CellRepr {
 
 impl CellRepr {
     /// Parses untrusted bytes of either kind.
+    #[inline]
     pub fn parse(bytes: &[u8], framing: &CellFraming) -> Result<CellRepr> {
         match CellPacket::new_unchecked(bytes).check(Format::CellPacket, framing)? {
-            CellKind::Data => DataRepr::parse_with(bytes, framing).map(CellRepr::Data),
-            CellKind::Event => EventRepr::parse_with(bytes, framing).map(CellRepr::Event),
+            CellKind::Data => DataRepr::from_checked_frame(bytes).map(CellRepr::Data),
+            CellKind::Event => EventRepr::from_checked_frame(bytes).map(CellRepr::Event),
         }
     }
 

@@ -70,6 +70,7 @@ impl Channel {
     ];
 
     /// Position in mask-bit order (0..9).
+    #[inline]
     pub const fn index(self) -> usize {
         self as usize
     }
@@ -95,6 +96,7 @@ impl Channel {
     }
 
     /// The modality this channel measures.
+    #[inline]
     pub fn modality(self) -> Modality {
         match self {
             Channel::AccelX | Channel::AccelY | Channel::AccelZ => Modality::Acceleration,
@@ -129,16 +131,18 @@ impl Channel {
         f64::from(raw) * self.units_per_lsb()
     }
 
-    /// Range of raw values the channel's 16-bit event word holds (i16 for acceleration,
-    /// u16 otherwise).
+    /// Range of raw values the channel's 16-bit event word may carry: acceleration is
+    /// 10-bit signed (-512..=511, sign-extended in an i16 word), the others u16.
+    #[inline]
     pub fn word_range(self) -> core::ops::RangeInclusive<i32> {
         match self.modality() {
-            Modality::Acceleration => i32::from(i16::MIN)..=i32::from(i16::MAX),
+            Modality::Acceleration => ACCEL_MIN..=ACCEL_MAX,
             _ => 0..=i32::from(u16::MAX),
         }
     }
 
     /// Range of raw values the channel's data-packet field holds (temperatures are u8 there).
+    #[inline]
     pub fn data_range(self) -> core::ops::RangeInclusive<i32> {
         match self.modality() {
             Modality::Temperature => 0..=i32::from(u8::MAX),
@@ -147,6 +151,7 @@ impl Channel {
     }
 
     /// Decodes a 16-bit event word to a raw value (sign-extends acceleration).
+    #[inline]
     pub fn decode_word(self, word: u16) -> i32 {
         match self.modality() {
             Modality::Acceleration => i32::from(word as i16),
@@ -183,6 +188,11 @@ impl fmt::Display for Channel {
     }
 }
 
+/// Smallest raw acceleration: -2 g in 1/256 g (10-bit signed).
+pub const ACCEL_MIN: i32 = -512;
+/// Largest raw acceleration: 2 g - 1/256 g (10-bit signed).
+pub const ACCEL_MAX: i32 = 511;
+
 /// A set of channels, as the 9 low bits of an event packet's mask field.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize)]
 pub struct ChannelMask(u16);
@@ -196,6 +206,7 @@ impl ChannelMask {
     pub const ALL: ChannelMask = ChannelMask(Self::CHANNEL_BITS);
 
     /// The mask of these bits, or `None` when a bit above channel 8 is set.
+    #[inline]
     pub fn from_bits(bits: u16) -> Option<ChannelMask> {
         if bits & !Self::CHANNEL_BITS == 0 {
             Some(ChannelMask(bits))
@@ -274,6 +285,10 @@ mod tests {
         assert_eq!(Channel::Force1.decode_word(0xFFFF), 65535);
         assert_eq!(Channel::AccelX.encode_word(-1), Some(0xFFFF));
         assert_eq!(Channel::AccelX.encode_word(40000), None);
+        assert_eq!(Channel::AccelX.encode_word(511), Some(0x01FF));
+        assert_eq!(Channel::AccelX.encode_word(512), None);
+        assert_eq!(Channel::AccelX.encode_word(-512), Some(0xFE00));
+        assert_eq!(Channel::AccelX.encode_word(-513), None);
         assert_eq!(Channel::Proximity.encode_word(-1), None);
     }
 

@@ -75,13 +75,30 @@ impl<T: AsRef<[u8]>> DataPacket<T> {
         Self::new_checked_with(buffer, &CellFraming::DEFAULT)
     }
 
-    /// Wraps untrusted bytes: length, data header, end-of-packet byte, 14-bit cell id.
+    /// Wraps untrusted bytes: length, data header, end-of-packet byte, 14-bit cell id,
+    /// accelerations in their 10-bit signed range.
     pub fn new_checked_with(buffer: T, framing: &CellFraming) -> Result<Self> {
         let cell = CellPacket::new_unchecked(buffer);
         match cell.check(Format::DataPacket, framing)? {
-            CellKind::Data => Ok(DataPacket {
-                buffer: cell.into_inner(),
-            }),
+            CellKind::Data => {
+                let p = DataPacket {
+                    buffer: cell.into_inner(),
+                };
+                for channel in [Channel::AccelX, Channel::AccelY, Channel::AccelZ] {
+                    let value = p.raw(channel);
+                    let range = channel.data_range();
+                    if !range.contains(&value) {
+                        return Err(Error::ValueOutOfRange {
+                            format: Format::DataPacket,
+                            channel,
+                            value,
+                            min: *range.start(),
+                            max: *range.end(),
+                        });
+                    }
+                }
+                Ok(p)
+            }
             CellKind::Event => Err(Error::BadHeader {
                 format: Format::DataPacket,
                 found: framing.event_header,
@@ -115,6 +132,8 @@ impl<T: AsRef<[u8]> + AsMut<[u8]>> DataPacket<T> {
                 format: Format::DataPacket,
                 channel,
                 value: raw,
+                min: *channel.data_range().start(),
+                max: *channel.data_range().end(),
             });
         }
         let at = channel_field(channel);
@@ -194,6 +213,42 @@ impl DataRepr {
     pub fn parse_with(bytes: &[u8], framing: &CellFraming) -> Result<DataRepr> {
         let p = DataPacket::new_checked_with(bytes, framing)?;
         Ok(Self::from_packet(p.cell_id(), &p))
+    }
+
+    /// The body of a data packet whose 20 bytes, header, end byte and cell id were checked:
+    /// every field read once, accelerations checked against their 10-bit range. The
+    /// decoder's path ([`crate::CellRepr::parse`]).
+    pub(crate) fn from_checked_frame(b: &[u8]) -> Result<DataRepr> {
+        let word = |at: usize| u16::from_be_bytes([b[at], b[at + 1]]);
+        let accel = [
+            word(field::ACCEL[0].start) as i16,
+            word(field::ACCEL[1].start) as i16,
+            word(field::ACCEL[2].start) as i16,
+        ];
+        let range = Channel::AccelX.data_range();
+        for (i, a) in accel.iter().enumerate() {
+            let value = i32::from(*a);
+            if !range.contains(&value) {
+                return Err(Error::ValueOutOfRange {
+                    format: Format::DataPacket,
+                    channel: Channel::ALL[i],
+                    value,
+                    min: *range.start(),
+                    max: *range.end(),
+                });
+            }
+        }
+        Ok(DataRepr {
+            cell_id: word(cell::field::CELL_ID.start),
+            accel,
+            force: [
+                word(field::FORCE[0].start),
+                word(field::FORCE[1].start),
+                word(field::FORCE[2].start),
+            ],
+            proximity: word(field::PROXIMITY.start),
+            temperature: [b[field::TEMPERATURE[0]], b[field::TEMPERATURE[1]]],
+        })
     }
 
     /// Bytes [`DataRepr::emit`] writes.

@@ -51,6 +51,8 @@ pub const MAX_RECORDS: usize = (MAX_PAYLOAD_LEN - HEADER_LEN) / RECORD_LEN;
 /// Most port counter blocks in one status datagram.
 pub const MAX_STATUS_PORTS: usize =
     (MAX_PAYLOAD_LEN - HEADER_LEN - STATUS_FIXED_LEN) / PORT_COUNTERS_LEN;
+/// Most UART ports a box has (the `port_count` field is 1..=64).
+pub const MAX_PORTS: u8 = 64;
 /// Header flag: a records datagram sent because its oldest record waited the flush timeout.
 pub const FLAG_FLUSH_TIMEOUT: u8 = 0x01;
 
@@ -151,8 +153,10 @@ impl<T: AsRef<[u8]>> Datagram<T> {
         Datagram { buffer }
     }
 
-    /// Wraps untrusted bytes: magic, version, kind, entry count, exact length, and every
-    /// port number against the port count.
+    /// Wraps untrusted bytes: magic, version, kind, entry count, exact length, port count
+    /// (1..=64), flags, and a status body's ports against the port count. Records are not
+    /// looked into: a bad record rejects only itself (check each with [`Record::check`]
+    /// and its cell packet with `CellRepr::parse`).
     pub fn new_checked(buffer: T) -> Result<Self> {
         let d = Datagram { buffer };
         let b = d.buffer.as_ref();
@@ -190,19 +194,32 @@ impl<T: AsRef<[u8]>> Datagram<T> {
             });
         }
         let port_count = d.port_count();
-        let last_port = match kind {
-            DatagramKind::Records => d.records().map(|r| r.port()).max().map(usize::from),
-            DatagramKind::Status => {
-                let first = usize::from(b[HEADER_LEN + crate::status::field::FIRST_PORT]);
-                count.checked_sub(1).map(|c| first + c)
-            }
-        };
-        if let Some(port) = last_port.filter(|p| *p >= usize::from(port_count)) {
-            return Err(Error::BadPort {
-                format,
-                port,
-                port_count,
+        if !(1..=MAX_PORTS).contains(&port_count) {
+            return Err(Error::BadPortCount {
+                found: port_count,
+                max: MAX_PORTS,
             });
+        }
+        let flags = d.flags();
+        if flags & !FLAG_FLUSH_TIMEOUT != 0 {
+            return Err(Error::BadFlags {
+                format: Format::Datagram,
+                found: flags,
+                defined: FLAG_FLUSH_TIMEOUT,
+            });
+        }
+        // A status body is one unit: a counter block of a port the box does not have
+        // rejects the datagram. Records are checked one by one (`Record::check`).
+        if kind == DatagramKind::Status && count > 0 {
+            let first = usize::from(b[HEADER_LEN + crate::status::field::FIRST_PORT]);
+            let port = first + count - 1;
+            if port >= usize::from(port_count) {
+                return Err(Error::BadPort {
+                    format,
+                    port,
+                    port_count,
+                });
+            }
         }
         Ok(d)
     }
@@ -293,13 +310,19 @@ pub struct DatagramRepr {
 }
 
 impl DatagramRepr {
-    /// Parses an untrusted UDP payload.
+    /// Parses an untrusted UDP payload: the header as [`Datagram::new_checked`] checks it,
+    /// each record's port and flags ([`Record::check`]) and a status body. The cell packets
+    /// are kept as bytes; parse each with `CellRepr::parse`. Unlike a decoder, which drops
+    /// only a bad record, this whole-datagram parse fails on the first bad record.
     pub fn parse(bytes: &[u8]) -> Result<DatagramRepr> {
         let d = Datagram::new_checked(bytes)?;
         let body = match d.kind() {
             DatagramKind::Records => DatagramBody::Records(
                 d.records()
-                    .map(|r| RecordRepr::parse(r.into_inner()))
+                    .map(|r| {
+                        r.check(d.port_count())?;
+                        RecordRepr::parse(r.into_inner())
+                    })
                     .collect::<Result<_>>()?,
             ),
             DatagramKind::Status => {

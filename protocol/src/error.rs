@@ -94,16 +94,31 @@ pub enum Error {
         port: usize,
         port_count: u8,
     },
-    /// A channel value that its wire field cannot hold.
-    #[error("{channel}: raw value {value} does not fit its {format} field")]
+    /// A channel value outside its range (acceleration: 10-bit signed) or its wire field.
+    #[error("{format}: {channel} raw value {value} outside {min}..={max}")]
     ValueOutOfRange {
         format: Format,
         channel: crate::Channel,
         value: i32,
+        min: i32,
+        max: i32,
     },
     /// Events not in strictly increasing channel order, or too many for one packet.
     #[error("event packet: {reason}")]
     BadEvents { reason: &'static str },
+    /// A datagram's port count outside 1..=64.
+    #[error("box datagram: port count {found} outside 1..={max}")]
+    BadPortCount { found: u8, max: u8 },
+    /// Flag bits the format does not define.
+    #[error("{format}: flags 0x{found:02X} set undefined bits (defined: 0x{defined:02X})")]
+    BadFlags {
+        format: Format,
+        found: u8,
+        defined: u8,
+    },
+    /// An event value slot past the mask's channels that is not 0.
+    #[error("event packet: value_{} is 0x{word:04X}, but the mask names only {used} channels (unused value slots are 0)", .slot + 1)]
+    UnusedValueSet { slot: usize, used: usize, word: u16 },
 }
 
 /// Result with this crate's [`Error`].

@@ -86,20 +86,10 @@ impl<T: AsRef<[u8]>> EventPacket<T> {
         let p = EventPacket {
             buffer: cell.into_inner(),
         };
-        let mask = p.mask_field();
-        let reason = if mask & MASK_RESERVED != 0 {
-            "reserved bits 9-14 set"
-        } else if p.channels().is_empty() {
-            "no channel"
-        } else if p.channels().len() > MAX_EVENTS {
-            "more than six channels"
-        } else {
-            return Ok(p);
-        };
-        Err(Error::BadEventMask { mask, reason })
+        EventRepr::from_checked_frame(p.buffer.as_ref())?;
+        Ok(p)
     }
 
-    /// Cell id.
     pub fn cell_id(&self) -> u16 {
         get_u16(self.buffer.as_ref(), cell::field::CELL_ID)
     }
@@ -176,6 +166,8 @@ impl EventRepr {
                     format: Format::EventPacket,
                     channel,
                     value,
+                    min: *channel.word_range().start(),
+                    max: *channel.word_range().end(),
                 });
             }
             previous = Some(channel);
@@ -225,17 +217,64 @@ impl EventRepr {
     /// Parses untrusted bytes.
     pub fn parse_with(bytes: &[u8], framing: &CellFraming) -> Result<EventRepr> {
         let p = EventPacket::new_checked_with(bytes, framing)?;
-        let channels = p.channels();
+        Self::from_checked_frame(p.buffer)
+    }
+
+    /// The body of an event packet whose 20 bytes, header, end byte and cell id were
+    /// checked: the mask, each value in its range, unused value slots 0, in one pass. The
+    /// decoder's path ([`crate::CellRepr::parse`]).
+    pub(crate) fn from_checked_frame(b: &[u8]) -> Result<EventRepr> {
+        let word = |at: usize| u16::from_be_bytes([b[at], b[at + 1]]);
+        let mask = word(field::MASK.start);
+        let bits = mask & ChannelMask::CHANNEL_BITS;
+        let used = bits.count_ones() as usize;
+        let reason = if mask & MASK_RESERVED != 0 {
+            Some("reserved bits 9-14 set")
+        } else if used == 0 {
+            Some("no channel")
+        } else if used > MAX_EVENTS {
+            Some("more than six channels")
+        } else {
+            None
+        };
+        if let Some(reason) = reason {
+            return Err(Error::BadEventMask { mask, reason });
+        }
         let mut values = [0; MAX_EVENTS];
-        for (slot, channel) in channels.iter().enumerate() {
-            values[slot] = channel.decode_word(p.value_word(slot));
+        let mut rest = bits;
+        for (slot, value) in values.iter_mut().enumerate() {
+            let w = word(field::VALUES[slot].start);
+            if rest == 0 {
+                if w != 0 {
+                    return Err(Error::UnusedValueSet {
+                        slot,
+                        used,
+                        word: w,
+                    });
+                }
+                continue;
+            }
+            let channel = Channel::ALL[rest.trailing_zeros() as usize];
+            rest &= rest - 1;
+            let v = channel.decode_word(w);
+            let range = channel.word_range();
+            if !range.contains(&v) {
+                return Err(Error::ValueOutOfRange {
+                    format: Format::EventPacket,
+                    channel,
+                    value: v,
+                    min: *range.start(),
+                    max: *range.end(),
+                });
+            }
+            *value = v;
         }
         Ok(EventRepr {
-            cell_id: p.cell_id(),
-            second_part: p.is_second_part(),
-            channels,
+            cell_id: word(cell::field::CELL_ID.start),
+            second_part: mask & MASK_SECOND_PART != 0,
+            channels: ChannelMask::from_bits(bits).unwrap_or(ChannelMask::EMPTY),
             values,
-            sequence: p.sequence(),
+            sequence: word(field::SEQUENCE.start),
         })
     }
 

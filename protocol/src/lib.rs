@@ -59,6 +59,7 @@ pub const TICK_NS: u64 = 8;
 /// Box ticks per second.
 pub const TICKS_PER_SECOND: u64 = 1_000_000_000 / TICK_NS;
 
+#[inline]
 pub(crate) fn check_len(format: Format, buffer: &[u8], required: usize) -> Result<()> {
     if buffer.len() < required {
         Err(Error::Truncated {
@@ -71,16 +72,19 @@ pub(crate) fn check_len(format: Format, buffer: &[u8], required: usize) -> Resul
     }
 }
 
+#[inline]
 pub(crate) fn get_u16(b: &[u8], at: Field) -> u16 {
     u16::from_be_bytes([b[at.start], b[at.start + 1]])
 }
 
+#[inline]
 pub(crate) fn get_u32(b: &[u8], at: Field) -> u32 {
     let mut w = [0u8; 4];
     w.copy_from_slice(&b[at]);
     u32::from_be_bytes(w)
 }
 
+#[inline]
 pub(crate) fn get_u64(b: &[u8], at: Field) -> u64 {
     let mut w = [0u8; 8];
     w.copy_from_slice(&b[at]);

@@ -12,7 +12,7 @@
 //! earlier after one that started later.
 
 use crate::cell::PACKET_LEN;
-use crate::{check_len, get_u32, Format, LayoutRow, Result};
+use crate::{check_len, get_u32, Error, Format, LayoutRow, Result};
 use core::fmt;
 
 /// Byte ranges and positions of the record's fields.
@@ -67,6 +67,26 @@ impl<T: AsRef<[u8]>> Record<T> {
     pub fn new_checked(buffer: T) -> Result<Self> {
         check_len(Format::Record, buffer.as_ref(), RECORD_LEN)?;
         Ok(Record { buffer })
+    }
+
+    /// The box's own fields against the datagram's `port_count`: the port below it, no
+    /// flag but [`FLAG_LOSS_BEFORE`]. (The cell packet is the cell's: `CellRepr::parse`.)
+    pub fn check(&self, port_count: u8) -> Result<()> {
+        if self.port() >= port_count {
+            return Err(Error::BadPort {
+                format: Format::Record,
+                port: usize::from(self.port()),
+                port_count,
+            });
+        }
+        if self.flags() & !FLAG_LOSS_BEFORE != 0 {
+            return Err(Error::BadFlags {
+                format: Format::Record,
+                found: self.flags(),
+                defined: FLAG_LOSS_BEFORE,
+            });
+        }
+        Ok(())
     }
 
     /// Port the packet arrived on.

@@ -232,7 +232,7 @@ fn ports_beyond_the_port_count_are_rejected() {
     assert_eq!(
         DatagramRepr::parse(&b),
         Err(Error::BadPort {
-            format: Format::Datagram,
+            format: Format::Record,
             port: 4,
             port_count: 4
         })

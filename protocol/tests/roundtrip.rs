@@ -7,7 +7,7 @@ use skinbox_protocol::*;
 fn data_repr() -> impl Strategy<Value = DataRepr> {
     (
         0..=cell::CELL_ID_MAX,
-        any::<[i16; 3]>(),
+        proptest::array::uniform3(-512i16..=511),
         any::<[u16; 3]>(),
         any::<u16>(),
         any::<[u8; 2]>(),
@@ -33,7 +33,11 @@ fn event_repr() -> impl Strategy<Value = EventRepr> {
             let events: Vec<_> = channels
                 .iter()
                 .zip(words)
-                .map(|(c, w)| (*c, c.decode_word(w)))
+                .map(|(c, w)| {
+                    let range = c.word_range();
+                    let span = range.end() - range.start() + 1;
+                    (*c, range.start() + c.decode_word(w).rem_euclid(span))
+                })
                 .collect();
             EventRepr::new(id, seq, second, &events).unwrap()
         })
@@ -48,15 +52,9 @@ fn cell_bytes() -> impl Strategy<Value = [u8; 20]> {
 }
 
 fn datagram_repr() -> impl Strategy<Value = DatagramRepr> {
-    let header = (
-        any::<u16>(),
-        1u8..=64,
-        any::<u8>(),
-        any::<u32>(),
-        any::<u64>(),
-    );
+    let header = (any::<u16>(), 1u8..=64, 0u8..=1, any::<u32>(), any::<u64>());
     let records = proptest::collection::vec(
-        (any::<u8>(), any::<u8>(), any::<i32>(), cell_bytes()),
+        (any::<u8>(), 0u8..=1, any::<i32>(), cell_bytes()),
         0..=datagram::MAX_RECORDS + 5,
     );
     let status = (
@@ -152,6 +150,37 @@ proptest! {
         prop_assert!(bytes.len() <= datagram::MAX_PAYLOAD_LEN);
         // An over-full body is written up to the most one datagram holds.
         prop_assert_eq!(DatagramRepr::parse(&bytes), Ok(capped(repr)));
+    }
+
+    #[test]
+    fn cell_parse_agrees_with_the_packet_views(
+        bytes in cell_bytes(),
+        at in 0usize..20,
+        value in any::<u8>(),
+        mutate in any::<bool>(),
+    ) {
+        let mut bytes = bytes;
+        if mutate {
+            bytes[at] = value;
+        }
+        // The decoder's one-pass parse against the checked views, which check the same
+        // rules their own way.
+        match CellRepr::parse(&bytes, &CellFraming::DEFAULT) {
+            Ok(CellRepr::Data(d)) => {
+                prop_assert_eq!(DataRepr::parse(&bytes), Ok(d));
+                prop_assert!(data::DataPacket::new_checked(&bytes[..]).is_ok());
+            }
+            Ok(CellRepr::Event(e)) => {
+                prop_assert_eq!(EventRepr::parse(&bytes), Ok(e));
+                prop_assert!(event::EventPacket::new_checked(&bytes[..]).is_ok());
+            }
+            Err(_) => {
+                prop_assert!(DataRepr::parse(&bytes).is_err());
+                prop_assert!(EventRepr::parse(&bytes).is_err());
+                prop_assert!(data::DataPacket::new_checked(&bytes[..]).is_err());
+                prop_assert!(event::EventPacket::new_checked(&bytes[..]).is_err());
+            }
+        }
     }
 
     #[test]

@@ -49,6 +49,25 @@ pub struct LiveBenchArgs {
     /// Seconds per rate step.
     #[arg(long, default_value_t = 1.0)]
     pub step_s: f64,
+    /// Receivers to compare side by side: datagrams per receive call of each (1: one call
+    /// per datagram, as a plain recv loop).
+    #[arg(long, value_delimiter = ',', default_values_t = [1, skinbox_host::live::DEFAULT_BATCH])]
+    pub batches: Vec<usize>,
+    /// Each receiver's wait after draining the socket, in microseconds (0: wake for every
+    /// datagram); as many as --batches.
+    #[arg(long, value_delimiter = ',', default_values_t = [0, 0])]
+    pub coalesce_us: Vec<u64>,
+    /// Receive buffer to ask for in the rate steps, in bytes.
+    #[arg(long, default_value_t = skinbox_host::live::DEFAULT_RECV_BUFFER_BYTES)]
+    pub recv_buffer: usize,
+    /// Receive buffers to try at --buffer-rate, rising, in bytes (e.g.
+    /// 1048576,2097152,4194304): reports the smallest lossless one. Asking for more than
+    /// net.core.rmem_max needs root (SO_RCVBUFFORCE).
+    #[arg(long, value_delimiter = ',')]
+    pub recv_buffers: Vec<usize>,
+    /// Record rate of the receive buffer sweep.
+    #[arg(long, default_value_t = 4.5e6)]
+    pub buffer_rate: f64,
 }
 
 /// Runs one benchmark.
@@ -113,27 +132,65 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
             Ok(())
         }
         BenchCommand::Live(a) => {
-            let r = skinbox_host::bench::bench_live(&a.rates, a.step_s)?;
+            anyhow::ensure!(
+                a.batches.iter().all(|b| *b >= 1),
+                "--batches: each receiver takes at least 1 datagram per call"
+            );
+            anyhow::ensure!(
+                a.batches.len() == a.coalesce_us.len(),
+                "--coalesce-us needs one value per --batches value ({} and {})",
+                a.coalesce_us.len(),
+                a.batches.len()
+            );
+            let receivers = a
+                .batches
+                .iter()
+                .zip(&a.coalesce_us)
+                .map(|(b, us)| (*b, std::time::Duration::from_micros(*us)))
+                .collect();
+            let r = skinbox_host::bench::bench_live(&skinbox_host::bench::LiveBenchConfig {
+                rates: a.rates,
+                step_s: a.step_s,
+                receivers,
+                recv_buffer_bytes: a.recv_buffer,
+                recv_buffers: a.recv_buffers,
+                buffer_rate: a.buffer_rate,
+            })?;
             if json {
                 return super::print_json(&r);
             }
-            for s in &r.steps {
+            let line = |s: &skinbox_host::bench::LiveStep| {
                 println!(
-                    "{:9.0} records/s asked, {:9.0} sent: {} of {} datagrams received, {} missing, {:.0} ns CPU per record{}",
+                    "batch {:3}, coalesce {:4} us, buffer {:9}: {:9.0} records/s asked, {:9.0} sent: {} of {} datagrams received in {} calls, {} missing; receiver CPU {:.0} ns per datagram, {:.1} ns per record{}",
+                    s.batch,
+                    s.coalesce_us,
+                    skinbox_host::live::usable_recv_buffer(s.recv_buffer_bytes),
                     s.target_records_per_second,
                     s.sent_records_per_second,
                     s.datagrams_received,
                     s.datagrams_sent,
+                    s.receive_calls,
                     s.datagrams_missing,
+                    s.receiver_cpu_ns_per_datagram,
                     s.receiver_cpu_ns_per_record,
                     if s.lossless { "" } else { "  LOSS" }
+                )
+            };
+            r.steps.iter().for_each(line);
+            for (receiver, best) in &r.max_lossless_records_per_second {
+                println!(
+                    "receiver {receiver} (batch/coalesce us): max lossless {:.2} M records/s (goal 4.5 M, at most {} ns CPU per record)",
+                    best / 1e6,
+                    r.goal_cpu_ns_per_record
                 );
             }
-            println!(
-                "max lossless: {:.2} M records/s (goal 4.5 M), receive buffer {} bytes",
-                r.max_lossless_records_per_second / 1e6,
-                r.recv_buffer_bytes
-            );
+            if !r.buffer_steps.is_empty() {
+                r.buffer_steps.iter().for_each(line);
+                match r.smallest_lossless_recv_buffer_bytes {
+                    Some(b) => println!("smallest lossless receive buffer: {b} bytes"),
+                    None => println!("no receive buffer tried was lossless"),
+                }
+            }
             Ok(())
         }
     }

@@ -12,22 +12,31 @@ use std::time::Duration;
 /// Arguments of `skinbox capture`.
 #[derive(Debug, Args)]
 pub struct CaptureArgs {
-    /// Address to listen on, e.g. 0.0.0.0:5000 (port 0 picks a free port; the bound address
-    /// is printed on stderr first).
+    /// Address to listen on, e.g. 0.0.0.0:54091, the box's default host port (port 0 picks
+    /// a free port; the bound address is printed on stderr first). Every box sending to it
+    /// is followed on its own (box id and source address).
     #[arg(long)]
     pub listen: SocketAddr,
     /// Record every datagram to this pcap file.
     #[arg(long)]
     pub pcap: Option<PathBuf>,
-    /// Stop after this many seconds (default: at Ctrl-C).
+    /// Stop after this many milliseconds (default: at Ctrl-C).
     #[arg(long)]
-    pub duration: Option<f64>,
+    pub duration_ms: Option<u64>,
     /// Stop after this many datagrams.
     #[arg(long)]
     pub count: Option<u64>,
-    /// Socket receive buffer to ask for, in bytes.
+    /// Socket receive buffer to ask for, in bytes (a warning says when the kernel grants
+    /// less, and which sysctl allows more).
     #[arg(long, default_value_t = live::DEFAULT_RECV_BUFFER_BYTES)]
     pub recv_buffer: usize,
+    /// Datagrams taken per receive call.
+    #[arg(long, default_value_t = live::DEFAULT_BATCH)]
+    pub batch: usize,
+    /// Wait after draining the socket before waiting again, in microseconds, so one
+    /// wake-up takes many datagrams (0: wake for every datagram).
+    #[arg(long, default_value_t = live::DEFAULT_COALESCE.as_micros() as u64)]
+    pub coalesce_us: u64,
     /// The cells' sample rate, for rates in % of data mode.
     #[arg(long, default_value_t = 125.0)]
     pub sample_rate_hz: f64,
@@ -37,9 +46,10 @@ pub struct CaptureArgs {
 /// Ctrl-C; prints a summary line every second on stderr and the report at the end.
 pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
     anyhow::ensure!(
-        args.duration.is_none_or(|s| s.is_finite() && s > 0.0),
-        "--duration must be a positive number of seconds"
+        args.duration_ms.is_none_or(|ms| ms > 0),
+        "--duration-ms must be a positive number of milliseconds"
     );
+    anyhow::ensure!(args.batch >= 1, "--batch must be at least 1");
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
@@ -48,8 +58,12 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         eprintln!(
             "listening on {} (receive buffer {} bytes)",
             socket.local_addr()?,
-            granted
+            live::usable_recv_buffer(granted)
         );
+        let recv_buffer_warning = live::recv_buffer_warning(args.recv_buffer, granted);
+        if let Some(w) = &recv_buffer_warning {
+            eprintln!("{w}");
+        }
         let mut recorder = match &args.pcap {
             Some(path) => Some(PcapFrameWriter::new(std::io::BufWriter::new(
                 std::fs::File::create(path)
@@ -61,12 +75,12 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             sample_rate_hz: args.sample_rate_hz,
             ..DecoderConfig::default()
         });
-        let duration = args.duration;
+        let duration = args.duration_ms;
         let shutdown = async move {
             match duration {
-                Some(s) => {
+                Some(ms) => {
                     tokio::select! {
-                        _ = tokio::time::sleep(Duration::from_secs_f64(s)) => {}
+                        _ = tokio::time::sleep(Duration::from_millis(ms)) => {}
                         _ = tokio::signal::ctrl_c() => {}
                     }
                 }
@@ -83,6 +97,8 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             CaptureLimits {
                 max_datagrams: args.count,
                 progress_every: Duration::from_secs(1),
+                batch: args.batch,
+                coalesce: Duration::from_micros(args.coalesce_us),
             },
             shutdown,
             &mut |s, d| {
@@ -112,7 +128,12 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             cpu_ns_per_packet: stats.cpu_s * 1e9 / report.records.max(1) as f64,
         });
         if json {
-            super::print_json(&serde_json::json!({ "capture": stats, "report": report }))
+            super::print_json(&serde_json::json!({
+                "capture": stats,
+                "recv_buffer_bytes": live::usable_recv_buffer(granted),
+                "recv_buffer_warning": recv_buffer_warning,
+                "report": report,
+            }))
         } else {
             print!("{}", report.summary());
             Ok(())

@@ -78,14 +78,17 @@ local function box_state(key)
 end
 
 -- The host client's sequence rules (host-client/src/sequence.rs): remember which of the
--- last WINDOW numbers below the highest arrived, with their base tick as a tag.
+-- last WINDOW numbers below the highest arrived, with their base tick (a UInt64) as a tag;
+-- a base tick more than RESTART_TAG_DROP below the highest one is a restarted box clock.
 local WINDOW = C.sequence_window
 local TWO32 = 4294967296
+local RESTART_TAG_DROP = UInt64(C.restart_tag_drop)
 
 local function seq_start(s, seq, tag)
     s.seen = {}
     s.highest = seq
     s.span = 0
+    s.top_tag = tag
     s.seen[seq % WINDOW] = { seq = seq, tag = tag }
 end
 
@@ -93,6 +96,17 @@ local function seq_push(s, seq, tag)
     if s.highest == nil then
         seq_start(s, seq, tag)
         return { kind = "first" }
+    end
+    if s.top_tag ~= nil then
+        if s.top_tag > tag and s.top_tag - tag > RESTART_TAG_DROP then
+            seq_start(s, seq, tag)
+            return { kind = "restart" }
+        end
+        if tag > s.top_tag then
+            s.top_tag = tag
+        end
+    else
+        s.top_tag = tag
     end
     local ahead = (seq - s.highest) % TWO32
     local entry = s.seen[seq % WINDOW]
@@ -121,7 +135,7 @@ local function seq_push(s, seq, tag)
     end
     local behind = (s.highest - seq) % TWO32
     if behind >= WINDOW then
-        seq_start(s, seq, tag)
+        seq_start(s, seq, nil)
         return { kind = "restart" }
     end
     if entry ~= nil and entry.seq == seq then
@@ -413,7 +427,7 @@ local function dissect(buf, pinfo, tree)
     local verdict = verdicts[pinfo.number]
     if verdict == nil or not pinfo.visited then
         verdict = { event_missing = {}, reset = false }
-        local tag = tostring(header.base_tick)
+        local tag = header.base_tick
         local boot_id = nil
         if header.kind ~= C.kind_records then
             boot_id = uint(buf, C.header_len, "status", "boot_id")

@@ -297,6 +297,10 @@ fn tables() -> String {
         ("tick_ns", TICK_NS.to_string()),
         ("udp_port", DEFAULT_PORT.to_string()),
         ("sequence_window", crate::sequence::WINDOW.to_string()),
+        (
+            "restart_tag_drop",
+            crate::sequence::RESTART_TAG_DROP.to_string(),
+        ),
     ];
     let _ = writeln!(w, "local C = {{");
     for (name, value) in constants {
