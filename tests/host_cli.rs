@@ -249,3 +249,30 @@ fn capture_warns_once_when_the_kernel_grants_less_buffer() {
     assert_eq!(err.matches("warning: asked for").count(), 1, "{err}");
     assert!(err.contains(&format!("net.core.rmem_max={asked}")), "{err}");
 }
+
+#[test]
+fn stats_names_its_denominators_and_refuses_bad_ones() {
+    let (path, _) = scene_pcap("denominators.pcap");
+    let out = skinbox()
+        .args(["stats", "--cells", "64"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let text = ok(&out);
+    assert!(
+        text.contains("sample rate: 125 Hz, learned from the stamps"),
+        "{text}"
+    );
+    assert!(text.contains("over 64 cells (given)"), "{text}");
+    for bad in [["--cells", "0"], ["--sample-rate-hz", "0"]] {
+        let out = skinbox()
+            .arg("stats")
+            .args(bad)
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(bad[0]) && err.contains("must be"), "{err}");
+    }
+}

@@ -170,3 +170,76 @@ fn unknown_scenes_and_durations_beyond_the_fidelity_are_refused() {
     ]);
     assert!(err.contains("sample_rate_hz"), "{err}");
 }
+
+/// Runs `skinbox stats --json PCAP EXTRA...`, asserts it succeeded, returns its JSON.
+fn stats_json(pcap: &Path, extra: &[&str]) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args(["stats", "--json"])
+        .arg(pcap)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// A 250 Hz scene through the reference model: `skinbox stats` without a rate learns
+/// 250 Hz from the stamps (event mode and data mode), and divides by the skin's cells
+/// when told them, as `skinbox sim` does.
+#[test]
+fn stats_learns_the_sample_rate_of_a_simulated_capture() {
+    let dir = std::env::temp_dir().join(format!("skinbox-sim-rate-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for mode in ["event", "data"] {
+        let pcap = dir.join(format!("{mode}.pcap"));
+        let sim = sim_json(
+            &[
+                "stroking_upper_arm",
+                "--fidelity",
+                "reference",
+                "--sample-rate-hz",
+                "250",
+                "--mode",
+                mode,
+                "--buses",
+                "16",
+                "--duration-ms",
+                "200",
+            ],
+            &pcap,
+        );
+        let host = &sim["host"];
+        assert_eq!(host["sample_rate_source"], "given");
+        assert_eq!(host["cells_denominator"]["cells"], 260);
+        assert_eq!(host["cells_denominator"]["source"], "given");
+        let r = stats_json(&pcap, &["--cells", "260"]);
+        assert_eq!(r["sample_rate_source"], "learned from the stamps", "{mode}");
+        assert_eq!(
+            r["sample_rate_hz"], 250.0,
+            "{mode}: {}",
+            r["sample_rate_learned"]
+        );
+        let e = r["sample_rate_learned"]["estimated_hz"].as_f64().unwrap();
+        assert!((e - 250.0).abs() < 2.5, "{mode}: {e}");
+        // Learned and given, the same figures as the simulation's own decoding.
+        for key in [
+            "packet_rate_percent_of_data_mode",
+            "packets_per_cell_per_second",
+        ] {
+            assert_eq!(r[key], host[key], "{mode}: {key}");
+        }
+        let records = r["records"].as_f64().unwrap();
+        let duration = r["duration_s"].as_f64().unwrap();
+        let per_cell = r["packets_per_cell_per_second"].as_f64().unwrap();
+        assert!((per_cell - records / 260.0 / duration).abs() < 1e-9);
+        if mode == "data" {
+            // Every cell sends every sample: within the edge of the window of 100 %.
+            let p = r["packet_rate_percent_of_data_mode"].as_f64().unwrap();
+            assert!((p - 100.0).abs() < 2.0, "{p}");
+        }
+    }
+}

@@ -18,7 +18,11 @@
 
 use crate::bad_input::{BadInput, Reason};
 use crate::convert::{EventToData, Sample, CELL_IDS};
-use crate::report::{self, BoxReport, BoxStatusReport, CellReport, LossReport, Report};
+use crate::rate::{learn_sample_rate, SampleRateEstimate};
+use crate::report::{
+    self, BoxReport, BoxStatusReport, CellReport, CellsDenominator, LossReport, Report,
+    CELLS_GIVEN, CELLS_SEEN, SAMPLE_RATE_ASSUMED, SAMPLE_RATE_GIVEN, SAMPLE_RATE_LEARNED,
+};
 use crate::sequence::{SequenceEvent, SequenceTracker};
 use serde::Serialize;
 use skinbox_protocol::datagram::{Datagram, DatagramKind};
@@ -41,21 +45,29 @@ pub struct BoxKey {
     pub source: Option<SocketAddr>,
 }
 
+/// The sample rate taken when none is given and the stamps cannot tell (2nd paper, Fig. 8).
+pub const ASSUMED_SAMPLE_RATE_HZ: f64 = 125.0;
+
 /// Settings of a decoder.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DecoderConfig {
     /// Header and end-of-packet bytes of the cells (a parameter of the box).
     pub framing: CellFraming,
-    /// The cells' sample rate, for "packet rate in % of data mode". The papers' event
-    /// rate tables (2nd paper, Fig. 8) sample at 125 Hz.
-    pub sample_rate_hz: f64,
+    /// The cells' sample rate, for "packet rate in % of data mode" (the papers' event
+    /// rate tables, 2nd paper Fig. 8, sample at 125 Hz); `None`: learned from the stamps
+    /// ([`crate::rate::learn_sample_rate`]).
+    pub sample_rate_hz: Option<f64>,
+    /// The skin's cell count, the denominator of every per-cell ratio; `None`: the cells
+    /// that sent at least one packet.
+    pub cells: Option<u64>,
 }
 
 impl Default for DecoderConfig {
     fn default() -> Self {
         DecoderConfig {
             framing: CellFraming::DEFAULT,
-            sample_rate_hz: 125.0,
+            sample_rate_hz: Some(125.0),
+            cells: None,
         }
     }
 }
@@ -136,6 +148,8 @@ struct CellCounters {
     event_sequence_gaps: u64,
     event_packets_missing: u64,
     event_packets_repeated: u64,
+    /// Tick of its last packet that began a sample (not a split sample's second).
+    last_sample_tick: Option<u64>,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -170,7 +184,13 @@ struct BoxTrack {
     last_counters: BTreeMap<u8, [u32; PortCounter::ALL.len()]>,
     datagrams_sent_delta: u64,
     records_sent_delta: u64,
+    /// Per-cell intervals between packets that began a sample, in ticks (the first
+    /// [`MAX_INTERVALS`]).
+    intervals: Vec<u64>,
 }
+
+/// How many per-cell tick intervals a box keeps for learning the sample rate.
+const MAX_INTERVALS: usize = 1 << 18;
 
 impl BoxTrack {
     fn new(key: BoxKey) -> Self {
@@ -194,6 +214,7 @@ impl BoxTrack {
             last_counters: BTreeMap::new(),
             datagrams_sent_delta: 0,
             records_sent_delta: 0,
+            intervals: Vec::new(),
         }
     }
 
@@ -532,6 +553,18 @@ impl Decoder {
             }
             let c = &mut track.cells[cell_index];
             c.port = port;
+            let begins_sample = match &cell {
+                CellRepr::Data(_) => true,
+                CellRepr::Event(e) => !e.second_part,
+            };
+            if begins_sample {
+                if let Some(last) = c.last_sample_tick {
+                    if track.intervals.len() < MAX_INTERVALS {
+                        track.intervals.push(tick.abs_diff(last));
+                    }
+                }
+                c.last_sample_tick = Some(tick);
+            }
             let mut missing_before = 0u16;
             match &cell {
                 CellRepr::Data(_) => {
@@ -591,17 +624,41 @@ impl Decoder {
     /// sample rate make exactly N / rate seconds, so data mode reads 100 %. With several
     /// boxes (each its own clock), the longest box's.
     pub fn duration_s(&self) -> f64 {
+        self.duration_at(self.sample_rate().0)
+    }
+
+    fn duration_at(&self, rate: f64) -> f64 {
         self.boxes
             .iter()
-            .map(|b| b.duration_s(self.config.sample_rate_hz))
+            .map(|b| b.duration_s(rate))
             .fold(0.0, f64::max)
+    }
+
+    /// The sample rate the rates are relative to, where it came from, and what the stamps
+    /// say about it: the configured rate, else the learned one, else 125 Hz.
+    pub fn sample_rate(&self) -> (f64, &'static str, Option<SampleRateEstimate>) {
+        let learned = if self.boxes.len() == 1 {
+            learn_sample_rate(&self.boxes[0].intervals)
+        } else {
+            let all: Vec<u64> = self
+                .boxes
+                .iter()
+                .flat_map(|b| b.intervals.iter().copied())
+                .collect();
+            learn_sample_rate(&all)
+        };
+        match (self.config.sample_rate_hz, learned) {
+            (Some(rate), _) => (rate, SAMPLE_RATE_GIVEN, learned),
+            (None, Some(e)) => (e.rate_hz, SAMPLE_RATE_LEARNED, learned),
+            (None, None) => (ASSUMED_SAMPLE_RATE_HZ, SAMPLE_RATE_ASSUMED, None),
+        }
     }
 
     /// Everything so far, as the papers report it: totals over every box, and each box
     /// on its own in `boxes`.
     pub fn report(&self) -> Report {
-        let rate = self.config.sample_rate_hz;
-        let duration_s = self.duration_s();
+        let (rate, sample_rate_source, sample_rate_learned) = self.sample_rate();
+        let duration_s = self.duration_at(rate);
         let per_s = |n: u64| {
             if duration_s > 0.0 {
                 n as f64 / duration_s
@@ -682,11 +739,26 @@ impl Decoder {
             box_status.last_counters = self.boxes[0].box_status().last_counters;
         }
         let cells_active = cells.len() as u64;
+        let cells_denominator = match self.config.cells {
+            Some(n) => {
+                // Every cell of the skin over the whole span.
+                expected_all = rate * duration_s * n as f64;
+                CellsDenominator {
+                    cells: n,
+                    source: CELLS_GIVEN,
+                }
+            }
+            None => CellsDenominator {
+                cells: cells_active,
+                source: CELLS_SEEN,
+            },
+        };
+        let denominator = cells_denominator.cells;
         let per_cell_s = |n: u64| {
-            if cells_active == 0 || duration_s <= 0.0 {
+            if denominator == 0 || duration_s <= 0.0 {
                 0.0
             } else {
-                n as f64 / cells_active as f64 / duration_s
+                n as f64 / denominator as f64 / duration_s
             }
         };
         let with_records = self.boxes.iter().filter(|b| b.records > 0);
@@ -700,6 +772,9 @@ impl Decoder {
         }
         Report {
             sample_rate_hz: rate,
+            sample_rate_source,
+            sample_rate_learned,
+            cells_denominator,
             box_ids,
             records_datagrams: boxes.iter().map(|b| b.records_datagrams).sum(),
             status_datagrams: box_status.status_datagrams,
@@ -713,6 +788,7 @@ impl Decoder {
             duration_s,
             cells_active,
             packets_per_second: per_s(self.records),
+            packets_per_cell_per_second: per_cell_s(self.records),
             packet_rate_percent_of_data_mode: report::percent(self.records as f64, expected_all),
             event_packet_rate_percent_of_data_mode: report::percent(
                 self.event_packets as f64,

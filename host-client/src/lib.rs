@@ -31,6 +31,7 @@ pub mod frame;
 pub mod live;
 pub mod output;
 pub mod pcap;
+pub mod rate;
 pub mod replay;
 pub mod report;
 pub mod sequence;

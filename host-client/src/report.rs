@@ -15,6 +15,26 @@ pub fn percent(part: f64, whole: f64) -> f64 {
     }
 }
 
+/// `sample_rate_source`: the rate was given (command line, scene).
+pub const SAMPLE_RATE_GIVEN: &str = "given";
+/// `sample_rate_source`: the rate was learned from the record stamps.
+pub const SAMPLE_RATE_LEARNED: &str = "learned from the stamps";
+/// `sample_rate_source`: neither given nor learnable (no cell sent twice): 125 Hz assumed.
+pub const SAMPLE_RATE_ASSUMED: &str = "assumed (125 Hz): not given, too few stamps to learn it";
+/// `cells_denominator.source`: the skin's cell count was given.
+pub const CELLS_GIVEN: &str = "given";
+/// `cells_denominator.source`: the cells that sent at least one packet.
+pub const CELLS_SEEN: &str = "cells seen";
+
+/// The cell count that per-cell ratios divide by, and where it came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct CellsDenominator {
+    /// Cells.
+    pub cells: u64,
+    /// [`CELLS_GIVEN`] (the skin's cells) or [`CELLS_SEEN`] (cells that sent a packet).
+    pub source: &'static str,
+}
+
 /// One cell's share.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CellReport {
@@ -174,6 +194,13 @@ pub struct HostCost {
 pub struct Report {
     /// Sample rate the rates are relative to.
     pub sample_rate_hz: f64,
+    /// Where `sample_rate_hz` came from: [`SAMPLE_RATE_GIVEN`], [`SAMPLE_RATE_LEARNED`] or
+    /// [`SAMPLE_RATE_ASSUMED`].
+    pub sample_rate_source: &'static str,
+    /// What the stamps say about the sample rate (also when it was given).
+    pub sample_rate_learned: Option<crate::rate::SampleRateEstimate>,
+    /// The cells every per-cell ratio divides by.
+    pub cells_denominator: CellsDenominator,
     /// Box ids seen.
     pub box_ids: Vec<u16>,
     /// Records datagrams decoded (duplicates skipped).
@@ -200,11 +227,15 @@ pub struct Report {
     pub cells_active: u64,
     /// Cell packets per second of box time.
     pub packets_per_second: f64,
-    /// All packets against every active cell sending every sample.
+    /// Cell packets per cell of `cells_denominator` per second.
+    pub packets_per_cell_per_second: f64,
+    /// All packets against every cell of `cells_denominator` sending every sample.
     pub packet_rate_percent_of_data_mode: f64,
-    /// Event packets against every active cell sending every sample (2nd paper, Fig. 8).
+    /// Event packets against every cell of `cells_denominator` sending every sample (2nd
+    /// paper, Fig. 8).
     pub event_packet_rate_percent_of_data_mode: f64,
-    /// Channel events per active cell per second, by modality (2nd paper, Fig. 8).
+    /// Channel events per cell of `cells_denominator` per second, by modality (2nd paper,
+    /// Fig. 8).
     pub events_per_cell_per_second: BTreeMap<Modality, f64>,
     /// Event packets carrying 1, 2, ... 6 channels.
     pub events_per_packet_histogram: Vec<u64>,
@@ -225,6 +256,22 @@ pub struct Report {
 }
 
 impl Report {
+    /// The sample rate, where it came from and what the stamps say, in one line.
+    pub fn sample_rate_line(&self) -> String {
+        let mut line = format!("{} Hz, {}", self.sample_rate_hz, self.sample_rate_source);
+        if let Some(e) = &self.sample_rate_learned {
+            let near = match e.standard_hz {
+                Some(std) => format!("{std} Hz"),
+                None => "the nearest standard rate".to_string(),
+            };
+            line += &format!(
+                " (stamps: {:.2} Hz, {:+.2} % from {near}, {} of {} per-cell intervals fitted)",
+                e.estimated_hz, e.off_nearest_standard_percent, e.intervals_fitted, e.intervals
+            );
+        }
+        line
+    }
+
     /// A few lines for a person.
     pub fn summary(&self) -> String {
         use std::fmt::Write;
@@ -239,13 +286,18 @@ impl Report {
             self.data_packets,
             self.event_packets
         );
+        let _ = writeln!(s, "sample rate: {}", self.sample_rate_line());
+        let d = &self.cells_denominator;
+        let per = format!("{} cells ({})", d.cells, d.source);
         let _ = writeln!(
             s,
-            "{} cells active at {} Hz: packet rate {:.2} % of data mode (events {:.2} %), {:.0} packets/s",
+            "{} cells active; over {per} at {} Hz: packet rate {:.2} % of data mode (events {:.2} %), \
+             {:.2} packets per cell per second; {:.0} packets/s in all",
             self.cells_active,
             self.sample_rate_hz,
             self.packet_rate_percent_of_data_mode,
             self.event_packet_rate_percent_of_data_mode,
+            self.packets_per_cell_per_second,
             self.packets_per_second
         );
         let rates: Vec<String> = self
@@ -253,7 +305,11 @@ impl Report {
             .iter()
             .map(|(m, r)| format!("{} {:.2}", m.name(), r))
             .collect();
-        let _ = writeln!(s, "events per cell per second: {}", rates.join(", "));
+        let _ = writeln!(
+            s,
+            "events per cell per second (over {per}): {}",
+            rates.join(", ")
+        );
         let _ = writeln!(
             s,
             "events per packet (1..6): {:?}",

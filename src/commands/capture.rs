@@ -72,7 +72,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             None => None,
         };
         let mut decoder = Decoder::new(DecoderConfig {
-            sample_rate_hz: args.sample_rate_hz,
+            sample_rate_hz: Some(args.sample_rate_hz),
             ..DecoderConfig::default()
         });
         let duration = args.duration_ms;

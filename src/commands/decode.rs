@@ -58,7 +58,7 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
     let mut writer = RowWriter::new(std::io::BufWriter::new(out), format, kind);
     let options = PcapOptions {
         decoder: DecoderConfig {
-            sample_rate_hz: args.sample_rate_hz,
+            sample_rate_hz: Some(args.sample_rate_hz),
             ..DecoderConfig::default()
         },
         udp_port: args.port,

@@ -231,10 +231,12 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     .report;
     bar.finish_and_clear();
 
-    // the host told the scene's true sample rate, so its "% of data mode" is right
+    // the host told the scene's true sample rate and cell count, so its "% of data mode"
+    // and per-cell rates are over the whole skin
     let options = skinbox_host::pcap::PcapOptions {
         decoder: skinbox_host::DecoderConfig {
-            sample_rate_hz: scene.config.scene.sample_rate_hz,
+            sample_rate_hz: Some(scene.config.scene.sample_rate_hz),
+            cells: Some(scene.config.scene.cells as u64),
             ..Default::default()
         },
         ..Default::default()
@@ -330,12 +332,14 @@ fn print_summary(o: &Output) {
     );
     let h = &o.host;
     println!(
-        "host:   {} records ({} data, {} event), {} cells active, {:.1} % of data mode",
+        "host:   {} records ({} data, {} event), {} cells active, {:.1} % of data mode over {} cells ({})",
         h.records,
         h.data_packets,
         h.event_packets,
         h.cells_active,
-        h.packet_rate_percent_of_data_mode
+        h.packet_rate_percent_of_data_mode,
+        h.cells_denominator.cells,
+        h.cells_denominator.source
     );
     println!(
         "        losses seen: {} datagrams missing, {} event sequence gaps ({} event packets missing), {} box packets lost",

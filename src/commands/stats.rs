@@ -13,20 +13,37 @@ pub struct StatsArgs {
     /// Only UDP datagrams from or to this port.
     #[arg(long)]
     pub port: Option<u16>,
-    /// The cells' sample rate, for rates in % of data mode (2nd paper, Fig. 8: 125 Hz).
-    #[arg(long, default_value_t = 125.0)]
-    pub sample_rate_hz: f64,
+    /// The cells' sample rate, for rates in % of data mode (2nd paper, Fig. 8: 125 Hz);
+    /// without it, learned from the stamps.
+    #[arg(long)]
+    pub sample_rate_hz: Option<f64>,
+    /// The skin's cell count, the denominator of per-cell ratios; without it, the cells
+    /// that sent a packet.
+    #[arg(long)]
+    pub cells: Option<u64>,
     /// Also list every cell (text output; JSON always has them).
     #[arg(long)]
-    pub cells: bool,
+    pub per_cell: bool,
 }
 
 /// Decodes the file and prints the report.
 pub fn run(args: StatsArgs, json: bool) -> anyhow::Result<()> {
+    if let Some(rate) = args.sample_rate_hz {
+        anyhow::ensure!(
+            rate.is_finite() && rate > 0.0 && rate <= 10_000.0,
+            "--sample-rate-hz {rate} must be above 0 and at most 10000"
+        );
+    }
+    anyhow::ensure!(
+        args.cells.is_none_or(|n| (1..=16_384).contains(&n)),
+        "--cells {} must be 1 to 16384 (cell ids are 14 bits)",
+        args.cells.unwrap_or(0)
+    );
     let bytes = pcap::read_file(&args.file)?;
     let options = PcapOptions {
         decoder: DecoderConfig {
             sample_rate_hz: args.sample_rate_hz,
+            cells: args.cells,
             ..DecoderConfig::default()
         },
         udp_port: args.port,
@@ -36,7 +53,7 @@ pub fn run(args: StatsArgs, json: bool) -> anyhow::Result<()> {
         return super::print_json(&report);
     }
     print!("{}", report.summary());
-    if args.cells {
+    if args.per_cell {
         for c in &report.cells {
             let rates: Vec<String> = c
                 .events_per_second

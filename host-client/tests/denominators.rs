@@ -1,0 +1,120 @@
+//! The report's denominators: the sample rate (given, or learned from the stamps) and the
+//! cell count (the skin's, or the cells seen), checked on synthetic captures whose truth
+//! is known.
+
+use skinbox_host::report::{CELLS_GIVEN, CELLS_SEEN, SAMPLE_RATE_GIVEN, SAMPLE_RATE_LEARNED};
+use skinbox_host::synth::{self, SynthCapture, SynthConfig};
+use skinbox_host::{Decoder, DecoderConfig, Report};
+use skinbox_protocol::datagram::DatagramBody;
+use skinbox_protocol::TICKS_PER_SECOND;
+
+fn decode(capture: &SynthCapture, config: DecoderConfig, skip_every: usize) -> Report {
+    let mut d = Decoder::new(config);
+    let mut records = 0;
+    for (i, g) in capture.datagrams.iter().enumerate() {
+        if skip_every > 0 && i % skip_every == 1 && matches!(g.body, DatagramBody::Records(_)) {
+            continue;
+        }
+        d.push_datagram(&g.to_bytes(), &mut ());
+        records += 1;
+    }
+    assert!(records > 0);
+    d.report()
+}
+
+fn learned(config: DecoderConfig) -> DecoderConfig {
+    DecoderConfig {
+        sample_rate_hz: None,
+        ..config
+    }
+}
+
+#[test]
+fn the_sample_rate_is_learned_in_data_and_event_mode_and_with_gaps() {
+    for rate in [62.5, 125.0, 250.0, 500.0, 1000.0] {
+        for event_every in [0, 1, 2] {
+            for skip_every in [0, 3] {
+                let capture = synth::generate(&SynthConfig {
+                    cells: 32,
+                    ports: 8,
+                    sample_rate_hz: rate,
+                    samples_per_cell: 60,
+                    event_every,
+                    seed: rate as u64 + u64::from(event_every),
+                    ..SynthConfig::default()
+                });
+                let r = decode(&capture, learned(DecoderConfig::default()), skip_every);
+                let what = format!("{rate} Hz, event_every {event_every}, skip {skip_every}");
+                assert_eq!(
+                    r.sample_rate_hz, rate,
+                    "{what}: {:?}",
+                    r.sample_rate_learned
+                );
+                assert_eq!(r.sample_rate_source, SAMPLE_RATE_LEARNED, "{what}");
+                let e = r.sample_rate_learned.unwrap();
+                assert_eq!(e.standard_hz, Some(rate), "{what}");
+                // The synthetic cells sample exactly at multiples of whole ticks.
+                let exact = TICKS_PER_SECOND as f64 / (TICKS_PER_SECOND as f64 / rate).floor();
+                assert!(
+                    (e.estimated_hz - exact).abs() < 1e-6 * rate,
+                    "{what}: {e:?}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_given_sample_rate_wins_and_the_stamps_are_still_shown() {
+    let capture = synth::generate(&SynthConfig {
+        sample_rate_hz: 250.0,
+        ..SynthConfig::default()
+    });
+    // 125 Hz given for a 250 Hz capture: used as given, the stamps say 250.
+    let r = decode(&capture, DecoderConfig::default(), 0);
+    assert_eq!(r.sample_rate_hz, 125.0);
+    assert_eq!(r.sample_rate_source, SAMPLE_RATE_GIVEN);
+    assert_eq!(r.sample_rate_learned.unwrap().standard_hz, Some(250.0));
+    assert!(r.summary().contains("125 Hz, given (stamps: 250.00 Hz"));
+}
+
+#[test]
+fn per_cell_ratios_divide_by_the_skins_cells_when_given() {
+    // 40 cells in data mode, but the skin has 50: 80 % of data mode.
+    let samples = 30u32;
+    let capture = synth::generate(&SynthConfig {
+        cells: 40,
+        sample_rate_hz: 125.0,
+        samples_per_cell: samples,
+        event_every: 0,
+        ..SynthConfig::default()
+    });
+    let first = capture.truth.iter().map(|t| t.tick).min().unwrap();
+    let last = capture.truth.iter().map(|t| t.tick).max().unwrap();
+    let duration_s = (last - first) as f64 / TICKS_PER_SECOND as f64 + 1.0 / 125.0;
+    let packets = f64::from(samples) * 40.0;
+    assert_eq!(capture.cell_packets() as f64, packets);
+
+    let given = decode(
+        &capture,
+        DecoderConfig {
+            cells: Some(50),
+            ..DecoderConfig::default()
+        },
+        0,
+    );
+    assert_eq!(given.cells_denominator.cells, 50);
+    assert_eq!(given.cells_denominator.source, CELLS_GIVEN);
+    assert_eq!(given.cells_active, 40);
+    let want = 100.0 * packets / (125.0 * duration_s * 50.0);
+    assert!((given.packet_rate_percent_of_data_mode - want).abs() < 1e-9);
+    assert!((given.packets_per_cell_per_second - packets / 50.0 / duration_s).abs() < 1e-9);
+    assert!(given.summary().contains("over 50 cells (given)"));
+
+    let seen = decode(&capture, DecoderConfig::default(), 0);
+    assert_eq!(seen.cells_denominator.cells, 40);
+    assert_eq!(seen.cells_denominator.source, CELLS_SEEN);
+    let want = 100.0 * packets / (125.0 * duration_s * 40.0);
+    assert!((seen.packet_rate_percent_of_data_mode - want).abs() < 1e-9);
+    assert!(seen.summary().contains("over 40 cells (cells seen)"));
+}
