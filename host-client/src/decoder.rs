@@ -20,8 +20,9 @@ use crate::bad_input::{BadInput, Reason};
 use crate::convert::{EventToData, Sample, CELL_IDS};
 use crate::rate::{learn_sample_rate, SampleRateEstimate};
 use crate::report::{
-    self, BoxReport, BoxStatusReport, CellReport, CellsDenominator, LossReport, Report,
-    CELLS_GIVEN, CELLS_SEEN, SAMPLE_RATE_ASSUMED, SAMPLE_RATE_GIVEN, SAMPLE_RATE_LEARNED,
+    self, ratio, BoxReport, BoxStatusReport, CellReport, CellsDenominator, LossReport,
+    PacketSizeAnalysis, Report, CELLS_GIVEN, CELLS_SEEN, SAMPLE_RATE_ASSUMED, SAMPLE_RATE_GIVEN,
+    SAMPLE_RATE_LEARNED,
 };
 use crate::sequence::{SequenceEvent, SequenceTracker};
 use serde::Serialize;
@@ -150,6 +151,9 @@ struct CellCounters {
     event_packets_repeated: u64,
     /// Tick of its last packet that began a sample (not a split sample's second).
     last_sample_tick: Option<u64>,
+    /// Channels of its last event sample so far (a split sample's second packet adds to
+    /// it), not yet in the fired-together histogram; 0: none.
+    pending_fired: u8,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -187,6 +191,9 @@ struct BoxTrack {
     /// Per-cell intervals between packets that began a sample, in ticks (the first
     /// [`MAX_INTERVALS`]).
     intervals: Vec<u64>,
+    /// Event samples by the number of channels that fired in them (index 1..=9), split
+    /// samples joined; the cells' pending samples are not in it yet.
+    fired_together: [u64; Channel::COUNT + 1],
 }
 
 /// How many per-cell tick intervals a box keeps for learning the sample rate.
@@ -215,7 +222,19 @@ impl BoxTrack {
             datagrams_sent_delta: 0,
             records_sent_delta: 0,
             intervals: Vec::new(),
+            fired_together: [0; Channel::COUNT + 1],
         }
+    }
+
+    /// Event samples by channels fired (index 1..=9), the pending ones included.
+    fn fired_together(&self) -> [u64; Channel::COUNT + 1] {
+        let mut h = self.fired_together;
+        for c in &self.cells {
+            if c.pending_fired > 0 {
+                h[usize::from(c.pending_fired).min(Channel::COUNT)] += 1;
+            }
+        }
+        h
     }
 
     /// Span of this box's record ticks plus one sample period (0 without records).
@@ -581,6 +600,21 @@ impl Decoder {
                         c.channel_events[i] += 1;
                         bits &= bits - 1;
                     }
+                    // A split sample's second packet follows its first with the next
+                    // sequence number; anything else begins a sample.
+                    let fired = e.channels.len() as u8;
+                    let joins = e.second_part
+                        && c.pending_fired > 0
+                        && c.last_event_sequence == Some(e.sequence.wrapping_sub(1));
+                    if joins {
+                        c.pending_fired += fired;
+                    } else {
+                        if c.pending_fired > 0 {
+                            track.fired_together
+                                [usize::from(c.pending_fired).min(Channel::COUNT)] += 1;
+                        }
+                        c.pending_fired = fired;
+                    }
                     if let Some(last) = c.last_event_sequence {
                         let ahead = e.sequence.wrapping_sub(last);
                         if ahead == 0 || ahead >= 1 << 15 {
@@ -761,6 +795,20 @@ impl Decoder {
                 n as f64 / denominator as f64 / duration_s
             }
         };
+        let samples = rate * duration_s * denominator as f64;
+        let mut fired_together = [0u64; Channel::COUNT + 1];
+        let mut channel_events = [0u64; Channel::COUNT];
+        for b in &self.boxes {
+            for (i, n) in b.fired_together().iter().enumerate() {
+                fired_together[i] += n;
+            }
+            for c in &b.cells {
+                for (i, n) in c.channel_events.iter().enumerate() {
+                    channel_events[i] += n;
+                }
+            }
+        }
+        let fired_together_histogram = fired_together[1..].to_vec();
         let with_records = self.boxes.iter().filter(|b| b.records > 0);
         let first_tick = with_records.clone().map(|b| b.min_tick).min().unwrap_or(0);
         let last_tick = with_records.map(|b| b.max_tick).max().unwrap_or(0);
@@ -799,6 +847,14 @@ impl Decoder {
                 .map(|(m, n)| (*m, per_cell_s(*n)))
                 .collect(),
             events_per_packet_histogram: self.events_per_packet[1..].to_vec(),
+            cells_active_ratio: ratio(cells_active as f64, denominator as f64),
+            samples_of_the_cells: samples,
+            channel_event_ratio: Channel::ALL
+                .iter()
+                .map(|c| (c.name(), ratio(channel_events[c.index()] as f64, samples)))
+                .collect(),
+            packet_sizes: PacketSizeAnalysis::new(&fired_together_histogram, samples),
+            fired_together_histogram,
             losses,
             box_status,
             boxes,

@@ -35,6 +35,107 @@ pub struct CellsDenominator {
     pub source: &'static str,
 }
 
+/// `part / whole`, 0 when `whole` is 0.
+pub fn ratio(part: f64, whole: f64) -> f64 {
+    if whole > 0.0 {
+        part / whole
+    } else {
+        0.0
+    }
+}
+
+/// Sizes in bytes of an event packet carrying k = 1..9 events, without a time stamp
+/// (the papers' packet-size analysis).
+pub const PACKET_SIZE_BYTES: [u32; 9] = [7, 9, 10, 12, 14, 15, 17, 18, 20];
+/// The same with a 21-bit time stamp.
+pub const PACKET_SIZE_WITH_TIMESTAMP_BYTES: [u32; 9] = [10, 12, 13, 15, 17, 18, 20, 21, 22];
+/// Size of today's fixed packet, bytes.
+pub const FIXED_PACKET_BYTES: u32 = 20;
+
+/// One packet size of the analysis: packets of at most `k` events.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PacketSizeRow {
+    /// Events per packet at most.
+    pub k: u32,
+    /// Packets needed: `sum_i n(i) * ceil(i / k)` over the fired-together histogram.
+    pub packets: u64,
+    /// Packet size without a time stamp, bytes.
+    pub size_bytes: u32,
+    /// Transmission rate against data mode (every cell, every sample, 20 bytes).
+    pub ratio: f64,
+    /// Packet size with a 21-bit time stamp, bytes.
+    pub size_with_timestamp_bytes: u32,
+    /// Transmission rate against data mode, with the time stamp.
+    pub ratio_with_timestamp: f64,
+}
+
+/// The best packet size: fewest bytes against data mode.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PacketSizeBest {
+    /// Events per packet.
+    pub k: u32,
+    /// Its transmission rate ratio.
+    pub ratio: f64,
+}
+
+/// The papers' packet-size analysis: transmission rate against events per packet,
+/// `ratio(k) = n_pkt(k) / (t * f_s * n_cells) * s(k) / 20`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PacketSizeAnalysis {
+    /// `t * f_s * n_cells`: the samples of the denominator's cells.
+    pub samples: f64,
+    /// k = 1..9.
+    pub rows: Vec<PacketSizeRow>,
+    /// The minimum without a time stamp.
+    pub best: Option<PacketSizeBest>,
+    /// The minimum with a time stamp.
+    pub best_with_timestamp: Option<PacketSizeBest>,
+}
+
+impl PacketSizeAnalysis {
+    /// From the histogram `n(i)` of samples in which i = 1..9 channels fired and the
+    /// samples of the cells.
+    pub fn new(fired_together: &[u64], samples: f64) -> Self {
+        let rows: Vec<PacketSizeRow> = (1..=9u32)
+            .map(|k| {
+                let packets: u64 = fired_together
+                    .iter()
+                    .enumerate()
+                    .map(|(j, n)| n * u64::from((j as u32 + 1).div_ceil(k)))
+                    .sum();
+                let s = PACKET_SIZE_BYTES[k as usize - 1];
+                let st = PACKET_SIZE_WITH_TIMESTAMP_BYTES[k as usize - 1];
+                let r = ratio(packets as f64, samples);
+                PacketSizeRow {
+                    k,
+                    packets,
+                    size_bytes: s,
+                    ratio: r * f64::from(s) / f64::from(FIXED_PACKET_BYTES),
+                    size_with_timestamp_bytes: st,
+                    ratio_with_timestamp: r * f64::from(st) / f64::from(FIXED_PACKET_BYTES),
+                }
+            })
+            .collect();
+        let best_by = |f: fn(&PacketSizeRow) -> f64| {
+            (samples > 0.0)
+                .then(|| rows.iter().min_by(|a, b| f(a).total_cmp(&f(b))))
+                .flatten()
+                .map(|r| PacketSizeBest {
+                    k: r.k,
+                    ratio: f(r),
+                })
+        };
+        let best = best_by(|r| r.ratio);
+        let best_with_timestamp = best_by(|r| r.ratio_with_timestamp);
+        PacketSizeAnalysis {
+            samples,
+            rows,
+            best,
+            best_with_timestamp,
+        }
+    }
+}
+
 /// One cell's share.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CellReport {
@@ -239,6 +340,18 @@ pub struct Report {
     pub events_per_cell_per_second: BTreeMap<Modality, f64>,
     /// Event packets carrying 1, 2, ... 6 channels.
     pub events_per_packet_histogram: Vec<u64>,
+    /// Cells that sent a packet against `cells_denominator`.
+    pub cells_active_ratio: f64,
+    /// `duration_s * sample_rate_hz * cells_denominator.cells`: the samples the ratios
+    /// below divide by.
+    pub samples_of_the_cells: f64,
+    /// Per channel, its events against `samples_of_the_cells`.
+    pub channel_event_ratio: BTreeMap<&'static str, f64>,
+    /// Event samples in which 1, 2, ... 9 channels fired (a split sample's two packets
+    /// joined).
+    pub fired_together_histogram: Vec<u64>,
+    /// Transmission rate against events per packet, with and without a time stamp.
+    pub packet_sizes: PacketSizeAnalysis,
     /// Every loss, summed over the boxes.
     pub losses: LossReport,
     /// The boxes' own counters, summed.
@@ -314,6 +427,56 @@ impl Report {
             s,
             "events per packet (1..6): {:?}",
             self.events_per_packet_histogram
+        );
+        let _ = writeln!(
+            s,
+            "active cells: {} of {per} = {:.4}",
+            self.cells_active, self.cells_active_ratio
+        );
+        let ratios: Vec<String> = self
+            .channel_event_ratio
+            .iter()
+            .map(|(c, r)| format!("{c} {r:.4}"))
+            .collect();
+        let _ = writeln!(
+            s,
+            "channel events per sample (over {:.0} samples of {per}): {}",
+            self.samples_of_the_cells,
+            ratios.join(", ")
+        );
+        let _ = writeln!(
+            s,
+            "channels fired in one sample (1..9): {:?}",
+            self.fired_together_histogram
+        );
+        let p = &self.packet_sizes;
+        let row = |f: fn(&PacketSizeRow) -> f64| {
+            p.rows
+                .iter()
+                .map(|r| format!("{:.4}", f(r)))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let best = |b: &Option<PacketSizeBest>| match b {
+            Some(b) => format!("best k = {} at {:.4}", b.k, b.ratio),
+            None => "no samples".to_string(),
+        };
+        let _ = writeln!(
+            s,
+            "transmission rate against data mode (over {:.0} samples of {per}) for k = 1..9 events per packet:",
+            p.samples
+        );
+        let _ = writeln!(
+            s,
+            "  without time stamp: {}; {}",
+            row(|r| r.ratio),
+            best(&p.best)
+        );
+        let _ = writeln!(
+            s,
+            "  with 21-bit time stamp: {}; {}",
+            row(|r| r.ratio_with_timestamp),
+            best(&p.best_with_timestamp)
         );
         let l = &self.losses;
         let _ = writeln!(

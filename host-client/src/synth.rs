@@ -38,6 +38,9 @@ pub struct SynthConfig {
     pub first_sequence: u32,
     /// Box tick of the first sample.
     pub start_tick: u64,
+    /// Random walk step, times the default (more events per sample, and split samples,
+    /// above 1).
+    pub walk_scale: i32,
 }
 
 impl Default for SynthConfig {
@@ -54,6 +57,7 @@ impl Default for SynthConfig {
             status_every: 100,
             first_sequence: 0,
             start_tick: 125_000_000,
+            walk_scale: 1,
         }
     }
 }
@@ -128,7 +132,7 @@ struct CellSim {
     sequence: u16,
 }
 
-fn step(rng: &mut Rng, channel: Channel, v: i32) -> i32 {
+fn step(rng: &mut Rng, channel: Channel, v: i32, scale: i32) -> i32 {
     let d = match channel.modality() {
         Modality::Acceleration => rng.range(-4, 4),
         Modality::Force => rng.range(-1, 1),
@@ -145,7 +149,7 @@ fn step(rng: &mut Rng, channel: Channel, v: i32) -> i32 {
         Modality::Acceleration => -512..=511,
         _ => channel.data_range(),
     };
-    (v + d).clamp(*range.start(), *range.end())
+    (v + d * scale).clamp(*range.start(), *range.end())
 }
 
 struct Batcher {
@@ -291,7 +295,7 @@ pub fn generate(config: &SynthConfig) -> SynthCapture {
         let t0 = config.start_tick + k * period_ticks;
         for (i, cell) in cells.iter_mut().enumerate() {
             for c in Channel::ALL {
-                cell.value[c.index()] = step(&mut rng, c, cell.value[c.index()]);
+                cell.value[c.index()] = step(&mut rng, c, cell.value[c.index()], config.walk_scale);
             }
             let slot = (i / usize::from(ports)) as u64;
             let tick = t0 + slot * packet_ticks % period_ticks.max(1);

@@ -118,3 +118,120 @@ fn per_cell_ratios_divide_by_the_skins_cells_when_given() {
     assert!((seen.packet_rate_percent_of_data_mode - want).abs() < 1e-9);
     assert!(seen.summary().contains("over 40 cells (cells seen)"));
 }
+
+/// The fired-together histogram, the channels' event ratios and the papers' packet-size
+/// analysis, against the same figures computed here from the generator's packets.
+#[test]
+fn packet_size_analysis_matches_the_truth() {
+    let rate = 250.0;
+    let config = SynthConfig {
+        cells: 48,
+        ports: 6,
+        sample_rate_hz: rate,
+        samples_per_cell: 400,
+        event_every: 1,
+        seed: 7,
+        walk_scale: 3,
+        ..SynthConfig::default()
+    };
+    let capture = synth::generate(&config);
+    // Truth: group each cell's event packets into samples by mask bit 15.
+    let mut open: std::collections::BTreeMap<u16, u32> = Default::default();
+    let mut n = [0u64; 10];
+    let mut channel_events = [0u64; 9];
+    for t in &capture.truth {
+        let p = &t.record.cell_packet;
+        assert_eq!(p[0], 0xA2);
+        let cell = u16::from_be_bytes([p[1], p[2]]);
+        let mask = u16::from_be_bytes([p[3], p[4]]);
+        for (i, e) in channel_events.iter_mut().enumerate() {
+            *e += u64::from(mask >> i & 1);
+        }
+        let fired = (mask & 0x1FF).count_ones();
+        if mask & 0x8000 != 0 {
+            *open.get_mut(&cell).unwrap() += fired;
+        } else if let Some(prev) = open.insert(cell, fired) {
+            n[prev as usize] += 1;
+        }
+    }
+    for fired in open.values() {
+        n[*fired as usize] += 1;
+    }
+    assert!(
+        n[7] + n[8] + n[9] > 0,
+        "no split sample in the truth: {n:?}"
+    );
+    let first = capture.truth.iter().map(|t| t.tick).min().unwrap();
+    let last = capture.truth.iter().map(|t| t.tick).max().unwrap();
+    let duration_s = (last - first) as f64 / TICKS_PER_SECOND as f64 + 1.0 / rate;
+    let samples = duration_s * rate * 48.0;
+
+    let r = decode(
+        &capture,
+        DecoderConfig {
+            cells: Some(48),
+            sample_rate_hz: None,
+            ..DecoderConfig::default()
+        },
+        0,
+    );
+    assert_eq!(r.fired_together_histogram, n[1..].to_vec());
+    assert!((r.samples_of_the_cells - samples).abs() < 1e-6);
+    assert_eq!(r.cells_active_ratio, 1.0);
+    let names = [
+        "accel_x",
+        "accel_y",
+        "accel_z",
+        "force_1",
+        "force_2",
+        "force_3",
+        "proximity",
+        "temperature_1",
+        "temperature_2",
+    ];
+    for (i, name) in names.iter().enumerate() {
+        let got = r.channel_event_ratio[name];
+        assert!(
+            (got - channel_events[i] as f64 / samples).abs() < 1e-12,
+            "{name}"
+        );
+    }
+    let size = [7.0, 9.0, 10.0, 12.0, 14.0, 15.0, 17.0, 18.0, 20.0];
+    let size_ts = [10.0, 12.0, 13.0, 15.0, 17.0, 18.0, 20.0, 21.0, 22.0];
+    let mut best = (0, f64::INFINITY);
+    let mut best_ts = (0, f64::INFINITY);
+    for k in 1..=9usize {
+        let packets: u64 = (1..=9usize).map(|i| n[i] * i.div_ceil(k) as u64).sum();
+        let row = &r.packet_sizes.rows[k - 1];
+        assert_eq!(row.k as usize, k);
+        assert_eq!(row.packets, packets, "k = {k}");
+        let want = packets as f64 / samples * size[k - 1] / 20.0;
+        let want_ts = packets as f64 / samples * size_ts[k - 1] / 20.0;
+        assert!((row.ratio - want).abs() < 1e-12, "k = {k}");
+        assert!(
+            (row.ratio_with_timestamp - want_ts).abs() < 1e-12,
+            "k = {k}"
+        );
+        if want < best.1 {
+            best = (k, want);
+        }
+        if want_ts < best_ts.1 {
+            best_ts = (k, want_ts);
+        }
+    }
+    let b = r.packet_sizes.best.unwrap();
+    assert_eq!((b.k as usize, b.ratio), best);
+    let b = r.packet_sizes.best_with_timestamp.unwrap();
+    assert_eq!((b.k as usize, b.ratio), best_ts);
+    // k = 6 is today's packet count: every event packet.
+    assert_eq!(r.packet_sizes.rows[5].packets, capture.event_packets);
+    let text = r.summary();
+    assert!(text.contains(&format!(
+        "channels fired in one sample (1..9): {:?}",
+        &n[1..]
+    )));
+    assert!(
+        text.contains(&format!("best k = {} at {:.4}", best.0, best.1)),
+        "{text}"
+    );
+}
