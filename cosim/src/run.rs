@@ -50,6 +50,27 @@ pub const RESET_CYCLES: u64 = 4;
 /// edge of cycle `t + TICK_ZERO_CYCLE`.
 pub const TICK_ZERO_CYCLE: u64 = RESET_CYCLES + skinbox_gateware::interface_box::RESET_LATENCY;
 
+/// The first cycle the box's ports see their pins: after the reset, the counters'
+/// clearing ([`skinbox_gateware::counter_file::CLEAR_CLOCKS`]) and a clock. A packet whose
+/// start edge comes earlier is cut: the box sees only its tail.
+pub const PORTS_READY_CYCLE: u64 =
+    TICK_ZERO_CYCLE + skinbox_gateware::counter_file::CLEAR_CLOCKS + 1;
+
+/// Per port, the packets of `spec` that begin before the ports see their pins
+/// ([`PORTS_READY_CYCLE`]); ports without any are left out.
+pub fn packets_cut_by_reset(spec: &SimSpec) -> std::collections::BTreeMap<usize, u64> {
+    let ready_ns = (PORTS_READY_CYCLE * TICK_NS) as f64;
+    spec.ports
+        .iter()
+        .enumerate()
+        .map(|(port, packets)| {
+            let cut = packets.iter().filter(|p| p.start_ns < ready_ns).count() as u64;
+            (port, cut)
+        })
+        .filter(|(_, cut)| *cut > 0)
+        .collect()
+}
+
 /// What came out, checked.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct SimReport {
