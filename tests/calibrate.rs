@@ -129,3 +129,82 @@ fn a_scene_pushed_outside_its_band_fails_and_one_at_another_rate_is_refused() {
         std::fs::remove_dir_all(dir).ok();
     }
 }
+
+/// `--through-box`: each seed scene through the box's reference model and the host
+/// decoder. Over a 1 s window the host's figures are those `skinbox sim` decodes of the
+/// same window, beside the cells' figures, each with its own verdict.
+#[test]
+fn through_box_gives_the_hosts_figures_beside_the_cells() {
+    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args([
+            "calibrate",
+            "--json",
+            "--through-box",
+            "--box-window-s",
+            "1",
+        ])
+        .output()
+        .unwrap();
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = doc["figures"].as_array().unwrap();
+    let with_host: Vec<_> = rows.iter().filter(|r| !r["host"].is_null()).collect();
+    assert_eq!(with_host.len(), 30);
+    let mut outside = 0;
+    for r in &with_host {
+        let ratio = r["host"].as_f64().unwrap() / r["seed"].as_f64().unwrap();
+        assert!(
+            (r["host_ratio"].as_f64().unwrap() - ratio).abs() < 1e-12,
+            "{r}"
+        );
+        let pass = (ratio - 1.0).abs() <= 0.03;
+        assert_eq!(r["host_pass"], pass, "{r}");
+        outside += usize::from(!pass);
+        // the cells' own verdict is still there
+        assert_eq!(r["pass"], true, "{r}");
+    }
+    assert_eq!(doc["compared"], 60);
+    assert_eq!(doc["outside"], outside);
+    assert_eq!(out.status.success(), outside == 0);
+
+    // The same window through `skinbox sim`: the same host figures.
+    let pcap = std::env::temp_dir().join(format!("skinbox-calibrate-{}.pcap", std::process::id()));
+    let sim = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args([
+            "sim",
+            "idle",
+            "--fidelity",
+            "reference",
+            "--from-ms",
+            "1000",
+        ])
+        .args(["--duration-ms", "1000", "--json", "--pcap"])
+        .arg(&pcap)
+        .output()
+        .unwrap();
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let sim: serde_json::Value = serde_json::from_slice(&sim.stdout).unwrap();
+    let host = &sim["host"];
+    let figure = |q: &str| {
+        with_host
+            .iter()
+            .find(|r| r["scene"] == "idle" && r["quantity"] == q)
+            .unwrap()["host"]
+            .as_f64()
+            .unwrap()
+    };
+    for m in ["acceleration", "force", "proximity", "temperature"] {
+        let want = host["events_per_cell_per_second"][m].as_f64().unwrap();
+        assert!(
+            (figure(&format!("events_per_cell_s_{m}")) - want).abs() < 1e-9,
+            "{m}"
+        );
+    }
+    let want = host["event_packet_rate_percent_of_data_mode"]
+        .as_f64()
+        .unwrap();
+    assert!((figure("packet_rate_pct") - want).abs() < 1e-9);
+}

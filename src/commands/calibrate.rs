@@ -12,6 +12,68 @@ pub struct Args {
     /// must run as the table was measured (125 Hz, event mode, 260 cells).
     #[arg(long)]
     pub scenes: Option<PathBuf>,
+    /// Also run each seed scene through the box's reference model and the host decoder,
+    /// and give the host's rate figures beside the cells', with verdicts.
+    #[arg(long)]
+    pub through_box: bool,
+    /// Seconds of each scene the box listens to after its warm-up (default: the scene's
+    /// whole window, as the cells' figures count it).
+    #[arg(long)]
+    pub box_window_s: Option<f64>,
+}
+
+/// What the host decoded of one seed scene run through the box.
+struct HostFigures {
+    /// Events per cell per second by modality name, over the scene's cells.
+    events_per_cell_s: std::collections::BTreeMap<&'static str, f64>,
+    /// Event packets in % of data mode, over the scene's cells.
+    packet_rate_pct: f64,
+}
+
+/// Runs the seed scene `name` from `dir` through the reference model of the box and the
+/// host decoder (told the scene's cells and sample rate).
+fn through_box(
+    dir: &std::path::Path,
+    name: &str,
+    window_s: Option<f64>,
+) -> anyhow::Result<HostFigures> {
+    use skinbox_cosim::sim::{run_with_progress, Fidelity};
+    let scene = skinbox_cells::scene::Scene::load(&dir.join(format!("{name}.toml")))?;
+    let s = &scene.config.scene;
+    let window_s = window_s.unwrap_or(s.duration_s - s.warmup_s);
+    anyhow::ensure!(
+        window_s > 0.0 && window_s <= 3600.0,
+        "--box-window-s {window_s} must be above 0 and at most 3600"
+    );
+    let generated = skinbox_cosim::scene::generate(&scene, s.warmup_s + window_s)?;
+    let config = skinbox_gateware::interface_box::BoxConfig {
+        ports: generated.buses.len(),
+        ..Default::default()
+    };
+    let spec = skinbox_cosim::scene::spec(
+        &generated,
+        config,
+        (s.warmup_s * 1e9) as u64,
+        (window_s * 1e9) as u64,
+    );
+    let run = run_with_progress(&spec, Fidelity::Reference, &mut |_, _| {})?;
+    let mut decoder = skinbox_host::Decoder::new(skinbox_host::DecoderConfig {
+        sample_rate_hz: Some(s.sample_rate_hz),
+        cells: Some(s.cells as u64),
+        ..Default::default()
+    });
+    for d in &run.datagrams {
+        decoder.push_datagram(&d.to_bytes(), &mut ());
+    }
+    let report = decoder.report();
+    Ok(HostFigures {
+        events_per_cell_s: report
+            .events_per_cell_per_second
+            .iter()
+            .map(|(m, r)| (m.name(), *r))
+            .collect(),
+        packet_rate_pct: report.event_packet_rate_percent_of_data_mode,
+    })
 }
 
 /// One figure with its verdict.
@@ -23,6 +85,16 @@ struct Verdict<'a> {
     ratio: Option<f64>,
     /// Within the tolerance (only figures with a papers' value have a verdict).
     pass: Option<bool>,
+    /// With `--through-box`: the host's value of the same figure, decoded from the box's
+    /// datagrams.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    host: Option<f64>,
+    /// The host's value over the papers' value.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    host_ratio: Option<f64>,
+    /// The host's value within the tolerance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    host_pass: Option<bool>,
 }
 
 #[derive(Serialize)]
@@ -43,16 +115,41 @@ struct Output<'a> {
 pub fn run(args: Args, json: bool) -> anyhow::Result<()> {
     let dir = args.scenes.unwrap_or_else(skinbox_cells::scenes_dir);
     let figures = calibrate(&dir)?;
+    let mut host = std::collections::BTreeMap::new();
+    if args.through_box {
+        for row in &skinbox_cells::calibration::SEED_TABLE {
+            host.insert(row.scene, through_box(&dir, row.scene, args.box_window_s)?);
+        }
+    }
     let verdicts: Vec<Verdict> = figures
         .iter()
-        .map(|f| Verdict {
-            figure: f,
-            ratio: f.ratio(),
-            pass: f.pass(),
+        .map(|f| {
+            let h = host.get(f.scene.as_str()).and_then(|h| {
+                if f.quantity == "packet_rate_pct" {
+                    Some(h.packet_rate_pct)
+                } else {
+                    let m = f.quantity.strip_prefix("events_per_cell_s_")?;
+                    h.events_per_cell_s.get(m).copied()
+                }
+            });
+            let host_ratio = h.zip(f.seed).map(|(h, s)| h / s);
+            Verdict {
+                figure: f,
+                ratio: f.ratio(),
+                pass: f.pass(),
+                host: h,
+                host_ratio,
+                host_pass: host_ratio.map(|r| (r - 1.0).abs() <= TOLERANCE),
+            }
         })
         .collect();
-    let compared = verdicts.iter().filter(|v| v.pass.is_some()).count();
-    let outside = verdicts.iter().filter(|v| v.pass == Some(false)).count();
+    let compared = verdicts.iter().filter(|v| v.pass.is_some()).count()
+        + verdicts.iter().filter(|v| v.host_pass.is_some()).count();
+    let outside = verdicts.iter().filter(|v| v.pass == Some(false)).count()
+        + verdicts
+            .iter()
+            .filter(|v| v.host_pass == Some(false))
+            .count();
     let out = Output {
         tolerance: TOLERANCE,
         compared,
@@ -67,17 +164,24 @@ pub fn run(args: Args, json: bool) -> anyhow::Result<()> {
             "{:24} {:36} {:>9} {:>9} {:>6}",
             "scene", "quantity", "seed", "model", "ratio"
         );
+        let verdict = |pass: bool| if pass { "pass" } else { "FAIL" };
         for v in &out.figures {
             let f = v.figure;
+            let host = match (v.host, v.host_ratio, v.host_pass) {
+                (Some(h), Some(r), Some(pass)) => {
+                    format!("   host {h:9.3} {r:6.3}  {}", verdict(pass))
+                }
+                _ => String::new(),
+            };
             match (v.ratio, v.pass) {
                 (Some(ratio), Some(pass)) => println!(
-                    "{:24} {:36} {:9.3} {:9.3} {:6.3}  {}",
+                    "{:24} {:36} {:9.3} {:9.3} {:6.3}  {}{host}",
                     f.scene,
                     f.quantity,
                     f.seed.unwrap_or_default(),
                     f.model,
                     ratio,
-                    if pass { "pass" } else { "FAIL" }
+                    verdict(pass)
                 ),
                 _ => println!(
                     "{:24} {:36} {:>9} {:9.3}",
