@@ -37,14 +37,15 @@ pub struct CaptureArgs {
     /// wake-up takes many datagrams (0: wake for every datagram).
     #[arg(long, default_value_t = live::DEFAULT_COALESCE.as_micros() as u64)]
     pub coalesce_us: u64,
-    /// The cells' sample rate, for rates in % of data mode.
-    #[arg(long, default_value_t = 125.0)]
-    pub sample_rate_hz: f64,
+    /// The cells' sample rate, for rates in % of data mode; without it, learned from the stamps.
+    #[arg(long)]
+    pub sample_rate_hz: Option<f64>,
 }
 
 /// Runs the capture on a single-threaded tokio runtime until the duration, the count or
 /// Ctrl-C; prints a summary line every second on stderr and the report at the end.
 pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
+    super::check_sample_rate(args.sample_rate_hz)?;
     anyhow::ensure!(
         args.duration_ms.is_none_or(|ms| ms > 0),
         "--duration-ms must be a positive number of milliseconds"
@@ -72,7 +73,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             None => None,
         };
         let mut decoder = Decoder::new(DecoderConfig {
-            sample_rate_hz: Some(args.sample_rate_hz),
+            sample_rate_hz: args.sample_rate_hz,
             ..DecoderConfig::default()
         });
         let duration = args.duration_ms;

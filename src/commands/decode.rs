@@ -31,13 +31,14 @@ pub struct DecodeArgs {
     /// Only UDP datagrams from or to this port.
     #[arg(long)]
     pub port: Option<u16>,
-    /// The cells' sample rate, for the summary.
-    #[arg(long, default_value_t = 125.0)]
-    pub sample_rate_hz: f64,
+    /// The cells' sample rate, for the summary; without it, learned from the stamps.
+    #[arg(long)]
+    pub sample_rate_hz: Option<f64>,
 }
 
 /// Decodes the file; rows on stdout (or --output), a one-line summary on stderr.
 pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
+    super::check_sample_rate(args.sample_rate_hz)?;
     let bytes = pcap::read_file(&args.file)?;
     let format = if args.jsonl || (json && !args.csv) {
         RowFormat::JsonLines
@@ -58,7 +59,7 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
     let mut writer = RowWriter::new(std::io::BufWriter::new(out), format, kind);
     let options = PcapOptions {
         decoder: DecoderConfig {
-            sample_rate_hz: Some(args.sample_rate_hz),
+            sample_rate_hz: args.sample_rate_hz,
             ..DecoderConfig::default()
         },
         udp_port: args.port,

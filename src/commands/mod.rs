@@ -79,3 +79,14 @@ pub fn print_json<T: serde::Serialize>(value: &T) -> anyhow::Result<()> {
     println!("{}", serde_json::to_string_pretty(value)?);
     Ok(())
 }
+
+/// Refuses a `--sample-rate-hz` that no cell runs at.
+pub(crate) fn check_sample_rate(rate: Option<f64>) -> anyhow::Result<()> {
+    if let Some(rate) = rate {
+        anyhow::ensure!(
+            rate.is_finite() && rate > 0.0 && rate <= 10_000.0,
+            "--sample-rate-hz {rate} must be above 0 and at most 10000"
+        );
+    }
+    Ok(())
+}

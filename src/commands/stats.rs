@@ -28,12 +28,7 @@ pub struct StatsArgs {
 
 /// Decodes the file and prints the report.
 pub fn run(args: StatsArgs, json: bool) -> anyhow::Result<()> {
-    if let Some(rate) = args.sample_rate_hz {
-        anyhow::ensure!(
-            rate.is_finite() && rate > 0.0 && rate <= 10_000.0,
-            "--sample-rate-hz {rate} must be above 0 and at most 10000"
-        );
-    }
+    super::check_sample_rate(args.sample_rate_hz)?;
     anyhow::ensure!(
         args.cells.is_none_or(|n| (1..=16_384).contains(&n)),
         "--cells {} must be 1 to 16384 (cell ids are 14 bits)",
