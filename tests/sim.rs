@@ -3,21 +3,30 @@
 use std::path::Path;
 use std::process::Command;
 
-/// Runs `skinbox sim ARGS --json --pcap PCAP`, asserts it succeeded, returns its JSON.
-fn sim_json(args: &[&str], pcap: &Path) -> serde_json::Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
-        .arg("sim")
+/// Runs `skinbox ARGS`.
+fn skinbox<I: AsRef<std::ffi::OsStr>>(args: impl IntoIterator<Item = I>) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_skinbox"))
         .args(args)
-        .args(["--json", "--pcap"])
-        .arg(pcap)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+/// Its JSON, after asserting that it succeeded.
+fn json(out: std::process::Output) -> serde_json::Value {
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Runs `skinbox sim ARGS --json --pcap PCAP`, asserts it succeeded, returns its JSON.
+fn sim_json(args: &[&str], pcap: &Path) -> serde_json::Value {
+    let pcap = pcap.as_os_str();
+    let mut all = vec!["sim".as_ref(), "--json".as_ref(), "--pcap".as_ref(), pcap];
+    all.extend(args.iter().map(std::ffi::OsStr::new));
+    json(skinbox(all))
 }
 
 #[test]
@@ -143,11 +152,7 @@ fn scene_by_name_with_rate_buses_and_mode_and_bus_root_losses_reported() {
 #[test]
 fn unknown_scenes_and_durations_beyond_the_fidelity_are_refused() {
     let run = |args: &[&str]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
-            .arg("sim")
-            .args(args)
-            .output()
-            .unwrap();
+        let out = skinbox(["sim"].iter().chain(args));
         assert!(!out.status.success());
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
@@ -173,18 +178,9 @@ fn unknown_scenes_and_durations_beyond_the_fidelity_are_refused() {
 
 /// Runs `skinbox stats --json PCAP EXTRA...`, asserts it succeeded, returns its JSON.
 fn stats_json(pcap: &Path, extra: &[&str]) -> serde_json::Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
-        .args(["stats", "--json"])
-        .arg(pcap)
-        .args(extra)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
+    let mut all = vec!["stats".as_ref(), "--json".as_ref(), pcap.as_os_str()];
+    all.extend(extra.iter().map(std::ffi::OsStr::new));
+    json(skinbox(all))
 }
 
 /// A 250 Hz scene through the reference model: `skinbox stats` without a rate learns

@@ -115,6 +115,17 @@ pub enum DatagramKind {
 }
 
 impl DatagramKind {
+    /// Every kind, in wire-value order.
+    pub const ALL: [DatagramKind; 2] = [DatagramKind::Records, DatagramKind::Status];
+
+    /// Lowercase name, as in JSON (`records`, `status`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            DatagramKind::Records => "records",
+            DatagramKind::Status => "status",
+        }
+    }
+
     fn from_byte(b: u8) -> Result<DatagramKind> {
         match b {
             1 => Ok(DatagramKind::Records),

@@ -247,3 +247,15 @@ fn over_full_datagrams_are_written_up_to_the_limit() {
         assert_eq!(parsed, capped(repr));
     }
 }
+
+#[test]
+fn datagram_kind_names_are_their_json_names() {
+    use skinbox_protocol::DatagramKind;
+    for kind in DatagramKind::ALL {
+        assert_eq!(
+            serde_json::to_value(kind).unwrap(),
+            serde_json::Value::from(kind.name())
+        );
+    }
+    assert_eq!(DatagramKind::ALL.map(|k| k as u8), [1, 2]);
+}

@@ -68,6 +68,15 @@ local function uint(buf, base, format, name)
     return buf(base + off, len):uint()
 end
 
+-- Length of a whole datagram of `kind` with `entries` entries, or nil for an unknown kind.
+local function datagram_len(kind, entries)
+    local entry_len = C.entry_len[kind]
+    if entry_len == nil then
+        return nil
+    end
+    return C.header_len + C.fixed_len[kind] + entries * entry_len
+end
+
 local function box_state(key)
     local s = boxes[key]
     if s == nil then
@@ -165,10 +174,6 @@ local function event_missing(s, cell_id, sequence)
     return missing
 end
 
-local function tick_text(tick)
-    return tostring(tick)
-end
-
 local function channel_tree(tree, range, channel, raw)
     local f = F.channel[channel.name]
     local item = tree:add(f, range, raw * channel.units_per_lsb)
@@ -255,11 +260,10 @@ local function dissect_cell(buf, base, tree, verdict, state)
         add(t, buf, base, "event", "sequence")
         local second = bit32.band(mask, C.mask_second_part) ~= 0
         t:add(F.event_extra.second_part, mask_range, second):set_generated()
-        local missing
         if verdict.event_missing[base] == nil then
             verdict.event_missing[base] = event_missing(state, cell_id, sequence)
         end
-        missing = verdict.event_missing[base]
+        local missing = verdict.event_missing[base]
         t:add(F.event_extra.missing_before, missing):set_generated()
         if missing > 0 then
             t:add_proto_expert_info(E.event_gap, string.format(
@@ -309,7 +313,7 @@ local function dissect_records(buf, tree, header, verdict, state)
         local cell_base = base + P.record.cell_packet[1]
         local summary = dissect_cell(buf, cell_base, rt, verdict, state)
         rt:set_text(string.format("Record %d: port %d, tick %s, %s", i + 1, port,
-            tick_text(tick), summary))
+            tostring(tick), summary))
         if lo == nil or port < lo then lo = port end
         if hi == nil or port > hi then hi = port end
     end
@@ -407,13 +411,12 @@ local function dissect(buf, pinfo, tree)
     add(root, buf, 0, "datagram", "entry_count")
     add(root, buf, 0, "datagram", "reserved")
 
-    local entry_len = C.entry_len[header.kind]
-    if entry_len == nil then
+    local expected = datagram_len(header.kind, header.entries)
+    if expected == nil then
         ki:add_proto_expert_info(E.malformed, "unknown datagram kind " .. header.kind)
         pinfo.cols.info:set("skinbox: unknown kind " .. header.kind)
         return len
     end
-    local expected = C.header_len + C.fixed_len[header.kind] + header.entries * entry_len
     if header.entries > C.max_entries[header.kind] or len ~= expected then
         root:add_proto_expert_info(E.malformed, string.format(
             "%d bytes, but %d entries make %d bytes (at most %d entries)", len,
@@ -497,12 +500,7 @@ local function heuristic(buf, pinfo, tree)
         return false
     end
     local kind = uint(buf, 0, "datagram", "kind")
-    local entry_len = C.entry_len[kind]
-    if entry_len == nil then
-        return false
-    end
-    local entries = uint(buf, 0, "datagram", "entry_count")
-    if len ~= C.header_len + C.fixed_len[kind] + entries * entry_len then
+    if len ~= datagram_len(kind, uint(buf, 0, "datagram", "entry_count")) then
         return false
     end
     dissect(buf, pinfo, tree)

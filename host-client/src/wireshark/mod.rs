@@ -142,8 +142,8 @@ fn tables() -> String {
         let _ = writeln!(w, "}}");
     }
     let _ = writeln!(w, "local KIND_NAMES = {{");
-    for kind in [DatagramKind::Records, DatagramKind::Status] {
-        let _ = writeln!(w, "    [{}] = {:?},", kind as u8, kind_name(kind));
+    for kind in DatagramKind::ALL {
+        let _ = writeln!(w, "    [{}] = {:?},", kind as u8, kind.name());
     }
     let _ = writeln!(w, "}}");
     let _ = writeln!(
@@ -308,13 +308,6 @@ fn tables() -> String {
     }
     let _ = writeln!(w, "}}");
     out
-}
-
-fn kind_name(kind: DatagramKind) -> &'static str {
-    match kind {
-        DatagramKind::Records => "records",
-        DatagramKind::Status => "status",
-    }
 }
 
 /// The whole plugin: generated tables, then the dissection logic.
