@@ -240,12 +240,12 @@ fn stats_learns_the_sample_rate_of_a_simulated_capture() {
     }
 }
 
-/// A window whose start falls just before a packet on port 2 (idle, 250 Hz, data mode, 4
-/// buses): the box's ports are still in reset for its first bytes, so it sees the tail as
-/// garbage and misses the packet; `skinbox sim` names the cut packet, and it accounts
-/// for every garbage byte and every missing packet. A window that cuts nothing says nothing.
+/// The run where a packet once began on port 2 while the box's ports were still in reset
+/// (idle, 250 Hz, data mode, 4 buses): the simulation now starts before the window by the
+/// reset's length, so every packet is delivered and no port counts garbage; the same for a
+/// busier scene on 16 buses.
 #[test]
-fn a_packet_cut_by_the_window_start_explains_the_garbage_bytes() {
+fn the_window_starts_with_the_ports_out_of_reset() {
     let dir = std::env::temp_dir().join(format!("skinbox-sim-cut-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let common = [
@@ -256,61 +256,22 @@ fn a_packet_cut_by_the_window_start_explains_the_garbage_bytes() {
         "--mode",
         "data",
     ];
-    let garbage_by_port = |r: &serde_json::Value| -> Vec<(String, u64)> {
-        let mut v: Vec<(String, u64)> = r["host"]["box_status"]["last_counters"]
+    let garbage = |r: &serde_json::Value| -> u64 {
+        r["host"]["box_status"]["last_counters"]
             .as_object()
             .unwrap()
-            .iter()
-            .map(|(p, c)| (p.clone(), c["garbage_bytes"].as_u64().unwrap()))
-            .filter(|(_, g)| *g > 0)
-            .collect();
-        v.sort();
-        v
+            .values()
+            .map(|c| c["garbage_bytes"].as_u64().unwrap())
+            .sum()
     };
-
-    let mut args = vec!["idle", "--buses", "4"];
-    args.extend(common);
-    let r = sim_json(&args, &dir.join("cut.pcap"));
-    let cut = &r["window_start_cut"];
-    assert!(cut.is_object(), "{r}");
-    let packets: u64 = cut["packets_by_port"]
-        .as_object()
-        .unwrap()
-        .values()
-        .map(|v| v.as_u64().unwrap())
-        .sum();
-    assert_eq!(packets, 1);
-    let sent = r["packets_sent"].as_u64().unwrap();
-    let delivered = r["packets_delivered"].as_u64().unwrap();
-    assert_eq!(
-        sent - delivered,
-        packets,
-        "every missing packet is a cut one"
-    );
-    let explained: Vec<(String, u64)> = cut["garbage_bytes_by_port"]
-        .as_object()
-        .unwrap()
-        .iter()
-        .map(|(p, g)| (p.clone(), g.as_u64().unwrap()))
-        .collect();
-    assert_eq!(
-        explained,
-        garbage_by_port(&r),
-        "the garbage is all on the cut ports"
-    );
-    for (port, g) in &explained {
-        // the tail of a 20-byte packet whose first byte fell in the reset
-        assert!((1..=19).contains(g), "port {port}: {g}");
-        assert!(cut["explanation"]
-            .as_str()
-            .unwrap()
-            .contains(&format!("port {port}: 1 cut, {g} garbage bytes")));
+    for (scene, buses) in [("idle", "4"), ("stroking_upper_arm", "16")] {
+        let mut args = vec![scene, "--buses", buses];
+        args.extend(common);
+        let r = sim_json(&args, &dir.join(format!("{scene}.pcap")));
+        let sent = r["packets_sent"].as_u64().unwrap();
+        assert!(sent > 1000, "{scene}: {sent}");
+        assert_eq!(r["packets_delivered"].as_u64(), Some(sent), "{scene}");
+        assert_eq!(garbage(&r), 0, "{scene}");
     }
-
-    let mut args = vec!["stroking_upper_arm", "--buses", "16"];
-    args.extend(common);
-    let r = sim_json(&args, &dir.join("whole.pcap"));
-    assert!(r["window_start_cut"].is_null(), "{r}");
-    assert_eq!(garbage_by_port(&r), vec![]);
-    assert_eq!(r["packets_sent"], r["packets_delivered"]);
+    std::fs::remove_dir_all(&dir).ok();
 }

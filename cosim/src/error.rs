@@ -22,6 +22,9 @@ pub enum CosimError {
         step: &'static str,
         source: skinbox_frame_check::FrameError,
     },
+    /// The box sent something a box of its configuration cannot send.
+    #[error("the box sent {0}")]
+    BoxOutput(String),
     /// A frame's UDP payload is not a box datagram.
     #[error("parsing a datagram: {0}")]
     Datagram(#[from] skinbox_protocol::Error),

@@ -52,24 +52,10 @@ pub const TICK_ZERO_CYCLE: u64 = RESET_CYCLES + skinbox_gateware::interface_box:
 
 /// The first cycle the box's ports see their pins: after the reset, the counters'
 /// clearing ([`skinbox_gateware::counter_file::CLEAR_CLOCKS`]) and a clock. A packet whose
-/// start edge comes earlier is cut: the box sees only its tail.
+/// start edge comes earlier is cut: the box sees only its tail (a scene's spec starts this
+/// long before its window, `scene::PORTS_READY_NS`).
 pub const PORTS_READY_CYCLE: u64 =
     TICK_ZERO_CYCLE + skinbox_gateware::counter_file::CLEAR_CLOCKS + 1;
-
-/// Per port, the packets of `spec` that begin before the ports see their pins
-/// ([`PORTS_READY_CYCLE`]); ports without any are left out.
-pub fn packets_cut_by_reset(spec: &SimSpec) -> std::collections::BTreeMap<usize, u64> {
-    let ready_ns = (PORTS_READY_CYCLE * TICK_NS) as f64;
-    spec.ports
-        .iter()
-        .enumerate()
-        .map(|(port, packets)| {
-            let cut = packets.iter().filter(|p| p.start_ns < ready_ns).count() as u64;
-            (port, cut)
-        })
-        .filter(|(_, cut)| *cut > 0)
-        .collect()
-}
 
 /// What came out, checked.
 #[derive(Debug, Clone, Default, serde::Serialize)]
@@ -202,7 +188,11 @@ pub(crate) fn analyse(
                 report.record_datagrams += 1;
                 for r in records {
                     report.records += 1;
-                    let queue = &mut pending[usize::from(r.port)];
+                    // a port the box does not have matches no packet sent
+                    let Some(queue) = pending.get_mut(usize::from(r.port)) else {
+                        report.records_corrupted += 1;
+                        continue;
+                    };
                     // packets before this one on the port were lost
                     match queue.iter().position(|p| p.0.bytes == r.cell_packet) {
                         Some(k) => {
@@ -226,7 +216,14 @@ pub(crate) fn analyse(
             DatagramBody::Status(status) => {
                 report.status_datagrams += 1;
                 for (i, counters) in status.ports.iter().enumerate() {
-                    last_status[usize::from(status.first_port) + i] = *counters;
+                    let port = usize::from(status.first_port) + i;
+                    let slot = last_status
+                        .get_mut(port)
+                        .ok_or(CosimError::BoxOutput(format!(
+                            "status counters for port {port} of a {}-port box",
+                            spec.config.ports
+                        )))?;
+                    *slot = *counters;
                 }
             }
         }
@@ -334,5 +331,43 @@ mod tests {
                 skinbox_protocol::Error::BadMagic { .. }
             ))
         ));
+    }
+
+    /// Ports an 8-port box does not have: a record is corrupted, status counters an error.
+    #[test]
+    fn ports_beyond_the_box_are_counted_or_refused_not_indexed() {
+        let starts = vec![Vec::new(); 8];
+        let records = DatagramRepr {
+            box_id: 1,
+            port_count: 16,
+            flags: 0,
+            sequence: 0,
+            base_tick: 0,
+            body: DatagramBody::Records(vec![skinbox_protocol::RecordRepr {
+                port: 9,
+                flags: 0,
+                tick_offset: 0,
+                cell_packet: skinbox_protocol::DataRepr::default().to_bytes(),
+            }]),
+        };
+        let run = analyse(&spec(), &[frame(&records.to_bytes())], &starts, 0.0).unwrap();
+        assert_eq!((run.report.records, run.report.records_corrupted), (1, 1));
+
+        let status = DatagramRepr {
+            box_id: 1,
+            port_count: 16,
+            flags: 0,
+            sequence: 1,
+            base_tick: 0,
+            body: DatagramBody::Status(skinbox_protocol::StatusRepr {
+                boot_id: 1,
+                datagrams_sent: 0,
+                records_sent: 0,
+                first_port: 4,
+                ports: vec![PortCounters::default(); 8],
+            }),
+        };
+        let err = analyse(&spec(), &[frame(&status.to_bytes())], &starts, 0.0).unwrap_err();
+        assert!(err.to_string().contains("port 8 of a 8-port box"), "{err}");
     }
 }

@@ -10,14 +10,20 @@ use skinbox_protocol::TICK_NS;
 /// timeout and the frames out.
 pub const DRAIN_NS: u64 = 2_000_000;
 
+/// Time from the simulation's start until the box's ports see their pins
+/// ([`crate::run::PORTS_READY_CYCLE`]): reset, the reset register, the counters' clearing.
+pub const PORTS_READY_NS: u64 = crate::run::PORTS_READY_CYCLE * TICK_NS;
+
 /// The packets of `generated` from scene time `from_ns` on, as a simulation of `config`
-/// (whose port count must equal the scene's bus count) that starts at `from_ns`: bus `i`
-/// drives port `i`, each packet with the bit period of the bus's root cell. Packets that
-/// start before `from_ns` or end after `from_ns + duration_ns` are left out. The simulation
-/// runs one status period and [`DRAIN_NS`] longer, so the last status report counts every
-/// packet.
+/// (whose port count must equal the scene's bus count): bus `i` drives port `i`, each packet
+/// with the bit period of the bus's root cell. The simulation starts [`PORTS_READY_NS`]
+/// before `from_ns`, so the ports are out of reset when the window's first packet begins.
+/// Packets that start before `from_ns` or end after `from_ns + duration_ns` are left out.
+/// The simulation runs one status period and [`DRAIN_NS`] longer, so the last status report
+/// counts every packet.
 pub fn spec(generated: &Generated, config: BoxConfig, from_ns: u64, duration_ns: u64) -> SimSpec {
     assert_eq!(config.ports, generated.buses.len(), "one port per bus");
+    let lead_ns = PORTS_READY_NS as f64;
     let ports = generated
         .buses
         .iter()
@@ -28,14 +34,17 @@ pub fn spec(generated: &Generated, config: BoxConfig, from_ns: u64, duration_ns:
                 .filter(|p| p.pin_end_ps() / 1000 <= from_ns + duration_ns)
                 .map(|p| SentPacket {
                     bytes: p.bytes,
-                    start_ns: p.pin_edge_ps as f64 / 1000.0 - from_ns as f64,
+                    start_ns: p.pin_edge_ps as f64 / 1000.0 - from_ns as f64 + lead_ns,
                     bit_ns: f64::from(p.bit_period_ps) / 1000.0,
                 })
                 .collect()
         })
         .collect();
     SimSpec {
-        duration_ns: (duration_ns + config.status_period_ticks * TICK_NS + DRAIN_NS)
+        duration_ns: (PORTS_READY_NS
+            + duration_ns
+            + config.status_period_ticks * TICK_NS
+            + DRAIN_NS)
             .div_ceil(TICK_NS)
             * TICK_NS,
         config,

@@ -114,19 +114,6 @@ impl From<FidelityArg> for Fidelity {
     }
 }
 
-/// Packets cut by the box's reset at the start of the window.
-#[derive(Serialize)]
-struct WindowStartCut {
-    /// When the ports first see their pins, ns from the window start.
-    ports_ready_ns: u64,
-    /// Per port, the packets that began before.
-    packets_by_port: std::collections::BTreeMap<usize, u64>,
-    /// Per such port, the garbage bytes the box counted since its reset.
-    garbage_bytes_by_port: std::collections::BTreeMap<usize, u64>,
-    /// The explanation, one line.
-    explanation: String,
-}
-
 #[derive(Serialize)]
 struct Output {
     scene: String,
@@ -146,8 +133,6 @@ struct Output {
     /// Set when the window lost packets at the bus roots: the buses are overloaded.
     bus_root_loss_warning: Option<String>,
     /// Set when packets began on the pins before the box's ports left reset at the window
-    /// start: the box saw only their tails (garbage bytes, packets missing).
-    window_start_cut: Option<WindowStartCut>,
     #[serde(flatten)]
     sim: SimReport,
     pcap: PathBuf,
@@ -277,36 +262,6 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             scene.config.scene.sample_rate_hz
         )
     });
-    let cut = skinbox_cosim::run::packets_cut_by_reset(&spec);
-    let window_start_cut = (!cut.is_empty()).then(|| {
-        let ports_ready_ns = skinbox_cosim::run::PORTS_READY_CYCLE * skinbox_protocol::TICK_NS;
-        let garbage: std::collections::BTreeMap<usize, u64> = cut
-            .keys()
-            .map(|port| {
-                let g = u8::try_from(*port)
-                    .ok()
-                    .and_then(|p| host.box_status.last_counters.get(&p))
-                    .and_then(|c| c.get("garbage_bytes"))
-                    .copied()
-                    .unwrap_or(0);
-                (*port, u64::from(g))
-            })
-            .collect();
-        let packets: u64 = cut.values().sum();
-        let ports: Vec<String> = cut
-            .iter()
-            .map(|(p, n)| format!("port {p}: {n} cut, {} garbage bytes", garbage[p]))
-            .collect();
-        WindowStartCut {
-            ports_ready_ns,
-            explanation: format!(
-                "{packets} packet(s) began on the pins in the window's first {ports_ready_ns} ns, while the box's ports were still in reset: the box saw only their tails, counted as garbage bytes, and they are missing from the records ({})",
-                ports.join("; ")
-            ),
-            packets_by_port: cut,
-            garbage_bytes_by_port: garbage,
-        }
-    });
     let out = Output {
         scene: scene.name().to_string(),
         cells: scene.config.scene.cells,
@@ -320,7 +275,6 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         packets_dropped_at_bus_roots_warmup: dropped - dropped_window,
         packets_dropped_at_bus_roots_window: dropped_window,
         bus_root_loss_warning,
-        window_start_cut,
         sim: report,
         pcap,
         host,
@@ -358,9 +312,6 @@ fn print_summary(o: &Output) {
     );
     if let Some(w) = &o.bus_root_loss_warning {
         println!("warning: {w}");
-    }
-    if let Some(c) = &o.window_start_cut {
-        println!("note:   {}", c.explanation);
     }
     println!(
         "box:    {} frames ({} records, {} status), {} records; {} of {} packets delivered, {} corrupted, {} mistimed",
