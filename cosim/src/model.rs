@@ -64,6 +64,19 @@ impl std::fmt::Debug for Model {
 // Builds from several threads wait for each other (and, by `CacheLock`, for other processes).
 static BUILD_LOCK: Mutex<()> = Mutex::new(());
 
+/// The runtime's key on this machine, with and without tracing: probing the toolchain and
+/// hashing the runtime sources once per process, not at every model load.
+fn runtime_key(trace: bool) -> Result<String, CosimError> {
+    static KEYS: [std::sync::OnceLock<String>; 2] =
+        [std::sync::OnceLock::new(), std::sync::OnceLock::new()];
+    let slot = &KEYS[usize::from(trace)];
+    if let Some(key) = slot.get() {
+        return Ok(key.clone());
+    }
+    let key = RuntimeInputs::of_this_machine(trace)?.key();
+    Ok(slot.get_or_init(|| key).clone())
+}
+
 impl Model {
     /// The model of `config` (with VCD tracing compiled in when `trace`), from the cache in
     /// `cache_dir` or built into it.
@@ -74,8 +87,7 @@ impl Model {
     ) -> Result<Arc<Model>, CosimError> {
         let verilog = verilog(config)?;
         let shim = shim_source(config.ports, trace);
-        let runtime = RuntimeInputs::of_this_machine(trace)?;
-        let runtime_key = runtime.key();
+        let runtime_key = runtime_key(trace)?;
         let key = ModelInputs {
             verilog: &verilog,
             shim: &shim,
