@@ -381,12 +381,15 @@ impl Points {
                 let started = std::time::Instant::now();
                 let value = serde_json::to_value(compute()?)
                     .with_context(|| format!("point {key}: result does not serialise"))?;
-                self.rows.push(Row {
-                    index,
-                    key: key.clone(),
-                    value: value.clone(),
-                    seconds: started.elapsed().as_secs_f64(),
-                });
+                // a shard writes its rows; a whole run only uses the value
+                if matches!(self.mode, Mode::Shard(_)) {
+                    self.rows.push(Row {
+                        index,
+                        key: key.clone(),
+                        value: value.clone(),
+                        seconds: started.elapsed().as_secs_f64(),
+                    });
+                }
                 value
             }
             Mode::Replay(merged) => {

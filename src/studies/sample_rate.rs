@@ -33,10 +33,7 @@ fn point(fit: &RateFit, rate_hz: f64, quick: bool) -> anyhow::Result<[f64; 2]> {
         ..Default::default()
     });
     let st = &g.stats;
-    Ok([
-        st.packets as f64 / (st.cells as f64 * st.window_s),
-        st.packet_rate_pct(),
-    ])
+    Ok([st.packets_per_cell_s(), st.packet_rate_pct()])
 }
 
 /// The study.

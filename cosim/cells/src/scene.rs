@@ -757,6 +757,11 @@ impl SceneStats {
         n as f64 / (self.cells as f64 * self.window_s)
     }
 
+    /// Packets per cell per second (the papers' Fig. 11 axis).
+    pub fn packets_per_cell_s(&self) -> f64 {
+        self.packets as f64 / (self.cells as f64 * self.window_s)
+    }
+
     /// Packets in percent of data mode (one packet per sample).
     pub fn packet_rate_pct(&self) -> f64 {
         100.0 * self.packets as f64 / self.samples.max(1) as f64
