@@ -385,12 +385,17 @@ pub fn run_shard(
     shards: u32,
     progress: &mut dyn FnMut(Event<'_>),
 ) -> Result<SeedShard, SynthError> {
+    if shard == 0 || shard > shards {
+        return Err(SynthError::Merge(format!(
+            "shard {shard}/{shards}: K must be 1 to N"
+        )));
+    }
     let started = Instant::now();
     let all: Vec<u64> = (options.seed..options.seed + options.seeds.max(1)).collect();
     let mine: Vec<u64> = all
         .iter()
         .enumerate()
-        .filter(|(i, _)| shard >= 1 && i % shards as usize == (shard - 1) as usize)
+        .filter(|(i, _)| i % shards as usize == (shard - 1) as usize)
         .map(|(_, s)| *s)
         .collect();
     if mine.is_empty() {
@@ -472,6 +477,14 @@ pub fn check_seed_shards(shards: &[(PathBuf, SeedShard)]) -> Result<Vec<SeedResu
         .ok_or_else(|| SynthError::Merge("no seed shards".into()))?;
     let mut have = std::collections::BTreeMap::new();
     for (dir, s) in shards {
+        if s.seeds == 0 || Board::from_name(&s.board).is_none() {
+            return Err(SynthError::Merge(format!(
+                "{}: a sweep of {} seeds on board {:?} is no shard of a seed sweep",
+                dir.display(),
+                s.seeds,
+                s.board
+            )));
+        }
         let same = (&s.board, s.ports, s.first_seed, s.seeds, s.shards)
             == (
                 &first.board,
@@ -784,6 +797,20 @@ mod tests {
         let mut other = shards.clone();
         other[1].1.ports = 8;
         assert!(error(&other).contains("are not shards of one sweep"));
+        let mut none = shards.clone();
+        none[0].1.seeds = 0;
+        assert!(
+            error(&none).contains("a sweep of 0 seeds"),
+            "{}",
+            error(&none)
+        );
+        let mut board = shards.clone();
+        board[0].1.board = "no-such-board".into();
+        assert!(
+            error(&board).contains("\"no-such-board\""),
+            "{}",
+            error(&board)
+        );
         let mut lost = shards.clone();
         lost[1].1.tried.pop();
         assert!(error(&lost).contains("the shards placed seeds [1, 2, 3]"));
