@@ -8,7 +8,7 @@ use skinbox_gateware::interface_box::{verilog, BoxConfig};
 use skinbox_gateware::verilog::LINT_WAIVERS;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> CosimError + '_ {
     move |source| CosimError::Io {
@@ -61,9 +61,6 @@ impl std::fmt::Debug for Model {
     }
 }
 
-// Builds from several threads wait for each other (and, by `CacheLock`, for other processes).
-static BUILD_LOCK: Mutex<()> = Mutex::new(());
-
 /// The runtime's key on this machine, with and without tracing: probing the toolchain and
 /// hashing the runtime sources once per process, not at every model load.
 fn runtime_key(trace: bool) -> Result<String, CosimError> {
@@ -99,8 +96,8 @@ impl Model {
         let library_path = dir.join("libbox.so");
         let mut built_here = false;
         if !library_path.exists() {
-            let _guard = BUILD_LOCK.lock().unwrap_or_else(|e| e.into_inner());
-            // other processes wait here too; the first builds, the rest find its model
+            // other threads and processes wait here (each takes the lock through its own
+            // open file); the first builds, the rest find its model
             let _cache_lock = CacheLock::acquire(&dir)?;
             if !library_path.exists() {
                 built_here = true;
