@@ -39,17 +39,6 @@ impl Shard {
     pub fn owns(&self, i: usize) -> bool {
         i % self.count as usize == (self.index - 1) as usize
     }
-
-    /// Whether item `i` of `items` in all goes to this shard (used by sweeps sharded the
-    /// same way, e.g. the seeds of `skinbox synth`).
-    pub fn take<T: Clone>(&self, items: &[T]) -> Vec<T> {
-        items
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| self.owns(*i))
-            .map(|(_, t)| t.clone())
-            .collect()
-    }
 }
 
 impl fmt::Display for Shard {
@@ -504,7 +493,6 @@ mod tests {
         for i in 0..10 {
             assert_eq!(shards.iter().filter(|s| s.owns(i)).count(), 1, "{i}");
         }
-        assert_eq!(shards[1].take(&[10, 11, 12, 13, 14]), vec![11, 14]);
     }
 
     /// A toy study: squares of 0..n, plus a search whose points depend on each other.
