@@ -151,8 +151,9 @@ struct CellCounters {
     event_packets_repeated: u64,
     /// Tick of its last packet that began a sample (not a split sample's second).
     last_sample_tick: Option<u64>,
-    /// Channels of its last event sample so far (a split sample's second packet adds to
-    /// it), not yet in the fired-together histogram; 0: none.
+    /// Channels of its last event sample while it may still be split (a second part
+    /// with the next sequence number completes it), not yet in the fired-together
+    /// histogram; 0: none.
     pending_fired: u8,
 }
 
@@ -601,13 +602,16 @@ impl Decoder {
                         bits &= bits - 1;
                     }
                     // A split sample's second packet follows its first with the next
-                    // sequence number; anything else begins a sample.
+                    // sequence number; anything else begins a sample. A split sample has
+                    // exactly two packets: the second completes it at once.
                     let fired = e.channels.len() as u8;
                     let joins = e.second_part
                         && c.pending_fired > 0
                         && c.last_event_sequence == Some(e.sequence.wrapping_sub(1));
                     if joins {
-                        c.pending_fired += fired;
+                        let together = usize::from(c.pending_fired) + usize::from(fired);
+                        track.fired_together[together.min(Channel::COUNT)] += 1;
+                        c.pending_fired = 0;
                     } else {
                         if c.pending_fired > 0 {
                             track.fired_together
