@@ -189,15 +189,13 @@ struct BoxTrack {
     last_counters: BTreeMap<u8, [u32; PortCounter::ALL.len()]>,
     datagrams_sent_delta: u64,
     records_sent_delta: u64,
-    /// Per-cell intervals between packets that began a sample, in ticks (the first
-    /// [`MAX_INTERVALS`]).
-    intervals: Vec<u64>,
     /// Event samples by the number of channels that fired in them (index 1..=9), split
     /// samples joined; the cells' pending samples are not in it yet.
     fired_together: [u64; Channel::COUNT + 1],
 }
 
-/// How many per-cell tick intervals a box keeps for learning the sample rate.
+/// How many per-cell tick intervals a decoder keeps for learning the sample rate, over
+/// all boxes.
 const MAX_INTERVALS: usize = 1 << 18;
 
 impl BoxTrack {
@@ -222,7 +220,6 @@ impl BoxTrack {
             last_counters: BTreeMap::new(),
             datagrams_sent_delta: 0,
             records_sent_delta: 0,
-            intervals: Vec::new(),
             fired_together: [0; Channel::COUNT + 1],
         }
     }
@@ -382,6 +379,9 @@ pub struct Decoder {
     current: usize,
     bad: BadInput,
     records: u64,
+    /// Per-cell intervals between packets that began a sample, in ticks, of every box
+    /// (the first [`MAX_INTERVALS`]).
+    intervals: Vec<u64>,
     data_packets: u64,
     event_packets: u64,
     events_per_packet: [u64; 7],
@@ -406,6 +406,7 @@ impl Decoder {
             current: 0,
             bad: BadInput::default(),
             records: 0,
+            intervals: Vec::new(),
             data_packets: 0,
             event_packets: 0,
             events_per_packet: [0; 7],
@@ -425,6 +426,17 @@ impl Decoder {
     /// Records decoded so far.
     pub fn records(&self) -> u64 {
         self.records
+    }
+
+    /// Datagrams missing so far, over every box (the report's `losses.datagrams_missing`,
+    /// without building a report).
+    pub fn datagrams_missing(&self) -> u64 {
+        self.boxes.iter().map(|b| b.sequence.counts().missing).sum()
+    }
+
+    /// Bad input counted so far (the report's `bad_input.total`).
+    pub fn bad_input_total(&self) -> u64 {
+        self.bad.total
     }
 
     /// The boxes seen so far, in order of their first datagram.
@@ -579,8 +591,8 @@ impl Decoder {
             };
             if begins_sample {
                 if let Some(last) = c.last_sample_tick {
-                    if track.intervals.len() < MAX_INTERVALS {
-                        track.intervals.push(tick.abs_diff(last));
+                    if self.intervals.len() < MAX_INTERVALS {
+                        self.intervals.push(tick.abs_diff(last));
                     }
                 }
                 c.last_sample_tick = Some(tick);
@@ -675,16 +687,7 @@ impl Decoder {
     /// The sample rate the rates are relative to, where it came from, and what the stamps
     /// say about it: the configured rate, else the learned one, else 125 Hz.
     pub fn sample_rate(&self) -> (f64, &'static str, Option<SampleRateEstimate>) {
-        let learned = if self.boxes.len() == 1 {
-            learn_sample_rate(&self.boxes[0].intervals)
-        } else {
-            let all: Vec<u64> = self
-                .boxes
-                .iter()
-                .flat_map(|b| b.intervals.iter().copied())
-                .collect();
-            learn_sample_rate(&all)
-        };
+        let learned = learn_sample_rate(self.intervals.iter().copied());
         match (self.config.sample_rate_hz, learned) {
             (Some(rate), _) => (rate, SAMPLE_RATE_GIVEN, learned),
             (None, Some(e)) => (e.rate_hz, SAMPLE_RATE_LEARNED, learned),
@@ -867,5 +870,64 @@ impl Decoder {
             host: None,
             cells,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinbox_protocol::datagram::{DatagramBody, MAX_RECORDS};
+    use skinbox_protocol::{DataRepr, RecordRepr, TICKS_PER_SECOND};
+
+    /// The intervals kept for learning the rate are capped over all boxes, not per box.
+    #[test]
+    fn the_intervals_are_capped_over_all_boxes() {
+        // One cell per box in data mode at 125 Hz.
+        let period = TICKS_PER_SECOND / 125;
+        let per_box = MAX_INTERVALS * 3 / 5;
+        let mut d = Decoder::new(DecoderConfig {
+            sample_rate_hz: None,
+            ..DecoderConfig::default()
+        });
+        for box_id in [1, 2] {
+            let mut sent = 0usize;
+            let mut sequence = 0;
+            while sent < per_box {
+                let n = MAX_RECORDS.min(per_box - sent);
+                let records = (0..n)
+                    .map(|k| RecordRepr {
+                        port: 0,
+                        flags: 0,
+                        tick_offset: (k as u64 * period) as i32,
+                        cell_packet: DataRepr {
+                            cell_id: 1,
+                            ..DataRepr::default()
+                        }
+                        .to_bytes(),
+                    })
+                    .collect();
+                let payload = DatagramRepr {
+                    box_id,
+                    port_count: 1,
+                    flags: 0,
+                    sequence,
+                    base_tick: sent as u64 * period,
+                    body: DatagramBody::Records(records),
+                }
+                .to_bytes();
+                d.push_datagram(&payload, &mut ());
+                sent += n;
+                sequence += 1;
+            }
+        }
+        assert_eq!(d.records(), 2 * per_box as u64);
+        assert_eq!(d.intervals.len(), MAX_INTERVALS);
+        let r = d.report();
+        assert_eq!(r.sample_rate_source, SAMPLE_RATE_LEARNED);
+        assert_eq!(r.sample_rate_hz, 125.0);
+        assert_eq!(
+            r.sample_rate_learned.unwrap().intervals,
+            MAX_INTERVALS as u64
+        );
     }
 }

@@ -103,14 +103,14 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             },
             shutdown,
             &mut |s, d| {
-                let r = d.report();
+                // Cheap getters: no report (and no rate learning) on the receive thread.
                 eprintln!(
                     "{:7.1} s: {} datagrams, {} records, {} missing, {} bad, {:.1} % CPU",
                     s.wall_s,
                     s.datagrams,
-                    s.records,
-                    r.losses.datagrams_missing,
-                    r.bad_input.total,
+                    d.records(),
+                    d.datagrams_missing(),
+                    d.bad_input_total(),
                     100.0 * s.cpu_s / s.wall_s.max(1e-9)
                 );
             },
