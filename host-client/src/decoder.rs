@@ -18,6 +18,7 @@
 
 use crate::bad_input::{BadInput, Reason};
 use crate::convert::{EventToData, Sample, CELL_IDS};
+pub use crate::rate::ASSUMED_SAMPLE_RATE_HZ;
 use crate::rate::{learn_sample_rate, SampleRateEstimate};
 use crate::report::{
     self, ratio, BoxReport, BoxStatusReport, CellReport, CellsDenominator, LossReport,
@@ -46,17 +47,14 @@ pub struct BoxKey {
     pub source: Option<SocketAddr>,
 }
 
-/// The sample rate taken when none is given and the stamps cannot tell (2nd paper, Fig. 8).
-pub const ASSUMED_SAMPLE_RATE_HZ: f64 = 125.0;
-
 /// Settings of a decoder.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DecoderConfig {
     /// Header and end-of-packet bytes of the cells (a parameter of the box).
     pub framing: CellFraming,
-    /// The cells' sample rate, for "packet rate in % of data mode" (the papers' event
-    /// rate tables, 2nd paper Fig. 8, sample at 125 Hz); `None`: learned from the stamps
-    /// ([`crate::rate::learn_sample_rate`]).
+    /// The cells' sample rate, for "packet rate in % of data mode"; `None` (the default):
+    /// learned from the stamps ([`crate::rate::learn_sample_rate`]), else
+    /// [`ASSUMED_SAMPLE_RATE_HZ`], and the report says which.
     pub sample_rate_hz: Option<f64>,
     /// The skin's cell count, the denominator of every per-cell ratio; `None`: the cells
     /// that sent at least one packet.
@@ -67,7 +65,7 @@ impl Default for DecoderConfig {
     fn default() -> Self {
         DecoderConfig {
             framing: CellFraming::DEFAULT,
-            sample_rate_hz: Some(125.0),
+            sample_rate_hz: None,
             cells: None,
         }
     }
@@ -685,7 +683,8 @@ impl Decoder {
     }
 
     /// The sample rate the rates are relative to, where it came from, and what the stamps
-    /// say about it: the configured rate, else the learned one, else 125 Hz.
+    /// say about it: the configured rate, else the learned one, else
+    /// [`ASSUMED_SAMPLE_RATE_HZ`].
     pub fn sample_rate(&self) -> (f64, &'static str, Option<SampleRateEstimate>) {
         let learned = learn_sample_rate(self.intervals.iter().copied());
         match (self.config.sample_rate_hz, learned) {

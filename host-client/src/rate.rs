@@ -10,6 +10,10 @@
 use serde::Serialize;
 use skinbox_protocol::TICKS_PER_SECOND;
 
+/// The sample rate taken when none is given and the stamps cannot tell, Hz (the papers'
+/// event rate tables, 2nd paper Fig. 8, sample at 125 Hz).
+pub const ASSUMED_SAMPLE_RATE_HZ: f64 = 125.0;
+
 /// The standard sample rates of the cells, Hz.
 pub const STANDARD_RATES_HZ: [f64; 5] = [62.5, 125.0, 250.0, 500.0, 1000.0];
 
@@ -79,7 +83,7 @@ pub fn learn_sample_rate(intervals: impl IntoIterator<Item = u64>) -> Option<Sam
                 .abs()
                 .total_cmp(&(estimated_hz / b - 1.0).abs())
         })
-        .unwrap_or(125.0);
+        .unwrap_or(ASSUMED_SAMPLE_RATE_HZ);
     let off = estimated_hz / nearest - 1.0;
     let standard_hz = (off.abs() <= STANDARD_TOLERANCE).then_some(nearest);
     Some(SampleRateEstimate {
