@@ -437,11 +437,6 @@ impl Decoder {
         self.bad.total
     }
 
-    /// The boxes seen so far, in order of their first datagram.
-    pub fn boxes(&self) -> impl Iterator<Item = BoxKey> + '_ {
-        self.boxes.iter().map(|b| b.key)
-    }
-
     /// Index of the box of `key`, added when new; `None` past [`MAX_BOXES`].
     fn box_index(&mut self, key: BoxKey) -> Option<usize> {
         if self.boxes.get(self.current).is_some_and(|b| b.key == key) {
@@ -671,10 +666,6 @@ impl Decoder {
     /// Duration the records span, plus one sample period: N samples per cell at the
     /// sample rate make exactly N / rate seconds, so data mode reads 100 %. With several
     /// boxes (each its own clock), the longest box's.
-    pub fn duration_s(&self) -> f64 {
-        self.duration_at(self.sample_rate().0)
-    }
-
     fn duration_at(&self, rate: f64) -> f64 {
         self.boxes
             .iter()
@@ -775,8 +766,8 @@ impl Decoder {
             });
         }
         // Counters by port mean something only for one box.
-        if self.boxes.len() == 1 {
-            box_status.last_counters = self.boxes[0].box_status().last_counters;
+        if let [only] = boxes.as_slice() {
+            box_status.last_counters = only.box_status.last_counters.clone();
         }
         let cells_active = cells.len() as u64;
         let cells_denominator = match self.config.cells {

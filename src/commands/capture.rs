@@ -126,7 +126,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         report.host = Some(skinbox_host::report::HostCost {
             cpu_s: stats.cpu_s,
             wall_s: stats.wall_s,
-            cpu_ns_per_packet: stats.cpu_s * 1e9 / report.records.max(1) as f64,
+            cpu_ns_per_packet: stats.cpu_ns_per_record(),
         });
         if json {
             super::print_json(&serde_json::json!({
