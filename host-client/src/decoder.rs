@@ -18,6 +18,7 @@
 
 use crate::bad_input::{BadInput, Reason};
 use crate::convert::{EventToData, Sample, CELL_IDS};
+pub use crate::rate::ASSUMED_SAMPLE_RATE_HZ;
 use crate::rate::{learn_sample_rate, SampleRateEstimate};
 use crate::report::{
     self, ratio, BoxReport, BoxStatusReport, CellReport, CellsDenominator, LossReport,
@@ -46,17 +47,14 @@ pub struct BoxKey {
     pub source: Option<SocketAddr>,
 }
 
-/// The sample rate taken when none is given and the stamps cannot tell (2nd paper, Fig. 8).
-pub const ASSUMED_SAMPLE_RATE_HZ: f64 = 125.0;
-
 /// Settings of a decoder.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DecoderConfig {
     /// Header and end-of-packet bytes of the cells (a parameter of the box).
     pub framing: CellFraming,
-    /// The cells' sample rate, for "packet rate in % of data mode" (the papers' event
-    /// rate tables, 2nd paper Fig. 8, sample at 125 Hz); `None`: learned from the stamps
-    /// ([`crate::rate::learn_sample_rate`]).
+    /// The cells' sample rate, for "packet rate in % of data mode"; `None` (the default):
+    /// learned from the stamps ([`crate::rate::learn_sample_rate`]), else
+    /// [`ASSUMED_SAMPLE_RATE_HZ`], and the report says which.
     pub sample_rate_hz: Option<f64>,
     /// The skin's cell count, the denominator of every per-cell ratio; `None`: the cells
     /// that sent at least one packet.
@@ -67,7 +65,7 @@ impl Default for DecoderConfig {
     fn default() -> Self {
         DecoderConfig {
             framing: CellFraming::DEFAULT,
-            sample_rate_hz: Some(125.0),
+            sample_rate_hz: None,
             cells: None,
         }
     }
@@ -151,8 +149,9 @@ struct CellCounters {
     event_packets_repeated: u64,
     /// Tick of its last packet that began a sample (not a split sample's second).
     last_sample_tick: Option<u64>,
-    /// Channels of its last event sample so far (a split sample's second packet adds to
-    /// it), not yet in the fired-together histogram; 0: none.
+    /// Channels of its last event sample while it may still be split (a second part
+    /// with the next sequence number completes it), not yet in the fired-together
+    /// histogram; 0: none.
     pending_fired: u8,
 }
 
@@ -188,15 +187,13 @@ struct BoxTrack {
     last_counters: BTreeMap<u8, [u32; PortCounter::ALL.len()]>,
     datagrams_sent_delta: u64,
     records_sent_delta: u64,
-    /// Per-cell intervals between packets that began a sample, in ticks (the first
-    /// [`MAX_INTERVALS`]).
-    intervals: Vec<u64>,
     /// Event samples by the number of channels that fired in them (index 1..=9), split
     /// samples joined; the cells' pending samples are not in it yet.
     fired_together: [u64; Channel::COUNT + 1],
 }
 
-/// How many per-cell tick intervals a box keeps for learning the sample rate.
+/// How many per-cell tick intervals a decoder keeps for learning the sample rate, over
+/// all boxes.
 const MAX_INTERVALS: usize = 1 << 18;
 
 impl BoxTrack {
@@ -221,7 +218,6 @@ impl BoxTrack {
             last_counters: BTreeMap::new(),
             datagrams_sent_delta: 0,
             records_sent_delta: 0,
-            intervals: Vec::new(),
             fired_together: [0; Channel::COUNT + 1],
         }
     }
@@ -381,6 +377,9 @@ pub struct Decoder {
     current: usize,
     bad: BadInput,
     records: u64,
+    /// Per-cell intervals between packets that began a sample, in ticks, of every box
+    /// (the first [`MAX_INTERVALS`]).
+    intervals: Vec<u64>,
     data_packets: u64,
     event_packets: u64,
     events_per_packet: [u64; 7],
@@ -405,6 +404,7 @@ impl Decoder {
             current: 0,
             bad: BadInput::default(),
             records: 0,
+            intervals: Vec::new(),
             data_packets: 0,
             event_packets: 0,
             events_per_packet: [0; 7],
@@ -426,9 +426,15 @@ impl Decoder {
         self.records
     }
 
-    /// The boxes seen so far, in order of their first datagram.
-    pub fn boxes(&self) -> impl Iterator<Item = BoxKey> + '_ {
-        self.boxes.iter().map(|b| b.key)
+    /// Datagrams missing so far, over every box (the report's `losses.datagrams_missing`,
+    /// without building a report).
+    pub fn datagrams_missing(&self) -> u64 {
+        self.boxes.iter().map(|b| b.sequence.counts().missing).sum()
+    }
+
+    /// Bad input counted so far (the report's `bad_input.total`).
+    pub fn bad_input_total(&self) -> u64 {
+        self.bad.total
     }
 
     /// Index of the box of `key`, added when new; `None` past [`MAX_BOXES`].
@@ -578,8 +584,8 @@ impl Decoder {
             };
             if begins_sample {
                 if let Some(last) = c.last_sample_tick {
-                    if track.intervals.len() < MAX_INTERVALS {
-                        track.intervals.push(tick.abs_diff(last));
+                    if self.intervals.len() < MAX_INTERVALS {
+                        self.intervals.push(tick.abs_diff(last));
                     }
                 }
                 c.last_sample_tick = Some(tick);
@@ -601,13 +607,16 @@ impl Decoder {
                         bits &= bits - 1;
                     }
                     // A split sample's second packet follows its first with the next
-                    // sequence number; anything else begins a sample.
+                    // sequence number; anything else begins a sample. A split sample has
+                    // exactly two packets: the second completes it at once.
                     let fired = e.channels.len() as u8;
                     let joins = e.second_part
                         && c.pending_fired > 0
                         && c.last_event_sequence == Some(e.sequence.wrapping_sub(1));
                     if joins {
-                        c.pending_fired += fired;
+                        let together = usize::from(c.pending_fired) + usize::from(fired);
+                        track.fired_together[together.min(Channel::COUNT)] += 1;
+                        c.pending_fired = 0;
                     } else {
                         if c.pending_fired > 0 {
                             track.fired_together
@@ -657,10 +666,6 @@ impl Decoder {
     /// Duration the records span, plus one sample period: N samples per cell at the
     /// sample rate make exactly N / rate seconds, so data mode reads 100 %. With several
     /// boxes (each its own clock), the longest box's.
-    pub fn duration_s(&self) -> f64 {
-        self.duration_at(self.sample_rate().0)
-    }
-
     fn duration_at(&self, rate: f64) -> f64 {
         self.boxes
             .iter()
@@ -669,18 +674,10 @@ impl Decoder {
     }
 
     /// The sample rate the rates are relative to, where it came from, and what the stamps
-    /// say about it: the configured rate, else the learned one, else 125 Hz.
+    /// say about it: the configured rate, else the learned one, else
+    /// [`ASSUMED_SAMPLE_RATE_HZ`].
     pub fn sample_rate(&self) -> (f64, &'static str, Option<SampleRateEstimate>) {
-        let learned = if self.boxes.len() == 1 {
-            learn_sample_rate(&self.boxes[0].intervals)
-        } else {
-            let all: Vec<u64> = self
-                .boxes
-                .iter()
-                .flat_map(|b| b.intervals.iter().copied())
-                .collect();
-            learn_sample_rate(&all)
-        };
+        let learned = learn_sample_rate(self.intervals.iter().copied());
         match (self.config.sample_rate_hz, learned) {
             (Some(rate), _) => (rate, SAMPLE_RATE_GIVEN, learned),
             (None, Some(e)) => (e.rate_hz, SAMPLE_RATE_LEARNED, learned),
@@ -769,8 +766,8 @@ impl Decoder {
             });
         }
         // Counters by port mean something only for one box.
-        if self.boxes.len() == 1 {
-            box_status.last_counters = self.boxes[0].box_status().last_counters;
+        if let [only] = boxes.as_slice() {
+            box_status.last_counters = only.box_status.last_counters.clone();
         }
         let cells_active = cells.len() as u64;
         let cells_denominator = match self.config.cells {
@@ -863,5 +860,64 @@ impl Decoder {
             host: None,
             cells,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinbox_protocol::datagram::{DatagramBody, MAX_RECORDS};
+    use skinbox_protocol::{DataRepr, RecordRepr, TICKS_PER_SECOND};
+
+    /// The intervals kept for learning the rate are capped over all boxes, not per box.
+    #[test]
+    fn the_intervals_are_capped_over_all_boxes() {
+        // One cell per box in data mode at 125 Hz.
+        let period = TICKS_PER_SECOND / 125;
+        let per_box = MAX_INTERVALS * 3 / 5;
+        let mut d = Decoder::new(DecoderConfig {
+            sample_rate_hz: None,
+            ..DecoderConfig::default()
+        });
+        for box_id in [1, 2] {
+            let mut sent = 0usize;
+            let mut sequence = 0;
+            while sent < per_box {
+                let n = MAX_RECORDS.min(per_box - sent);
+                let records = (0..n)
+                    .map(|k| RecordRepr {
+                        port: 0,
+                        flags: 0,
+                        tick_offset: (k as u64 * period) as i32,
+                        cell_packet: DataRepr {
+                            cell_id: 1,
+                            ..DataRepr::default()
+                        }
+                        .to_bytes(),
+                    })
+                    .collect();
+                let payload = DatagramRepr {
+                    box_id,
+                    port_count: 1,
+                    flags: 0,
+                    sequence,
+                    base_tick: sent as u64 * period,
+                    body: DatagramBody::Records(records),
+                }
+                .to_bytes();
+                d.push_datagram(&payload, &mut ());
+                sent += n;
+                sequence += 1;
+            }
+        }
+        assert_eq!(d.records(), 2 * per_box as u64);
+        assert_eq!(d.intervals.len(), MAX_INTERVALS);
+        let r = d.report();
+        assert_eq!(r.sample_rate_source, SAMPLE_RATE_LEARNED);
+        assert_eq!(r.sample_rate_hz, 125.0);
+        assert_eq!(
+            r.sample_rate_learned.unwrap().intervals,
+            MAX_INTERVALS as u64
+        );
     }
 }

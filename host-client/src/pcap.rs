@@ -74,23 +74,27 @@ fn link_type(datalink: DataLink) -> Option<LinkType> {
     }
 }
 
-/// Takes one captured frame: counts it, finds its UDP datagram or counts why not.
-fn take_frame<'a>(
+/// Takes one captured frame: counts it, finds its UDP datagram or counts why not. A frame
+/// without a timestamp (`None`: a pcapng simple packet block) is passed on with a zero
+/// timestamp and leaves the capture span alone.
+fn take_frame(
     scan: &mut PcapScan,
     span: &mut (Option<Duration>, Duration),
-    ts: Duration,
-    data: &'a [u8],
+    ts: Option<Duration>,
+    data: &[u8],
     link: LinkType,
     udp_port: Option<u16>,
-    f: &mut impl FnMut(Duration, UdpDatagram<'a>),
+    f: &mut impl FnMut(Duration, UdpDatagram<'_>),
 ) {
     scan.frames.frames += 1;
-    span.0.get_or_insert(ts);
-    span.1 = span.1.max(ts);
+    if let Some(ts) = ts {
+        span.0.get_or_insert(ts);
+        span.1 = span.1.max(ts);
+    }
     match frame::udp_payload(data, link, udp_port) {
         Ok(udp) => {
             scan.frames.udp_payloads += 1;
-            f(ts, udp);
+            f(ts.unwrap_or_default(), udp);
         }
         Err(FrameReject::OtherPort(_)) => scan.frames.other_port += 1,
         Err(reject) => reject.count_in(&mut scan.bad),
@@ -98,11 +102,12 @@ fn take_frame<'a>(
 }
 
 /// Calls `f` with the timestamp and UDP datagram of every frame of a pcap or pcapng that
-/// carries one; counts every other frame by reason.
-pub fn for_each_udp_payload<'a>(
-    bytes: &'a [u8],
+/// carries one; counts every other frame by reason. Frames of pcapng simple packet blocks
+/// have no timestamp: `f` gets a zero one, and they do not enter the capture span.
+pub fn for_each_udp_payload(
+    bytes: &[u8],
     udp_port: Option<u16>,
-    f: impl FnMut(Duration, UdpDatagram<'a>),
+    f: impl FnMut(Duration, UdpDatagram<'_>),
 ) -> Result<PcapScan, PcapError> {
     if bytes.starts_with(&PCAPNG_MAGIC) {
         for_each_pcapng(bytes, udp_port, f)
@@ -111,10 +116,10 @@ pub fn for_each_udp_payload<'a>(
     }
 }
 
-fn for_each_pcapng<'a>(
-    bytes: &'a [u8],
+fn for_each_pcapng(
+    bytes: &[u8],
     udp_port: Option<u16>,
-    mut f: impl FnMut(Duration, UdpDatagram<'a>),
+    mut f: impl FnMut(Duration, UdpDatagram<'_>),
 ) -> Result<PcapScan, PcapError> {
     let (mut rest, mut parser) = PcapNgParser::new(bytes)
         .map_err(|e| PcapError::NotPcap(format!("pcapng section header: {e}")))?;
@@ -140,9 +145,10 @@ fn for_each_pcapng<'a>(
         rest = next;
         // Timestamps come decoded with the interface's if_tsresol and if_tsoffset.
         let (interface, ts, data) = match block {
-            Block::EnhancedPacket(p) => (p.interface_id, p.timestamp, p.data),
-            Block::Packet(p) => (u32::from(p.interface_id), p.timestamp, p.data),
-            Block::SimplePacket(p) => (0, Duration::ZERO, p.data),
+            Block::EnhancedPacket(p) => (p.interface_id, Some(p.timestamp), p.data),
+            Block::Packet(p) => (u32::from(p.interface_id), Some(p.timestamp), p.data),
+            // A simple packet block has no timestamp.
+            Block::SimplePacket(p) => (0, None, p.data),
             _ => continue,
         };
         let datalink = parser
@@ -156,11 +162,8 @@ fn for_each_pcapng<'a>(
             });
             continue;
         };
-        // The parser borrows packet data from `bytes`.
-        let std::borrow::Cow::Borrowed(data) = data else {
-            continue;
-        };
-        take_frame(&mut scan, &mut span, ts, data, link, udp_port, &mut f);
+        // The parser borrows packet data from `bytes`; owned data is read all the same.
+        take_frame(&mut scan, &mut span, ts, &data, link, udp_port, &mut f);
     }
     if let Some(first) = span.0 {
         scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
@@ -168,10 +171,10 @@ fn for_each_pcapng<'a>(
     Ok(scan)
 }
 
-fn for_each_pcap<'a>(
-    bytes: &'a [u8],
+fn for_each_pcap(
+    bytes: &[u8],
     udp_port: Option<u16>,
-    mut f: impl FnMut(Duration, UdpDatagram<'a>),
+    mut f: impl FnMut(Duration, UdpDatagram<'_>),
 ) -> Result<PcapScan, PcapError> {
     let (mut rest, parser) =
         PcapParser::new(bytes).map_err(|e| PcapError::NotPcap(e.to_string()))?;
@@ -184,12 +187,17 @@ fn for_each_pcap<'a>(
             Ok((next, packet)) => {
                 rest = next;
                 let ts = packet.timestamp();
-                // `next_packet` borrows from `bytes`: the data is a borrowed Cow.
-                let data: &'a [u8] = match packet.into_data() {
-                    std::borrow::Cow::Borrowed(d) => d,
-                    std::borrow::Cow::Owned(_) => continue,
-                };
-                take_frame(&mut scan, &mut span, ts, data, link, udp_port, &mut f);
+                // `next_packet` borrows from `bytes`; owned data is read all the same.
+                let data = packet.into_data();
+                take_frame(
+                    &mut scan,
+                    &mut span,
+                    Some(ts),
+                    &data,
+                    link,
+                    udp_port,
+                    &mut f,
+                );
             }
             Err(PcapParseError::IncompleteBuffer(needed, have)) => {
                 scan.bad.count(Reason::PcapTruncated, || {

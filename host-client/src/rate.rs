@@ -10,6 +10,10 @@
 use serde::Serialize;
 use skinbox_protocol::TICKS_PER_SECOND;
 
+/// The sample rate taken when none is given and the stamps cannot tell, Hz (the papers'
+/// event rate tables, 2nd paper Fig. 8, sample at 125 Hz).
+pub const ASSUMED_SAMPLE_RATE_HZ: f64 = 125.0;
+
 /// The standard sample rates of the cells, Hz.
 pub const STANDARD_RATES_HZ: [f64; 5] = [62.5, 125.0, 250.0, 500.0, 1000.0];
 
@@ -40,11 +44,10 @@ pub struct SampleRateEstimate {
 }
 
 /// The sample rate from per-cell intervals between packets that began a sample, in box
-/// ticks; `None` when no interval is usable.
-pub fn learn_sample_rate(intervals: &[u64]) -> Option<SampleRateEstimate> {
+/// ticks; `None` when no interval is usable. Only the usable intervals are collected.
+pub fn learn_sample_rate(intervals: impl IntoIterator<Item = u64>) -> Option<SampleRateEstimate> {
     let mut d: Vec<u64> = intervals
-        .iter()
-        .copied()
+        .into_iter()
         .filter(|d| (MIN_INTERVAL_TICKS..=MAX_INTERVAL_TICKS).contains(d))
         .collect();
     if d.is_empty() {
@@ -80,7 +83,7 @@ pub fn learn_sample_rate(intervals: &[u64]) -> Option<SampleRateEstimate> {
                 .abs()
                 .total_cmp(&(estimated_hz / b - 1.0).abs())
         })
-        .unwrap_or(125.0);
+        .unwrap_or(ASSUMED_SAMPLE_RATE_HZ);
     let off = estimated_hz / nearest - 1.0;
     let standard_hz = (off.abs() <= STANDARD_TOLERANCE).then_some(nearest);
     Some(SampleRateEstimate {
@@ -107,7 +110,7 @@ mod tests {
             let jitter = (i * 7_919 % 60_001) as i64 - 30_000;
             v.push((k * p) as i64 + jitter);
         }
-        let e = learn_sample_rate(&v.iter().map(|&x| x as u64).collect::<Vec<_>>()).unwrap();
+        let e = learn_sample_rate(v.iter().map(|&x| x as u64)).unwrap();
         assert!((e.estimated_hz - 250.0).abs() < 2.0, "{e:?}");
         assert_eq!(e.standard_hz, Some(250.0));
         assert_eq!(e.rate_hz, 250.0);
@@ -118,14 +121,14 @@ mod tests {
     fn a_rate_far_from_the_standards_is_kept() {
         // 180 Hz is 28 % above 125 and 28 % below 250.
         let p = TICKS_PER_SECOND / 180;
-        let e = learn_sample_rate(&[p; 50]).unwrap();
+        let e = learn_sample_rate([p; 50]).unwrap();
         assert_eq!(e.standard_hz, None);
         assert!((e.rate_hz - 180.0).abs() < 0.01, "{e:?}");
     }
 
     #[test]
     fn nothing_usable_gives_none() {
-        assert_eq!(learn_sample_rate(&[]), None);
-        assert_eq!(learn_sample_rate(&[10, 20]), None);
+        assert_eq!(learn_sample_rate([]), None);
+        assert_eq!(learn_sample_rate([10, 20]), None);
     }
 }

@@ -19,8 +19,9 @@ pub fn percent(part: f64, whole: f64) -> f64 {
 pub const SAMPLE_RATE_GIVEN: &str = "given";
 /// `sample_rate_source`: the rate was learned from the record stamps.
 pub const SAMPLE_RATE_LEARNED: &str = "learned from the stamps";
-/// `sample_rate_source`: neither given nor learnable (no cell sent twice): 125 Hz assumed.
-pub const SAMPLE_RATE_ASSUMED: &str = "assumed (125 Hz): not given, too few stamps to learn it";
+/// `sample_rate_source`: neither given nor learnable (no cell sent twice):
+/// [`crate::rate::ASSUMED_SAMPLE_RATE_HZ`] assumed.
+pub const SAMPLE_RATE_ASSUMED: &str = "assumed: not given, too few stamps to learn it";
 /// `cells_denominator.source`: the skin's cell count was given.
 pub const CELLS_GIVEN: &str = "given";
 /// `cells_denominator.source`: the cells that sent at least one packet.

@@ -145,10 +145,7 @@ fn step(rng: &mut Rng, channel: Channel, v: i32, scale: i32) -> i32 {
             }
         }
     };
-    let range = match channel.modality() {
-        Modality::Acceleration => -512..=511,
-        _ => channel.data_range(),
-    };
+    let range = channel.data_range();
     (v + d * scale).clamp(*range.start(), *range.end())
 }
 

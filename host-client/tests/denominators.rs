@@ -2,7 +2,10 @@
 //! cell count (the skin's, or the cells seen), checked on synthetic captures whose truth
 //! is known.
 
-use skinbox_host::report::{CELLS_GIVEN, CELLS_SEEN, SAMPLE_RATE_GIVEN, SAMPLE_RATE_LEARNED};
+use skinbox_host::rate::ASSUMED_SAMPLE_RATE_HZ;
+use skinbox_host::report::{
+    CELLS_GIVEN, CELLS_SEEN, SAMPLE_RATE_ASSUMED, SAMPLE_RATE_GIVEN, SAMPLE_RATE_LEARNED,
+};
 use skinbox_host::synth::{self, SynthCapture, SynthConfig};
 use skinbox_host::{Decoder, DecoderConfig, Report};
 use skinbox_protocol::datagram::DatagramBody;
@@ -71,11 +74,45 @@ fn a_given_sample_rate_wins_and_the_stamps_are_still_shown() {
         ..SynthConfig::default()
     });
     // 125 Hz given for a 250 Hz capture: used as given, the stamps say 250.
-    let r = decode(&capture, DecoderConfig::default(), 0);
+    let r = decode(
+        &capture,
+        DecoderConfig {
+            sample_rate_hz: Some(125.0),
+            ..DecoderConfig::default()
+        },
+        0,
+    );
     assert_eq!(r.sample_rate_hz, 125.0);
     assert_eq!(r.sample_rate_source, SAMPLE_RATE_GIVEN);
     assert_eq!(r.sample_rate_learned.unwrap().standard_hz, Some(250.0));
     assert!(r.summary().contains("125 Hz, given (stamps: 250.00 Hz"));
+}
+
+/// Nobody gave a rate: the default learns it from the stamps, and says it assumed one when
+/// the stamps cannot tell.
+#[test]
+fn the_default_learns_the_rate_or_says_it_assumed_one() {
+    assert_eq!(DecoderConfig::default().sample_rate_hz, None);
+    let capture = synth::generate(&SynthConfig {
+        sample_rate_hz: 250.0,
+        ..SynthConfig::default()
+    });
+    let r = decode(&capture, DecoderConfig::default(), 0);
+    assert_eq!(r.sample_rate_hz, 250.0);
+    assert_eq!(r.sample_rate_source, SAMPLE_RATE_LEARNED);
+
+    // One packet per cell: no interval to learn from.
+    let one = synth::generate(&SynthConfig {
+        sample_rate_hz: 250.0,
+        samples_per_cell: 1,
+        ..SynthConfig::default()
+    });
+    let r = decode(&one, DecoderConfig::default(), 0);
+    assert!(r.records > 0);
+    assert_eq!(r.sample_rate_hz, ASSUMED_SAMPLE_RATE_HZ);
+    assert_eq!(r.sample_rate_source, SAMPLE_RATE_ASSUMED);
+    assert_eq!(r.sample_rate_learned, None);
+    assert!(r.summary().contains("125 Hz, assumed"), "{}", r.summary());
 }
 
 #[test]

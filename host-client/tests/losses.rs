@@ -70,6 +70,26 @@ fn nothing_lost_when_nothing_is_dropped() {
     assert_eq!((l.event_sequence_gaps, l.event_packets_missing), (0, 0));
 }
 
+/// The decoder's cheap getters (for a progress line) say what its report says.
+#[test]
+fn the_getters_agree_with_the_report() {
+    let c = capture(1, 0);
+    let mut payloads = c.payloads();
+    payloads.remove(5);
+    payloads.remove(9);
+    payloads[3].truncate(10);
+    let mut d = Decoder::new(DecoderConfig::default());
+    for p in &payloads {
+        d.push_datagram(p, &mut ());
+    }
+    let r = d.report();
+    assert!(r.losses.datagrams_missing >= 2, "{:?}", r.losses);
+    assert_eq!(d.datagrams_missing(), r.losses.datagrams_missing);
+    assert_eq!(r.bad_input.total, 1);
+    assert_eq!(d.bad_input_total(), r.bad_input.total);
+    assert_eq!(d.records(), r.records);
+}
+
 #[test]
 fn dropped_datagrams_are_counted_exactly() {
     let c = capture(1, 0);

@@ -1,12 +1,18 @@
 //! pcapng as Wireshark's tools write it: a pcap made by the project, converted by editcap
 //! (`editcap -F pcapng`) and merged by mergecap (two interfaces with different timestamp
 //! resolutions), decodes to exactly what the pcap decodes to. Needs editcap and mergecap
-//! (Debian's wireshark-common; scripts/test installs it).
+//! (Debian's wireshark-common; scripts/test installs it). Simple packet blocks (no
+//! timestamp) are read and counted, outside the capture span.
 
 use pcap_file::pcap::{PcapHeader, PcapPacket, PcapTsResolution, PcapWriter};
+use pcap_file::pcapng::blocks::enhanced_packet::EnhancedPacketBlock;
+use pcap_file::pcapng::blocks::interface_description::InterfaceDescriptionBlock;
+use pcap_file::pcapng::blocks::simple_packet::SimplePacketBlock;
+use pcap_file::pcapng::{PcapNgBlock, PcapNgWriter};
 use pcap_file::DataLink;
 use skinbox_host::pcap::{decode_pcap_bytes, udp_payloads, PcapFrameWriter, PcapOptions};
 use skinbox_host::synth::{self, SynthConfig};
+use std::borrow::Cow;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -173,4 +179,79 @@ fn mergecap_pcapng_with_two_interfaces_and_resolutions() {
             .collect();
         assert_eq!(mine, alone.records);
     }
+}
+
+/// A pcapng written here: enhanced packet blocks 1 ms apart, with simple packet blocks
+/// (no timestamp) first and in between. Every frame is counted and decoded; the span is
+/// the enhanced packets' alone.
+#[test]
+fn simple_packet_blocks_are_counted_and_have_no_time() {
+    let src: SocketAddr = "192.0.2.10:54091".parse().unwrap();
+    let frames: Vec<Vec<u8>> = payloads(1, 3)
+        .iter()
+        .map(|p| skinbox_host::frame::build_udp_frame(src, HOST.parse().unwrap(), p))
+        .collect();
+    assert!(frames.len() > 4, "{}", frames.len());
+    let mut w = PcapNgWriter::new(Vec::new()).unwrap();
+    w.write_block(
+        &InterfaceDescriptionBlock {
+            linktype: DataLink::ETHERNET,
+            snaplen: 0,
+            options: vec![],
+        }
+        .into_block(),
+    )
+    .unwrap();
+    let simple = [0, frames.len() / 2];
+    let mut enhanced = 0u32;
+    for (i, f) in frames.iter().enumerate() {
+        let block = if simple.contains(&i) {
+            SimplePacketBlock {
+                original_len: f.len() as u32,
+                data: Cow::Borrowed(&f[..]),
+            }
+            .into_block()
+        } else {
+            enhanced += 1;
+            EnhancedPacketBlock {
+                interface_id: 0,
+                timestamp: Duration::new(T0, 1_000_000 * enhanced),
+                original_len: f.len() as u32,
+                data: Cow::Borrowed(&f[..]),
+                options: vec![],
+            }
+            .into_block()
+        };
+        w.write_block(&block).unwrap();
+    }
+    let ng = w.into_inner();
+
+    let (got, scan) = udp_payloads(&ng, None).unwrap();
+    assert_eq!(scan.bad.total, 0, "{:?}", scan.bad);
+    assert_eq!(scan.frames.frames, frames.len() as u64);
+    assert_eq!(scan.frames.udp_payloads, frames.len() as u64);
+    assert_eq!(got.len(), frames.len());
+    for i in simple {
+        assert_eq!(got[i].timestamp, Duration::ZERO);
+    }
+    // The enhanced packets span (enhanced - 1) ms.
+    let want_span = f64::from(enhanced - 1) * 1e-3;
+    assert!(
+        (scan.frames.capture_span_s - want_span).abs() < 1e-9,
+        "{} s",
+        scan.frames.capture_span_s
+    );
+
+    let decoded = decode_pcap_bytes(&ng, &PcapOptions::default()).unwrap();
+    assert_eq!(decoded.report.frames, scan.frames);
+    assert_eq!(decoded.report.losses.datagrams_missing, 0);
+    let mut from_pcap = PcapFrameWriter::new(Vec::new()).unwrap();
+    for (i, f) in frames.iter().enumerate() {
+        from_pcap
+            .write_frame(Duration::new(T0, 1_000_000 * i as u32), f)
+            .unwrap();
+    }
+    let alone = decode_pcap_bytes(&from_pcap.finish().unwrap(), &PcapOptions::default()).unwrap();
+    assert!(!alone.records.is_empty());
+    assert_eq!(decoded.records, alone.records);
 }

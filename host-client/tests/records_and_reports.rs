@@ -1,10 +1,13 @@
 //! The decoder's policy for bad records (a bad record rejects only itself, counted by
-//! reason), status reports counted per report, and `first_tick` as the earliest record.
+//! reason), status reports counted per report, `first_tick` as the earliest record, and
+//! split samples of exactly two event packets.
 
 use skinbox_host::bad_input::{FormatFault, Reason};
 use skinbox_host::{DecodedRecord, Decoder, DecoderConfig};
 use skinbox_protocol::datagram::DatagramBody;
-use skinbox_protocol::{DataRepr, DatagramRepr, PortCounters, RecordRepr, StatusRepr};
+use skinbox_protocol::{
+    Channel, DataRepr, DatagramRepr, EventRepr, PortCounters, RecordRepr, StatusRepr,
+};
 
 fn record(port: u8, flags: u8, tick_offset: i32, cell_id: u16) -> RecordRepr {
     RecordRepr {
@@ -139,4 +142,50 @@ fn first_tick_is_the_earliest_record() {
     assert_eq!(r.first_tick, 7_000);
     assert_eq!(r.last_tick, 11_000);
     assert_eq!(r.boxes[0].first_tick, 7_000);
+}
+
+/// A split sample has exactly two packets: a run of second parts with consecutive sequence
+/// numbers pairs up (the first with its first part, then two by two), never adding up
+/// past one pair, and the last unpaired packet is a pending sample of its own.
+#[test]
+fn a_run_of_second_parts_pairs_up() {
+    let event = |sequence: u16, second_part: bool, channels: usize| RecordRepr {
+        port: 0,
+        flags: 0,
+        tick_offset: i32::from(sequence) * 1_000,
+        cell_packet: EventRepr::new(
+            5,
+            sequence,
+            second_part,
+            &Channel::ALL[..channels]
+                .iter()
+                .map(|c| (*c, 0))
+                .collect::<Vec<_>>(),
+        )
+        .unwrap()
+        .to_bytes(),
+    };
+    // A first part of six channels, then 300 second parts of three channels each.
+    let packets: Vec<RecordRepr> = std::iter::once(event(0, false, 6))
+        .chain((1..=300).map(|s| event(s, true, 3)))
+        .collect();
+    let mut decoder = Decoder::new(DecoderConfig::default());
+    let mut records = Vec::new();
+    for (i, chunk) in packets.chunks(20).enumerate() {
+        decoder.push_datagram(
+            &records_datagram(i as u32, 1_000_000, chunk.to_vec()),
+            &mut records,
+        );
+    }
+    assert_eq!(records.len(), 301);
+    let r = decoder.report();
+    assert_eq!(r.bad_input.total, 0);
+    assert_eq!(r.event_packets, 301);
+    assert_eq!(r.losses.event_sequence_gaps, 0);
+    // (0, 1): 6 + 3 channels; (2, 3) .. (298, 299): 3 + 3; 300 alone: 3.
+    let mut expected = vec![0u64; 9];
+    expected[9 - 1] = 1;
+    expected[6 - 1] = 149;
+    expected[3 - 1] = 1;
+    assert_eq!(r.fired_together_histogram, expected);
 }

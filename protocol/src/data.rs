@@ -58,6 +58,19 @@ fn channel_field(c: Channel) -> crate::Field {
     }
 }
 
+/// Checks the frame of a data packet: length, data header, end-of-packet byte, cell id.
+fn check_frame(b: &[u8], framing: &CellFraming) -> Result<()> {
+    match CellPacket::new_unchecked(b).check(Format::DataPacket, framing)? {
+        CellKind::Data => Ok(()),
+        CellKind::Event => Err(Error::BadHeader {
+            format: Format::DataPacket,
+            found: framing.event_header,
+            data: framing.data_header,
+            event: framing.event_header,
+        }),
+    }
+}
+
 /// A view over a data packet.
 #[derive(Debug, Clone)]
 pub struct DataPacket<T: AsRef<[u8]>> {
@@ -78,34 +91,9 @@ impl<T: AsRef<[u8]>> DataPacket<T> {
     /// Wraps untrusted bytes: length, data header, end-of-packet byte, 14-bit cell id,
     /// accelerations in their 10-bit signed range.
     pub fn new_checked_with(buffer: T, framing: &CellFraming) -> Result<Self> {
-        let cell = CellPacket::new_unchecked(buffer);
-        match cell.check(Format::DataPacket, framing)? {
-            CellKind::Data => {
-                let p = DataPacket {
-                    buffer: cell.into_inner(),
-                };
-                for channel in [Channel::AccelX, Channel::AccelY, Channel::AccelZ] {
-                    let value = p.raw(channel);
-                    let range = channel.data_range();
-                    if !range.contains(&value) {
-                        return Err(Error::ValueOutOfRange {
-                            format: Format::DataPacket,
-                            channel,
-                            value,
-                            min: *range.start(),
-                            max: *range.end(),
-                        });
-                    }
-                }
-                Ok(p)
-            }
-            CellKind::Event => Err(Error::BadHeader {
-                format: Format::DataPacket,
-                found: framing.event_header,
-                data: framing.data_header,
-                event: framing.event_header,
-            }),
-        }
+        check_frame(buffer.as_ref(), framing)?;
+        DataRepr::from_checked_frame(buffer.as_ref())?;
+        Ok(DataPacket { buffer })
     }
 
     /// Cell id.
@@ -209,29 +197,24 @@ impl DataRepr {
         Self::parse_with(bytes, &CellFraming::DEFAULT)
     }
 
-    /// Parses untrusted bytes.
+    /// Parses untrusted bytes: the frame checked, then every field read once.
     pub fn parse_with(bytes: &[u8], framing: &CellFraming) -> Result<DataRepr> {
-        let p = DataPacket::new_checked_with(bytes, framing)?;
-        Ok(Self::from_packet(p.cell_id(), &p))
+        check_frame(bytes, framing)?;
+        Self::from_checked_frame(bytes)
     }
 
     /// The body of a data packet whose 20 bytes, header, end byte and cell id were checked:
     /// every field read once, accelerations checked against their 10-bit range. The
     /// decoder's path ([`crate::CellRepr::parse`]).
     pub(crate) fn from_checked_frame(b: &[u8]) -> Result<DataRepr> {
-        let word = |at: usize| u16::from_be_bytes([b[at], b[at + 1]]);
-        let accel = [
-            word(field::ACCEL[0].start) as i16,
-            word(field::ACCEL[1].start) as i16,
-            word(field::ACCEL[2].start) as i16,
-        ];
+        let accel = field::ACCEL.map(|at| get_u16(b, at) as i16);
         let range = Channel::AccelX.data_range();
         for (i, a) in accel.iter().enumerate() {
             let value = i32::from(*a);
             if !range.contains(&value) {
                 return Err(Error::ValueOutOfRange {
                     format: Format::DataPacket,
-                    channel: Channel::ALL[i],
+                    channel: ACCEL[i],
                     value,
                     min: *range.start(),
                     max: *range.end(),
@@ -239,14 +222,10 @@ impl DataRepr {
             }
         }
         Ok(DataRepr {
-            cell_id: word(cell::field::CELL_ID.start),
+            cell_id: get_u16(b, cell::field::CELL_ID),
             accel,
-            force: [
-                word(field::FORCE[0].start),
-                word(field::FORCE[1].start),
-                word(field::FORCE[2].start),
-            ],
-            proximity: word(field::PROXIMITY.start),
+            force: field::FORCE.map(|at| get_u16(b, at)),
+            proximity: get_u16(b, field::PROXIMITY),
             temperature: [b[field::TEMPERATURE[0]], b[field::TEMPERATURE[1]]],
         })
     }

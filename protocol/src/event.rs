@@ -54,6 +54,19 @@ pub fn layout() -> Vec<LayoutRow> {
     rows
 }
 
+/// Checks the frame of an event packet: length, event header, end-of-packet byte, cell id.
+fn check_frame(b: &[u8], framing: &CellFraming) -> Result<()> {
+    match CellPacket::new_unchecked(b).check(Format::EventPacket, framing)? {
+        CellKind::Event => Ok(()),
+        CellKind::Data => Err(Error::BadHeader {
+            format: Format::EventPacket,
+            found: framing.data_header,
+            data: framing.data_header,
+            event: framing.event_header,
+        }),
+    }
+}
+
 /// A view over an event packet.
 #[derive(Debug, Clone)]
 pub struct EventPacket<T: AsRef<[u8]>> {
@@ -74,20 +87,9 @@ impl<T: AsRef<[u8]>> EventPacket<T> {
     /// Wraps untrusted bytes: framing, cell id, and a mask with no reserved bit and one to
     /// six events.
     pub fn new_checked_with(buffer: T, framing: &CellFraming) -> Result<Self> {
-        let cell = CellPacket::new_unchecked(buffer);
-        if cell.check(Format::EventPacket, framing)? == CellKind::Data {
-            return Err(Error::BadHeader {
-                format: Format::EventPacket,
-                found: framing.data_header,
-                data: framing.data_header,
-                event: framing.event_header,
-            });
-        }
-        let p = EventPacket {
-            buffer: cell.into_inner(),
-        };
-        EventRepr::from_checked_frame(p.buffer.as_ref())?;
-        Ok(p)
+        check_frame(buffer.as_ref(), framing)?;
+        EventRepr::from_checked_frame(buffer.as_ref())?;
+        Ok(EventPacket { buffer })
     }
 
     pub fn cell_id(&self) -> u16 {
@@ -214,18 +216,17 @@ impl EventRepr {
         Self::parse_with(bytes, &CellFraming::DEFAULT)
     }
 
-    /// Parses untrusted bytes.
+    /// Parses untrusted bytes: the frame checked, then the body decoded once.
     pub fn parse_with(bytes: &[u8], framing: &CellFraming) -> Result<EventRepr> {
-        let p = EventPacket::new_checked_with(bytes, framing)?;
-        Self::from_checked_frame(p.buffer)
+        check_frame(bytes, framing)?;
+        Self::from_checked_frame(bytes)
     }
 
     /// The body of an event packet whose 20 bytes, header, end byte and cell id were
     /// checked: the mask, each value in its range, unused value slots 0, in one pass. The
     /// decoder's path ([`crate::CellRepr::parse`]).
     pub(crate) fn from_checked_frame(b: &[u8]) -> Result<EventRepr> {
-        let word = |at: usize| u16::from_be_bytes([b[at], b[at + 1]]);
-        let mask = word(field::MASK.start);
+        let mask = get_u16(b, field::MASK);
         let bits = mask & ChannelMask::CHANNEL_BITS;
         let used = bits.count_ones() as usize;
         let reason = if mask & MASK_RESERVED != 0 {
@@ -243,7 +244,7 @@ impl EventRepr {
         let mut values = [0; MAX_EVENTS];
         let mut rest = bits;
         for (slot, value) in values.iter_mut().enumerate() {
-            let w = word(field::VALUES[slot].start);
+            let w = get_u16(b, field::VALUES[slot].clone());
             if rest == 0 {
                 if w != 0 {
                     return Err(Error::UnusedValueSet {
@@ -270,11 +271,11 @@ impl EventRepr {
             *value = v;
         }
         Ok(EventRepr {
-            cell_id: word(cell::field::CELL_ID.start),
+            cell_id: get_u16(b, cell::field::CELL_ID),
             second_part: mask & MASK_SECOND_PART != 0,
             channels: ChannelMask::from_bits(bits).unwrap_or(ChannelMask::EMPTY),
             values,
-            sequence: word(field::SEQUENCE.start),
+            sequence: get_u16(b, field::SEQUENCE),
         })
     }
 

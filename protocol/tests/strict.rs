@@ -1,7 +1,9 @@
 //! What docs/wire-format.md forbids is refused, each field on both sides of its limit:
 //! accepted at the limit, refused just past it, with an error naming the field.
 
+use skinbox_protocol::data::DataPacket;
 use skinbox_protocol::datagram::{Datagram, DatagramBody, MAX_PORTS};
+use skinbox_protocol::event::EventPacket;
 use skinbox_protocol::record::Record;
 use skinbox_protocol::*;
 
@@ -106,11 +108,21 @@ fn data_accelerations_are_10_bit_signed() {
     for axis in 0..3 {
         let channel = Channel::ALL[axis];
         for ok in [-512, -1, 0, 511] {
-            let d = DataRepr::parse(&data_with_accel(axis, ok)).unwrap();
+            let b = data_with_accel(axis, ok);
+            let d = DataRepr::parse(&b).unwrap();
             assert_eq!(d.raw(channel), ok);
+            // The view and the decoder's path agree.
+            assert_eq!(DataPacket::new_checked(&b[..]).unwrap().raw(channel), ok);
+            assert_eq!(
+                CellRepr::parse(&b, &CellFraming::DEFAULT),
+                Ok(CellRepr::Data(d))
+            );
         }
         for bad in [-513, 512, i32::from(i16::MIN), i32::from(i16::MAX)] {
-            let err = DataRepr::parse(&data_with_accel(axis, bad)).unwrap_err();
+            let b = data_with_accel(axis, bad);
+            let err = DataRepr::parse(&b).unwrap_err();
+            assert_eq!(DataPacket::new_checked(&b[..]).unwrap_err(), err);
+            assert_eq!(CellRepr::parse(&b, &CellFraming::DEFAULT), Err(err));
             assert_eq!(
                 err,
                 Error::ValueOutOfRange {
@@ -153,7 +165,10 @@ fn event_accelerations_are_10_bit_signed() {
         for bad in [-513i32, 512] {
             let mut words = [0u16; 6];
             words[slot] = bad as i16 as u16;
-            let err = EventRepr::parse(&event_bytes(mask, words)).unwrap_err();
+            let b = event_bytes(mask, words);
+            let err = EventRepr::parse(&b).unwrap_err();
+            assert_eq!(EventPacket::new_checked(&b[..]).unwrap_err(), err);
+            assert_eq!(CellRepr::parse(&b, &CellFraming::DEFAULT), Err(err));
             assert!(
                 matches!(err, Error::ValueOutOfRange { format: Format::EventPacket, value, min: -512, max: 511, .. } if value == bad),
                 "{err}"

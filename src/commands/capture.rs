@@ -103,14 +103,14 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             },
             shutdown,
             &mut |s, d| {
-                let r = d.report();
+                // Cheap getters: no report (and no rate learning) on the receive thread.
                 eprintln!(
                     "{:7.1} s: {} datagrams, {} records, {} missing, {} bad, {:.1} % CPU",
                     s.wall_s,
                     s.datagrams,
-                    s.records,
-                    r.losses.datagrams_missing,
-                    r.bad_input.total,
+                    d.records(),
+                    d.datagrams_missing(),
+                    d.bad_input_total(),
                     100.0 * s.cpu_s / s.wall_s.max(1e-9)
                 );
             },
@@ -126,7 +126,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         report.host = Some(skinbox_host::report::HostCost {
             cpu_s: stats.cpu_s,
             wall_s: stats.wall_s,
-            cpu_ns_per_packet: stats.cpu_s * 1e9 / report.records.max(1) as f64,
+            cpu_ns_per_packet: stats.cpu_ns_per_record(),
         });
         if json {
             super::print_json(&serde_json::json!({

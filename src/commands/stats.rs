@@ -1,6 +1,7 @@
 //! `skinbox stats`: what the papers report about a pcap, every loss, and the host's cost.
 
 use clap::Args;
+use skinbox_host::convert::CELL_IDS;
 use skinbox_host::pcap::{self, PcapOptions};
 use skinbox_host::DecoderConfig;
 use std::path::PathBuf;
@@ -30,8 +31,9 @@ pub struct StatsArgs {
 pub fn run(args: StatsArgs, json: bool) -> anyhow::Result<()> {
     super::check_sample_rate(args.sample_rate_hz)?;
     anyhow::ensure!(
-        args.cells.is_none_or(|n| (1..=16_384).contains(&n)),
-        "--cells {} must be 1 to 16384 (cell ids are 14 bits)",
+        args.cells
+            .is_none_or(|n| (1..=CELL_IDS as u64).contains(&n)),
+        "--cells {} must be 1 to {CELL_IDS} (cell ids are 14 bits)",
         args.cells.unwrap_or(0)
     );
     let bytes = pcap::read_file(&args.file)?;
