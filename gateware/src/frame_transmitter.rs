@@ -1,19 +1,22 @@
 //! FrameTransmitter: sends one box datagram as a complete Ethernet frame on GMII.
 //!
-//! On `start` (while `idle`) it takes a datagram descriptor (kind, flags, entry count,
-//! base tick, body length and the ones'-complement sum of the body's 16-bit words) and
-//! emits, one byte per clock: preamble and SFD, Ethernet II header, IPv4 header with its
-//! checksum, UDP header with its checksum, the 24-byte datagram header with the next
-//! sequence number, the body read from the payload memory, the FCS, and then at least 12
-//! idle clocks. (The headers alone exceed the 60-byte minimum frame: no padding is needed.)
+//! It takes a datagram's descriptor (kind, flags, entry count, base tick, body length and
+//! the ones'-complement sum of the body's 16-bit words; [`DatagramSink`]) when it is idle
+//! and emits, one byte per clock: preamble and SFD, Ethernet II header, IPv4 header with
+//! its checksum, UDP header with its checksum, the 24-byte datagram header with the next
+//! sequence number, the body from the datagram's body stream, the FCS, and then at least
+//! 12 idle clocks. (The headers alone exceed the 60-byte minimum frame: no padding is
+//! needed.)
 //!
 //! The checksums are finished long before they are sent: the UDP sum starts from the
 //! constant words (addresses, ports, magic, box id) plus the body sum, and adds the UDP
 //! length, the kind and then the 16 bytes of the header fields (flags, sequence, base tick,
 //! entry count, a zero) one per clock, each at its place in its word (a byte multiplexer
-//! stepped by a counter, no word multiplexer); the sum is folded by byte 21. The body memory is read two clocks ahead
-//! (`payload_address`; `payload_data` must be that byte two clocks later: a block RAM read
-//! and a register after it).
+//! stepped by a counter, no word multiplexer); the sum is folded by byte 21. The body is
+//! taken one beat per clock from byte 74 on (`ready` is a register): a source must have
+//! its beats ready by then (a [`crate::body_reader::BodyReader`] has them three clocks
+//! after its start). A body beat missing when due is sent as it is with `gmii_tx_er` set,
+//! so the PHY corrupts the frame and the host counts it lost instead of reading garbage.
 //! Output: the selected byte goes into a register, the CRC is computed from that register,
 //! and the output register takes the byte or, at the end, the FCS: `gmii_txd`/`gmii_tx_en`
 //! follow the byte counter by two clocks, and no path runs from byte selection through the
@@ -23,6 +26,7 @@
 use crate::block_ram::BlockRam;
 use crate::crc32::Crc32Byte;
 use crate::hdl::*;
+use crate::stream::DatagramSink;
 use skinbox_protocol::datagram::{self, field, HEADER_LEN};
 use skinbox_protocol::link::*;
 
@@ -112,32 +116,13 @@ pub struct FrameTransmitter {
     pub clock: Signal<In, Clock>,
     /// Synchronous reset: the sequence number restarts at 0.
     pub reset: Signal<In, Bit>,
-    /// Take the descriptor and send (only while `idle`).
-    pub start: Signal<In, Bit>,
-    /// Ready for the next datagram (the inter-frame gap is over).
-    pub idle: Signal<Out, Bit>,
-    /// Datagram kind (1 records, 2 status).
-    pub kind: Signal<In, Bits<8>>,
-    /// Datagram header flags.
-    pub flags: Signal<In, Bits<8>>,
-    /// Records or port counter blocks in the body.
-    pub entry_count: Signal<In, Bits<16>>,
-    /// Base tick of the datagram.
-    pub base_tick: Signal<In, Bits<64>>,
-    /// Body length in bytes (after the 24-byte header).
-    pub body_len: Signal<In, Bits<11>>,
-    /// Sum of the body's big-endian 16-bit words, not folded.
-    pub body_sum: Signal<In, Bits<32>>,
-    /// Body byte to read; its data must arrive on `payload_data` two clocks later (a memory
-    /// read and a register).
-    pub payload_address: Signal<Out, Bits<11>>,
-    /// Body byte read.
-    pub payload_data: Signal<In, Bits<8>>,
+    /// The datagrams to send; `ready` while idle (the inter-frame gap is over).
+    pub datagrams: DatagramSink,
     /// GMII transmit data.
     pub gmii_txd: Signal<Out, Bits<8>>,
     /// GMII transmit enable.
     pub gmii_tx_en: Signal<Out, Bit>,
-    /// GMII transmit error (never set).
+    /// GMII transmit error: a body beat was missing when due.
     pub gmii_tx_er: Signal<Out, Bit>,
     // the template in block RAM, read two clocks ahead: byte i + 2 at address i, and at
     // `TEMPLATE_IDLE` the first byte (the preamble's, also the second), read between frames
@@ -156,7 +141,6 @@ pub struct FrameTransmitter {
     // `end_minus_one`); the body's first byte - 2 (the payload is read two clocks ahead)
     body_start: Constant<Bits<11>>,
     frame_end_over_body: Constant<Bits<11>>,
-    body_ahead: Constant<Bits<11>>,
     // IPv4 total length and UDP length minus the body length
     ip_len_over_body: Constant<Bits<16>>,
     udp_len_over_body: Constant<Bits<16>>,
@@ -173,6 +157,9 @@ pub struct FrameTransmitter {
     fields_ahead: Constant<Bits<7>>,
     fields_end_ahead: Constant<Bits<7>>,
     template_idle: Constant<Bits<7>>,
+    // the byte sources, one bit each (see `byte_source`)
+    source_template: Constant<Bits<12>>,
+    source_body: Constant<Bits<12>>,
     crc: Crc32Byte,
     sending: DFF<Bit>,
     index: DFF<Bits<11>>,
@@ -199,6 +186,12 @@ pub struct FrameTransmitter {
     txd: DFF<Bits<8>>,
     tx_en: DFF<Bit>,
     body_end: DFF<Bits<11>>,
+    body_end_less_one: DFF<Bits<11>>,
+    // the byte at `index` is a body byte: the body stream's `ready`
+    in_body: DFF<Bit>,
+    // a body beat was missing: the byte in the output stage, then at the output
+    stage_error: DFF<Bit>,
+    tx_er: DFF<Bit>,
     // the index before the frame's last one (its last FCS byte), set with the descriptor
     end_minus_one: DFF<Bits<11>>,
     // registered index tests, true at index 7 (the CRC starts) and at the last index
@@ -268,16 +261,7 @@ impl FrameTransmitter {
         Self {
             clock: Default::default(),
             reset: Default::default(),
-            start: Default::default(),
-            idle: Default::default(),
-            kind: Default::default(),
-            flags: Default::default(),
-            entry_count: Default::default(),
-            base_tick: Default::default(),
-            body_len: Default::default(),
-            body_sum: Default::default(),
-            payload_address: Default::default(),
-            payload_data: Default::default(),
+            datagrams: Default::default(),
             gmii_txd: Default::default(),
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
@@ -290,7 +274,6 @@ impl FrameTransmitter {
             crc_from: position(PREAMBLE_LEN),
             body_start: position(BODY_START),
             frame_end_over_body: position(BODY_START + FCS_LEN - 2),
-            body_ahead: position(BODY_START - 2),
             ip_len_over_body: position(BODY_START - IP_AT),
             udp_len_over_body: position(BODY_START - UDP_AT),
             gap_clocks: position(INTER_FRAME_GAP - 1),
@@ -302,6 +285,8 @@ impl FrameTransmitter {
             fields_ahead: position(FIELDS_AT - 2),
             fields_end_ahead: position(FIELDS_AT + FIELDS_LEN - 2),
             template_idle: position(TEMPLATE_IDLE),
+            source_template: Constant::new(1u64.into()),
+            source_body: Constant::new((1u64 << 11).into()),
             crc: Default::default(),
             sending: Default::default(),
             index: Default::default(),
@@ -321,6 +306,10 @@ impl FrameTransmitter {
             txd: Default::default(),
             tx_en: Default::default(),
             body_end: Default::default(),
+            body_end_less_one: Default::default(),
+            in_body: Default::default(),
+            stage_error: Default::default(),
+            tx_er: Default::default(),
             end_minus_one: Default::default(),
             crc_starts: Default::default(),
             term_from_fields: Default::default(),
@@ -384,6 +373,10 @@ impl Logic for FrameTransmitter {
             txd,
             tx_en,
             body_end,
+            body_end_less_one,
+            in_body,
+            stage_error,
+            tx_er,
             end_minus_one,
             crc_starts,
             term_from_fields,
@@ -483,10 +476,10 @@ impl Logic for FrameTransmitter {
         // The template holds 0 at every variable byte, so it is ORed in all through the
         // header (bit 0 is "not the body") and the header's sources are independent tests.
         self.frame_goes_on.next = self.sending.q.val() & !self.frame_ends.q.val();
-        self.source_next.next = 1.into();
+        self.source_next.next = self.source_template.val();
         if self.frame_goes_on.val() & self.body_follows.val() {
             // the body (the FCS replaces what follows it at the output)
-            self.source_next.next = 2048.into();
+            self.source_next.next = self.source_body.val();
         }
         if self.frame_goes_on.val() & !self.body_follows.val() {
             if self.header_index.val() == self.ip_len_ahead.val() {
@@ -563,9 +556,16 @@ impl Logic for FrameTransmitter {
             self.tx_byte.next = self.tx_byte.val() | self.field_byte.q.val();
         }
         if self.byte_source.q.val().get_bit(11) {
-            self.tx_byte.next = self.tx_byte.val() | self.payload_data.val();
+            self.tx_byte.next = self.tx_byte.val() | self.datagrams.body.data.val();
         }
-        self.payload_address.next = self.index.q.val() - self.body_ahead.val();
+        // The body beat is taken at its index: `in_body` is set a clock ahead, from the
+        // source looked up for the next index (`source_ahead`) and the body's end.
+        self.datagrams.body.ready.next = self.in_body.q.val();
+        self.in_body.d.next = self.frame_goes_on.val()
+            & (self.source_ahead.q.val() == self.source_body.val())
+            & (self.index.q.val() < self.body_end_less_one.q.val());
+        self.stage_error.d.next = self.in_body.q.val() & !self.datagrams.body.valid.val();
+        self.tx_er.d.next = self.stage_valid.q.val() & self.stage_error.q.val();
 
         // Output stage: the byte goes through a register, the CRC is computed from that
         // register, and the FCS is put in at the output, so no path runs from the byte
@@ -635,12 +635,13 @@ impl Logic for FrameTransmitter {
         } else if !self.gap_done.q.val() {
             self.gap.d.next = self.gap.q.val() - 1;
             self.gap_done.d.next = self.gap.q.val() == 1;
-        } else if self.start.val() {
+        } else if self.datagrams.valid.val() {
             self.sending.d.next = true;
         }
         // The frame geometry follows the held body length a clock later: it is valid from
         // index 1 on (nothing reads it at index 0).
         self.body_end.d.next = self.body_len_held.q.val() + self.body_start.val();
+        self.body_end_less_one.d.next = self.body_len_held.q.val() + self.body_start.val() - 1;
         self.end_minus_one.d.next = self.body_len_held.q.val() + self.frame_end_over_body.val();
         self.total_len.d.next =
             bit_cast::<16, 11>(self.body_len_held.q.val()) + self.ip_len_over_body.val();
@@ -648,18 +649,18 @@ impl Logic for FrameTransmitter {
             bit_cast::<16, 11>(self.body_len_held.q.val()) + self.udp_len_over_body.val();
         self.udp_term.d.next =
             (bit_cast::<32, 11>(self.body_len_held.q.val()) << 1) + self.udp_term_constant.val();
-        // The descriptor is taken in every clock without a frame going out, so `start` only
-        // has to set `sending` (the descriptor must be valid in the clock of `start`).
+        // The descriptor is taken in every clock without a frame going out, so taking it
+        // only has to set `sending`.
         if !self.sending.q.val() {
-            self.kind_held.d.next = self.kind.val();
-            self.body_len_held.d.next = self.body_len.val();
-            self.checksum.d.next = self.body_sum.val();
-            self.fields_high.d.next = (bit_cast::<64, 8>(self.flags.val()) << 56)
+            self.kind_held.d.next = self.datagrams.kind.val();
+            self.body_len_held.d.next = self.datagrams.body_len.val();
+            self.checksum.d.next = self.datagrams.body_sum.val();
+            self.fields_high.d.next = (bit_cast::<64, 8>(self.datagrams.flags.val()) << 56)
                 | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
-                | bit_cast::<64, 24>(self.base_tick.val().get_bits::<24>(40));
-            self.fields_low.d.next = (bit_cast::<64, 40>(self.base_tick.val().get_bits::<40>(0))
-                << 24)
-                | (bit_cast::<64, 16>(self.entry_count.val()) << 8);
+                | bit_cast::<64, 24>(self.datagrams.base_tick.val().get_bits::<24>(40));
+            self.fields_low.d.next =
+                (bit_cast::<64, 40>(self.datagrams.base_tick.val().get_bits::<40>(0)) << 24)
+                    | (bit_cast::<64, 16>(self.datagrams.entry_count.val()) << 8);
         }
         if self.reset.val() {
             self.sending.d.next = false;
@@ -677,12 +678,14 @@ impl Logic for FrameTransmitter {
             self.index.d.next = 0.into();
             self.term_is_kind.d.next = true;
             self.term_is_udp_len.d.next = false;
-            self.source_ahead.d.next = 1.into();
+            self.source_ahead.d.next = self.source_template.val();
+            self.in_body.d.next = false;
+            self.tx_er.d.next = false;
         }
-        self.idle.next = !self.sending.q.val() & self.gap_done.q.val();
+        self.datagrams.ready.next = !self.sending.q.val() & self.gap_done.q.val();
         self.gmii_txd.next = self.txd.q.val();
         self.gmii_tx_en.next = self.tx_en.q.val();
-        self.gmii_tx_er.next = false;
+        self.gmii_tx_er.next = self.tx_er.q.val();
     }
 }
 
@@ -692,6 +695,7 @@ mod tests {
     use crate::testbench::{check_frame, Bench, GmiiCapture};
     use skinbox_protocol::datagram::DatagramBody;
     use skinbox_protocol::{DataRepr, DatagramRepr, PortCounters, RecordRepr, StatusRepr};
+    use std::collections::VecDeque;
 
     #[test]
     fn frame_positions_match_the_formats() {
@@ -729,6 +733,19 @@ mod tests {
     /// Sends the datagrams (their sequence numbers are ignored: the transmitter numbers
     /// them) and returns the captured frames.
     fn send(datagrams: &[DatagramRepr]) -> GmiiCapture {
+        let (capture, errors) = send_with_hole(datagrams, None);
+        assert!(errors.is_empty(), "no body beat missing: {errors:?}");
+        capture
+    }
+
+    /// Offers each datagram's descriptor and then its body, every beat ready before it is
+    /// due, except that body byte `hole.1` of datagram `hole.0` is not offered the first
+    /// clock it is due (the rest of that body is dropped when its frame ends). Returns the
+    /// frames (the one with the hole left out) and the clocks `gmii_tx_er` was set.
+    fn send_with_hole(
+        datagrams: &[DatagramRepr],
+        hole: Option<(usize, usize)>,
+    ) -> (GmiiCapture, Vec<u64>) {
         let mut bench = Bench::new(
             FrameTransmitter::new(&LinkConfig::DEFAULT, 0x0102, 8),
             |b| &mut b.clock,
@@ -737,45 +754,78 @@ mod tests {
         bench.cycles(2);
         bench.uut.reset.next = false;
         let mut capture = GmiiCapture::default();
-        let mut queue = datagrams.to_vec();
-        queue.reverse();
-        let mut memory: Vec<u8> = vec![];
-        // addresses of the last two clocks: the data comes two clocks after its address
-        let mut reads: [u64; 2] = [0, 0];
+        let mut errors = vec![];
+        let mut next = 0;
+        let mut body: VecDeque<u8> = VecDeque::new();
+        let mut taken_of_current = 0;
+        let mut hole_done = false;
+        let mut frames = 0;
+        let mut tx_en_before = false;
         for clock in 0..20_000u64 {
             let u = &mut bench.uut;
-            u.payload_data.next = u64::from(*memory.get(reads[1] as usize).unwrap_or(&0xEE)).into();
-            u.start.next = false;
+            let in_hole = hole == Some((next.max(1) - 1, taken_of_current)) && !hole_done;
+            u.datagrams.body.valid.next = !body.is_empty() && !in_hole;
+            u.datagrams.body.data.next = u64::from(*body.front().unwrap_or(&0xEE)).into();
+            u.datagrams.body.last.next = body.len() == 1;
+            u.datagrams.body.error.next = false;
+            u.datagrams.valid.next = false;
+            if let Some(d) = datagrams.get(next).filter(|_| body.is_empty()) {
+                let bytes = d.to_bytes();
+                let b = &bytes[HEADER_LEN..];
+                u.datagrams.valid.next = true;
+                u.datagrams.kind.next = (d.kind() as u64).into();
+                u.datagrams.flags.next = u64::from(d.flags).into();
+                u.datagrams.entry_count.next =
+                    (u64::from(bytes[20]) << 8 | u64::from(bytes[21])).into();
+                u.datagrams.base_tick.next = d.base_tick.into();
+                u.datagrams.body_len.next = (b.len() as u64).into();
+                u.datagrams.body_sum.next = body_sum(b).into();
+            }
             bench.settle();
-            if bench.uut.idle.val() {
-                if let Some(d) = queue.pop() {
-                    let bytes = d.to_bytes();
-                    memory = bytes[HEADER_LEN..].to_vec();
-                    let u = &mut bench.uut;
-                    u.start.next = true;
-                    u.kind.next = (d.kind() as u64).into();
-                    u.flags.next = u64::from(d.flags).into();
-                    u.entry_count.next = (u64::from(bytes[20]) << 8 | u64::from(bytes[21])).into();
-                    u.base_tick.next = d.base_tick.into();
-                    u.body_len.next = (memory.len() as u64).into();
-                    u.body_sum.next = body_sum(&memory).into();
-                    bench.settle();
+            let u = &bench.uut;
+            if u.datagrams.valid.val() && u.datagrams.ready.val() {
+                body = datagrams[next].to_bytes()[HEADER_LEN..]
+                    .iter()
+                    .copied()
+                    .collect();
+                next += 1;
+                taken_of_current = 0;
+            }
+            if u.datagrams.body.ready.val() {
+                if in_hole {
+                    hole_done = true;
+                } else {
+                    assert!(
+                        u.datagrams.body.valid.val(),
+                        "clock {clock}: body not ready"
+                    );
+                    body.pop_front();
+                    taken_of_current += 1;
                 }
             }
-            reads = [bench.uut.payload_address.val().to_u64(), reads[0]];
-            let u = &bench.uut;
-            capture.clock(
-                clock,
-                u.gmii_tx_en.val(),
-                u.gmii_txd.val().to_u8(),
-                u.gmii_tx_er.val(),
-            );
+            if u.gmii_tx_er.val() {
+                errors.push(clock);
+            }
+            let tx_en = u.gmii_tx_en.val();
+            if hole.is_some_and(|(k, _)| k == frames) {
+                // the broken frame is not captured
+                if tx_en_before && !tx_en {
+                    frames += 1;
+                    body.clear();
+                }
+            } else {
+                capture.clock(clock, tx_en, u.gmii_txd.val().to_u8(), false);
+                if tx_en_before && !tx_en {
+                    frames += 1;
+                }
+            }
+            tx_en_before = tx_en;
             bench.cycle();
-            if queue.is_empty() && capture.frames.len() == datagrams.len() {
+            if next == datagrams.len() && frames == datagrams.len() {
                 break;
             }
         }
-        capture
+        (capture, errors)
     }
 
     fn records(n: usize, base_tick: u64) -> DatagramRepr {
@@ -872,5 +922,27 @@ mod tests {
             (udp.source_port, udp.destination_port),
             (link.box_port, link.host_port)
         );
+    }
+
+    #[test]
+    fn a_missing_body_beat_marks_its_frame_with_tx_er_and_the_next_frames_are_whole() {
+        let sent = vec![records(3, 7), records(2, 8), status(4)];
+        let (capture, errors) = send_with_hole(&sent, Some((1, 10)));
+        // the error is set on the one byte that was missing, as it leaves GMII
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        assert_eq!(capture.frames.len(), 2);
+        for (frame, (i, expected)) in capture.frames.iter().zip([(0, &sent[0]), (2, &sent[2])]) {
+            let got = DatagramRepr::parse(&check_frame(frame).unwrap()).unwrap();
+            assert_eq!(
+                got,
+                DatagramRepr {
+                    sequence: i,
+                    ..expected.clone()
+                }
+            );
+        }
+        // the byte with tx_er is body byte 10 of the second frame
+        let second_start = capture.starts[0] + capture.frames[0].len() as u64;
+        assert!(errors[0] > second_start + BODY_START as u64);
     }
 }

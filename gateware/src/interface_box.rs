@@ -2,22 +2,31 @@
 //!
 //! Per port: [`UartRx`] -> [`CellDeframer`]; the [`PacketStore`] holds every port's
 //! packets in shared block RAM and merges them, one whole record at a time, into the
-//! [`UdpFramer`], which also sends the [`StatusReporter`]'s datagrams. The [`CounterFile`] counts every port's events. The ports stay in reset
-//! until the counters are cleared (about 4 us after reset), so no event goes uncounted.
+//! [`RecordBatcher`]. The batcher's records datagrams and the [`StatusReporter`]'s status
+//! datagrams meet in the [`DatagramArbiter`], whose output the [`FrameTransmitter`] sends
+//! on GMII. The [`CounterFile`] counts every port's events. The ports stay in reset until
+//! the counters are cleared (about 4 us after reset), so no event goes uncounted.
 //!
 //! Timestamps: a record's tick is the tick of the first clock edge that sampled its
 //! packet's first start bit low at the pin (the true falling edge lies in the tick before).
 
 use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
 use crate::counter_file::CounterFile;
+use crate::datagram_arbiter::DatagramArbiter;
+use crate::frame_transmitter::FrameTransmitter;
 use crate::hdl::*;
 use crate::packet_store::{group_onehot, PacketStore, GROUP_PORTS, MAX_PORTS};
+use crate::record_batcher::RecordBatcher;
 use crate::replica_register::ReplicaRegister;
 use crate::status_reporter::StatusReporter;
+use crate::stream::{ByteStreamSource, DatagramSource};
 use crate::timestamp::TimestampCounter;
 use crate::uart_rx::UartRx;
-use crate::udp_framer::{FramerConfig, UdpFramer};
 use skinbox_protocol::{CellFraming, LinkConfig};
+
+/// The datagram arbiter's sources, in their order of precedence after reset: records
+/// datagrams (source 0), status datagrams (source 1).
+pub const DATAGRAM_SOURCES: usize = 2;
 
 /// Parameters of the box.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
@@ -204,7 +213,9 @@ pub struct InterfaceBox {
     store: PacketStore,
     counters: CounterFile,
     status: StatusReporter,
-    framer: UdpFramer,
+    batcher: RecordBatcher,
+    arbiter: DatagramArbiter,
+    transmitter: FrameTransmitter,
     core_reset: DFF<Bit>,
     /// The ports' reset before its copies.
     port_reset: Signal<Local, Bit>,
@@ -239,12 +250,9 @@ impl InterfaceBox {
             store: PacketStore::new(n),
             counters: CounterFile::new(n),
             status: StatusReporter::new(n, config.status_period_ticks, config.boot_seed),
-            framer: UdpFramer::new(&FramerConfig {
-                link: config.link,
-                box_id: config.box_id,
-                port_count: n as u8,
-                flush_timeout_ticks: config.flush_timeout_ticks,
-            }),
+            batcher: RecordBatcher::new(config.flush_timeout_ticks),
+            arbiter: DatagramArbiter::new(DATAGRAM_SOURCES),
+            transmitter: FrameTransmitter::new(&config.link, config.box_id, n as u8),
             core_reset: Default::default(),
             port_reset: Default::default(),
             group_resets: (0..n.div_ceil(GROUP_PORTS))
@@ -314,37 +322,33 @@ impl Logic for InterfaceBox {
         self.counters.reset.next = self.core_reset.q.val();
         self.counters.read_address.next = self.status.counter_address.val();
 
-        self.framer.clock.next = self.clock.val();
-        self.framer.reset.next = self.core_reset.q.val();
-        self.framer.tick.next = self.timestamp.tick.val();
-        // store -> framer: the store's output FIFO holds every beat in flight, so the
-        // framer's ready reaches its FIFO registers only
-        self.framer.records.data.next = self.store.records.data.val();
-        self.framer.records.valid.next = self.store.records.valid.val();
-        self.framer.records.last.next = self.store.records.last.val();
-        self.framer.records.error.next = self.store.records.error.val();
-        self.store.records.ready.next = self.framer.records.ready.val();
+        // store -> batcher: the store's output FIFO holds every beat in flight, so the
+        // batcher's ready reaches its FIFO registers only
+        self.batcher.clock.next = self.clock.val();
+        self.batcher.reset.next = self.core_reset.q.val();
+        self.batcher.tick.next = self.timestamp.tick.val();
+        ByteStreamSource::join(&mut self.store.records, &mut self.batcher.records);
 
         self.status.clock.next = self.clock.val();
         self.status.reset.next = self.core_reset.q.val();
         self.status.tick.next = self.timestamp.tick.val();
-        self.status.datagrams_sent.next = self.framer.datagrams_sent.val();
-        self.status.records_sent.next = self.framer.records_sent.val();
+        self.status.datagrams_sent.next = self.batcher.datagrams_sent.val();
+        self.status.records_sent.next = self.batcher.records_sent.val();
         self.status.counters_ready.next = self.counters.ready.val();
         self.status.counter_data.next = self.counters.read_data.val();
-        self.status.taken.next = self.framer.status_taken.val();
-        self.status.sending.next = self.framer.status_sending.val();
-        self.status.read_address.next = self.framer.status_address.val();
-        self.framer.status_request.next = self.status.request.val();
-        self.framer.status_entry_count.next = self.status.entry_count.val();
-        self.framer.status_body_len.next = self.status.body_len.val();
-        self.framer.status_body_sum.next = self.status.body_sum.val();
-        self.framer.status_tick.next = self.status.report_tick.val();
-        self.framer.status_data.next = self.status.read_data.val();
 
-        self.gmii_txd.next = self.framer.gmii_txd.val();
-        self.gmii_tx_en.next = self.framer.gmii_tx_en.val();
-        self.gmii_tx_er.next = self.framer.gmii_tx_er.val();
+        // records and status datagrams -> arbiter -> transmitter
+        self.arbiter.clock.next = self.clock.val();
+        self.arbiter.reset.next = self.core_reset.q.val();
+        DatagramSource::join(&mut self.batcher.datagrams, &mut self.arbiter.sources[0]);
+        DatagramSource::join(&mut self.status.datagrams, &mut self.arbiter.sources[1]);
+        self.transmitter.clock.next = self.clock.val();
+        self.transmitter.reset.next = self.core_reset.q.val();
+        DatagramSource::join(&mut self.arbiter.datagrams, &mut self.transmitter.datagrams);
+
+        self.gmii_txd.next = self.transmitter.gmii_txd.val();
+        self.gmii_tx_en.next = self.transmitter.gmii_tx_en.val();
+        self.gmii_tx_er.next = self.transmitter.gmii_tx_er.val();
     }
 }
 

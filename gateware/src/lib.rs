@@ -9,27 +9,32 @@
 //!    rejects broken ones, counting each cause;
 //! 3. [`packet_store::PacketStore`]: holds every port's whole packets in shared block RAM
 //!    and merges the ports, one whole record at a time;
-//! 4. [`udp_framer::UdpFramer`]: batches the records into UDP datagrams and sends them,
-//!    with the [`status_reporter::StatusReporter`]'s, as Ethernet frames on GMII.
+//! 4. [`record_batcher::RecordBatcher`]: batches the records into records datagrams;
+//! 5. [`datagram_arbiter::DatagramArbiter`]: merges them with the
+//!    [`status_reporter::StatusReporter`]'s datagrams, whole datagrams round robin;
+//! 6. [`frame_transmitter::FrameTransmitter`]: sends each as an Ethernet frame on GMII.
 //!
 //! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
-//! over one interface, [`stream`].
+//! over the interfaces of [`stream`]: bytes, and datagrams (a descriptor, then bytes).
 
 pub mod block_ram;
 pub mod board;
+pub mod body_reader;
 pub mod cell_deframer;
 pub mod counter_file;
 pub mod crc32;
+pub mod datagram_arbiter;
 pub mod frame_transmitter;
 pub mod hdl;
 pub mod interface_box;
 pub mod packet_store;
+pub mod record_batcher;
 pub mod replica_register;
 pub mod status_reporter;
 pub mod stream;
+pub mod stream_fifo;
 pub mod timestamp;
 pub mod uart_rx;
-pub mod udp_framer;
 pub mod verilog;
 
 #[cfg(test)]

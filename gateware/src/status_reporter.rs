@@ -3,9 +3,10 @@
 //! Right after reset (once the counters are cleared) and then every `status_period_ticks`
 //! it writes a status body into its own 2 KB memory: boot id, records datagrams and
 //! records sent, first port, then the eight counters of up to 32 ports (one datagram per
-//! 32 ports). It sums the body's 16-bit words while writing, asks the framer to send it
-//! (`request`), and after the framer read the memory (`sending` fell) goes on with the
-//! next ports or waits for the next period. Building a page of 32 ports takes 1,820 clocks
+//! 32 ports). It sums the body's 16-bit words while writing, offers the datagram's
+//! descriptor on `datagrams`, streams the body from its memory once the descriptor was
+//! taken ([`BodyReader`]), and after the last body byte was taken goes on with the next
+//! ports or waits for the next period. Building a page of 32 ports takes 1,820 clocks
 //! (seven per word: the counter memory's output is registered twice before it is summed).
 //!
 //! The boot id is a seed parameter plus the number of resets since configuration, so
@@ -13,13 +14,16 @@
 //! sequence number restart at 0).
 
 use crate::block_ram::BlockRam;
+use crate::body_reader::BodyReader;
 use crate::hdl::*;
+use crate::stream::DatagramSource;
+use skinbox_protocol::datagram::DatagramKind;
 
 /// Clocks per 32-bit word of the status body: the address, the memory read, its register,
 /// the word into the shift register, four bytes out.
 pub const CLOCKS_PER_WORD: u64 = 7;
 
-/// Clock of a word (from its first) in which the framer's counts are taken (into a register
+/// Clock of a word (from its first) in which the batcher's counts are taken (into a register
 /// the word's value is loaded from a clock later); counters come from the memory, read at
 /// the address of the word's first clock.
 pub const WORD_VALUE_CLOCK: u64 = 1;
@@ -46,25 +50,11 @@ pub struct StatusReporter {
     pub counter_address: Signal<Out, Bits<9>>,
     /// The counter, two clocks after its address.
     pub counter_data: Signal<In, Bits<32>>,
-    /// A status body is ready.
-    pub request: Signal<Out, Bit>,
-    /// Port counter blocks in the body.
-    pub entry_count: Signal<Out, Bits<16>>,
-    /// Body length.
-    pub body_len: Signal<Out, Bits<11>>,
-    /// Sum of the body's 16-bit words.
-    pub body_sum: Signal<Out, Bits<32>>,
-    /// Time of the report.
-    pub report_tick: Signal<Out, Bits<64>>,
-    /// The framer took the request.
-    pub taken: Signal<In, Bit>,
-    /// The framer is reading the body.
-    pub sending: Signal<In, Bit>,
-    /// Body byte to read.
-    pub read_address: Signal<In, Bits<11>>,
-    /// The body byte, two clocks after its address (from the memory's output register).
-    pub read_data: Signal<Out, Bits<8>>,
+    /// The status datagrams: base tick the time of the report, one entry per port.
+    pub datagrams: DatagramSource,
     memory: BlockRam<8, 11>,
+    reader: BodyReader,
+    status_kind: Constant<Bits<8>>,
     period: Constant<Bits<32>>,
     ports: Constant<Bits<7>>,
     ports_per_page: Constant<Bits<7>>,
@@ -74,7 +64,7 @@ pub struct StatusReporter {
     timer_zero: DFF<Bit>,
     due: DFF<Bit>,
     state: DFF<ReportState>,
-    // state == Request, kept in a register (`request` selects the framer's descriptor)
+    // state == Request, kept in a register (the descriptor's `valid`)
     requesting: DFF<Bit>,
     first_port: DFF<Bits<7>>,
     page_ports: DFF<Bits<7>>,
@@ -111,9 +101,9 @@ enum ReportState {
     Start,
     /// Writing the body.
     Build,
-    /// Waiting for the framer to take it.
+    /// Offering the descriptor.
     Request,
-    /// The framer reads the body.
+    /// The body streams out.
     Sending,
 }
 
@@ -138,16 +128,10 @@ impl StatusReporter {
             counters_ready: Default::default(),
             counter_address: Default::default(),
             counter_data: Default::default(),
-            request: Default::default(),
-            entry_count: Default::default(),
-            body_len: Default::default(),
-            body_sum: Default::default(),
-            report_tick: Default::default(),
-            taken: Default::default(),
-            sending: Default::default(),
-            read_address: Default::default(),
-            read_data: Default::default(),
+            datagrams: Default::default(),
             memory: Default::default(),
+            reader: Default::default(),
+            status_kind: Constant::new((DatagramKind::Status as u64).into()),
             period: Constant::new(period_ticks.into()),
             ports: Constant::new((ports as u64).into()),
             ports_per_page: Constant::new((PORTS_PER_STATUS as u64).into()),
@@ -210,8 +194,17 @@ impl Logic for StatusReporter {
             word_from_memory
         );
         self.memory.clock.next = self.clock.val();
-        self.memory.read_address.next = self.read_address.val();
-        self.read_data.next = self.memory.read_data.val();
+        self.reader.clock.next = self.clock.val();
+        self.reader.reset.next = self.reset.val();
+        self.memory.read_address.next = self.reader.read_address.val();
+        self.reader.read_data.next = self.memory.read_data.val();
+        self.reader.start.next = self.requesting.q.val() & self.datagrams.ready.val();
+        self.reader.length.next = self.offset.q.val();
+        self.datagrams.body.valid.next = self.reader.body.valid.val();
+        self.datagrams.body.data.next = self.reader.body.data.val();
+        self.datagrams.body.last.next = self.reader.body.last.val();
+        self.datagrams.body.error.next = self.reader.body.error.val();
+        self.reader.body.ready.next = self.datagrams.body.ready.val();
 
         // A report is due every period, counted from report start to report start; one
         // that comes due while the previous is still going starts right after it.
@@ -286,14 +279,14 @@ impl Logic for StatusReporter {
                 }
             }
             ReportState::Request => {
-                if self.taken.val() {
+                if self.datagrams.ready.val() {
                     self.state.d.next = ReportState::Sending;
                     self.requesting.d.next = false;
                 }
             }
             ReportState::Sending => {
-                // the framer read the page: next ports, or wait for the next period
-                if !self.sending.val() {
+                // the page was sent: next ports, or wait for the next period
+                if !self.reader.busy.val() {
                     self.first_port.d.next = self.first_port.q.val() + self.page_ports.q.val();
                     if self.first_port.q.val() + self.page_ports.q.val() == self.ports.val() {
                         self.state.d.next = ReportState::Wait;
@@ -316,11 +309,13 @@ impl Logic for StatusReporter {
             }
         }
 
-        self.request.next = self.requesting.q.val();
-        self.entry_count.next = bit_cast::<16, 7>(self.page_ports.q.val());
-        self.body_len.next = self.offset.q.val();
-        self.body_sum.next = self.sum.q.val();
-        self.report_tick.next = self.tick_held.q.val();
+        self.datagrams.valid.next = self.requesting.q.val();
+        self.datagrams.kind.next = self.status_kind.val();
+        self.datagrams.flags.next = 0.into();
+        self.datagrams.entry_count.next = bit_cast::<16, 7>(self.page_ports.q.val());
+        self.datagrams.base_tick.next = self.tick_held.q.val();
+        self.datagrams.body_len.next = self.offset.q.val();
+        self.datagrams.body_sum.next = self.sum.q.val();
 
         self.reset_seen.d.next = self.reset.val();
         if self.reset.val() {
@@ -341,7 +336,7 @@ impl Logic for StatusReporter {
 mod tests {
     use super::*;
     use crate::frame_transmitter::word_sum;
-    use crate::testbench::Bench;
+    use crate::testbench::{Bench, TestRng};
     use skinbox_protocol::datagram::DatagramBody;
     use skinbox_protocol::{DatagramRepr, PortCounters, StatusRepr};
 
@@ -349,19 +344,24 @@ mod tests {
         (port as u32) << 16 | (c as u32) << 8 | 0x5A
     }
 
-    /// A page as the framer would send it: (clock of the request, entries, body, sum).
+    /// A page as it was sent: (its base tick, entries, body, sum).
     type Page = (u64, u16, Vec<u8>, u64);
 
+    /// Runs the reporter; its descriptors are taken a few clocks after they are offered and
+    /// its bodies read with random backpressure (`last` checked on every beat).
     fn run(ports: usize, period: u64, clocks: u64) -> Vec<Page> {
         let mut bench = Bench::new(StatusReporter::new(ports, period, 0x1000), |b| &mut b.clock);
+        let mut rng = TestRng::new(ports as u64);
         bench.uut.reset.next = true;
         bench.cycles(3);
         bench.uut.reset.next = false;
         let mut pages = vec![];
         // the counter addresses of the last two clocks: the counter file answers two late
-        let (mut counter_reads, mut body_read) = ([0usize; 2], 0u64);
+        let mut counter_reads = [0usize; 2];
         let mut reading: Option<(u64, u16, u64, u64, Vec<u8>)> = None;
         for clock in 0..clocks {
+            let take_descriptor = rng.chance(0.3);
+            let take_body = rng.chance(0.6);
             let u = &mut bench.uut;
             u.tick.next = clock.into();
             u.datagrams_sent.next = 77.into();
@@ -369,34 +369,37 @@ mod tests {
             u.counters_ready.next = true;
             let read = counter_reads[1];
             u.counter_data.next = u64::from(counter(read / 8, read % 8)).into();
-            u.taken.next = false;
-            u.sending.next = reading.is_some();
-            u.read_address.next = body_read.into();
+            u.datagrams.ready.next = take_descriptor && reading.is_none();
+            u.datagrams.body.ready.next = take_body;
             bench.settle();
             let u = &bench.uut;
             counter_reads = [u.counter_address.val().index(), counter_reads[0]];
             if let Some((_, _, len, _, body)) = &mut reading {
-                if body_read >= crate::block_ram::READ_LATENCY {
-                    body.push(u.read_data.val().to_u8());
+                assert!(!u.datagrams.valid.val(), "one datagram at a time");
+                if take_body && u.datagrams.body.valid.val() {
+                    body.push(u.datagrams.body.data.val().to_u8());
+                    assert_eq!(u.datagrams.body.last.val(), body.len() as u64 == *len);
+                    if body.len() as u64 == *len {
+                        let (at, n, _, sum, body) = reading.take().unwrap();
+                        pages.push((at, n, body, sum));
+                    }
                 }
-                if body.len() as u64 == *len {
-                    let (at, n, _, sum, body) = reading.take().unwrap();
-                    pages.push((at, n, body, sum));
-                    body_read = 0;
-                } else {
-                    body_read += 1;
+            } else {
+                assert!(
+                    !u.datagrams.body.valid.val(),
+                    "no body before its descriptor"
+                );
+                if u.datagrams.valid.val() && take_descriptor {
+                    assert_eq!(u.datagrams.kind.val().to_u8(), DatagramKind::Status as u8);
+                    assert_eq!(u.datagrams.flags.val().to_u8(), 0);
+                    reading = Some((
+                        u.datagrams.base_tick.val().to_u64(),
+                        u.datagrams.entry_count.val().to_u16(),
+                        u.datagrams.body_len.val().to_u64(),
+                        u.datagrams.body_sum.val().to_u64(),
+                        vec![],
+                    ));
                 }
-            } else if u.request.val() {
-                reading = Some((
-                    clock,
-                    u.entry_count.val().to_u16(),
-                    u.body_len.val().to_u64(),
-                    u.body_sum.val().to_u64(),
-                    vec![],
-                ));
-                body_read = 0;
-                bench.uut.taken.next = true;
-                bench.uut.sending.next = true;
             }
             bench.cycle();
         }

@@ -38,3 +38,57 @@ pub struct ByteStreamSink {
     /// This side takes the beat.
     pub ready: Signal<Out, Bit>,
 }
+
+/// The sending side of a datagram: a descriptor, taken when `valid & ready`, then its
+/// body of `body_len` beats (at least one) on `body`, the last one with `last`. A source
+/// offers no body beat before its descriptor was taken.
+///
+/// The descriptor carries what the frame's headers need before the body goes out: the
+/// datagram header's kind, flags, entry count and base tick, the body's length and the
+/// sum of its big-endian 16-bit words (not folded) for the UDP checksum.
+#[derive(LogicInterface, Default)]
+#[join = "DatagramSink"]
+pub struct DatagramSource {
+    /// A descriptor is offered.
+    pub valid: Signal<Out, Bit>,
+    /// The receiver takes the descriptor.
+    pub ready: Signal<In, Bit>,
+    /// Datagram kind (`skinbox_protocol::DatagramKind`).
+    pub kind: Signal<Out, Bits<8>>,
+    /// Datagram header flags.
+    pub flags: Signal<Out, Bits<8>>,
+    /// Records or port counter blocks in the body.
+    pub entry_count: Signal<Out, Bits<16>>,
+    /// Base tick of the datagram.
+    pub base_tick: Signal<Out, Bits<64>>,
+    /// Body length in bytes, 1 to 2047.
+    pub body_len: Signal<Out, Bits<11>>,
+    /// Sum of the body's big-endian 16-bit words, not folded.
+    pub body_sum: Signal<Out, Bits<32>>,
+    /// The body, after the descriptor was taken.
+    pub body: ByteStreamSource,
+}
+
+/// The receiving side of a datagram (see [`DatagramSource`]).
+#[derive(LogicInterface, Default)]
+#[join = "DatagramSource"]
+pub struct DatagramSink {
+    /// A descriptor is offered.
+    pub valid: Signal<In, Bit>,
+    /// This side takes the descriptor.
+    pub ready: Signal<Out, Bit>,
+    /// Datagram kind.
+    pub kind: Signal<In, Bits<8>>,
+    /// Datagram header flags.
+    pub flags: Signal<In, Bits<8>>,
+    /// Records or port counter blocks in the body.
+    pub entry_count: Signal<In, Bits<16>>,
+    /// Base tick of the datagram.
+    pub base_tick: Signal<In, Bits<64>>,
+    /// Body length in bytes.
+    pub body_len: Signal<In, Bits<11>>,
+    /// Sum of the body's big-endian 16-bit words, not folded.
+    pub body_sum: Signal<In, Bits<32>>,
+    /// The body.
+    pub body: ByteStreamSink,
+}

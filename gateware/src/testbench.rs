@@ -155,3 +155,32 @@ pub fn check_frame(frame: &[u8]) -> Result<Vec<u8>, String> {
         .map(|(_, payload)| payload.to_vec())
         .map_err(|e| e.to_string())
 }
+
+/// A small seeded random source for valid/ready patterns (xorshift64*): fixed seeds make
+/// every run of a test the same.
+pub struct TestRng(u64);
+
+impl TestRng {
+    /// A generator from `seed` (any value).
+    pub fn new(seed: u64) -> Self {
+        TestRng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// True with probability `p`.
+    pub fn chance(&mut self, p: f64) -> bool {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64 <= p
+    }
+
+    /// A random byte.
+    pub fn byte(&mut self) -> u8 {
+        (self.next_u64() >> 56) as u8
+    }
+}

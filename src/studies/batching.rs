@@ -1,10 +1,12 @@
 //! C3, batching: what the flush timeout costs in latency and buys in link capacity.
 //!
-//! [`FramerModel`] is a packet-level model of the box's UDP framer (`gateware/src/
-//! udp_framer.rs`): records are written into the filling datagram one after the other, 30
-//! clocks each; a datagram closes when it holds 55 records or its first record has waited
-//! the flush timeout, but not before the previous records datagram has left the wire (two
-//! buffers: one fills while the other is sent), so under load a due datagram keeps taking
+//! [`FramerModel`] is a packet-level model of the box's record batcher and transmitter
+//! (`gateware/src/record_batcher.rs`, `frame_transmitter.rs`): records are written into the
+//! filling datagram one after the other, 30 clocks each; a datagram closes when it holds 55
+//! records or its first record has waited the flush timeout, but not before the previous
+//! records datagram has left the wire (two buffers: one fills while the other is sent; the
+//! gateware frees the buffer with the body's last byte, 16 clocks before the wire is free,
+//! which this model leaves out), so under load a due datagram keeps taking
 //! records; a full one that cannot close stops the input. The latency the box adds to a
 //! record is the time from the end of its packet at the pin to the end of its datagram on
 //! the wire (the host can use a record only when the frame's FCS has arrived). Status

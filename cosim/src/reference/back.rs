@@ -153,9 +153,12 @@ pub(super) struct Back<'a> {
     deadline: u32,
     deadline_passed: bool,
     pending: Option<DatagramRepr>,
-    sending_records: bool,
-    sending_status: bool,
-    status_taken: bool,
+    /// First cycle after the last body byte of the records datagram sent last was taken
+    /// (its buffer is free from then on).
+    records_body_until: u64,
+    // datagram arbiter: the last grant went to the records datagrams (the status
+    // datagram goes first when both wait)
+    last_grant_records: bool,
     /// Cycles from which each records datagram counts as sent, and the records sum.
     started_records: Vec<(u64, u64)>,
     records_sent: u64,
@@ -169,6 +172,8 @@ pub(super) struct Back<'a> {
     page_ports: usize,
     report_tick: u64,
     status_body: Option<StatusRepr>,
+    /// As `records_body_until`, for the status datagram sent last.
+    status_body_until: u64,
     /// Frames sent, in order.
     pub frames: Vec<SentFrame>,
 }
@@ -238,9 +243,8 @@ impl<'a> Back<'a> {
             deadline: 0,
             deadline_passed: false,
             pending: None,
-            sending_records: false,
-            sending_status: false,
-            status_taken: false,
+            records_body_until: 0,
+            last_grant_records: false,
             started_records: vec![],
             records_sent: 0,
             idle_from: 0,
@@ -251,6 +255,7 @@ impl<'a> Back<'a> {
             page_ports: 0,
             report_tick: 0,
             status_body: None,
+            status_body_until: 0,
             frames: vec![],
         }
     }
@@ -307,19 +312,14 @@ impl<'a> Back<'a> {
                 .all(|b| b.slots.is_empty() && b.committed.is_none())
             && self.offset_left == 0
             && self.beat == 0
-            && !self.close_now()
-            && !(idle
-                && (self.pending.is_some()
-                    || self.report == Report::Request
-                    || self.sending_records
-                    || self.sending_status))
-            && !self.status_taken
+            && !self.close_now(c)
+            && !(idle && (self.pending.is_some() || self.report == Report::Request))
             && match self.report {
                 Report::Wait => !(self.due && c >= self.t.counters_ready_from),
                 Report::Start => false,
                 Report::Build { request_at, .. } => c + 1 != request_at,
                 Report::Request => true,
-                Report::Sending => self.sending_status,
+                Report::Sending => c < self.status_body_until,
             }
             && self.beats.get(self.next_beat).is_none_or(|b| b.cycle > c)
     }
@@ -330,8 +330,14 @@ impl<'a> Back<'a> {
         if let Some(b) = self.beats.get(self.next_beat) {
             next = next.min(b.cycle);
         }
-        if c < self.idle_from {
-            next = next.min(self.idle_from);
+        for until in [
+            self.idle_from,
+            self.records_body_until,
+            self.status_body_until,
+        ] {
+            if c < until {
+                next = next.min(until);
+            }
         }
         if !self.fill.is_empty() && !self.deadline_passed {
             // deadline_passed rises one clock after the tick reaches the deadline
@@ -378,8 +384,9 @@ impl<'a> Back<'a> {
             && (self.fill.len() == MAX_RECORDS || (!self.fill.is_empty() && self.deadline_passed))
     }
 
-    fn close_now(&self) -> bool {
-        self.close_due() && self.pending.is_none() && !self.sending_records
+    /// The filling datagram closes in cycle `c`: due, none waiting, the other buffer free.
+    fn close_now(&self, c: u64) -> bool {
+        self.close_due() && self.pending.is_none() && c >= self.records_body_until
     }
 
     /// One clock cycle of every block, as the gateware computes it.
@@ -389,7 +396,7 @@ impl<'a> Back<'a> {
         let idle = c >= self.idle_from;
 
         // framer input control
-        let closing = self.close_now();
+        let closing = self.close_now(c);
         let accept = self.offset_left == 0 && !self.close_due();
 
         // store reader: scan, grant, issue (on the registers as they are)
@@ -477,15 +484,16 @@ impl<'a> Back<'a> {
         let next_deadline_passed = (tick as u32).wrapping_sub(self.deadline) as i32 >= 0;
         self.deadline = next_deadline;
 
-        // transmitter: a waiting records datagram first, then a status datagram (both
-        // decided on the registers as they are: a datagram closing now waits a clock)
-        let pending_q = self.pending.is_some();
-        let start_records = idle && pending_q;
-        let start_status = idle && !pending_q && self.report == Report::Request;
+        // arbiter and transmitter: of two waiting datagrams the one whose source was not
+        // granted last (decided on the registers as they are: a datagram closing now waits
+        // a clock)
+        let records_wait = self.pending.is_some();
+        let status_waits = self.report == Report::Request;
+        let status_first = status_waits && (!records_wait || self.last_grant_records);
+        let start_records = idle && records_wait && !status_first;
+        let start_status = idle && status_first;
 
-        // the status reporter sees the framer's registers as they are
-        self.step_report(c, tick);
-        self.status_taken = start_status;
+        self.step_report(c, tick, start_status);
 
         if start_records {
             let mut d = self.pending.take().expect("checked");
@@ -494,9 +502,8 @@ impl<'a> Back<'a> {
             }
             self.started_records.push((c + 1, self.records_sent));
             d.sequence = self.sequence;
-            self.send(c, d);
-            self.sending_records = true;
-            self.sending_status = false;
+            self.records_body_until = self.send(c, d);
+            self.last_grant_records = true;
         } else if start_status {
             let status = self
                 .status_body
@@ -510,12 +517,8 @@ impl<'a> Back<'a> {
                 base_tick: self.report_tick,
                 body: DatagramBody::Status(status),
             };
-            self.send(c, d);
-            self.sending_status = true;
-            self.sending_records = false;
-        } else if idle {
-            self.sending_records = false;
-            self.sending_status = false;
+            self.status_body_until = self.send(c, d);
+            self.last_grant_records = false;
         }
         if closing {
             let records = std::mem::take(&mut self.fill);
@@ -573,8 +576,10 @@ impl<'a> Back<'a> {
         self.deadline_passed = next_deadline_passed;
     }
 
-    /// Starts a frame in cycle `c`.
-    fn send(&mut self, c: u64, d: DatagramRepr) {
+    /// Starts a frame in cycle `c`; returns the first cycle after its body's last byte was
+    /// taken from its source (the transmitter takes body byte `k` at frame byte
+    /// `body_start + k`, the clock after the start being frame byte 0).
+    fn send(&mut self, c: u64, d: DatagramRepr) -> u64 {
         let body_len = (d.buffer_len() - HEADER_LEN) as u64;
         // (the headers exceed the minimum frame: there is never padding)
         self.idle_from = c + self.t.body_start + body_len + self.t.frame_tail;
@@ -583,6 +588,7 @@ impl<'a> Back<'a> {
             first_cycle: c + self.t.start_to_first_byte,
             datagram: d,
         });
+        c + 1 + self.t.body_start + body_len
     }
 
     /// Records datagrams started before cycle `at` (the framer's count register then), and
@@ -595,8 +601,9 @@ impl<'a> Back<'a> {
         (k as u32, records as u32)
     }
 
-    /// One cycle of the status reporter, on the registers as they are.
-    fn step_report(&mut self, c: u64, tick: u64) {
+    /// One cycle of the status reporter, on the registers as they are; `taken`: its
+    /// descriptor is taken in this cycle.
+    fn step_report(&mut self, c: u64, tick: u64, taken: bool) {
         let mut due = self.due || self.timer_zero(c);
         match self.report {
             Report::Wait => {
@@ -623,12 +630,12 @@ impl<'a> Back<'a> {
                 }
             }
             Report::Request => {
-                if self.status_taken {
+                if taken {
                     self.report = Report::Sending;
                 }
             }
             Report::Sending => {
-                if !self.sending_status {
+                if c >= self.status_body_until {
                     self.first_port += self.page_ports;
                     self.report = if self.first_port == self.t.ports {
                         Report::Wait

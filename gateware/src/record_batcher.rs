@@ -1,4 +1,4 @@
-//! UdpFramer: batches records into box datagrams and sends them as Ethernet frames.
+//! RecordBatcher: batches records into records datagrams.
 //!
 //! Records arrive as 26-beat stream packets from the packet store (port, flags, the low 32 bits
 //! of the start tick, 20 cell bytes). The framer writes them into one of two 2 KB payload
@@ -7,37 +7,25 @@
 //! from it (the input pauses 4 clocks for that), and the ones'-complement sum of the body
 //! grows with every byte. A datagram closes when it holds 55 records (1454 bytes) or when
 //! its first record has waited `flush_timeout_ticks` (one clock later, as the deadline test
-//! is registered, and after a record on its way in is complete); it then goes to the
-//! [`FrameTransmitter`] while the other buffer fills (double buffering). A datagram due to
-//! close takes no more records: while the other buffer is still busy the input is not
-//! ready and records wait upstream, none is lost here.
-//!
-//! Status datagrams come from the status block's own memory through the `status_*`
-//! ports and share the transmitter; a waiting records datagram goes first.
+//! is registered, and after a record on its way in is complete); its descriptor is then
+//! offered on `datagrams` and, once taken, its body streams out of its buffer
+//! ([`BodyReader`]) while the other buffer fills (double buffering). A datagram due to
+//! close takes no more records: while the other buffer is still being read the input is
+//! not ready and records wait upstream, none is lost here.
 
 use crate::block_ram::BlockRam;
-use crate::frame_transmitter::FrameTransmitter;
+use crate::body_reader::BodyReader;
 use crate::hdl::*;
-use crate::stream::ByteStreamSink;
-use skinbox_protocol::datagram::MAX_RECORDS;
-use skinbox_protocol::LinkConfig;
+use crate::stream::{ByteStreamSink, DatagramSource};
+use skinbox_protocol::datagram::{DatagramKind, FLAG_FLUSH_TIMEOUT, MAX_RECORDS};
+use skinbox_protocol::record::{field, RECORD_LEN};
 
-/// Parameters of the framer.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct FramerConfig {
-    /// Addresses and ports.
-    pub link: LinkConfig,
-    /// Box id in every datagram header.
-    pub box_id: u16,
-    /// Port count in every datagram header.
-    pub port_count: u8,
-    /// A datagram is sent when its first record has waited this long.
-    pub flush_timeout_ticks: u64,
-}
+/// Beat of a record (port, flags, tick, cell bytes) that carries the tick's last byte.
+const LAST_TICK_BEAT: usize = field::TICK_OFFSET.end - 1;
 
-/// Batches records into datagrams and sends them on GMII.
+/// Batches records into datagrams.
 #[derive(LogicBlock)]
-pub struct UdpFramer {
+pub struct RecordBatcher {
     /// The box clock.
     pub clock: Signal<In, Clock>,
     /// Synchronous reset.
@@ -46,38 +34,18 @@ pub struct UdpFramer {
     pub records: ByteStreamSink,
     /// Box time.
     pub tick: Signal<In, Bits<64>>,
-    /// A status body is ready in the status memory.
-    pub status_request: Signal<In, Bit>,
-    /// Port counter blocks in the status body.
-    pub status_entry_count: Signal<In, Bits<16>>,
-    /// Length of the status body.
-    pub status_body_len: Signal<In, Bits<11>>,
-    /// Sum of the status body's 16-bit words.
-    pub status_body_sum: Signal<In, Bits<32>>,
-    /// Time of the status report.
-    pub status_tick: Signal<In, Bits<64>>,
-    /// One clock: the status datagram was taken; its memory is read from now until
-    /// `status_sending` falls.
-    pub status_taken: Signal<Out, Bit>,
-    /// The transmitter is reading the status memory.
-    pub status_sending: Signal<Out, Bit>,
-    /// Status memory byte to read (its data due two clocks later on `status_data`, from
-    /// the memory's output register).
-    pub status_address: Signal<Out, Bits<11>>,
-    /// Status memory byte.
-    pub status_data: Signal<In, Bits<8>>,
-    /// Records datagrams sent since reset.
+    /// The records datagrams.
+    pub datagrams: DatagramSource,
+    /// Records datagrams taken since reset.
     pub datagrams_sent: Signal<Out, Bits<32>>,
-    /// Records sent since reset.
+    /// Records taken since reset.
     pub records_sent: Signal<Out, Bits<32>>,
-    /// GMII transmit data.
-    pub gmii_txd: Signal<Out, Bits<8>>,
-    /// GMII transmit enable.
-    pub gmii_tx_en: Signal<Out, Bit>,
-    /// GMII transmit error.
-    pub gmii_tx_er: Signal<Out, Bit>,
-    transmitter: FrameTransmitter,
+    reader: BodyReader,
     memory: BlockRam<8, 12>,
+    records_kind: Constant<Bits<8>>,
+    flush_timeout_flag: Constant<Bits<8>>,
+    last_tick_beat_less_one: Constant<Bits<5>>,
+    record_last_beat_less_one: Constant<Bits<5>>,
     last_fill_less_one: Constant<Bits<6>>,
     flush_timeout_less_two: Constant<Bits<32>>,
     // a timeout of 1 or 2 ticks has passed a clock after the deadline is set
@@ -98,9 +66,9 @@ pub struct UdpFramer {
     deadline_passed_next: DFF<Bit>,
     // beat == 0, offset_left == 0, fill_count == max and != 0, kept in registers
     beat_zero: DFF<Bit>,
-    // beat == 5 (the record's last tick byte), set and cleared as the beat moves
-    beat_five: DFF<Bit>,
-    // beat == 25 (the record's last beat), and fill_count == the last record's index
+    // the beat is the record's last tick byte, set and cleared as the beat moves
+    beat_at_last_tick: DFF<Bit>,
+    // the beat is the record's last, and fill_count == the last record's index
     beat_last: DFF<Bit>,
     fill_at_last: DFF<Bit>,
     offset_idle: DFF<Bit>,
@@ -116,9 +84,6 @@ pub struct UdpFramer {
     pending_sum: DFF<Bits<32>>,
     pending_base_tick: DFF<Bits<64>>,
     pending_flags: DFF<Bits<8>>,
-    sending_records: DFF<Bit>,
-    sending_status: DFF<Bit>,
-    status_taken_pulse: DFF<Bit>,
     datagram_count: DFF<Bits<32>>,
     record_count: DFF<Bits<32>>,
     record_tick: Signal<Local, Bits<32>>,
@@ -134,45 +99,37 @@ pub struct UdpFramer {
     close_due: DFF<Bit>,
     can_close: Signal<Local, Bit>,
     accept: Signal<Local, Bit>,
-    start_records: Signal<Local, Bit>,
-    start_status: Signal<Local, Bit>,
+    taken: Signal<Local, Bit>,
     deadline_delta: Signal<Local, Bits<32>>,
 }
 
-impl UdpFramer {
-    /// A framer with these parameters.
-    pub fn new(config: &FramerConfig) -> Self {
+impl RecordBatcher {
+    /// A batcher that closes a datagram `flush_timeout_ticks` (1 to 2^31 - 1) after its
+    /// first record's tick.
+    pub fn new(flush_timeout_ticks: u64) -> Self {
         assert!(
-            config.flush_timeout_ticks > 0 && config.flush_timeout_ticks < 1 << 31,
-            "UdpFramer: flush timeout of {} ticks must be 1 to 2^31 - 1",
-            config.flush_timeout_ticks
+            flush_timeout_ticks > 0 && flush_timeout_ticks < 1 << 31,
+            "RecordBatcher: flush timeout of {flush_timeout_ticks} ticks must be 1 to 2^31 - 1"
         );
         Self {
             clock: Default::default(),
             reset: Default::default(),
             records: Default::default(),
             tick: Default::default(),
-            status_request: Default::default(),
-            status_entry_count: Default::default(),
-            status_body_len: Default::default(),
-            status_body_sum: Default::default(),
-            status_tick: Default::default(),
-            status_taken: Default::default(),
-            status_sending: Default::default(),
-            status_address: Default::default(),
-            status_data: Default::default(),
+            datagrams: Default::default(),
             datagrams_sent: Default::default(),
             records_sent: Default::default(),
-            gmii_txd: Default::default(),
-            gmii_tx_en: Default::default(),
-            gmii_tx_er: Default::default(),
-            transmitter: FrameTransmitter::new(&config.link, config.box_id, config.port_count),
+            reader: Default::default(),
             memory: Default::default(),
+            records_kind: Constant::new((DatagramKind::Records as u64).into()),
+            flush_timeout_flag: Constant::new(u64::from(FLAG_FLUSH_TIMEOUT).into()),
+            last_tick_beat_less_one: Constant::new((LAST_TICK_BEAT as u64 - 1).into()),
+            record_last_beat_less_one: Constant::new((RECORD_LEN as u64 - 2).into()),
             last_fill_less_one: Constant::new((MAX_RECORDS as u64 - 2).into()),
             flush_timeout_less_two: Constant::new(
-                (config.flush_timeout_ticks.wrapping_sub(2) & 0xFFFF_FFFF).into(),
+                (flush_timeout_ticks.wrapping_sub(2) & 0xFFFF_FFFF).into(),
             ),
-            short_timeout: Constant::new(config.flush_timeout_ticks <= 2),
+            short_timeout: Constant::new(flush_timeout_ticks <= 2),
             fill_buffer: Default::default(),
             fill_count: Default::default(),
             fill_offset: Default::default(),
@@ -183,7 +140,7 @@ impl UdpFramer {
             first_seen: Default::default(),
             deadline_passed_next: Default::default(),
             beat_zero: Default::default(),
-            beat_five: Default::default(),
+            beat_at_last_tick: Default::default(),
             beat_last: Default::default(),
             fill_at_last: Default::default(),
             offset_idle: Default::default(),
@@ -199,9 +156,6 @@ impl UdpFramer {
             pending_sum: Default::default(),
             pending_base_tick: Default::default(),
             pending_flags: Default::default(),
-            sending_records: Default::default(),
-            sending_status: Default::default(),
-            status_taken_pulse: Default::default(),
             datagram_count: Default::default(),
             record_count: Default::default(),
             record_tick: Default::default(),
@@ -214,8 +168,7 @@ impl UdpFramer {
             close_due: Default::default(),
             can_close: Default::default(),
             accept: Default::default(),
-            start_records: Default::default(),
-            start_status: Default::default(),
+            taken: Default::default(),
             deadline_delta: Default::default(),
         }
     }
@@ -223,7 +176,7 @@ impl UdpFramer {
 
 // Record beats: 0 port, 1 flags, 2..=5 tick (not written; replaced by the 4 offset bytes),
 // 6..=25 cell bytes.
-impl Logic for UdpFramer {
+impl Logic for RecordBatcher {
     #[hdl_gen]
     fn update(&mut self) {
         dff_setup!(
@@ -240,7 +193,7 @@ impl Logic for UdpFramer {
             first_seen,
             deadline_passed_next,
             beat_zero,
-            beat_five,
+            beat_at_last_tick,
             beat_last,
             fill_at_last,
             offset_idle,
@@ -256,17 +209,14 @@ impl Logic for UdpFramer {
             pending_sum,
             pending_base_tick,
             pending_flags,
-            sending_records,
-            sending_status,
-            status_taken_pulse,
             datagram_count,
             record_count,
             memory_write,
             memory_write_address,
             memory_write_data
         );
-        self.transmitter.clock.next = self.clock.val();
-        self.transmitter.reset.next = self.reset.val();
+        self.reader.clock.next = self.clock.val();
+        self.reader.reset.next = self.reset.val();
         self.memory.clock.next = self.clock.val();
 
         // The flush deadline passed: a registered, wrap-safe 32-bit test (the timeout is far
@@ -289,7 +239,7 @@ impl Logic for UdpFramer {
         // Close the filling datagram at a record boundary when full or due (`close_due`,
         // set at the end from the tests of beat, offset_left, fill_count and the deadline,
         // each set and cleared by the events that change what it tests, below).
-        self.can_close.next = !self.pending.q.val() & !self.sending_records.q.val();
+        self.can_close.next = !self.pending.q.val() & !self.reader.busy.val();
         // No beat moves while a datagram is due to close: in the clock it closes (the beat
         // would land in the old buffer) and while it waits for the other buffer (a full one
         // and one whose time is up alike). Whether the other buffer is free stays off the
@@ -311,8 +261,8 @@ impl Logic for UdpFramer {
         } else if self.records.valid.val() & self.accept.val() {
             self.beat.d.next = self.beat.q.val() + 1;
             self.beat_zero.d.next = false;
-            self.beat_five.d.next = self.beat.q.val() == 4;
-            self.beat_last.d.next = self.beat.q.val() == 24;
+            self.beat_at_last_tick.d.next = self.beat.q.val() == self.last_tick_beat_less_one.val();
+            self.beat_last.d.next = self.beat.q.val() == self.record_last_beat_less_one.val();
             if self.beat_last.q.val() {
                 self.beat.d.next = 0.into();
                 self.beat_zero.d.next = true;
@@ -329,7 +279,7 @@ impl Logic for UdpFramer {
             } else {
                 self.write.next = true;
             }
-            if self.beat_five.q.val() {
+            if self.beat_at_last_tick.q.val() {
                 self.offset_left.d.next = 4.into();
                 self.offset_idle.d.next = false;
             }
@@ -344,10 +294,10 @@ impl Logic for UdpFramer {
         // flip-flop would get a reset net of its own, a LUT level on the path)
         self.first_seen.d.next = self.records.valid.val()
             & self.accept.val()
-            & self.beat_five.q.val()
+            & self.beat_at_last_tick.q.val()
             & !self.fill_nonzero.q.val()
             & !self.reset.val();
-        if self.offset_idle.q.val() & self.beat_five.q.val() {
+        if self.offset_idle.q.val() & self.beat_at_last_tick.q.val() {
             if !self.fill_nonzero.q.val() {
                 self.offset_bytes.d.next = 0.into();
                 self.first_age.d.next = self.tick.val().get_bits::<32>(0) - self.record_tick.val();
@@ -392,7 +342,7 @@ impl Logic for UdpFramer {
             self.pending_base_tick.d.next = self.fill_base_tick.q.val();
             self.pending_flags.d.next = 0.into();
             if !self.fill_full.q.val() {
-                self.pending_flags.d.next = 1.into();
+                self.pending_flags.d.next = self.flush_timeout_flag.val();
             }
             self.fill_buffer.d.next = !self.fill_buffer.q.val();
             self.fill_count.d.next = 0.into();
@@ -403,53 +353,33 @@ impl Logic for UdpFramer {
             self.fill_sum.d.next = 0.into();
         }
 
-        // The transmitter: a waiting records datagram first, then a status datagram.
-        self.start_records.next = self.transmitter.idle.val() & self.pending.q.val();
-        self.start_status.next =
-            self.transmitter.idle.val() & !self.pending.q.val() & self.status_request.val();
-        self.transmitter.start.next = self.start_records.val() | self.start_status.val();
-        self.transmitter.kind.next = 1.into();
-        self.transmitter.flags.next = self.pending_flags.q.val();
-        self.transmitter.entry_count.next = bit_cast::<16, 6>(self.pending_count.q.val());
-        self.transmitter.base_tick.next = self.pending_base_tick.q.val();
-        self.transmitter.body_len.next = self.pending_len.q.val();
-        self.transmitter.body_sum.next = self.pending_sum.q.val();
-        // the descriptor of what would start now (the transmitter takes it while idle)
-        if !self.pending.q.val() & self.status_request.val() {
-            self.transmitter.kind.next = 2.into();
-            self.transmitter.flags.next = 0.into();
-            self.transmitter.entry_count.next = self.status_entry_count.val();
-            self.transmitter.base_tick.next = self.status_tick.val();
-            self.transmitter.body_len.next = self.status_body_len.val();
-            self.transmitter.body_sum.next = self.status_body_sum.val();
-        }
-        self.status_taken_pulse.d.next = self.start_status.val();
-        // Each start names the memory the transmitter reads next; a start can come in the
-        // very clock the previous frame (of either kind) ends.
-        if self.start_records.val() {
+        // The closed datagram: its descriptor until taken, then its body from the buffer
+        // that is not filling.
+        self.datagrams.valid.next = self.pending.q.val();
+        self.datagrams.kind.next = self.records_kind.val();
+        self.datagrams.flags.next = self.pending_flags.q.val();
+        self.datagrams.entry_count.next = bit_cast::<16, 6>(self.pending_count.q.val());
+        self.datagrams.base_tick.next = self.pending_base_tick.q.val();
+        self.datagrams.body_len.next = self.pending_len.q.val();
+        self.datagrams.body_sum.next = self.pending_sum.q.val();
+        self.taken.next = self.pending.q.val() & self.datagrams.ready.val();
+        self.reader.start.next = self.taken.val();
+        self.reader.length.next = self.pending_len.q.val();
+        if self.taken.val() {
             self.pending.d.next = false;
-            self.sending_records.d.next = true;
-            self.sending_status.d.next = false;
             self.datagram_count.d.next = self.datagram_count.q.val() + 1;
             self.record_count.d.next =
                 self.record_count.q.val() + bit_cast::<32, 6>(self.pending_count.q.val());
-        } else if self.start_status.val() {
-            self.sending_status.d.next = true;
-            self.sending_records.d.next = false;
-        } else if self.transmitter.idle.val() {
-            self.sending_records.d.next = false;
-            self.sending_status.d.next = false;
         }
-        // The body being sent is always the buffer that is not filling.
         self.memory.read_address.next = (bit_cast::<12, 1>((!self.fill_buffer.q.val()).into())
             << 11)
-            | bit_cast::<12, 11>(self.transmitter.payload_address.val());
-        // both memories answer two clocks after the address, from their output registers
-        self.transmitter.payload_data.next = self.memory.read_data.val();
-        if self.sending_status.q.val() {
-            self.transmitter.payload_data.next = self.status_data.val();
-        }
-        self.status_address.next = self.transmitter.payload_address.val();
+            | bit_cast::<12, 11>(self.reader.read_address.val());
+        self.reader.read_data.next = self.memory.read_data.val();
+        self.datagrams.body.valid.next = self.reader.body.valid.val();
+        self.datagrams.body.data.next = self.reader.body.data.val();
+        self.datagrams.body.last.next = self.reader.body.last.val();
+        self.datagrams.body.error.next = self.reader.body.error.val();
+        self.reader.body.ready.next = self.datagrams.body.ready.val();
 
         if self.reset.val() {
             self.memory_write.d.next = false;
@@ -463,13 +393,10 @@ impl Logic for UdpFramer {
             self.fill_offset.d.next = 0.into();
             self.fill_sum.d.next = 0.into();
             self.beat.d.next = 0.into();
-            self.beat_five.d.next = false;
+            self.beat_at_last_tick.d.next = false;
             self.beat_last.d.next = false;
             self.offset_left.d.next = 0.into();
             self.pending.d.next = false;
-            self.sending_records.d.next = false;
-            self.sending_status.d.next = false;
-            self.status_taken_pulse.d.next = false;
             self.datagram_count.d.next = 0.into();
             self.record_count.d.next = 0.into();
         }
@@ -493,22 +420,17 @@ impl Logic for UdpFramer {
         if self.reset.val() {
             self.close_due.d.next = false;
         }
-        self.status_taken.next = self.status_taken_pulse.q.val();
-        self.status_sending.next = self.sending_status.q.val();
         self.datagrams_sent.next = self.datagram_count.q.val();
         self.records_sent.next = self.record_count.q.val();
-        self.gmii_txd.next = self.transmitter.gmii_txd.val();
-        self.gmii_tx_en.next = self.transmitter.gmii_tx_en.val();
-        self.gmii_tx_er.next = self.transmitter.gmii_tx_er.val();
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{check_frame, Bench, GmiiCapture};
-    use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT};
-    use skinbox_protocol::{DataRepr, DatagramRepr, PortCounters, RecordRepr, StatusRepr};
+    use crate::frame_transmitter::word_sum;
+    use crate::testbench::{Bench, TestRng};
+    use skinbox_protocol::{DataRepr, RecordRepr};
 
     const TIMEOUT: u64 = 3000;
 
@@ -527,123 +449,147 @@ mod tests {
         }
     }
 
+    /// A datagram as it left the batcher.
+    #[derive(Debug)]
+    struct Batch {
+        /// Clock its descriptor was first offered.
+        offered: u64,
+        flags: u8,
+        base_tick: u64,
+        records: Vec<RecordRepr>,
+    }
+
+    /// How the sink takes datagrams: descriptors from `hold_until` on, each descriptor
+    /// and body beat with probability `take_p`.
+    #[derive(Clone, Copy)]
+    struct Sink {
+        hold_until: u64,
+        take_p: f64,
+    }
+
+    const EAGER: Sink = Sink {
+        hold_until: 0,
+        take_p: 1.0,
+    };
+
     struct Run {
-        capture: GmiiCapture,
-        /// Clock at which each record's first beat was taken.
+        batches: Vec<Batch>,
+        /// Clock each record's first beat was taken.
         taken: Vec<u64>,
-        status_taken: u32,
     }
 
-    /// Offers each record from its clock on, at most one beat per clock, with the status
-    /// body requested from `status_at`.
-    fn run(
-        records: &[(u64, RecordRepr)],
-        status_at: Option<(u64, Vec<u8>, u16)>,
-        clocks: u64,
-    ) -> Run {
-        run_from(0, records, status_at, clocks)
-    }
-
-    /// As [`run`], with the box time starting at `epoch`.
-    fn run_from(
-        epoch: u64,
-        records: &[(u64, RecordRepr)],
-        status_at: Option<(u64, Vec<u8>, u16)>,
-        clocks: u64,
-    ) -> Run {
-        let config = FramerConfig {
-            link: LinkConfig::DEFAULT,
-            box_id: 3,
-            port_count: 8,
-            flush_timeout_ticks: TIMEOUT,
-        };
-        let mut bench = Bench::new(UdpFramer::new(&config), |b| &mut b.clock);
+    /// Offers each record from its clock on, at most one beat per clock, with the box
+    /// time starting at `epoch`; checks every descriptor against its body.
+    fn run(epoch: u64, records: &[(u64, RecordRepr)], sink: Sink, clocks: u64) -> Run {
+        let mut bench = Bench::new(RecordBatcher::new(TIMEOUT), |b| &mut b.clock);
+        let mut rng = TestRng::new(epoch ^ clocks);
         bench.uut.reset.next = true;
         bench.cycles(2);
         bench.uut.reset.next = false;
         let beats: Vec<Vec<u8>> = records
             .iter()
             .map(|(_, r)| {
-                let mut b = vec![0; 26];
+                let mut b = vec![0; RECORD_LEN];
                 r.emit(&mut b);
                 b
             })
             .collect();
         let (mut next, mut beat) = (0, 0);
-        let mut run = Run {
-            capture: GmiiCapture::default(),
-            taken: vec![],
-            status_taken: 0,
-        };
-        let mut status_pending = false;
-        // the status memory's addresses of the last two clocks: it answers two clocks late
-        let mut status_reads: [u64; 2] = [0; 2];
+        let mut taken = vec![];
+        let mut out: Vec<Batch> = vec![];
+        let mut offered_since: Option<u64> = None;
+        // descriptor taken: (entries, length, sum, body so far)
+        let mut open: Option<(usize, usize, u64, Vec<u8>)> = None;
         for clock in 0..clocks {
             let offer = next < records.len() && clock >= records[next].0;
+            let take = clock >= sink.hold_until && rng.chance(sink.take_p);
+            let take_body = rng.chance(sink.take_p);
             let u = &mut bench.uut;
             u.tick.next = (epoch + clock).into();
             u.records.valid.next = offer;
             if offer {
                 u.records.data.next = u64::from(beats[next][beat]).into();
-                u.records.last.next = beat == 25;
+                u.records.last.next = beat == RECORD_LEN - 1;
             }
-            if let Some((at, body, entries)) = &status_at {
-                if clock == *at {
-                    status_pending = true;
-                }
-                u.status_request.next = status_pending;
-                u.status_entry_count.next = u64::from(*entries).into();
-                u.status_body_len.next = (body.len() as u64).into();
-                u.status_body_sum.next = crate::frame_transmitter::word_sum(body).into();
-                u.status_tick.next = 777_777.into();
-                u.status_data.next =
-                    u64::from(*body.get(status_reads[1] as usize).unwrap_or(&0)).into();
-            }
+            u.datagrams.ready.next = take && open.is_none();
+            u.datagrams.body.ready.next = take_body;
             bench.settle();
             let u = &bench.uut;
             if offer && u.records.ready.val() {
                 if beat == 0 {
-                    run.taken.push(clock);
+                    taken.push(clock);
                 }
                 beat += 1;
-                if beat == 26 {
+                if beat == RECORD_LEN {
                     beat = 0;
                     next += 1;
                 }
             }
-            status_reads = [u.status_address.val().to_u64(), status_reads[0]];
-            if u.status_taken.val() {
-                run.status_taken += 1;
-                status_pending = false;
+            if let Some((entries, len, sum, body)) = &mut open {
+                if take_body && u.datagrams.body.valid.val() {
+                    body.push(u.datagrams.body.data.val().to_u8());
+                    assert_eq!(u.datagrams.body.last.val(), body.len() == *len);
+                    if body.len() == *len {
+                        assert_eq!(word_sum(body), *sum, "body sum");
+                        let records: Vec<RecordRepr> = body
+                            .chunks(RECORD_LEN)
+                            .map(|r| RecordRepr::parse(r).unwrap())
+                            .collect();
+                        assert_eq!(records.len(), *entries);
+                        out.last_mut().unwrap().records = records;
+                        open = None;
+                    }
+                }
+            } else {
+                assert!(
+                    !u.datagrams.body.valid.val(),
+                    "no body before its descriptor"
+                );
+                if u.datagrams.valid.val() {
+                    let offered = *offered_since.get_or_insert(clock);
+                    if take {
+                        assert_eq!(u.datagrams.kind.val().to_u8(), DatagramKind::Records as u8);
+                        let entries = u.datagrams.entry_count.val().index();
+                        let len = u.datagrams.body_len.val().index();
+                        assert_eq!(len, entries * RECORD_LEN);
+                        open = Some((entries, len, u.datagrams.body_sum.val().to_u64(), vec![]));
+                        out.push(Batch {
+                            offered,
+                            flags: u.datagrams.flags.val().to_u8(),
+                            base_tick: u.datagrams.base_tick.val().to_u64(),
+                            records: vec![],
+                        });
+                        offered_since = None;
+                    }
+                }
             }
-            run.capture.clock(
-                clock,
-                u.gmii_tx_en.val(),
-                u.gmii_txd.val().to_u8(),
-                u.gmii_tx_er.val(),
-            );
             bench.cycle();
         }
         assert_eq!(next, records.len(), "records not taken");
-        run
+        assert!(open.is_none(), "a body left unfinished");
+        let records_out = out.iter().map(|b| b.records.len() as u32).sum::<u32>();
+        assert_eq!(bench.uut.records_sent.val().to_u32(), records_out);
+        assert_eq!(bench.uut.datagrams_sent.val().to_u32(), out.len() as u32);
+        Run {
+            batches: out,
+            taken,
+        }
     }
 
-    fn datagrams(capture: &GmiiCapture) -> Vec<DatagramRepr> {
-        capture
-            .frames
+    /// Every record once, in order, with its tick rebuilt from its datagram's base.
+    fn assert_all_delivered(out: &[Batch], input: &[(u64, RecordRepr)]) {
+        let got: Vec<(u64, &RecordRepr)> = out
             .iter()
-            .enumerate()
-            .map(|(i, f)| {
-                let payload = check_frame(f).unwrap_or_else(|e| panic!("frame {i}: {e}"));
-                DatagramRepr::parse(&payload).unwrap_or_else(|e| panic!("frame {i}: {e}"))
-            })
-            .collect()
-    }
-
-    fn records_of(d: &DatagramRepr) -> &[RecordRepr] {
-        match &d.body {
-            DatagramBody::Records(r) => r,
-            DatagramBody::Status(_) => panic!("status datagram where records were expected"),
+            .flat_map(|b| b.records.iter().map(|r| (r.tick(b.base_tick), r)))
+            .collect();
+        assert_eq!(got.len(), input.len());
+        for (i, ((tick, r), (_, sent))) in got.iter().zip(input).enumerate() {
+            assert_eq!(
+                (r.port, r.flags, r.cell_packet),
+                (sent.port, sent.flags, sent.cell_packet),
+                "record {i}"
+            );
+            assert_eq!(*tick as u32, sent.tick_offset as u32, "record {i}");
         }
     }
 
@@ -652,36 +598,21 @@ mod tests {
         let input: Vec<(u64, RecordRepr)> = (0..60)
             .map(|i| (2000, record(i, 1000 + 7 * i as u32)))
             .collect();
-        let run = run(&input, None, 2000 + 60 * 32 + TIMEOUT + 3000);
-        let got = datagrams(&run.capture);
-        assert_eq!(got.len(), 2);
-        assert_eq!((got[0].sequence, got[1].sequence), (0, 1));
-        assert_eq!(got[0].flags, 0, "sent because full");
-        assert_eq!(got[1].flags, FLAG_FLUSH_TIMEOUT);
-        assert_eq!((got[0].box_id, got[0].port_count), (3, 8));
-        for (d, range, base) in [(&got[0], 0..55, 1000u64), (&got[1], 55..60, 1000 + 7 * 55)] {
-            assert_eq!(d.base_tick, base);
-            let recs = records_of(d);
-            assert_eq!(recs.len(), range.len());
-            for (r, i) in recs.iter().zip(range) {
-                let sent = &input[i].1;
-                assert_eq!(
-                    (r.port, r.flags, r.cell_packet),
-                    (sent.port, sent.flags, sent.cell_packet)
-                );
-                assert_eq!(r.tick(d.base_tick), 1000 + 7 * i as u64, "record {i}");
-            }
-        }
-        // the second datagram left when its first record had waited the flush timeout
-        let first_of_second = run.taken[55];
-        let start = run.capture.starts[1];
+        let run = run(0, &input, EAGER, 2000 + 60 * 32 + TIMEOUT + 3000);
+        let out = &run.batches;
+        assert_eq!(out.len(), 2);
+        assert_eq!(out[0].flags, 0, "closed because full");
+        assert_eq!(out[1].flags, FLAG_FLUSH_TIMEOUT);
+        assert_eq!(out[0].records.len(), MAX_RECORDS);
+        assert_eq!((out[0].base_tick, out[1].base_tick), (1000, 1000 + 7 * 55));
+        assert_all_delivered(out, &input);
+        // the second datagram closed when its first record had waited the flush timeout
+        // (from its arrival here, plus its beats up to its tick)
+        let due = run.taken[55] + TIMEOUT;
         assert!(
-            start >= first_of_second + TIMEOUT,
-            "{start} < {first_of_second} + {TIMEOUT}"
-        );
-        assert!(
-            start <= first_of_second + TIMEOUT + 10,
-            "late flush: {start}"
+            (due..=due + 10).contains(&out[1].offered),
+            "closed at {}, due at {due}",
+            out[1].offered
         );
     }
 
@@ -695,99 +626,57 @@ mod tests {
             (6030, record(1, at(4990))),
             (6060, record(2, at(5010))),
         ];
-        let run = run_from(epoch, &input, None, 7000 + TIMEOUT);
-        let got = datagrams(&run.capture);
-        assert_eq!(got.len(), 1);
-        let offsets: Vec<i32> = records_of(&got[0]).iter().map(|r| r.tick_offset).collect();
+        let out = run(epoch, &input, EAGER, 7000 + TIMEOUT).batches;
+        assert_eq!(out.len(), 1);
+        let offsets: Vec<i32> = out[0].records.iter().map(|r| r.tick_offset).collect();
         assert_eq!(offsets, vec![0, -10, 10]);
-        assert_eq!(got[0].base_tick, epoch + 5000);
+        assert_eq!(out[0].base_tick, epoch + 5000);
     }
 
     #[test]
-    fn every_record_arrives_once_in_order_at_full_input_rate() {
-        let input: Vec<(u64, RecordRepr)> = (0..200).map(|i| (10, record(i, i as u32))).collect();
-        let run = run(&input, None, 200 * 40 + TIMEOUT + 5000);
-        let got = datagrams(&run.capture);
-        let all: Vec<RecordRepr> = got.iter().flat_map(|d| records_of(d).to_vec()).collect();
-        assert_eq!(all.len(), 200);
-        for (i, (r, sent)) in all.iter().zip(&input).enumerate() {
-            assert_eq!(r.cell_packet, sent.1.cell_packet, "record {i}");
+    fn every_record_arrives_once_in_order_under_random_backpressure() {
+        let input: Vec<(u64, RecordRepr)> = (0..300).map(|i| (10, record(i, i as u32))).collect();
+        for take_p in [1.0, 0.5, 0.2] {
+            let sink = Sink {
+                hold_until: 0,
+                take_p,
+            };
+            let out = run(0, &input, sink, 120_000).batches;
+            assert_all_delivered(&out, &input);
+            assert!(out[..out.len() - 1]
+                .iter()
+                .all(|d| d.records.len() == MAX_RECORDS));
         }
-        let sequences: Vec<u32> = got.iter().map(|d| d.sequence).collect();
-        assert_eq!(sequences, (0..got.len() as u32).collect::<Vec<_>>());
-        assert!(got[..got.len() - 1]
-            .iter()
-            .all(|d| records_of(d).len() == 55));
     }
 
     #[test]
-    fn records_waiting_behind_a_status_datagram_are_sent_from_their_own_buffer() {
-        // the records close (timeout) while the status frame is on the wire, so they start
-        // in the clock the status frame ends
-        let status = StatusRepr {
-            boot_id: 7,
-            datagrams_sent: 0,
-            records_sent: 0,
-            first_port: 0,
-            ports: vec![PortCounters([9; 8]); 8],
+    fn records_wait_upstream_while_no_datagram_is_taken() {
+        // nothing is taken for 8 timeouts: one datagram closes and waits, the next fills
+        // and closes, the input stops; then everything leaves, in order, none lost
+        let input: Vec<(u64, RecordRepr)> = (0..150)
+            .map(|i| (100 + 200 * i as u64, record(i, 100 + 200 * i as u32)))
+            .collect();
+        let sink = Sink {
+            hold_until: 8 * TIMEOUT,
+            take_p: 1.0,
         };
-        let whole = DatagramRepr {
-            box_id: 3,
-            port_count: 8,
-            flags: 0,
-            sequence: 0,
-            base_tick: 777_777,
-            body: DatagramBody::Status(status),
-        };
-        let body = whole.to_bytes()[24..].to_vec();
-        let input: Vec<(u64, RecordRepr)> = (0..3).map(|i| (50, record(i, 40))).collect();
-        let run = run(&input, Some((TIMEOUT, body, 8)), 4 * TIMEOUT);
-        let got = datagrams(&run.capture);
-        assert_eq!(got.len(), 2);
-        assert_eq!(got[0], whole);
-        let gap =
-            run.capture.starts[1] - run.capture.starts[0] - run.capture.frames[0].len() as u64;
+        let run = run(0, &input, sink, 150 * 200 + 4 * TIMEOUT);
+        let out = &run.batches;
+        assert_all_delivered(out, &input);
+        // the first closed at its timeout (at the end of the record then coming in) and
+        // waited; the second filled and waited too, holding the records upstream
+        let due = run.taken[0] + TIMEOUT;
         assert!(
-            gap <= 13,
-            "the records left right after the status frame ({gap} clocks)"
+            (due..due + 40).contains(&out[0].offered),
+            "{}",
+            out[0].offered
         );
-        let sent: Vec<[u8; 20]> = input.iter().map(|r| r.1.cell_packet).collect();
-        let out: Vec<[u8; 20]> = records_of(&got[1]).iter().map(|r| r.cell_packet).collect();
-        assert_eq!(out, sent);
-    }
-
-    #[test]
-    fn status_datagram_shares_the_link() {
-        let status = StatusRepr {
-            boot_id: 0xABCD,
-            datagrams_sent: 1,
-            records_sent: 3,
-            first_port: 0,
-            ports: vec![PortCounters([1, 2, 3, 4, 5, 6, 7, 8]); 8],
-        };
-        let whole = DatagramRepr {
-            box_id: 3,
-            port_count: 8,
-            flags: 0,
-            sequence: 1,
-            base_tick: 777_777,
-            body: DatagramBody::Status(status),
-        };
-        let body = whole.to_bytes()[24..].to_vec();
-        let input: Vec<(u64, RecordRepr)> = (0..3).map(|i| (50, record(i, 40))).collect();
-        let run = run(&input, Some((60, body, 8)), 6000 + TIMEOUT);
-        let got = datagrams(&run.capture);
-        assert_eq!(run.status_taken, 1);
-        assert_eq!(got.len(), 2);
-        // the status went first: the records datagram waited for its timeout
-        assert_eq!(
-            got[0],
-            DatagramRepr {
-                sequence: 0,
-                ..whole
-            }
+        assert_eq!(out[0].flags, FLAG_FLUSH_TIMEOUT);
+        let held = run.taken.iter().filter(|&&t| t > sink.hold_until).count();
+        let late = input.iter().filter(|(at, _)| *at > sink.hold_until).count();
+        assert!(
+            held > late,
+            "records were held upstream ({held} taken late, {late} offered late)"
         );
-        assert_eq!(records_of(&got[1]).len(), 3);
-        assert_eq!(got[1].sequence, 1);
     }
 }
