@@ -1,8 +1,9 @@
 //! Every port busy at UART line rate (20,000 packets/s each, back to back), each line with
 //! its own clock error and +-10 ns of edge jitter: nothing is lost, nothing corrupted,
 //! every stamp lies within one tick after the true (jittered) start edge; the reference
-//! model predicts the same frames. Eight ports (the default box) and 40 (both banks of
-//! the packet store, the first with its write ring at its longest, 32 clocks).
+//! model predicts the same frames. Eight ports (the default box), 40 (both banks of the
+//! packet store, the first with its write ring at its longest, 32 clocks) and 64 (the
+//! largest box) for 10 ms.
 
 use skinbox_cosim::reference::run_reference;
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec};
@@ -20,6 +21,12 @@ fn forty_ports_at_line_rate_lose_nothing() {
     // clock errors from -3 % to +3 %: the fast cells' bytes come 297 clocks apart, the
     // write ring takes a header's five beats in at most 160
     at_line_rate(40, 16, 0.03);
+}
+
+#[test]
+fn sixty_four_ports_at_line_rate_for_ten_ms_lose_nothing() {
+    // the largest box: both banks full, 12,800 packets over 10 ms, clock errors +-3 %
+    at_line_rate(64, 200, 0.03);
 }
 
 /// `per_port` packets back to back on each of `ports` lines, the lines' clock errors

@@ -28,6 +28,8 @@ pub mod frame_transmitter;
 pub mod hdl;
 pub mod interface_box;
 pub mod packet_store;
+pub mod port_slots;
+pub mod record_arbiter;
 pub mod record_batcher;
 pub mod replica_register;
 pub mod status_reporter;
