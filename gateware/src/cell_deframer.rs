@@ -24,10 +24,12 @@
 //! framing error a header value inside the rest of the broken packet can start a false
 //! packet that is rejected too.
 
+use crate::counter_file::counter_bit;
 use crate::hdl::*;
 use crate::stream::ByteStreamSource;
 use crate::uart_rx::{BIT_COUNT_AFTER_STOP, BIT_COUNT_MAX};
 use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
+use skinbox_protocol::PortCounter;
 
 /// Beats of the packet stream before the cell bytes: the 32-bit start tick.
 pub const TICK_BEATS: usize = 4;
@@ -95,6 +97,14 @@ pub struct CellDeframer {
     // the counter events of this clock, one bit each (`events`), from a register, each
     // set by its own test (no chain through the branches of the packet logic)
     event_bits: DFF<Bits<8>>,
+    // each event's bit in `events`
+    good_event: Constant<Bits<8>>,
+    end_byte_event: Constant<Bits<8>>,
+    framing_event: Constant<Bits<8>>,
+    truncated_event: Constant<Bits<8>>,
+    garbage_event: Constant<Bits<8>>,
+    framing_error_event: Constant<Bits<8>>,
+    resync_event: Constant<Bits<8>>,
     events_now: Signal<Local, Bits<8>>,
     // a packet's last byte arrives (no framing error), a framing error inside a packet,
     // a byte outside a packet that is not a header, a packet truncated at the idle gap
@@ -154,6 +164,13 @@ impl CellDeframer {
             pending_last: Default::default(),
             pending_error: Default::default(),
             event_bits: Default::default(),
+            good_event: counter_bit(PortCounter::PacketsGood),
+            end_byte_event: counter_bit(PortCounter::RejectedEndByte),
+            framing_event: counter_bit(PortCounter::RejectedFraming),
+            truncated_event: counter_bit(PortCounter::RejectedTruncated),
+            garbage_event: counter_bit(PortCounter::GarbageBytes),
+            framing_error_event: counter_bit(PortCounter::FramingErrors),
+            resync_event: counter_bit(PortCounter::Resyncs),
             events_now: Default::default(),
             packet_end: Default::default(),
             packet_framing_error: Default::default(),
@@ -304,23 +321,33 @@ impl Logic for CellDeframer {
             self.input_strobe.q.val() & !self.in_packet.q.val() & !self.input_is_header.q.val();
         self.truncated.next =
             !self.input_strobe.q.val() & self.in_packet.q.val() & self.input_gap.q.val();
-        self.events_now.next =
-            bit_cast::<8, 1>((self.packet_end.val() & self.end_byte_good.val()).into())
-                | (bit_cast::<8, 1>((self.packet_end.val() & !self.end_byte_good.val()).into())
-                    << 2)
-                | (bit_cast::<8, 1>(self.packet_framing_error.val().into()) << 3)
-                | (bit_cast::<8, 1>(self.truncated.val().into()) << 4)
-                | (bit_cast::<8, 1>(self.garbage.val().into()) << 5)
-                | (bit_cast::<8, 1>(
-                    (self.input_strobe.q.val() & self.input_framing_error.q.val()).into(),
-                ) << 6)
-                | (bit_cast::<8, 1>(
-                    ((self.garbage.val() & self.aligned.q.val())
-                        | self.packet_framing_error.val()
-                        | (self.packet_end.val() & !self.end_byte_good.val())
-                        | self.truncated.val())
-                    .into(),
-                ) << 7);
+        // (each event's bit from its `PortCounter`, ORed in: independent tests)
+        self.events_now.next = 0.into();
+        if self.packet_end.val() & self.end_byte_good.val() {
+            self.events_now.next = self.events_now.val() | self.good_event.val();
+        }
+        if self.packet_end.val() & !self.end_byte_good.val() {
+            self.events_now.next = self.events_now.val() | self.end_byte_event.val();
+        }
+        if self.packet_framing_error.val() {
+            self.events_now.next = self.events_now.val() | self.framing_event.val();
+        }
+        if self.truncated.val() {
+            self.events_now.next = self.events_now.val() | self.truncated_event.val();
+        }
+        if self.garbage.val() {
+            self.events_now.next = self.events_now.val() | self.garbage_event.val();
+        }
+        if self.input_strobe.q.val() & self.input_framing_error.q.val() {
+            self.events_now.next = self.events_now.val() | self.framing_error_event.val();
+        }
+        if (self.garbage.val() & self.aligned.q.val())
+            | self.packet_framing_error.val()
+            | (self.packet_end.val() & !self.end_byte_good.val())
+            | self.truncated.val()
+        {
+            self.events_now.next = self.events_now.val() | self.resync_event.val();
+        }
         self.event_bits.d.next = self.events_now.val();
         if self.reset.val() {
             self.event_bits.d.next = 0.into();

@@ -23,7 +23,12 @@
 use crate::block_ram::BlockRam;
 use crate::hdl::*;
 use crate::packet_store::{group_onehot, GROUP_PORTS};
+use skinbox_protocol::PortCounter;
 
+/// The event bit of `counter` in a port's 8-bit counter events (bit i = `PortCounter` i).
+pub fn counter_bit(counter: PortCounter) -> Constant<Bits<8>> {
+    Constant::new((1u64 << counter as u64).into())
+}
 /// Clocks the counter file spends clearing its memories after reset (`ready` low).
 pub const CLEAR_CLOCKS: u64 = 512;
 

@@ -23,6 +23,7 @@
 
 use crate::block_ram::BlockRam;
 use crate::cell_deframer::TICK_BEATS;
+use crate::counter_file::counter_bit;
 use crate::hdl::*;
 use crate::stream::ByteStreamSink;
 use skinbox_protocol::cell::PACKET_LEN;
@@ -175,7 +176,7 @@ impl PortSlots {
             bank_data: each(banks),
             free_slot: Default::default(),
             free_port: Default::default(),
-            dropped_event: Constant::new((1u64 << PortCounter::DroppedOverflow as u64).into()),
+            dropped_event: counter_bit(PortCounter::DroppedOverflow),
             memories: each(banks),
             ring_start: Constant::new((1 | high).into()),
             ring_keep: Constant::new((!(wrap_low | wrap_high)).into()),
