@@ -15,6 +15,7 @@
 pub mod bench;
 mod binding;
 pub mod cache_lock;
+pub mod control;
 pub mod dut;
 pub mod error;
 pub mod frames;

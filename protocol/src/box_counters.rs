@@ -52,8 +52,9 @@ pub enum BoxCounter {
     Ipv4Options,
     /// IPv4 fragments (MF set or a fragment offset): refused.
     Ipv4Fragment,
-    /// ICMP or UDP packets with a wrong checksum (a UDP checksum of 0 is not checked).
-    BadChecksum,
+    /// ICMP or UDP messages too short for their header, a UDP length other than the IPv4
+    /// payload's, or a wrong ICMP or UDP checksum (a UDP checksum of 0 means none).
+    BadTransport,
     /// UDP datagrams to a port other than the box's command port.
     UnknownUdpPort,
     /// ARP requests answered.
@@ -88,7 +89,7 @@ impl BoxCounter {
         BoxCounter::Ipv4BadHeader,
         BoxCounter::Ipv4Options,
         BoxCounter::Ipv4Fragment,
-        BoxCounter::BadChecksum,
+        BoxCounter::BadTransport,
         BoxCounter::UnknownUdpPort,
         BoxCounter::ArpAnswered,
         BoxCounter::PingsAnswered,
@@ -123,7 +124,7 @@ impl BoxCounter {
             BoxCounter::Ipv4BadHeader => "ipv4_bad_header",
             BoxCounter::Ipv4Options => "ipv4_options",
             BoxCounter::Ipv4Fragment => "ipv4_fragment",
-            BoxCounter::BadChecksum => "bad_checksum",
+            BoxCounter::BadTransport => "bad_transport",
             BoxCounter::UnknownUdpPort => "unknown_udp_port",
             BoxCounter::ArpAnswered => "arp_answered",
             BoxCounter::PingsAnswered => "pings_answered",
