@@ -336,6 +336,60 @@ mod tests {
     }
 
     #[test]
+    fn status_datagrams_carry_the_block_behind_flag_bit_1() {
+        use crate::datagram::{
+            Datagram, DatagramBody, DatagramRepr, FLAG_BOX_COUNTERS,
+            MAX_STATUS_PORTS_WITH_BOX_COUNTERS,
+        };
+        use crate::{PortCounters, StatusRepr};
+        let status = |ports: usize| DatagramRepr {
+            box_id: 3,
+            port_count: 64,
+            flags: 0,
+            sequence: 9,
+            base_tick: 1234,
+            body: DatagramBody::Status(StatusRepr {
+                boot_id: 7,
+                datagrams_sent: 1,
+                records_sent: 2,
+                first_port: 0,
+                ports: vec![PortCounters([5; 8]); ports],
+            }),
+        };
+        let mut counters = BoxCounters::default();
+        counters.bump(BoxCounter::FramesReceived);
+        counters.bump(BoxCounter::PingsAnswered);
+        let plain = status(4).to_bytes();
+        let with = status(4).to_bytes_with_box_counters(&counters);
+        // the same datagram, the flag and the block added
+        assert_eq!(with.len(), plain.len() + BOX_COUNTERS_LEN);
+        assert_eq!(with[7], FLAG_BOX_COUNTERS);
+        assert_eq!(with[..7], plain[..7]);
+        assert_eq!(with[8..plain.len()], plain[8..]);
+        let (repr, parsed) = DatagramRepr::parse_box_counters(&with).unwrap();
+        assert_eq!((repr, parsed), (status(4), Some(counters)));
+        assert_eq!(
+            DatagramRepr::parse_box_counters(&plain).unwrap(),
+            (status(4), None)
+        );
+        assert_eq!(parsed.unwrap().unaccounted_frames(), 0);
+        // at most 42 port blocks beside the block
+        let full = status(44).to_bytes_with_box_counters(&counters);
+        assert_eq!(
+            Datagram::new_checked(&full[..]).unwrap().entry_count(),
+            MAX_STATUS_PORTS_WITH_BOX_COUNTERS
+        );
+        assert!(full.len() <= crate::datagram::MAX_PAYLOAD_LEN);
+        // the flag without the block, and the block without the flag, are refused
+        let mut flag_only = plain.clone();
+        flag_only[7] = FLAG_BOX_COUNTERS;
+        assert!(Datagram::new_checked(&flag_only[..]).is_err());
+        let mut block_only = with.clone();
+        block_only[7] = 0;
+        assert!(Datagram::new_checked(&block_only[..]).is_err());
+    }
+
+    #[test]
     fn refuses_bad_link_fields() {
         let mut bytes = vec![0u8; BOX_COUNTERS_LEN];
         bytes[0] = 2;
