@@ -157,6 +157,18 @@ fn ctl_and_capture_against_the_emulator() {
     assert_eq!(status["box_counters"]["unaccounted_frames"], 0);
     assert_eq!(status["port_count"], 4);
 
+    // time: the four times of a clock exchange, in order on each clock
+    let time = json(&ctl(&addr, &["time"]));
+    assert_eq!(time["command"], "read_tick");
+    let n = |k: &str| time[k].as_u64().unwrap();
+    assert!(n("host_send_ns") <= n("host_receive_ns"), "{time}");
+    assert!(n("box_receive_tick") <= n("box_send_tick"), "{time}");
+    assert!(n("box_receive_tick") > 0, "{time}");
+    // ping: status-now round trips
+    let ping = json(&ctl(&addr, &["ping", "--count", "3"]));
+    assert_eq!(ping["exchanges"].as_array().unwrap().len(), 3, "{ping}");
+    assert!(ping["rtt_us_max"].as_f64().unwrap() < 250_000.0, "{ping}");
+
     // stream-to, then a capture on that address receives the scene's records
     let port = free_port();
     let to = format!("127.0.0.1:{port}");
