@@ -207,14 +207,8 @@ fn predict_frames_with_progress(
     end: u64,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Vec<Frame>, CosimError> {
-    config.validate()?;
-    let (front_timing, back_timing) = timings(config);
-    let mut fronts: Vec<PortFront> = lines
-        .iter()
-        .map(|l| port_front(l, &front_timing, end))
-        .collect();
-    fronts.resize_with(config.ports, PortFront::default);
-    let mut back = Back::new(back_timing, &fronts);
+    let prepared = prepare(config, lines, end)?;
+    let mut back = Back::new(prepared.back_timing.clone(), &prepared.fronts);
     let step = 1 << 24;
     let mut done = TICK_ZERO_CYCLE;
     while done < end {
