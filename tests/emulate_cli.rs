@@ -168,6 +168,11 @@ fn ctl_and_capture_against_the_emulator() {
     let ping = json(&ctl(&addr, &["ping", "--count", "3"]));
     assert_eq!(ping["exchanges"].as_array().unwrap().len(), 3, "{ping}");
     assert!(ping["rtt_us_max"].as_f64().unwrap() < 250_000.0, "{ping}");
+    eprintln!(
+        "ctl ping round trip on loopback: {:.0} to {:.0} us",
+        ping["rtt_us_min"].as_f64().unwrap(),
+        ping["rtt_us_max"].as_f64().unwrap()
+    );
 
     // stream-to, then a capture on that address receives the scene's records
     let port = free_port();
@@ -209,6 +214,12 @@ fn ctl_and_capture_against_the_emulator() {
         mean(&after),
         mean(&before)
     );
+    eprintln!(
+        "flushed datagrams: largest record tick spread {spread_before} -> {spread_after} ticks, \
+         records per datagram {:.2} -> {:.2}",
+        mean(&before),
+        mean(&after)
+    );
 
     // a replayed command is refused, answered and counted (from another loopback address:
     // the box keeps the last sequence number per host)
@@ -233,8 +244,13 @@ fn ctl_and_capture_against_the_emulator() {
     assert_eq!(results[0].result, AckResult::Ok);
     assert_eq!(results[1].result, AckResult::Replay);
     assert_eq!(results[1].last_accepted, 0x7000_0000);
+    // a cell-network command: no downlink yet, refused with its reason
+    let cell = ctl(&addr, &["cell-command", "--port", "2", &"A5".repeat(20)]);
+    assert!(!cell.status.success());
+    assert!(String::from_utf8_lossy(&cell.stderr).contains("no_downlink"));
     let status = json(&ctl(&addr, &["status"]));
     assert_eq!(status["box_counters"]["counters"]["refused_replay"], 1);
+    assert_eq!(status["box_counters"]["counters"]["refused_no_downlink"], 1);
 
     // the claim of a capture: the stream comes to the capture's own socket
     let out = skinbox()
