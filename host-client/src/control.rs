@@ -199,3 +199,97 @@ impl<'s> BoxClient<'s> {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinbox_protocol::command::{AckReply, Opcode};
+
+    fn ack_for(command: &CommandRepr, result: AckResult, last_accepted: u32) -> Vec<u8> {
+        AckRepr {
+            box_id: 1,
+            port_count: 4,
+            sequence: command.sequence,
+            host_time: command.host_time,
+            opcode: command.request.opcode() as u8,
+            result,
+            last_accepted,
+            receive_tick: 10,
+            send_tick: 11,
+            reply: AckReply::None,
+        }
+        .to_bytes()
+    }
+
+    /// A box on a thread that ignores the first command, answers the second as a replay
+    /// (last accepted 5000) after a stream datagram, and accepts the third if it is 5001.
+    #[test]
+    fn retries_after_a_timeout_and_goes_past_a_replay() {
+        let fake_box = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let box_addr = fake_box.local_addr().unwrap();
+        let thread = std::thread::spawn(move || {
+            let mut buf = [0u8; 256];
+            let mut sequences = vec![];
+            for step in 0..3 {
+                let (n, from) = fake_box.recv_from(&mut buf).unwrap();
+                let command = CommandRepr::parse(&buf[..n], 4).unwrap();
+                sequences.push(command.sequence);
+                match step {
+                    0 => {}
+                    1 => {
+                        fake_box.send_to(b"a stream datagram", from).unwrap();
+                        let ack = ack_for(&command, AckResult::Replay, 5000);
+                        fake_box.send_to(&ack, from).unwrap();
+                    }
+                    _ => {
+                        let ack = ack_for(&command, AckResult::Ok, command.sequence);
+                        fake_box.send_to(&ack, from).unwrap();
+                    }
+                }
+            }
+            sequences
+        });
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let mut client = BoxClient::new(&socket, box_addr);
+        client.timeout = Duration::from_millis(100);
+        client.retries = 1;
+        let e = client.send(Request::ReadTick).unwrap();
+        let sequences = thread.join().unwrap();
+        assert_eq!(sequences[1], sequences[0].wrapping_add(1));
+        assert_eq!(sequences[2], 5001);
+        assert_eq!((e.ack.result, e.ack.sequence), (AckResult::Ok, 5001));
+        assert_eq!(e.ack.opcode, Opcode::ReadTick as u8);
+        assert_eq!(e.attempts, 2);
+        assert_eq!(e.passed_over.len(), 1);
+        assert_eq!(e.passed_over[0].1, b"a stream datagram");
+        assert!(e.host_send_ns <= e.host_receive_ns);
+    }
+
+    #[test]
+    fn no_box_is_a_timeout_after_every_attempt() {
+        let silent = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let mut client = BoxClient::new(&socket, silent.local_addr().unwrap());
+        client.timeout = Duration::from_millis(20);
+        client.retries = 2;
+        match client.send(Request::StatusNow) {
+            Err(ControlError::Timeout { attempts, .. }) => assert_eq!(attempts, 3),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_decoder_counts_acknowledgements_apart_from_bad_input() {
+        let command = CommandRepr {
+            box_id: 1,
+            sequence: 1,
+            host_time: 2,
+            request: Request::ReadTick,
+        };
+        let mut decoder = crate::Decoder::new(crate::DecoderConfig::default());
+        let outcome = decoder.push_datagram(&ack_for(&command, AckResult::Ok, 1), &mut ());
+        assert_eq!(outcome, crate::decoder::DatagramOutcome::Acknowledgement);
+        assert_eq!(decoder.bad_input_total(), 0);
+        assert_eq!(decoder.report().acknowledgements, 1);
+    }
+}

@@ -852,6 +852,7 @@ impl Decoder {
             box_ids,
             records_datagrams: boxes.iter().map(|b| b.records_datagrams).sum(),
             status_datagrams: box_status.status_datagrams,
+            acknowledgements: self.acknowledgements,
             records: self.records,
             data_packets: self.data_packets,
             event_packets: self.event_packets,

@@ -336,6 +336,8 @@ pub struct Report {
     pub records_datagrams: u64,
     /// Status datagrams decoded.
     pub status_datagrams: u64,
+    /// Command acknowledgements among the datagrams (kind 4; not box datagrams).
+    pub acknowledgements: u64,
     /// Records with a valid cell packet.
     pub records: u64,
     /// Cell data packets.

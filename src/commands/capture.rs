@@ -183,7 +183,6 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                     "datagrams_before_capture": passed_over,
                     "datagrams_dropped": e.dropped,
                 })),
-                "acknowledgements": decoder.acknowledgements(),
                 "report": report,
             }))
         } else {
