@@ -44,7 +44,7 @@ pub struct Args {
     /// Box id.
     #[arg(long, default_value_t = 1)]
     box_id: u16,
-    /// Stop after this much wall-clock time, ms, and print a summary (default: run until killed).
+    /// Stop after this much wall-clock time, ms (default: at Ctrl-C); then print a summary.
     #[arg(long)]
     run_ms: Option<u64>,
 }
@@ -149,10 +149,24 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     let send =
         |socket: &UdpSocket, o: &Outgoing| u64::from(socket.send_to(&o.payload, o.to).is_err());
     let deadline = args.run_ms.map(|ms| started + Duration::from_millis(ms));
+    let interrupted = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    {
+        let interrupted = interrupted.clone();
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?;
+        std::thread::spawn(move || {
+            if runtime.block_on(tokio::signal::ctrl_c()).is_ok() {
+                interrupted.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
+        });
+    }
     let mut buf = vec![0u8; 65536];
     loop {
         let now = Instant::now();
-        if deadline.is_some_and(|d| now >= d) {
+        if deadline.is_some_and(|d| now >= d)
+            || interrupted.load(std::sync::atomic::Ordering::Relaxed)
+        {
             break;
         }
         for o in emulated.advance(tick_now(now)) {
@@ -176,7 +190,9 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             Err(e)
                 if matches!(
                     e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::Interrupted
                 ) => {}
             // an ICMP port unreachable of an earlier send shows up here on Linux
             Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => send_errors += 1,
