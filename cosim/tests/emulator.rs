@@ -170,4 +170,30 @@ fn commands_change_the_stream_from_their_tick() {
         3
     );
     assert!(status[0].0.base_tick > 30 * MS && status[0].0.base_tick < 30 * MS + MS / 10);
+
+    // a 1 ms status period from 31 ms on: reports at every whole ms from then (it was 5 ms)
+    let ack = emulated
+        .command(
+            host,
+            &command(4, Request::SetStatusPeriod { ticks: MS as u32 }),
+            31 * MS,
+            || 31 * MS,
+        )
+        .unwrap();
+    assert_eq!(AckRepr::parse(&ack.payload).unwrap().result, AckResult::Ok);
+    let report_ticks: Vec<u64> = emulated
+        .advance(40 * MS)
+        .iter()
+        .map(|o| DatagramRepr::parse(&o.payload).unwrap())
+        .filter(|d| matches!(d.body, DatagramBody::Status(_)))
+        .map(|d| d.base_tick)
+        .collect();
+    assert_eq!(report_ticks.len(), 9, "{report_ticks:?}");
+    for (k, tick) in report_ticks.iter().enumerate() {
+        let period_start = (31 + k as u64) * MS;
+        assert!(
+            (period_start..period_start + MS / 10).contains(tick),
+            "{report_ticks:?}"
+        );
+    }
 }
