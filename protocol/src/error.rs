@@ -88,7 +88,7 @@ pub enum Error {
     UnsupportedVersion { found: u8, supported: u8 },
     /// A datagram kind that is neither records nor status.
     #[error(
-        "box datagram: unknown kind {found} (1 records, 2 status, 3 command, 4 acknowledgement)"
+        "box datagram: unknown kind {found} (1 records, 2 status; 3 and 4 are commands and acknowledgements)"
     )]
     UnknownKind { found: u8 },
     /// More entries than fit one datagram.
