@@ -279,7 +279,7 @@ mod tests {
     }
 
     #[test]
-    fn the_decoder_counts_acknowledgements_apart_from_bad_input() {
+    fn the_decoder_counts_commands_and_acknowledgements_apart_from_bad_input() {
         let command = CommandRepr {
             box_id: 1,
             sequence: 1,
@@ -291,5 +291,9 @@ mod tests {
         assert_eq!(outcome, crate::decoder::DatagramOutcome::Acknowledgement);
         assert_eq!(decoder.bad_input_total(), 0);
         assert_eq!(decoder.report().acknowledgements, 1);
+        let outcome = decoder.push_datagram(&command.to_bytes(), &mut ());
+        assert_eq!(outcome, crate::decoder::DatagramOutcome::Command);
+        assert_eq!(decoder.bad_input_total(), 0);
+        assert_eq!(decoder.report().commands, 1);
     }
 }

@@ -138,6 +138,8 @@ pub enum DatagramOutcome {
     /// A command acknowledgement (kind 4): counted, not a box datagram
     /// ([`crate::control`] reads them).
     Acknowledgement,
+    /// A command to a box (kind 3, in a capture of both directions): counted.
+    Command,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -387,6 +389,7 @@ pub struct Decoder {
     current: usize,
     bad: BadInput,
     acknowledgements: u64,
+    commands: u64,
     records: u64,
     /// Per-cell intervals between packets that began a sample, in ticks, of every box
     /// (the first [`MAX_INTERVALS`]).
@@ -415,6 +418,7 @@ impl Decoder {
             current: 0,
             bad: BadInput::default(),
             acknowledgements: 0,
+            commands: 0,
             records: 0,
             intervals: Vec::new(),
             data_packets: 0,
@@ -488,11 +492,16 @@ impl Decoder {
         payload: &[u8],
         sink: &mut S,
     ) -> DatagramOutcome {
-        if skinbox_protocol::command::peek_kind(payload)
-            == Some(skinbox_protocol::command::KIND_ACK)
-        {
-            self.acknowledgements += 1;
-            return DatagramOutcome::Acknowledgement;
+        match skinbox_protocol::command::peek_kind(payload) {
+            Some(skinbox_protocol::command::KIND_ACK) => {
+                self.acknowledgements += 1;
+                return DatagramOutcome::Acknowledgement;
+            }
+            Some(skinbox_protocol::command::KIND_COMMAND) => {
+                self.commands += 1;
+                return DatagramOutcome::Command;
+            }
+            _ => {}
         }
         let d = match Datagram::new_checked(payload) {
             Ok(d) => d,
@@ -853,6 +862,7 @@ impl Decoder {
             records_datagrams: boxes.iter().map(|b| b.records_datagrams).sum(),
             status_datagrams: box_status.status_datagrams,
             acknowledgements: self.acknowledgements,
+            commands: self.commands,
             records: self.records,
             data_packets: self.data_packets,
             event_packets: self.event_packets,

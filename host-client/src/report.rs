@@ -338,6 +338,8 @@ pub struct Report {
     pub status_datagrams: u64,
     /// Command acknowledgements among the datagrams (kind 4; not box datagrams).
     pub acknowledgements: u64,
+    /// Commands to a box among the datagrams (kind 3; not box datagrams).
+    pub commands: u64,
     /// Records with a valid cell packet.
     pub records: u64,
     /// Cell data packets.
