@@ -659,11 +659,18 @@ pub struct AckRepr {
     pub reply: AckReply,
 }
 
-impl AckRepr {
-    /// Parses an untrusted acknowledgement: the header as for a command (kind 4), a port
-    /// count of 1..=64, a known result, reserved 0, and the reply the opcode and result
-    /// call for.
-    pub fn parse(b: &[u8]) -> Result<AckRepr> {
+/// A view over an acknowledgement datagram.
+#[derive(Debug, Clone)]
+pub struct Ack<T: AsRef<[u8]>> {
+    buffer: T,
+}
+
+impl<T: AsRef<[u8]>> Ack<T> {
+    /// Wraps untrusted bytes: the header as for a command (kind 4), a port count of
+    /// 1..=64, a known result, reserved 0, and the reply length the opcode and result call
+    /// for (the reply itself is checked by [`AckRepr::parse`]).
+    pub fn new_checked(buffer: T) -> Result<Self> {
+        let b = buffer.as_ref();
         check_header(Format::Ack, b, KIND_ACK)?;
         check_len(Format::Ack, b, HEADER_LEN + ACK_FIXED_LEN)?;
         let port_count = b[ack_field::PORT_COUNT];
@@ -686,35 +693,96 @@ impl AckRepr {
                 found: u32::from(get_u16(body, ack_field::RESERVED)),
             });
         }
-        let opcode = body[ack_field::OPCODE];
-        let rest = &body[ACK_FIXED_LEN..];
-        let expected = match (Opcode::from_byte(opcode), result) {
+        let expected = match (Opcode::from_byte(body[ack_field::OPCODE]), result) {
             (Some(Opcode::StreamTo), AckResult::Ok) => DESTINATION_LEN,
             (Some(Opcode::StatusNow), AckResult::Ok) => BOX_COUNTERS_LEN,
             _ => 0,
         };
-        if rest.len() != expected {
+        if body.len() != ACK_FIXED_LEN + expected {
             return Err(Error::LengthMismatch {
                 format: Format::Ack,
                 required: HEADER_LEN + ACK_FIXED_LEN + expected,
                 actual: b.len(),
             });
         }
-        let reply = match expected {
+        Ok(Ack { buffer })
+    }
+
+    fn body(&self) -> &[u8] {
+        &self.buffer.as_ref()[HEADER_LEN..]
+    }
+
+    /// Box id of the answering box.
+    pub fn box_id(&self) -> u16 {
+        get_u16(self.buffer.as_ref(), field::BOX_ID)
+    }
+
+    /// Ports of the answering box.
+    pub fn port_count(&self) -> u8 {
+        self.buffer.as_ref()[ack_field::PORT_COUNT]
+    }
+
+    /// The command's sequence number.
+    pub fn sequence(&self) -> u32 {
+        get_u32(self.buffer.as_ref(), field::SEQUENCE)
+    }
+
+    /// The command's host time.
+    pub fn host_time(&self) -> u64 {
+        get_u64(self.buffer.as_ref(), field::HOST_TIME)
+    }
+
+    /// The command's opcode byte.
+    pub fn opcode(&self) -> u8 {
+        self.body()[ack_field::OPCODE]
+    }
+
+    /// The result (valid after `new_checked`; `Ok` otherwise when unknown).
+    pub fn result(&self) -> AckResult {
+        AckResult::from_byte(self.body()[ack_field::RESULT]).unwrap_or(AckResult::Ok)
+    }
+
+    /// Last sequence number accepted from this host.
+    pub fn last_accepted(&self) -> u32 {
+        get_u32(self.body(), ack_field::LAST_ACCEPTED)
+    }
+
+    /// Box tick of the command frame's last byte.
+    pub fn receive_tick(&self) -> u64 {
+        get_u64(self.body(), ack_field::RECEIVE_TICK)
+    }
+
+    /// Box tick of the acknowledgement frame's first byte.
+    pub fn send_tick(&self) -> u64 {
+        get_u64(self.body(), ack_field::SEND_TICK)
+    }
+
+    /// The reply bytes after the fixed body (0, 12 or 80 bytes).
+    pub fn reply(&self) -> &[u8] {
+        &self.body()[ACK_FIXED_LEN..]
+    }
+}
+
+impl AckRepr {
+    /// Parses an untrusted acknowledgement: [`Ack::new_checked`], then its reply.
+    pub fn parse(b: &[u8]) -> Result<AckRepr> {
+        let a = Ack::new_checked(b)?;
+        let rest = a.reply();
+        let reply = match rest.len() {
             0 => AckReply::None,
             DESTINATION_LEN => AckReply::Destination(Destination::parse(rest)?),
             _ => AckReply::Counters(BoxCounters::parse(rest)?),
         };
         Ok(AckRepr {
-            box_id: get_u16(b, field::BOX_ID),
-            port_count,
-            sequence: get_u32(b, field::SEQUENCE),
-            host_time: get_u64(b, field::HOST_TIME),
-            opcode,
-            result,
-            last_accepted: get_u32(body, ack_field::LAST_ACCEPTED),
-            receive_tick: get_u64(body, ack_field::RECEIVE_TICK),
-            send_tick: get_u64(body, ack_field::SEND_TICK),
+            box_id: a.box_id(),
+            port_count: a.port_count(),
+            sequence: a.sequence(),
+            host_time: a.host_time(),
+            opcode: a.opcode(),
+            result: a.result(),
+            last_accepted: a.last_accepted(),
+            receive_tick: a.receive_tick(),
+            send_tick: a.send_tick(),
             reply,
         })
     }
@@ -842,6 +910,26 @@ mod tests {
         ack.emit(&mut out);
         assert_eq!(out, expected);
         assert_eq!(AckRepr::parse(&out).unwrap(), ack);
+        let view = Ack::new_checked(&out[..]).unwrap();
+        assert_eq!((view.sequence(), view.receive_tick()), (258, 0x0102));
+
+        // refused: an unknown result, a reply the result does not call for, port count 0
+        let mut bad = out.clone();
+        bad[HEADER_LEN + ack_field::RESULT] = 6;
+        assert!(matches!(AckRepr::parse(&bad), Err(Error::BadField { .. })));
+        let mut bad = out.clone();
+        bad[HEADER_LEN + ack_field::RESULT] = AckResult::Replay as u8;
+        assert!(matches!(
+            AckRepr::parse(&bad),
+            Err(Error::LengthMismatch { .. })
+        ));
+        let mut bad = out.clone();
+        bad[ack_field::PORT_COUNT] = 0;
+        assert!(matches!(
+            AckRepr::parse(&bad),
+            Err(Error::BadPortCount { .. })
+        ));
+        assert!(AckRepr::parse(&out[..out.len() - 1]).is_err());
     }
 
     #[test]
