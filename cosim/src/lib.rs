@@ -15,7 +15,9 @@
 pub mod bench;
 mod binding;
 pub mod cache_lock;
+pub mod control;
 pub mod dut;
+pub mod emulator;
 pub mod error;
 pub mod frames;
 pub mod harness;

@@ -31,6 +31,9 @@ pub enum FormatFault {
     BadPortCount,
     BadFlags,
     UnusedValueSet,
+    BadField,
+    UnknownOpcode,
+    BadArgument,
 }
 
 impl FormatFault {
@@ -53,6 +56,9 @@ impl FormatFault {
             Error::BadPortCount { .. } => FormatFault::BadPortCount,
             Error::BadFlags { .. } => FormatFault::BadFlags,
             Error::UnusedValueSet { .. } => FormatFault::UnusedValueSet,
+            Error::BadField { .. } => FormatFault::BadField,
+            Error::UnknownOpcode { .. } => FormatFault::UnknownOpcode,
+            Error::BadArgument { .. } => FormatFault::BadArgument,
         }
     }
 
@@ -75,6 +81,9 @@ impl FormatFault {
             FormatFault::BadPortCount => "port count out of range",
             FormatFault::BadFlags => "undefined flag bits",
             FormatFault::UnusedValueSet => "unused event value slot not 0",
+            FormatFault::BadField => "undefined field value",
+            FormatFault::UnknownOpcode => "unknown opcode",
+            FormatFault::BadArgument => "bad command argument",
         }
     }
 }

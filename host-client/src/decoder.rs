@@ -135,6 +135,11 @@ pub enum DatagramOutcome {
     Duplicate,
     /// Rejected as bad input.
     Rejected,
+    /// A command acknowledgement (kind 4): counted, not a box datagram
+    /// ([`crate::control`] reads them).
+    Acknowledgement,
+    /// A command to a box (kind 3, in a capture of both directions): counted.
+    Command,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -162,6 +167,8 @@ struct BoxState {
     ports: BTreeMap<u8, [u32; PortCounter::ALL.len()]>,
     datagrams_sent: Option<u32>,
     records_sent: Option<u32>,
+    /// The box counter block of the last status datagram that carried one.
+    box_counters: Option<skinbox_protocol::BoxCounters>,
 }
 
 /// Everything the decoder follows of one box.
@@ -337,6 +344,11 @@ impl BoxTrack {
             boot_ids: self.boot_ids.clone(),
             datagrams_sent_delta: self.datagrams_sent_delta,
             records_sent_delta: self.records_sent_delta,
+            last_box_counters: self
+                .state
+                .box_counters
+                .as_ref()
+                .map(crate::report::BoxCountersReport::from),
             counter_deltas: self
                 .counter_deltas
                 .iter()
@@ -376,6 +388,8 @@ pub struct Decoder {
     /// Index of the box of the previous datagram (most datagrams come from the same box).
     current: usize,
     bad: BadInput,
+    acknowledgements: u64,
+    commands: u64,
     records: u64,
     /// Per-cell intervals between packets that began a sample, in ticks, of every box
     /// (the first [`MAX_INTERVALS`]).
@@ -403,12 +417,19 @@ impl Decoder {
             boxes: Vec::new(),
             current: 0,
             bad: BadInput::default(),
+            acknowledgements: 0,
+            commands: 0,
             records: 0,
             intervals: Vec::new(),
             data_packets: 0,
             event_packets: 0,
             events_per_packet: [0; 7],
         }
+    }
+
+    /// Command acknowledgements received among the datagrams (not box datagrams).
+    pub fn acknowledgements(&self) -> u64 {
+        self.acknowledgements
     }
 
     /// The settings.
@@ -471,6 +492,17 @@ impl Decoder {
         payload: &[u8],
         sink: &mut S,
     ) -> DatagramOutcome {
+        match skinbox_protocol::command::peek_kind(payload) {
+            Some(skinbox_protocol::command::KIND_ACK) => {
+                self.acknowledgements += 1;
+                return DatagramOutcome::Acknowledgement;
+            }
+            Some(skinbox_protocol::command::KIND_COMMAND) => {
+                self.commands += 1;
+                return DatagramOutcome::Command;
+            }
+            _ => {}
+        }
         let d = match Datagram::new_checked(payload) {
             Ok(d) => d,
             Err(e) => {
@@ -503,6 +535,11 @@ impl Decoder {
                     }) => {
                         if !self.boxes[index].take_status(sequence, base_tick, &status) {
                             return DatagramOutcome::Duplicate;
+                        }
+                        match d.box_counters() {
+                            Ok(Some(c)) => self.boxes[index].state.box_counters = Some(c),
+                            Ok(None) => {}
+                            Err(e) => self.bad.count_error(Reason::Status, &e),
                         }
                         DatagramOutcome::Status
                     }
@@ -768,6 +805,7 @@ impl Decoder {
         // Counters by port mean something only for one box.
         if let [only] = boxes.as_slice() {
             box_status.last_counters = only.box_status.last_counters.clone();
+            box_status.last_box_counters = only.box_status.last_box_counters.clone();
         }
         let cells_active = cells.len() as u64;
         let cells_denominator = match self.config.cells {
@@ -823,6 +861,8 @@ impl Decoder {
             box_ids,
             records_datagrams: boxes.iter().map(|b| b.records_datagrams).sum(),
             status_datagrams: box_status.status_datagrams,
+            acknowledgements: self.acknowledgements,
+            commands: self.commands,
             records: self.records,
             data_packets: self.data_packets,
             event_packets: self.event_packets,

@@ -25,6 +25,7 @@
 
 pub mod bad_input;
 pub mod bench;
+pub mod control;
 pub mod convert;
 pub mod decoder;
 pub mod frame;

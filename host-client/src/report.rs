@@ -223,6 +223,33 @@ pub struct BoxStatusReport {
     pub counter_deltas: BTreeMap<u8, BTreeMap<&'static str, u64>>,
     /// Per port, the counters of the last report (in a total over several boxes: empty).
     pub last_counters: BTreeMap<u8, BTreeMap<&'static str, u32>>,
+    /// The box counter block of the last status datagram that carried one (in a total
+    /// over several boxes: none).
+    pub last_box_counters: Option<BoxCountersReport>,
+}
+
+/// The box-wide counters and link state of a status datagram (docs/wire-format.md).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BoxCountersReport {
+    /// The PHY reports the link up.
+    pub link_up: bool,
+    /// Link speed.
+    pub link_speed: skinbox_protocol::box_counters::LinkSpeed,
+    /// Each counter by name (`BoxCounter::name`), in wire order.
+    pub counters: BTreeMap<&'static str, u32>,
+    /// Frames counted in no fate or in several (0 from a consistent box).
+    pub unaccounted_frames: u32,
+}
+
+impl From<&skinbox_protocol::BoxCounters> for BoxCountersReport {
+    fn from(c: &skinbox_protocol::BoxCounters) -> Self {
+        BoxCountersReport {
+            link_up: c.link_up,
+            link_speed: c.link_speed,
+            counters: c.named().into_iter().collect(),
+            unaccounted_frames: c.unaccounted_frames(),
+        }
+    }
 }
 
 impl BoxStatusReport {
@@ -309,6 +336,10 @@ pub struct Report {
     pub records_datagrams: u64,
     /// Status datagrams decoded.
     pub status_datagrams: u64,
+    /// Command acknowledgements among the datagrams (kind 4; not box datagrams).
+    pub acknowledgements: u64,
+    /// Commands to a box among the datagrams (kind 3; not box datagrams).
+    pub commands: u64,
     /// Records with a valid cell packet.
     pub records: u64,
     /// Cell data packets.
@@ -502,6 +533,30 @@ impl Report {
             self.box_status.datagrams_sent_delta,
             self.box_status.records_sent_delta
         );
+        if let Some(c) = &self.box_status.last_box_counters {
+            let nonzero: Vec<String> = c
+                .counters
+                .iter()
+                .filter(|(_, v)| **v != 0)
+                .map(|(k, v)| format!("{k}={v}"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "box counters: link {} ({:?}), {}{}",
+                if c.link_up { "up" } else { "down" },
+                c.link_speed,
+                if nonzero.is_empty() {
+                    "no frames received".to_string()
+                } else {
+                    nonzero.join(" ")
+                },
+                if c.unaccounted_frames != 0 {
+                    format!(", {} frames unaccounted", c.unaccounted_frames)
+                } else {
+                    String::new()
+                }
+            );
+        }
         if self.boxes.len() > 1 {
             for b in &self.boxes {
                 let l = &b.losses;

@@ -7,7 +7,7 @@
 //! | 3 | kind: 1 records, 2 status |
 //! | 4-5 | box id |
 //! | 6 | port count of the box |
-//! | 7 | flags: bit 0 = records datagram sent by flush timeout (not full) |
+//! | 7 | flags: bit 0 = records datagram sent by flush timeout (not full); bit 1 = status datagram carries the box counter block |
 //! | 8-11 | sequence number, +1 per datagram of either kind (u32, wraps) |
 //! | 12-19 | base tick (u64, 8 ns): first record's tick, or the status report's time |
 //! | 20-21 | entry count: records, or port counter blocks |
@@ -16,7 +16,14 @@
 //! The payload length is exact: header plus entries, nothing after them. At most 55
 //! records (1454 bytes) or 44 port counter blocks fit the 1472-byte UDP payload of a
 //! 1500-byte IPv4 packet.
+//!
+//! A status datagram with flag bit 1 carries the 80-byte box counter block
+//! ([`crate::box_counters`]) after its port counter blocks (then at most 42 of them fit);
+//! without the flag it is byte for byte what it was before the block existed. Kinds 3 and 4
+//! (command and acknowledgement) share magic and version but are read by
+//! [`crate::command`], not here.
 
+use crate::box_counters::{BoxCounters, BOX_COUNTERS_LEN};
 use crate::record::{Record, RecordRepr, RECORD_LEN};
 use crate::status::{StatusRepr, PORT_COUNTERS_LEN, STATUS_FIXED_LEN};
 use crate::{check_len, get_u16, get_u32, get_u64, Error, Format, LayoutRow, Result};
@@ -55,6 +62,11 @@ pub const MAX_STATUS_PORTS: usize =
 pub const MAX_PORTS: u8 = 64;
 /// Header flag: a records datagram sent because its oldest record waited the flush timeout.
 pub const FLAG_FLUSH_TIMEOUT: u8 = 0x01;
+/// Header flag of a status datagram: the box counter block follows the port counter blocks.
+pub const FLAG_BOX_COUNTERS: u8 = 0x02;
+/// Most port counter blocks in a status datagram that carries the box counter block.
+pub const MAX_STATUS_PORTS_WITH_BOX_COUNTERS: usize =
+    (MAX_PAYLOAD_LEN - HEADER_LEN - STATUS_FIXED_LEN - BOX_COUNTERS_LEN) / PORT_COUNTERS_LEN;
 
 /// Published layout of the datagram header.
 pub fn layout() -> Vec<LayoutRow> {
@@ -187,15 +199,34 @@ impl<T: AsRef<[u8]>> Datagram<T> {
             DatagramKind::Records => Format::Datagram,
             DatagramKind::Status => Format::Status,
         };
-        let count = d.entry_count();
-        if count > kind.max_entries() {
-            return Err(Error::TooManyEntries {
-                format,
-                count,
-                max: kind.max_entries(),
+        let flags = d.flags();
+        let defined = match kind {
+            DatagramKind::Records => FLAG_FLUSH_TIMEOUT,
+            DatagramKind::Status => FLAG_FLUSH_TIMEOUT | FLAG_BOX_COUNTERS,
+        };
+        if flags & !defined != 0 {
+            return Err(Error::BadFlags {
+                format: Format::Datagram,
+                found: flags,
+                defined,
             });
         }
-        let required = kind.payload_len(count);
+        let with_box_counters = kind == DatagramKind::Status && flags & FLAG_BOX_COUNTERS != 0;
+        let count = d.entry_count();
+        let max = if with_box_counters {
+            MAX_STATUS_PORTS_WITH_BOX_COUNTERS
+        } else {
+            kind.max_entries()
+        };
+        if count > max {
+            return Err(Error::TooManyEntries { format, count, max });
+        }
+        let required = kind.payload_len(count)
+            + if with_box_counters {
+                BOX_COUNTERS_LEN
+            } else {
+                0
+            };
         check_len(format, b, required)?;
         if b.len() != required {
             return Err(Error::LengthMismatch {
@@ -209,14 +240,6 @@ impl<T: AsRef<[u8]>> Datagram<T> {
             return Err(Error::BadPortCount {
                 found: port_count,
                 max: MAX_PORTS,
-            });
-        }
-        let flags = d.flags();
-        if flags & !FLAG_FLUSH_TIMEOUT != 0 {
-            return Err(Error::BadFlags {
-                format: Format::Datagram,
-                found: flags,
-                defined: FLAG_FLUSH_TIMEOUT,
             });
         }
         // A status body is one unit: a counter block of a port the box does not have
@@ -291,6 +314,16 @@ impl<T: AsRef<[u8]>> Datagram<T> {
     pub fn body(&self) -> &[u8] {
         &self.buffer.as_ref()[HEADER_LEN..]
     }
+
+    /// The box counter block of a status datagram with [`FLAG_BOX_COUNTERS`] (valid after
+    /// `new_checked`), none for every other datagram.
+    pub fn box_counters(&self) -> Result<Option<BoxCounters>> {
+        if self.kind() != DatagramKind::Status || self.flags() & FLAG_BOX_COUNTERS == 0 {
+            return Ok(None);
+        }
+        let at = StatusRepr::body_len(self.entry_count());
+        BoxCounters::parse(&self.body()[at..]).map(Some)
+    }
 }
 
 /// What follows the header.
@@ -310,7 +343,9 @@ pub struct DatagramRepr {
     pub box_id: u16,
     /// Number of ports of the box.
     pub port_count: u8,
-    /// Header flags ([`FLAG_FLUSH_TIMEOUT`]).
+    /// Header flags ([`FLAG_FLUSH_TIMEOUT`]); [`FLAG_BOX_COUNTERS`] is not kept here: read
+    /// the block with [`DatagramRepr::parse_box_counters`], write it with
+    /// [`DatagramRepr::to_bytes_with_box_counters`].
     pub flags: u8,
     /// Sequence number.
     pub sequence: u32,
@@ -343,7 +378,7 @@ impl DatagramRepr {
         Ok(DatagramRepr {
             box_id: d.box_id(),
             port_count: d.port_count(),
-            flags: d.flags(),
+            flags: d.flags() & !FLAG_BOX_COUNTERS,
             sequence: d.sequence(),
             base_tick: d.base_tick(),
             body,
@@ -411,6 +446,40 @@ impl DatagramRepr {
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut b = vec![0u8; self.buffer_len()];
         self.emit(&mut b);
+        b
+    }
+
+    /// Parses an untrusted datagram as [`DatagramRepr::parse`] does, and the box counter
+    /// block a status datagram with [`FLAG_BOX_COUNTERS`] carries.
+    pub fn parse_box_counters(bytes: &[u8]) -> Result<(DatagramRepr, Option<BoxCounters>)> {
+        let counters = Datagram::new_checked(bytes)?.box_counters()?;
+        Ok((DatagramRepr::parse(bytes)?, counters))
+    }
+
+    /// A status datagram as bytes with `counters` after its port counter blocks (at most
+    /// [`MAX_STATUS_PORTS_WITH_BOX_COUNTERS`] of them are written); a records datagram as
+    /// [`DatagramRepr::to_bytes`] writes it (records carry no box counters).
+    pub fn to_bytes_with_box_counters(&self, counters: &BoxCounters) -> Vec<u8> {
+        let DatagramBody::Status(status) = &self.body else {
+            return self.to_bytes();
+        };
+        let clipped = DatagramRepr {
+            body: DatagramBody::Status(StatusRepr {
+                ports: status
+                    .ports
+                    .iter()
+                    .take(MAX_STATUS_PORTS_WITH_BOX_COUNTERS)
+                    .copied()
+                    .collect(),
+                ..status.clone()
+            }),
+            ..self.clone()
+        };
+        let mut b = clipped.to_bytes();
+        b[field::FLAGS] |= FLAG_BOX_COUNTERS;
+        let at = b.len();
+        b.resize(at + BOX_COUNTERS_LEN, 0);
+        counters.emit(&mut b[at..]);
         b
     }
 }

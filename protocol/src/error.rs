@@ -17,6 +17,12 @@ pub enum Format {
     Status,
     /// One port's counters inside a status datagram.
     PortCounters,
+    /// A command datagram (host to box).
+    Command,
+    /// An acknowledgement datagram (box to host).
+    Ack,
+    /// The box-wide counter block.
+    BoxCounters,
 }
 
 impl fmt::Display for Format {
@@ -29,6 +35,9 @@ impl fmt::Display for Format {
             Format::Record => "record",
             Format::Status => "status datagram",
             Format::PortCounters => "port counters",
+            Format::Command => "command",
+            Format::Ack => "acknowledgement",
+            Format::BoxCounters => "box counters",
         })
     }
 }
@@ -78,7 +87,9 @@ pub enum Error {
     #[error("box datagram: version {found}, this decoder reads version {supported}")]
     UnsupportedVersion { found: u8, supported: u8 },
     /// A datagram kind that is neither records nor status.
-    #[error("box datagram: unknown kind {found} (1 records, 2 status)")]
+    #[error(
+        "box datagram: unknown kind {found} (1 records, 2 status; 3 and 4 are commands and acknowledgements)"
+    )]
     UnknownKind { found: u8 },
     /// More entries than fit one datagram.
     #[error("{format}: {count} entries, at most {max} fit one datagram")]
@@ -119,6 +130,22 @@ pub enum Error {
     /// An event value slot past the mask's channels that is not 0.
     #[error("event packet: value_{} is 0x{word:04X}, but the mask names only {used} channels (unused value slots are 0)", .slot + 1)]
     UnusedValueSet { slot: usize, used: usize, word: u16 },
+    /// A field with a value the format does not define.
+    #[error("{format}: {field} is {found} (0x{found:X}), not a defined value")]
+    BadField {
+        format: Format,
+        field: &'static str,
+        found: u32,
+    },
+    /// A command opcode the box does not know.
+    #[error("command: unknown opcode {found}")]
+    UnknownOpcode { found: u8 },
+    /// A command's arguments of the wrong length or out of range.
+    #[error("command {opcode}: bad argument: {reason}")]
+    BadArgument {
+        opcode: &'static str,
+        reason: &'static str,
+    },
 }
 
 /// Result with this crate's [`Error`].

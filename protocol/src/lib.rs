@@ -7,7 +7,8 @@
 //! - [`data`]: the cell's 20-byte data packet (every sample, header 0xA1);
 //! - [`event`]: the cell's 20-byte event packet (send-on-delta, header 0xA2);
 //! - [`datagram`]: the box's UDP payload: a 24-byte header, then 26-byte [`record`]s or a
-//!   [`status`] body with per-port counters.
+//!   [`status`] body with per-port counters, and optionally the [`box_counters`] block;
+//! - [`command`]: commands to the box (kind 3) and its acknowledgements (kind 4).
 //!
 //! Each format follows one contract, after smoltcp's `wire` module:
 //! - `Packet<T: AsRef<[u8]>>` is a zero-copy view; field offsets live once in a private
@@ -20,8 +21,10 @@
 //!
 //! All multi-byte fields are big-endian.
 
+pub mod box_counters;
 pub mod cell;
 pub mod channel;
+pub mod command;
 pub mod data;
 pub mod datagram;
 mod error;
@@ -30,8 +33,10 @@ pub mod link;
 pub mod record;
 pub mod status;
 
+pub use box_counters::{BoxCounter, BoxCounters};
 pub use cell::{CellFraming, CellRepr};
 pub use channel::{Channel, ChannelMask, Modality};
+pub use command::{AckRepr, AckResult, CommandRepr, Request};
 pub use data::DataRepr;
 pub use datagram::{DatagramKind, DatagramRepr};
 pub use error::{Error, Format, Result};

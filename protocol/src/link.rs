@@ -18,6 +18,10 @@ pub struct LinkConfig {
     pub box_port: u16,
     /// Host UDP port.
     pub host_port: u16,
+    /// The host subnet the box takes commands from: its network address...
+    pub host_subnet: [u8; 4],
+    /// ...and prefix length (0 = every address, 32 = one host).
+    pub host_subnet_prefix_len: u8,
 }
 
 /// UDP port of box and host: 54091 (0xD34B, "SK" with the top bit set), in the dynamic
@@ -25,7 +29,8 @@ pub struct LinkConfig {
 pub const DEFAULT_PORT: u16 = 0xD34B;
 
 impl LinkConfig {
-    /// Box 02:53:4b:00:00:01 at 192.0.2.10:54091 to broadcast, 192.0.2.1:54091.
+    /// Box 02:53:4b:00:00:01 at 192.0.2.10:54091 to broadcast, 192.0.2.1:54091; commands
+    /// from 192.0.2.0/24.
     pub const DEFAULT: LinkConfig = LinkConfig {
         box_mac: [0x02, 0x53, 0x4B, 0x00, 0x00, 0x01],
         host_mac: [0xFF; 6],
@@ -33,7 +38,17 @@ impl LinkConfig {
         host_ip: [192, 0, 2, 1],
         box_port: DEFAULT_PORT,
         host_port: DEFAULT_PORT,
+        host_subnet: [192, 0, 2, 0],
+        host_subnet_prefix_len: 24,
     };
+
+    /// Whether `ip` is inside the host subnet (the prefix's bits equal; a prefix length
+    /// above 32 counts as 32).
+    pub fn in_host_subnet(&self, ip: [u8; 4]) -> bool {
+        let bits = u32::from(self.host_subnet_prefix_len.min(32));
+        let mask = u32::MAX.checked_shl(32 - bits).unwrap_or(0);
+        (u32::from_be_bytes(ip) ^ u32::from_be_bytes(self.host_subnet)) & mask == 0
+    }
 }
 
 impl Default for LinkConfig {
@@ -70,3 +85,23 @@ pub const MIN_FRAME_LEN: usize = 60;
 pub const INTER_FRAME_GAP: usize = 12;
 /// IPv4 time to live of the box's packets.
 pub const IPV4_TTL: u8 = 64;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn host_subnet_prefixes() {
+        let mut l = LinkConfig::DEFAULT;
+        assert!(l.in_host_subnet([192, 0, 2, 1]));
+        assert!(l.in_host_subnet([192, 0, 2, 255]));
+        assert!(!l.in_host_subnet([192, 0, 3, 1]));
+        assert!(!l.in_host_subnet([127, 0, 0, 1]));
+        l.host_subnet_prefix_len = 0;
+        assert!(l.in_host_subnet([127, 0, 0, 1]));
+        l.host_subnet = [127, 0, 0, 1];
+        l.host_subnet_prefix_len = 32;
+        assert!(l.in_host_subnet([127, 0, 0, 1]));
+        assert!(!l.in_host_subnet([127, 0, 0, 2]));
+    }
+}

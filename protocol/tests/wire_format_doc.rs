@@ -1,6 +1,8 @@
 //! docs/wire-format.md and the code describe the same bytes.
 
-use skinbox_protocol::{cell, data, datagram, event, record, status, LayoutRow};
+use skinbox_protocol::{
+    box_counters, cell, command, data, datagram, event, record, status, LayoutRow,
+};
 
 /// The rows of the table marked `<!-- layout: NAME -->`, as (field, first byte, last byte).
 fn doc_table(doc: &str, name: &str) -> Vec<(String, usize, usize)> {
@@ -45,6 +47,12 @@ fn every_documented_table_matches_the_code() {
         ("record", record::layout()),
         ("status", status::layout()),
         ("port_counters", status::port_counters_layout()),
+        ("box_counters", box_counters::layout()),
+        ("command", command::layout()),
+        ("destination", command::destination_layout()),
+        ("cell_command", command::cell_command_layout()),
+        ("ack", command::ack_layout()),
+        ("ack_body", command::ack_body_layout()),
     ];
     for (name, rows) in formats {
         assert_eq!(doc_table(&doc, name), code_table(rows), "table {name}");
@@ -60,6 +68,12 @@ fn layouts_are_contiguous_and_fill_their_format() {
         (record::layout(), record::RECORD_LEN),
         (status::layout(), status::STATUS_FIXED_LEN),
         (status::port_counters_layout(), status::PORT_COUNTERS_LEN),
+        (box_counters::layout(), box_counters::BOX_COUNTERS_LEN),
+        (command::layout(), command::HEADER_LEN),
+        (command::ack_layout(), command::HEADER_LEN),
+        (command::ack_body_layout(), command::ACK_FIXED_LEN),
+        (command::destination_layout(), command::DESTINATION_LEN),
+        (command::cell_command_layout(), command::CELL_COMMAND_LEN),
     ];
     for (rows, len) in formats {
         let mut at = 0;

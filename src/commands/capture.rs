@@ -40,6 +40,34 @@ pub struct CaptureArgs {
     /// The cells' sample rate, for rates in % of data mode; without it, learned from the stamps.
     #[arg(long)]
     pub sample_rate_hz: Option<f64>,
+    /// Claim the stream of the box at this command address first: a stream-to command
+    /// from the capture's own socket, so the box sends its datagrams here.
+    #[arg(long)]
+    pub claim: Option<String>,
+}
+
+/// Claims the stream of the box at `box_addr` from `socket` (a stream-to of the sender);
+/// returns the exchange, whose passed-over datagrams the capture decodes first.
+fn claim(
+    socket: tokio::net::UdpSocket,
+    box_addr: &str,
+) -> anyhow::Result<(tokio::net::UdpSocket, skinbox_host::control::Exchange)> {
+    use std::net::ToSocketAddrs;
+    let addr = box_addr
+        .to_socket_addrs()
+        .map_err(|e| anyhow::anyhow!("--claim {box_addr}: {e}"))?
+        .find(SocketAddr::is_ipv4)
+        .ok_or_else(|| anyhow::anyhow!("--claim {box_addr}: no IPv4 address"))?;
+    let std_socket = socket.into_std()?;
+    let exchange = skinbox_host::control::BoxClient::new(&std_socket, addr)
+        .send(skinbox_protocol::command::Request::StreamTo { to: None })?;
+    anyhow::ensure!(
+        exchange.ack.result == skinbox_protocol::AckResult::Ok,
+        "--claim {box_addr}: the box refused stream-to: {}",
+        exchange.ack.result.name()
+    );
+    std_socket.set_nonblocking(true)?;
+    Ok((tokio::net::UdpSocket::from_std(std_socket)?, exchange))
 }
 
 /// Runs the capture on a single-threaded tokio runtime until the duration, the count or
@@ -61,6 +89,14 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             socket.local_addr()?,
             live::usable_recv_buffer(granted)
         );
+        let (socket, claimed) = match &args.claim {
+            Some(box_addr) => {
+                let (socket, exchange) = claim(socket, box_addr)?;
+                eprintln!("claimed the stream: {}", exchange.ack);
+                (socket, Some(exchange))
+            }
+            None => (socket, None),
+        };
         let recv_buffer_warning = live::recv_buffer_warning(args.recv_buffer, granted);
         if let Some(w) = &recv_buffer_warning {
             eprintln!("{w}");
@@ -76,6 +112,13 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             sample_rate_hz: args.sample_rate_hz,
             ..DecoderConfig::default()
         });
+        // stream datagrams that arrived while the claim waited for its acknowledgement
+        let passed_over = claimed.as_ref().map_or(0, |e| e.passed_over.len() as u64);
+        if let Some(e) = &claimed {
+            for (from, payload) in &e.passed_over {
+                decoder.push_datagram_from(Some(*from), payload, &mut ());
+            }
+        }
         let duration = args.duration_ms;
         let shutdown = async move {
             match duration {
@@ -120,8 +163,8 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             w.finish()?.flush()?;
         }
         let mut report = decoder.report();
-        report.frames.frames = stats.datagrams;
-        report.frames.udp_payloads = stats.datagrams;
+        report.frames.frames = stats.datagrams + passed_over;
+        report.frames.udp_payloads = stats.datagrams + passed_over;
         report.frames.capture_span_s = stats.wall_s;
         report.host = Some(skinbox_host::report::HostCost {
             cpu_s: stats.cpu_s,
@@ -133,6 +176,13 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 "capture": stats,
                 "recv_buffer_bytes": live::usable_recv_buffer(granted),
                 "recv_buffer_warning": recv_buffer_warning,
+                "claim": claimed.as_ref().map(|e| serde_json::json!({
+                    "result": e.ack.result.name(),
+                    "attempts": e.attempts,
+                    "rtt_us": e.rtt_ns as f64 / 1000.0,
+                    "datagrams_before_capture": passed_over,
+                    "datagrams_dropped": e.dropped,
+                })),
                 "report": report,
             }))
         } else {

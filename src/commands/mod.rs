@@ -3,7 +3,9 @@
 mod bench;
 mod calibrate;
 mod capture;
+mod ctl;
 mod decode;
+mod emulate;
 mod examples;
 mod replay;
 mod report;
@@ -37,6 +39,11 @@ pub enum Command {
     Sim(sim::Args),
     /// Receive the box's datagrams live on a UDP socket; optionally record a pcap.
     Capture(capture::CaptureArgs),
+    /// Command a box: status, stream-to, set, time, ping (waits for the acknowledgement).
+    Ctl(ctl::Args),
+    /// A box on a UDP socket without a board: the reference model plays a scene in real
+    /// time and answers commands as the box does.
+    Emulate(emulate::Args),
     /// Send the UDP payloads of a pcap to a socket, at a rate or as recorded.
     Replay(replay::ReplayArgs),
     /// Decode a pcap to cell packets or full samples (CSV or JSON lines).
@@ -63,6 +70,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Verilog(args) => verilog::run(&args, cli.json),
         Command::Sim(args) => sim::run(&args, cli.json),
         Command::Capture(args) => capture::run(args, cli.json),
+        Command::Ctl(args) => ctl::run(&args, cli.json),
+        Command::Emulate(args) => emulate::run(&args, cli.json),
         Command::Replay(args) => replay::run(args, cli.json),
         Command::Decode(args) => decode::run(args, cli.json),
         Command::Stats(args) => stats::run(args, cli.json),

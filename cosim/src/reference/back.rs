@@ -264,6 +264,18 @@ impl<'a> Back<'a> {
         c - self.t.tick_offset
     }
 
+    /// Run-time configuration (the box's commands): flush timeout, status period, and a
+    /// status report as soon as the reporter waits.
+    pub(super) fn set_flush_timeout(&mut self, ticks: u64) {
+        self.t.flush_timeout = ticks;
+    }
+    pub(super) fn set_status_period(&mut self, ticks: u64) {
+        self.t.status_period = ticks;
+    }
+    pub(super) fn request_status(&mut self) {
+        self.due = true;
+    }
+
     /// The status timer reaches zero in cycle `c` (every period from the end of reset).
     fn timer_zero(&self, c: u64) -> bool {
         c >= self.t.tick_offset && (c - self.t.tick_offset).is_multiple_of(self.t.status_period)

@@ -41,6 +41,134 @@ pub(crate) use skinbox_gateware::packet_store::SLOTS;
 use skinbox_gateware::packet_store::{visit_period, BANK_PORTS};
 pub(crate) use skinbox_gateware::uart_rx::PHASE_BITS;
 
+/// The fixed numbers of front and back end for `config`.
+fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
+    // counters clear for CLEAR_CLOCKS after the blocks leave reset; the ports leave reset
+    // a clock later
+    let counters_ready_from = TICK_ZERO_CYCLE + CLEAR_CLOCKS;
+    let front = FrontTiming {
+        phase_increment: phase_increment(config.clock_hz, config.baud),
+        phase_start: PHASE_START,
+        idle_gap_bits: config.idle_gap_bits,
+        framing: config.framing,
+        port_reset_until: counters_ready_from + 1,
+        tick_offset: TICK_ZERO_CYCLE,
+    };
+    let back = BackTiming {
+        ports: config.ports,
+        tick_offset: TICK_ZERO_CYCLE,
+        counters_ready_from,
+        flush_timeout: config.flush_timeout_ticks,
+        status_period: config.status_period_ticks,
+        ports_per_status: PORTS_PER_STATUS,
+        // the boot id counts the reset the run starts with
+        boot_id: config.boot_seed.wrapping_add(1),
+        box_id: config.box_id,
+        body_start: BODY_START as u64,
+        frame_tail: (FCS_LEN + INTER_FRAME_GAP) as u64,
+        start_to_first_byte: START_TO_FIRST_BYTE,
+        visit_from: counters_ready_from + 1,
+        visit_period: visit_period(config.ports) as u64,
+        bank_ports: BANK_PORTS,
+    };
+    (front, back)
+}
+
+/// The reference model's front end computed for a whole run, ready to be played in time
+/// slices by [`PreparedReference::start`] (the box emulator plays it in real time and
+/// changes the run-time configuration between slices).
+pub struct PreparedReference {
+    fronts: Vec<PortFront>,
+    back_timing: BackTiming,
+}
+
+/// Prepares the reference model of `config` for pins carrying `lines` up to cycle `end`
+/// (as [`predict_frames`] takes them); past `end` the ports are idle.
+pub fn prepare(
+    config: &BoxConfig,
+    lines: &[Vec<Transition>],
+    end: u64,
+) -> Result<PreparedReference, CosimError> {
+    config.validate()?;
+    let (front_timing, back_timing) = timings(config);
+    let mut fronts: Vec<PortFront> = lines
+        .iter()
+        .map(|l| port_front(l, &front_timing, end))
+        .collect();
+    fronts.resize_with(config.ports, PortFront::default);
+    Ok(PreparedReference {
+        fronts,
+        back_timing,
+    })
+}
+
+impl PreparedReference {
+    /// The box leaving reset: a back end at cycle [`TICK_ZERO_CYCLE`].
+    pub fn start(&self) -> SlicedReference<'_> {
+        SlicedReference {
+            back: Back::new(self.back_timing.clone(), &self.fronts),
+            done: TICK_ZERO_CYCLE,
+            taken: 0,
+        }
+    }
+}
+
+/// A datagram the box starts to send, and the cycle of its first byte on GMII.
+#[derive(Debug, Clone)]
+pub struct SlicedDatagram {
+    /// Cycle of the frame's first preamble byte.
+    pub first_cycle: u64,
+    /// The datagram.
+    pub datagram: skinbox_protocol::DatagramRepr,
+}
+
+/// The reference model run slice by slice.
+pub struct SlicedReference<'a> {
+    back: Back<'a>,
+    done: u64,
+    taken: usize,
+}
+
+impl SlicedReference<'_> {
+    /// Runs the box up to cycle `cycle` (exclusive) and returns the datagrams it started
+    /// since the last call.
+    pub fn run_until(&mut self, cycle: u64) -> Vec<SlicedDatagram> {
+        if cycle > self.done {
+            self.back.run(self.done, cycle);
+            self.done = cycle;
+        }
+        let new = self.back.frames[self.taken..]
+            .iter()
+            .map(|f| SlicedDatagram {
+                first_cycle: f.first_cycle,
+                datagram: f.datagram.clone(),
+            })
+            .collect();
+        self.taken = self.back.frames.len();
+        new
+    }
+
+    /// The cycle the box has run to.
+    pub fn cycle(&self) -> u64 {
+        self.done
+    }
+
+    /// Datagrams opened from now on close after `ticks`.
+    pub fn set_flush_timeout_ticks(&mut self, ticks: u64) {
+        self.back.set_flush_timeout(ticks);
+    }
+
+    /// Status reports every `ticks` from now on (on the grid of that period from tick 0).
+    pub fn set_status_period_ticks(&mut self, ticks: u64) {
+        self.back.set_status_period(ticks);
+    }
+
+    /// A status report as soon as the reporter is idle.
+    pub fn request_status(&mut self) {
+        self.back.request_status();
+    }
+}
+
 /// Clocks from the cycle a transmitter start is decided to the first GMII byte: the
 /// transmitter registers `sending`, then the byte, then the output (with the FCS).
 const START_TO_FIRST_BYTE: u64 = 3;
@@ -79,43 +207,8 @@ fn predict_frames_with_progress(
     end: u64,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Vec<Frame>, CosimError> {
-    config.validate()?;
-    // counters clear for CLEAR_CLOCKS after the blocks leave reset; the ports leave reset
-    // a clock later
-    let counters_ready_from = TICK_ZERO_CYCLE + CLEAR_CLOCKS;
-    let front_timing = FrontTiming {
-        phase_increment: phase_increment(config.clock_hz, config.baud),
-        phase_start: PHASE_START,
-        idle_gap_bits: config.idle_gap_bits,
-        framing: config.framing,
-        port_reset_until: counters_ready_from + 1,
-        tick_offset: TICK_ZERO_CYCLE,
-    };
-    let mut fronts: Vec<PortFront> = lines
-        .iter()
-        .map(|l| port_front(l, &front_timing, end))
-        .collect();
-    fronts.resize_with(config.ports, PortFront::default);
-    let mut back = Back::new(
-        BackTiming {
-            ports: config.ports,
-            tick_offset: TICK_ZERO_CYCLE,
-            counters_ready_from,
-            flush_timeout: config.flush_timeout_ticks,
-            status_period: config.status_period_ticks,
-            ports_per_status: PORTS_PER_STATUS,
-            // the boot id counts the reset the run starts with
-            boot_id: config.boot_seed.wrapping_add(1),
-            box_id: config.box_id,
-            body_start: BODY_START as u64,
-            frame_tail: (FCS_LEN + INTER_FRAME_GAP) as u64,
-            start_to_first_byte: START_TO_FIRST_BYTE,
-            visit_from: counters_ready_from + 1,
-            visit_period: visit_period(config.ports) as u64,
-            bank_ports: BANK_PORTS,
-        },
-        &fronts,
-    );
+    let prepared = prepare(config, lines, end)?;
+    let mut back = Back::new(prepared.back_timing.clone(), &prepared.fronts);
     let step = 1 << 24;
     let mut done = TICK_ZERO_CYCLE;
     while done < end {

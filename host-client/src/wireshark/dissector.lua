@@ -68,13 +68,118 @@ local function uint(buf, base, format, name)
     return buf(base + off, len):uint()
 end
 
--- Length of a whole datagram of `kind` with `entries` entries, or nil for an unknown kind.
-local function datagram_len(kind, entries)
+-- Length of a whole datagram of `kind` with `entries` entries and `flags`, or nil for an
+-- unknown kind (a status datagram with the box counter flag carries the block after its
+-- port counters).
+local function datagram_len(kind, entries, flags)
     local entry_len = C.entry_len[kind]
     if entry_len == nil then
         return nil
     end
-    return C.header_len + C.fixed_len[kind] + entries * entry_len
+    local len = C.header_len + C.fixed_len[kind] + entries * entry_len
+    if kind ~= C.kind_records and bit32.band(flags, C.flag_box_counters) ~= 0 then
+        len = len + C.box_counters_len
+    end
+    return len
+end
+
+-- Most entries of a datagram of `kind` with `flags`.
+local function max_entries(kind, flags)
+    if kind ~= C.kind_records and bit32.band(flags, C.flag_box_counters) ~= 0 then
+        return C.max_status_ports_with_box_counters
+    end
+    return C.max_entries[kind]
+end
+
+local function dissect_box_counters(buf, tree, base)
+    local bt = tree:add(F.box_counters.block, buf(base, C.box_counters_len))
+    for _, name in ipairs(ROWS.box_counters) do
+        add(bt, buf, base, "box_counters", name)
+    end
+    local refused = 0
+    for _, name in ipairs(BOX_COUNTERS) do
+        if string.sub(name, 1, 8) == "refused_" then
+            refused = refused + uint(buf, base, "box_counters", name)
+        end
+    end
+    bt:set_text(string.format(
+        "Box counters: link %s, %d frames received, %d commands accepted, %d refused",
+        uint(buf, base, "box_counters", "link_up") == 1 and "up" or "down",
+        uint(buf, base, "box_counters", "frames_received"),
+        uint(buf, base, "box_counters", "commands_accepted"), refused))
+end
+
+local function dissect_destination(buf, tree, base)
+    local dt = tree:add(F.destination.block, buf(base, C.destination_len))
+    for _, name in ipairs(ROWS.destination) do
+        add(dt, buf, base, "destination", name)
+    end
+    local text = string.format("%s:%d", tostring(buf(base + P.destination.ip[1], 4):ipv4()),
+        uint(buf, base, "destination", "port"))
+    dt:set_text("Destination: " .. text)
+    return text
+end
+
+-- A command (kind 3) or an acknowledgement (kind 4).
+local function dissect_control(buf, pinfo, root, kind)
+    local len = buf:len()
+    local format = "ack"
+    local length_field = "body_length"
+    if kind == C.kind_command then
+        format = "command"
+        length_field = "argument_length"
+    end
+    for _, name in ipairs(ROWS[format]) do
+        add(root, buf, 0, format, name)
+    end
+    local box_id = uint(buf, 0, format, "box_id")
+    local sequence = uint(buf, 0, format, "sequence")
+    local body_len = uint(buf, 0, format, length_field)
+    if len ~= C.header_len + body_len then
+        root:add_proto_expert_info(E.malformed, string.format(
+            "%d bytes, but the header announces %d", len, C.header_len + body_len))
+        pinfo.cols.info:set("skinbox: length does not match the header")
+        return len
+    end
+    local base = C.header_len
+    local text
+    if format == "command" then
+        local op = uint(buf, 0, "command", "opcode")
+        text = "command " .. (OPCODE_NAMES[op] or ("opcode " .. op)) .. ", seq " .. sequence
+        if op == C.opcode_stream_to and body_len == C.destination_len then
+            text = text .. " to " .. dissect_destination(buf, root, base)
+        elseif op == C.opcode_cell_command and body_len == C.cell_command_len then
+            for _, name in ipairs(ROWS.cell_command) do
+                add(root, buf, base, "cell_command", name)
+            end
+        elseif body_len == 4 then
+            root:add(F.command.ticks, buf(base, 4))
+            text = text .. ": " .. buf(base, 4):uint() .. " ticks"
+        end
+    else
+        if body_len < C.ack_fixed_len then
+            root:add_proto_expert_info(E.malformed, "acknowledgement body shorter than "
+                .. C.ack_fixed_len .. " bytes")
+            pinfo.cols.info:set("skinbox: truncated acknowledgement")
+            return len
+        end
+        for _, name in ipairs(ROWS.ack_body) do
+            add(root, buf, base, "ack_body", name)
+        end
+        local op = uint(buf, base, "ack_body", "command_opcode")
+        local result = uint(buf, base, "ack_body", "result")
+        text = "ack " .. (OPCODE_NAMES[op] or ("opcode " .. op)) .. ", seq " .. sequence
+            .. ": " .. (RESULT_NAMES[result] or ("result " .. result))
+        local rest = base + C.ack_fixed_len
+        if len - rest == C.destination_len then
+            text = text .. ", streaming to " .. dissect_destination(buf, root, rest)
+        elseif len - rest == C.box_counters_len then
+            dissect_box_counters(buf, root, rest)
+        end
+    end
+    root:append_text(": " .. text)
+    pinfo.cols.info:set("box " .. box_id .. ": " .. text)
+    return len
 end
 
 local function box_state(key)
@@ -399,28 +504,32 @@ local function dissect(buf, pinfo, tree)
         pinfo.cols.info:set("skinbox: unknown version " .. header.version)
         return len
     end
+    if header.kind == C.kind_command or header.kind == C.kind_ack then
+        return dissect_control(buf, pinfo, root, header.kind)
+    end
     local ki = add(root, buf, 0, "datagram", "kind")
     add(root, buf, 0, "datagram", "box_id")
     add(root, buf, 0, "datagram", "port_count")
     local fi = add(root, buf, 0, "datagram", "flags")
     local flags_range = buf(P.datagram.flags[1], P.datagram.flags[2])
     fi:add(F.flags.flush_timeout, flags_range)
+    fi:add(F.flags.box_counters, flags_range)
     fi:add(F.flags.reserved, flags_range)
     local si = add(root, buf, 0, "datagram", "sequence")
     add(root, buf, 0, "datagram", "base_tick")
     add(root, buf, 0, "datagram", "entry_count")
     add(root, buf, 0, "datagram", "reserved")
 
-    local expected = datagram_len(header.kind, header.entries)
+    local expected = datagram_len(header.kind, header.entries, header.flags)
     if expected == nil then
         ki:add_proto_expert_info(E.malformed, "unknown datagram kind " .. header.kind)
         pinfo.cols.info:set("skinbox: unknown kind " .. header.kind)
         return len
     end
-    if header.entries > C.max_entries[header.kind] or len ~= expected then
+    if header.entries > max_entries(header.kind, header.flags) or len ~= expected then
         root:add_proto_expert_info(E.malformed, string.format(
             "%d bytes, but %d entries make %d bytes (at most %d entries)", len,
-            header.entries, expected, C.max_entries[header.kind]))
+            header.entries, expected, max_entries(header.kind, header.flags)))
         pinfo.cols.info:set("skinbox: length does not match the entry count")
         return len
     end
@@ -480,6 +589,9 @@ local function dissect(buf, pinfo, tree)
         text = dissect_records(buf, root, header, verdict, state)
     else
         text = dissect_status(buf, root, header, verdict, state)
+        if bit32.band(header.flags, C.flag_box_counters) ~= 0 then
+            dissect_box_counters(buf, root, len - C.box_counters_len)
+        end
     end
     root:append_text(": " .. text)
     pinfo.cols.info:set("box " .. header.box_id .. ": " .. text)
@@ -500,7 +612,13 @@ local function heuristic(buf, pinfo, tree)
         return false
     end
     local kind = uint(buf, 0, "datagram", "kind")
-    if len ~= datagram_len(kind, uint(buf, 0, "datagram", "entry_count")) then
+    if kind == C.kind_command or kind == C.kind_ack then
+        -- the command header's length field sits where a box datagram has its entry count
+        if len ~= C.header_len + uint(buf, 0, "command", "argument_length") then
+            return false
+        end
+    elseif len ~= datagram_len(kind, uint(buf, 0, "datagram", "entry_count"),
+        uint(buf, 0, "datagram", "flags")) then
         return false
     end
     dissect(buf, pinfo, tree)

@@ -7,8 +7,16 @@
 //! logic (`dissector.lua`) reads every position through those tables, so the plugin cannot
 //! drift from the formats: a renamed or moved field changes the plugin with it.
 
+use skinbox_protocol::box_counters::{self, BoxCounter, BOX_COUNTERS_LEN};
 use skinbox_protocol::cell::{self, DATA_HEADER, END_OF_PACKET, EVENT_HEADER, PACKET_LEN};
-use skinbox_protocol::datagram::{self, DatagramKind, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAGIC};
+use skinbox_protocol::command::{
+    self, AckResult, Opcode, ACK_FIXED_LEN, CELL_COMMAND_LEN, DESTINATION_LEN, KIND_ACK,
+    KIND_COMMAND,
+};
+use skinbox_protocol::datagram::{
+    self, DatagramKind, FLAG_BOX_COUNTERS, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAGIC,
+    MAX_STATUS_PORTS_WITH_BOX_COUNTERS,
+};
 use skinbox_protocol::event::MASK_SECOND_PART;
 use skinbox_protocol::link::DEFAULT_PORT;
 use skinbox_protocol::record::{self, FLAG_LOSS_BEFORE, RECORD_LEN};
@@ -68,6 +76,47 @@ fn formats() -> Vec<Format> {
             prefix: "skinbox.port_counters",
             rows: status::port_counters_layout(),
         },
+        Format {
+            name: "box_counters",
+            prefix: "skinbox.box_counters",
+            rows: box_counters::layout(),
+        },
+        Format {
+            name: "command",
+            prefix: "skinbox.command",
+            rows: command::layout(),
+        },
+        Format {
+            name: "ack",
+            prefix: "skinbox.ack",
+            rows: command::ack_layout(),
+        },
+        Format {
+            name: "ack_body",
+            prefix: "skinbox.ack",
+            rows: command::ack_body_layout()
+                .into_iter()
+                // the body's opcode and reserved bytes share names with the header's
+                .map(|mut r| {
+                    r.name = match r.name {
+                        "opcode" => "command_opcode",
+                        "reserved" => "body_reserved",
+                        n => n,
+                    };
+                    r
+                })
+                .collect(),
+        },
+        Format {
+            name: "destination",
+            prefix: "skinbox.destination",
+            rows: command::destination_layout(),
+        },
+        Format {
+            name: "cell_command",
+            prefix: "skinbox.cell_command",
+            rows: command::cell_command_layout(),
+        },
     ]
 }
 
@@ -92,6 +141,12 @@ fn proto_field(format: &str, row: &LayoutRow) -> String {
     };
     match (row.name, len) {
         ("magic", _) => "string(%ABBR%, %NAME%)".to_string(),
+        ("mac", 6) => "ether(%ABBR%, %NAME%)".to_string(),
+        ("ip", 4) => "ipv4(%ABBR%, %NAME%)".to_string(),
+        ("opcode" | "command_opcode", 1) => {
+            "uint8(%ABBR%, %NAME%, base.DEC, OPCODE_NAMES)".to_string()
+        }
+        ("result", 1) => "uint8(%ABBR%, %NAME%, base.DEC, RESULT_NAMES)".to_string(),
         ("kind", 1) => "uint8(%ABBR%, %NAME%, base.DEC, KIND_NAMES)".to_string(),
         ("header", 1) => "uint8(%ABBR%, %NAME%, base.HEX, HEADER_NAMES)".to_string(),
         (_, 1) => int(8),
@@ -141,9 +196,32 @@ fn tables() -> String {
         }
         let _ = writeln!(w, "}}");
     }
+    let _ = writeln!(w, "-- Field names of every format in wire order.");
+    let _ = writeln!(w, "local ROWS = {{}}");
+    for f in &formats {
+        let names: Vec<String> = f.rows.iter().map(|r| lua_string(r.name)).collect();
+        let _ = writeln!(w, "ROWS.{} = {{ {} }}", f.name, names.join(", "));
+    }
     let _ = writeln!(w, "local KIND_NAMES = {{");
     for kind in DatagramKind::ALL {
         let _ = writeln!(w, "    [{}] = {:?},", kind as u8, kind.name());
+    }
+    let _ = writeln!(w, "    [{KIND_COMMAND}] = \"command\",");
+    let _ = writeln!(w, "    [{KIND_ACK}] = \"acknowledgement\",");
+    let _ = writeln!(w, "}}");
+    let _ = writeln!(w, "local OPCODE_NAMES = {{");
+    for op in Opcode::ALL {
+        let _ = writeln!(w, "    [{}] = {:?},", op as u8, op.name());
+    }
+    let _ = writeln!(w, "}}");
+    let _ = writeln!(w, "local RESULT_NAMES = {{");
+    for r in AckResult::ALL {
+        let _ = writeln!(w, "    [{}] = {:?},", r as u8, r.name());
+    }
+    let _ = writeln!(w, "}}");
+    let _ = writeln!(w, "local BOX_COUNTERS = {{");
+    for c in BoxCounter::ALL {
+        let _ = writeln!(w, "    {:?},", c.name());
     }
     let _ = writeln!(w, "}}");
     let _ = writeln!(
@@ -173,11 +251,19 @@ fn tables() -> String {
             .to_string(),
         "F.port_counters.port = ProtoField.uint8(\"skinbox.port_counters.port\", \"Port\", base.DEC)"
             .to_string(),
+        "F.box_counters.block = ProtoField.none(\"skinbox.box_counters\", \"Box counters\")"
+            .to_string(),
+        "F.destination.block = ProtoField.none(\"skinbox.destination\", \"Destination\")"
+            .to_string(),
+        "F.command.ticks = ProtoField.uint32(\"skinbox.command.ticks\", \"Ticks\", base.DEC)"
+            .to_string(),
         format!(
             "F.flags = {{ flush_timeout = ProtoField.bool(\"skinbox.flags.flush_timeout\", \
-             \"Sent by flush timeout\", 8, nil, {FLAG_FLUSH_TIMEOUT}), reserved = \
+             \"Sent by flush timeout\", 8, nil, {FLAG_FLUSH_TIMEOUT}), box_counters = \
+             ProtoField.bool(\"skinbox.flags.box_counters\", \"Box counters follow\", 8, nil, \
+             {FLAG_BOX_COUNTERS}), reserved = \
              ProtoField.uint8(\"skinbox.flags.reserved\", \"Reserved flags\", base.HEX, nil, {}) }}",
-            !FLAG_FLUSH_TIMEOUT
+            !(FLAG_FLUSH_TIMEOUT | FLAG_BOX_COUNTERS)
         ),
         format!(
             "F.record_flags = {{ loss_before = ProtoField.bool(\"skinbox.record.flags.loss_before\", \
@@ -292,6 +378,22 @@ fn tables() -> String {
         ("event_header", EVENT_HEADER.to_string()),
         ("end_of_packet", END_OF_PACKET.to_string()),
         ("flag_flush_timeout", FLAG_FLUSH_TIMEOUT.to_string()),
+        ("flag_box_counters", FLAG_BOX_COUNTERS.to_string()),
+        ("box_counters_len", BOX_COUNTERS_LEN.to_string()),
+        (
+            "max_status_ports_with_box_counters",
+            MAX_STATUS_PORTS_WITH_BOX_COUNTERS.to_string(),
+        ),
+        ("kind_command", KIND_COMMAND.to_string()),
+        ("kind_ack", KIND_ACK.to_string()),
+        ("ack_fixed_len", ACK_FIXED_LEN.to_string()),
+        ("destination_len", DESTINATION_LEN.to_string()),
+        ("cell_command_len", CELL_COMMAND_LEN.to_string()),
+        ("opcode_stream_to", (Opcode::StreamTo as u8).to_string()),
+        (
+            "opcode_cell_command",
+            (Opcode::CellCommand as u8).to_string(),
+        ),
         ("mask_second_part", MASK_SECOND_PART.to_string()),
         ("mask_reserved", reserved_mask.to_string()),
         ("tick_ns", TICK_NS.to_string()),

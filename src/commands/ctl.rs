@@ -1,0 +1,241 @@
+//! `skinbox ctl`: command a box (or `skinbox emulate`) and print its acknowledgement.
+
+use anyhow::Context;
+use skinbox_host::control::{BoxClient, Exchange};
+use skinbox_protocol::command::{AckReply, AckResult, Destination, Opcode, Request, ALL_PORTS};
+use skinbox_protocol::TICKS_PER_SECOND;
+use std::net::{SocketAddr, SocketAddrV4, ToSocketAddrs, UdpSocket};
+use std::time::Duration;
+
+/// Arguments of `skinbox ctl`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The box's command address, e.g. 192.0.2.10:54091 or 127.0.0.1:PORT of `skinbox emulate`.
+    #[arg(long = "box")]
+    box_addr: String,
+    /// Local address to send from (default: any address, a free port).
+    #[arg(long, default_value = "0.0.0.0:0")]
+    bind: SocketAddr,
+    /// Box id to address (default: any box).
+    #[arg(long)]
+    box_id: Option<u16>,
+    /// Wait for each acknowledgement, ms.
+    #[arg(long, default_value_t = 250)]
+    timeout_ms: u64,
+    /// Retries after the first attempt.
+    #[arg(long, default_value_t = 3)]
+    retries: u32,
+    #[command(subcommand)]
+    command: CtlCommand,
+}
+
+/// What to ask the box.
+#[derive(Debug, clap::Subcommand)]
+pub enum CtlCommand {
+    /// A status report now; prints the box counters from the acknowledgement.
+    Status,
+    /// Send the box's datagrams to an address (default: to this command's own socket,
+    /// see --bind).
+    StreamTo {
+        /// IPv4 address and UDP port to stream to.
+        #[arg(long)]
+        to: Option<SocketAddrV4>,
+        /// Destination MAC address with --to (default ff:ff:ff:ff:ff:ff: the box has no
+        /// ARP client, so a given IP needs its MAC or broadcast).
+        #[arg(long, default_value = "ff:ff:ff:ff:ff:ff")]
+        mac: String,
+    },
+    /// Set a run-time parameter: `flush-timeout-us N` or `status-period-ms N`.
+    Set {
+        /// `flush-timeout-us` or `status-period-ms`.
+        parameter: String,
+        /// The value.
+        value: f64,
+    },
+    /// Read the box's tick: host send ns, box receive tick, box send tick, host receive ns.
+    Time,
+    /// Round trip of a status-now command, with its time.
+    Ping {
+        /// Round trips.
+        #[arg(long, default_value_t = 4)]
+        count: u32,
+    },
+    /// Pass a 20-byte cell-network command (hex) to one port or all.
+    CellCommand {
+        /// Port, or none for all ports.
+        #[arg(long)]
+        port: Option<u8>,
+        /// The 20-byte cell command packet, 40 hex digits.
+        packet: String,
+    },
+}
+
+fn parse_mac(s: &str) -> anyhow::Result<[u8; 6]> {
+    let parts: Vec<&str> = s.split(':').collect();
+    anyhow::ensure!(
+        parts.len() == 6,
+        "MAC address {s}: expected six hex bytes a:b:c:d:e:f"
+    );
+    let mut mac = [0u8; 6];
+    for (m, p) in mac.iter_mut().zip(parts) {
+        *m = u8::from_str_radix(p, 16)
+            .with_context(|| format!("MAC address {s}: {p} is not a hex byte"))?;
+    }
+    Ok(mac)
+}
+
+fn request_of(command: &CtlCommand) -> anyhow::Result<Request> {
+    Ok(match command {
+        CtlCommand::Status | CtlCommand::Ping { .. } => Request::StatusNow,
+        CtlCommand::Time => Request::ReadTick,
+        CtlCommand::StreamTo { to: None, .. } => Request::StreamTo { to: None },
+        CtlCommand::StreamTo { to: Some(to), mac } => Request::StreamTo {
+            to: Some(Destination {
+                mac: parse_mac(mac)?,
+                ip: to.ip().octets(),
+                port: to.port(),
+            }),
+        },
+        CtlCommand::Set { parameter, value } => {
+            anyhow::ensure!(
+                value.is_finite() && *value > 0.0,
+                "set {parameter}: {value} must be positive"
+            );
+            match parameter.as_str() {
+                "flush-timeout-us" => Request::SetFlushTimeout {
+                    ticks: (value * 125.0).round().min(f64::from(u32::MAX)) as u32,
+                },
+                "status-period-ms" => Request::SetStatusPeriod {
+                    ticks: (value * 125_000.0).round().min(f64::from(u32::MAX)) as u32,
+                },
+                other => anyhow::bail!(
+                    "set {other}: the parameters are flush-timeout-us and status-period-ms"
+                ),
+            }
+        }
+        CtlCommand::CellCommand { port, packet } => {
+            let hex = packet.trim();
+            anyhow::ensure!(
+                hex.len() == 40,
+                "cell packet: 40 hex digits (20 bytes), got {}",
+                hex.len()
+            );
+            let mut bytes = [0u8; 20];
+            for (i, b) in bytes.iter_mut().enumerate() {
+                *b = u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).with_context(|| {
+                    format!("cell packet: {} is not a hex byte", &hex[2 * i..2 * i + 2])
+                })?;
+            }
+            Request::CellCommand {
+                port: port.unwrap_or(ALL_PORTS),
+                packet: bytes,
+            }
+        }
+    })
+}
+
+fn exchange_json(e: &Exchange) -> serde_json::Value {
+    let op = Opcode::from_byte(e.ack.opcode).map_or("unknown", Opcode::name);
+    let mut v = serde_json::json!({
+        "command": op,
+        "sequence": e.ack.sequence,
+        "result": e.ack.result.name(),
+        "last_accepted": e.ack.last_accepted,
+        "attempts": e.attempts,
+        "rtt_us": e.rtt_ns as f64 / 1000.0,
+        "host_send_ns": e.host_send_ns,
+        "box_receive_tick": e.ack.receive_tick,
+        "box_send_tick": e.ack.send_tick,
+        "host_receive_ns": e.host_receive_ns,
+        "box_id": e.ack.box_id,
+        "port_count": e.ack.port_count,
+    });
+    match &e.ack.reply {
+        AckReply::None => {}
+        AckReply::Destination(d) => {
+            v["streaming_to"] = serde_json::json!({
+                "ip": std::net::Ipv4Addr::from(d.ip).to_string(),
+                "port": d.port,
+                "mac": d.mac.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(":"),
+            })
+        }
+        AckReply::Counters(c) => {
+            v["box_counters"] =
+                serde_json::to_value(skinbox_host::report::BoxCountersReport::from(c))
+                    .unwrap_or_default()
+        }
+    }
+    v
+}
+
+/// Runs one `ctl` command; fails when the box refuses it or does not answer.
+pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
+    let box_addr = args
+        .box_addr
+        .to_socket_addrs()
+        .with_context(|| format!("--box {}", args.box_addr))?
+        .find(SocketAddr::is_ipv4)
+        .with_context(|| format!("--box {}: no IPv4 address", args.box_addr))?;
+    let socket = UdpSocket::bind(args.bind).with_context(|| format!("binding {}", args.bind))?;
+    let mut client = BoxClient::new(&socket, box_addr);
+    client.timeout = Duration::from_millis(args.timeout_ms.max(1));
+    client.retries = args.retries;
+    if let Some(id) = args.box_id {
+        client.box_id = id;
+    }
+    let request = request_of(&args.command)?;
+    let rounds = match args.command {
+        CtlCommand::Ping { count } => count.max(1),
+        _ => 1,
+    };
+    let mut exchanges = Vec::new();
+    for _ in 0..rounds {
+        exchanges.push(client.send(request)?);
+    }
+    let refused = exchanges.iter().find(|e| e.ack.result != AckResult::Ok);
+    if json {
+        let values: Vec<_> = exchanges.iter().map(exchange_json).collect();
+        if let [one] = values.as_slice() {
+            super::print_json(one)?;
+        } else {
+            let rtts: Vec<f64> = exchanges.iter().map(|e| e.rtt_ns as f64 / 1000.0).collect();
+            super::print_json(&serde_json::json!({
+                "exchanges": values,
+                "rtt_us_min": rtts.iter().copied().fold(f64::INFINITY, f64::min),
+                "rtt_us_max": rtts.iter().copied().fold(0.0, f64::max),
+            }))?;
+        }
+    } else {
+        for e in &exchanges {
+            match args.command {
+                CtlCommand::Time => println!(
+                    "host send {} ns, box receive tick {}, box send tick {}, host receive {} ns (box time {:.6} s, round trip {:.1} us)",
+                    e.host_send_ns,
+                    e.ack.receive_tick,
+                    e.ack.send_tick,
+                    e.host_receive_ns,
+                    e.ack.receive_tick as f64 / TICKS_PER_SECOND as f64,
+                    e.rtt_ns as f64 / 1000.0
+                ),
+                CtlCommand::Ping { .. } => println!(
+                    "ack from {} seq {}: {} in {:.1} us ({} attempt{})",
+                    client.box_addr(),
+                    e.ack.sequence,
+                    e.ack.result.name(),
+                    e.rtt_ns as f64 / 1000.0,
+                    e.attempts,
+                    if e.attempts == 1 { "" } else { "s" }
+                ),
+                _ => println!("{}", e.ack),
+            }
+        }
+    }
+    if let Some(e) = refused {
+        anyhow::bail!(
+            "the box refused the command: {} (last accepted sequence {})",
+            e.ack.result.name(),
+            e.ack.last_accepted
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,293 @@
+//! `skinbox emulate`, `skinbox ctl` and `skinbox capture` end to end on loopback: a box
+//! without a board answers commands, streams a scene to whoever claimed it, changes its
+//! flush timeout at run time, and refuses (and counts) replays and foreign hosts.
+
+use skinbox_protocol::command::{AckRepr, AckResult, CommandRepr, Request};
+use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT};
+use skinbox_protocol::DatagramRepr;
+use std::io::{BufRead, BufReader};
+use std::net::UdpSocket;
+use std::path::PathBuf;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+fn skinbox() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_skinbox"))
+}
+
+fn temp_path(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("skinbox-emulate-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// A free UDP port on loopback (bound and released; the tests bind it right after).
+fn free_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// An emulator child process, killed when dropped.
+struct Emulator {
+    child: Option<Child>,
+    addr: String,
+}
+
+impl Emulator {
+    fn start(extra: &[&str], run_ms: u64) -> Emulator {
+        let addr = format!("127.0.0.1:{}", free_port());
+        let mut child = skinbox()
+            .args([
+                "--json",
+                "emulate",
+                "--listen",
+                &addr,
+                "--duration-ms",
+                "6000",
+            ])
+            .args(["--run-ms", &run_ms.to_string()])
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // ready when it says so on stderr
+        let mut line = String::new();
+        BufReader::new(child.stderr.as_mut().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        assert!(line.starts_with("emulating box"), "{line}");
+        Emulator {
+            child: Some(child),
+            addr,
+        }
+    }
+
+    /// Waits for the end of its `--run-ms` and returns its JSON summary.
+    fn summary(mut self) -> serde_json::Value {
+        let out = self.child.take().unwrap().wait_with_output().unwrap();
+        serde_json::from_str(&ok(&out)).unwrap()
+    }
+}
+
+impl Drop for Emulator {
+    fn drop(&mut self) {
+        if let Some(child) = &mut self.child {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout.clone()).unwrap()
+}
+
+fn ctl(addr: &str, args: &[&str]) -> Output {
+    skinbox()
+        .args(["--json", "ctl", "--box", addr])
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    serde_json::from_str(&ok(out)).unwrap()
+}
+
+/// Captures for `ms` on `port` to a pcap; returns the capture's JSON and the datagrams.
+fn capture(port: u16, ms: u64, name: &str) -> (serde_json::Value, Vec<DatagramRepr>) {
+    let pcap = temp_path(name);
+    let out = skinbox()
+        .args([
+            "--json",
+            "capture",
+            "--listen",
+            &format!("127.0.0.1:{port}"),
+        ])
+        .args(["--duration-ms", &ms.to_string(), "--pcap"])
+        .arg(&pcap)
+        .output()
+        .unwrap();
+    let report = json(&out);
+    let bytes = std::fs::read(&pcap).unwrap();
+    let (payloads, _) = skinbox_host::pcap::udp_payloads(&bytes, None).unwrap();
+    let datagrams = payloads
+        .iter()
+        .map(|p| DatagramRepr::parse(&p.payload).expect("every captured datagram parses"))
+        .collect();
+    (report, datagrams)
+}
+
+/// Records datagrams closed by the flush timeout: their largest spread of record ticks.
+fn flushed_spread_ticks(datagrams: &[DatagramRepr]) -> (usize, i64) {
+    let spreads: Vec<i64> = datagrams
+        .iter()
+        .filter(|d| d.flags & FLAG_FLUSH_TIMEOUT != 0)
+        .filter_map(|d| match &d.body {
+            DatagramBody::Records(r) => {
+                let max = r.iter().map(|r| i64::from(r.tick_offset)).max()?;
+                let min = r.iter().map(|r| i64::from(r.tick_offset)).min()?;
+                Some(max - min)
+            }
+            DatagramBody::Status(_) => None,
+        })
+        .collect();
+    (spreads.len(), spreads.into_iter().max().unwrap_or(0))
+}
+
+#[test]
+fn ctl_and_capture_against_the_emulator() {
+    let emulator = Emulator::start(&["--speed", "1"], 30_000);
+    let addr = emulator.addr.clone();
+
+    // status answers, with the box counters
+    let status = json(&ctl(&addr, &["status"]));
+    assert_eq!(status["result"], "ok");
+    assert_eq!(status["command"], "status_now");
+    assert_eq!(status["box_counters"]["counters"]["commands_accepted"], 1);
+    assert_eq!(status["box_counters"]["unaccounted_frames"], 0);
+    assert_eq!(status["port_count"], 4);
+
+    // time: the four times of a clock exchange, in order on each clock
+    let time = json(&ctl(&addr, &["time"]));
+    assert_eq!(time["command"], "read_tick");
+    let n = |k: &str| time[k].as_u64().unwrap();
+    assert!(n("host_send_ns") <= n("host_receive_ns"), "{time}");
+    assert!(n("box_receive_tick") <= n("box_send_tick"), "{time}");
+    assert!(n("box_receive_tick") > 0, "{time}");
+    // ping: status-now round trips
+    let ping = json(&ctl(&addr, &["ping", "--count", "3"]));
+    assert_eq!(ping["exchanges"].as_array().unwrap().len(), 3, "{ping}");
+    assert!(ping["rtt_us_max"].as_f64().unwrap() < 250_000.0, "{ping}");
+    eprintln!(
+        "ctl ping round trip on loopback: {:.0} to {:.0} us",
+        ping["rtt_us_min"].as_f64().unwrap(),
+        ping["rtt_us_max"].as_f64().unwrap()
+    );
+
+    // stream-to, then a capture on that address receives the scene's records
+    let port = free_port();
+    let to = format!("127.0.0.1:{port}");
+    let claim = json(&ctl(&addr, &["stream-to", "--to", &to]));
+    assert_eq!(claim["result"], "ok");
+    assert_eq!(claim["streaming_to"]["port"], port);
+    let (report, before) = capture(port, 700, "before.pcap");
+    let records = report["report"]["records"].as_u64().unwrap();
+    assert!(records > 50, "{report}");
+    assert_eq!(report["report"]["bad_input"]["total"], 0, "{report}");
+    assert!(before
+        .iter()
+        .any(|d| matches!(d.body, DatagramBody::Status(_))));
+
+    // a shorter flush timeout shows in the datagrams flushed from then on
+    let set = json(&ctl(&addr, &["set", "flush-timeout-us", "10"]));
+    assert_eq!(set["result"], "ok");
+    let (_, after) = capture(port, 700, "after.pcap");
+    let (n_before, spread_before) = flushed_spread_ticks(&before);
+    let (n_after, spread_after) = flushed_spread_ticks(&after);
+    assert!(n_before > 5 && n_after > 5, "{n_before} {n_after}");
+    // 100 us = 12,500 ticks before, 10 us = 1,250 ticks after (plus the difference of
+    // two packets' ways from pin to framer)
+    assert!(
+        spread_before > 2500 && spread_after < 2500,
+        "largest spread of a flushed datagram: {spread_before} ticks before, {spread_after} after"
+    );
+    let mean = |d: &[DatagramRepr]| {
+        let (n, r) = d.iter().fold((0, 0), |(n, r), d| match &d.body {
+            DatagramBody::Records(x) => (n + 1, r + x.len()),
+            DatagramBody::Status(_) => (n, r),
+        });
+        r as f64 / n as f64
+    };
+    assert!(
+        mean(&after) < mean(&before),
+        "{} {}",
+        mean(&after),
+        mean(&before)
+    );
+    eprintln!(
+        "flushed datagrams: largest record tick spread {spread_before} -> {spread_after} ticks, \
+         records per datagram {:.2} -> {:.2}",
+        mean(&before),
+        mean(&after)
+    );
+
+    // a replayed command is refused, answered and counted (from another loopback address:
+    // the box keeps the last sequence number per host)
+    let socket = UdpSocket::bind("127.0.0.2:0").unwrap();
+    socket
+        .set_read_timeout(Some(Duration::from_secs(2)))
+        .unwrap();
+    let command = CommandRepr {
+        box_id: 1,
+        sequence: 0x7000_0000,
+        host_time: 42,
+        request: Request::ReadTick,
+    }
+    .to_bytes();
+    let mut buf = [0u8; 2048];
+    let mut results = Vec::new();
+    for _ in 0..2 {
+        socket.send_to(&command, &addr).unwrap();
+        let n = socket.recv(&mut buf).unwrap();
+        results.push(AckRepr::parse(&buf[..n]).unwrap());
+    }
+    assert_eq!(results[0].result, AckResult::Ok);
+    assert_eq!(results[1].result, AckResult::Replay);
+    assert_eq!(results[1].last_accepted, 0x7000_0000);
+    // a cell-network command: no downlink yet, refused with its reason
+    let cell = ctl(&addr, &["cell-command", "--port", "2", &"A5".repeat(20)]);
+    assert!(!cell.status.success());
+    assert!(String::from_utf8_lossy(&cell.stderr).contains("no_downlink"));
+    let status = json(&ctl(&addr, &["status"]));
+    assert_eq!(status["box_counters"]["counters"]["refused_replay"], 1);
+    assert_eq!(status["box_counters"]["counters"]["refused_no_downlink"], 1);
+
+    // the claim of a capture: the stream comes to the capture's own socket
+    let out = skinbox()
+        .args([
+            "--json",
+            "capture",
+            "--listen",
+            "127.0.0.1:0",
+            "--claim",
+            &addr,
+        ])
+        .args(["--duration-ms", "500"])
+        .output()
+        .unwrap();
+    let claimed = json(&out);
+    assert_eq!(claimed["claim"]["result"], "ok");
+    assert!(
+        claimed["report"]["records"].as_u64().unwrap() > 20,
+        "{claimed}"
+    );
+}
+
+#[test]
+fn a_host_outside_the_subnet_is_refused_and_counted() {
+    let emulator = Emulator::start(&["--host-subnet", "192.0.2.0/24"], 3000);
+    let out = ctl(
+        &emulator.addr,
+        &["--timeout-ms", "100", "--retries", "1", "status"],
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no acknowledgement"), "{err}");
+    let summary = emulator.summary();
+    assert_eq!(
+        summary["box_counters"]["counters"]["refused_foreign_subnet"],
+        2
+    );
+    assert_eq!(summary["box_counters"]["counters"]["commands_accepted"], 0);
+    assert_eq!(summary["acks_sent"], 0);
+}
