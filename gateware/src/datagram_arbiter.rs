@@ -5,8 +5,9 @@
 //! source it granted last (so no source waits more than one datagram of each other
 //! source), and passes the granted source's body through until its `last` beat; no other
 //! descriptor is offered before that beat moved, so two datagrams never interleave.
-//! Selection is combinational from the sources' `valid` and two registers (the last grant
-//! and "a body is open"): a source granted in a clock is taken in that clock.
+//! Selection is combinational from the sources' `valid` and registers (the last grant, the
+//! sources after it, "a body is open") through no adder or carry chain (a prefix OR picks
+//! the lowest candidate): a source granted in a clock is taken in that clock.
 
 use crate::hdl::*;
 use crate::stream::{DatagramSink, DatagramSource};
@@ -25,8 +26,10 @@ pub struct DatagramArbiter {
     pub sources: Vec<DatagramSink>,
     /// The merged datagrams.
     pub datagrams: DatagramSource,
-    // the source granted last, one-hot (0 after reset: source 0 comes first)
+    // the source granted last, one-hot, and the sources after it (0 after reset: source 0
+    // comes first)
     last_grant: DFF<Bits<MAX_SOURCES>>,
+    after_last_grant: DFF<Bits<MAX_SOURCES>>,
     // a descriptor was taken and its body's last beat has not moved
     body_open: DFF<Bit>,
     // source i's bit
@@ -35,8 +38,12 @@ pub struct DatagramArbiter {
     // the waiting sources after the last grant
     after_last: Signal<Local, Bits<MAX_SOURCES>>,
     candidates: Signal<Local, Bits<MAX_SOURCES>>,
-    // the granted source, one-hot
+    // the granted source, one-hot, the lowest candidate: a candidate below is seen
     grant: Signal<Local, Bits<MAX_SOURCES>>,
+    candidate_below: Signal<Local, Bit>,
+    // the sources after the grant (for the next round)
+    after_grant: Signal<Local, Bits<MAX_SOURCES>>,
+    granted_below: Signal<Local, Bit>,
     taken: Signal<Local, Bit>,
 }
 
@@ -53,6 +60,7 @@ impl DatagramArbiter {
             sources: (0..sources).map(|_| Default::default()).collect(),
             datagrams: Default::default(),
             last_grant: Default::default(),
+            after_last_grant: Default::default(),
             body_open: Default::default(),
             source_bit: (0..sources)
                 .map(|i| Constant::new((1u64 << i).into()))
@@ -61,6 +69,9 @@ impl DatagramArbiter {
             after_last: Default::default(),
             candidates: Default::default(),
             grant: Default::default(),
+            candidate_below: Default::default(),
+            after_grant: Default::default(),
+            granted_below: Default::default(),
             taken: Default::default(),
         }
     }
@@ -69,22 +80,35 @@ impl DatagramArbiter {
 impl Logic for DatagramArbiter {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, last_grant, body_open);
+        dff_setup!(self, clock, last_grant, after_last_grant, body_open);
         self.waiting.next = 0.into();
         for i in 0..self.sources.len() {
             if self.sources[i].valid.val() & !self.body_open.q.val() {
                 self.waiting.next = self.waiting.val() | self.source_bit[i].val();
             }
         }
-        // the waiting sources above the last grant: not the grant, not below it
-        self.after_last.next =
-            self.waiting.val() & !(self.last_grant.q.val() | (self.last_grant.q.val() - 1));
+        // the waiting sources after the last grant first, else all waiting
+        self.after_last.next = self.waiting.val() & self.after_last_grant.q.val();
         self.candidates.next = self.waiting.val();
         if self.after_last.val() != 0 {
             self.candidates.next = self.after_last.val();
         }
-        // the lowest candidate
-        self.grant.next = self.candidates.val() & (!self.candidates.val() + 1);
+        // the lowest candidate, and the sources after it
+        self.grant.next = 0.into();
+        self.candidate_below.next = false;
+        self.after_grant.next = 0.into();
+        self.granted_below.next = false;
+        for i in 0..self.sources.len() {
+            if self.granted_below.val() {
+                self.after_grant.next = self.after_grant.val() | self.source_bit[i].val();
+            }
+            if self.candidates.val().get_bit(i) & !self.candidate_below.val() {
+                self.grant.next = self.source_bit[i].val();
+                self.granted_below.next = true;
+            }
+            self.candidate_below.next =
+                self.candidate_below.val() | self.candidates.val().get_bit(i);
+        }
         self.datagrams.valid.next = self.waiting.val() != 0;
         self.datagrams.kind.next = 0.into();
         self.datagrams.flags.next = 0.into();
@@ -120,6 +144,7 @@ impl Logic for DatagramArbiter {
         self.taken.next = self.datagrams.ready.val() & (self.waiting.val() != 0);
         if self.taken.val() {
             self.last_grant.d.next = self.grant.val();
+            self.after_last_grant.d.next = self.after_grant.val();
             self.body_open.d.next = true;
         }
         if self.body_open.q.val()
@@ -131,6 +156,7 @@ impl Logic for DatagramArbiter {
         }
         if self.reset.val() {
             self.last_grant.d.next = 0.into();
+            self.after_last_grant.d.next = 0.into();
             self.body_open.d.next = false;
         }
     }
