@@ -23,6 +23,7 @@ pub mod crc32;
 pub mod frame_transmitter;
 pub mod hdl;
 pub mod interface_box;
+pub mod mdio;
 pub mod packet_store;
 pub mod replica_register;
 pub mod status_reporter;
