@@ -50,8 +50,8 @@ fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
         "the framer's payload buffers are block RAM"
     );
     assert!(count("lut4_sites") <= count("lut4_sites_available"));
-    // clk25, the UART pins, TX clock, TX_CTL, 4 TX data, PHY reset, LED.
-    assert_eq!(count("io"), PORTS as u64 + 9);
+    // clk25, the UART pins, TX clock, TX_CTL, 4 TX data, PHY reset, MDC, MDIO, LED.
+    assert_eq!(count("io"), PORTS as u64 + 11);
     assert_eq!(count("pll"), 1);
     assert_eq!(report["target_mhz"], 125.0);
     let fmax = report["fmax_mhz"].as_f64().expect("fmax_mhz");

@@ -121,9 +121,9 @@ pub struct MdioMaster {
     poll_clocks: Constant<Bits<25>>,
     divider: DFF<Bits<6>>,
     busy: DFF<Bit>,
-    bit: DFF<Bits<6>>,
+    bit_index: DFF<Bits<6>>,
     step: DFF<Bits<3>>,
-    wait: DFF<Bits<25>>,
+    countdown: DFF<Bits<25>>,
     shift: DFF<Bits<32>>,
     out: DFF<Bit>,
     oe: DFF<Bit>,
@@ -170,9 +170,9 @@ impl MdioMaster {
             poll_clocks: Constant::new(poll_clocks.into()),
             divider: Default::default(),
             busy: Default::default(),
-            bit: Default::default(),
+            bit_index: Default::default(),
             step: Default::default(),
-            wait: Default::default(),
+            countdown: Default::default(),
             shift: Default::default(),
             out: Default::default(),
             oe: Default::default(),
@@ -199,9 +199,9 @@ impl Logic for MdioMaster {
             clock,
             divider,
             busy,
-            bit,
+            bit_index,
             step,
-            wait,
+            countdown,
             shift,
             out,
             oe,
@@ -217,25 +217,26 @@ impl Logic for MdioMaster {
         self.sampled.d.next = self.mdio_in.val();
         // steps 3 and 4 are the reads
         self.reading.next = self.step.q.val() >= 3;
-        self.next_bit.next = self.bit.q.val() + 1;
+        self.next_bit.next = self.bit_index.q.val() + 1;
         self.mode.next = self.data.q.val().get_bits::<3>(8);
-        self.speed.next = SPEED_UNKNOWN.into();
+        // the SPEED_ codes as literals (the Verilog has no Rust constants)
+        self.speed.next = 3.into();
         if (self.mode.val() == 7) | (self.mode.val() == 6) {
-            self.speed.next = SPEED_1000.into();
+            self.speed.next = 2.into();
         } else if (self.mode.val() == 5) | (self.mode.val() == 4) | (self.mode.val() == 3) {
-            self.speed.next = SPEED_100.into();
+            self.speed.next = 1.into();
         } else if (self.mode.val() == 2) | (self.mode.val() == 1) {
-            self.speed.next = SPEED_10.into();
+            self.speed.next = 0.into();
         }
-        if !self.busy.q.val() & (self.wait.q.val() != 0) {
-            self.wait.d.next = self.wait.q.val() - 1;
+        if !self.busy.q.val() & (self.countdown.q.val() != 0) {
+            self.countdown.d.next = self.countdown.q.val() - 1;
         }
         // the last clock before MDC rises: read data is sampled here
         if (self.divider.q.val() == 31) & self.busy.q.val() & self.reading.val() {
-            if self.bit.q.val() == 47 {
+            if self.bit_index.q.val() == 47 {
                 self.turnaround_low.d.next = !self.sampled.q.val();
             }
-            if self.bit.q.val() >= 48 {
+            if self.bit_index.q.val() >= 48 {
                 self.data.d.next =
                     (self.data.q.val() << 1) | bit_cast::<16, 1>(self.sampled.q.val().into());
             }
@@ -243,7 +244,7 @@ impl Logic for MdioMaster {
         // the last clock before MDC falls: the next bit goes out with the falling edge
         if self.divider.q.val() == 63 {
             if self.busy.q.val() {
-                if self.bit.q.val() == 63 {
+                if self.bit_index.q.val() == 63 {
                     self.busy.d.next = false;
                     self.oe.d.next = false;
                     self.out.d.next = true;
@@ -254,18 +255,18 @@ impl Logic for MdioMaster {
                     }
                     if self.step.q.val() == 4 {
                         self.step.d.next = 3.into();
-                        self.wait.d.next = self.poll_clocks.val();
+                        self.countdown.d.next = self.poll_clocks.val();
                         self.link_up_out.d.next = self.status_link.q.val()
                             & self.status_answered.q.val()
                             & self.turnaround_low.q.val();
                         if self.status_answered.q.val() & self.turnaround_low.q.val() {
                             self.link_speed_out.d.next = self.speed.val();
                         } else {
-                            self.link_speed_out.d.next = SPEED_UNKNOWN.into();
+                            self.link_speed_out.d.next = 3.into();
                         }
                     }
                 } else {
-                    self.bit.d.next = self.next_bit.val();
+                    self.bit_index.d.next = self.next_bit.val();
                     self.out.d.next = true;
                     if self.next_bit.val() >= 32 {
                         self.out.d.next = self.shift.q.val().get_bit(31);
@@ -274,9 +275,9 @@ impl Logic for MdioMaster {
                     // a read releases MDIO from the turnaround on
                     self.oe.d.next = !(self.reading.val() & (self.next_bit.val() >= 46));
                 }
-            } else if self.wait.q.val() == 0 {
+            } else if self.countdown.q.val() == 0 {
                 self.busy.d.next = true;
-                self.bit.d.next = 0.into();
+                self.bit_index.d.next = 0.into();
                 self.out.d.next = true;
                 self.oe.d.next = true;
                 self.data.d.next = 0.into();
@@ -299,9 +300,9 @@ impl Logic for MdioMaster {
             self.oe.d.next = false;
             self.out.d.next = true;
             self.step.d.next = 0.into();
-            self.wait.d.next = self.startup_clocks.val();
+            self.countdown.d.next = self.startup_clocks.val();
             self.link_up_out.d.next = false;
-            self.link_speed_out.d.next = SPEED_UNKNOWN.into();
+            self.link_speed_out.d.next = 3.into();
         }
         self.mdc.next = self.divider.q.val().get_bit(5);
         self.mdio_out.next = self.out.q.val();
