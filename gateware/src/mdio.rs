@@ -17,8 +17,9 @@
 //! 1 (status, bit 2 link status) and the vendor's register 19h (auxiliary status summary,
 //! bits 10:8 the auto-negotiation highest common denominator: 111 1000BASE-T full duplex,
 //! 110 half, 101 100BASE-TX full, 100 100BASE-T4, 011 100BASE-TX half, 010 10BASE-T full,
-//! 001 half, 000 none; the layout of Broadcom's BCM54xx/BCM5061x family, as Linux's
-//! `drivers/net/phy/broadcom.c` reads it: `MII_BCM54XX_AUXSTATUS`). The outputs
+//! 001 half, 000 none; the layout of Broadcom's BCM54xx PHYs as U-Boot's
+//! `drivers/net/phy/broadcom.c` reads it, `MIIM_BCM54xx_AUXSTATUS` and its link-mode field
+//! 0x0700; 100 = 100BASE-T4, which U-Boot does not list, is taken as 100 Mbit/s). The outputs
 //! [`MdioMaster::link_up`] and [`MdioMaster::link_speed`] change only after both reads.
 //!
 //! Timing: MDC is the clock divided by [`MDC_DIVIDER`] (1.95 MHz at 125 MHz, below
