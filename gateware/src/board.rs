@@ -44,8 +44,8 @@ pub const PHY_RESET_CLOCKS: u64 = 1 << 21;
 /// is 0 (litex-boards, `platforms/colorlight_i5.py`).
 pub const PHY_ADDRESS: u8 = 0;
 
-/// Clocks from the end of the PHY reset to the first MDIO frame: 2^17 (1.05 ms), a margin
-/// for the PHY's own start-up.
+/// Clocks from the end of the PHY reset to the first MDIO frame, at least: 2^17 (1.05
+/// ms), a margin for the PHY's own start-up.
 pub const MDIO_STARTUP_CLOCKS: u64 = 1 << 17;
 
 /// Clocks between link polls: 2^24 (134 ms).
@@ -148,7 +148,11 @@ impl Board {
         })?;
         let box_verilog = verilog(config)?;
         let mdio = crate::mdio::module_verilog(
-            MdioMaster::new(PHY_ADDRESS, MDIO_STARTUP_CLOCKS, MDIO_POLL_CLOCKS),
+            MdioMaster::new(
+                PHY_ADDRESS,
+                MDIO_STARTUP_CLOCKS / crate::mdio::MDC_DIVIDER,
+                MDIO_POLL_CLOCKS / crate::mdio::MDC_DIVIDER,
+            ),
             MDIO_MODULE,
         );
         Ok(format!(

@@ -13,7 +13,8 @@
 //!    9 restart it, bit 8 full duplex, bits 6 and 13 = 10: 1000 Mbit/s).
 //!
 //! So the PHY links only with a Gigabit full-duplex partner; a 100 Mbit/s partner gets no
-//! link instead of garbage. Then, at once and every `poll_clocks` after, it reads register
+//! link instead of garbage. Then, at once and every `poll_periods` MDC periods after, it
+//! reads register
 //! 1 (status, bit 2 link status) and the vendor's register 19h (auxiliary status summary,
 //! bits 10:8 the auto-negotiation highest common denominator: 111 1000BASE-T full duplex,
 //! 110 half, 101 100BASE-TX full, 100 100BASE-T4, 011 100BASE-TX half, 010 10BASE-T full,
@@ -118,13 +119,19 @@ pub struct MdioMaster {
     word_control: Constant<Bits<32>>,
     word_status: Constant<Bits<32>>,
     word_aux: Constant<Bits<32>>,
-    startup_clocks: Constant<Bits<25>>,
-    poll_clocks: Constant<Bits<25>>,
+    startup_periods: Constant<Bits<20>>,
+    poll_periods: Constant<Bits<20>>,
     divider: DFF<Bits<6>>,
     busy: DFF<Bit>,
     bit_index: DFF<Bits<6>>,
     step: DFF<Bits<3>>,
-    countdown: DFF<Bits<25>>,
+    /// MDC periods left to wait, minus one: the wait is over when it has gone below zero
+    /// (bit 19 set), so no comparison with zero sits in front of the decisions.
+    countdown: DFF<Bits<20>>,
+    /// High in the clock before MDC falls (divider 63): the bit boundary.
+    at_fall: DFF<Bit>,
+    /// High in the clock before MDC rises (divider 31): read data is sampled.
+    at_sample: DFF<Bit>,
     shift: DFF<Bits<32>>,
     out: DFF<Bit>,
     oe: DFF<Bit>,
@@ -142,13 +149,14 @@ pub struct MdioMaster {
 }
 
 impl MdioMaster {
-    /// A master for the PHY at `phy_address` that starts `startup_clocks` after its reset
-    /// and polls the link every `poll_clocks` (both below 2^25). Panics beyond those limits.
-    pub fn new(phy_address: u8, startup_clocks: u64, poll_clocks: u64) -> Self {
+    /// A master for the PHY at `phy_address` that starts about `startup_periods` MDC
+    /// periods ([`MDC_DIVIDER`] clocks each) after its reset and polls the link every
+    /// `poll_periods` periods (both 1 to 2^19). Panics beyond those limits.
+    pub fn new(phy_address: u8, startup_periods: u64, poll_periods: u64) -> Self {
         assert!(phy_address < 32, "MDIO PHY address {phy_address} above 31");
         assert!(
-            startup_clocks < 1 << 25 && poll_clocks < 1 << 25,
-            "MdioMaster waits below 2^25 clocks"
+            (1..=1 << 19).contains(&startup_periods) && (1..=1 << 19).contains(&poll_periods),
+            "MdioMaster waits 1 to 2^19 MDC periods"
         );
         let word = |write, register, data| {
             Constant::new(u64::from(frame_word(write, phy_address, register, data)).into())
@@ -167,13 +175,15 @@ impl MdioMaster {
             word_control: word(true, REG_CONTROL, CONTROL_RESTART_AN_1000_FULL),
             word_status: word(false, REG_STATUS, 0),
             word_aux: word(false, REG_AUX_STATUS, 0),
-            startup_clocks: Constant::new(startup_clocks.into()),
-            poll_clocks: Constant::new(poll_clocks.into()),
+            startup_periods: Constant::new((startup_periods - 1).into()),
+            poll_periods: Constant::new((poll_periods - 1).into()),
             divider: Default::default(),
             busy: Default::default(),
             bit_index: Default::default(),
             step: Default::default(),
             countdown: Default::default(),
+            at_fall: Default::default(),
+            at_sample: Default::default(),
             shift: Default::default(),
             out: Default::default(),
             oe: Default::default(),
@@ -203,6 +213,8 @@ impl Logic for MdioMaster {
             bit_index,
             step,
             countdown,
+            at_fall,
+            at_sample,
             shift,
             out,
             oe,
@@ -229,11 +241,13 @@ impl Logic for MdioMaster {
         } else if (self.mode.val() == 2) | (self.mode.val() == 1) {
             self.speed.next = 0.into();
         }
-        if !self.busy.q.val() & (self.countdown.q.val() != 0) {
+        self.at_fall.d.next = self.divider.q.val() == 62;
+        self.at_sample.d.next = self.divider.q.val() == 30;
+        if self.at_fall.q.val() & !self.busy.q.val() & !self.countdown.q.val().get_bit(19) {
             self.countdown.d.next = self.countdown.q.val() - 1;
         }
         // the last clock before MDC rises: read data is sampled here
-        if (self.divider.q.val() == 31) & self.busy.q.val() & self.reading.val() {
+        if self.at_sample.q.val() & self.busy.q.val() & self.reading.val() {
             if self.bit_index.q.val() == 47 {
                 self.turnaround_low.d.next = !self.sampled.q.val();
             }
@@ -243,7 +257,7 @@ impl Logic for MdioMaster {
             }
         }
         // the last clock before MDC falls: the next bit goes out with the falling edge
-        if self.divider.q.val() == 63 {
+        if self.at_fall.q.val() {
             if self.busy.q.val() {
                 if self.bit_index.q.val() == 63 {
                     self.busy.d.next = false;
@@ -256,7 +270,7 @@ impl Logic for MdioMaster {
                     }
                     if self.step.q.val() == 4 {
                         self.step.d.next = 3.into();
-                        self.countdown.d.next = self.poll_clocks.val();
+                        self.countdown.d.next = self.poll_periods.val();
                         self.link_up_out.d.next = self.status_link.q.val()
                             & self.status_answered.q.val()
                             & self.turnaround_low.q.val();
@@ -269,14 +283,16 @@ impl Logic for MdioMaster {
                 } else {
                     self.bit_index.d.next = self.next_bit.val();
                     self.out.d.next = true;
-                    if self.next_bit.val() >= 32 {
+                    // the next bit is bit_index + 1: the tests compare bit_index itself, so
+                    // no adder sits in front of MDIO's registers
+                    if self.bit_index.q.val() >= 31 {
                         self.out.d.next = self.shift.q.val().get_bit(31);
                         self.shift.d.next = self.shift.q.val() << 1;
                     }
-                    // a read releases MDIO from the turnaround on
-                    self.oe.d.next = !(self.reading.val() & (self.next_bit.val() >= 46));
+                    // a read releases MDIO from the turnaround (bit 46) on
+                    self.oe.d.next = !(self.reading.val() & (self.bit_index.q.val() >= 45));
                 }
-            } else if self.countdown.q.val() == 0 {
+            } else if self.countdown.q.val().get_bit(19) {
                 self.busy.d.next = true;
                 self.bit_index.d.next = 0.into();
                 self.out.d.next = true;
@@ -301,7 +317,9 @@ impl Logic for MdioMaster {
             self.oe.d.next = false;
             self.out.d.next = true;
             self.step.d.next = 0.into();
-            self.countdown.d.next = self.startup_clocks.val();
+            self.countdown.d.next = self.startup_periods.val();
+            self.at_fall.d.next = false;
+            self.at_sample.d.next = false;
             self.link_up_out.d.next = false;
             self.link_speed_out.d.next = 3.into();
         }
@@ -428,8 +446,9 @@ mod tests {
         }
     }
 
-    const STARTUP: u64 = 100;
-    const POLL: u64 = 3000;
+    /// Waits in MDC periods.
+    const STARTUP: u64 = 2;
+    const POLL: u64 = 40;
 
     fn master() -> Bench<MdioMaster> {
         let mut bench = Bench::new(MdioMaster::new(0, STARTUP, POLL), |b| &mut b.clock);
@@ -467,7 +486,7 @@ mod tests {
 
     /// Clocks for the three writes and the two reads: five frames of 64 MDC periods, one
     /// idle period after each.
-    const SEQUENCE: u64 = STARTUP + 5 * 65 * MDC_DIVIDER + 200;
+    const SEQUENCE: u64 = (STARTUP + 1 + 5 * 65) * MDC_DIVIDER + 200;
 
     #[test]
     fn configures_gigabit_full_duplex_only_then_reads_the_link() {
@@ -511,7 +530,7 @@ mod tests {
         // the next poll: link down, nothing negotiated
         phy.registers[1] = 0x0000;
         phy.registers[0x19] = 0x0000;
-        run(&mut bench, &mut phy, POLL + 2 * 65 * MDC_DIVIDER + 200);
+        run(&mut bench, &mut phy, (POLL + 1 + 2 * 65) * MDC_DIVIDER);
         assert_eq!(phy.reads, [1, 0x19, 1, 0x19]);
         assert_eq!(phy.writes.len(), 3, "the configuration is written once");
         assert!(!bench.uut.link_up.val());
@@ -519,7 +538,7 @@ mod tests {
         // 10BASE-T half duplex
         phy.registers[1] = 0x0004;
         phy.registers[0x19] = 0x0100;
-        run(&mut bench, &mut phy, POLL + 2 * 65 * MDC_DIVIDER + 200);
+        run(&mut bench, &mut phy, (POLL + 1 + 2 * 65) * MDC_DIVIDER);
         assert!(bench.uut.link_up.val());
         assert_eq!(bench.uut.link_speed.val().to_u64(), 0);
     }
