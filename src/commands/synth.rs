@@ -73,6 +73,13 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         ..BoxConfig::default()
     };
     config.validate().map_err(anyhow::Error::msg)?;
+    // refused before any tool runs
+    if !(args.sim_window_ms > 0.0 && args.sim_window_ms <= 1000.0) {
+        anyhow::bail!(
+            "--sim-window-ms {} must be above 0 and at most 1000",
+            args.sim_window_ms
+        );
+    }
     let build = build_dir();
     let toolchain = Toolchain::at(args.venv.clone().unwrap_or(build.join("synth-venv")));
     let default_out =
@@ -159,12 +166,6 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     let report = report.map_err(anyhow::Error::new)?;
 
     let netlist_sim = if args.sim {
-        if !(args.sim_window_ms > 0.0 && args.sim_window_ms <= 1000.0) {
-            anyhow::bail!(
-                "--sim-window-ms {} must be above 0 and at most 1000",
-                args.sim_window_ms
-            );
-        }
         let board = Board::from_name(&report.board)
             .ok_or_else(|| anyhow::anyhow!("unknown board {}", report.board))?;
         let config = BoxConfig {
