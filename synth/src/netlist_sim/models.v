@@ -1,8 +1,9 @@
 // Simulation models for the cells of the board-top netlist that yosys ships no model of
 // (its share/ecp5/cells_sim.v has LUT4, CCU2C, TRELLIS_FF, PFUMX, L6MUX21, TRELLIS_IO and
 // distributed RAM; DP16KD and ODDRX1F are black boxes there). Written by skinbox from
-// Lattice's descriptions of the primitives (FPGA-TN-02204 "ECP5 and ECP5-5G Memory Usage
-// Guide", FPGA-TN-02035 "ECP5 and ECP5-5G High-Speed I/O Interface"), for
+// Lattice's descriptions of the primitives (TN1264 "ECP5 and ECP5-5G Memory Usage Guide",
+// TN1265 "ECP5 and ECP5-5G High-Speed I/O Interface") and the INITVAL layout yosys uses
+// (checked by tests/synth_flow.rs, block_ram_contents_are_where_yosys_puts_them), for
 // synth/src/netlist_sim.rs.
 
 // The PLL bypassed: the harness drives the 125 MHz clock into CLKI; LOCK rises after 64
