@@ -125,6 +125,14 @@ fn synth_refuses_bad_arguments_and_a_missing_python_before_running_any_tool() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("ports = 0"), "{stderr}");
 
+    let out = skinbox(&["synth", "--sim", "--sim-window-ms", "0", "--venv", venv]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--sim-window-ms 0 must be above 0"),
+        "{stderr}"
+    );
+
     let out = skinbox(&["synth", "--venv", venv, "--python", "/nonexistent/python3"]);
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);

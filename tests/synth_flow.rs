@@ -50,8 +50,8 @@ fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
         "the framer's payload buffers are block RAM"
     );
     assert!(count("lut4_sites") <= count("lut4_sites_available"));
-    // clk25, the UART pins, TX clock, TX_CTL, 4 TX data, PHY reset, LED.
-    assert_eq!(count("io"), PORTS as u64 + 9);
+    // clk25, the UART pins, TX clock, TX_CTL, 4 TX data, PHY reset, MDC, MDIO, LED.
+    assert_eq!(count("io"), PORTS as u64 + 11);
     assert_eq!(count("pll"), 1);
     assert_eq!(report["target_mhz"], 125.0);
     let fmax = report["fmax_mhz"].as_f64().expect("fmax_mhz");
@@ -273,6 +273,86 @@ fn block_ram_contents_are_where_yosys_puts_them() {
             "yosys' reading of the model"
         );
         assert_eq!(dp16kd_words(&ours[0], 128), contents, "width {width}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The netlist nextpnr places (yosys' `write_verilog` after `synth_ecp5`), simulated with
+/// yosys' ECP5 cell models under a short scene, sends the RTL co-simulation's frames byte
+/// for byte and clock for clock, from the first status datagram after power-up on; the PHY
+/// reset, the LED and the MDIO configuration are checked in the same run. A netlist with
+/// the RGMII nibbles or the TX clock's edges swapped is caught.
+#[test]
+fn two_port_netlist_sends_the_rtl_frames_and_a_swapped_rgmii_output_is_caught() {
+    use skinbox_gateware::board::Board;
+    use skinbox_gateware::interface_box::BoxConfig;
+    use skinbox_synth::netlist_sim::{
+        scene_spec, simulate_variant, NetlistVariant, DEFAULT_WINDOW_NS,
+    };
+
+    let _tools = TOOLS.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = std::env::temp_dir().join(format!("skinbox-netlist-sim-{}", std::process::id()));
+    let started = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
+        .args(["synth", "--json", "--ports", &PORTS.to_string(), "--sim"])
+        .arg("--out-dir")
+        .arg(&dir)
+        .output()
+        .expect("run skinbox synth --sim");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("no JSON report ({e}); stderr:\n{stderr}"));
+    let sim = &report["netlist_sim"];
+    eprintln!(
+        "netlist simulation: {} frames compared, {:.2} ms simulated ({} clocks); Verilator build \
+         {:.0} s, netlist {:.1} s, RTL {:.1} s; whole command {:.0} s",
+        report["frames_compared"],
+        report["simulated_ms"].as_f64().unwrap_or(0.0),
+        sim["clocks"],
+        sim["build_seconds"].as_f64().unwrap_or(0.0),
+        sim["netlist_seconds"].as_f64().unwrap_or(0.0),
+        sim["rtl_seconds"].as_f64().unwrap_or(0.0),
+        started.elapsed().as_secs_f64()
+    );
+    assert_eq!(report["netlist_matches_rtl"], true, "{sim:#}\n{stderr}");
+    assert!(out.status.success(), "{stderr}");
+    assert!(report["frames_compared"].as_u64().unwrap() >= 5, "{sim:#}");
+    assert_eq!(sim["frames_differing"], 0);
+    // power-up: the PLL stand-in locks after 64 clocks, its synchroniser takes 2, then the
+    // PHY reset's 2^21 clocks; the simulation covers it and the scene
+    assert_eq!(sim["phy_reset_clocks"], 64 + 2 + (1u64 << 21));
+    assert!(report["simulated_ms"].as_f64().unwrap() > 16.8);
+    assert_eq!(sim["led_ok"], true);
+    // IEEE 802.3 clause 22 at PHY address 0: advertisement (4) = selector only, 1000BASE-T
+    // control (9) = full duplex only (bit 9), control (0) = AN on and restarted, 1000 Mbit/s,
+    // full duplex; then status (1) and the Broadcom auxiliary status summary (19h) read
+    assert_eq!(
+        sim["mdio_writes"],
+        serde_json::json!([[0, 4, 0x0001], [0, 9, 0x0200], [0, 0, 0x1340]])
+    );
+    assert_eq!(sim["mdio_reads"][0], serde_json::json!([0, 1]));
+    assert_eq!(sim["mdio_reads"][1], serde_json::json!([0, 0x19]));
+
+    // The same netlist with the RGMII output wired wrong fails the comparison.
+    let tools = skinbox_synth::toolchain::Toolchain::at(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("build/synth-venv"),
+    );
+    let config = BoxConfig {
+        ports: PORTS,
+        ..BoxConfig::default()
+    };
+    let spec = scene_spec(config, DEFAULT_WINDOW_NS).expect("the scene");
+    for variant in [
+        NetlistVariant::NibblesSwapped,
+        NetlistVariant::ClockEdgeSwapped,
+    ] {
+        let wrong = simulate_variant(&tools, Board::ColorlightI5, &spec, &dir, variant)
+            .unwrap_or_else(|e| panic!("{variant:?}: {e}"));
+        assert!(!wrong.netlist_matches_rtl, "{variant:?}: {wrong:#?}");
+        assert!(
+            wrong.frames_compared > 0 && wrong.frames_differing >= wrong.frames_compared,
+            "{variant:?}: every frame differs: {wrong:#?}"
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
 }

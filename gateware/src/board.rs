@@ -17,6 +17,12 @@
 //!   clocks (16.8 ms, more than the 10 ms of docs/design.md section 9), and the box stays in
 //!   reset until then too, so its first status datagram is not sent into a PHY in reset.
 //!   Losing lock starts the sequence again.
+//! - MDIO ([`crate::mdio::MdioMaster`], on MDC/MDIO shared by both PHYs, the PHY at
+//!   [`PHY_ADDRESS`]): [`MDIO_STARTUP_CLOCKS`] after the PHY reset it restricts
+//!   auto-negotiation to 1000BASE-T full duplex, then polls the link every
+//!   [`MDIO_POLL_CLOCKS`]. Its `link_up` and `link_speed` outputs are wires of the board top
+//!   (`link_up`, `link_speed`) that nothing reads yet: yosys removes the read-data registers
+//!   until a status field takes them.
 //! - one status LED (active low): dark until the PHY reset ends; then a 1 Hz heartbeat (bit 26
 //!   of a free-running counter) that each frame start inverts for 2^19 clocks (4.2 ms), so
 //!   traffic shows as flicker.
@@ -25,6 +31,7 @@
 //! Pins and the clock constraint are in `constraints/` ([`Board::lpf`]).
 
 use crate::interface_box::{verilog, BoxConfig, ConfigError};
+use crate::mdio::MdioMaster;
 use std::fmt::Write as _;
 
 /// Constraints of the Colorlight i5 on its extension board (and, with another LED pin, the i9).
@@ -32,6 +39,20 @@ pub const COLORLIGHT_I5_LPF: &str = include_str!("../../constraints/colorlight_i
 
 /// Clocks the PHY stays in reset after PLL lock: 2^21 at 125 MHz is 16.8 ms.
 pub const PHY_RESET_CLOCKS: u64 = 1 << 21;
+
+/// MDIO address of the PHY the box sends through: LiteX's `eth` 0, whose PHYA[0] strap
+/// is 0 (litex-boards, `platforms/colorlight_i5.py`).
+pub const PHY_ADDRESS: u8 = 0;
+
+/// Clocks from the end of the PHY reset to the first MDIO frame, at least: 2^17 (1.05
+/// ms), a margin for the PHY's own start-up.
+pub const MDIO_STARTUP_CLOCKS: u64 = 1 << 17;
+
+/// Clocks between link polls: 2^24 (134 ms).
+pub const MDIO_POLL_CLOCKS: u64 = 1 << 24;
+
+/// Name of the MDIO master's module in the board top's Verilog.
+pub const MDIO_MODULE: &str = "skinbox_mdio";
 
 /// A board the box can be synthesised for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -126,8 +147,16 @@ impl Board {
             oscillator_hz: self.oscillator_hz(),
         })?;
         let box_verilog = verilog(config)?;
+        let mdio = crate::mdio::module_verilog(
+            MdioMaster::new(
+                PHY_ADDRESS,
+                MDIO_STARTUP_CLOCKS / crate::mdio::MDC_DIVIDER,
+                MDIO_POLL_CLOCKS / crate::mdio::MDC_DIVIDER,
+            ),
+            MDIO_MODULE,
+        );
         Ok(format!(
-            "{box_verilog}\n{}",
+            "{box_verilog}\n{mdio}\n{}",
             board_top(self, config.ports, self.oscillator_hz(), &pll)
         ))
     }
@@ -243,6 +272,8 @@ module {top} (
     output wire eth_tx_ctl,
     output wire [3:0] eth_tx_data,
     output wire eth_rst_n,
+    output wire eth_mdc,
+    inout  wire eth_mdio,
     output wire led_n
 );
     wire clk125;
@@ -307,6 +338,24 @@ module {top} (
         .gmii_tx_er(gmii_tx_er)
     );
 
+    // MDIO: Gigabit-only advertisement after the PHY reset, then link polls. link_up and
+    // link_speed wait for a status field to carry them.
+    wire mdio_out;
+    wire mdio_oe;
+    wire link_up;
+    wire [1:0] link_speed;
+    {mdio_module} mdio (
+        .clock(clk125),
+        .reset(!released),
+        .mdio_in(eth_mdio),
+        .mdc(eth_mdc),
+        .mdio_out(mdio_out),
+        .mdio_oe(mdio_oe),
+        .link_up(link_up),
+        .link_speed(link_speed)
+    );
+    assign eth_mdio = mdio_oe ? mdio_out : 1'bz;
+
     // RGMII: D0 leaves with the rising edge of the forwarded clock, D1 with the falling edge.
     ODDRX1F tx_clk (.SCLK(clk125), .RST(1'b0), .D0(1'b1), .D1(1'b0), .Q(eth_tx_clk));
     ODDRX1F tx_ctl (.SCLK(clk125), .RST(1'b0), .D0(gmii_tx_en), .D1(gmii_tx_en ^ gmii_tx_er), .Q(eth_tx_ctl));
@@ -338,6 +387,7 @@ endmodule
         cphase = pll.clkop_cphase,
         last_port = ports - 1,
         reset_top = reset_bits - 1,
+        mdio_module = MDIO_MODULE,
     )
 }
 
@@ -397,7 +447,15 @@ mod tests {
             for i in 0..64 {
                 assert!(sites.iter().any(|(p, _)| *p == format!("uart_rx[{i}]")));
             }
-            for port in ["clk25", "led_n", "eth_tx_clk", "eth_tx_ctl", "eth_rst_n"] {
+            for port in [
+                "clk25",
+                "led_n",
+                "eth_tx_clk",
+                "eth_tx_ctl",
+                "eth_rst_n",
+                "eth_mdc",
+                "eth_mdio",
+            ] {
                 assert!(sites.iter().any(|(p, _)| p == port), "{board:?}: {port}");
             }
         }
@@ -441,6 +499,10 @@ mod tests {
         assert!(text.contains(".CLKOP_DIV(5),"));
         // The reset counter's top bit is PHY_RESET_CLOCKS.
         assert!(text.contains("reg [21:0] reset_count"));
+        // The MDIO master, its module beside the box's, on the shared MDC/MDIO pins.
+        assert!(text.contains("module skinbox_mdio("));
+        assert!(text.contains("skinbox_mdio mdio ("));
+        assert!(text.contains("assign eth_mdio = mdio_oe ? mdio_out : 1'bz;"));
     }
 
     #[test]

@@ -41,6 +41,15 @@ pub struct Args {
     #[arg(long, value_name = "DIR", num_args = 1..,
           conflicts_with_all = ["board", "ports", "seed", "seeds"])]
     merge: Vec<PathBuf>,
+    /// Then simulate the synthesised netlist (Verilator, yosys' ECP5 cell models) under a
+    /// short scene and compare its RGMII frames with the RTL co-simulation's byte for byte;
+    /// also checks the PHY reset, the LED and the MDIO sequence.
+    #[arg(long, conflicts_with = "shard")]
+    sim: bool,
+    /// Scene window of --sim, ms.
+    #[arg(long, default_value_t = skinbox_synth::netlist_sim::DEFAULT_WINDOW_NS as f64 / 1e6,
+          requires = "sim")]
+    sim_window_ms: f64,
 }
 
 fn parse_board(name: &str) -> Result<Board, String> {
@@ -64,6 +73,13 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         ..BoxConfig::default()
     };
     config.validate().map_err(anyhow::Error::msg)?;
+    // refused before any tool runs
+    if !(args.sim_window_ms > 0.0 && args.sim_window_ms <= 1000.0) {
+        anyhow::bail!(
+            "--sim-window-ms {} must be above 0 and at most 1000",
+            args.sim_window_ms
+        );
+    }
     let build = build_dir();
     let toolchain = Toolchain::at(args.venv.clone().unwrap_or(build.join("synth-venv")));
     let default_out =
@@ -149,10 +165,59 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let report = report.map_err(anyhow::Error::new)?;
 
+    let netlist_sim = if args.sim {
+        let board = Board::from_name(&report.board)
+            .ok_or_else(|| anyhow::anyhow!("unknown board {}", report.board))?;
+        let config = BoxConfig {
+            ports: report.ports,
+            ..BoxConfig::default()
+        };
+        let spec = skinbox_synth::netlist_sim::scene_spec(
+            config,
+            (args.sim_window_ms * 1e6).round() as u64,
+        )?;
+        eprintln!(
+            "skinbox synth: simulating the netlist (Verilator build, then {:.1} ms of PHY reset and scene) and the RTL",
+            (skinbox_gateware::board::PHY_RESET_CLOCKS as f64 * 8e-6) + spec.duration_ns as f64 * 1e-6
+        );
+        Some(skinbox_synth::netlist_sim::simulate(
+            &toolchain,
+            board,
+            &spec,
+            &report.out_dir,
+        )?)
+    } else {
+        None
+    };
+
     if json {
-        super::print_json(&report)?;
+        let mut value = serde_json::to_value(&report)?;
+        if let Some(sim) = &netlist_sim {
+            value["netlist_matches_rtl"] = sim.netlist_matches_rtl.into();
+            value["frames_compared"] = sim.frames_compared.into();
+            value["simulated_ms"] = sim.simulated_ms.into();
+            value["netlist_sim"] = serde_json::to_value(sim)?;
+        }
+        super::print_json(&value)?;
     } else {
         print_report(&report);
+        if let Some(sim) = &netlist_sim {
+            print_netlist_sim(sim);
+        }
+    }
+    if let Some(sim) = &netlist_sim {
+        if !sim.netlist_matches_rtl {
+            anyhow::bail!(
+                "the netlist does not behave as the RTL: {} of {} frames differ ({}); PHY reset {}, LED {}, MDIO {} (files in {})",
+                sim.frames_differing,
+                sim.frames_compared,
+                sim.first_difference.as_deref().unwrap_or("frames equal"),
+                ok(sim.phy_reset_ok),
+                ok(sim.led_ok),
+                ok(sim.mdio_ok),
+                sim.dir.display()
+            );
+        }
     }
     if !report.timing_met {
         anyhow::bail!(
@@ -186,6 +251,39 @@ fn print_shard(shard: &SeedShard, dir: &Path, json: bool) -> anyhow::Result<()> 
             .display()
     );
     Ok(())
+}
+
+fn ok(good: bool) -> &'static str {
+    if good {
+        "as designed"
+    } else {
+        "WRONG"
+    }
+}
+
+fn print_netlist_sim(s: &skinbox_synth::netlist_sim::NetlistSimReport) {
+    println!(
+        "  netlist {} of {} frames equal to the RTL's ({} from the netlist), {:.2} ms simulated ({} clocks): {}",
+        s.frames_compared - s.frames_differing.min(s.frames_compared),
+        s.frames_compared,
+        s.frames_netlist,
+        s.simulated_ms,
+        s.clocks,
+        if s.netlist_matches_rtl { "matches" } else { "DIFFERS" }
+    );
+    println!(
+        "          PHY reset {} clocks ({}), LED {}, MDIO {} ({} writes, {} reads)",
+        s.phy_reset_clocks,
+        ok(s.phy_reset_ok),
+        ok(s.led_ok),
+        ok(s.mdio_ok),
+        s.mdio_writes.len(),
+        s.mdio_reads.len()
+    );
+    println!(
+        "          wall: Verilator build {:.0} s, netlist {:.1} s, RTL {:.1} s",
+        s.build_seconds, s.netlist_seconds, s.rtl_seconds
+    );
 }
 
 fn percent(used: u64, available: u64) -> f64 {

@@ -204,7 +204,9 @@ fn synthesise(
         &format!(
             "read_verilog -D{bram} {top}.v\n\
              synth_ecp5 -top {top} -json {top}.json\n\
-             tee -q -o yosys-stat.json stat -json\n",
+             tee -q -o yosys-stat.json stat -json\n\
+             write_verilog -noattr {netlist}\n",
+            netlist = netlist_file(board),
             bram = skinbox_gateware::block_ram::ECP5_MACRO,
         ),
     )?;
@@ -218,6 +220,12 @@ fn synthesise(
         Ok(())
     })?;
     Ok(stage_started.elapsed().as_secs_f64())
+}
+
+/// The netlist nextpnr places, as Verilog of ECP5 cells (yosys `write_verilog` after
+/// `synth_ecp5`): what `skinbox synth --sim` simulates.
+pub fn netlist_file(board: Board) -> String {
+    format!("{}_netlist.v", board.top_module())
 }
 
 fn lpf_name(board: Board) -> String {

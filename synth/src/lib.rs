@@ -6,6 +6,7 @@
 //! from the tools' JSON reports ([`report`]).
 
 pub mod flow;
+pub mod netlist_sim;
 pub mod report;
 pub mod toolchain;
 
