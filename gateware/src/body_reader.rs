@@ -5,7 +5,9 @@
 //! [`READ_LATENCY`] clocks), so the body stream's `ready` reaches the FIFO only and a
 //! consumer that takes one beat per clock is never starved once the first beats arrived
 //! (three clocks after `start`). `busy` holds from the clock after `start` until the last
-//! beat was taken: the owner may write the RAM again when it falls.
+//! beat was taken: the owner may write the RAM again when it falls. It is a register (set
+//! by `start`, cleared by the last beat), so an owner's decisions on it start at a
+//! flip-flop.
 
 use crate::block_ram::READ_LATENCY;
 use crate::hdl::*;
@@ -38,6 +40,7 @@ pub struct BodyReader {
     /// A body is being read or has beats not yet taken.
     pub busy: Signal<Out, Bit>,
     fifo: StreamFifo,
+    reading: DFF<Bit>,
     fifo_depth: Constant<Bits<3>>,
     address: DFF<Bits<BODY_ADDRESS_BITS>>,
     // reads still to issue
@@ -62,6 +65,7 @@ impl Default for BodyReader {
             body: Default::default(),
             busy: Default::default(),
             fifo: Default::default(),
+            reading: Default::default(),
             fifo_depth: Constant::new((FIFO_DEPTH as u64).into()),
             address: Default::default(),
             left: Default::default(),
@@ -85,7 +89,8 @@ impl Logic for BodyReader {
             read_1,
             read_1_last,
             read_2,
-            read_2_last
+            read_2_last,
+            reading
         );
         self.fifo.clock.next = self.clock.val();
         self.fifo.reset.next = self.reset.val();
@@ -117,11 +122,19 @@ impl Logic for BodyReader {
         self.body.last.next = self.fifo.beats_out.last.val();
         self.body.error.next = false;
         self.fifo.beats_out.ready.next = self.body.ready.val();
-        self.busy.next = (self.left.q.val() != 0)
-            | self.read_1.q.val()
-            | self.read_2.q.val()
-            | (self.fifo.count.val() != 0);
+        // from `start` to the clock after the last beat moved
+        self.busy.next = self.reading.q.val();
+        if self.fifo.beats_out.valid.val()
+            & self.fifo.beats_out.last.val()
+            & self.body.ready.val()
+        {
+            self.reading.d.next = false;
+        }
+        if self.start.val() {
+            self.reading.d.next = true;
+        }
         if self.reset.val() {
+            self.reading.d.next = false;
             self.left.d.next = 0.into();
             self.read_1.d.next = false;
             self.read_2.d.next = false;
