@@ -34,6 +34,7 @@ pub mod pcap;
 pub mod rate;
 pub mod replay;
 pub mod report;
+pub mod sample_clock;
 pub mod sequence;
 pub mod synth;
 pub mod wireshark;

@@ -14,6 +14,7 @@ pub use crate::config::{
 };
 use crate::rng::Rng;
 use crate::signal::SignalModel;
+use crate::time_sync::{SyncedClock, TimeSync};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::{CellFraming, CellRepr, Channel, ChannelMask, Modality};
 use std::cmp::Reverse;
@@ -452,9 +453,24 @@ impl Scene {
                 let mut held = [None; Channel::COUNT];
                 let mut loss_rng = Rng::for_stream(s.seed ^ 0x1055, index as u64);
                 let delay_ns = c.bus.processing_ns + position as u64 * c.bus.hop_latency_ns;
+                // Method c of docs/time.md: the cell samples on the box's grid instead.
+                let mut synced = options.time_sync.as_ref().map(|sync| {
+                    SyncedClock::new(
+                        sync,
+                        &c.bus,
+                        position,
+                        clock.drift_ppm,
+                        s.sample_rate_hz,
+                        s.seed,
+                        index as u64,
+                    )
+                });
                 let mut k = 0u64;
                 loop {
-                    let t_s = phase_s + k as f64 * cell_period_s;
+                    let t_s = match &mut synced {
+                        Some(clock) => clock.sample_time_s(k),
+                        None => phase_s + k as f64 * cell_period_s,
+                    };
                     if t_s >= s.duration_s {
                         break;
                     }
@@ -625,6 +641,9 @@ pub struct GenerateOptions {
     /// packet, seeded by the scene seed), for the reconstruction error only: the buses
     /// still carry every packet.
     pub packet_loss: f64,
+    /// Cells sample on the box's time grid, set by a time-sync command
+    /// ([`crate::time_sync`]); `None`: each on its own free-running clock.
+    pub time_sync: Option<TimeSync>,
 }
 
 impl Default for GenerateOptions {
@@ -633,6 +652,7 @@ impl Default for GenerateOptions {
             keep_packets: true,
             truth_cells: Vec::new(),
             packet_loss: 0.0,
+            time_sync: None,
         }
     }
 }
