@@ -6,15 +6,18 @@
 //! queued at the root. A cell samples on its own periodic clock (period `P`, off nominal by
 //! its drift), so its stamps are `phase + k * P + path + queue_k`: the sample index `k` of
 //! each packet follows from the stamps, and since queueing only ever adds, the stamps' lower
-//! envelope is the line `phase + path + k * P`. [`SampleClockEstimator`] fits that line per
-//! cell (period by least squares, then through the lowest point of each half of a sliding
-//! window; offset through the lowest point) and subtracts the path latency, which the stamps
-//! cannot show (only differences of stamps are observable): the [`PathModel`] gives it from
-//! the cell's position on its chain.
+//! envelope is the line `phase + path + k * P`. Better still, a packet whose first start bit
+//! came more than one packet's length after the previous packet's on the same port found
+//! the root's line idle and did not queue at all: its stamp lies exactly on the line
+//! ([`SampleTimer`] tells those apart per port). [`SampleClockEstimator`] fits the line per
+//! cell through such unqueued packets where it has them (least squares over the recent
+//! ones), else through the lowest points of a sliding window, and subtracts the path
+//! latency, which the stamps cannot show (only differences of stamps are observable): the
+//! [`PathModel`] gives it from the cell's position on its chain.
 //!
 //! Where it fails (the study C5 of `skinbox report` charts each): a wrong per-hop latency
-//! (the error grows with the hop count), a root queue that never empties (the envelope
-//! then sits on the smallest queueing delay seen), and a cell silent for so long that its
+//! (the error grows with the hop count), a root queue that never empties (no packet is
+//! unqueued and the envelope sits on the smallest queueing delay seen), and a cell silent for so long that its
 //! drift moves the grid by more than an eighth of a period before the period is learnt
 //! (the sample index is then wrong by one).
 
@@ -30,6 +33,17 @@ pub const HOP_LATENCY_NS: u64 = 52_000;
 pub const WINDOW: usize = 256;
 /// The fit is redone after this many new stamps (between fits only the offset follows).
 const REFIT_EVERY: u32 = 16;
+/// Unqueued packets kept per cell for the fit.
+pub const ANCHORS: usize = 32;
+/// Longest time between two packets' first start bits that can still be back to back on a
+/// port, ns: 200 bits at 4 Mbit/s, on a root UART up to 2 % slow.
+pub const BACK_TO_BACK_NS: u64 = skinbox_protocol::cell::UART_BITS_PER_PACKET * 1_000_000_000
+    / skinbox_protocol::cell::UART_BAUD
+    * 102
+    / 100;
+/// How far a packet may lie below the fitted line, or an unqueued one off it, before the
+/// line is taken as wrong, ns: well above the tick and the fit's drift between refits.
+const RESTART_NS: f64 = 10_000.0;
 /// Sample indices a window must span before its period replaces the nominal one.
 const MIN_SPAN: i64 = 64;
 /// Largest sample clock error a fitted period may show, relative: cells' clocks are
@@ -101,6 +115,8 @@ pub struct SampleClockEstimator {
     anchor_ns: u64,
     /// (sample index, stamp - anchor) of the recent packets.
     window: VecDeque<(i64, i64)>,
+    /// (sample index, stamp - anchor) of the recent unqueued packets, kept however old.
+    unqueued: VecDeque<(i64, i64)>,
     last: Option<(i64, u64)>,
     since_fit: u32,
     period_learnt: bool,
@@ -128,6 +144,7 @@ impl SampleClockEstimator {
             offset_ns: 0.0,
             anchor_ns: 0,
             window: VecDeque::with_capacity(WINDOW),
+            unqueued: VecDeque::with_capacity(ANCHORS),
             last: None,
             since_fit: 0,
             period_learnt: false,
@@ -146,9 +163,11 @@ impl SampleClockEstimator {
     }
 
     /// Takes the stamp of the cell's next packet (box time of its first start bit, ns, in
-    /// arrival order) and returns its estimated sample time. A stamp before the previous one
-    /// (the box was reset) starts the estimator over.
-    pub fn push(&mut self, stamp_ns: u64) -> SampleTime {
+    /// arrival order) and returns its estimated sample time; `unqueued`: the packet found
+    /// the root's line idle (see [`SampleTimer`]), so its stamp is its sample time plus the
+    /// path latency exactly. A stamp before the previous one (the box was reset) starts the
+    /// estimator over.
+    pub fn push(&mut self, stamp_ns: u64, unqueued: bool) -> SampleTime {
         if self.last.is_some_and(|(_, s)| stamp_ns < s) {
             self.reset();
         }
@@ -173,15 +192,36 @@ impl SampleClockEstimator {
             }
         };
         let rel = (stamp_ns - self.anchor_ns) as i64;
+        // Unqueued packets lie on the line, none below it: when one is off, or any packet
+        // below, the line is wrong (a sample index slipped, e.g. in the start-up burst's
+        // long queues), and the estimator starts over from this packet.
+        if !self.unqueued.is_empty() {
+            let residual = rel as f64 - self.offset_ns - self.period_ns * index as f64;
+            if residual < -RESTART_NS || (unqueued && residual > RESTART_NS) {
+                self.reset();
+                return self.push(stamp_ns, unqueued);
+            }
+        }
         if self.window.len() == WINDOW {
             self.window.pop_front();
         }
         self.window.push_back((index, rel));
         self.last = Some((index, stamp_ns));
         self.since_fit += 1;
-        if self.since_fit >= REFIT_EVERY || self.window.len() < 2 * REFIT_EVERY as usize {
+        if unqueued {
+            if self.unqueued.len() == ANCHORS {
+                self.unqueued.pop_front();
+            }
+            self.unqueued.push_back((index, rel));
+        }
+        if self.since_fit >= REFIT_EVERY
+            || self.window.len() < 2 * REFIT_EVERY as usize
+            || (unqueued && self.unqueued.len() <= 2)
+        {
             self.fit();
-        } else {
+        } else if unqueued {
+            self.fit_anchors();
+        } else if self.unqueued.is_empty() {
             let residual = rel as f64 - self.period_ns * index as f64;
             self.offset_ns = self.offset_ns.min(residual);
         }
@@ -193,25 +233,23 @@ impl SampleClockEstimator {
         }
     }
 
-    /// Refits period and offset over the window.
+    /// Refits period and offset: through the unqueued packets where they span enough
+    /// samples, else over the window.
     fn fit(&mut self) {
         self.since_fit = 0;
-        let (Some(&(k0, _)), Some(&(k1, _))) = (self.window.front(), self.window.back()) else {
-            return;
+        let span = |q: &VecDeque<(i64, i64)>| match (q.front(), q.back()) {
+            (Some(a), Some(b)) => b.0 - a.0,
+            _ => 0,
         };
-        if k1 - k0 >= MIN_SPAN {
-            // Least squares first, then the line through the lowest point of each half:
-            // packets that did not queue lie exactly on the true line.
-            let n = self.window.len() as f64;
-            let (mk, mr) = self.window.iter().fold((0.0, 0.0), |(a, b), &(k, r)| {
-                (a + (k - k0) as f64 / n, b + r as f64 / n)
-            });
-            let (sxy, sxx) = self.window.iter().fold((0.0, 0.0), |(a, b), &(k, r)| {
-                let dk = (k - k0) as f64 - mk;
-                (a + dk * (r as f64 - mr), b + dk * dk)
-            });
-            let ls = sxy / sxx;
-            if ls.is_finite() && (ls / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR {
+        let plausible = |p: f64| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR;
+        if span(&self.unqueued) >= MIN_SPAN {
+            self.fit_anchors();
+            return;
+        }
+        if span(&self.window) >= MIN_SPAN {
+            if let Some(ls) = least_squares(&self.window).filter(|&p| plausible(p)) {
+                // Then the line through the lowest point of each half: packets that did
+                // not queue lie exactly on the true line.
                 let lowest = |from: usize, to: usize| {
                     self.window
                         .range(from..to)
@@ -225,29 +263,71 @@ impl SampleClockEstimator {
                     }
                     _ => ls,
                 };
-                self.period_ns =
-                    if (envelope / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR {
-                        envelope
-                    } else {
-                        ls
-                    };
+                self.period_ns = if plausible(envelope) { envelope } else { ls };
                 self.period_learnt = true;
             }
         }
-        self.offset_ns = self
-            .window
+        self.offset_ns = if self.unqueued.is_empty() {
+            self.window
+                .iter()
+                .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
+                .fold(f64::INFINITY, f64::min)
+        } else {
+            self.anchored_offset()
+        };
+    }
+
+    /// Period and offset through the unqueued packets alone (cheap: at most [`ANCHORS`]),
+    /// the period only where they span enough samples.
+    fn fit_anchors(&mut self) {
+        if let (Some(a), Some(b)) = (self.unqueued.front(), self.unqueued.back()) {
+            if b.0 - a.0 >= MIN_SPAN {
+                if let Some(p) = least_squares(&self.unqueued)
+                    .filter(|&p| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR)
+                {
+                    self.period_ns = p;
+                    self.period_learnt = true;
+                }
+            }
+        }
+        self.offset_ns = self.anchored_offset();
+    }
+
+    /// The unqueued packets lie on the line, up to the tick: the mean of their offsets.
+    fn anchored_offset(&self) -> f64 {
+        self.unqueued
             .iter()
             .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
-            .fold(f64::INFINITY, f64::min);
+            .sum::<f64>()
+            / self.unqueued.len().max(1) as f64
     }
 }
 
-/// Sample times of every cell of every box: one [`SampleClockEstimator`] per (box, cell).
+/// Slope of stamps over sample indices by least squares, ns per sample.
+fn least_squares(points: &VecDeque<(i64, i64)>) -> Option<f64> {
+    let &(k0, r0) = points.front()?;
+    let n = points.len() as f64;
+    let (mk, mr) = points.iter().fold((0.0, 0.0), |(a, b), &(k, r)| {
+        (a + (k - k0) as f64 / n, b + (r - r0) as f64 / n)
+    });
+    let (sxy, sxx) = points.iter().fold((0.0, 0.0), |(a, b), &(k, r)| {
+        let dk = (k - k0) as f64 - mk;
+        (a + dk * ((r - r0) as f64 - mr), b + dk * dk)
+    });
+    let slope = sxy / sxx;
+    slope.is_finite().then_some(slope)
+}
+
+/// Sample times of every cell of every box: one [`SampleClockEstimator`] per (box, cell),
+/// and per (box, port) the last stamp, to tell the packets that found the root's line idle
+/// (more than [`BACK_TO_BACK_NS`] after the previous one on the port; records of one port
+/// come in pin order).
 #[derive(Debug, Clone)]
 pub struct SampleTimer {
     nominal_period_ns: f64,
     paths: PathModel,
     cells: HashMap<(u16, u16), SampleClockEstimator>,
+    last_on_port: HashMap<(u16, u8), u64>,
 }
 
 impl SampleTimer {
@@ -257,22 +337,29 @@ impl SampleTimer {
             nominal_period_ns: 1e9 / sample_rate_hz,
             paths,
             cells: HashMap::new(),
+            last_on_port: HashMap::new(),
         }
     }
 
-    /// The estimated sample time of a packet of `cell_id` from box `box_id` stamped at
-    /// `stamp_ns` (box time).
-    pub fn push(&mut self, box_id: u16, cell_id: u16, stamp_ns: u64) -> SampleTime {
+    /// The estimated sample time of a packet of `cell_id` on `port` of box `box_id`
+    /// stamped at `stamp_ns` (box time); a port's packets in pin order.
+    pub fn push(&mut self, box_id: u16, port: u8, cell_id: u16, stamp_ns: u64) -> SampleTime {
         let (period, latency) = (self.nominal_period_ns, self.paths.latency_ns(cell_id));
+        // The port's first packet: whether the line was idle before it is unknown.
+        let unqueued = self
+            .last_on_port
+            .insert((box_id, port), stamp_ns)
+            .is_some_and(|last| stamp_ns >= last && stamp_ns - last > BACK_TO_BACK_NS);
         self.cells
             .entry((box_id, cell_id))
             .or_insert_with(|| SampleClockEstimator::new(period, latency))
-            .push(stamp_ns)
+            .push(stamp_ns, unqueued)
     }
 
-    /// Starts every cell of `box_id` over (the box was reset).
+    /// Starts every cell and port of `box_id` over (the box was reset).
     pub fn reset_box(&mut self, box_id: u16) {
         self.cells.retain(|&(b, _), _| b != box_id);
+        self.last_on_port.retain(|&(b, _), _| b != box_id);
     }
 
     /// Cells followed.
@@ -318,7 +405,9 @@ mod tests {
         let mut est = SampleClockEstimator::new(1e9 / nominal_hz, cell.latency_ns);
         let mut e: Vec<f64> = samples
             .iter()
-            .map(|&(k, q)| (est.push(cell.stamp_ns(k, q)).sample_time_ns - cell.sample_ns(k)).abs())
+            .map(|&(k, q)| {
+                (est.push(cell.stamp_ns(k, q), false).sample_time_ns - cell.sample_ns(k)).abs()
+            })
             .collect();
         e.sort_by(f64::total_cmp);
         e
@@ -356,7 +445,9 @@ mod tests {
                 let mut est = SampleClockEstimator::new(1e9 / rate, c.latency_ns);
                 let mut v: Vec<f64> = samples
                     .iter()
-                    .map(|&(k, q)| est.push(c.stamp_ns(k, q)).sample_time_ns - c.sample_ns(k))
+                    .map(|&(k, q)| {
+                        est.push(c.stamp_ns(k, q), false).sample_time_ns - c.sample_ns(k)
+                    })
                     .skip(WINDOW)
                     .map(f64::abs)
                     .collect();
@@ -395,7 +486,7 @@ mod tests {
         let mut est = SampleClockEstimator::new(2e6, c.latency_ns);
         let mut first = None;
         for &(k, q) in &samples {
-            let s = est.push(c.stamp_ns(k, q));
+            let s = est.push(c.stamp_ns(k, q), false);
             let k0 = *first.get_or_insert(k);
             assert_eq!(s.index as u64, k - k0, "sample index lost at {k}");
         }
@@ -411,8 +502,8 @@ mod tests {
         for (gap, kept) in [(4_500u64, true), (5_500, false)] {
             let c = cell(-100.0, 500.0, 0);
             let mut est = SampleClockEstimator::new(2e6, c.latency_ns);
-            est.push(c.stamp_ns(0, 0.0));
-            let s = est.push(c.stamp_ns(gap, 0.0));
+            est.push(c.stamp_ns(0, 0.0), false);
+            let s = est.push(c.stamp_ns(gap, 0.0), false);
             assert_eq!(s.index as u64 == gap, kept, "gap {gap}: index {}", s.index);
         }
     }
@@ -425,7 +516,7 @@ mod tests {
         let mut est = SampleClockEstimator::new(4e6, believed);
         let mut last = 0.0;
         for k in 0..1_000 {
-            last = est.push(c.stamp_ns(k, 0.0)).sample_time_ns - c.sample_ns(k);
+            last = est.push(c.stamp_ns(k, 0.0), false).sample_time_ns - c.sample_ns(k);
         }
         assert!((last - 20_000.0).abs() < 16.0, "{last}");
     }
@@ -435,9 +526,9 @@ mod tests {
         let c = cell(0.0, 250.0, 2);
         let mut est = SampleClockEstimator::new(4e6, c.latency_ns);
         for k in 0..100 {
-            est.push(c.stamp_ns(k + 1_000, 0.0));
+            est.push(c.stamp_ns(k + 1_000, 0.0), false);
         }
-        let s = est.push(c.stamp_ns(3, 0.0));
+        let s = est.push(c.stamp_ns(3, 0.0), false);
         assert_eq!(s.index, 0);
         assert!((s.sample_time_ns - c.sample_ns(3)).abs() < 8.0);
     }
