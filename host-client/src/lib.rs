@@ -25,6 +25,7 @@
 
 pub mod bad_input;
 pub mod bench;
+pub mod clock_map;
 pub mod convert;
 pub mod decoder;
 pub mod frame;
