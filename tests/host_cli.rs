@@ -103,8 +103,33 @@ fn decode_writes_one_row_per_packet() {
         header.starts_with("time_s,tick,box_id,cell_id,"),
         "{header}"
     );
-    assert_eq!(header.split(',').count(), 7 + 9);
-    assert_eq!(lines.count(), records);
+    // 9 channels, then the sample's box time, host time, bound and the host time's source
+    assert_eq!(header.split(',').count(), 7 + 9 + 4);
+    assert!(
+        header.ends_with(skinbox_host::output::TIME_COLUMNS),
+        "{header}"
+    );
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), records);
+    // The pcap's receive times are the host clock: every row has a host time, without a
+    // bound (receive timestamps give none), before the datagram's receive time.
+    // (The first frame's timestamp is zero, which pcap readers take as none: its records
+    // have no host time.)
+    let mut mapped = 0;
+    for row in &rows {
+        let cells: Vec<&str> = row.split(',').collect();
+        assert_eq!(cells[cells.len() - 2], "", "{row}");
+        match cells[cells.len() - 1] {
+            "receive_stamps" => {
+                let host_ns: f64 = cells[cells.len() - 3].parse().unwrap();
+                assert!((0.0..=200e3 * records as f64).contains(&host_ns), "{row}");
+                mapped += 1;
+            }
+            "none" => assert_eq!(cells[cells.len() - 3], "", "{row}"),
+            other => panic!("host time source {other}: {row}"),
+        }
+    }
+    assert!(mapped >= records * 9 / 10, "{mapped} of {records}");
 }
 
 #[test]
@@ -116,8 +141,11 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
         .report
         .frames
         .udp_payloads;
+    let rows = temp_path("replay-rows.csv");
     let mut capture = skinbox()
         .args(["capture", "--listen", "127.0.0.1:0", "--json"])
+        .args(["--sample-rate-hz", "250", "--rows"])
+        .arg(&rows)
         .args(["--count", &datagrams.to_string()])
         // Only a fallback if datagrams were lost: the comparison below then fails.
         .args(["--duration-ms", "30000"])
@@ -146,6 +174,30 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
     let summary: serde_json::Value = serde_json::from_str(&ok(&out)).unwrap();
     assert_eq!(summary["capture"]["datagrams"], datagrams);
     assert_eq!(summary["report"]["records"], records as u64);
+    // Every record as a row with its host time: the kernel's receive time (CLOCK_REALTIME)
+    // mapped, within this test's run.
+    let text = std::fs::read_to_string(&rows).unwrap();
+    let mut lines = text.lines();
+    assert!(lines
+        .next()
+        .unwrap()
+        .ends_with(skinbox_host::output::TIME_COLUMNS));
+    let now_ns = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as f64;
+    let mut n = 0;
+    for row in lines {
+        let cells: Vec<&str> = row.split(',').collect();
+        assert_eq!(cells[cells.len() - 1], "receive_stamps", "{row}");
+        let host_ns: f64 = cells[cells.len() - 3].parse().unwrap();
+        assert!(
+            host_ns < now_ns && now_ns - host_ns < 120e9,
+            "{row} now {now_ns}"
+        );
+        n += 1;
+    }
+    assert_eq!(n, records);
 
     let original = decode_pcap_file(&path, &PcapOptions::default()).unwrap();
     let captured = decode_pcap_file(&recorded, &PcapOptions::default()).unwrap();

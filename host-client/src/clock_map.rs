@@ -13,13 +13,13 @@
 //!
 //! [`ReceiveStampMap`] is the fallback without a command path: the kernel's receive
 //! timestamps of the datagrams (SO_TIMESTAMPNS on the live socket, the pcap's timestamps)
-//! against their first record's tick. A datagram leaves the box some time after that tick
-//! and needs time to arrive, never less, so the lower envelope of host receive time minus
-//! box time is the offset plus the shortest such delay: the map is late by that delay,
-//! which one-way stamps cannot show, so it has no error bound, only the spread above the
-//! envelope.
+//! against their records' ticks. A datagram leaves the box some time after its records
+//! were stamped and needs time to arrive, never less, so the lower envelope of host receive
+//! time minus box time is the offset plus the shortest such delay: the map is late by that
+//! delay, which one-way stamps cannot show, so it has no error bound.
 //!
-//! A box reset (a new boot id, or box time going backwards) starts either map over.
+//! A box reset (a new boot id; for the fallback, box time jumping back by more than a
+//! second) starts either map over.
 
 use std::collections::VecDeque;
 
@@ -295,8 +295,10 @@ pub struct ReceiveStampMap {
     restarts: u64,
 }
 
-/// Datagrams a [`ReceiveStampMap`] keeps.
+/// Records a [`ReceiveStampMap`] keeps.
 pub const RECEIVE_STAMPS: usize = 1024;
+/// How far box time must jump back for [`ReceiveStampMap`] to take it as a box reset, ns.
+pub const RESET_JUMP_NS: f64 = 1e9;
 
 impl ReceiveStampMap {
     /// An empty map.
@@ -304,16 +306,22 @@ impl ReceiveStampMap {
         ReceiveStampMap::default()
     }
 
-    /// Takes a datagram whose first record (or status report) has box tick `tick`, received
-    /// at `host_receive_ns` on the host clock; box time going backwards starts over.
+    /// Takes a record stamped at box tick `tick` whose datagram was received at
+    /// `host_receive_ns` on the host clock; box time more than [`RESET_JUMP_NS`] before the
+    /// last starts over (the records of one datagram, from several ports, are not in tick
+    /// order, but within the flush timeout).
     pub fn push(&mut self, tick: u64, host_receive_ns: u64) {
         let box_ns = tick as f64 * TICK_NS;
-        if self.last_box_ns.is_some_and(|last| box_ns < last) {
+        if self
+            .last_box_ns
+            .is_some_and(|last| box_ns < last - RESET_JUMP_NS)
+        {
             self.points.clear();
             self.line = None;
+            self.last_box_ns = None;
             self.restarts += 1;
         }
-        self.last_box_ns = Some(box_ns);
+        self.last_box_ns = Some(self.last_box_ns.map_or(box_ns, |l| l.max(box_ns)));
         if self.points.len() == RECEIVE_STAMPS {
             self.points.pop_front();
         }
@@ -359,8 +367,15 @@ impl ReceiveStampMap {
                 .min_by(|a, b| a.1.total_cmp(&b.1))
         };
         let half = self.points.len() / 2;
+        // A drift beyond any oscillator's is no box running in real time (a replay, say):
+        // clamped to the largest assumed.
+        let max_slope = ASSUMED_DRIFT_PPM * 1e-6;
         let (x0, o0, slope) = match (lowest(0, half), lowest(half, self.points.len())) {
-            (Some(a), Some(b)) if b.0 - a.0 > 1e6 => (a.0, a.1, (b.1 - a.1) / (b.0 - a.0)),
+            (Some(a), Some(b)) if b.0 - a.0 > 1e6 => (
+                a.0,
+                a.1,
+                ((b.1 - a.1) / (b.0 - a.0)).clamp(-max_slope, max_slope),
+            ),
             _ => match lowest(0, self.points.len()) {
                 Some(p) => (p.0, p.1, 0.0),
                 None => return,
@@ -582,8 +597,12 @@ mod tests {
         let late = map.to_host(tick).unwrap().host_ns - clock.host_of(tick);
         assert!((late - 30e3).abs() < 2e3, "late by {late} ns");
         assert_eq!(map.to_host(tick).unwrap().error_bound_ns, None);
-        // A reset: box time starts again.
+        // A reset: box time starts again, and goes on from there.
         map.push(5, 8e9 as u64);
+        map.push(125_005, 8_001_000_000);
+        assert_eq!(map.restarts(), 1);
+        let h = map.to_host(125_005).unwrap().host_ns;
+        assert!((h - 8_001_000_000.0).abs() < 1e3, "{h}");
         assert_eq!(map.restarts(), 1);
     }
 }

@@ -38,6 +38,7 @@ pub mod report;
 pub mod sample_clock;
 pub mod sequence;
 pub mod synth;
+pub mod timing;
 pub mod wireshark;
 
 pub use bad_input::BadInput;

@@ -1,7 +1,10 @@
-//! Decoded records and samples as CSV or JSON lines, in physical units with box time.
+//! Decoded records and samples as CSV or JSON lines, in physical units with box time; with
+//! [`RowWriter::with_timing`] also each sample's estimated box time and its host time
+//! ([`crate::timing`]).
 
 use crate::convert::Sample;
 use crate::decoder::{DecodedRecord, RecordSink};
+use crate::timing::{RecordTimes, Timing};
 use skinbox_protocol::{CellRepr, Channel};
 use std::io::{self, Write};
 
@@ -31,7 +34,14 @@ pub struct RowWriter<W: Write> {
     header_written: bool,
     rows: u64,
     error: Option<io::Error>,
+    timing: Option<Timing>,
+    /// Times of the last record (its sample row follows it).
+    last_times: Option<RecordTimes>,
 }
+
+/// The columns [`RowWriter::with_timing`] appends to every CSV row.
+pub const TIME_COLUMNS: &str =
+    "sample_box_time_s,sample_host_time_ns,host_time_bound_ns,host_time_source";
 
 impl<W: Write> RowWriter<W> {
     /// A writer of `kind` rows in `format`.
@@ -43,6 +53,59 @@ impl<W: Write> RowWriter<W> {
             header_written: false,
             rows: 0,
             error: None,
+            timing: None,
+            last_times: None,
+        }
+    }
+
+    /// Also writes each row's sample time: estimated box time, host time, the host time's
+    /// error bound (empty where the mapping has none) and its source.
+    pub fn with_timing(mut self, timing: Timing) -> Self {
+        self.timing = Some(timing);
+        self
+    }
+
+    /// The timing, to feed exchanges with the boxes.
+    pub fn timing_mut(&mut self) -> Option<&mut Timing> {
+        self.timing.as_mut()
+    }
+
+    fn time_csv(&mut self) -> io::Result<()> {
+        if self.timing.is_none() {
+            return Ok(());
+        }
+        match self.last_times {
+            Some(t) => write!(
+                self.out,
+                ",{:.9},{},{},{}",
+                t.sample_box_s,
+                t.sample_host_ns
+                    .map(|v| format!("{v:.0}"))
+                    .unwrap_or_default(),
+                t.host_error_bound_ns
+                    .map(|v| format!("{v:.0}"))
+                    .unwrap_or_default(),
+                t.source.name()
+            ),
+            None => self.out.write_all(b",,,,none"),
+        }
+    }
+
+    fn time_json(&self, row: &mut serde_json::Value) {
+        if self.timing.is_none() {
+            return;
+        }
+        if let (Some(t), Some(map)) = (self.last_times, row.as_object_mut()) {
+            map.insert("sample_box_time_s".into(), t.sample_box_s.into());
+            map.insert(
+                "sample_host_time_ns".into(),
+                t.sample_host_ns.map(|v| v.round()).into(),
+            );
+            map.insert(
+                "host_time_bound_ns".into(),
+                t.host_error_bound_ns.map(|v| v.round()).into(),
+            );
+            map.insert("host_time_source".into(), t.source.name().into());
         }
     }
 
@@ -66,15 +129,20 @@ impl<W: Write> RowWriter<W> {
     fn header(&mut self) -> io::Result<()> {
         self.header_written = true;
         let channels: Vec<&str> = Channel::ALL.iter().map(|c| c.name()).collect();
+        let times = if self.timing.is_some() {
+            format!(",{TIME_COLUMNS}")
+        } else {
+            String::new()
+        };
         match self.kind {
             RowKind::Packets => writeln!(
                 self.out,
-                "time_s,tick,box_id,datagram_sequence,port,flags,cell_id,kind,event_sequence,second_part,event_packets_missing_before,{}",
+                "time_s,tick,box_id,datagram_sequence,port,flags,cell_id,kind,event_sequence,second_part,event_packets_missing_before,{}{times}",
                 channels.join(",")
             ),
             RowKind::Samples => writeln!(
                 self.out,
-                "time_s,tick,box_id,cell_id,updated_mask,stale_mask,known_mask,{}",
+                "time_s,tick,box_id,cell_id,updated_mask,stale_mask,known_mask,{}{times}",
                 channels.join(",")
             ),
         }
@@ -122,6 +190,7 @@ impl<W: Write> RowWriter<W> {
                         None => self.out.write_all(b",")?,
                     }
                 }
+                self.time_csv()?;
                 self.out.write_all(b"\n")
             }
             RowFormat::JsonLines => {
@@ -129,7 +198,7 @@ impl<W: Write> RowWriter<W> {
                     .iter()
                     .filter_map(|c| values[c.index()].map(|v| (c.name().to_string(), v.into())))
                     .collect();
-                let row = serde_json::json!({
+                let mut row = serde_json::json!({
                     "time_s": r.time_s(),
                     "tick": r.tick,
                     "box_id": r.box_id,
@@ -143,6 +212,7 @@ impl<W: Write> RowWriter<W> {
                     "event_packets_missing_before": r.event_packets_missing_before,
                     "values": map,
                 });
+                self.time_json(&mut row);
                 serde_json::to_writer(&mut self.out, &row)?;
                 self.out.write_all(b"\n")
             }
@@ -169,6 +239,7 @@ impl<W: Write> RowWriter<W> {
                 for c in Channel::ALL {
                     write!(self.out, ",{}", s.value(c))?;
                 }
+                self.time_csv()?;
                 self.out.write_all(b"\n")
             }
             RowFormat::JsonLines => {
@@ -176,7 +247,7 @@ impl<W: Write> RowWriter<W> {
                     .iter()
                     .map(|c| (c.name().to_string(), s.value(*c).into()))
                     .collect();
-                let row = serde_json::json!({
+                let mut row = serde_json::json!({
                     "time_s": s.time_s(),
                     "tick": s.tick,
                     "box_id": s.box_id,
@@ -186,6 +257,7 @@ impl<W: Write> RowWriter<W> {
                     "known": s.known.iter().map(|c| c.name()).collect::<Vec<_>>(),
                     "values": map,
                 });
+                self.time_json(&mut row);
                 serde_json::to_writer(&mut self.out, &row)?;
                 self.out.write_all(b"\n")
             }
@@ -195,6 +267,9 @@ impl<W: Write> RowWriter<W> {
 
 impl<W: Write> RecordSink for RowWriter<W> {
     fn record(&mut self, record: &DecodedRecord) {
+        if let Some(timing) = &mut self.timing {
+            self.last_times = Some(timing.record(record));
+        }
         if self.kind != RowKind::Packets || self.error.is_some() {
             return;
         }
@@ -206,6 +281,12 @@ impl<W: Write> RecordSink for RowWriter<W> {
 
     fn wants_samples(&self) -> bool {
         self.kind == RowKind::Samples
+    }
+
+    fn datagram_received(&mut self, receive: Option<std::time::Duration>) {
+        if let Some(timing) = &mut self.timing {
+            timing.datagram_received(receive);
+        }
     }
 
     fn sample(&mut self, sample: &Sample) {

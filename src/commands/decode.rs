@@ -1,5 +1,6 @@
 //! `skinbox decode`: a pcap's box datagrams to cell packets or full samples, as CSV or JSON
-//! lines in physical units with box time.
+//! lines in physical units with box time, each with its estimated sample time in box time
+//! and on the pcap's clock (docs/time.md).
 
 use clap::Args;
 use skinbox_host::output::{RowFormat, RowKind, RowWriter};
@@ -31,9 +32,13 @@ pub struct DecodeArgs {
     /// Only UDP datagrams from or to this port.
     #[arg(long)]
     pub port: Option<u16>,
-    /// The cells' sample rate, for the summary; without it, learned from the stamps.
+    /// The cells' sample rate, for the summary and the sample times; without it, learned
+    /// from the stamps (a first pass over the file).
     #[arg(long)]
     pub sample_rate_hz: Option<f64>,
+    /// Where the cells sit on their chains, for the sample times.
+    #[command(flatten)]
+    pub timing: super::TimingArgs,
 }
 
 /// Decodes the file; rows on stdout (or --output), a one-line summary on stderr.
@@ -56,7 +61,6 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         ),
         None => Box::new(std::io::stdout().lock()),
     };
-    let mut writer = RowWriter::new(std::io::BufWriter::new(out), format, kind);
     let options = PcapOptions {
         decoder: DecoderConfig {
             sample_rate_hz: args.sample_rate_hz,
@@ -64,6 +68,13 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         },
         udp_port: args.port,
     };
+    // The sample clocks need the nominal rate up front: given, or learned in a first pass.
+    let rate_hz = match args.sample_rate_hz {
+        Some(rate) => rate,
+        None => pcap::decode_pcap_with(&bytes, &options, &mut ())?.sample_rate_hz,
+    };
+    let mut writer = RowWriter::new(std::io::BufWriter::new(out), format, kind)
+        .with_timing(args.timing.timing(rate_hz)?);
     let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
     let rows = match writer.finish() {
         Ok(rows) => rows,

@@ -24,6 +24,7 @@ use super::{chart, scene, Points, Progress, Section, Table};
 use serde::{Deserialize, Serialize};
 use skinbox_cells::{GenerateOptions, Generated, Mode, TimeSync};
 use skinbox_host::sample_clock::{PathModel, Positions, SampleTimer};
+use skinbox_protocol::cell::PACKET_LEN;
 use std::collections::HashMap;
 
 /// The goal: host sample time within this of the truth at p99 for every cell, us.
@@ -169,6 +170,53 @@ pub fn stamped(generated: &Generated) -> Vec<Vec<Stamped>> {
         .collect()
 }
 
+/// The delivered packets of a co-simulated run, per port, matched to the cell models'
+/// packets in the window: each record's stamp (box tick) taken to scene time,
+/// `tick_to_scene_ns`, beside its packet's truth. Records that match no packet (the
+/// co-simulation counts them as corrupted) are left out.
+pub fn matched(
+    generated: &Generated,
+    records: &[skinbox_host::DecodedRecord],
+    window_ns: std::ops::Range<u64>,
+    tick_to_scene_ns: impl Fn(u64) -> u64,
+) -> Vec<Vec<Stamped>> {
+    let truth = stamped(generated);
+    let mut pending: Vec<std::collections::VecDeque<(Stamped, [u8; PACKET_LEN])>> = generated
+        .buses
+        .iter()
+        .zip(&truth)
+        .map(|(bus, stamped)| {
+            bus.packets
+                .iter()
+                .zip(stamped)
+                .filter(|(p, _)| {
+                    p.pin_edge_ps >= window_ns.start * 1000
+                        && p.pin_end_ps() / 1000 <= window_ns.end
+                })
+                .map(|(p, s)| (*s, p.bytes))
+                .collect()
+        })
+        .collect();
+    let mut out = vec![Vec::new(); pending.len()];
+    for r in records {
+        let port = usize::from(r.port);
+        let Some(queue) = pending.get_mut(port) else {
+            continue;
+        };
+        let bytes = r.cell.to_bytes(&skinbox_protocol::CellFraming::DEFAULT);
+        if let Some(k) = queue.iter().position(|(_, b)| *b == bytes) {
+            queue.drain(..k);
+            if let Some((s, _)) = queue.pop_front() {
+                out[port].push(Stamped {
+                    stamp_ns: tick_to_scene_ns(r.tick),
+                    ..s
+                });
+            }
+        }
+    }
+    out
+}
+
 /// Method (a): the stamp.
 pub fn assign_arrival(packets: &[Stamped]) -> Vec<f64> {
     packets.iter().map(|p| p.stamp_ns as f64).collect()
@@ -300,10 +348,20 @@ pub struct RunResult {
 }
 
 impl RunResult {
-    /// The errors of `method`.
+    /// The errors of `method` (none, all zero, for a point another shard computes).
     pub fn of(&self, method: Method) -> &Errors {
+        static NONE: Errors = Errors {
+            packets: 0,
+            p50_us: 0.0,
+            p99_us: 0.0,
+            max_us: 0.0,
+            worst_cell_p99_us: 0.0,
+            p99_by_hops_us: Vec::new(),
+            p50_by_hops_us: Vec::new(),
+            cpu_ns_per_packet: 0.0,
+        };
         let i = Method::ALL.iter().position(|&m| m == method).unwrap_or(0);
-        &self.methods[i]
+        self.methods.get(i).unwrap_or(&NONE)
     }
 }
 
@@ -588,6 +646,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         "boundary",
         "method",
         "setting",
+        "judged by",
+        "value (us)",
         "worst cell p99 (us)",
         "max (us)",
         "bus load (%)",
