@@ -33,7 +33,8 @@ pub const HOP_LATENCY_NS: u64 = 52_000;
 pub const WINDOW: usize = 256;
 /// The fit is redone after this many new stamps (between fits only the offset follows).
 const REFIT_EVERY: u32 = 16;
-/// Unqueued packets kept per cell for the fit.
+/// Unqueued packets kept per cell for the fit (the older ones thinned out, so they span a
+/// growing stretch of samples).
 pub const ANCHORS: usize = 32;
 /// Longest time between two packets' first start bits that can still be back to back on a
 /// port, ns: 200 bits at 4 Mbit/s, on a root UART up to 2 % slow.
@@ -46,6 +47,9 @@ pub const BACK_TO_BACK_NS: u64 = skinbox_protocol::cell::UART_BITS_PER_PACKET * 
 const RESTART_NS: f64 = 10_000.0;
 /// Sample indices a window must span before its period replaces the nominal one.
 const MIN_SPAN: i64 = 64;
+/// Sample indices unqueued packets must span before their period is used: they lie on the
+/// line to the tick, so 8 samples give the period to 2 ns.
+const MIN_ANCHOR_SPAN: i64 = 8;
 /// Largest sample clock error a fitted period may show, relative: cells' clocks are
 /// specified to +-100 ppm (docs/design.md section 7); a fit beyond five times that is noise.
 const MAX_PERIOD_ERROR: f64 = 500e-6;
@@ -115,7 +119,8 @@ pub struct SampleClockEstimator {
     anchor_ns: u64,
     /// (sample index, stamp - anchor) of the recent packets.
     window: VecDeque<(i64, i64)>,
-    /// (sample index, stamp - anchor) of the recent unqueued packets, kept however old.
+    /// (sample index, stamp - anchor) of unqueued packets, kept however old: dense recently,
+    /// thinned further back.
     unqueued: VecDeque<(i64, i64)>,
     last: Option<(i64, u64)>,
     since_fit: u32,
@@ -197,7 +202,13 @@ impl SampleClockEstimator {
         // long queues), and the estimator starts over from this packet.
         if !self.unqueued.is_empty() {
             let residual = rel as f64 - self.offset_ns - self.period_ns * index as f64;
-            if residual < -RESTART_NS || (unqueued && residual > RESTART_NS) {
+            // Before the period is learnt the nominal one drifts off: only a gross miss.
+            let limit = if self.period_learnt {
+                RESTART_NS
+            } else {
+                self.period_ns / 8.0
+            };
+            if residual < -limit || (unqueued && residual > limit) {
                 self.reset();
                 return self.push(stamp_ns, unqueued);
             }
@@ -210,7 +221,13 @@ impl SampleClockEstimator {
         self.since_fit += 1;
         if unqueued {
             if self.unqueued.len() == ANCHORS {
-                self.unqueued.pop_front();
+                // Thin the older half to every other one: the kept ones span ever more
+                // samples (the period's precision grows with it), the newest stay dense.
+                let mut i = 0;
+                self.unqueued.retain(|_| {
+                    i += 1;
+                    i > ANCHORS / 2 || i % 2 == 1
+                });
             }
             self.unqueued.push_back((index, rel));
         }
@@ -242,7 +259,7 @@ impl SampleClockEstimator {
             _ => 0,
         };
         let plausible = |p: f64| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR;
-        if span(&self.unqueued) >= MIN_SPAN {
+        if span(&self.unqueued) >= MIN_ANCHOR_SPAN {
             self.fit_anchors();
             return;
         }
@@ -281,7 +298,7 @@ impl SampleClockEstimator {
     /// the period only where they span enough samples.
     fn fit_anchors(&mut self) {
         if let (Some(a), Some(b)) = (self.unqueued.front(), self.unqueued.back()) {
-            if b.0 - a.0 >= MIN_SPAN {
+            if b.0 - a.0 >= MIN_ANCHOR_SPAN {
                 if let Some(p) = least_squares(&self.unqueued)
                     .filter(|&p| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR)
                 {
@@ -519,6 +536,28 @@ mod tests {
             last = est.push(c.stamp_ns(k, 0.0), false).sample_time_ns - c.sample_ns(k);
         }
         assert!((last - 20_000.0).abs() < 16.0, "{last}");
+    }
+
+    #[test]
+    fn unqueued_packets_pin_the_line_through_long_queued_stretches() {
+        // Data mode, 100 ppm off: 100 unqueued packets, then 2,000 queued by 100 to 120 us
+        // (a collision at the root lasting 16 s), then unqueued again.
+        let c = cell(100.0, 125.0, 50);
+        let mut est = SampleClockEstimator::new(8e6, c.latency_ns);
+        let mut worst = 0.0f64;
+        for k in 0..3_000u64 {
+            let queued = (100..2_100).contains(&k);
+            let q = if queued {
+                100e3 + (k % 7) as f64 * 3e3
+            } else {
+                0.0
+            };
+            let s = est.push(c.stamp_ns(k, q), !queued);
+            if k >= 50 {
+                worst = worst.max((s.sample_time_ns - c.sample_ns(k)).abs());
+            }
+        }
+        assert!(worst < 100.0, "worst {worst} ns");
     }
 
     #[test]
