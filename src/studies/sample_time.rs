@@ -882,7 +882,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
     };
     let x_max = |p: &[(f64, f64)]| p.iter().map(|q| q.0).fold(0.0, f64::max) * 1.05;
     b_series.push(line(
-        "(b) hop latency short by (us per hop, x10)",
+        "(b) hop latency short by (us per hop, x10; median at 65 hops)",
         hop.iter().map(|&(x, y)| (x * 10.0, y)).collect(),
         1,
     ));
@@ -932,18 +932,21 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         },
         mk(
             "c5c_sample_time_boundaries",
-            "C5c Where (b) and (c) fail (data mode, 250 Hz, 66 cells)",
+            "C5c Where (b) and (c) fail (66-cell bus)",
             "setting, scaled x10 (see the legend)",
             b_series,
             (0.0, b_x),
         ),
-        mk(
-            "c5d_sample_time_bus_load",
-            "C5d Sample time error against bus load (data mode)",
-            "packets offered per s on the bus, % of the UART's 20,000",
-            load_series,
-            (0.0, load_x),
-        ),
+        chart::Chart {
+            legend: chart::Legend::LowerRight,
+            ..mk(
+                "c5d_sample_time_bus_load",
+                "C5d Sample time error against bus load (data mode)",
+                "packets offered per s on the bus, % of the UART's 20,000",
+                load_series,
+                (0.0, load_x),
+            )
+        },
     ];
     Ok(Section {
         id: "C5",
