@@ -217,6 +217,12 @@ impl ClockMap {
             .map(|l| l.slope_bound * 1e6)
     }
 
+    /// Error bound at the last exchange's box time, ns.
+    pub fn last_bound_ns(&self) -> Option<f64> {
+        let last = self.exchanges.back()?;
+        self.ns_to_host(last.box_mid_ns())?.error_bound_ns
+    }
+
     /// Host time of box tick `tick`, with its error bound; `None` before any exchange.
     pub fn to_host(&self, tick: u64) -> Option<HostTime> {
         self.line.map(|l| l.at(tick as f64 * TICK_NS))
@@ -287,7 +293,8 @@ impl ClockMap {
 /// fallback without a command path); see the module documentation.
 #[derive(Debug, Clone, Default)]
 pub struct ReceiveStampMap {
-    /// (box ns, host receive ns - box ns) of recent datagrams.
+    /// (box ns, host receive ns - box ns): the lowest point of each [`BUCKET_NS`] of box
+    /// time, the last [`BUCKETS`] of them.
     points: VecDeque<(f64, f64)>,
     last_box_ns: Option<f64>,
     line: Option<(f64, f64, f64)>,
@@ -295,8 +302,12 @@ pub struct ReceiveStampMap {
     restarts: u64,
 }
 
-/// Records a [`ReceiveStampMap`] keeps.
-pub const RECEIVE_STAMPS: usize = 1024;
+/// Box time over which a [`ReceiveStampMap`] keeps only the lowest point, ns.
+pub const BUCKET_NS: f64 = 100e6;
+/// Buckets a [`ReceiveStampMap`] keeps: a minute of box time.
+pub const BUCKETS: usize = 600;
+/// Box time the kept points must span before the envelope's slope counts as drift, ns.
+pub const MIN_DRIFT_SPAN_NS: f64 = 1e9;
 /// How far box time must jump back for [`ReceiveStampMap`] to take it as a box reset, ns.
 pub const RESET_JUMP_NS: f64 = 1e9;
 
@@ -322,13 +333,22 @@ impl ReceiveStampMap {
             self.restarts += 1;
         }
         self.last_box_ns = Some(self.last_box_ns.map_or(box_ns, |l| l.max(box_ns)));
-        if self.points.len() == RECEIVE_STAMPS {
-            self.points.pop_front();
-        }
-        self.points
-            .push_back((box_ns, host_receive_ns as f64 - box_ns));
-        self.since_fit += 1;
         let offset = host_receive_ns as f64 - box_ns;
+        let bucket = (box_ns / BUCKET_NS).floor();
+        match self.points.back_mut() {
+            Some(last) if (last.0 / BUCKET_NS).floor() == bucket => {
+                if offset < last.1 {
+                    *last = (box_ns, offset);
+                }
+            }
+            _ => {
+                if self.points.len() == BUCKETS {
+                    self.points.pop_front();
+                }
+                self.points.push_back((box_ns, offset));
+            }
+        }
+        self.since_fit += 1;
         match &mut self.line {
             Some((x0, o0, slope)) if self.since_fit < 64 => {
                 // Between fits only the envelope follows a lower point.
@@ -346,8 +366,20 @@ impl ReceiveStampMap {
         self.restarts
     }
 
-    /// Host time of box tick `tick` (late by the shortest delay from a datagram's first
-    /// record to its arrival; no bound).
+    /// The box oscillator's drift against the host clock from the envelope's slope, ppm
+    /// (positive: the box is slow), once the kept points span [`MIN_DRIFT_SPAN_NS`].
+    pub fn drift_ppm(&self) -> Option<f64> {
+        let span = match (self.points.front(), self.points.back()) {
+            (Some(a), Some(b)) => b.0 - a.0,
+            _ => 0.0,
+        };
+        self.line
+            .filter(|_| span >= MIN_DRIFT_SPAN_NS)
+            .map(|(_, _, slope)| slope * 1e6)
+    }
+
+    /// Host time of box tick `tick` (late by the shortest delay from a record to its
+    /// datagram's arrival; no bound).
     pub fn to_host(&self, tick: u64) -> Option<HostTime> {
         let box_ns = tick as f64 * TICK_NS;
         self.line.map(|(x0, o0, slope)| HostTime {
@@ -371,7 +403,7 @@ impl ReceiveStampMap {
         // clamped to the largest assumed.
         let max_slope = ASSUMED_DRIFT_PPM * 1e-6;
         let (x0, o0, slope) = match (lowest(0, half), lowest(half, self.points.len())) {
-            (Some(a), Some(b)) if b.0 - a.0 > 1e6 => (
+            (Some(a), Some(b)) if b.0 - a.0 >= MIN_DRIFT_SPAN_NS / 2.0 => (
                 a.0,
                 a.1,
                 ((b.1 - a.1) / (b.0 - a.0)).clamp(-max_slope, max_slope),
@@ -597,6 +629,9 @@ mod tests {
         let late = map.to_host(tick).unwrap().host_ns - clock.host_of(tick);
         assert!((late - 30e3).abs() < 2e3, "late by {late} ns");
         assert_eq!(map.to_host(tick).unwrap().error_bound_ns, None);
+        // 40 ppm slow box: host time per box time 40 ppm more.
+        let drift = map.drift_ppm().unwrap();
+        assert!((drift - 40.0).abs() < 3.0, "drift {drift} ppm");
         // A reset: box time starts again, and goes on from there.
         map.push(5, 8e9 as u64);
         map.push(125_005, 8_001_000_000);

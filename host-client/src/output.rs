@@ -65,6 +65,11 @@ impl<W: Write> RowWriter<W> {
         self
     }
 
+    /// The timing, to read its summary.
+    pub fn timing(&self) -> Option<&Timing> {
+        self.timing.as_ref()
+    }
+
     /// The timing, to feed exchanges with the boxes.
     pub fn timing_mut(&mut self) -> Option<&mut Timing> {
         self.timing.as_mut()

@@ -51,6 +51,21 @@ pub struct RecordTimes {
     pub source: HostTimeSource,
 }
 
+/// How one box's time is mapped to host time, for reports.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BoxTimeSummary {
+    /// The box.
+    pub box_id: u16,
+    /// Which map gives its host times.
+    pub source: HostTimeSource,
+    /// The box oscillator's drift against the host clock, ppm, where measured.
+    pub drift_ppm: Option<f64>,
+    /// Error bound of a host time at the last exchange's box time, ns (exchanges only).
+    pub error_bound_ns: Option<f64>,
+    /// Times the map started over on a box reset.
+    pub restarts: u64,
+}
+
 /// Sample times and host times of every record, per box.
 #[derive(Debug, Clone)]
 pub struct Timing {
@@ -89,6 +104,45 @@ impl Timing {
             .entry(box_id)
             .or_default()
             .push(boot_id, exchange)
+    }
+
+    /// How each box's time is mapped, by box id.
+    pub fn summary(&self) -> Vec<BoxTimeSummary> {
+        let mut ids: Vec<u16> = self
+            .exchanges
+            .keys()
+            .chain(self.receive.keys())
+            .copied()
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids.into_iter()
+            .map(
+                |box_id| match (self.exchanges.get(&box_id), self.receive.get(&box_id)) {
+                    (Some(m), _) if m.boot_id().is_some() => BoxTimeSummary {
+                        box_id,
+                        source: HostTimeSource::Exchanges,
+                        drift_ppm: m.drift_ppm(),
+                        error_bound_ns: m.last_bound_ns(),
+                        restarts: m.restarts(),
+                    },
+                    (_, Some(r)) => BoxTimeSummary {
+                        box_id,
+                        source: HostTimeSource::ReceiveStamps,
+                        drift_ppm: r.drift_ppm(),
+                        error_bound_ns: None,
+                        restarts: r.restarts(),
+                    },
+                    _ => BoxTimeSummary {
+                        box_id,
+                        source: HostTimeSource::None,
+                        drift_ppm: None,
+                        error_bound_ns: None,
+                        restarts: 0,
+                    },
+                },
+            )
+            .collect()
     }
 
     /// The times of `record` (records in datagram order).

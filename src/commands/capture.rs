@@ -160,6 +160,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         if let Some(w) = recorder {
             w.finish()?.flush()?;
         }
+        let host_times = rows.as_ref().and_then(|w| w.timing()).map(|t| t.summary());
         if let Some(w) = rows {
             match w.finish() {
                 Ok(_) => {}
@@ -182,9 +183,13 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 "recv_buffer_bytes": live::usable_recv_buffer(granted),
                 "recv_buffer_warning": recv_buffer_warning,
                 "report": report,
+                "host_times": host_times,
             }))
         } else {
             print!("{}", report.summary());
+            if let Some(times) = &host_times {
+                println!("host times: {}", super::host_time_line(times));
+            }
             Ok(())
         }
     })

@@ -76,6 +76,7 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
     let mut writer = RowWriter::new(std::io::BufWriter::new(out), format, kind)
         .with_timing(args.timing.timing(rate_hz)?);
     let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
+    let times = writer.timing().map(|t| t.summary()).unwrap_or_default();
     let rows = match writer.finish() {
         Ok(rows) => rows,
         // The reader went away (`| head`): not an error of ours.
@@ -89,6 +90,10 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         report.losses.datagrams_missing,
         report.losses.event_packets_missing,
         report.bad_input.total
+    );
+    eprintln!(
+        "sample times at {rate_hz} Hz; host times: {}",
+        super::host_time_line(&times)
     );
     Ok(())
 }

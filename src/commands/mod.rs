@@ -129,3 +129,28 @@ impl TimingArgs {
         ))
     }
 }
+
+/// One line on how each box's time was mapped to host time.
+pub fn host_time_line(times: &[skinbox_host::timing::BoxTimeSummary]) -> String {
+    if times.is_empty() {
+        return "none (no receive timestamps, no exchanges)".into();
+    }
+    times
+        .iter()
+        .map(|t| {
+            let mut s = format!("box {} from {}", t.box_id, t.source.name());
+            if let Some(d) = t.drift_ppm {
+                s += &format!(", drift {d:.1} ppm");
+            }
+            match t.error_bound_ns {
+                Some(b) => s += &format!(", bound {:.1} us", b / 1e3),
+                None => s += ", late by the shortest delivery delay (no bound)",
+            }
+            if t.restarts > 0 {
+                s += &format!(", restarted {} times (box resets)", t.restarts);
+            }
+            s
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
