@@ -120,7 +120,12 @@ impl<W: Write> RowWriter<W> {
     }
 
     /// Flushes; returns the first error.
-    pub fn finish(mut self) -> io::Result<u64> {
+    pub fn finish(self) -> io::Result<u64> {
+        self.finish_into().map(|(rows, _)| rows)
+    }
+
+    /// Flushes; returns the rows written and the output, or the first error.
+    pub fn finish_into(mut self) -> io::Result<(u64, W)> {
         if let Some(e) = self.error.take() {
             return Err(e);
         }
@@ -128,7 +133,7 @@ impl<W: Write> RowWriter<W> {
             self.header()?;
         }
         self.out.flush()?;
-        Ok(self.rows)
+        Ok((self.rows, self.out))
     }
 
     fn header(&mut self) -> io::Result<()> {
@@ -288,9 +293,9 @@ impl<W: Write> RecordSink for RowWriter<W> {
         self.kind == RowKind::Samples
     }
 
-    fn datagram_received(&mut self, receive: Option<std::time::Duration>) {
+    fn datagram_received(&mut self, receive: Option<std::time::Duration>, payload: &[u8]) {
         if let Some(timing) = &mut self.timing {
-            timing.datagram_received(receive);
+            timing.datagram_received(receive, payload);
         }
     }
 
@@ -303,6 +308,46 @@ impl<W: Write> RecordSink for RowWriter<W> {
             Err(e) => self.error = Some(e),
         }
     }
+}
+
+/// Reads a row's sample host time.
+type HostTimeKey = Box<dyn Fn(&str) -> Option<f64>>;
+
+/// Rows written with timing, put in order of their sample's host time: the records of
+/// several boxes, each box's time mapped on its own, merged on one host time line. A CSV
+/// header stays first; rows without a host time come first, in their order.
+pub fn sort_by_host_time(text: &str, format: RowFormat) -> String {
+    let mut lines = text.lines();
+    let (header, key): (Option<&str>, HostTimeKey) = match format {
+        RowFormat::Csv => {
+            let header = lines.next();
+            let column = header.and_then(|h| h.split(',').position(|c| c == "sample_host_time_ns"));
+            (
+                header,
+                Box::new(move |l: &str| column.and_then(|k| l.split(',').nth(k)?.parse().ok())),
+            )
+        }
+        RowFormat::JsonLines => (
+            None,
+            Box::new(|l: &str| {
+                serde_json::from_str::<serde_json::Value>(l)
+                    .ok()?
+                    .get("sample_host_time_ns")?
+                    .as_f64()
+            }),
+        ),
+    };
+    let mut rows: Vec<(f64, &str)> = lines
+        .map(|l| (key(l).unwrap_or(f64::NEG_INFINITY), l))
+        .collect();
+    // stable: rows of equal time keep their order
+    rows.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut out = String::with_capacity(text.len());
+    for l in header.into_iter().chain(rows.into_iter().map(|r| r.1)) {
+        out.push_str(l);
+        out.push('\n');
+    }
+    out
 }
 
 #[cfg(test)]
@@ -346,6 +391,48 @@ mod tests {
             lines[2],
             "2.000000000,250000000,1,9,2,0,17,event,41,0,0,,,,0.5,,,,,"
         );
+    }
+
+    #[test]
+    fn rows_of_two_boxes_merge_on_host_time() {
+        use crate::sample_clock::{PathModel, Positions};
+        use std::time::Duration;
+        // Box 2 was reset 5 s after box 1: its ticks are 5 s behind for the same host time.
+        let timing = Timing::new(125.0, PathModel::bus_model(Positions::Unknown));
+        let mut w =
+            RowWriter::new(Vec::new(), RowFormat::Csv, RowKind::Packets).with_timing(timing);
+        let data = |cell| CellRepr::Data(DataRepr::from_raw(cell, [0; 9]).unwrap());
+        for (i, host_ms) in [10u64, 30, 50].into_iter().enumerate() {
+            // box 2's datagrams come first at each step, but 1 ms later in host time
+            for (box_id, reset_ms) in [(2u16, 5_000u64), (1, 0)] {
+                let host = host_ms + u64::from(box_id);
+                let tick = (host + 6_000 - reset_ms) * 125_000;
+                let payload = crate::timing::tests::datagram(box_id, box_id, &[tick]);
+                w.datagram_received(Some(Duration::from_millis(host + 1_000)), &payload);
+                w.record(&DecodedRecord {
+                    box_id,
+                    tick,
+                    datagram_sequence: i as u32,
+                    ..record(data(box_id))
+                });
+            }
+        }
+        let (_, bytes) = w.finish_into().unwrap();
+        let text = String::from_utf8(bytes).unwrap();
+        let arrived: Vec<&str> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(2).unwrap())
+            .collect();
+        assert_eq!(arrived, ["2", "1", "2", "1", "2", "1"]);
+        let sorted = sort_by_host_time(&text, RowFormat::Csv);
+        let boxes: Vec<&str> = sorted
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(2).unwrap())
+            .collect();
+        assert_eq!(boxes, ["1", "2", "1", "2", "1", "2"]);
+        assert!(sorted.starts_with("time_s,"));
     }
 
     #[test]

@@ -11,6 +11,7 @@
 use crate::clock_map::{ClockMap, HostTime, ReceiveStampMap, TimeExchange};
 use crate::decoder::DecodedRecord;
 use crate::sample_clock::{PathModel, SampleTimer};
+use skinbox_protocol::datagram::{Datagram, DatagramKind};
 use std::collections::HashMap;
 use std::time::Duration;
 
@@ -72,8 +73,6 @@ pub struct Timing {
     samples: SampleTimer,
     exchanges: HashMap<u16, ClockMap>,
     receive: HashMap<u16, ReceiveStampMap>,
-    /// Receive time of the datagram being decoded.
-    datagram_receive_ns: Option<u64>,
 }
 
 impl Timing {
@@ -83,13 +82,35 @@ impl Timing {
             samples: SampleTimer::new(sample_rate_hz, paths),
             exchanges: HashMap::new(),
             receive: HashMap::new(),
-            datagram_receive_ns: None,
         }
     }
 
-    /// The next datagram was received at `receive` on the host clock (`None`: unknown).
-    pub fn datagram_received(&mut self, receive: Option<Duration>) {
-        self.datagram_receive_ns = receive.map(|d| d.as_nanos() as u64);
+    /// The next datagram, `payload`, was received at `receive` on the host clock (`None`:
+    /// unknown). Its records were all stamped before it left: its latest record's tick
+    /// against `receive` is a point above the receive-stamp envelope of its box, taken
+    /// before any of its records is mapped. A payload that is no records datagram adds no
+    /// point (the decoder counts it).
+    pub fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
+        let Some(receive) = receive else {
+            return;
+        };
+        let Ok(d) = Datagram::new_checked(payload) else {
+            return;
+        };
+        if d.kind() != DatagramKind::Records {
+            return;
+        }
+        let base = d.base_tick();
+        let latest = d
+            .records()
+            .map(|r| base.saturating_add_signed(i64::from(r.tick_offset())))
+            .max();
+        if let Some(tick) = latest {
+            self.receive
+                .entry(d.box_id())
+                .or_default()
+                .push(tick, receive.as_nanos() as u64);
+        }
     }
 
     /// An exchange with box `box_id` of boot id `boot_id` (from the box's "read tick"
@@ -147,14 +168,6 @@ impl Timing {
 
     /// The times of `record` (records in datagram order).
     pub fn record(&mut self, record: &DecodedRecord) -> RecordTimes {
-        // Every record was stamped before its datagram arrived: each is a point above the
-        // envelope (the datagram's latest record the tightest).
-        if let Some(ns) = self.datagram_receive_ns {
-            self.receive
-                .entry(record.box_id)
-                .or_default()
-                .push(record.tick, ns);
-        }
         let stamp_ns = record.tick * skinbox_protocol::TICK_NS;
         let sample = self
             .samples
@@ -188,7 +201,7 @@ impl Timing {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::sample_clock::Positions;
     use skinbox_protocol::{CellRepr, DataRepr};
@@ -205,14 +218,43 @@ mod tests {
         }
     }
 
+    /// A records datagram of box `box_id` holding one record of `cell` at each tick.
+    pub(crate) fn datagram(box_id: u16, cell: u16, ticks: &[u64]) -> Vec<u8> {
+        use skinbox_protocol::datagram::DatagramBody;
+        use skinbox_protocol::{DatagramRepr, RecordRepr};
+        let base = ticks.iter().copied().min().unwrap_or(0);
+        DatagramRepr {
+            box_id,
+            port_count: 1,
+            flags: 0,
+            sequence: 0,
+            base_tick: base,
+            body: DatagramBody::Records(
+                ticks
+                    .iter()
+                    .map(|&t| RecordRepr {
+                        port: 0,
+                        flags: 0,
+                        tick_offset: (t - base) as i32,
+                        cell_packet: DataRepr::from_raw(cell, [0; 9]).unwrap().to_bytes(),
+                    })
+                    .collect(),
+            ),
+        }
+        .to_bytes()
+    }
+
     #[test]
     fn two_boxes_land_on_one_host_time_line() {
         // Box 1 was reset 10 s before box 2 (host clock): the same host instant is 10 s
-        // more box time on box 1. Each is received 40 us after its first record.
+        // more box time on box 1. Each datagram is received 40 us after its latest record
+        // (100 us after the first).
         let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
         let host_ns = 100_000_000_000u64;
         for (box_id, box_ns) in [(1u16, 30_000_000_000u64), (2, 20_000_000_000)] {
-            t.datagram_received(Some(Duration::from_nanos(host_ns + 40_000)));
+            let ticks = [box_ns / 8, (box_ns + 60_000) / 8];
+            let payload = datagram(box_id, 5, &ticks);
+            t.datagram_received(Some(Duration::from_nanos(host_ns + 100_000)), &payload);
             let times = t.record(&record(box_id, 5, box_ns / 8));
             // Sample 20 us (processing) before the stamp, host time 40 us late.
             let expected = (host_ns - 20_000 + 40_000) as f64;
@@ -240,7 +282,7 @@ mod tests {
             },
         )
         .unwrap();
-        t.datagram_received(None);
+        t.datagram_received(None, &datagram(3, 1, &[10_000]));
         let times = t.record(&record(3, 1, 10_000));
         assert_eq!(times.source, HostTimeSource::Exchanges);
         assert!(times.host_error_bound_ns.unwrap() >= 50_000.0);

@@ -3,7 +3,7 @@
 //! and on the pcap's clock (docs/time.md).
 
 use clap::Args;
-use skinbox_host::output::{RowFormat, RowKind, RowWriter};
+use skinbox_host::output::{sort_by_host_time, RowFormat, RowKind, RowWriter};
 use skinbox_host::pcap::{self, PcapOptions};
 use skinbox_host::DecoderConfig;
 use std::io::Write;
@@ -36,6 +36,10 @@ pub struct DecodeArgs {
     /// from the stamps (a first pass over the file).
     #[arg(long)]
     pub sample_rate_hz: Option<f64>,
+    /// Rows in order of their sample's host time (several boxes merged on one host time
+    /// line) instead of arrival order; holds every row in memory.
+    #[arg(long)]
+    pub by_host_time: bool,
     /// Where the cells sit on their chains, for the sample times.
     #[command(flatten)]
     pub timing: super::TimingArgs,
@@ -73,15 +77,32 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         Some(rate) => rate,
         None => pcap::decode_pcap_with(&bytes, &options, &mut ())?.sample_rate_hz,
     };
-    let mut writer = RowWriter::new(std::io::BufWriter::new(out), format, kind)
-        .with_timing(args.timing.timing(rate_hz)?);
-    let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
-    let times = writer.timing().map(|t| t.summary()).unwrap_or_default();
-    let rows = match writer.finish() {
-        Ok(rows) => rows,
-        // The reader went away (`| head`): not an error of ours.
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
-        Err(e) => return Err(e.into()),
+    let timing = args.timing.timing(rate_hz)?;
+    let (report, times, rows) = if args.by_host_time {
+        let mut writer = RowWriter::new(Vec::new(), format, kind).with_timing(timing);
+        let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
+        let times = writer.timing().map(|t| t.summary()).unwrap_or_default();
+        let (rows, text) = writer.finish_into()?;
+        let sorted = sort_by_host_time(&String::from_utf8_lossy(&text), format);
+        let mut out = std::io::BufWriter::new(out);
+        match out.write_all(sorted.as_bytes()).and_then(|()| out.flush()) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
+            Err(e) => return Err(e.into()),
+        }
+        (report, times, rows)
+    } else {
+        let mut writer =
+            RowWriter::new(std::io::BufWriter::new(out), format, kind).with_timing(timing);
+        let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
+        let times = writer.timing().map(|t| t.summary()).unwrap_or_default();
+        let rows = match writer.finish() {
+            Ok(rows) => rows,
+            // The reader went away (`| head`): not an error of ours.
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
+            Err(e) => return Err(e.into()),
+        };
+        (report, times, rows)
     };
     eprintln!(
         "{rows} rows from {} records in {} datagrams; {} datagrams missing, {} event packets missing, {} bad input",
