@@ -550,7 +550,17 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
     ]);
     let mut worst: HashMap<&'static str, (f64, String)> = HashMap::new();
     let mut by_hops_chart = Vec::new();
-    let mut cost_points: Vec<Vec<(f64, f64)>> = vec![Vec::new(); 3];
+    let mut positions = Table::new(&[
+        "scene",
+        "mode",
+        "rate (Hz)",
+        "method",
+        "p99 at 0 hops (us)",
+        "1-16",
+        "17-32",
+        "33-48",
+        "49-65",
+    ]);
     let mut cpu_sum = [0.0f64; 3];
     let mut runs = 0.0;
     for (name, mode) in scenes() {
@@ -584,7 +594,25 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
                     );
                 }
                 cpu_sum[i] += e.cpu_ns_per_packet;
-                cost_points[i].push((rate, e.p99_us.max(1e-3)));
+                // the worst p99 of the cells in each stretch of the chain
+                let stretch = |from: usize, to: usize| {
+                    us(e.p99_by_hops_us
+                        .iter()
+                        .skip(from)
+                        .take(to + 1 - from)
+                        .fold(0.0, |a: f64, &b| a.max(b)))
+                };
+                positions.row(vec![
+                    name.to_string(),
+                    mode_name(mode).to_string(),
+                    format!("{rate}"),
+                    m.name().to_string(),
+                    stretch(0, 0),
+                    stretch(1, 16),
+                    stretch(17, 32),
+                    stretch(33, 48),
+                    stretch(49, 65),
+                ]);
                 if name == "idle" && mode == Mode::Data && rate == 250.0 {
                     by_hops_chart.push(chart::Series {
                         label: m.name().to_string(),
@@ -967,7 +995,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             d - 1.0
         ),
         findings,
-        tables: vec![main, costs, boundary],
+        tables: vec![main, positions, costs, boundary],
         charts,
     })
 }
