@@ -573,6 +573,34 @@ mod tests {
     }
 
     #[test]
+    fn the_timer_tells_unqueued_packets_by_the_idle_line_before_them() {
+        // Port 0: cell 1 (root) and cell 2 (1 hop) at 250 Hz, cell 2 sampling 40 us before
+        // cell 1: its packet reaches the root (72 us later) 12 us after cell 1's started
+        // and waits 38 us behind it, back to back. Cell 3 on port 1 finds its line idle.
+        let paths =
+            PathModel::bus_model(Positions::Listed(HashMap::from([(1, 0), (2, 1), (3, 0)])));
+        let mut timer = SampleTimer::new(250.0, paths);
+        let (mut worst2, mut worst3) = (0.0f64, 0.0f64);
+        for k in 0..500u64 {
+            let t1 = 1_000_000 + k * 4_000_000;
+            let s1 = t1 + PROCESSING_NS;
+            let s2 = s1 + 50_000; // queued: starts when cell 1's packet ends
+            let e1 = timer.push(7, 0, 1, s1).sample_time_ns - t1 as f64;
+            let e2 = timer.push(7, 0, 2, s2).sample_time_ns - (t1 - 40_000) as f64;
+            let e3 = timer.push(7, 1, 3, s1).sample_time_ns - t1 as f64;
+            assert!(e1.abs() < 1.0, "cell 1 at {k}: {e1}");
+            worst2 = worst2.max(e2.abs());
+            worst3 = worst3.max(e3.abs());
+        }
+        // Cell 2 never shows its own clock: it carries its 38 us of queue.
+        assert!((worst2 - 38_000.0).abs() < 1.0, "{worst2}");
+        assert!(worst3 < 1.0, "{worst3}");
+        assert_eq!(timer.cells(), 3);
+        timer.reset_box(7);
+        assert_eq!(timer.cells(), 0);
+    }
+
+    #[test]
     fn positions_give_the_hops() {
         let numbered = PathModel::bus_model(Positions::Numbered { cells_per_bus: 65 });
         assert_eq!(numbered.hops(1), 0);
