@@ -16,10 +16,11 @@
 //! [`PathModel`] gives it from the cell's position on its chain.
 //!
 //! Where it fails (the study C5 of `skinbox report` charts each): a wrong per-hop latency
-//! (the error grows with the hop count), a root queue that never empties (no packet is
-//! unqueued and the envelope sits on the smallest queueing delay seen), and a cell silent for so long that its
-//! drift moves the grid by more than an eighth of a period before the period is learnt
-//! (the sample index is then wrong by one).
+//! (the error grows with the hop count); cells colliding at the root, whose packets keep
+//! queueing behind each other for seconds when their clocks differ by a few ppm (none of
+//! them unqueued, the estimate carries the queue); a root queue that never empties; and a
+//! cell silent for so long that its drift moves the grid by more than half a period before
+//! its period is learnt (the sample index is then wrong by one).
 
 use std::collections::{HashMap, VecDeque};
 
