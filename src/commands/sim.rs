@@ -422,16 +422,16 @@ fn print_summary(o: &Output) {
         "        losses seen: {} datagrams missing, {} event sequence gaps ({} event packets missing), {} box packets lost",
         h.losses.datagrams_missing, h.losses.event_sequence_gaps, h.losses.event_packets_missing, h.losses.box_packets_lost
     );
+    let (a, b) = (&o.arrival_stamp_error_us, &o.sample_time_error_us);
+    println!(
+        "        sample time - true sample time: {} p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} p50 {:.0} us, p99 {:.0} us)",
+        b.method, b.p50, b.p99, b.max, a.method, a.p50, a.p99
+    );
     println!(
         "speed:  {:.2} M cycles/s, {:.2} s wall for {:.1} ms simulated",
         s.cycles_per_second / 1e6,
         s.wall_seconds,
         s.sim_seconds * 1e3
-    );
-    let (a, b) = (&o.arrival_stamp_error_us, &o.sample_time_error_us);
-    println!(
-        "        sample time - true sample time: {} p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} p50 {:.0} us, p99 {:.0} us)",
-        b.method, b.p50, b.p99, b.max, a.method, a.p50, a.p99
     );
     println!("pcap:   {}", o.pcap.display());
 }
