@@ -6,10 +6,11 @@
 //! exchange says that, at the box's midpoint, host time minus box time lies within half the
 //! exchange's round trip (less the box's turnaround) of the midpoint offset, whatever the
 //! path's asymmetry (RFC 5905 section 8). Over many exchanges the map fits the offset as a
-//! line in box time (the slope is the box oscillator's drift against the host clock),
-//! through the exchanges with the shortest round trips, and bounds its error by the worst
-//! of those exchanges' half round trips plus its distance from the fitted line; beyond the
-//! last exchange the bound grows with the slope's own uncertainty.
+//! line in box time (the slope is the box oscillator's drift against the host clock, by
+//! least squares over the exchanges with the shortest round trips), through the best of the
+//! latest exchanges, and bounds its error by the worst of those exchanges' half round trips
+//! plus their distance from the line; beyond them the bound grows with the slope's own
+//! uncertainty.
 //!
 //! [`ReceiveStampMap`] is the fallback without a command path: the kernel's receive
 //! timestamps of the datagrams (SO_TIMESTAMPNS on the live socket, the pcap's timestamps)
@@ -27,6 +28,9 @@ use std::collections::VecDeque;
 const TICK_NS: f64 = skinbox_protocol::TICK_NS as f64;
 /// Exchanges a [`ClockMap`] keeps.
 pub const EXCHANGES: usize = 64;
+/// The latest exchanges among which [`ClockMap`]'s line takes its anchor (the shortest
+/// round trip of them).
+pub const RECENT: usize = 8;
 /// Largest drift between the box's oscillator and a host clock assumed before the map has
 /// measured it, ppm (a crystal of +-50 ppm on each side, doubled).
 pub const ASSUMED_DRIFT_PPM: f64 = 200.0;
@@ -259,13 +263,28 @@ impl ClockMap {
             let dx = e.box_mid_ns() - x0_ns;
             (a + dx * (e.offset_ns() - mean_offset), b + dx * dx)
         });
-        let span = last_ns - first_ns;
-        // The slope needs a span: below a millisecond the offset alone is fitted.
-        let slope = if span > 1e6 && sxx > 0.0 {
-            sxy / sxx
+        // The slope needs a span (below a millisecond the offset alone is fitted), and no
+        // oscillator drifts beyond the assumed.
+        let max_slope = ASSUMED_DRIFT_PPM * 1e-6;
+        let slope = if last_ns - first_ns > 1e6 && sxx > 0.0 {
+            (sxy / sxx).clamp(-max_slope, max_slope)
         } else {
             0.0
         };
+        // The line passes through the best of the latest exchanges: host times are mostly
+        // wanted now, where the slope's error then matters least.
+        // (if one of them is among the best quarter; else through the kept ones' centre).
+        let recent = self.exchanges.len().saturating_sub(RECENT);
+        let anchor = self
+            .exchanges
+            .range(recent..)
+            .filter(|e| e.delay_ns() <= cut)
+            .min_by(|a, b| a.delay_ns().total_cmp(&b.delay_ns()));
+        let (x0_ns, mean_offset) = match anchor {
+            Some(a) => (a.box_mid_ns(), a.offset_ns()),
+            None => (x0_ns, mean_offset),
+        };
+        let span = last_ns - first_ns;
         let line = |x: f64| mean_offset + slope * (x - x0_ns);
         let bound_ns = kept
             .iter()
@@ -275,7 +294,7 @@ impl ClockMap {
             // Both ends may be off by the bound in opposite directions.
             (2.0 * bound_ns / span).max(1e-9)
         } else {
-            ASSUMED_DRIFT_PPM * 1e-6
+            max_slope
         };
         self.line = Some(Line {
             x0_ns,
