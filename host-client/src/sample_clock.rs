@@ -37,6 +37,9 @@ const REFIT_EVERY: u32 = 16;
 /// Unqueued packets kept per cell for the fit (the older ones thinned out, so they span a
 /// growing stretch of samples).
 pub const ANCHORS: usize = 32;
+/// Oldest unqueued packet the line is fitted through, ns of box time: a straight line holds
+/// a wandering drift only so long (docs/time.md).
+pub const MAX_ANCHOR_AGE_NS: f64 = 4e9;
 /// Longest time between two packets' first start bits that can still be back to back on a
 /// port, ns: 200 bits at 4 Mbit/s, on a root UART up to 2 % slow.
 pub const BACK_TO_BACK_NS: u64 = skinbox_protocol::cell::UART_BITS_PER_PACKET * 1_000_000_000
@@ -231,6 +234,14 @@ impl SampleClockEstimator {
                 });
             }
             self.unqueued.push_back((index, rel));
+            // A cell's drift wanders (temperature): the line holds only over a while.
+            while self
+                .unqueued
+                .front()
+                .is_some_and(|&(_, r)| (rel - r) as f64 > MAX_ANCHOR_AGE_NS)
+            {
+                self.unqueued.pop_front();
+            }
         }
         if self.since_fit >= REFIT_EVERY
             || self.window.len() < 2 * REFIT_EVERY as usize
@@ -260,7 +271,10 @@ impl SampleClockEstimator {
             _ => 0,
         };
         let plausible = |p: f64| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR;
-        if span(&self.unqueued) >= MIN_ANCHOR_SPAN {
+        if span(&self.unqueued) >= MIN_ANCHOR_SPAN
+            || (self.period_learnt && !self.unqueued.is_empty())
+        {
+            // (Too few unqueued packets for a period: the one learnt before holds.)
             self.fit_anchors();
             return;
         }

@@ -80,6 +80,10 @@ pub struct Setup {
     pub sync_loss: f64,
     /// The sync command (c): relay delay per cell on the way down, ns.
     pub downlink_hop_latency_ns: u64,
+    /// Wander of each cell's drift around its own (temperature), amplitude, ppm (0: none).
+    pub wander_ppm: f64,
+    /// Period of that wander, s.
+    pub wander_period_s: f64,
 }
 
 /// The bus model's relay delay per cell, ns.
@@ -101,7 +105,16 @@ impl Setup {
             sync_interval_s: 0.1,
             sync_loss: 0.0,
             downlink_hop_latency_ns: HOP_NS,
+            wander_ppm: 0.0,
+            wander_period_s: 10.0,
         }
+    }
+
+    fn clock_wander(&self) -> Option<skinbox_cells::ClockWander> {
+        (self.wander_ppm > 0.0).then_some(skinbox_cells::ClockWander {
+            amplitude_ppm: self.wander_ppm,
+            period_s: self.wander_period_s,
+        })
     }
 
     fn scene(&self) -> anyhow::Result<skinbox_cells::Scene> {
@@ -378,7 +391,10 @@ fn timed(assign: impl FnOnce() -> Vec<f64>) -> (Vec<f64>, f64) {
 pub fn run(setup: &Setup) -> anyhow::Result<RunResult> {
     let sc = setup.scene()?;
     let from_ns = (sc.config.scene.warmup_s * 1e9) as u64;
-    let free = sc.generate(&GenerateOptions::default());
+    let free = sc.generate(&GenerateOptions {
+        clock_wander: setup.clock_wander(),
+        ..Default::default()
+    });
     let bus = &stamped(&free)[0];
     let mut methods = Vec::new();
     let (a, cpu) = timed(|| assign_arrival(bus));
@@ -393,6 +409,7 @@ pub fn run(setup: &Setup) -> anyhow::Result<RunResult> {
     });
     let synced = sc.generate(&GenerateOptions {
         time_sync: Some(setup.time_sync()),
+        clock_wander: setup.clock_wander(),
         ..Default::default()
     });
     let bus_c = &stamped(&synced)[0];
@@ -478,6 +495,15 @@ fn sync_losses(quick: bool) -> Vec<f64> {
     }
 }
 
+/// Amplitudes of the drift wander swept, ppm (over 10 s).
+fn wanders_ppm(quick: bool) -> Vec<f64> {
+    if quick {
+        vec![100.0, 1_000.0]
+    } else {
+        vec![0.0, 10.0, 30.0, 50.0, 100.0, 200.0, 300.0, 500.0, 1_000.0]
+    }
+}
+
 fn asymmetries_ns(quick: bool) -> Vec<u64> {
     if quick {
         vec![0, 1_000]
@@ -511,6 +537,7 @@ pub fn steps(quick: bool) -> u64 {
         + intervals_s(quick).len()
         + sync_losses(quick).len()
         + asymmetries_ns(quick).len()
+        + 2 * wanders_ppm(quick).len()
         + load_cells(quick).len()
         + load_rates_hz(quick).len()) as u64
 }
@@ -796,6 +823,35 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         progress,
         grid,
     )?;
+    let mut wander = |method: Method, base: Setup, progress: &mut Progress, grid: &mut Points| {
+        let key = format!(
+            "wander_{}",
+            if method == Method::Synced { "c" } else { "b" }
+        );
+        sweep(
+            "drift wander over 10 s, amplitude",
+            &key,
+            method,
+            Judge::WorstCellP99,
+            wanders_ppm(quick)
+                .into_iter()
+                .map(|a| {
+                    (
+                        format!("{a} ppm"),
+                        a,
+                        Setup {
+                            wander_ppm: a,
+                            ..base.clone()
+                        },
+                    )
+                })
+                .collect(),
+            progress,
+            grid,
+        )
+    };
+    let wander_b = wander(Method::Estimated, few(), progress, grid)?;
+    let wander_c = wander(Method::Synced, base.clone(), progress, grid)?;
     let load_b = sweep(
         "cells on a 250 Hz data bus",
         "load_b",
@@ -865,6 +921,14 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
     findings.push((
         "(c) downlink slower per hop by (us)".to_string(),
         within(&asym),
+    ));
+    findings.push((
+        "(b) drift wander over 10 s, 4 cells without collisions (ppm)".to_string(),
+        within(&wander_b),
+    ));
+    findings.push((
+        "(c) drift wander over 10 s, sync every 0.1 s (ppm)".to_string(),
+        within(&wander_c),
     ));
     findings.push((
         "(b) bus load, 250 Hz data (% of the UART)".to_string(),
@@ -1003,6 +1067,14 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
 /// The bus where (b)'s hop latency is judged: 66 cells in event mode at 500 Hz, 7 % load.
 fn light() -> Setup {
     Setup::bus66("idle", Mode::Event, 500.0, 3.0)
+}
+
+/// A bus where no cells collide, for (b)'s drift wander: 4 cells in data mode at 250 Hz.
+fn few() -> Setup {
+    Setup {
+        cells: 4,
+        ..Setup::bus66("idle", Mode::Data, 250.0, 6.0)
+    }
 }
 
 /// What a boundary sweep judges.
@@ -1156,6 +1228,27 @@ mod tests {
         };
         assert!(at(200) <= GOAL_P99_US);
         assert!(at(800) > GOAL_P99_US);
+    }
+
+    #[test]
+    fn a_wandering_drift_bends_b_beyond_its_4_s_line_and_c_beyond_its_sync() {
+        // Drift wandering over 10 s: (b)'s line through 4 s of unqueued packets holds a
+        // sine of 100 ppm, not one of 1,000; (c) adds the wander to the 100 ppm it corrects
+        // every 0.1 s, so 200 ppm more passes 20 us.
+        let at = |setup: Setup, method: Method, ppm: f64| {
+            worst(
+                &Setup {
+                    wander_ppm: ppm,
+                    duration_s: 6.0,
+                    ..setup
+                },
+                method,
+            )
+        };
+        assert!(at(few(), Method::Estimated, 100.0) <= GOAL_P99_US);
+        assert!(at(few(), Method::Estimated, 1_000.0) > GOAL_P99_US);
+        assert!(at(base(), Method::Synced, 50.0) <= GOAL_P99_US);
+        assert!(at(base(), Method::Synced, 200.0) > GOAL_P99_US);
     }
 
     #[test]

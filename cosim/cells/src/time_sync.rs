@@ -18,6 +18,7 @@
 
 use crate::config::BusConfig;
 use crate::rng::Rng;
+use crate::scene::ClockWander;
 
 /// The time-sync command as the cells obey it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,6 +61,8 @@ pub struct SyncedClock {
     next: u64,
     /// First grid point the cell samples (the first after the first sync arrives).
     first_grid: u64,
+    /// The clock's drift wander and this cell's angle of it.
+    wander: Option<(ClockWander, f64)>,
 }
 
 impl SyncedClock {
@@ -90,6 +93,7 @@ impl SyncedClock {
             current: None,
             next: 0,
             first_grid: 0,
+            wander: None,
         };
         // The cell starts sampling on the grid after the first sync it receives.
         while clock.current.is_none() {
@@ -98,6 +102,12 @@ impl SyncedClock {
         let first_arrival = clock.arrival_s(clock.current.unwrap_or(0));
         clock.first_grid = (first_arrival / period_s).ceil() as u64;
         clock
+    }
+
+    /// The same clock with its drift wandering ([`ClockWander`], this cell's `angle`).
+    pub fn with_wander(mut self, wander: ClockWander, angle: f64) -> SyncedClock {
+        self.wander = Some((wander, angle));
+        self
     }
 
     /// Decides whether the next sync command arrives; takes it if it does.
@@ -117,7 +127,15 @@ impl SyncedClock {
     fn time_under(&self, j: u64, grid_s: f64) -> f64 {
         let sent_s = j as f64 * self.interval_s;
         let set_to_s = sent_s + self.believed_down_s;
-        self.arrival_s(j) + (grid_s - set_to_s) / (1.0 + self.drift)
+        // A wandering drift, taken at the middle of the stretch since the sync (its mean
+        // there, to second order).
+        let drift = match self.wander {
+            Some((w, angle)) => {
+                w.drift_ppm(self.drift * 1e6, angle, (self.arrival_s(j) + grid_s) / 2.0) * 1e-6
+            }
+            None => self.drift,
+        };
+        self.arrival_s(j) + (grid_s - set_to_s) / (1.0 + drift)
     }
 
     /// The grid point (box time, s) of the cell's sample `n` (0 = its first).
