@@ -103,8 +103,34 @@ fn decode_writes_one_row_per_packet() {
         header.starts_with("time_s,tick,box_id,cell_id,"),
         "{header}"
     );
-    assert_eq!(header.split(',').count(), 7 + 9);
-    assert_eq!(lines.count(), records);
+    // 9 channels, then the sample's box time, host time, bound and the host time's source
+    assert_eq!(header.split(',').count(), 7 + 9 + 4);
+    assert!(
+        header.ends_with(skinbox_host::output::TIME_COLUMNS),
+        "{header}"
+    );
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), records);
+    // The pcap's receive times are the host clock: every row has a host time, without a
+    // bound (receive timestamps give none), before the datagram's receive time.
+    // (The first frame's timestamp is zero, which pcap readers take as none: its records
+    // have no host time.)
+    let mut mapped = 0;
+    for row in &rows {
+        let cells: Vec<&str> = row.split(',').collect();
+        assert_eq!(cells[cells.len() - 2], "", "{row}");
+        match cells[cells.len() - 1] {
+            "receive_stamps" => {
+                let host_ns: f64 = cells[cells.len() - 3].parse().unwrap();
+                // the sample was taken before its datagram arrived, the last at 200 us each
+                assert!(host_ns <= 200e3 * records as f64, "{row}");
+                mapped += 1;
+            }
+            "none" => assert_eq!(cells[cells.len() - 3], "", "{row}"),
+            other => panic!("host time source {other}: {row}"),
+        }
+    }
+    assert!(mapped >= records * 9 / 10, "{mapped} of {records}");
 }
 
 #[test]
@@ -116,8 +142,11 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
         .report
         .frames
         .udp_payloads;
+    let rows = temp_path("replay-rows.csv");
     let mut capture = skinbox()
         .args(["capture", "--listen", "127.0.0.1:0", "--json"])
+        .args(["--sample-rate-hz", "250", "--rows"])
+        .arg(&rows)
         .args(["--count", &datagrams.to_string()])
         // Only a fallback if datagrams were lost: the comparison below then fails.
         .args(["--duration-ms", "30000"])
@@ -146,6 +175,30 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
     let summary: serde_json::Value = serde_json::from_str(&ok(&out)).unwrap();
     assert_eq!(summary["capture"]["datagrams"], datagrams);
     assert_eq!(summary["report"]["records"], records as u64);
+    // Every record as a row with its host time: the kernel's receive time (CLOCK_REALTIME)
+    // mapped, within this test's run.
+    let text = std::fs::read_to_string(&rows).unwrap();
+    let mut lines = text.lines();
+    assert!(lines
+        .next()
+        .unwrap()
+        .ends_with(skinbox_host::output::TIME_COLUMNS));
+    let now_ns = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as f64;
+    let mut n = 0;
+    for row in lines {
+        let cells: Vec<&str> = row.split(',').collect();
+        assert_eq!(cells[cells.len() - 1], "receive_stamps", "{row}");
+        let host_ns: f64 = cells[cells.len() - 3].parse().unwrap();
+        assert!(
+            host_ns < now_ns && now_ns - host_ns < 120e9,
+            "{row} now {now_ns}"
+        );
+        n += 1;
+    }
+    assert_eq!(n, records);
 
     let original = decode_pcap_file(&path, &PcapOptions::default()).unwrap();
     let captured = decode_pcap_file(&recorded, &PcapOptions::default()).unwrap();
@@ -275,4 +328,84 @@ fn stats_names_its_denominators_and_refuses_bad_ones() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(bad[0]) && err.contains("must be"), "{err}");
     }
+}
+
+/// Two boxes in one pcap, reset 7 s apart (their ticks differ by 7 s for the same host
+/// time), their datagrams received 40 us after each one's latest record: `decode
+/// --by-host-time` maps each box's ticks on its own and merges the rows on the pcap's clock.
+#[test]
+fn decode_merges_two_boxes_on_one_host_time_line() {
+    use skinbox_protocol::datagram::DatagramBody;
+    use skinbox_protocol::DatagramRepr;
+    let path = temp_path("two-boxes-time.pcap");
+    let mut w = PcapFrameWriter::new(std::io::BufWriter::new(
+        std::fs::File::create(&path).unwrap(),
+    ))
+    .unwrap();
+    let dst: SocketAddr = "127.0.0.1:6000".parse().unwrap();
+    // host time = box time + offset; box 2 was reset 7 s after box 1
+    let boxes = [(1u16, 20_000_000_000u64), (2, 27_000_000_000)];
+    let mut frames = Vec::new();
+    for (box_id, offset_ns) in boxes {
+        let capture = synth::generate(&SynthConfig {
+            cells: 20,
+            samples_per_cell: 60,
+            box_id,
+            seed: u64::from(box_id),
+            ..SynthConfig::default()
+        });
+        let src: SocketAddr = format!("127.0.0.{box_id}:5000").parse().unwrap();
+        for p in capture.payloads() {
+            let d = DatagramRepr::parse(&p).unwrap();
+            let latest = match &d.body {
+                DatagramBody::Records(r) => r.iter().map(|r| r.tick(d.base_tick)).max().unwrap(),
+                DatagramBody::Status(_) => d.base_tick,
+            };
+            frames.push((latest * 8 + offset_ns + 40_000, src, p));
+        }
+    }
+    // In one pcap the frames are in receive order.
+    frames.sort_by_key(|f| f.0);
+    let mut records = 0;
+    for (ts, src, p) in &frames {
+        let d = DatagramRepr::parse(p).unwrap();
+        if let DatagramBody::Records(r) = &d.body {
+            records += r.len();
+        }
+        w.write_udp(Duration::from_nanos(*ts), *src, dst, p)
+            .unwrap();
+    }
+    w.finish().unwrap();
+
+    let out = skinbox()
+        .args(["decode", "--jsonl", "--by-host-time"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let text = ok(&out);
+    let rows: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(rows.len(), records);
+    let host: Vec<f64> = rows
+        .iter()
+        .map(|r| r["sample_host_time_ns"].as_f64().unwrap())
+        .collect();
+    assert!(
+        host.windows(2).all(|w| w[0] <= w[1]),
+        "not in host time order"
+    );
+    for r in &rows {
+        let box_id = r["box_id"].as_u64().unwrap() as u16;
+        let offset = boxes.iter().find(|b| b.0 == box_id).unwrap().1 as f64;
+        // each box's envelope: its offset plus the 40 us delivery
+        let expected = r["sample_box_time_s"].as_f64().unwrap() * 1e9 + offset + 40_000.0;
+        let got = r["sample_host_time_ns"].as_f64().unwrap();
+        assert!((got - expected).abs() < 2.0, "{r}: {got} vs {expected}");
+        assert_eq!(r["host_time_source"], "receive_stamps");
+    }
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("box 1 from receive_stamps"), "{stderr}");
+    assert!(stderr.contains("box 2 from receive_stamps"), "{stderr}");
 }

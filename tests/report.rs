@@ -107,6 +107,16 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
         ("c4b_cells_per_bus", "C4b Cells per bus"),
         ("c4c_sensor_noise", "C4c Sensor noise"),
         ("c4d_event_loss", "C4d Event loss"),
+        (
+            "c5a_sample_time_by_hop",
+            "C5a Sample time error along a 66-cell bus",
+        ),
+        ("c5b_sample_time_cost", "C5b Sample time error against cost"),
+        ("c5c_sample_time_boundaries", "C5c Where (b) and (c) fail"),
+        (
+            "c5d_sample_time_bus_load",
+            "C5d Sample time error against bus load",
+        ),
         ("c6_sample_rate", "C6 Packet rate against sample rate"),
     ];
     assert_eq!(
@@ -246,6 +256,19 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
         }
     }
 
+    // C5: every method on every run of the grid; the arrival stamp is late by the path
+    // (over 3 ms at the chain's end), the time sync within the goal everywhere.
+    let c5 = &tables(&summary, "C5");
+    assert_eq!(c5[1].len(), 4 * 3 * 3);
+    for r in &c5[1] {
+        let worst = num(r, "worst cell p99 (us)");
+        match r["method"].as_str() {
+            "(a) arrival stamp" => assert!(worst > 3_000.0, "{r:?}"),
+            "(c) time sync" => assert!(worst <= 20.0, "{r:?}"),
+            _ => {}
+        }
+    }
+
     // C6: the five scenes of Fig. 11 at its four rates; the model against the papers' fit,
     // recomputed here from the fit's constants (docs/design.md section 2)
     let c6 = &tables(&summary, "C6")[1];
@@ -282,10 +305,12 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
 
 /// The summary with the measured wall times masked: the first line (how and in how long
 /// it was written), C2's "wall time per simulated s (s)" column and the C2 findings made
-/// from those times (speed-ups, wall times, the extrapolation). A merged report keeps the
-/// times each shard measured, which differ from run to run; every other number must agree.
+/// from those times (speed-ups, wall times, the extrapolation), and C5's host CPU columns.
+/// A merged report keeps the times each shard measured, which differ from run to run;
+/// every other number must agree.
 fn masked(summary: &str) -> String {
     const TIMING_COLUMN: &str = "wall time per simulated s (s)";
+    const CPU_COLUMN: &str = "host CPU (ns/packet";
     const TIMING_FINDINGS: [&str; 3] = [
         "reference model wall time per simulated s",
         "RTL wall time per simulated s",
@@ -294,6 +319,7 @@ fn masked(summary: &str) -> String {
     let mut out = Vec::new();
     let mut section = "";
     let mut masked_column = None;
+    let mut cpu_column = None;
     let mut in_table = false;
     for line in summary.lines() {
         if let Some(heading) = line.strip_prefix("## ") {
@@ -316,6 +342,9 @@ fn masked(summary: &str) -> String {
         if !in_table {
             in_table = true;
             masked_column = cells.iter().position(|c| c == TIMING_COLUMN);
+            cpu_column = cells.iter().position(|c| c.starts_with(CPU_COLUMN));
+        } else if let Some(k) = cpu_column.filter(|&k| k < cells.len()) {
+            cells[k] = "(time)".into();
         } else if section == "C2" && cells.len() > 1 {
             if let Some(k) = masked_column.filter(|&k| k < cells.len()) {
                 cells[k] = "(time)".into();
@@ -359,7 +388,7 @@ fn finished(child: std::process::Child) -> serde_json::Value {
 
 /// `report --quick` as three shards, run at once (as on three machines, here sharing the
 /// model cache) and merged, equals the unsharded `--quick` run number for number; only the
-/// measured wall times (see [`masked`]) and the two C2 charts drawn from them may differ.
+/// measured wall times (see [`masked`]) and the charts drawn from them (C2, C5b) may differ.
 /// Every other chart is the same file byte for byte.
 #[test]
 fn quick_report_in_three_shards_merges_into_the_unsharded_report() {
@@ -419,8 +448,12 @@ fn quick_report_in_three_shards_merges_into_the_unsharded_report() {
     assert!(merged_summary.contains("merged from 3 shards"));
     assert_eq!(masked(&merged_summary), masked(&whole_summary));
     // the mask hides the times and nothing else: the column in the 10 rows of the quick
-    // C2 table (RTL, cell models, reference, rate model at 7 sizes) and 4 findings
-    assert_eq!(masked(&whole_summary).matches("(time)").count(), 10 + 4);
+    // C2 table (RTL, cell models, reference, rate model at 7 sizes) and 4 findings; C5's
+    // host CPU in its 36 rows (4 scenes and modes, 3 rates, 3 methods) and 3 cost rows
+    assert_eq!(
+        masked(&whole_summary).matches("(time)").count(),
+        10 + 4 + 36 + 3
+    );
 
     let names = |v: &serde_json::Value| -> Vec<String> {
         v["charts"]
@@ -437,7 +470,11 @@ fn quick_report_in_three_shards_merges_into_the_unsharded_report() {
             .collect()
     };
     assert_eq!(names(&merged), names(&whole));
-    for name in names(&whole).iter().filter(|n| !n.starts_with("c2_")) {
+    // (the C2 charts and C5's cost chart draw measured times)
+    for name in names(&whole)
+        .iter()
+        .filter(|n| !n.starts_with("c2_") && !n.starts_with("c5b_"))
+    {
         let read = |d: &str| std::fs::read(dir.join(d).join(name)).unwrap();
         assert!(read("merged") == read("whole"), "{name} differs");
     }

@@ -275,3 +275,43 @@ fn the_window_starts_with_the_ports_out_of_reset() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `sample_time_error_us`: the host's sample time against the cell models' truth, for every
+/// delivered packet; the arrival stamp beside it is late by at least the cell's processing.
+#[test]
+fn sim_reports_the_sample_time_error_of_every_delivered_packet() {
+    let dir = std::env::temp_dir().join(format!("skinbox-sim-time-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let pcap = dir.join("time.pcap");
+    let r = sim_json(
+        &[
+            "stroking_upper_arm",
+            "--fidelity",
+            "reference",
+            "--cells",
+            "66",
+            "--buses",
+            "1",
+            "--duration-ms",
+            "2000",
+        ],
+        &pcap,
+    );
+    let (b, a) = (&r["sample_time_error_us"], &r["arrival_stamp_error_us"]);
+    let delivered = r["packets_delivered"].as_u64().unwrap();
+    assert!(delivered > 1_000, "{r}");
+    assert_eq!(b["packets"].as_u64(), Some(delivered), "{b}");
+    assert_eq!(a["packets"].as_u64(), Some(delivered), "{a}");
+    let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap();
+    // 20 us of processing at least, 65 hops of 52 us at the chain's end
+    assert!(f(a, "p50") > 20.0 && f(a, "max") > 65.0 * 52.0, "{a}");
+    assert!(
+        f(b, "p50") < 20.0 && f(b, "p99") < f(a, "p99") / 10.0,
+        "{b}"
+    );
+    assert!(
+        f(b, "p50") <= f(b, "p99") && f(b, "p99") <= f(b, "max"),
+        "{b}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -124,9 +124,7 @@ impl Logic for BodyReader {
         self.fifo.beats_out.ready.next = self.body.ready.val();
         // from `start` to the clock after the last beat moved
         self.busy.next = self.reading.q.val();
-        if self.fifo.beats_out.valid.val()
-            & self.fifo.beats_out.last.val()
-            & self.body.ready.val()
+        if self.fifo.beats_out.valid.val() & self.fifo.beats_out.last.val() & self.body.ready.val()
         {
             self.reading.d.next = false;
         }

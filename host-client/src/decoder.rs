@@ -107,6 +107,11 @@ pub trait RecordSink {
     }
     /// The full sample of the record's cell after it.
     fn sample(&mut self, _sample: &Sample) {}
+    /// The next datagram, `payload` (not yet checked), was received at `receive` on the
+    /// host clock (the kernel's receive timestamp, or the pcap's; `None`: unknown): for
+    /// sinks that map box time to host time ([`crate::timing`]). The shells call it before
+    /// decoding each datagram.
+    fn datagram_received(&mut self, _receive: Option<std::time::Duration>, _payload: &[u8]) {}
 }
 
 /// A sink that drops everything (for reports only).

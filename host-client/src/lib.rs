@@ -25,6 +25,7 @@
 
 pub mod bad_input;
 pub mod bench;
+pub mod clock_map;
 pub mod control;
 pub mod convert;
 pub mod decoder;
@@ -35,8 +36,10 @@ pub mod pcap;
 pub mod rate;
 pub mod replay;
 pub mod report;
+pub mod sample_clock;
 pub mod sequence;
 pub mod synth;
+pub mod timing;
 pub mod wireshark;
 
 pub use bad_input::BadInput;

@@ -1,7 +1,10 @@
-//! Decoded records and samples as CSV or JSON lines, in physical units with box time.
+//! Decoded records and samples as CSV or JSON lines, in physical units with box time; with
+//! [`RowWriter::with_timing`] also each sample's estimated box time and its host time
+//! ([`crate::timing`]).
 
 use crate::convert::Sample;
 use crate::decoder::{DecodedRecord, RecordSink};
+use crate::timing::{RecordTimes, Timing};
 use skinbox_protocol::{CellRepr, Channel};
 use std::io::{self, Write};
 
@@ -31,7 +34,14 @@ pub struct RowWriter<W: Write> {
     header_written: bool,
     rows: u64,
     error: Option<io::Error>,
+    timing: Option<Timing>,
+    /// Times of the last record (its sample row follows it).
+    last_times: Option<RecordTimes>,
 }
+
+/// The columns [`RowWriter::with_timing`] appends to every CSV row.
+pub const TIME_COLUMNS: &str =
+    "sample_box_time_s,sample_host_time_ns,host_time_bound_ns,host_time_source";
 
 impl<W: Write> RowWriter<W> {
     /// A writer of `kind` rows in `format`.
@@ -43,6 +53,64 @@ impl<W: Write> RowWriter<W> {
             header_written: false,
             rows: 0,
             error: None,
+            timing: None,
+            last_times: None,
+        }
+    }
+
+    /// Also writes each row's sample time: estimated box time, host time, the host time's
+    /// error bound (empty where the mapping has none) and its source.
+    pub fn with_timing(mut self, timing: Timing) -> Self {
+        self.timing = Some(timing);
+        self
+    }
+
+    /// The timing, to read its summary.
+    pub fn timing(&self) -> Option<&Timing> {
+        self.timing.as_ref()
+    }
+
+    /// The timing, to feed exchanges with the boxes.
+    pub fn timing_mut(&mut self) -> Option<&mut Timing> {
+        self.timing.as_mut()
+    }
+
+    fn time_csv(&mut self) -> io::Result<()> {
+        if self.timing.is_none() {
+            return Ok(());
+        }
+        match self.last_times {
+            Some(t) => write!(
+                self.out,
+                ",{:.9},{},{},{}",
+                t.sample_box_s,
+                t.sample_host_ns
+                    .map(|v| format!("{v:.0}"))
+                    .unwrap_or_default(),
+                t.host_error_bound_ns
+                    .map(|v| format!("{v:.0}"))
+                    .unwrap_or_default(),
+                t.source.name()
+            ),
+            None => self.out.write_all(b",,,,none"),
+        }
+    }
+
+    fn time_json(&self, row: &mut serde_json::Value) {
+        if self.timing.is_none() {
+            return;
+        }
+        if let (Some(t), Some(map)) = (self.last_times, row.as_object_mut()) {
+            map.insert("sample_box_time_s".into(), t.sample_box_s.into());
+            map.insert(
+                "sample_host_time_ns".into(),
+                t.sample_host_ns.map(|v| v.round()).into(),
+            );
+            map.insert(
+                "host_time_bound_ns".into(),
+                t.host_error_bound_ns.map(|v| v.round()).into(),
+            );
+            map.insert("host_time_source".into(), t.source.name().into());
         }
     }
 
@@ -52,7 +120,12 @@ impl<W: Write> RowWriter<W> {
     }
 
     /// Flushes; returns the first error.
-    pub fn finish(mut self) -> io::Result<u64> {
+    pub fn finish(self) -> io::Result<u64> {
+        self.finish_into().map(|(rows, _)| rows)
+    }
+
+    /// Flushes; returns the rows written and the output, or the first error.
+    pub fn finish_into(mut self) -> io::Result<(u64, W)> {
         if let Some(e) = self.error.take() {
             return Err(e);
         }
@@ -60,21 +133,26 @@ impl<W: Write> RowWriter<W> {
             self.header()?;
         }
         self.out.flush()?;
-        Ok(self.rows)
+        Ok((self.rows, self.out))
     }
 
     fn header(&mut self) -> io::Result<()> {
         self.header_written = true;
         let channels: Vec<&str> = Channel::ALL.iter().map(|c| c.name()).collect();
+        let times = if self.timing.is_some() {
+            format!(",{TIME_COLUMNS}")
+        } else {
+            String::new()
+        };
         match self.kind {
             RowKind::Packets => writeln!(
                 self.out,
-                "time_s,tick,box_id,datagram_sequence,port,flags,cell_id,kind,event_sequence,second_part,event_packets_missing_before,{}",
+                "time_s,tick,box_id,datagram_sequence,port,flags,cell_id,kind,event_sequence,second_part,event_packets_missing_before,{}{times}",
                 channels.join(",")
             ),
             RowKind::Samples => writeln!(
                 self.out,
-                "time_s,tick,box_id,cell_id,updated_mask,stale_mask,known_mask,{}",
+                "time_s,tick,box_id,cell_id,updated_mask,stale_mask,known_mask,{}{times}",
                 channels.join(",")
             ),
         }
@@ -122,6 +200,7 @@ impl<W: Write> RowWriter<W> {
                         None => self.out.write_all(b",")?,
                     }
                 }
+                self.time_csv()?;
                 self.out.write_all(b"\n")
             }
             RowFormat::JsonLines => {
@@ -129,7 +208,7 @@ impl<W: Write> RowWriter<W> {
                     .iter()
                     .filter_map(|c| values[c.index()].map(|v| (c.name().to_string(), v.into())))
                     .collect();
-                let row = serde_json::json!({
+                let mut row = serde_json::json!({
                     "time_s": r.time_s(),
                     "tick": r.tick,
                     "box_id": r.box_id,
@@ -143,6 +222,7 @@ impl<W: Write> RowWriter<W> {
                     "event_packets_missing_before": r.event_packets_missing_before,
                     "values": map,
                 });
+                self.time_json(&mut row);
                 serde_json::to_writer(&mut self.out, &row)?;
                 self.out.write_all(b"\n")
             }
@@ -169,6 +249,7 @@ impl<W: Write> RowWriter<W> {
                 for c in Channel::ALL {
                     write!(self.out, ",{}", s.value(c))?;
                 }
+                self.time_csv()?;
                 self.out.write_all(b"\n")
             }
             RowFormat::JsonLines => {
@@ -176,7 +257,7 @@ impl<W: Write> RowWriter<W> {
                     .iter()
                     .map(|c| (c.name().to_string(), s.value(*c).into()))
                     .collect();
-                let row = serde_json::json!({
+                let mut row = serde_json::json!({
                     "time_s": s.time_s(),
                     "tick": s.tick,
                     "box_id": s.box_id,
@@ -186,6 +267,7 @@ impl<W: Write> RowWriter<W> {
                     "known": s.known.iter().map(|c| c.name()).collect::<Vec<_>>(),
                     "values": map,
                 });
+                self.time_json(&mut row);
                 serde_json::to_writer(&mut self.out, &row)?;
                 self.out.write_all(b"\n")
             }
@@ -195,6 +277,9 @@ impl<W: Write> RowWriter<W> {
 
 impl<W: Write> RecordSink for RowWriter<W> {
     fn record(&mut self, record: &DecodedRecord) {
+        if let Some(timing) = &mut self.timing {
+            self.last_times = Some(timing.record(record));
+        }
         if self.kind != RowKind::Packets || self.error.is_some() {
             return;
         }
@@ -208,6 +293,12 @@ impl<W: Write> RecordSink for RowWriter<W> {
         self.kind == RowKind::Samples
     }
 
+    fn datagram_received(&mut self, receive: Option<std::time::Duration>, payload: &[u8]) {
+        if let Some(timing) = &mut self.timing {
+            timing.datagram_received(receive, payload);
+        }
+    }
+
     fn sample(&mut self, sample: &Sample) {
         if self.error.is_some() {
             return;
@@ -217,6 +308,46 @@ impl<W: Write> RecordSink for RowWriter<W> {
             Err(e) => self.error = Some(e),
         }
     }
+}
+
+/// Reads a row's sample host time.
+type HostTimeKey = Box<dyn Fn(&str) -> Option<f64>>;
+
+/// Rows written with timing, put in order of their sample's host time: the records of
+/// several boxes, each box's time mapped on its own, merged on one host time line. A CSV
+/// header stays first; rows without a host time come first, in their order.
+pub fn sort_by_host_time(text: &str, format: RowFormat) -> String {
+    let mut lines = text.lines();
+    let (header, key): (Option<&str>, HostTimeKey) = match format {
+        RowFormat::Csv => {
+            let header = lines.next();
+            let column = header.and_then(|h| h.split(',').position(|c| c == "sample_host_time_ns"));
+            (
+                header,
+                Box::new(move |l: &str| column.and_then(|k| l.split(',').nth(k)?.parse().ok())),
+            )
+        }
+        RowFormat::JsonLines => (
+            None,
+            Box::new(|l: &str| {
+                serde_json::from_str::<serde_json::Value>(l)
+                    .ok()?
+                    .get("sample_host_time_ns")?
+                    .as_f64()
+            }),
+        ),
+    };
+    let mut rows: Vec<(f64, &str)> = lines
+        .map(|l| (key(l).unwrap_or(f64::NEG_INFINITY), l))
+        .collect();
+    // stable: rows of equal time keep their order
+    rows.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut out = String::with_capacity(text.len());
+    for l in header.into_iter().chain(rows.into_iter().map(|r| r.1)) {
+        out.push_str(l);
+        out.push('\n');
+    }
+    out
 }
 
 #[cfg(test)]
@@ -260,6 +391,48 @@ mod tests {
             lines[2],
             "2.000000000,250000000,1,9,2,0,17,event,41,0,0,,,,0.5,,,,,"
         );
+    }
+
+    #[test]
+    fn rows_of_two_boxes_merge_on_host_time() {
+        use crate::sample_clock::{PathModel, Positions};
+        use std::time::Duration;
+        // Box 2 was reset 5 s after box 1: its ticks are 5 s behind for the same host time.
+        let timing = Timing::new(125.0, PathModel::bus_model(Positions::Unknown));
+        let mut w =
+            RowWriter::new(Vec::new(), RowFormat::Csv, RowKind::Packets).with_timing(timing);
+        let data = |cell| CellRepr::Data(DataRepr::from_raw(cell, [0; 9]).unwrap());
+        for (i, host_ms) in [10u64, 30, 50].into_iter().enumerate() {
+            // box 2's datagrams come first at each step, but 1 ms later in host time
+            for (box_id, reset_ms) in [(2u16, 5_000u64), (1, 0)] {
+                let host = host_ms + u64::from(box_id);
+                let tick = (host + 6_000 - reset_ms) * 125_000;
+                let payload = crate::timing::tests::datagram(box_id, box_id, &[tick]);
+                w.datagram_received(Some(Duration::from_millis(host + 1_000)), &payload);
+                w.record(&DecodedRecord {
+                    box_id,
+                    tick,
+                    datagram_sequence: i as u32,
+                    ..record(data(box_id))
+                });
+            }
+        }
+        let (_, bytes) = w.finish_into().unwrap();
+        let text = String::from_utf8(bytes).unwrap();
+        let arrived: Vec<&str> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(2).unwrap())
+            .collect();
+        assert_eq!(arrived, ["2", "1", "2", "1", "2", "1"]);
+        let sorted = sort_by_host_time(&text, RowFormat::Csv);
+        let boxes: Vec<&str> = sorted
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(2).unwrap())
+            .collect();
+        assert_eq!(boxes, ["1", "2", "1", "2", "1", "2"]);
+        assert!(sorted.starts_with("time_s,"));
     }
 
     #[test]

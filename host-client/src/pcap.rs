@@ -230,7 +230,9 @@ pub fn decode_pcap_with<S: RecordSink + ?Sized>(
     let wall = std::time::Instant::now();
     let cpu = crate::thread_cpu_ns();
     let mut decoder = Decoder::new(options.decoder);
-    let scan = for_each_udp_payload(bytes, options.udp_port, |_, udp| {
+    let scan = for_each_udp_payload(bytes, options.udp_port, |timestamp, udp| {
+        // A frame without a timestamp comes with zero.
+        sink.datagram_received((!timestamp.is_zero()).then_some(timestamp), udp.payload);
         decoder.push_datagram_from(Some(udp.source), udp.payload, sink);
     })?;
     let cpu_ns = crate::thread_cpu_ns().saturating_sub(cpu);

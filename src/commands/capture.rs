@@ -2,6 +2,7 @@
 
 use clap::Args;
 use skinbox_host::live::{self, CaptureLimits};
+use skinbox_host::output::{RowFormat, RowKind, RowWriter};
 use skinbox_host::pcap::PcapFrameWriter;
 use skinbox_host::{Decoder, DecoderConfig};
 use std::io::Write;
@@ -37,13 +38,24 @@ pub struct CaptureArgs {
     /// wake-up takes many datagrams (0: wake for every datagram).
     #[arg(long, default_value_t = live::DEFAULT_COALESCE.as_micros() as u64)]
     pub coalesce_us: u64,
-    /// The cells' sample rate, for rates in % of data mode; without it, learned from the stamps.
+    /// The cells' sample rate, for rates in % of data mode; without it, learned from the
+    /// stamps (the sample times of `--rows` then assume 125 Hz: give it for them).
     #[arg(long)]
     pub sample_rate_hz: Option<f64>,
     /// Claim the stream of the box at this command address first: a stream-to command
     /// from the capture's own socket, so the box sends its datagrams here.
     #[arg(long)]
     pub claim: Option<String>,
+    /// Write every record as a CSV row to this file (`-`: stdout), with its sample time in
+    /// box time and in host time (CLOCK_REALTIME, from the kernel's receive timestamps).
+    #[arg(long)]
+    pub rows: Option<PathBuf>,
+    /// With --rows: one row per record, the cell's full sample after it (event to data).
+    #[arg(long, requires = "rows")]
+    pub samples: bool,
+    /// Where the cells sit on their chains, for the sample times.
+    #[command(flatten)]
+    pub timing: super::TimingArgs,
 }
 
 /// Claims the stream of the box at `box_addr` from `socket` (a stream-to of the sender);
@@ -108,6 +120,31 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             ))?),
             None => None,
         };
+        let rate_hz = args
+            .sample_rate_hz
+            .unwrap_or(skinbox_host::decoder::ASSUMED_SAMPLE_RATE_HZ);
+        let mut rows = match &args.rows {
+            Some(path) => {
+                let out: Box<dyn Write> = if path.as_os_str() == "-" {
+                    Box::new(std::io::stdout())
+                } else {
+                    Box::new(
+                        std::fs::File::create(path)
+                            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
+                    )
+                };
+                let kind = if args.samples {
+                    RowKind::Samples
+                } else {
+                    RowKind::Packets
+                };
+                Some(
+                    RowWriter::new(std::io::BufWriter::new(out), RowFormat::Csv, kind)
+                        .with_timing(args.timing.timing(rate_hz)?),
+                )
+            }
+            None => None,
+        };
         let mut decoder = Decoder::new(DecoderConfig {
             sample_rate_hz: args.sample_rate_hz,
             ..DecoderConfig::default()
@@ -133,10 +170,14 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 }
             }
         };
+        let sink: &mut dyn skinbox_host::RecordSink = match &mut rows {
+            Some(w) => w,
+            None => &mut (),
+        };
         let stats = live::run_capture(
             &socket,
             &mut decoder,
-            &mut (),
+            sink,
             recorder.as_mut(),
             CaptureLimits {
                 max_datagrams: args.count,
@@ -162,6 +203,14 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         if let Some(w) = recorder {
             w.finish()?.flush()?;
         }
+        let host_times = rows.as_ref().and_then(|w| w.timing()).map(|t| t.summary());
+        if let Some(w) = rows {
+            match w.finish() {
+                Ok(_) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
         let mut report = decoder.report();
         report.frames.frames = stats.datagrams + passed_over;
         report.frames.udp_payloads = stats.datagrams + passed_over;
@@ -184,9 +233,13 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                     "datagrams_dropped": e.dropped,
                 })),
                 "report": report,
+                "host_times": host_times,
             }))
         } else {
             print!("{}", report.summary());
+            if let Some(times) = &host_times {
+                println!("host times: {}", super::host_time_line(times));
+            }
             Ok(())
         }
     })

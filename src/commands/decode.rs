@@ -1,8 +1,9 @@
 //! `skinbox decode`: a pcap's box datagrams to cell packets or full samples, as CSV or JSON
-//! lines in physical units with box time.
+//! lines in physical units with box time, each with its estimated sample time in box time
+//! and on the pcap's clock (docs/time.md).
 
 use clap::Args;
-use skinbox_host::output::{RowFormat, RowKind, RowWriter};
+use skinbox_host::output::{sort_by_host_time, RowFormat, RowKind, RowWriter};
 use skinbox_host::pcap::{self, PcapOptions};
 use skinbox_host::DecoderConfig;
 use std::io::Write;
@@ -31,9 +32,17 @@ pub struct DecodeArgs {
     /// Only UDP datagrams from or to this port.
     #[arg(long)]
     pub port: Option<u16>,
-    /// The cells' sample rate, for the summary; without it, learned from the stamps.
+    /// The cells' sample rate, for the summary and the sample times; without it, learned
+    /// from the stamps (a first pass over the file).
     #[arg(long)]
     pub sample_rate_hz: Option<f64>,
+    /// Rows in order of their sample's host time (several boxes merged on one host time
+    /// line) instead of arrival order; holds every row in memory.
+    #[arg(long)]
+    pub by_host_time: bool,
+    /// Where the cells sit on their chains, for the sample times.
+    #[command(flatten)]
+    pub timing: super::TimingArgs,
 }
 
 /// Decodes the file; rows on stdout (or --output), a one-line summary on stderr.
@@ -56,7 +65,6 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         ),
         None => Box::new(std::io::stdout().lock()),
     };
-    let mut writer = RowWriter::new(std::io::BufWriter::new(out), format, kind);
     let options = PcapOptions {
         decoder: DecoderConfig {
             sample_rate_hz: args.sample_rate_hz,
@@ -64,12 +72,37 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         },
         udp_port: args.port,
     };
-    let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
-    let rows = match writer.finish() {
-        Ok(rows) => rows,
-        // The reader went away (`| head`): not an error of ours.
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
-        Err(e) => return Err(e.into()),
+    // The sample clocks need the nominal rate up front: given, or learned in a first pass.
+    let rate_hz = match args.sample_rate_hz {
+        Some(rate) => rate,
+        None => pcap::decode_pcap_with(&bytes, &options, &mut ())?.sample_rate_hz,
+    };
+    let timing = args.timing.timing(rate_hz)?;
+    let (report, times, rows) = if args.by_host_time {
+        let mut writer = RowWriter::new(Vec::new(), format, kind).with_timing(timing);
+        let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
+        let times = writer.timing().map(|t| t.summary()).unwrap_or_default();
+        let (rows, text) = writer.finish_into()?;
+        let sorted = sort_by_host_time(&String::from_utf8_lossy(&text), format);
+        let mut out = std::io::BufWriter::new(out);
+        match out.write_all(sorted.as_bytes()).and_then(|()| out.flush()) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
+            Err(e) => return Err(e.into()),
+        }
+        (report, times, rows)
+    } else {
+        let mut writer =
+            RowWriter::new(std::io::BufWriter::new(out), format, kind).with_timing(timing);
+        let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
+        let times = writer.timing().map(|t| t.summary()).unwrap_or_default();
+        let rows = match writer.finish() {
+            Ok(rows) => rows,
+            // The reader went away (`| head`): not an error of ours.
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => return Ok(()),
+            Err(e) => return Err(e.into()),
+        };
+        (report, times, rows)
     };
     eprintln!(
         "{rows} rows from {} records in {} datagrams; {} datagrams missing, {} event packets missing, {} bad input",
@@ -78,6 +111,10 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         report.losses.datagrams_missing,
         report.losses.event_packets_missing,
         report.bad_input.total
+    );
+    eprintln!(
+        "sample times at {rate_hz} Hz; host times: {}",
+        super::host_time_line(&times)
     );
     Ok(())
 }

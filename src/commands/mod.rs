@@ -99,3 +99,67 @@ pub(crate) fn check_sample_rate(rate: Option<f64>) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// Arguments of the sample-time estimate (docs/time.md), shared by `decode` and `capture`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TimingArgs {
+    /// Cells per bus, numbered from 1 along the chains, root first (the scenes' layout):
+    /// gives each cell's hops to its root, and so its path latency. Without it every cell
+    /// counts as a root (path latency: the processing time only).
+    #[arg(long)]
+    pub cells_per_bus: Option<u16>,
+    /// Relay delay per cell on the way to the root, ns (the bus model's 52 us).
+    #[arg(long, default_value_t = skinbox_host::sample_clock::HOP_LATENCY_NS)]
+    pub hop_latency_ns: u64,
+    /// A cell's processing before its packet leaves, ns (the bus model's 20 us).
+    #[arg(long, default_value_t = skinbox_host::sample_clock::PROCESSING_NS)]
+    pub processing_ns: u64,
+}
+
+impl TimingArgs {
+    /// The timing of cells sampling at `sample_rate_hz`.
+    pub fn timing(&self, sample_rate_hz: f64) -> anyhow::Result<skinbox_host::timing::Timing> {
+        use skinbox_host::sample_clock::{PathModel, Positions};
+        anyhow::ensure!(
+            self.cells_per_bus != Some(0),
+            "--cells-per-bus must be at least 1"
+        );
+        let hops = match self.cells_per_bus {
+            Some(n) => Positions::Numbered { cells_per_bus: n },
+            None => Positions::Unknown,
+        };
+        Ok(skinbox_host::timing::Timing::new(
+            sample_rate_hz,
+            PathModel {
+                processing_ns: self.processing_ns,
+                hop_latency_ns: self.hop_latency_ns,
+                hops,
+            },
+        ))
+    }
+}
+
+/// One line on how each box's time was mapped to host time.
+pub fn host_time_line(times: &[skinbox_host::timing::BoxTimeSummary]) -> String {
+    if times.is_empty() {
+        return "none (no receive timestamps, no exchanges)".into();
+    }
+    times
+        .iter()
+        .map(|t| {
+            let mut s = format!("box {} from {}", t.box_id, t.source.name());
+            if let Some(d) = t.drift_ppm {
+                s += &format!(", drift {d:.1} ppm");
+            }
+            match t.error_bound_ns {
+                Some(b) => s += &format!(", bound {:.1} us", b / 1e3),
+                None => s += ", late by the shortest delivery delay (no bound)",
+            }
+            if t.restarts > 0 {
+                s += &format!(", restarted {} times (box resets)", t.restarts);
+            }
+            s
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}

@@ -137,6 +137,35 @@ struct Output {
     sim: SimReport,
     pcap: PathBuf,
     host: skinbox_host::Report,
+    /// The host's sample time (its default method, the estimate from the stamps) minus
+    /// the cell models' true sample time, over the delivered packets (docs/time.md).
+    sample_time_error_us: SampleTimeError,
+    /// The same for the arrival stamp as the sample time.
+    arrival_stamp_error_us: SampleTimeError,
+}
+
+/// Sample time error figures, us (absolute).
+#[derive(Serialize)]
+struct SampleTimeError {
+    method: &'static str,
+    packets: u64,
+    p50: f64,
+    p99: f64,
+    max: f64,
+    worst_cell_p99: f64,
+}
+
+impl SampleTimeError {
+    fn of(method: &'static str, e: &skinbox::studies::sample_time::Errors) -> Self {
+        SampleTimeError {
+            method,
+            packets: e.packets,
+            p50: e.p50_us,
+            p99: e.p99_us,
+            max: e.max_us,
+            worst_cell_p99: e.worst_cell_p99_us,
+        }
+    }
 }
 
 /// Runs the scene.
@@ -242,10 +271,17 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         },
         ..Default::default()
     };
-    let host = skinbox_host::decode_pcap_file(&pcap, &options)
-        .with_context(|| format!("decoding {}", pcap.display()))?
-        .report;
+    let decoded = skinbox_host::decode_pcap_file(&pcap, &options)
+        .with_context(|| format!("decoding {}", pcap.display()))?;
+    let host = decoded.report;
     let from_ns = (args.from_ms * 1e6) as u64;
+    let (arrival_stamp_error_us, sample_time_error_us) = sample_time_errors(
+        &generated,
+        &decoded.records,
+        &scene,
+        from_ns,
+        args.duration_ms,
+    );
     let dropped: u64 = generated.buses.iter().map(|b| b.stats.dropped).sum();
     let dropped_window: u64 = generated
         .buses
@@ -278,12 +314,52 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         sim: report,
         pcap,
         host,
+        sample_time_error_us,
+        arrival_stamp_error_us,
     };
     if json {
         return super::print_json(&out);
     }
     print_summary(&out);
     Ok(())
+}
+
+/// The sample time errors of the arrival stamp and of the host's estimate over the
+/// delivered records, against the cell models' truth. A stamp of tick `t` is the edge of
+/// simulation cycle `t + TICK_ZERO_CYCLE`; the simulation starts `PORTS_READY_NS` before
+/// scene time `from_ns`.
+fn sample_time_errors(
+    generated: &skinbox_cells::Generated,
+    records: &[skinbox_host::DecodedRecord],
+    scene: &Scene,
+    from_ns: u64,
+    duration_ms: f64,
+) -> (SampleTimeError, SampleTimeError) {
+    use skinbox::studies::sample_time::{
+        assign_arrival, assign_estimated, errors, matched, Errors, Method,
+    };
+    use skinbox_protocol::TICK_NS;
+    let zero_ns = skinbox_cosim::run::TICK_ZERO_CYCLE * TICK_NS;
+    let lead_ns = skinbox_cosim::scene::PORTS_READY_NS;
+    let window = from_ns..from_ns + (duration_ms * 1e6) as u64;
+    let buses = matched(generated, records, window, |tick| {
+        (tick * TICK_NS + zero_ns + from_ns).saturating_sub(lead_ns)
+    });
+    let rate = scene.config.scene.sample_rate_hz;
+    let hop = scene.config.bus.hop_latency_ns;
+    let all = |assign: &dyn Fn(&[skinbox::studies::sample_time::Stamped]) -> Vec<f64>| {
+        let (packets, assigned): (Vec<_>, Vec<_>) = buses
+            .iter()
+            .flat_map(|bus| bus.iter().copied().zip(assign(bus)))
+            .unzip();
+        errors(&packets, &assigned, 0)
+    };
+    let a: Errors = all(&|bus| assign_arrival(bus));
+    let b: Errors = all(&|bus| assign_estimated(bus, rate, hop));
+    (
+        SampleTimeError::of(Method::Arrival.name(), &a),
+        SampleTimeError::of(Method::Estimated.name(), &b),
+    )
 }
 
 fn print_summary(o: &Output) {
@@ -345,6 +421,11 @@ fn print_summary(o: &Output) {
     println!(
         "        losses seen: {} datagrams missing, {} event sequence gaps ({} event packets missing), {} box packets lost",
         h.losses.datagrams_missing, h.losses.event_sequence_gaps, h.losses.event_packets_missing, h.losses.box_packets_lost
+    );
+    let (a, b) = (&o.arrival_stamp_error_us, &o.sample_time_error_us);
+    println!(
+        "        sample time - true sample time: {} p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} p50 {:.0} us, p99 {:.0} us)",
+        b.method, b.p50, b.p99, b.max, a.method, a.p50, a.p99
     );
     println!(
         "speed:  {:.2} M cycles/s, {:.2} s wall for {:.1} ms simulated",

@@ -7,6 +7,8 @@
 //!   the RTL co-simulation and the closed-form [`rate_model`], across skin sizes.
 //! - C3 [`batching`]: the flush timeout's latency against the link capacity it reaches.
 //! - C4 [`boundaries`]: UART baud mismatch (RTL), cells per bus, sensor noise, event loss.
+//! - C5 [`sample_time`]: when each packet was sampled, as the host assigns it by three
+//!   methods, against the cell models' truth; cost and failure boundaries.
 //! - C6 [`sample_rate`]: the scenes' packet rate against sample rate, beside the papers'
 //!   Fig. 11 fits.
 //!
@@ -22,6 +24,7 @@ pub mod fidelity;
 pub mod points;
 pub mod rate_model;
 pub mod sample_rate;
+pub mod sample_time;
 pub mod send_on_delta;
 
 use anyhow::Context;
@@ -142,6 +145,7 @@ pub fn steps(quick: bool) -> u64 {
         + fidelity::steps(quick)
         + batching::steps(quick)
         + boundaries::steps(quick)
+        + sample_time::steps(quick)
         + sample_rate::steps(quick)
         + 1
 }
@@ -161,6 +165,7 @@ pub fn run(options: &Options, progress: &mut Progress) -> anyhow::Result<Written
     sections.push(fidelity::study(q, progress, &mut grid)?);
     sections.push(batching::study(q, progress, &mut grid)?);
     sections.extend(boundaries::study(q, progress, &mut grid)?);
+    sections.push(sample_time::study(q, progress, &mut grid)?);
     sections.push(sample_rate::study(q, progress, &mut grid)?);
     let points = grid.len();
     if grid.shard_of().is_some() {

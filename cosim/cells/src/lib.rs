@@ -7,7 +7,8 @@
 //!   what the co-simulation drives onto a box pin;
 //! - [`scene`]: scene files (`cosim/scenes/*.toml`) and [`Scene::generate`], which gives
 //!   every bus's packet stream, the rates and the reconstruction error;
-//! - [`calibration`]: the scenes against the papers' Fig. 8 table.
+//! - [`calibration`]: the scenes against the papers' Fig. 8 table;
+//! - [`time_sync`]: cells that sample on the box's time grid (a time-sync command).
 //!
 //! What the co-simulation drives onto the box pins:
 //!
@@ -38,12 +39,15 @@ pub mod config;
 pub mod rng;
 pub mod scene;
 pub mod signal;
+pub mod time_sync;
 
 pub use bus::{BusPacket, BusStats, RootFifo};
 pub use cell::{Cell, CellConfig, Mode, SendOnDelta, Thresholds};
 pub use scene::{
-    BusStream, CellClock, CellTruth, GenerateOptions, Generated, Scene, SceneError, SceneStats,
+    BusStream, CellClock, CellTruth, ClockWander, GenerateOptions, Generated, Scene, SceneError,
+    SceneStats,
 };
+pub use time_sync::TimeSync;
 
 /// Directory of the scene files shipped with the project.
 pub fn scenes_dir() -> std::path::PathBuf {

@@ -14,6 +14,7 @@ pub use crate::config::{
 };
 use crate::rng::Rng;
 use crate::signal::SignalModel;
+use crate::time_sync::{SyncedClock, TimeSync};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::{CellFraming, CellRepr, Channel, ChannelMask, Modality};
 use std::cmp::Reverse;
@@ -452,9 +453,39 @@ impl Scene {
                 let mut held = [None; Channel::COUNT];
                 let mut loss_rng = Rng::for_stream(s.seed ^ 0x1055, index as u64);
                 let delay_ns = c.bus.processing_ns + position as u64 * c.bus.hop_latency_ns;
+                // Method c of docs/time.md: the cell samples on the box's grid instead.
+                let mut synced = options.time_sync.as_ref().map(|sync| {
+                    SyncedClock::new(
+                        sync,
+                        &c.bus,
+                        position,
+                        clock.drift_ppm,
+                        s.sample_rate_hz,
+                        s.seed,
+                        index as u64,
+                    )
+                });
+                // A wandering clock (its drift changing over time) is stepped sample by
+                // sample; a steady one in closed form.
+                let mut wander = options.clock_wander.map(|w| {
+                    let mut rng = Rng::for_stream(s.seed ^ 0x3A4D, index as u64);
+                    (w, rng.range(0.0, std::f64::consts::TAU), phase_s)
+                });
+                if let Some((w, angle, _)) = wander {
+                    synced = synced.map(|clock| clock.with_wander(w, angle));
+                }
                 let mut k = 0u64;
                 loop {
-                    let t_s = phase_s + k as f64 * cell_period_s;
+                    let t_s = match (&mut synced, &mut wander) {
+                        (Some(clock), _) => clock.sample_time_s(k),
+                        (None, Some((w, angle, next_s))) => {
+                            let t = *next_s;
+                            *next_s +=
+                                period_s / (1.0 + w.drift_ppm(clock.drift_ppm, *angle, t) * 1e-6);
+                            t
+                        }
+                        (None, None) => phase_s + k as f64 * cell_period_s,
+                    };
                     if t_s >= s.duration_s {
                         break;
                     }
@@ -625,6 +656,31 @@ pub struct GenerateOptions {
     /// packet, seeded by the scene seed), for the reconstruction error only: the buses
     /// still carry every packet.
     pub packet_loss: f64,
+    /// Cells sample on the box's time grid, set by a time-sync command
+    /// ([`crate::time_sync`]); `None`: each on its own free-running clock.
+    pub time_sync: Option<TimeSync>,
+    /// The free-running clocks' drift wanders (temperature) around each cell's own;
+    /// `None`: steady.
+    pub clock_wander: Option<ClockWander>,
+}
+
+/// A sample clock whose drift wanders: `drift + amplitude * sin(2 pi t / period + angle)`,
+/// each cell with its own angle (drawn from the scene seed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockWander {
+    /// Amplitude of the wander, ppm.
+    pub amplitude_ppm: f64,
+    /// Period of the wander, s.
+    pub period_s: f64,
+}
+
+impl ClockWander {
+    /// The drift at time `t_s` of a cell whose steady drift is `drift_ppm`, ppm.
+    pub fn drift_ppm(&self, drift_ppm: f64, angle: f64, t_s: f64) -> f64 {
+        drift_ppm
+            + self.amplitude_ppm
+                * (std::f64::consts::TAU * t_s / self.period_s.max(1e-9) + angle).sin()
+    }
 }
 
 impl Default for GenerateOptions {
@@ -633,6 +689,8 @@ impl Default for GenerateOptions {
             keep_packets: true,
             truth_cells: Vec::new(),
             packet_loss: 0.0,
+            time_sync: None,
+            clock_wander: None,
         }
     }
 }

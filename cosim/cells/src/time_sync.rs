@@ -1,0 +1,225 @@
+//! Cells that sample on the box's time grid (docs/time.md, method c): a model of the
+//! time-sync command that the downlink will carry, at the level of the cell models.
+//!
+//! The box broadcasts a sync command down every bus every [`TimeSync::interval_s`], carrying
+//! its send time `T`. It reaches the cell at position `h` (0 = the root) after
+//! `processing + h * downlink_hop` ns. The cell learnt its one-way path latency from a round
+//! trip through the box (the best of several, so no queueing in it) and takes half of it:
+//! `(down + up) / 2`, exact only when the downlink's hops are as slow as the uplink's. On
+//! receipt it sets its clock to `T + half round trip`, then lets the clock run at its own
+//! rate (its drift, [`crate::CellClock::drift_ppm`]) and takes a sample each time its clock
+//! passes a grid point `n / sample_rate_hz` of box time. A lost sync command leaves the
+//! clock running from the previous one.
+//!
+//! So a cell's sample for grid point `g` falls at `g + e`, `e` being the half-round-trip
+//! error plus the drift accumulated since the last sync it received. Box time is scene time
+//! here (the box's oscillator is the reference; the host maps it to its own clock, see
+//! `skinbox_host::clock_map`).
+
+use crate::config::BusConfig;
+use crate::rng::Rng;
+use crate::scene::ClockWander;
+
+/// The time-sync command as the cells obey it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeSync {
+    /// The box sends a sync command down every bus this often, s; the first at scene time 0.
+    pub interval_s: f64,
+    /// Probability that one cell misses one sync command (independent per cell and command,
+    /// seeded by the scene seed).
+    pub loss: f64,
+    /// Relay delay per cell on the way down, ns; the uplink's is `[bus] hop_latency_ns`.
+    /// Their difference halves into an error of the measured one-way latency per hop.
+    pub downlink_hop_latency_ns: u64,
+}
+
+impl TimeSync {
+    /// A sync every `interval_s` on a downlink as fast as the uplink, none lost.
+    pub fn every(interval_s: f64, bus: &BusConfig) -> TimeSync {
+        TimeSync {
+            interval_s,
+            loss: 0.0,
+            downlink_hop_latency_ns: bus.hop_latency_ns,
+        }
+    }
+}
+
+/// The sample clock of one cell that obeys [`TimeSync`].
+#[derive(Debug, Clone)]
+pub struct SyncedClock {
+    interval_s: f64,
+    period_s: f64,
+    drift: f64,
+    /// Sync arrival after its send time, s.
+    down_s: f64,
+    /// What the cell believes that arrival delay to be (half its round trip), s.
+    believed_down_s: f64,
+    loss: f64,
+    loss_rng: Rng,
+    /// Index of the sync the clock runs from, and the next one not yet decided.
+    current: Option<u64>,
+    next: u64,
+    /// First grid point the cell samples (the first after the first sync arrives).
+    first_grid: u64,
+    /// The clock's drift wander and this cell's angle of it.
+    wander: Option<(ClockWander, f64)>,
+}
+
+impl SyncedClock {
+    /// The clock of the cell at chain position `position` (0 = root), with sample clock
+    /// drift `drift_ppm`, on a grid of `sample_rate_hz`; `seed` and `stream` draw its lost
+    /// sync commands.
+    pub fn new(
+        sync: &TimeSync,
+        bus: &BusConfig,
+        position: usize,
+        drift_ppm: f64,
+        sample_rate_hz: f64,
+        seed: u64,
+        stream: u64,
+    ) -> SyncedClock {
+        let hops = position as f64;
+        let down_ns = bus.processing_ns as f64 + hops * sync.downlink_hop_latency_ns as f64;
+        let up_ns = bus.processing_ns as f64 + hops * bus.hop_latency_ns as f64;
+        let period_s = 1.0 / sample_rate_hz;
+        let mut clock = SyncedClock {
+            interval_s: sync.interval_s,
+            period_s,
+            drift: drift_ppm * 1e-6,
+            down_s: down_ns * 1e-9,
+            believed_down_s: (down_ns + up_ns) * 0.5e-9,
+            loss: sync.loss,
+            loss_rng: Rng::for_stream(seed ^ 0x5F9C, stream),
+            current: None,
+            next: 0,
+            first_grid: 0,
+            wander: None,
+        };
+        // The cell starts sampling on the grid after the first sync it receives.
+        while clock.current.is_none() {
+            clock.advance();
+        }
+        let first_arrival = clock.arrival_s(clock.current.unwrap_or(0));
+        clock.first_grid = (first_arrival / period_s).ceil() as u64;
+        clock
+    }
+
+    /// The same clock with its drift wandering ([`ClockWander`], this cell's `angle`).
+    pub fn with_wander(mut self, wander: ClockWander, angle: f64) -> SyncedClock {
+        self.wander = Some((wander, angle));
+        self
+    }
+
+    /// Decides whether the next sync command arrives; takes it if it does.
+    fn advance(&mut self) {
+        let j = self.next;
+        self.next += 1;
+        if !(self.loss > 0.0 && self.loss_rng.uniform() < self.loss) {
+            self.current = Some(j);
+        }
+    }
+
+    fn arrival_s(&self, j: u64) -> f64 {
+        j as f64 * self.interval_s + self.down_s
+    }
+
+    /// True time of the sample for grid point `first + n` under sync `j`.
+    fn time_under(&self, j: u64, grid_s: f64) -> f64 {
+        let sent_s = j as f64 * self.interval_s;
+        let set_to_s = sent_s + self.believed_down_s;
+        // A wandering drift, taken at the middle of the stretch since the sync (its mean
+        // there, to second order).
+        let drift = match self.wander {
+            Some((w, angle)) => {
+                w.drift_ppm(self.drift * 1e6, angle, (self.arrival_s(j) + grid_s) / 2.0) * 1e-6
+            }
+            None => self.drift,
+        };
+        self.arrival_s(j) + (grid_s - set_to_s) / (1.0 + drift)
+    }
+
+    /// The grid point (box time, s) of the cell's sample `n` (0 = its first).
+    pub fn grid_s(&self, n: u64) -> f64 {
+        (self.first_grid + n) as f64 * self.period_s
+    }
+
+    /// The true time of the cell's sample `n` (0 = its first), s; call with `n` rising.
+    pub fn sample_time_s(&mut self, n: u64) -> f64 {
+        let grid_s = self.grid_s(n);
+        loop {
+            let j = self.current.unwrap_or(0);
+            let t = self.time_under(j, grid_s);
+            // A sync arriving before this sample resets the clock first.
+            if self.arrival_s(self.next) <= t {
+                self.advance();
+                continue;
+            }
+            return t;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bus() -> BusConfig {
+        BusConfig::default()
+    }
+
+    #[test]
+    fn a_symmetric_bus_without_drift_samples_on_the_grid() {
+        let sync = TimeSync::every(0.1, &bus());
+        for position in [0, 10, 65] {
+            let mut clock = SyncedClock::new(&sync, &bus(), position, 0.0, 250.0, 1, 2);
+            for n in 0..1_000 {
+                let t = clock.sample_time_s(n);
+                assert!((t - clock.grid_s(n)).abs() < 1e-12, "{position} {n}");
+            }
+        }
+    }
+
+    #[test]
+    fn drift_accumulates_between_syncs_and_resets_at_each() {
+        // 100 ppm fast, sync every 0.1 s: the clock gains up to 10 us before the next sync
+        // (sample times come early), then starts over.
+        let sync = TimeSync::every(0.1, &bus());
+        let mut clock = SyncedClock::new(&sync, &bus(), 0, 100.0, 500.0, 1, 2);
+        let mut worst = 0.0f64;
+        for n in 0..2_000 {
+            let e = clock.sample_time_s(n) - clock.grid_s(n);
+            assert!(e <= 1e-12, "a fast clock samples early, {e}");
+            worst = worst.min(e);
+        }
+        assert!((worst + 10e-6).abs() < 0.1e-6, "worst {worst}");
+    }
+
+    #[test]
+    fn an_asymmetric_downlink_halves_into_the_error() {
+        // Down 2 us per hop slower than up: half a round trip is 1 us per hop short of the
+        // way down, so the cell's clock runs 1 us per hop behind and samples late.
+        let b = bus();
+        let sync = TimeSync {
+            downlink_hop_latency_ns: b.hop_latency_ns + 2_000,
+            ..TimeSync::every(0.1, &b)
+        };
+        let mut clock = SyncedClock::new(&sync, &b, 40, 0.0, 125.0, 1, 2);
+        let e = clock.sample_time_s(100) - clock.grid_s(100);
+        assert!((e - 40e-6).abs() < 1e-12, "{e}");
+    }
+
+    #[test]
+    fn lost_syncs_let_the_drift_grow() {
+        let b = bus();
+        let sync = TimeSync {
+            loss: 0.5,
+            ..TimeSync::every(0.1, &b)
+        };
+        let mut clock = SyncedClock::new(&sync, &b, 0, -100.0, 500.0, 7, 3);
+        let worst = (0..5_000)
+            .map(|n| clock.sample_time_s(n) - clock.grid_s(n))
+            .fold(0.0f64, f64::max);
+        // slow clock: late; with half the syncs lost some gaps are several intervals
+        assert!(worst > 20e-6, "worst {worst}");
+    }
+}

@@ -1,0 +1,632 @@
+//! When was a packet sampled? The host's estimate from the box's stamps alone, with no
+//! change to the cells (docs/time.md, method b).
+//!
+//! The box stamps the first start bit of a packet at its pin; the cell sampled earlier by
+//! its processing time, one relay hop per cell between it and the bus root, and the time it
+//! queued at the root. A cell samples on its own periodic clock (period `P`, off nominal by
+//! its drift), so its stamps are `phase + k * P + path + queue_k`: the sample index `k` of
+//! each packet follows from the stamps, and since queueing only ever adds, the stamps' lower
+//! envelope is the line `phase + path + k * P`. Better still, a packet whose first start bit
+//! came more than one packet's length after the previous packet's on the same port found
+//! the root's line idle and did not queue at all: its stamp lies exactly on the line
+//! ([`SampleTimer`] tells those apart per port). [`SampleClockEstimator`] fits the line per
+//! cell through such unqueued packets where it has them (least squares over the recent
+//! ones), else through the lowest points of a sliding window, and subtracts the path
+//! latency, which the stamps cannot show (only differences of stamps are observable): the
+//! [`PathModel`] gives it from the cell's position on its chain.
+//!
+//! Where it fails (the study C5 of `skinbox report` charts each): a wrong per-hop latency
+//! (the error grows with the hop count); cells colliding at the root, whose packets keep
+//! queueing behind each other for seconds when their clocks differ by a few ppm (none of
+//! them unqueued, the estimate carries the queue); a root queue that never empties; and a
+//! cell silent for so long that its drift moves the grid by more than half a period before
+//! its period is learnt (the sample index is then wrong by one).
+
+use std::collections::{HashMap, VecDeque};
+
+/// The bus model's processing time in a cell before its packet leaves, ns (docs/design.md
+/// section 7).
+pub const PROCESSING_NS: u64 = 20_000;
+/// The bus model's relay delay per cell, ns: one 50 us packet plus handling.
+pub const HOP_LATENCY_NS: u64 = 52_000;
+
+/// Stamps kept per cell for the fit.
+pub const WINDOW: usize = 256;
+/// The fit is redone after this many new stamps (between fits only the offset follows).
+const REFIT_EVERY: u32 = 16;
+/// Unqueued packets kept per cell for the fit (the older ones thinned out, so they span a
+/// growing stretch of samples).
+pub const ANCHORS: usize = 32;
+/// Oldest unqueued packet the line is fitted through, ns of box time: a straight line holds
+/// a wandering drift only so long (docs/time.md).
+pub const MAX_ANCHOR_AGE_NS: f64 = 4e9;
+/// Longest time between two packets' first start bits that can still be back to back on a
+/// port, ns: 200 bits at 4 Mbit/s, on a root UART up to 2 % slow.
+pub const BACK_TO_BACK_NS: u64 = skinbox_protocol::cell::UART_BITS_PER_PACKET * 1_000_000_000
+    / skinbox_protocol::cell::UART_BAUD
+    * 102
+    / 100;
+/// How far a packet may lie below the fitted line, or an unqueued one off it, before the
+/// line is taken as wrong, ns: well above the tick and the fit's drift between refits.
+const RESTART_NS: f64 = 10_000.0;
+/// Sample indices a window must span before its period replaces the nominal one.
+const MIN_SPAN: i64 = 64;
+/// Sample indices unqueued packets must span before their period is used: they lie on the
+/// line to the tick, so 8 samples give the period to 2 ns.
+const MIN_ANCHOR_SPAN: i64 = 8;
+/// Largest sample clock error a fitted period may show, relative: cells' clocks are
+/// specified to +-100 ppm (docs/design.md section 7); a fit beyond five times that is noise.
+const MAX_PERIOD_ERROR: f64 = 500e-6;
+
+/// Where each cell sits on its chain, and the latency of its path to the box pin.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PathModel {
+    /// Processing in the cell before its packet leaves, ns.
+    pub processing_ns: u64,
+    /// Relay delay per cell between it and the root, ns.
+    pub hop_latency_ns: u64,
+    /// Hops of each cell (0 = the root), by cell id.
+    pub hops: Positions,
+}
+
+/// The chain position of each cell.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Positions {
+    /// Unknown: every cell counted as the root (the path latency is the processing only).
+    Unknown,
+    /// Cells numbered from 1 along the chains, root first, this many per bus (the scenes'
+    /// layout): cell `id` sits `(id - 1) % cells_per_bus` hops from its root.
+    Numbered {
+        /// Cells per bus.
+        cells_per_bus: u16,
+    },
+    /// Hops of each cell by id, as the skin's initialisation enumerated them; cells not in
+    /// it count as the root.
+    Listed(HashMap<u16, u16>),
+}
+
+impl PathModel {
+    /// The bus model's latencies with these positions.
+    pub fn bus_model(hops: Positions) -> PathModel {
+        PathModel {
+            processing_ns: PROCESSING_NS,
+            hop_latency_ns: HOP_LATENCY_NS,
+            hops,
+        }
+    }
+
+    /// Hops between `cell_id` and its root.
+    pub fn hops(&self, cell_id: u16) -> u16 {
+        match &self.hops {
+            Positions::Unknown => 0,
+            Positions::Numbered { cells_per_bus } => {
+                cell_id.saturating_sub(1) % (*cells_per_bus).max(1)
+            }
+            Positions::Listed(map) => map.get(&cell_id).copied().unwrap_or(0),
+        }
+    }
+
+    /// Latency from `cell_id`'s sample to its first start bit at the pin with no queue, ns.
+    pub fn latency_ns(&self, cell_id: u16) -> u64 {
+        self.processing_ns + u64::from(self.hops(cell_id)) * self.hop_latency_ns
+    }
+}
+
+/// One cell's sample clock, learnt from the stamps of its packets.
+#[derive(Debug, Clone)]
+pub struct SampleClockEstimator {
+    path_latency_ns: f64,
+    nominal_period_ns: f64,
+    period_ns: f64,
+    /// Time of sample index 0 plus the path latency, ns after `anchor_ns`.
+    offset_ns: f64,
+    anchor_ns: u64,
+    /// (sample index, stamp - anchor) of the recent packets.
+    window: VecDeque<(i64, i64)>,
+    /// (sample index, stamp - anchor) of unqueued packets, kept however old: dense recently,
+    /// thinned further back.
+    unqueued: VecDeque<(i64, i64)>,
+    last: Option<(i64, u64)>,
+    since_fit: u32,
+    period_learnt: bool,
+}
+
+/// A packet's estimated sample time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SampleTime {
+    /// Estimated sample time, ns of box time.
+    pub sample_time_ns: f64,
+    /// The cell's sample index (0 = its first packet's sample since the estimator began).
+    pub index: i64,
+    /// Whether the cell's own period was learnt (else the nominal one is used).
+    pub period_learnt: bool,
+}
+
+impl SampleClockEstimator {
+    /// An estimator for a cell sampling nominally every `nominal_period_ns` whose packets
+    /// need `path_latency_ns` from the sample to the pin with no queue.
+    pub fn new(nominal_period_ns: f64, path_latency_ns: u64) -> SampleClockEstimator {
+        SampleClockEstimator {
+            path_latency_ns: path_latency_ns as f64,
+            nominal_period_ns,
+            period_ns: nominal_period_ns,
+            offset_ns: 0.0,
+            anchor_ns: 0,
+            window: VecDeque::with_capacity(WINDOW),
+            unqueued: VecDeque::with_capacity(ANCHORS),
+            last: None,
+            since_fit: 0,
+            period_learnt: false,
+        }
+    }
+
+    /// The period in use, ns.
+    pub fn period_ns(&self) -> f64 {
+        self.period_ns
+    }
+
+    /// Starts over (a box reset: the stamps restart).
+    pub fn reset(&mut self) {
+        *self =
+            SampleClockEstimator::new(self.nominal_period_ns, self.path_latency_ns.round() as u64);
+    }
+
+    /// Takes the stamp of the cell's next packet (box time of its first start bit, ns, in
+    /// arrival order) and returns its estimated sample time; `unqueued`: the packet found
+    /// the root's line idle (see [`SampleTimer`]), so its stamp is its sample time plus the
+    /// path latency exactly. A stamp before the previous one (the box was reset) starts the
+    /// estimator over.
+    pub fn push(&mut self, stamp_ns: u64, unqueued: bool) -> SampleTime {
+        if self.last.is_some_and(|(_, s)| stamp_ns < s) {
+            self.reset();
+        }
+        let index = match self.last {
+            None => {
+                self.anchor_ns = stamp_ns;
+                self.offset_ns = 0.0;
+                0
+            }
+            Some((last_index, _)) => {
+                let rel = (stamp_ns - self.anchor_ns) as f64;
+                // Queueing only delays: once the offset sits on the lower envelope, the
+                // index whose grid point lies at most 7/8 of a period before the stamp (up
+                // to 1/8 after, for the fit's own error); before that, the nearest.
+                let margin = if self.window.len() < 2 * REFIT_EVERY as usize {
+                    0.5
+                } else {
+                    0.125
+                };
+                let k = ((rel - self.offset_ns + margin * self.period_ns) / self.period_ns).floor();
+                (k as i64).max(last_index)
+            }
+        };
+        let rel = (stamp_ns - self.anchor_ns) as i64;
+        // Unqueued packets lie on the line, none below it: when one is off, or any packet
+        // below, the line is wrong (a sample index slipped, e.g. in the start-up burst's
+        // long queues), and the estimator starts over from this packet.
+        if !self.unqueued.is_empty() {
+            let residual = rel as f64 - self.offset_ns - self.period_ns * index as f64;
+            // Before the period is learnt the nominal one drifts off: only a gross miss.
+            let limit = if self.period_learnt {
+                RESTART_NS
+            } else {
+                self.period_ns / 8.0
+            };
+            if residual < -limit || (unqueued && residual > limit) {
+                self.reset();
+                return self.push(stamp_ns, unqueued);
+            }
+        }
+        if self.window.len() == WINDOW {
+            self.window.pop_front();
+        }
+        self.window.push_back((index, rel));
+        self.last = Some((index, stamp_ns));
+        self.since_fit += 1;
+        if unqueued {
+            if self.unqueued.len() == ANCHORS {
+                // Thin the older half to every other one: the kept ones span ever more
+                // samples (the period's precision grows with it), the newest stay dense.
+                let mut i = 0;
+                self.unqueued.retain(|_| {
+                    i += 1;
+                    i > ANCHORS / 2 || i % 2 == 1
+                });
+            }
+            self.unqueued.push_back((index, rel));
+            // A cell's drift wanders (temperature): the line holds only over a while.
+            while self
+                .unqueued
+                .front()
+                .is_some_and(|&(_, r)| (rel - r) as f64 > MAX_ANCHOR_AGE_NS)
+            {
+                self.unqueued.pop_front();
+            }
+        }
+        if self.since_fit >= REFIT_EVERY
+            || self.window.len() < 2 * REFIT_EVERY as usize
+            || (unqueued && self.unqueued.len() <= 2)
+        {
+            self.fit();
+        } else if unqueued {
+            self.fit_anchors();
+        } else if self.unqueued.is_empty() {
+            let residual = rel as f64 - self.period_ns * index as f64;
+            self.offset_ns = self.offset_ns.min(residual);
+        }
+        SampleTime {
+            sample_time_ns: self.anchor_ns as f64 + self.offset_ns + self.period_ns * index as f64
+                - self.path_latency_ns,
+            index,
+            period_learnt: self.period_learnt,
+        }
+    }
+
+    /// Refits period and offset: through the unqueued packets where they span enough
+    /// samples, else over the window.
+    fn fit(&mut self) {
+        self.since_fit = 0;
+        let span = |q: &VecDeque<(i64, i64)>| match (q.front(), q.back()) {
+            (Some(a), Some(b)) => b.0 - a.0,
+            _ => 0,
+        };
+        let plausible = |p: f64| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR;
+        if span(&self.unqueued) >= MIN_ANCHOR_SPAN
+            || (self.period_learnt && !self.unqueued.is_empty())
+        {
+            // (Too few unqueued packets for a period: the one learnt before holds.)
+            self.fit_anchors();
+            return;
+        }
+        if span(&self.window) >= MIN_SPAN {
+            if let Some(ls) = least_squares(&self.window).filter(|&p| plausible(p)) {
+                // Then the line through the lowest point of each half: packets that did
+                // not queue lie exactly on the true line.
+                let lowest = |from: usize, to: usize| {
+                    self.window
+                        .range(from..to)
+                        .map(|&(k, r)| (k, r as f64 - ls * k as f64))
+                        .min_by(|a, b| a.1.total_cmp(&b.1))
+                };
+                let half = self.window.len() / 2;
+                let envelope = match (lowest(0, half), lowest(half, self.window.len())) {
+                    (Some((ka, ra)), Some((kb, rb))) if kb - ka >= MIN_SPAN / 2 => {
+                        ls + (rb - ra) / (kb - ka) as f64
+                    }
+                    _ => ls,
+                };
+                self.period_ns = if plausible(envelope) { envelope } else { ls };
+                self.period_learnt = true;
+            }
+        }
+        self.offset_ns = if self.unqueued.is_empty() {
+            self.window
+                .iter()
+                .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
+                .fold(f64::INFINITY, f64::min)
+        } else {
+            self.anchored_offset()
+        };
+    }
+
+    /// Period and offset through the unqueued packets alone (cheap: at most [`ANCHORS`]),
+    /// the period only where they span enough samples.
+    fn fit_anchors(&mut self) {
+        if let (Some(a), Some(b)) = (self.unqueued.front(), self.unqueued.back()) {
+            if b.0 - a.0 >= MIN_ANCHOR_SPAN {
+                if let Some(p) = least_squares(&self.unqueued)
+                    .filter(|&p| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR)
+                {
+                    self.period_ns = p;
+                    self.period_learnt = true;
+                }
+            }
+        }
+        self.offset_ns = self.anchored_offset();
+    }
+
+    /// The unqueued packets lie on the line, up to the tick: the mean of their offsets.
+    fn anchored_offset(&self) -> f64 {
+        self.unqueued
+            .iter()
+            .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
+            .sum::<f64>()
+            / self.unqueued.len().max(1) as f64
+    }
+}
+
+/// Slope of stamps over sample indices by least squares, ns per sample.
+fn least_squares(points: &VecDeque<(i64, i64)>) -> Option<f64> {
+    let &(k0, r0) = points.front()?;
+    let n = points.len() as f64;
+    let (mk, mr) = points.iter().fold((0.0, 0.0), |(a, b), &(k, r)| {
+        (a + (k - k0) as f64 / n, b + (r - r0) as f64 / n)
+    });
+    let (sxy, sxx) = points.iter().fold((0.0, 0.0), |(a, b), &(k, r)| {
+        let dk = (k - k0) as f64 - mk;
+        (a + dk * ((r - r0) as f64 - mr), b + dk * dk)
+    });
+    let slope = sxy / sxx;
+    slope.is_finite().then_some(slope)
+}
+
+/// Sample times of every cell of every box: one [`SampleClockEstimator`] per (box, cell),
+/// and per (box, port) the last stamp, to tell the packets that found the root's line idle
+/// (more than [`BACK_TO_BACK_NS`] after the previous one on the port; records of one port
+/// come in pin order).
+#[derive(Debug, Clone)]
+pub struct SampleTimer {
+    nominal_period_ns: f64,
+    paths: PathModel,
+    cells: HashMap<(u16, u16), SampleClockEstimator>,
+    last_on_port: HashMap<(u16, u8), u64>,
+}
+
+impl SampleTimer {
+    /// Cells sampling nominally at `sample_rate_hz` on paths of `paths`.
+    pub fn new(sample_rate_hz: f64, paths: PathModel) -> SampleTimer {
+        SampleTimer {
+            nominal_period_ns: 1e9 / sample_rate_hz,
+            paths,
+            cells: HashMap::new(),
+            last_on_port: HashMap::new(),
+        }
+    }
+
+    /// The estimated sample time of a packet of `cell_id` on `port` of box `box_id`
+    /// stamped at `stamp_ns` (box time); a port's packets in pin order.
+    pub fn push(&mut self, box_id: u16, port: u8, cell_id: u16, stamp_ns: u64) -> SampleTime {
+        let (period, latency) = (self.nominal_period_ns, self.paths.latency_ns(cell_id));
+        // The port's first packet: whether the line was idle before it is unknown.
+        let unqueued = self
+            .last_on_port
+            .insert((box_id, port), stamp_ns)
+            .is_some_and(|last| stamp_ns >= last && stamp_ns - last > BACK_TO_BACK_NS);
+        self.cells
+            .entry((box_id, cell_id))
+            .or_insert_with(|| SampleClockEstimator::new(period, latency))
+            .push(stamp_ns, unqueued)
+    }
+
+    /// Starts every cell and port of `box_id` over (the box was reset).
+    pub fn reset_box(&mut self, box_id: u16) {
+        self.cells.retain(|&(b, _), _| b != box_id);
+        self.last_on_port.retain(|&(b, _), _| b != box_id);
+    }
+
+    /// Cells followed.
+    pub fn cells(&self) -> usize {
+        self.cells.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// xorshift64*: the tests' own noise, independent of the code under test.
+    struct Noise(u64);
+    impl Noise {
+        fn next(&mut self) -> f64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    struct Cell {
+        phase_ns: f64,
+        period_ns: f64,
+        latency_ns: u64,
+    }
+
+    impl Cell {
+        fn sample_ns(&self, k: u64) -> f64 {
+            self.phase_ns + k as f64 * self.period_ns
+        }
+        /// The box stamp: sample, path, queue, rounded down to the 8 ns tick.
+        fn stamp_ns(&self, k: u64, queue_ns: f64) -> u64 {
+            let t = self.sample_ns(k) + self.latency_ns as f64 + queue_ns;
+            (t / 8.0).floor() as u64 * 8
+        }
+    }
+
+    /// Errors of the estimates against the true sample times, ns, sorted by size.
+    fn errors(cell: &Cell, samples: &[(u64, f64)], nominal_hz: f64) -> Vec<f64> {
+        let mut est = SampleClockEstimator::new(1e9 / nominal_hz, cell.latency_ns);
+        let mut e: Vec<f64> = samples
+            .iter()
+            .map(|&(k, q)| {
+                (est.push(cell.stamp_ns(k, q), false).sample_time_ns - cell.sample_ns(k)).abs()
+            })
+            .collect();
+        e.sort_by(f64::total_cmp);
+        e
+    }
+
+    fn p99(e: &[f64]) -> f64 {
+        e[(e.len() * 99 / 100).min(e.len() - 1)]
+    }
+
+    fn cell(drift_ppm: f64, rate_hz: f64, hops: u64) -> Cell {
+        Cell {
+            phase_ns: 1_234_567.0,
+            period_ns: 1e9 / rate_hz / (1.0 + drift_ppm * 1e-6),
+            latency_ns: PROCESSING_NS + hops * HOP_LATENCY_NS,
+        }
+    }
+
+    #[test]
+    fn data_mode_with_drift_and_queueing_is_within_a_microsecond_after_warm_up() {
+        let mut noise = Noise(0x9E37_79B9_7F4A_7C15);
+        for (drift, rate) in [(100.0, 125.0), (-100.0, 500.0), (37.0, 250.0)] {
+            let c = cell(drift, rate, 65);
+            // Most packets queue 0 to 800 us at the root; one in four finds it empty.
+            let samples: Vec<(u64, f64)> = (0..5_000u64)
+                .map(|k| {
+                    let q = if noise.next() < 0.25 {
+                        0.0
+                    } else {
+                        noise.next() * 800e3
+                    };
+                    (k, q)
+                })
+                .collect();
+            let late: Vec<f64> = {
+                let mut est = SampleClockEstimator::new(1e9 / rate, c.latency_ns);
+                let mut v: Vec<f64> = samples
+                    .iter()
+                    .map(|&(k, q)| {
+                        est.push(c.stamp_ns(k, q), false).sample_time_ns - c.sample_ns(k)
+                    })
+                    .skip(WINDOW)
+                    .map(f64::abs)
+                    .collect();
+                v.sort_by(f64::total_cmp);
+                v
+            };
+            assert!(
+                p99(&late) < 1_000.0,
+                "{drift} ppm {rate} Hz p99 {}",
+                p99(&late)
+            );
+            assert!(
+                late[late.len() - 1] < 5_000.0,
+                "max {}",
+                late[late.len() - 1]
+            );
+        }
+    }
+
+    #[test]
+    fn event_mode_gaps_keep_the_sample_index() {
+        // Silent stretches of up to 2 s between bursts; drift 100 ppm at 500 Hz moves the
+        // grid 200 us per 2 s, within an eighth of a period (250 us) of the nominal one.
+        let mut noise = Noise(42);
+        let c = cell(100.0, 500.0, 30);
+        let mut samples = Vec::new();
+        let mut k = 0u64;
+        while samples.len() < 3_000 {
+            let burst = 1 + (noise.next() * 30.0) as u64;
+            for _ in 0..burst {
+                samples.push((k, noise.next() * 100e3));
+                k += 1;
+            }
+            k += (noise.next() * 1_000.0) as u64; // up to 2 s silent
+        }
+        let mut est = SampleClockEstimator::new(2e6, c.latency_ns);
+        let mut first = None;
+        for &(k, q) in &samples {
+            let s = est.push(c.stamp_ns(k, q), false);
+            let k0 = *first.get_or_insert(k);
+            assert_eq!(s.index as u64, k - k0, "sample index lost at {k}");
+        }
+        let e = errors(&c, &samples[200..], 500.0);
+        assert!(p99(&e) < 20e3, "p99 {}", p99(&e));
+    }
+
+    #[test]
+    fn a_silence_longer_than_the_drift_allows_before_the_period_is_learnt_loses_the_index() {
+        // Both sides of the boundary: a second packet after a silence of `gap` periods at
+        // 100 ppm off nominal. The grid moves 1e-4 * gap periods; beyond half a period
+        // (gap > 5000, 10 s at 500 Hz) the nearest index is off by one.
+        for (gap, kept) in [(4_500u64, true), (5_500, false)] {
+            let c = cell(-100.0, 500.0, 0);
+            let mut est = SampleClockEstimator::new(2e6, c.latency_ns);
+            est.push(c.stamp_ns(0, 0.0), false);
+            let s = est.push(c.stamp_ns(gap, 0.0), false);
+            assert_eq!(s.index as u64 == gap, kept, "gap {gap}: index {}", s.index);
+        }
+    }
+
+    #[test]
+    fn a_wrong_hop_latency_shifts_every_sample_by_hops_times_the_error() {
+        let c = cell(0.0, 250.0, 40);
+        // The host believes 0.5 us less per hop than the cells take.
+        let believed = PROCESSING_NS + 40 * (HOP_LATENCY_NS - 500);
+        let mut est = SampleClockEstimator::new(4e6, believed);
+        let mut last = 0.0;
+        for k in 0..1_000 {
+            last = est.push(c.stamp_ns(k, 0.0), false).sample_time_ns - c.sample_ns(k);
+        }
+        assert!((last - 20_000.0).abs() < 16.0, "{last}");
+    }
+
+    #[test]
+    fn unqueued_packets_pin_the_line_through_long_queued_stretches() {
+        // Data mode, 100 ppm off: 100 unqueued packets, then 2,000 queued by 100 to 120 us
+        // (a collision at the root lasting 16 s), then unqueued again.
+        let c = cell(100.0, 125.0, 50);
+        let mut est = SampleClockEstimator::new(8e6, c.latency_ns);
+        let mut worst = 0.0f64;
+        for k in 0..3_000u64 {
+            let queued = (100..2_100).contains(&k);
+            let q = if queued {
+                100e3 + (k % 7) as f64 * 3e3
+            } else {
+                0.0
+            };
+            let s = est.push(c.stamp_ns(k, q), !queued);
+            if k >= 50 {
+                worst = worst.max((s.sample_time_ns - c.sample_ns(k)).abs());
+            }
+        }
+        assert!(worst < 100.0, "worst {worst} ns");
+    }
+
+    #[test]
+    fn a_box_reset_starts_over() {
+        let c = cell(0.0, 250.0, 2);
+        let mut est = SampleClockEstimator::new(4e6, c.latency_ns);
+        for k in 0..100 {
+            est.push(c.stamp_ns(k + 1_000, 0.0), false);
+        }
+        let s = est.push(c.stamp_ns(3, 0.0), false);
+        assert_eq!(s.index, 0);
+        assert!((s.sample_time_ns - c.sample_ns(3)).abs() < 8.0);
+    }
+
+    #[test]
+    fn the_timer_tells_unqueued_packets_by_the_idle_line_before_them() {
+        // Port 0: cell 1 (root) and cell 2 (1 hop) at 250 Hz, cell 2 sampling 40 us before
+        // cell 1: its packet reaches the root (72 us later) 12 us after cell 1's started
+        // and waits 38 us behind it, back to back. Cell 3 on port 1 finds its line idle.
+        let paths =
+            PathModel::bus_model(Positions::Listed(HashMap::from([(1, 0), (2, 1), (3, 0)])));
+        let mut timer = SampleTimer::new(250.0, paths);
+        let (mut worst2, mut worst3) = (0.0f64, 0.0f64);
+        for k in 0..500u64 {
+            let t1 = 1_000_000 + k * 4_000_000;
+            let s1 = t1 + PROCESSING_NS;
+            let s2 = s1 + 50_000; // queued: starts when cell 1's packet ends
+            let e1 = timer.push(7, 0, 1, s1).sample_time_ns - t1 as f64;
+            let e2 = timer.push(7, 0, 2, s2).sample_time_ns - (t1 - 40_000) as f64;
+            let e3 = timer.push(7, 1, 3, s1).sample_time_ns - t1 as f64;
+            assert!(e1.abs() < 1.0, "cell 1 at {k}: {e1}");
+            worst2 = worst2.max(e2.abs());
+            worst3 = worst3.max(e3.abs());
+        }
+        // Cell 2 never shows its own clock: it carries its 38 us of queue.
+        assert!((worst2 - 38_000.0).abs() < 1.0, "{worst2}");
+        assert!(worst3 < 1.0, "{worst3}");
+        assert_eq!(timer.cells(), 3);
+        timer.reset_box(7);
+        assert_eq!(timer.cells(), 0);
+    }
+
+    #[test]
+    fn positions_give_the_hops() {
+        let numbered = PathModel::bus_model(Positions::Numbered { cells_per_bus: 65 });
+        assert_eq!(numbered.hops(1), 0);
+        assert_eq!(numbered.hops(65), 64);
+        assert_eq!(numbered.hops(66), 0);
+        assert_eq!(numbered.latency_ns(67), 20_000 + 52_000);
+        let listed = PathModel::bus_model(Positions::Listed(HashMap::from([(9, 3)])));
+        assert_eq!((listed.hops(9), listed.hops(10)), (3, 0));
+        assert_eq!(
+            PathModel::bus_model(Positions::Unknown).latency_ns(500),
+            20_000
+        );
+    }
+}

@@ -1,0 +1,296 @@
+//! Every record's times, as `skinbox decode` and `skinbox capture` write them: the box time
+//! of its first start bit (the stamp), the estimated box time of its sample
+//! ([`crate::sample_clock`]), and that sample time on the host's clock
+//! ([`crate::clock_map`]), with the mapping's error bound where it has one.
+//!
+//! The host clock is the one the datagrams' receive times are on: CLOCK_REALTIME for a live
+//! capture (the kernel's SO_TIMESTAMPNS) and for its pcap; whatever the writer used for
+//! other pcaps (a co-simulation's are simulated time). Each box has its own map, so the
+//! records of several boxes land on one host time line.
+
+use crate::clock_map::{ClockMap, HostTime, ReceiveStampMap, TimeExchange};
+use crate::decoder::DecodedRecord;
+use crate::sample_clock::{PathModel, SampleTimer};
+use skinbox_protocol::datagram::{Datagram, DatagramKind};
+use std::collections::HashMap;
+use std::time::Duration;
+
+/// Where a record's host time came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HostTimeSource {
+    /// NTP-style exchanges with the box ([`ClockMap`]); with an error bound.
+    Exchanges,
+    /// The datagrams' receive timestamps ([`ReceiveStampMap`]); late by the shortest
+    /// delivery delay, no bound.
+    ReceiveStamps,
+    /// No host time (no exchange, no receive timestamp yet).
+    None,
+}
+
+impl HostTimeSource {
+    /// Name in rows.
+    pub fn name(self) -> &'static str {
+        match self {
+            HostTimeSource::Exchanges => "exchanges",
+            HostTimeSource::ReceiveStamps => "receive_stamps",
+            HostTimeSource::None => "none",
+        }
+    }
+}
+
+/// The times of one record.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecordTimes {
+    /// Estimated box time of the sample, s.
+    pub sample_box_s: f64,
+    /// The sample's host time, ns on the host clock, if mapped.
+    pub sample_host_ns: Option<f64>,
+    /// The mapping's error bound, ns, where it has one.
+    pub host_error_bound_ns: Option<f64>,
+    /// Where the host time came from.
+    pub source: HostTimeSource,
+}
+
+/// How one box's time is mapped to host time, for reports.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BoxTimeSummary {
+    /// The box.
+    pub box_id: u16,
+    /// Which map gives its host times.
+    pub source: HostTimeSource,
+    /// The box oscillator's drift against the host clock, ppm, where measured.
+    pub drift_ppm: Option<f64>,
+    /// Error bound of a host time at the last exchange's box time, ns (exchanges only).
+    pub error_bound_ns: Option<f64>,
+    /// Times the map started over on a box reset.
+    pub restarts: u64,
+}
+
+/// Sample times and host times of every record, per box.
+#[derive(Debug, Clone)]
+pub struct Timing {
+    samples: SampleTimer,
+    exchanges: HashMap<u16, ClockMap>,
+    receive: HashMap<u16, ReceiveStampMap>,
+}
+
+impl Timing {
+    /// Cells sampling nominally at `sample_rate_hz` on paths of `paths`.
+    pub fn new(sample_rate_hz: f64, paths: PathModel) -> Timing {
+        Timing {
+            samples: SampleTimer::new(sample_rate_hz, paths),
+            exchanges: HashMap::new(),
+            receive: HashMap::new(),
+        }
+    }
+
+    /// The next datagram, `payload`, was received at `receive` on the host clock (`None`:
+    /// unknown). Its records were all stamped before it left: its latest record's tick
+    /// against `receive` is a point above the receive-stamp envelope of its box, taken
+    /// before any of its records is mapped. A payload that is no records datagram adds no
+    /// point (the decoder counts it).
+    pub fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
+        let Some(receive) = receive else {
+            return;
+        };
+        let Ok(d) = Datagram::new_checked(payload) else {
+            return;
+        };
+        if d.kind() != DatagramKind::Records {
+            return;
+        }
+        let base = d.base_tick();
+        let latest = d
+            .records()
+            .map(|r| base.saturating_add_signed(i64::from(r.tick_offset())))
+            .max();
+        if let Some(tick) = latest {
+            self.receive
+                .entry(d.box_id())
+                .or_default()
+                .push(tick, receive.as_nanos() as u64);
+        }
+    }
+
+    /// An exchange with box `box_id` of boot id `boot_id` (from the box's "read tick"
+    /// command); its map then takes precedence over receive timestamps.
+    pub fn exchange(
+        &mut self,
+        box_id: u16,
+        boot_id: u32,
+        exchange: TimeExchange,
+    ) -> Result<(), crate::clock_map::ExchangeError> {
+        self.exchanges
+            .entry(box_id)
+            .or_default()
+            .push(boot_id, exchange)
+    }
+
+    /// How each box's time is mapped, by box id.
+    pub fn summary(&self) -> Vec<BoxTimeSummary> {
+        let mut ids: Vec<u16> = self
+            .exchanges
+            .keys()
+            .chain(self.receive.keys())
+            .copied()
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids.into_iter()
+            .map(
+                |box_id| match (self.exchanges.get(&box_id), self.receive.get(&box_id)) {
+                    (Some(m), _) if m.boot_id().is_some() => BoxTimeSummary {
+                        box_id,
+                        source: HostTimeSource::Exchanges,
+                        drift_ppm: m.drift_ppm(),
+                        error_bound_ns: m.last_bound_ns(),
+                        restarts: m.restarts(),
+                    },
+                    (_, Some(r)) => BoxTimeSummary {
+                        box_id,
+                        source: HostTimeSource::ReceiveStamps,
+                        drift_ppm: r.drift_ppm(),
+                        error_bound_ns: None,
+                        restarts: r.restarts(),
+                    },
+                    _ => BoxTimeSummary {
+                        box_id,
+                        source: HostTimeSource::None,
+                        drift_ppm: None,
+                        error_bound_ns: None,
+                        restarts: 0,
+                    },
+                },
+            )
+            .collect()
+    }
+
+    /// The times of `record` (records in datagram order).
+    pub fn record(&mut self, record: &DecodedRecord) -> RecordTimes {
+        let stamp_ns = record.tick * skinbox_protocol::TICK_NS;
+        let sample = self
+            .samples
+            .push(record.box_id, record.port, record.cell.cell_id(), stamp_ns);
+        let sample_box_ns = sample.sample_time_ns;
+        let (host, source) = match self
+            .exchanges
+            .get(&record.box_id)
+            .and_then(|m| m.ns_to_host(sample_box_ns))
+        {
+            Some(h) => (Some(h), HostTimeSource::Exchanges),
+            None => match self.receive.get(&record.box_id).and_then(|m| {
+                // The receive map is linear: the sample's host time is the stamp's less
+                // the stamp-to-sample interval.
+                m.to_host(record.tick).map(|h| HostTime {
+                    host_ns: h.host_ns - (stamp_ns as f64 - sample_box_ns),
+                    error_bound_ns: None,
+                })
+            }) {
+                Some(h) => (Some(h), HostTimeSource::ReceiveStamps),
+                None => (None, HostTimeSource::None),
+            },
+        };
+        RecordTimes {
+            sample_box_s: sample_box_ns * 1e-9,
+            sample_host_ns: host.map(|h| h.host_ns),
+            host_error_bound_ns: host.and_then(|h| h.error_bound_ns),
+            source,
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::sample_clock::Positions;
+    use skinbox_protocol::{CellRepr, DataRepr};
+
+    fn record(box_id: u16, cell: u16, tick: u64) -> DecodedRecord {
+        DecodedRecord {
+            box_id,
+            datagram_sequence: 0,
+            port: 0,
+            flags: 0,
+            tick,
+            cell: CellRepr::Data(DataRepr::from_raw(cell, [0; 9]).unwrap()),
+            event_packets_missing_before: 0,
+        }
+    }
+
+    /// A records datagram of box `box_id` holding one record of `cell` at each tick.
+    pub(crate) fn datagram(box_id: u16, cell: u16, ticks: &[u64]) -> Vec<u8> {
+        use skinbox_protocol::datagram::DatagramBody;
+        use skinbox_protocol::{DatagramRepr, RecordRepr};
+        let base = ticks.iter().copied().min().unwrap_or(0);
+        DatagramRepr {
+            box_id,
+            port_count: 1,
+            flags: 0,
+            sequence: 0,
+            base_tick: base,
+            body: DatagramBody::Records(
+                ticks
+                    .iter()
+                    .map(|&t| RecordRepr {
+                        port: 0,
+                        flags: 0,
+                        tick_offset: (t - base) as i32,
+                        cell_packet: DataRepr::from_raw(cell, [0; 9]).unwrap().to_bytes(),
+                    })
+                    .collect(),
+            ),
+        }
+        .to_bytes()
+    }
+
+    #[test]
+    fn two_boxes_land_on_one_host_time_line() {
+        // Box 1 was reset 10 s before box 2 (host clock): the same host instant is 10 s
+        // more box time on box 1. Each datagram is received 40 us after its latest record
+        // (100 us after the first).
+        let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
+        let host_ns = 100_000_000_000u64;
+        for (box_id, box_ns) in [(1u16, 30_000_000_000u64), (2, 20_000_000_000)] {
+            let ticks = [box_ns / 8, (box_ns + 60_000) / 8];
+            let payload = datagram(box_id, 5, &ticks);
+            t.datagram_received(Some(Duration::from_nanos(host_ns + 100_000)), &payload);
+            let times = t.record(&record(box_id, 5, box_ns / 8));
+            // Sample 20 us (processing) before the stamp, host time 40 us late.
+            let expected = (host_ns - 20_000 + 40_000) as f64;
+            let got = times.sample_host_ns.unwrap();
+            assert!(
+                (got - expected).abs() < 1.0,
+                "box {box_id}: {got} vs {expected}"
+            );
+            assert_eq!(times.source, HostTimeSource::ReceiveStamps);
+            assert_eq!(times.host_error_bound_ns, None);
+        }
+    }
+
+    #[test]
+    fn exchanges_take_precedence_and_carry_their_bound() {
+        let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
+        t.exchange(
+            3,
+            9,
+            TimeExchange {
+                host_send_ns: 1_000_000,
+                box_receive_tick: 1_000,
+                box_send_tick: 1_001,
+                host_receive_ns: 1_100_008,
+            },
+        )
+        .unwrap();
+        t.datagram_received(None, &datagram(3, 1, &[10_000]));
+        let times = t.record(&record(3, 1, 10_000));
+        assert_eq!(times.source, HostTimeSource::Exchanges);
+        assert!(times.host_error_bound_ns.unwrap() >= 50_000.0);
+        assert_eq!(
+            Timing::new(250.0, PathModel::bus_model(Positions::Unknown))
+                .record(&record(3, 1, 10_000))
+                .source,
+            HostTimeSource::None
+        );
+    }
+}
