@@ -1,10 +1,11 @@
 //! BodyReader: streams a datagram body out of a block RAM.
 //!
-//! On `start` it takes `length` and reads the RAM from address 0 on, one read per clock
+//! On `start` it takes `length` (a clock later, so `start` drives two flip-flops and
+//! nothing else: `length` must hold for that clock) and reads the RAM from address 0 on, one read per clock
 //! while its [`StreamFifo`] has room for every read in flight (a read takes
 //! [`READ_LATENCY`] clocks), so the body stream's `ready` reaches the FIFO only and a
 //! consumer that takes one beat per clock is never starved once the first beats arrived
-//! (three clocks after `start`). `busy` holds from the clock after `start` until the last
+//! (four clocks after `start`). `busy` holds from the clock after `start` until the last
 //! beat was taken: the owner may write the RAM again when it falls. It is a register (set
 //! by `start`, cleared by the last beat), so an owner's decisions on it start at a
 //! flip-flop.
@@ -41,6 +42,8 @@ pub struct BodyReader {
     pub busy: Signal<Out, Bit>,
     fifo: StreamFifo,
     reading: DFF<Bit>,
+    // `start` a clock ago: the reads begin
+    starting: DFF<Bit>,
     fifo_depth: Constant<Bits<3>>,
     address: DFF<Bits<BODY_ADDRESS_BITS>>,
     // reads still to issue
@@ -66,6 +69,7 @@ impl Default for BodyReader {
             busy: Default::default(),
             fifo: Default::default(),
             reading: Default::default(),
+            starting: Default::default(),
             fifo_depth: Constant::new((FIFO_DEPTH as u64).into()),
             address: Default::default(),
             left: Default::default(),
@@ -90,7 +94,8 @@ impl Logic for BodyReader {
             read_1_last,
             read_2,
             read_2_last,
-            reading
+            reading,
+            starting
         );
         self.fifo.clock.next = self.clock.val();
         self.fifo.reset.next = self.reset.val();
@@ -104,7 +109,8 @@ impl Logic for BodyReader {
             self.address.d.next = self.address.q.val() + 1;
             self.left.d.next = self.left.q.val() - 1;
         }
-        if self.start.val() {
+        self.starting.d.next = self.start.val();
+        if self.starting.q.val() {
             self.address.d.next = 0.into();
             self.left.d.next = self.length.val();
         }
@@ -127,12 +133,14 @@ impl Logic for BodyReader {
         if self.fifo.beats_out.valid.val() & self.fifo.beats_out.last.val() & self.body.ready.val()
         {
             self.reading.d.next = false;
+            self.starting.d.next = false;
         }
         if self.start.val() {
             self.reading.d.next = true;
         }
         if self.reset.val() {
             self.reading.d.next = false;
+            self.starting.d.next = false;
             self.left.d.next = 0.into();
             self.read_1.d.next = false;
             self.read_2.d.next = false;
@@ -194,8 +202,8 @@ mod tests {
                 }
                 assert_eq!(got, ram[..len], "length {len}");
                 if take_p == 1.0 {
-                    // three clocks to the first beat, then one per clock
-                    assert_eq!(clocks, len + 3, "length {len}");
+                    // four clocks to the first beat, then one per clock
+                    assert_eq!(clocks, len + 4, "length {len}");
                 }
             }
         }

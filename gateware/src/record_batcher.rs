@@ -84,6 +84,8 @@ pub struct RecordBatcher {
     pending_sum: DFF<Bits<32>>,
     pending_base_tick: DFF<Bits<64>>,
     pending_flags: DFF<Bits<8>>,
+    // the descriptor was taken a clock ago
+    counting: DFF<Bit>,
     datagram_count: DFF<Bits<32>>,
     record_count: DFF<Bits<32>>,
     record_tick: Signal<Local, Bits<32>>,
@@ -156,6 +158,7 @@ impl RecordBatcher {
             pending_sum: Default::default(),
             pending_base_tick: Default::default(),
             pending_flags: Default::default(),
+            counting: Default::default(),
             datagram_count: Default::default(),
             record_count: Default::default(),
             record_tick: Default::default(),
@@ -209,6 +212,7 @@ impl Logic for RecordBatcher {
             pending_sum,
             pending_base_tick,
             pending_flags,
+            counting,
             datagram_count,
             record_count,
             memory_write,
@@ -367,6 +371,11 @@ impl Logic for RecordBatcher {
         self.reader.length.next = self.pending_len.q.val();
         if self.taken.val() {
             self.pending.d.next = false;
+        }
+        // counted a clock after the take (`pending_count` holds: no datagram closes while
+        // the reader is busy), so the counters' enable comes from a register
+        self.counting.d.next = self.taken.val();
+        if self.counting.q.val() {
             self.datagram_count.d.next = self.datagram_count.q.val() + 1;
             self.record_count.d.next =
                 self.record_count.q.val() + bit_cast::<32, 6>(self.pending_count.q.val());
@@ -397,6 +406,7 @@ impl Logic for RecordBatcher {
             self.beat_last.d.next = false;
             self.offset_left.d.next = 0.into();
             self.pending.d.next = false;
+            self.counting.d.next = false;
             self.datagram_count.d.next = 0.into();
             self.record_count.d.next = 0.into();
         }
@@ -498,6 +508,9 @@ mod tests {
         let mut taken = vec![];
         let mut out: Vec<Batch> = vec![];
         let mut offered_since: Option<u64> = None;
+        // clocks the descriptors were taken: each is counted from two clocks later on
+        // (the reference model's status words rely on that clock)
+        let mut take_clocks: Vec<u64> = vec![];
         // descriptor taken: (entries, length, sum, body so far)
         let mut open: Option<(usize, usize, u64, Vec<u8>)> = None;
         for clock in 0..clocks {
@@ -515,6 +528,8 @@ mod tests {
             u.datagrams.body.ready.next = take_body;
             bench.settle();
             let u = &bench.uut;
+            let counted = take_clocks.iter().filter(|&&t| t + 2 <= clock).count();
+            assert_eq!(u.datagrams_sent.val().index(), counted, "clock {clock}");
             if offer && u.records.ready.val() {
                 if beat == 0 {
                     taken.push(clock);
@@ -560,6 +575,7 @@ mod tests {
                             records: vec![],
                         });
                         offered_since = None;
+                        take_clocks.push(clock);
                     }
                 }
             }

@@ -199,6 +199,9 @@ impl Logic for StatusReporter {
         self.memory.read_address.next = self.reader.read_address.val();
         self.reader.read_data.next = self.memory.read_data.val();
         self.reader.start.next = self.requesting.q.val() & self.datagrams.ready.val();
+        if self.requesting.q.val() & self.datagrams.ready.val() {
+            self.requesting.d.next = false;
+        }
         self.reader.length.next = self.offset.q.val();
         self.datagrams.body.valid.next = self.reader.body.valid.val();
         self.datagrams.body.data.next = self.reader.body.data.val();
@@ -279,9 +282,10 @@ impl Logic for StatusReporter {
                 }
             }
             ReportState::Request => {
-                if self.datagrams.ready.val() {
+                // taken a clock ago (the state's enable comes from a register, not from
+                // the arbiter's grant; the reader is busy from the clock after the take)
+                if !self.requesting.q.val() {
                     self.state.d.next = ReportState::Sending;
-                    self.requesting.d.next = false;
                 }
             }
             ReportState::Sending => {

@@ -512,7 +512,8 @@ impl<'a> Back<'a> {
             if let DatagramBody::Records(r) = &d.body {
                 self.records_sent += r.len() as u64;
             }
-            self.started_records.push((c + 1, self.records_sent));
+            // (the batcher counts it a clock after the take)
+            self.started_records.push((c + 2, self.records_sent));
             d.sequence = self.sequence;
             self.records_body_until = self.send(c, d);
             self.last_grant_records = true;
