@@ -36,7 +36,6 @@ pub mod rate;
 pub mod replay;
 pub mod report;
 pub mod sequence;
-pub mod synth;
 pub mod wireshark;
 
 pub use bad_input::BadInput;
