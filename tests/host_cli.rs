@@ -1,8 +1,8 @@
 //! The host subcommands as a user runs them: stats, decode, and replay into capture on
 //! loopback, checked against the library's decoding of the same pcap.
 
+use skinbox_cosim::synth::{self, SynthConfig};
 use skinbox_host::pcap::{decode_pcap_file, PcapFrameWriter, PcapOptions};
-use skinbox_host::synth::{self, SynthConfig};
 use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -24,9 +24,10 @@ fn scene_pcap(name: &str) -> (PathBuf, usize) {
     let capture = synth::generate(&SynthConfig {
         cells: 50,
         samples_per_cell: 40,
-        status_every: 10,
+        status_period_ticks: 2_500_000,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let path = temp_path(name);
     let file = std::fs::File::create(&path).unwrap();
     let mut w = PcapFrameWriter::new(std::io::BufWriter::new(file)).unwrap();
@@ -353,7 +354,8 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
             box_id,
             seed: u64::from(box_id),
             ..SynthConfig::default()
-        });
+        })
+        .unwrap();
         let src: SocketAddr = format!("127.0.0.{box_id}:5000").parse().unwrap();
         for p in capture.payloads() {
             let d = DatagramRepr::parse(&p).unwrap();

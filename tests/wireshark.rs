@@ -5,8 +5,8 @@
 //! tshark comes from Debian (scripts/test installs it); the ADwin heuristic stays on.
 
 use serde_json::Value;
+use skinbox_cosim::synth::{self, SynthConfig};
 use skinbox_host::pcap::PcapFrameWriter;
-use skinbox_host::synth::{self, SynthConfig};
 use skinbox_protocol::{Channel, DatagramRepr};
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -317,9 +317,10 @@ fn synthetic_data_and_event_capture_on_another_port_is_found_by_the_heuristic() 
     let capture = synth::generate(&SynthConfig {
         cells: 40,
         samples_per_cell: 30,
-        status_every: 7,
+        status_period_ticks: 2_500_000,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let pcap = dir.join("synthetic.pcap");
     // not the box's port: only the heuristic (on the magic and the length) can claim these
     write_pcap(
@@ -623,12 +624,28 @@ fn expert_infos_mark_exactly_the_injected_gaps() {
         cells: 40,
         samples_per_cell: 200,
         event_every: 1,
-        status_every: 5,
+        status_period_ticks: 2_500_000,
         first_sequence: u32::MAX - 20,
         ..SynthConfig::default()
-    });
-    let removed = [3usize, 10, 11, 12, 40];
-    assert!(capture.datagrams.len() > 60);
+    })
+    .unwrap();
+    // around the wrap of the numbering (at datagram 21), and from the middle on, where
+    // every event cell has sent before
+    assert!(capture.datagrams.len() > 200);
+    let middle = capture.datagrams.len() / 2;
+    let removed = [
+        3usize,
+        10,
+        11,
+        12,
+        20,
+        21,
+        40,
+        middle,
+        middle + 7,
+        middle + 8,
+        middle + 9,
+    ];
     let kept: Vec<&DatagramRepr> = capture
         .datagrams
         .iter()
@@ -724,46 +741,60 @@ fn expert_infos_mark_a_box_reset_a_late_and_a_duplicate_datagram() {
     let before = synth::generate(&SynthConfig {
         cells: 20,
         samples_per_cell: 20,
-        status_every: 4,
+        status_period_ticks: 2_500_000,
         first_sequence: 100_000,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     // the box restarts: a new boot id, the numbering from 0, ticks from near 0
     let after = synth::generate(&SynthConfig {
         cells: 20,
         samples_per_cell: 150,
-        status_every: 4,
+        status_period_ticks: 2_500_000,
         first_sequence: 0,
         boot_id: 0x5eed_0002,
         start_tick: 1000,
         seed: 2,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     // then its clock alone restarts: numbering goes on, base ticks fall 1.2 s back (a box
     // whose status reports were lost); its boot id stays the same
     let last = after.datagrams.last().unwrap().sequence;
     let again = synth::generate(&SynthConfig {
         cells: 20,
         samples_per_cell: 5,
-        status_every: 0,
+        status_period_ticks: 0,
         first_sequence: last.wrapping_add(1),
         boot_id: 0x5eed_0002,
         start_tick: 1000,
         seed: 3,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
+    // the box reports at reset; this one's reporter is late (an edit of the box's capture):
+    // its first report goes after its first three records datagrams, the four numbered in
+    // that order, so the numbering restarts before the new boot id arrives
+    let mut after_datagrams = after.datagrams.clone();
+    assert_eq!(
+        after_datagrams[0].kind(),
+        skinbox_protocol::DatagramKind::Status
+    );
+    after_datagrams[..4].rotate_left(1);
+    for (n, d) in after_datagrams[..4].iter_mut().enumerate() {
+        d.sequence = n as u32;
+    }
     let mut payloads = before.payloads();
     // the third datagram arrives after the fourth, and the fifth twice
     payloads.swap(2, 3);
     payloads.insert(5, payloads[4].clone());
     let restart_frame = payloads.len() as u64 + 1;
-    let first_status_after = after
-        .datagrams
+    let first_status_after = after_datagrams
         .iter()
         .position(|d| d.kind() == skinbox_protocol::DatagramKind::Status)
         .unwrap() as u64
         + restart_frame;
-    payloads.extend(after.payloads());
+    payloads.extend(after_datagrams.iter().map(|d| d.to_bytes()));
     let clock_restart_frame = payloads.len() as u64 + 1;
     payloads.extend(again.payloads());
     let pcap = dir.join("reset.pcap");

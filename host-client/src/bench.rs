@@ -6,7 +6,6 @@ use crate::live::{self, CaptureLimits, CaptureStats};
 use crate::pcap::PcapFrameWriter;
 use crate::replay::{self, Pacing, ReplaySummary};
 use crate::report::Report;
-use crate::synth::{self, SynthConfig};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::net::{SocketAddr, UdpSocket};
@@ -38,41 +37,35 @@ pub struct DecodeBench {
     pub goal_packets_per_second: f64,
 }
 
-/// A capture of at least `min_packets` cell packets, half the cells in data mode and half
-/// in event mode, as UDP payloads.
-pub fn realistic_payloads(min_packets: usize, seed: u64) -> (Vec<Vec<u8>>, synth::SynthCapture) {
-    let mut config = SynthConfig {
-        cells: 2_000,
-        ports: 32,
-        samples_per_cell: 400,
-        event_every: 2,
-        seed,
-        status_every: 800,
-        ..SynthConfig::default()
-    };
-    loop {
-        let capture = synth::generate(&config);
-        let have = capture.cell_packets().max(1);
-        if have >= min_packets {
-            return (capture.payloads(), capture);
-        }
-        // Packets grow with samples: scale once, with a margin for the random walk.
-        let scale = min_packets as f64 / have as f64 * 1.05;
-        config.samples_per_cell = (f64::from(config.samples_per_cell) * scale).ceil() as u32;
+/// A capture to benchmark with: its datagrams as UDP payloads, and the cell packets in it.
+#[derive(Debug, Clone, Default)]
+pub struct BenchPayloads {
+    /// UDP payloads in sending order.
+    pub payloads: Vec<Vec<u8>>,
+    /// Data packets among their records.
+    pub data_packets: u64,
+    /// Event packets among their records.
+    pub event_packets: u64,
+}
+
+impl BenchPayloads {
+    /// Cell packets in the capture.
+    pub fn cell_packets(&self) -> u64 {
+        self.data_packets + self.event_packets
     }
 }
 
-/// Decodes an in-memory capture of at least `min_packets` cell packets `rounds` times with
-/// a fresh decoder each time and reports the fastest round.
-pub fn bench_decode(min_packets: usize, rounds: u32) -> DecodeBench {
-    let (payloads, capture) = realistic_payloads(min_packets, 7);
+/// Decodes an in-memory capture `rounds` times with a fresh decoder each time and reports
+/// the fastest round.
+pub fn bench_decode(capture: &BenchPayloads, rounds: u32) -> DecodeBench {
+    let payloads = &capture.payloads;
     let bytes = payloads.iter().map(|p| p.len() as u64).sum();
     let mut best = f64::INFINITY;
     let mut decoded = 0;
     for _ in 0..rounds.max(1) {
         let mut decoder = Decoder::new(DecoderConfig::default());
         let cpu = crate::thread_cpu_ns();
-        for p in &payloads {
+        for p in payloads {
             decoder.push_datagram(p, &mut ());
         }
         let s = crate::thread_cpu_ns().saturating_sub(cpu) as f64 * 1e-9;
@@ -299,6 +292,19 @@ pub struct LiveBenchConfig {
     pub buffer_rate: f64,
 }
 
+impl LiveBenchConfig {
+    /// Cell packets the capture of [`bench_live`] needs: one step at the highest rate.
+    pub fn packets_needed(&self) -> usize {
+        let max_rate = self
+            .rates
+            .iter()
+            .chain([&self.buffer_rate])
+            .cloned()
+            .fold(0.0, f64::max);
+        (max_rate * self.step_s).ceil() as usize + 1
+    }
+}
+
 impl Default for LiveBenchConfig {
     fn default() -> Self {
         LiveBenchConfig {
@@ -381,18 +387,17 @@ fn live_step(
     })
 }
 
-/// Replays full datagrams (55 records) on loopback at rising record rates, `step_s`
-/// seconds each, in bursts of [`SENDER_BURST`], to each receiver in turn, until a step
-/// loses datagrams or the rates run out; then, if asked, the receive buffer sweep.
-pub fn bench_live(config: &LiveBenchConfig) -> Result<LiveBench, LoopbackError> {
-    let max_rate = config
-        .rates
-        .iter()
-        .chain([&config.buffer_rate])
-        .cloned()
-        .fold(0.0, f64::max);
-    let (payloads, capture) =
-        realistic_payloads((max_rate * config.step_s).ceil() as usize + 1, 11);
+/// Replays the datagrams of `capture` (nearly all full: 55 records) on loopback at rising
+/// record rates, `step_s` seconds each, in bursts of [`SENDER_BURST`], to each receiver in
+/// turn, until a step loses datagrams or the rates run out; then, if asked, the receive
+/// buffer sweep.
+///
+/// `capture` holds at least [`LiveBenchConfig::packets_needed`] cell packets.
+pub fn bench_live(
+    config: &LiveBenchConfig,
+    capture: &BenchPayloads,
+) -> Result<LiveBench, LoopbackError> {
+    let payloads = &capture.payloads;
     let per_datagram = capture.cell_packets() as f64 / payloads.len().max(1) as f64;
     let mut steps = Vec::new();
     let mut best = BTreeMap::new();
@@ -405,7 +410,7 @@ pub fn bench_live(config: &LiveBenchConfig) -> Result<LiveBench, LoopbackError> 
         let name = format!("{batch}/{}", coalesce.as_micros());
         best.insert(name.clone(), 0.0f64);
         for &rate in &config.rates {
-            let step = live_step(&payloads, per_datagram, rate, config.step_s, receiver)?;
+            let step = live_step(payloads, per_datagram, rate, config.step_s, receiver)?;
             let lossless = step.lossless;
             if lossless {
                 let b = best.entry(name.clone()).or_insert(0.0);
@@ -431,7 +436,7 @@ pub fn bench_live(config: &LiveBenchConfig) -> Result<LiveBench, LoopbackError> 
             recv_buffer_bytes: bytes,
         };
         let step = live_step(
-            &payloads,
+            payloads,
             per_datagram,
             config.buffer_rate,
             config.step_s,

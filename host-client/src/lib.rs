@@ -38,7 +38,6 @@ pub mod replay;
 pub mod report;
 pub mod sample_clock;
 pub mod sequence;
-pub mod synth;
 pub mod timing;
 pub mod wireshark;
 

@@ -116,7 +116,8 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
             Ok(())
         }
         BenchCommand::Decode(a) => {
-            let r = skinbox_host::bench::bench_decode(a.packets, a.rounds);
+            let capture = skinbox_cosim::synth::bench_payloads(a.packets, 7)?;
+            let r = skinbox_host::bench::bench_decode(&capture, a.rounds);
             if json {
                 return super::print_json(&r);
             }
@@ -148,14 +149,16 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 .zip(&a.coalesce_us)
                 .map(|(b, us)| (*b, std::time::Duration::from_micros(*us)))
                 .collect();
-            let r = skinbox_host::bench::bench_live(&skinbox_host::bench::LiveBenchConfig {
+            let config = skinbox_host::bench::LiveBenchConfig {
                 rates: a.rates,
                 step_s: a.step_s,
                 receivers,
                 recv_buffer_bytes: a.recv_buffer,
                 recv_buffers: a.recv_buffers,
                 buffer_rate: a.buffer_rate,
-            })?;
+            };
+            let capture = skinbox_cosim::synth::bench_payloads(config.packets_needed(), 11)?;
+            let r = skinbox_host::bench::bench_live(&config, &capture)?;
             if json {
                 return super::print_json(&r);
             }

@@ -1,6 +1,6 @@
 //! Loss detection: drop, duplicate and reorder datagrams, reset the box; exact counts.
 
-use skinbox_host::synth::{self, SynthCapture, SynthConfig};
+use skinbox_cosim::synth::{self, SynthCapture, SynthConfig};
 use skinbox_host::{DecodedRecord, Decoder, DecoderConfig, Report};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{CellFraming, CellRepr};
@@ -11,11 +11,12 @@ fn capture(boot_id: u32, first_sequence: u32) -> SynthCapture {
         cells: 60,
         samples_per_cell: 60,
         event_every: 3,
-        status_every: 0,
+        status_period_ticks: 0,
         boot_id,
         first_sequence,
         ..SynthConfig::default()
     })
+    .unwrap()
 }
 
 fn decode(payloads: &[Vec<u8>]) -> (Report, Vec<DecodedRecord>) {
@@ -168,16 +169,16 @@ fn box_reset_is_counted_from_the_boot_id() {
     let mut config = SynthConfig {
         cells: 20,
         samples_per_cell: 30,
-        status_every: 4,
+        status_period_ticks: 2_500_000,
         boot_id: 0xaaaa_0001,
         first_sequence: 0,
         ..SynthConfig::default()
     };
-    let before = synth::generate(&config);
+    let before = synth::generate(&config).unwrap();
     // The box restarts: a new boot id, sequence numbers and counters from zero.
     config.boot_id = 0xbbbb_0002;
     config.seed = 2;
-    let after = synth::generate(&config);
+    let after = synth::generate(&config).unwrap();
     // The new boot's first status comes first (the box reports at reset).
     let mut payloads = before.payloads();
     let mut next = after.payloads();
@@ -223,11 +224,25 @@ impl skinbox_host::RecordSink for Pairs {
 #[test]
 fn event_gaps_make_the_converter_mark_channels_stale() {
     let c = capture(1, 0);
+    // drop the first datagram from the middle of the capture on that carries an event
+    // packet (every event cell has sent before)
+    let is_event = |p: &[u8; 20]| {
+        matches!(
+            CellRepr::parse(p, &CellFraming::DEFAULT),
+            Ok(CellRepr::Event(_))
+        )
+    };
+    let dropped = (c.datagrams.len() / 2..c.datagrams.len())
+        .find(|&i| match &c.datagrams[i].body {
+            DatagramBody::Records(records) => records.iter().any(|r| is_event(&r.cell_packet)),
+            DatagramBody::Status(_) => false,
+        })
+        .expect("a datagram with an event packet");
     let kept: Vec<Vec<u8>> = c
         .payloads()
         .into_iter()
         .enumerate()
-        .filter(|(i, _)| *i != 6)
+        .filter(|(i, _)| *i != dropped)
         .map(|(_, p)| p)
         .collect();
     let mut d = Decoder::new(DecoderConfig::default());
@@ -274,9 +289,10 @@ fn duplicate_status_datagrams_are_skipped() {
     let c = synth::generate(&SynthConfig {
         cells: 10,
         samples_per_cell: 30,
-        status_every: 2,
+        status_period_ticks: 2_500_000,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let mut payloads = c.payloads();
     let status_at = c
         .datagrams
@@ -302,19 +318,27 @@ fn box_reset_before_its_status_arrives_loses_nothing() {
     let mut config = SynthConfig {
         cells: 20,
         samples_per_cell: 30,
-        status_every: 4,
+        status_period_ticks: 2_500_000,
         boot_id: 0xaaaa_0001,
         ..SynthConfig::default()
     };
-    let before = synth::generate(&config);
+    let before = synth::generate(&config).unwrap();
     config.boot_id = 0xbbbb_0002;
     config.seed = 2;
     config.start_tick = 1_000; // the box's clock starts again too
-    let after = synth::generate(&config);
-    // In sending order: the new boot's first records datagrams reuse numbers 0.. that the
-    // old boot used, before the new boot's first status report says so.
+    let after = synth::generate(&config).unwrap();
+    // The box reports at reset; this one's reporter is late (an edit of the box's
+    // capture): its first report goes after its first three records datagrams, the four
+    // numbered in that order. So the new boot's first records datagrams reuse numbers 0..
+    // that the old boot used, before the new boot's first status report says so.
+    let mut next = after.datagrams.clone();
+    assert!(matches!(next[0].body, DatagramBody::Status(_)));
+    next[..4].rotate_left(1);
+    for (n, d) in next[..4].iter_mut().enumerate() {
+        d.sequence = n as u32;
+    }
     let mut payloads = before.payloads();
-    payloads.extend(after.payloads());
+    payloads.extend(next.iter().map(|d| d.to_bytes()));
     let (r, records) = decode(&payloads);
     assert_eq!(records.len(), before.truth.len() + after.truth.len());
     let l = &r.losses;

@@ -2,8 +2,8 @@
 //! flipped, truncated or extended (the fuzz target's check, as a property test).
 
 use proptest::prelude::*;
+use skinbox_cosim::synth::{self, SynthConfig};
 use skinbox_host::pcap::{decode_pcap_bytes, PcapOptions};
-use skinbox_host::synth::{self, SynthConfig};
 use skinbox_host::{DecodedRecord, Decoder, DecoderConfig, RecordSink, Sample};
 
 struct Samples(u64);
@@ -22,9 +22,10 @@ fn valid_payloads() -> Vec<Vec<u8>> {
     synth::generate(&SynthConfig {
         cells: 12,
         samples_per_cell: 12,
-        status_every: 2,
+        status_period_ticks: 2_500_000,
         ..SynthConfig::default()
     })
+    .unwrap()
     .payloads()
 }
 

@@ -3,9 +3,9 @@
 
 use etherparse::PacketBuilder;
 use pcap_file::pcap::{PcapPacket, PcapWriter};
+use skinbox_cosim::synth::{self, SynthConfig};
 use skinbox_host::bad_input::{FormatFault, FrameFault, Reason};
 use skinbox_host::pcap::{decode_pcap_bytes, PcapOptions};
-use skinbox_host::synth::{self, SynthConfig};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{CellFraming, CellRepr, DatagramRepr};
 use std::time::Duration;
@@ -50,7 +50,8 @@ fn every_record_decodes_to_what_was_emitted() {
         cells: 40,
         samples_per_cell: 30,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let mut frames: Vec<Vec<u8>> = capture
         .payloads()
         .iter()
@@ -98,9 +99,10 @@ fn bad_input_is_counted_by_reason() {
     let capture = synth::generate(&SynthConfig {
         cells: 8,
         samples_per_cell: 10,
-        status_every: 0,
+        status_period_ticks: 0,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let good = capture.payloads();
     let mut frames: Vec<Vec<u8>> = good.iter().map(|p| udp_frame(BOX_PORT, 6_000, p)).collect();
     let sample = good[0].clone();
@@ -162,9 +164,10 @@ fn port_filter_skips_other_traffic() {
     let capture = synth::generate(&SynthConfig {
         cells: 4,
         samples_per_cell: 5,
-        status_every: 0,
+        status_period_ticks: 0,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let mut frames: Vec<Vec<u8>> = capture
         .payloads()
         .iter()
@@ -195,9 +198,10 @@ fn status_datagrams_give_counter_deltas() {
     let capture = synth::generate(&SynthConfig {
         cells: 16,
         samples_per_cell: 40,
-        status_every: 3,
+        status_period_ticks: 2_500_000,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let statuses: Vec<_> = capture
         .datagrams
         .iter()
@@ -276,9 +280,10 @@ fn corrupted_payload_with_stale_checksum_is_refused_and_counted() {
     let capture = synth::generate(&SynthConfig {
         cells: 40,
         samples_per_cell: 10,
-        status_every: 0,
+        status_period_ticks: 0,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let payloads = capture.payloads();
     assert!(payloads.len() >= 4);
     let mut frames: Vec<Vec<u8>> = payloads
@@ -335,7 +340,8 @@ fn linux_cooked_captures_decode_like_ethernet() {
         cells: 10,
         samples_per_cell: 10,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let ethernet: Vec<Vec<u8>> = capture
         .payloads()
         .iter()

@@ -1,10 +1,10 @@
 //! The live path on loopback: a pcap is replayed to a capture on 127.0.0.1:0 and every
 //! record received is compared with the pcap's, one by one.
 
+use skinbox_cosim::synth::{self, SynthConfig};
 use skinbox_host::bench::loopback_run;
 use skinbox_host::pcap::{self, PcapFrameWriter, PcapOptions};
 use skinbox_host::replay::Pacing;
-use skinbox_host::synth::{self, SynthConfig};
 use std::net::SocketAddr;
 use std::time::Duration;
 
@@ -13,9 +13,10 @@ fn replayed_pcap_arrives_record_by_record() {
     let capture = synth::generate(&SynthConfig {
         cells: 120,
         samples_per_cell: 40,
-        status_every: 25,
+        status_period_ticks: 2_500_000,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     // Write the capture as a pcap, the way the co-simulation or `capture --pcap` does.
     let src: SocketAddr = "127.0.0.1:5000".parse().unwrap();
     let dst: SocketAddr = "127.0.0.1:6000".parse().unwrap();
@@ -67,6 +68,7 @@ fn one_socket_follows_several_boxes() {
                 seed: u64::from(box_id),
                 ..SynthConfig::default()
             })
+            .unwrap()
             .payloads()
         })
         .collect();

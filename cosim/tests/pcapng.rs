@@ -10,8 +10,8 @@ use pcap_file::pcapng::blocks::interface_description::InterfaceDescriptionBlock;
 use pcap_file::pcapng::blocks::simple_packet::SimplePacketBlock;
 use pcap_file::pcapng::{PcapNgBlock, PcapNgWriter};
 use pcap_file::DataLink;
+use skinbox_cosim::synth::{self, SynthConfig};
 use skinbox_host::pcap::{decode_pcap_bytes, udp_payloads, PcapFrameWriter, PcapOptions};
-use skinbox_host::synth::{self, SynthConfig};
 use std::borrow::Cow;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -45,6 +45,7 @@ fn payloads(box_id: u16, seed: u64) -> Vec<Vec<u8>> {
         seed,
         ..SynthConfig::default()
     })
+    .unwrap()
     .payloads()
 }
 

@@ -2,11 +2,11 @@
 //! cell count (the skin's, or the cells seen), checked on synthetic captures whose truth
 //! is known.
 
+use skinbox_cosim::synth::{self, SynthCapture, SynthConfig};
 use skinbox_host::rate::ASSUMED_SAMPLE_RATE_HZ;
 use skinbox_host::report::{
     CELLS_GIVEN, CELLS_SEEN, SAMPLE_RATE_ASSUMED, SAMPLE_RATE_GIVEN, SAMPLE_RATE_LEARNED,
 };
-use skinbox_host::synth::{self, SynthCapture, SynthConfig};
 use skinbox_host::{Decoder, DecoderConfig, Report};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::TICKS_PER_SECOND;
@@ -45,7 +45,8 @@ fn the_sample_rate_is_learned_in_data_and_event_mode_and_with_gaps() {
                     event_every,
                     seed: rate as u64 + u64::from(event_every),
                     ..SynthConfig::default()
-                });
+                })
+                .unwrap();
                 let r = decode(&capture, learned(DecoderConfig::default()), skip_every);
                 let what = format!("{rate} Hz, event_every {event_every}, skip {skip_every}");
                 assert_eq!(
@@ -72,7 +73,8 @@ fn a_given_sample_rate_wins_and_the_stamps_are_still_shown() {
     let capture = synth::generate(&SynthConfig {
         sample_rate_hz: 250.0,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     // 125 Hz given for a 250 Hz capture: used as given, the stamps say 250.
     let r = decode(
         &capture,
@@ -96,7 +98,8 @@ fn the_default_learns_the_rate_or_says_it_assumed_one() {
     let capture = synth::generate(&SynthConfig {
         sample_rate_hz: 250.0,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let r = decode(&capture, DecoderConfig::default(), 0);
     assert_eq!(r.sample_rate_hz, 250.0);
     assert_eq!(r.sample_rate_source, SAMPLE_RATE_LEARNED);
@@ -106,7 +109,8 @@ fn the_default_learns_the_rate_or_says_it_assumed_one() {
         sample_rate_hz: 250.0,
         samples_per_cell: 1,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let r = decode(&one, DecoderConfig::default(), 0);
     assert!(r.records > 0);
     assert_eq!(r.sample_rate_hz, ASSUMED_SAMPLE_RATE_HZ);
@@ -125,7 +129,8 @@ fn per_cell_ratios_divide_by_the_skins_cells_when_given() {
         samples_per_cell: samples,
         event_every: 0,
         ..SynthConfig::default()
-    });
+    })
+    .unwrap();
     let first = capture.truth.iter().map(|t| t.tick).min().unwrap();
     let last = capture.truth.iter().map(|t| t.tick).max().unwrap();
     let duration_s = (last - first) as f64 / TICKS_PER_SECOND as f64 + 1.0 / 125.0;
@@ -171,7 +176,7 @@ fn packet_size_analysis_matches_the_truth() {
         walk_scale: 3,
         ..SynthConfig::default()
     };
-    let capture = synth::generate(&config);
+    let capture = synth::generate(&config).unwrap();
     // Truth: group each cell's event packets into samples by mask bit 15.
     let mut open: std::collections::BTreeMap<u16, u32> = Default::default();
     let mut n = [0u64; 10];
