@@ -465,6 +465,8 @@ void* skinbox_new(const char* vcd_path) {{
     for (int i = 0; i < {ports}; i++) {{ d->rx[i] = pins[i]; *pins[i] = 1; }}
     top->clock = 0;
     top->reset = 1;
+    top->link_up = {link_up};
+    top->link_speed = {link_speed};
     d->time = 0;
     {vcd_init}
     {trace_open}
@@ -512,6 +514,8 @@ uint64_t skinbox_run(void* p, uint64_t cycles, uint32_t* offsets, uint8_t* bytes
 }}
 "#,
         pins = pins.join(", "),
+        link_up = u8::from(crate::harness::LINK_UP),
+        link_speed = crate::harness::LINK_SPEED as u8,
         vcd_member = if trace { "VerilatedVcdC* vcd;" } else { "" },
         vcd_init = if trace { "d->vcd = nullptr;" } else { "" },
     )

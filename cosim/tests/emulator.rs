@@ -52,10 +52,7 @@ fn time_slices_send_the_frames_of_the_whole_run() {
         at = (at + step).min(end);
         step = (step * 7 + 13) % 400_000 + 1;
         for d in sliced.run_until(at) {
-            got.push((
-                d.first_cycle,
-                encode(&addresses, &d.datagram.to_bytes()).unwrap(),
-            ));
+            got.push((d.first_cycle, encode(&addresses, &d.payload()).unwrap()));
         }
     }
     assert!(whole.len() > 100, "{} frames", whole.len());

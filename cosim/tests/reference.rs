@@ -61,8 +61,16 @@ fn data(id: u16, k: i32) -> [u8; PACKET_LEN] {
         .to_bytes()
 }
 
+/// The frames but one the run ended inside (its last, if it is cut short).
+fn complete(frames: &[Frame]) -> &[Frame] {
+    match frames.split_last() {
+        Some((last, rest)) if check(&last.bytes).is_err() => rest,
+        _ => frames,
+    }
+}
+
 fn records(frames: &[Frame]) -> usize {
-    frames
+    complete(frames)
         .iter()
         .map(|f| {
             match DatagramRepr::parse(check(&f.bytes).unwrap().1)
@@ -165,6 +173,7 @@ fn status_and_records_waiting_together_take_turns() {
     let cycles = (8_000 + per_port as u64 * 50_000 + 100_000) / 8;
     let frames = agree(&config, &lines, cycles);
     assert_eq!(records(&frames), ports * per_port);
+    let frames = complete(&frames);
     // frames that follow the previous one after the minimum gap went out of a queue: a
     // records frame, a status frame and a records frame back to back mean both kinds
     // waited while the first was sent

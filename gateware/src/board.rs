@@ -20,9 +20,8 @@
 //! - MDIO ([`crate::mdio::MdioMaster`], on MDC/MDIO shared by both PHYs, the PHY at
 //!   [`PHY_ADDRESS`]): [`MDIO_STARTUP_CLOCKS`] after the PHY reset it restricts
 //!   auto-negotiation to 1000BASE-T full duplex, then polls the link every
-//!   [`MDIO_POLL_CLOCKS`]. Its `link_up` and `link_speed` outputs are wires of the board top
-//!   (`link_up`, `link_speed`) that nothing reads yet: yosys removes the read-data registers
-//!   until a status field takes them.
+//!   [`MDIO_POLL_CLOCKS`]. Its `link_up` and `link_speed` outputs go to the box, which
+//!   reports them in every status datagram's box counter block.
 //! - one status LED (active low): dark until the PHY reset ends; then a 1 Hz heartbeat (bit 26
 //!   of a free-running counter) that each frame start inverts for 2^19 clocks (4.2 ms), so
 //!   traffic shows as flicker.
@@ -330,20 +329,22 @@ module {top} (
     wire [7:0] gmii_txd;
     wire gmii_tx_en;
     wire gmii_tx_er;
+    wire link_up;
+    wire [1:0] link_speed;
     top interface_box (
         .clock(clk125),
         .reset(!released),{uart}
+        .link_up(link_up),
+        .link_speed(link_speed),
         .gmii_txd(gmii_txd),
         .gmii_tx_en(gmii_tx_en),
         .gmii_tx_er(gmii_tx_er)
     );
 
-    // MDIO: Gigabit-only advertisement after the PHY reset, then link polls. link_up and
-    // link_speed wait for a status field to carry them.
+    // MDIO: Gigabit-only advertisement after the PHY reset, then link polls; link_up and
+    // link_speed go into the box's status datagrams.
     wire mdio_out;
     wire mdio_oe;
-    wire link_up;
-    wire [1:0] link_speed;
     {mdio_module} mdio (
         .clock(clk125),
         .reset(!released),

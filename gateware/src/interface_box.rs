@@ -201,6 +201,11 @@ pub struct InterfaceBox {
     pub reset: Signal<In, Bit>,
     /// The UART pins of the ports, idle high.
     pub uart_rx: Vec<Signal<In, Bit>>,
+    /// The PHY reports the link up (the board top's MDIO master; held low without a PHY).
+    pub link_up: Signal<In, Bit>,
+    /// The link's speed as the PHY reports it: 0 = 10, 1 = 100, 2 = 1000 Mbit/s, 3 = not
+    /// known (hold it at 3 without a PHY).
+    pub link_speed: Signal<In, Bits<2>>,
     /// GMII transmit data.
     pub gmii_txd: Signal<Out, Bits<8>>,
     /// GMII transmit enable.
@@ -237,6 +242,8 @@ impl InterfaceBox {
             clock: Default::default(),
             reset: Default::default(),
             uart_rx: (0..n).map(|_| Default::default()).collect(),
+            link_up: Default::default(),
+            link_speed: Default::default(),
             gmii_txd: Default::default(),
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
@@ -336,6 +343,8 @@ impl Logic for InterfaceBox {
         self.status.records_sent.next = self.batcher.records_sent.val();
         self.status.counters_ready.next = self.counters.ready.val();
         self.status.counter_data.next = self.counters.read_data.val();
+        self.status.link_up.next = self.link_up.val();
+        self.status.link_speed.next = self.link_speed.val();
 
         // records and status datagrams -> arbiter -> transmitter
         self.arbiter.clock.next = self.clock.val();
@@ -434,14 +443,28 @@ mod tests {
         );
     }
     use crate::testbench::{bit_period, check_frame, Bench, GmiiCapture, UartLine};
+    use skinbox_protocol::box_counters::LinkSpeed;
     use skinbox_protocol::datagram::DatagramBody;
     use skinbox_protocol::status::PortCounter;
-    use skinbox_protocol::{Channel, DataRepr, DatagramRepr, EventRepr};
+    use skinbox_protocol::{BoxCounters, Channel, DataRepr, DatagramRepr, EventRepr};
 
     /// Runs the box on the pin levels (one list per port, indexed by clock edge, reset
-    /// for edges 1 to 3) and returns its datagrams, every frame checked.
+    /// for edges 1 to 3), its link up at 100 Mbit/s, and returns its datagrams with their
+    /// box counter blocks, every frame checked.
     fn run_box(config: &BoxConfig, levels: &[Vec<bool>]) -> Vec<DatagramRepr> {
+        run_box_with_blocks(config, levels)
+            .into_iter()
+            .map(|(d, _)| d)
+            .collect()
+    }
+
+    fn run_box_with_blocks(
+        config: &BoxConfig,
+        levels: &[Vec<bool>],
+    ) -> Vec<(DatagramRepr, Option<BoxCounters>)> {
         let mut bench = Bench::new(InterfaceBox::connected(config).unwrap(), |b| &mut b.clock);
+        bench.uut.link_up.next = true;
+        bench.uut.link_speed.next = 1.into();
         let mut capture = GmiiCapture::default();
         let clocks = levels.iter().map(Vec::len).max().unwrap_or(0) as u64;
         for e in 1..clocks {
@@ -462,7 +485,7 @@ mod tests {
         capture
             .frames
             .iter()
-            .map(|f| DatagramRepr::parse(&check_frame(f).unwrap()).unwrap())
+            .map(|f| DatagramRepr::parse_box_counters(&check_frame(f).unwrap()).unwrap())
             .collect()
     }
 
@@ -548,7 +571,22 @@ mod tests {
         let clocks = 23_000;
         let levels: Vec<Vec<bool>> = lines.iter().map(|l| l.levels(clocks)).collect();
 
-        let datagrams = run_box(&config, &levels);
+        let with_blocks = run_box_with_blocks(&config, &levels);
+        // every status datagram carries the link state the box was given, and no records
+        // datagram carries a block
+        for (d, block) in &with_blocks {
+            match d.body {
+                DatagramBody::Status(_) => {
+                    let b = block
+                        .as_ref()
+                        .expect("a status datagram's box counter block");
+                    assert_eq!((b.link_up, b.link_speed), (true, LinkSpeed::Mbit100));
+                    assert!(b.counts.iter().all(|&c| c == 0), "no receive path");
+                }
+                DatagramBody::Records(_) => assert!(block.is_none()),
+            }
+        }
+        let datagrams: Vec<DatagramRepr> = with_blocks.into_iter().map(|(d, _)| d).collect();
         let kinds: Vec<&str> = datagrams
             .iter()
             .map(|d| match d.body {

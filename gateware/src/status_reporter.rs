@@ -3,10 +3,12 @@
 //! Right after reset (once the counters are cleared) and then every `status_period_ticks`
 //! it writes a status body into its own 2 KB memory: boot id, records datagrams and
 //! records sent, first port, then the eight counters of up to 32 ports (one datagram per
-//! 32 ports). It sums the body's 16-bit words while writing, offers the datagram's
+//! 32 ports), then the box counter block (`skinbox_protocol::box_counters`, header flag
+//! `FLAG_BOX_COUNTERS`): the link state from `link_up` and `link_speed`, and the receive
+//! side's counters, 0 while the box has no receive path. It sums the body's 16-bit words while writing, offers the datagram's
 //! descriptor on `datagrams`, streams the body from its memory once the descriptor was
 //! taken ([`BodyReader`]), and after the last body byte was taken goes on with the next
-//! ports or waits for the next period. Building a page of 32 ports takes 1,820 clocks
+//! ports or waits for the next period. Building a page of 32 ports takes 1,960 clocks
 //! (seven per word: the counter memory's output is registered twice before it is summed).
 //!
 //! The boot id is a seed parameter plus the number of resets since configuration, so
@@ -17,7 +19,14 @@ use crate::block_ram::BlockRam;
 use crate::body_reader::BodyReader;
 use crate::hdl::*;
 use crate::stream::DatagramSource;
-use skinbox_protocol::datagram::DatagramKind;
+use skinbox_protocol::box_counters::BOX_COUNTERS_LEN;
+use skinbox_protocol::datagram::{DatagramKind, FLAG_BOX_COUNTERS};
+
+/// Words of a page before the port counters: boot id, datagrams, records, first port.
+pub const HEADER_WORDS: usize = 4;
+/// Words of the box counter block after the port counters.
+pub const BOX_COUNTER_WORDS: usize = BOX_COUNTERS_LEN / 4;
+const BLOCK_WORDS: usize = BOX_COUNTER_WORDS;
 
 /// Clocks per 32-bit word of the status body: the address, the memory read, its register,
 /// the word into the shift register, four bytes out.
@@ -50,11 +59,22 @@ pub struct StatusReporter {
     pub counter_address: Signal<Out, Bits<9>>,
     /// The counter, two clocks after its address.
     pub counter_data: Signal<In, Bits<32>>,
-    /// The status datagrams: base tick the time of the report, one entry per port.
+    /// The PHY reports the link up (the board's MDIO master; low without a PHY).
+    pub link_up: Signal<In, Bit>,
+    /// The link's speed: 0 = 10, 1 = 100, 2 = 1000 Mbit/s, 3 = unknown.
+    pub link_speed: Signal<In, Bits<2>>,
+    /// The status datagrams: base tick the time of the report, one entry per port, the box
+    /// counter block after the port blocks.
     pub datagrams: DatagramSource,
     memory: BlockRam<8, 11>,
     reader: BodyReader,
     status_kind: Constant<Bits<8>>,
+    box_counters_flag: Constant<Bits<8>>,
+    // the page's first counter word, and its last word less 8 per port
+    first_counter_word: Constant<Bits<9>>,
+    last_word_over_ports: Constant<Bits<9>>,
+    // the box counter block's first word
+    block_start: DFF<Bits<9>>,
     period: Constant<Bits<32>>,
     ports: Constant<Bits<7>>,
     ports_per_page: Constant<Bits<7>>,
@@ -128,10 +148,16 @@ impl StatusReporter {
             counters_ready: Default::default(),
             counter_address: Default::default(),
             counter_data: Default::default(),
+            link_up: Default::default(),
+            link_speed: Default::default(),
             datagrams: Default::default(),
             memory: Default::default(),
             reader: Default::default(),
             status_kind: Constant::new((DatagramKind::Status as u64).into()),
+            box_counters_flag: Constant::new(u64::from(FLAG_BOX_COUNTERS).into()),
+            first_counter_word: Constant::new((HEADER_WORDS as u64).into()),
+            last_word_over_ports: Constant::new(((HEADER_WORDS + BLOCK_WORDS - 1) as u64).into()),
+            block_start: Default::default(),
             period: Constant::new(period_ticks.into()),
             ports: Constant::new((ports as u64).into()),
             ports_per_page: Constant::new((PORTS_PER_STATUS as u64).into()),
@@ -191,7 +217,8 @@ impl Logic for StatusReporter {
             resets,
             reset_seen,
             header_word,
-            word_from_memory
+            word_from_memory,
+            block_start
         );
         self.memory.clock.next = self.clock.val();
         self.reader.clock.next = self.clock.val();
@@ -234,9 +261,21 @@ impl Logic for StatusReporter {
         } else if self.word.q.val().get_bits::<2>(0) == 2 {
             self.header_word.d.next = self.records_sent.val();
         }
-        self.word_from_memory.d.next = self.word.q.val() >= 4;
-        self.last_word.d.next =
-            self.word.q.val() == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + 3;
+        // the box counter block after the port blocks: the link word, then the receive
+        // side's counters (0: the box has no receive path yet)
+        self.block_start.d.next =
+            (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + self.first_counter_word.val();
+        if self.word.q.val() >= self.block_start.q.val() {
+            self.header_word.d.next = 0.into();
+            if self.word.q.val() == self.block_start.q.val() {
+                self.header_word.d.next = (bit_cast::<32, 1>(self.link_up.val().into()) << 24)
+                    | (bit_cast::<32, 2>(self.link_speed.val()) << 16);
+            }
+        }
+        self.word_from_memory.d.next = (self.word.q.val() >= self.first_counter_word.val())
+            & (self.word.q.val() < self.block_start.q.val());
+        self.last_word.d.next = self.word.q.val()
+            == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + self.last_word_over_ports.val();
         self.word_value.next = self.header_word.q.val();
         if self.word_from_memory.q.val() {
             self.word_value.next = self.counter_data.val();
@@ -315,7 +354,7 @@ impl Logic for StatusReporter {
 
         self.datagrams.valid.next = self.requesting.q.val();
         self.datagrams.kind.next = self.status_kind.val();
-        self.datagrams.flags.next = 0.into();
+        self.datagrams.flags.next = self.box_counters_flag.val();
         self.datagrams.entry_count.next = bit_cast::<16, 7>(self.page_ports.q.val());
         self.datagrams.base_tick.next = self.tick_held.q.val();
         self.datagrams.body_len.next = self.offset.q.val();
@@ -341,8 +380,9 @@ mod tests {
     use super::*;
     use crate::frame_transmitter::word_sum;
     use crate::testbench::{Bench, TestRng};
+    use skinbox_protocol::box_counters::LinkSpeed;
     use skinbox_protocol::datagram::DatagramBody;
-    use skinbox_protocol::{DatagramRepr, PortCounters, StatusRepr};
+    use skinbox_protocol::{BoxCounters, DatagramRepr, PortCounters, StatusRepr};
 
     fn counter(port: usize, c: usize) -> u32 {
         (port as u32) << 16 | (c as u32) << 8 | 0x5A
@@ -371,6 +411,9 @@ mod tests {
             u.datagrams_sent.next = 77.into();
             u.records_sent.next = 4242.into();
             u.counters_ready.next = true;
+            // the link comes up at 1000 Mbit/s after 9,000 clocks
+            u.link_up.next = clock >= 9_000;
+            u.link_speed.next = if clock >= 9_000 { 2 } else { 3 }.into();
             let read = counter_reads[1];
             u.counter_data.next = u64::from(counter(read / 8, read % 8)).into();
             u.datagrams.ready.next = take_descriptor && reading.is_none();
@@ -395,7 +438,7 @@ mod tests {
                 );
                 if u.datagrams.valid.val() && take_descriptor {
                     assert_eq!(u.datagrams.kind.val().to_u8(), DatagramKind::Status as u8);
-                    assert_eq!(u.datagrams.flags.val().to_u8(), 0);
+                    assert_eq!(u.datagrams.flags.val().to_u8(), FLAG_BOX_COUNTERS);
                     reading = Some((
                         u.datagrams.base_tick.val().to_u64(),
                         u.datagrams.entry_count.val().to_u16(),
@@ -410,11 +453,12 @@ mod tests {
         pages
     }
 
-    fn parse(ports: usize, page: &Page) -> StatusRepr {
+    /// The page as a status datagram: its status and its box counter block.
+    fn parse(ports: usize, page: &Page) -> (StatusRepr, BoxCounters) {
         let mut header = DatagramRepr {
             box_id: 1,
             port_count: ports as u8,
-            flags: 0,
+            flags: FLAG_BOX_COUNTERS,
             sequence: 0,
             base_tick: 0,
             body: DatagramBody::Status(StatusRepr {
@@ -424,9 +468,11 @@ mod tests {
         }
         .to_bytes();
         header.truncate(24);
+        header[skinbox_protocol::datagram::field::FLAGS] = FLAG_BOX_COUNTERS;
         header.extend(&page.2);
-        match DatagramRepr::parse(&header).unwrap().body {
-            DatagramBody::Status(s) => s,
+        let (d, block) = DatagramRepr::parse_box_counters(&header).unwrap();
+        match d.body {
+            DatagramBody::Status(s) => (s, block.expect("the box counter block")),
             DatagramBody::Records(_) => unreachable!(),
         }
     }
@@ -441,7 +487,18 @@ mod tests {
             "two pages at reset, after one and two periods"
         );
         for (i, page) in pages.iter().enumerate() {
-            let status = parse(40, page);
+            let (status, block) = parse(40, page);
+            // the link came up after the first period's pages were written, before the
+            // second period's first page reached its block (about 1,800 clocks in)
+            let up = i >= 2;
+            assert_eq!(block.link_up, up, "page {i}");
+            let speed = if up {
+                LinkSpeed::Mbit1000
+            } else {
+                LinkSpeed::Unknown
+            };
+            assert_eq!(block.link_speed, speed, "page {i}");
+            assert!(block.counts.iter().all(|&c| c == 0), "no receive path yet");
             let first = if i % 2 == 0 { 0 } else { 32 };
             assert_eq!(usize::from(status.first_port), first, "page {i}");
             assert_eq!(status.ports.len(), if i % 2 == 0 { 32 } else { 8 });
@@ -470,7 +527,7 @@ mod tests {
     fn a_single_port_box_reports_one_block() {
         let pages = run(1, 100_000, 3_000);
         assert_eq!(pages.len(), 1);
-        let status = parse(1, &pages[0]);
+        let (status, _) = parse(1, &pages[0]);
         assert_eq!(
             status.ports,
             vec![PortCounters(

@@ -4,10 +4,14 @@
 //! ending) and jumps over every stretch in which only free-running counters advance.
 
 use super::front::{PortFront, StartedPacket};
+use crate::harness::{LINK_SPEED, LINK_UP};
 use skinbox_gateware::cell_deframer::TICK_BEATS;
 use skinbox_gateware::counter_file::scan_period;
 use skinbox_gateware::packet_store::{FIFO_DEPTH, RECORD_BEATS};
-use skinbox_gateware::status_reporter::{CLOCKS_PER_WORD, WORD_VALUE_CLOCK};
+use skinbox_gateware::status_reporter::{
+    BOX_COUNTER_WORDS, CLOCKS_PER_WORD, HEADER_WORDS, WORD_VALUE_CLOCK,
+};
+use skinbox_protocol::box_counters::{BoxCounters, BOX_COUNTERS_LEN};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAX_RECORDS};
 use skinbox_protocol::status::PortCounter;
@@ -54,6 +58,8 @@ pub(super) struct SentFrame {
     pub first_cycle: u64,
     /// The datagram.
     pub datagram: DatagramRepr,
+    /// A status datagram's box counter block.
+    pub box_counters: Option<BoxCounters>,
 }
 
 /// Last issue of a store record (port, flags, 4 tick bytes, 20 cell bytes).
@@ -515,7 +521,7 @@ impl<'a> Back<'a> {
             // (the batcher counts it a clock after the take)
             self.started_records.push((c + 2, self.records_sent));
             d.sequence = self.sequence;
-            self.records_body_until = self.send(c, d);
+            self.records_body_until = self.send(c, d, None);
             self.last_grant_records = true;
         } else if start_status {
             let status = self
@@ -530,7 +536,13 @@ impl<'a> Back<'a> {
                 base_tick: self.report_tick,
                 body: DatagramBody::Status(status),
             };
-            self.status_body_until = self.send(c, d);
+            // the link as the harness drives it; the box has no receive path to count
+            let block = BoxCounters {
+                link_up: LINK_UP,
+                link_speed: LINK_SPEED,
+                ..BoxCounters::default()
+            };
+            self.status_body_until = self.send(c, d, Some(block));
             self.last_grant_records = false;
         }
         if closing {
@@ -592,14 +604,16 @@ impl<'a> Back<'a> {
     /// Starts a frame in cycle `c`; returns the first cycle after its body's last byte was
     /// taken from its source (the transmitter takes body byte `k` at frame byte
     /// `body_start + k`, the clock after the start being frame byte 0).
-    fn send(&mut self, c: u64, d: DatagramRepr) -> u64 {
-        let body_len = (d.buffer_len() - HEADER_LEN) as u64;
+    fn send(&mut self, c: u64, d: DatagramRepr, box_counters: Option<BoxCounters>) -> u64 {
+        let block_len = box_counters.map_or(0, |_| BOX_COUNTERS_LEN);
+        let body_len = (d.buffer_len() - HEADER_LEN + block_len) as u64;
         // (the headers exceed the minimum frame: there is never padding)
         self.idle_from = c + self.t.body_start + body_len + self.t.frame_tail;
         self.sequence = self.sequence.wrapping_add(1);
         self.frames.push(SentFrame {
             first_cycle: c + self.t.start_to_first_byte,
             datagram: d,
+            box_counters,
         });
         c + 1 + self.t.body_start + body_len
     }
@@ -630,7 +644,7 @@ impl<'a> Back<'a> {
                 self.report_tick = tick;
                 self.page_ports = self.t.ports_per_status.min(self.t.ports - self.first_port);
                 // words: boot id, datagrams, records, first port, 8 counters per port
-                let words = 4 + 8 * self.page_ports as u64;
+                let words = (HEADER_WORDS + 8 * self.page_ports + BOX_COUNTER_WORDS) as u64;
                 self.report = Report::Build {
                     from: c + 1,
                     request_at: c + 1 + CLOCKS_PER_WORD * words,

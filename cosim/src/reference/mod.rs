@@ -26,7 +26,7 @@ use crate::error::CosimError;
 use crate::frames::Frame;
 use crate::line::Transition;
 use crate::run::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
-use back::{Back, BackTiming};
+use back::{Back, BackTiming, SentFrame};
 use front::{port_front, FrontTiming, PortFront};
 use skinbox_frame_check::{encode, UdpAddresses};
 use skinbox_gateware::counter_file::CLEAR_CLOCKS;
@@ -120,6 +120,18 @@ pub struct SlicedDatagram {
     pub first_cycle: u64,
     /// The datagram.
     pub datagram: skinbox_protocol::DatagramRepr,
+    /// A status datagram's box counter block.
+    pub box_counters: Option<skinbox_protocol::BoxCounters>,
+}
+
+impl SlicedDatagram {
+    /// The UDP payload: the datagram, with its box counter block if it has one.
+    pub fn payload(&self) -> Vec<u8> {
+        match &self.box_counters {
+            Some(block) => self.datagram.to_bytes_with_box_counters(block),
+            None => self.datagram.to_bytes(),
+        }
+    }
 }
 
 /// The reference model run slice by slice.
@@ -142,6 +154,7 @@ impl SlicedReference<'_> {
             .map(|f| SlicedDatagram {
                 first_cycle: f.first_cycle,
                 datagram: f.datagram.clone(),
+                box_counters: f.box_counters,
             })
             .collect();
         self.taken = self.back.frames.len();
@@ -228,11 +241,10 @@ fn predict_frames_with_progress(
     };
     let mut frames = Vec::with_capacity(back.frames.len());
     for f in &back.frames {
-        let mut bytes =
-            encode(&addresses, &f.datagram.to_bytes()).map_err(|source| CosimError::Frame {
-                step: "encoding a predicted frame",
-                source,
-            })?;
+        let mut bytes = encode(&addresses, &payload(f)).map_err(|source| CosimError::Frame {
+            step: "encoding a predicted frame",
+            source,
+        })?;
         // the run ends at cycle `end`: a frame still going is cut there, as on the pins
         let room = (end + 1).saturating_sub(f.first_cycle) as usize;
         bytes.truncate(room);
@@ -244,4 +256,13 @@ fn predict_frames_with_progress(
         }
     }
     Ok(frames)
+}
+
+/// The UDP payload of a predicted frame: the datagram, with its box counter block if it
+/// has one.
+fn payload(f: &SentFrame) -> Vec<u8> {
+    match &f.box_counters {
+        Some(block) => f.datagram.to_bytes_with_box_counters(block),
+        None => f.datagram.to_bytes(),
+    }
 }
