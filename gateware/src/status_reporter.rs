@@ -73,8 +73,10 @@ pub struct StatusReporter {
     // the page's first counter word, and its last word less 8 per port
     first_counter_word: Constant<Bits<9>>,
     last_word_over_ports: Constant<Bits<9>>,
-    // the box counter block's first word
+    // the box counter block's first word; the word is in the block, at its first word
     block_start: DFF<Bits<9>>,
+    in_block: DFF<Bit>,
+    at_block: DFF<Bit>,
     period: Constant<Bits<32>>,
     ports: Constant<Bits<7>>,
     ports_per_page: Constant<Bits<7>>,
@@ -158,6 +160,8 @@ impl StatusReporter {
             first_counter_word: Constant::new((HEADER_WORDS as u64).into()),
             last_word_over_ports: Constant::new(((HEADER_WORDS + BLOCK_WORDS - 1) as u64).into()),
             block_start: Default::default(),
+            in_block: Default::default(),
+            at_block: Default::default(),
             period: Constant::new(period_ticks.into()),
             ports: Constant::new((ports as u64).into()),
             ports_per_page: Constant::new((PORTS_PER_STATUS as u64).into()),
@@ -218,7 +222,9 @@ impl Logic for StatusReporter {
             reset_seen,
             header_word,
             word_from_memory,
-            block_start
+            block_start,
+            in_block,
+            at_block
         );
         self.memory.clock.next = self.clock.val();
         self.reader.clock.next = self.clock.val();
@@ -265,15 +271,19 @@ impl Logic for StatusReporter {
         // side's counters (0: the box has no receive path yet)
         self.block_start.d.next =
             (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + self.first_counter_word.val();
-        if self.word.q.val() >= self.block_start.q.val() {
+        // (the word's tests against the block are registered: a word holds for seven
+        // clocks and its value is taken from its second on)
+        self.in_block.d.next = self.word.q.val() >= self.block_start.q.val();
+        self.at_block.d.next = self.word.q.val() == self.block_start.q.val();
+        if self.in_block.q.val() {
             self.header_word.d.next = 0.into();
-            if self.word.q.val() == self.block_start.q.val() {
+            if self.at_block.q.val() {
                 self.header_word.d.next = (bit_cast::<32, 1>(self.link_up.val().into()) << 24)
                     | (bit_cast::<32, 2>(self.link_speed.val()) << 16);
             }
         }
-        self.word_from_memory.d.next = (self.word.q.val() >= self.first_counter_word.val())
-            & (self.word.q.val() < self.block_start.q.val());
+        self.word_from_memory.d.next =
+            (self.word.q.val() >= self.first_counter_word.val()) & !self.in_block.q.val();
         self.last_word.d.next = self.word.q.val()
             == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + self.last_word_over_ports.val();
         self.word_value.next = self.header_word.q.val();
