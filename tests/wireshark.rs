@@ -14,52 +14,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-fn skinbox() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_skinbox"))
-}
+mod support;
 
-fn temp_dir(test: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("skinbox-wireshark-{}-{test}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// Writes the plugin with `skinbox wireshark --output`.
-fn plugin(dir: &Path) -> PathBuf {
-    let path = dir.join("skinbox.lua");
-    let out = skinbox()
-        .arg("wireshark")
-        .arg("-o")
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    path
-}
-
-/// tshark with the plugin, on a pcap; returns stdout. Lua errors fail the test.
-fn tshark(plugin: &Path, pcap: &Path, args: &[&str]) -> String {
-    let out = Command::new("tshark")
-        .arg("-X")
-        .arg(format!("lua_script:{}", plugin.display()))
-        .args(["-n", "-r"])
-        .arg(pcap)
-        .args(args)
-        .output()
-        .expect("run tshark (scripts/test installs it)");
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "tshark failed: {stderr}");
-    assert!(
-        !stdout.contains("Lua Error") && !stderr.contains("Lua Error"),
-        "{stderr}\n{stdout}"
-    );
-    stdout
-}
+use support::{plugin, skinbox, temp_dir, tshark};
 
 /// The skinbox layer of every frame (tshark -T json), in frame order.
 fn layers(plugin: &Path, pcap: &Path) -> Vec<Value> {

@@ -10,37 +10,20 @@ use skinbox_protocol::command::{
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{DatagramRepr, PortCounters, StatusRepr};
 use std::net::SocketAddr;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 use std::time::Duration;
 
-fn temp_dir() -> PathBuf {
-    let dir =
-        std::env::temp_dir().join(format!("skinbox-wireshark-control-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod support;
+
+use support::{plugin, temp_dir, tshark};
 
 /// One tshark field per line of output, for each frame.
 fn tshark_fields(plugin: &Path, pcap: &Path, fields: &[&str]) -> Vec<Vec<String>> {
-    let mut cmd = Command::new("tshark");
-    cmd.arg("-X")
-        .arg(format!("lua_script:{}", plugin.display()))
-        .args(["-n", "-r"])
-        .arg(pcap)
-        .args(["-T", "fields", "-E", "separator=|"]);
+    let mut args = vec!["-T", "fields", "-E", "separator=|"];
     for f in fields {
-        cmd.args(["-e", f]);
+        args.extend(["-e", f]);
     }
-    let out = cmd.output().expect("run tshark (scripts/test installs it)");
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "tshark failed: {stderr}");
-    assert!(
-        !stdout.contains("Lua Error") && !stderr.contains("Lua Error"),
-        "{stderr}"
-    );
-    stdout
+    tshark(plugin, pcap, &args)
         .lines()
         .map(|l| l.split('|').map(str::to_string).collect())
         .collect()
@@ -48,18 +31,8 @@ fn tshark_fields(plugin: &Path, pcap: &Path, fields: &[&str]) -> Vec<Vec<String>
 
 #[test]
 fn commands_acknowledgements_and_box_counters_in_tshark() {
-    let dir = temp_dir();
-    let plugin = dir.join("skinbox.lua");
-    let out = Command::new(env!("CARGO_BIN_EXE_skinbox"))
-        .args(["wireshark", "-o"])
-        .arg(&plugin)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let dir = temp_dir("control");
+    let plugin = plugin(&dir);
 
     let destination = Destination {
         mac: [2, 0, 0, 0, 0, 9],
