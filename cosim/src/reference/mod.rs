@@ -26,7 +26,7 @@ use crate::error::CosimError;
 use crate::frames::Frame;
 use crate::line::Transition;
 use crate::run::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
-use back::{Back, BackTiming, SentFrame};
+use back::{Back, BackTiming};
 use front::{port_front, FrontTiming, PortFront};
 use skinbox_frame_check::{encode, UdpAddresses};
 use skinbox_gateware::counter_file::CLEAR_CLOCKS;
@@ -127,10 +127,7 @@ pub struct SlicedDatagram {
 impl SlicedDatagram {
     /// The UDP payload: the datagram, with its box counter block if it has one.
     pub fn payload(&self) -> Vec<u8> {
-        match &self.box_counters {
-            Some(block) => self.datagram.to_bytes_with_box_counters(block),
-            None => self.datagram.to_bytes(),
-        }
+        payload(&self.datagram, self.box_counters.as_ref())
     }
 }
 
@@ -241,10 +238,11 @@ fn predict_frames_with_progress(
     };
     let mut frames = Vec::with_capacity(back.frames.len());
     for f in &back.frames {
-        let mut bytes = encode(&addresses, &payload(f)).map_err(|source| CosimError::Frame {
-            step: "encoding a predicted frame",
-            source,
-        })?;
+        let mut bytes = encode(&addresses, &payload(&f.datagram, f.box_counters.as_ref()))
+            .map_err(|source| CosimError::Frame {
+                step: "encoding a predicted frame",
+                source,
+            })?;
         // the run ends at cycle `end`: a frame still going is cut there, as on the pins
         let room = (end + 1).saturating_sub(f.first_cycle) as usize;
         bytes.truncate(room);
@@ -258,11 +256,13 @@ fn predict_frames_with_progress(
     Ok(frames)
 }
 
-/// The UDP payload of a predicted frame: the datagram, with its box counter block if it
-/// has one.
-fn payload(f: &SentFrame) -> Vec<u8> {
-    match &f.box_counters {
-        Some(block) => f.datagram.to_bytes_with_box_counters(block),
-        None => f.datagram.to_bytes(),
+/// The UDP payload of a predicted datagram, with its box counter block if it has one.
+fn payload(
+    datagram: &skinbox_protocol::DatagramRepr,
+    block: Option<&skinbox_protocol::BoxCounters>,
+) -> Vec<u8> {
+    match block {
+        Some(block) => datagram.to_bytes_with_box_counters(block),
+        None => datagram.to_bytes(),
     }
 }
