@@ -26,7 +26,6 @@ use skinbox_protocol::datagram::{DatagramKind, FLAG_BOX_COUNTERS};
 pub const HEADER_WORDS: usize = 4;
 /// Words of the box counter block after the port counters.
 pub const BOX_COUNTER_WORDS: usize = BOX_COUNTERS_LEN / 4;
-const BLOCK_WORDS: usize = BOX_COUNTER_WORDS;
 
 /// Clocks per 32-bit word of the status body: the address, the memory read, its register,
 /// the word into the shift register, four bytes out.
@@ -158,7 +157,9 @@ impl StatusReporter {
             status_kind: Constant::new((DatagramKind::Status as u64).into()),
             box_counters_flag: Constant::new(u64::from(FLAG_BOX_COUNTERS).into()),
             first_counter_word: Constant::new((HEADER_WORDS as u64).into()),
-            last_word_over_ports: Constant::new(((HEADER_WORDS + BLOCK_WORDS - 1) as u64).into()),
+            last_word_over_ports: Constant::new(
+                ((HEADER_WORDS + BOX_COUNTER_WORDS - 1) as u64).into(),
+            ),
             block_start: Default::default(),
             in_block: Default::default(),
             at_block: Default::default(),
