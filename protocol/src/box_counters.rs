@@ -77,11 +77,15 @@ pub enum BoxCounter {
     RefusedBadArgument,
     /// Cell-network commands while the box has no downlink to the cells.
     RefusedNoDownlink,
+    /// Frames that would be answered (ARP request, echo request, command) while the
+    /// previous reply had not left yet: the box holds one frame for its reply, so these
+    /// are neither stored, carried out nor answered.
+    ReplyBusy,
 }
 
 impl BoxCounter {
     /// All counters in wire order.
-    pub const ALL: [BoxCounter; 19] = [
+    pub const ALL: [BoxCounter; 20] = [
         BoxCounter::FramesReceived,
         BoxCounter::BadFcs,
         BoxCounter::BadLength,
@@ -101,6 +105,7 @@ impl BoxCounter {
         BoxCounter::RefusedUnknownOpcode,
         BoxCounter::RefusedBadArgument,
         BoxCounter::RefusedNoDownlink,
+        BoxCounter::ReplyBusy,
     ];
 
     /// Position in the block's counter list.
@@ -136,6 +141,7 @@ impl BoxCounter {
             BoxCounter::RefusedUnknownOpcode => "refused_unknown_opcode",
             BoxCounter::RefusedBadArgument => "refused_bad_argument",
             BoxCounter::RefusedNoDownlink => "refused_no_downlink",
+            BoxCounter::ReplyBusy => "reply_busy",
         }
     }
 }
@@ -332,7 +338,7 @@ mod tests {
         let mut out = vec![0xA5; BOX_COUNTERS_LEN];
         c.emit(&mut out);
         assert_eq!(out, bytes);
-        assert_eq!(BOX_COUNTERS_LEN, 80);
+        assert_eq!(BOX_COUNTERS_LEN, 84);
     }
 
     #[test]

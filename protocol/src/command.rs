@@ -620,7 +620,7 @@ pub enum AckReply {
     None,
     /// Stream-to, `ok`: the destination now in effect (12 bytes).
     Destination(Destination),
-    /// Status-now, `ok`: the box counters, this command counted (80 bytes).
+    /// Status-now, `ok`: the box counters, this command counted (84 bytes).
     Counters(BoxCounters),
 }
 
@@ -757,7 +757,7 @@ impl<T: AsRef<[u8]>> Ack<T> {
         get_u64(self.body(), ack_field::SEND_TICK)
     }
 
-    /// The reply bytes after the fixed body (0, 12 or 80 bytes).
+    /// The reply bytes after the fixed body (0, 12 or 84 bytes).
     pub fn reply(&self) -> &[u8] {
         &self.body()[ACK_FIXED_LEN..]
     }

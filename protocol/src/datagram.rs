@@ -17,7 +17,7 @@
 //! records (1454 bytes) or 44 port counter blocks fit the 1472-byte UDP payload of a
 //! 1500-byte IPv4 packet.
 //!
-//! A status datagram with flag bit 1 carries the 80-byte box counter block
+//! A status datagram with flag bit 1 carries the 84-byte box counter block
 //! ([`crate::box_counters`]) after its port counter blocks (then at most 42 of them fit);
 //! without the flag it is byte for byte what it was before the block existed. Kinds 3 and 4
 //! (command and acknowledgement) share magic and version but are read by
