@@ -30,6 +30,11 @@ use crate::stream::DatagramSink;
 use skinbox_protocol::datagram::{self, field, HEADER_LEN};
 use skinbox_protocol::link::*;
 
+/// Clocks from the clock a descriptor is taken (`valid & ready` at its edge) to the clock
+/// the frame's first preamble byte is on `gmii_txd`: the transmitter registers `sending`,
+/// then the byte, then the output (with the FCS).
+pub const TAKE_TO_FIRST_BYTE: u64 = 3;
+
 /// Frame byte where the datagram body starts (preamble, Ethernet, IPv4, UDP, box header).
 pub const BODY_START: usize =
     PREAMBLE_LEN + ETHERNET_HEADER_LEN + IPV4_HEADER_LEN + UDP_HEADER_LEN + HEADER_LEN;

@@ -179,9 +179,8 @@ impl SlicedReference<'_> {
     }
 }
 
-/// Clocks from the cycle a transmitter start is decided to the first GMII byte: the
-/// transmitter registers `sending`, then the byte, then the output (with the FCS).
-const START_TO_FIRST_BYTE: u64 = 3;
+/// Clocks from the cycle a transmitter start is decided to the first GMII byte.
+const START_TO_FIRST_BYTE: u64 = skinbox_gateware::frame_transmitter::TAKE_TO_FIRST_BYTE;
 
 /// Runs `spec` on the reference model.
 pub fn run_reference(spec: &SimSpec) -> Result<SimRun, CosimError> {
