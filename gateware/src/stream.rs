@@ -39,6 +39,11 @@ pub struct ByteStreamSink {
     pub ready: Signal<Out, Bit>,
 }
 
+/// Descriptor kind of a raw frame: its body is the whole Ethernet frame from the
+/// destination MAC on, padded to the minimum length by its source; the transmitter adds
+/// only preamble, SFD and FCS. (No box datagram has kind 0.)
+pub const RAW_FRAME_KIND: u8 = 0;
+
 /// The sending side of a datagram: a descriptor, taken when `valid & ready`, then its
 /// body of `body_len` beats (at least one) on `body`, the last one with `last`. A source
 /// offers no body beat before its descriptor was taken.
