@@ -221,6 +221,9 @@ pub struct InterfaceBox {
     batcher: RecordBatcher,
     arbiter: DatagramArbiter,
     transmitter: FrameTransmitter,
+    // the run-time configuration's build-time values
+    flush_timeout_ticks: Constant<Bits<32>>,
+    status_period_ticks: Constant<Bits<32>>,
     core_reset: DFF<Bit>,
     /// The ports' reset before its copies.
     port_reset: Signal<Local, Bit>,
@@ -256,10 +259,12 @@ impl InterfaceBox {
                 .collect(),
             store: PacketStore::new(n),
             counters: CounterFile::new(n),
-            status: StatusReporter::new(n, config.status_period_ticks, config.boot_seed),
-            batcher: RecordBatcher::new(config.flush_timeout_ticks),
+            status: StatusReporter::new(n, config.boot_seed),
+            batcher: RecordBatcher::new(),
             arbiter: DatagramArbiter::new(DATAGRAM_SOURCES),
             transmitter: FrameTransmitter::new(&config.link, config.box_id, n as u8),
+            flush_timeout_ticks: Constant::new(config.flush_timeout_ticks.into()),
+            status_period_ticks: Constant::new(config.status_period_ticks.into()),
             core_reset: Default::default(),
             port_reset: Default::default(),
             group_resets: (0..n.div_ceil(GROUP_PORTS))
@@ -334,6 +339,7 @@ impl Logic for InterfaceBox {
         self.batcher.clock.next = self.clock.val();
         self.batcher.reset.next = self.core_reset.q.val();
         self.batcher.tick.next = self.timestamp.tick.val();
+        self.batcher.flush_timeout_ticks.next = self.flush_timeout_ticks.val();
         ByteStreamSource::join(&mut self.store.records, &mut self.batcher.records);
 
         self.status.clock.next = self.clock.val();
@@ -345,6 +351,10 @@ impl Logic for InterfaceBox {
         self.status.counter_data.next = self.counters.read_data.val();
         self.status.link_up.next = self.link_up.val();
         self.status.link_speed.next = self.link_speed.val();
+        self.status.status_period_ticks.next = self.status_period_ticks.val();
+        self.status.restart_period.next = false;
+        self.status.report_now.next = false;
+        self.status.box_counter_data.next = 0.into();
 
         // records and status datagrams -> arbiter -> transmitter
         self.arbiter.clock.next = self.clock.val();

@@ -34,6 +34,9 @@ pub struct RecordBatcher {
     pub records: ByteStreamSink,
     /// Box time.
     pub tick: Signal<In, Bits<64>>,
+    /// Flush timeout in ticks, 1 to 2^31 - 1 (run-time configuration): a datagram whose
+    /// first record is seen two clocks after a change or later closes after the new one.
+    pub flush_timeout_ticks: Signal<In, Bits<32>>,
     /// The records datagrams.
     pub datagrams: DatagramSource,
     /// Records datagrams taken since reset.
@@ -47,9 +50,10 @@ pub struct RecordBatcher {
     last_tick_beat_less_one: Constant<Bits<5>>,
     record_last_beat_less_one: Constant<Bits<5>>,
     last_fill_less_one: Constant<Bits<6>>,
-    flush_timeout_less_two: Constant<Bits<32>>,
-    // a timeout of 1 or 2 ticks has passed a clock after the deadline is set
-    short_timeout: Constant<Bit>,
+    // the flush timeout less two, registered from the input
+    flush_timeout_less_two: DFF<Bits<32>>,
+    // a timeout of 1 or 2 ticks has passed a clock after the deadline is set (registered)
+    short_timeout: DFF<Bit>,
     fill_buffer: DFF<Bit>,
     fill_count: DFF<Bits<6>>,
     fill_offset: DFF<Bits<11>>,
@@ -105,19 +109,22 @@ pub struct RecordBatcher {
     deadline_delta: Signal<Local, Bits<32>>,
 }
 
+impl Default for RecordBatcher {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl RecordBatcher {
-    /// A batcher that closes a datagram `flush_timeout_ticks` (1 to 2^31 - 1) after its
-    /// first record's tick.
-    pub fn new(flush_timeout_ticks: u64) -> Self {
-        assert!(
-            flush_timeout_ticks > 0 && flush_timeout_ticks < 1 << 31,
-            "RecordBatcher: flush timeout of {flush_timeout_ticks} ticks must be 1 to 2^31 - 1"
-        );
+    /// A batcher that closes a datagram `flush_timeout_ticks` (its input) after its first
+    /// record's tick.
+    pub fn new() -> Self {
         Self {
             clock: Default::default(),
             reset: Default::default(),
             records: Default::default(),
             tick: Default::default(),
+            flush_timeout_ticks: Default::default(),
             datagrams: Default::default(),
             datagrams_sent: Default::default(),
             records_sent: Default::default(),
@@ -128,10 +135,8 @@ impl RecordBatcher {
             last_tick_beat_less_one: Constant::new((LAST_TICK_BEAT as u64 - 1).into()),
             record_last_beat_less_one: Constant::new((RECORD_LEN as u64 - 2).into()),
             last_fill_less_one: Constant::new((MAX_RECORDS as u64 - 2).into()),
-            flush_timeout_less_two: Constant::new(
-                (flush_timeout_ticks.wrapping_sub(2) & 0xFFFF_FFFF).into(),
-            ),
-            short_timeout: Constant::new(flush_timeout_ticks <= 2),
+            flush_timeout_less_two: Default::default(),
+            short_timeout: Default::default(),
             fill_buffer: Default::default(),
             fill_count: Default::default(),
             fill_offset: Default::default(),
@@ -217,8 +222,12 @@ impl Logic for RecordBatcher {
             record_count,
             memory_write,
             memory_write_address,
-            memory_write_data
+            memory_write_data,
+            flush_timeout_less_two,
+            short_timeout
         );
+        self.flush_timeout_less_two.d.next = self.flush_timeout_ticks.val() - 2;
+        self.short_timeout.d.next = self.flush_timeout_ticks.val() <= 2;
         self.reader.clock.next = self.clock.val();
         self.reader.reset.next = self.reset.val();
         self.memory.clock.next = self.clock.val();
@@ -236,9 +245,9 @@ impl Logic for RecordBatcher {
             self.fill_base_tick.d.next = self.tick.val()
                 + (bit_cast::<64, 32>(!self.first_age.q.val()) | 0xFFFF_FFFF_0000_0000_u64);
             self.fill_deadline_less_one.d.next =
-                self.tick.val().get_bits::<32>(0) + self.flush_timeout_less_two.val();
+                self.tick.val().get_bits::<32>(0) + self.flush_timeout_less_two.q.val();
             // (the next tick is now + 1: the deadline has passed if timeout - 1 <= 1)
-            self.deadline_passed_next.d.next = self.short_timeout.val();
+            self.deadline_passed_next.d.next = self.short_timeout.q.val();
         }
         // Close the filling datagram at a record boundary when full or due (`close_due`,
         // set at the end from the tests of beat, offset_left, fill_count and the deadline,
@@ -491,7 +500,8 @@ mod tests {
     /// Offers each record from its clock on, at most one beat per clock, with the box
     /// time starting at `epoch`; checks every descriptor against its body.
     fn run(epoch: u64, records: &[(u64, RecordRepr)], sink: Sink, clocks: u64) -> Run {
-        let mut bench = Bench::new(RecordBatcher::new(TIMEOUT), |b| &mut b.clock);
+        let mut bench = Bench::new(RecordBatcher::new(), |b| &mut b.clock);
+        bench.uut.flush_timeout_ticks.next = TIMEOUT.into();
         let mut rng = TestRng::new(epoch ^ clocks);
         bench.uut.reset.next = true;
         bench.cycles(2);

@@ -62,6 +62,16 @@ pub struct StatusReporter {
     pub link_up: Signal<In, Bit>,
     /// The link's speed: 0 = 10, 1 = 100, 2 = 1000 Mbit/s, 3 = unknown.
     pub link_speed: Signal<In, Bits<2>>,
+    /// Box counter to read (`skinbox_protocol::box_counters::BoxCounter` index).
+    pub box_counter_address: Signal<Out, Bits<5>>,
+    /// The box counter, two clocks after its address.
+    pub box_counter_data: Signal<In, Bits<32>>,
+    /// Status period in ticks, 1 to 2^32 - 1 (run-time configuration).
+    pub status_period_ticks: Signal<In, Bits<32>>,
+    /// One clock: the period changed; the next report is due a period from then.
+    pub restart_period: Signal<In, Bit>,
+    /// One clock: a report is due now (it starts when the reporter waits).
+    pub report_now: Signal<In, Bit>,
     /// The status datagrams: base tick the time of the report, one entry per port, the box
     /// counter block after the port blocks.
     pub datagrams: DatagramSource,
@@ -76,7 +86,9 @@ pub struct StatusReporter {
     block_start: DFF<Bits<9>>,
     in_block: DFF<Bit>,
     at_block: DFF<Bit>,
-    period: Constant<Bits<32>>,
+    // the box counter of the block's next counter word, stepped with `word` in the block
+    box_counter_word: DFF<Bits<5>>,
+    word_from_box_counters: DFF<Bit>,
     ports: Constant<Bits<7>>,
     ports_per_page: Constant<Bits<7>>,
     boot_seed: Constant<Bits<32>>,
@@ -129,16 +141,12 @@ enum ReportState {
 }
 
 impl StatusReporter {
-    /// A reporter for `ports` ports (1 to 64), one report every `period_ticks`
-    /// (1 to 2^32 - 1), with boot ids counting from `boot_seed`.
-    pub fn new(ports: usize, period_ticks: u64, boot_seed: u32) -> Self {
+    /// A reporter for `ports` ports (1 to 64), one report every `status_period_ticks` (its
+    /// input), with boot ids counting from `boot_seed`.
+    pub fn new(ports: usize, boot_seed: u32) -> Self {
         assert!(
             (1..=64).contains(&ports),
             "StatusReporter: {ports} ports, must be 1 to 64"
-        );
-        assert!(
-            (1..1 << 32).contains(&period_ticks),
-            "StatusReporter: period of {period_ticks} ticks must be 1 to 2^32 - 1"
         );
         Self {
             clock: Default::default(),
@@ -151,6 +159,11 @@ impl StatusReporter {
             counter_data: Default::default(),
             link_up: Default::default(),
             link_speed: Default::default(),
+            box_counter_address: Default::default(),
+            box_counter_data: Default::default(),
+            status_period_ticks: Default::default(),
+            restart_period: Default::default(),
+            report_now: Default::default(),
             datagrams: Default::default(),
             memory: Default::default(),
             reader: Default::default(),
@@ -163,7 +176,8 @@ impl StatusReporter {
             block_start: Default::default(),
             in_block: Default::default(),
             at_block: Default::default(),
-            period: Constant::new(period_ticks.into()),
+            box_counter_word: Default::default(),
+            word_from_box_counters: Default::default(),
             ports: Constant::new((ports as u64).into()),
             ports_per_page: Constant::new((PORTS_PER_STATUS as u64).into()),
             boot_seed: Constant::new(u64::from(boot_seed).into()),
@@ -225,7 +239,9 @@ impl Logic for StatusReporter {
             word_from_memory,
             block_start,
             in_block,
-            at_block
+            at_block,
+            box_counter_word,
+            word_from_box_counters
         );
         self.memory.clock.next = self.clock.val();
         self.reader.clock.next = self.clock.val();
@@ -246,13 +262,19 @@ impl Logic for StatusReporter {
         // A report is due every period, counted from report start to report start; one
         // that comes due while the previous is still going starts right after it.
         if self.timer_zero.q.val() {
-            self.timer.d.next = self.period.val() - 1;
-            self.timer_zero.d.next = self.period.val() == 1;
+            self.timer.d.next = self.status_period_ticks.val() - 1;
+            self.timer_zero.d.next = self.status_period_ticks.val() == 1;
             self.due.d.next = true;
         } else {
             self.timer.d.next = self.timer.q.val() - 1;
             self.timer_zero.d.next = self.timer.q.val() == 1;
         }
+        // a new period counts from its change; a report asked for now is due now
+        if self.restart_period.val() {
+            self.timer.d.next = self.status_period_ticks.val() - 1;
+            self.timer_zero.d.next = self.status_period_ticks.val() == 1;
+        }
+
         self.remaining.next = self.ports.val() - self.first_port.q.val();
         // (in Build the phase steps from 2..=5 to 3..=6 and the state stays)
         self.write.d.next = (self.state.q.val() == ReportState::Build)
@@ -285,11 +307,17 @@ impl Logic for StatusReporter {
         }
         self.word_from_memory.d.next =
             (self.word.q.val() >= self.first_counter_word.val()) & !self.in_block.q.val();
+        // the block's counters come from the box counter file, read like the port counters
+        self.word_from_box_counters.d.next = self.in_block.q.val() & !self.at_block.q.val();
+        self.box_counter_address.next = self.box_counter_word.q.val();
         self.last_word.d.next = self.word.q.val()
             == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + self.last_word_over_ports.val();
         self.word_value.next = self.header_word.q.val();
         if self.word_from_memory.q.val() {
             self.word_value.next = self.counter_data.val();
+        }
+        if self.word_from_box_counters.q.val() {
+            self.word_value.next = self.box_counter_data.val();
         }
         self.tx_byte.next = self.shift.q.val().get_bits::<8>(24);
 
@@ -305,6 +333,7 @@ impl Logic for StatusReporter {
                 self.state.d.next = ReportState::Build;
                 self.word.d.next = 0.into();
                 self.counter_word.d.next = (bit_cast::<9, 7>(self.first_port.q.val()) << 3) - 4;
+                self.box_counter_word.d.next = 0.into();
                 self.phase.d.next = 0.into();
                 self.offset.d.next = 0.into();
                 self.sum.d.next = 0.into();
@@ -325,6 +354,9 @@ impl Logic for StatusReporter {
                     self.phase.d.next = 0.into();
                     self.word.d.next = self.word.q.val() + 1;
                     self.counter_word.d.next = self.counter_word.q.val() + 1;
+                    if self.in_block.q.val() & !self.at_block.q.val() {
+                        self.box_counter_word.d.next = self.box_counter_word.q.val() + 1;
+                    }
                     if self.last_word.q.val() {
                         self.state.d.next = ReportState::Request;
                         self.requesting.d.next = true;
@@ -349,6 +381,12 @@ impl Logic for StatusReporter {
                     }
                 }
             }
+        }
+
+        // (after the state machine: a report asked for in the clock Wait takes the last due
+        // one is due again)
+        if self.report_now.val() {
+            self.due.d.next = true;
         }
 
         self.memory.write_enable.next = self.write.q.val();
@@ -404,8 +442,24 @@ mod tests {
 
     /// Runs the reporter; its descriptors are taken a few clocks after they are offered and
     /// its bodies read with random backpressure (`last` checked on every beat).
+    fn box_counter(c: usize) -> u32 {
+        0xB0C0_0000 | (c as u32) * 3
+    }
+
     fn run(ports: usize, period: u64, clocks: u64) -> Vec<Page> {
-        let mut bench = Bench::new(StatusReporter::new(ports, period, 0x1000), |b| &mut b.clock);
+        run_with(ports, period, clocks, |_, _| {})
+    }
+
+    /// As [`run`], calling `drive(clock, reporter)` before every clock's settle (for the
+    /// period and report-now inputs).
+    fn run_with(
+        ports: usize,
+        period: u64,
+        clocks: u64,
+        mut drive: impl FnMut(u64, &mut StatusReporter),
+    ) -> Vec<Page> {
+        let mut bench = Bench::new(StatusReporter::new(ports, 0x1000), |b| &mut b.clock);
+        bench.uut.status_period_ticks.next = period.into();
         let mut rng = TestRng::new(ports as u64);
         bench.uut.reset.next = true;
         bench.cycles(3);
@@ -413,6 +467,7 @@ mod tests {
         let mut pages = vec![];
         // the counter addresses of the last two clocks: the counter file answers two late
         let mut counter_reads = [0usize; 2];
+        let mut box_counter_reads = [0usize; 2];
         let mut reading: Option<(u64, u16, u64, u64, Vec<u8>)> = None;
         for clock in 0..clocks {
             let take_descriptor = rng.chance(0.3);
@@ -427,11 +482,16 @@ mod tests {
             u.link_speed.next = if clock >= 9_000 { 2 } else { 3 }.into();
             let read = counter_reads[1];
             u.counter_data.next = u64::from(counter(read / 8, read % 8)).into();
+            u.box_counter_data.next = u64::from(box_counter(box_counter_reads[1])).into();
+            u.restart_period.next = false;
+            u.report_now.next = false;
+            drive(clock, u);
             u.datagrams.ready.next = take_descriptor && reading.is_none();
             u.datagrams.body.ready.next = take_body;
             bench.settle();
             let u = &bench.uut;
             counter_reads = [u.counter_address.val().index(), counter_reads[0]];
+            box_counter_reads = [u.box_counter_address.val().index(), box_counter_reads[0]];
             if let Some((_, _, len, _, body)) = &mut reading {
                 assert!(!u.datagrams.valid.val(), "one datagram at a time");
                 if take_body && u.datagrams.body.valid.val() {
@@ -509,7 +569,8 @@ mod tests {
                 LinkSpeed::Unknown
             };
             assert_eq!(block.link_speed, speed, "page {i}");
-            assert!(block.counts.iter().all(|&c| c == 0), "no receive path yet");
+            let expected: Vec<u32> = (0..block.counts.len()).map(box_counter).collect();
+            assert_eq!(block.counts.to_vec(), expected, "box counters of page {i}");
             let first = if i % 2 == 0 { 0 } else { 32 };
             assert_eq!(usize::from(status.first_port), first, "page {i}");
             assert_eq!(status.ports.len(), if i % 2 == 0 { 32 } else { 8 });
@@ -545,5 +606,31 @@ mod tests {
                 [0, 1, 2, 3, 4, 5, 6, 7].map(|c| counter(0, c))
             )]
         );
+    }
+
+    #[test]
+    fn report_now_and_a_new_period_move_the_reports() {
+        // period 8,000; a report asked for at clock 3,000; at 12,000 the period becomes
+        // 5,000, counted from then
+        let pages = run_with(8, 8_000, 25_000, |clock, u| {
+            if clock == 3_000 {
+                u.report_now.next = true;
+            }
+            if clock >= 12_000 {
+                u.status_period_ticks.next = 5_000.into();
+            }
+            if clock == 12_000 {
+                u.restart_period.next = true;
+            }
+        });
+        let ticks: Vec<u64> = pages.iter().map(|p| p.0).collect();
+        let expected = [0, 3_000, 8_000, 17_000, 22_000];
+        assert_eq!(ticks.len(), expected.len(), "report ticks {ticks:?}");
+        for (t, e) in ticks.iter().zip(expected) {
+            assert!(
+                (e..e + 4).contains(t),
+                "report ticks {ticks:?}, expected about {expected:?}"
+            );
+        }
     }
 }
