@@ -443,7 +443,7 @@ mod tests {
     /// Runs the reporter; its descriptors are taken a few clocks after they are offered and
     /// its bodies read with random backpressure (`last` checked on every beat).
     fn box_counter(c: usize) -> u32 {
-        0xB0C0_0000 | (c as u32) * 3
+        0xB0C0_0000 | ((c as u32) * 3)
     }
 
     fn run(ports: usize, period: u64, clocks: u64) -> Vec<Page> {
