@@ -13,6 +13,7 @@ type New = unsafe extern "C" fn(*const c_char) -> *mut c_void;
 type Free = unsafe extern "C" fn(*mut c_void);
 type SetRx = unsafe extern "C" fn(*mut c_void, u32, u8);
 type SetReset = unsafe extern "C" fn(*mut c_void, u8);
+type QueueRx = unsafe extern "C" fn(*mut c_void, u64, *const u8, u64);
 type Run =
     unsafe extern "C" fn(*mut c_void, u64, *mut u32, *mut u8, u64, *mut u64, *mut u64) -> u64;
 type Ports = unsafe extern "C" fn() -> u32;
@@ -23,6 +24,7 @@ pub(crate) struct Library {
     free: Free,
     set_rx: SetRx,
     set_reset: SetReset,
+    queue_rx: QueueRx,
     run: Run,
     // keeps the code mapped while the function pointers above are in use
     _library: libloading::Library,
@@ -52,6 +54,7 @@ impl Library {
                 set_reset: std::mem::transmute::<*const c_void, SetReset>(get(
                     b"skinbox_set_reset",
                 )?),
+                queue_rx: std::mem::transmute::<*const c_void, QueueRx>(get(b"skinbox_queue_rx")?),
                 run: std::mem::transmute::<*const c_void, Run>(get(b"skinbox_run")?),
                 _library: library,
             };
@@ -99,6 +102,13 @@ impl Instance {
     pub(crate) fn set_reset(&mut self, library: &Library, on: bool) {
         // SAFETY: valid handle.
         unsafe { (library.set_reset)(self.handle, u8::from(on)) }
+    }
+
+    /// Queues `bytes` to be driven on GMII receive from rising edge `start` on (edges
+    /// counted from 1 since the instance was made), one per edge.
+    pub(crate) fn queue_rx(&mut self, library: &Library, start: u64, bytes: &[u8]) {
+        // SAFETY: valid handle; the shim copies `bytes.len()` bytes before returning.
+        unsafe { (library.queue_rx)(self.handle, start, bytes.as_ptr(), bytes.len() as u64) }
     }
 
     /// Runs up to `cycles` clocks, storing GMII bytes into the buffers (equal lengths);

@@ -23,6 +23,8 @@ pub struct Dut {
     tx_errors: u64,
     offsets: Vec<u32>,
     bytes: Vec<u8>,
+    /// The edge after which GMII receive is free again (the last queued frame's end).
+    rx_free_from: u64,
 }
 
 const BUFFER: usize = 1 << 16;
@@ -44,6 +46,7 @@ impl Dut {
             tx_errors: 0,
             offsets: vec![0; BUFFER],
             bytes: vec![0; BUFFER],
+            rx_free_from: 0,
         })
     }
 
@@ -76,6 +79,26 @@ impl Dut {
     /// Drives the synchronous reset.
     pub fn set_reset(&mut self, on: bool) {
         self.instance.set_reset(&self.model.library, on);
+    }
+
+    /// Drives `wire` (a frame as it is on the wire: preamble, SFD, frame, FCS) on GMII
+    /// receive, one byte per clock, the first byte sampled by rising edge `start` (the
+    /// cycle numbering of [`GmiiByte`]). Fails when `start` is not after the frame queued
+    /// before it (its last byte and at least one idle clock) or not in the future.
+    pub fn queue_rx_frame(&mut self, start: u64, wire: &[u8]) -> Result<(), String> {
+        if start <= self.cycle || start <= self.rx_free_from {
+            return Err(format!(
+                "receive frame at edge {start}: GMII receive is busy or that edge has passed \
+                 (cycle {}, receive free after edge {})",
+                self.cycle, self.rx_free_from
+            ));
+        }
+        if wire.is_empty() {
+            return Err("receive frame of no bytes".into());
+        }
+        self.instance.queue_rx(&self.model.library, start, wire);
+        self.rx_free_from = start + wire.len() as u64;
+        Ok(())
     }
 
     /// Runs `cycles` clock cycles with the inputs held, passing every GMII byte to `sink`.

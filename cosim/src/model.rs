@@ -441,13 +441,25 @@ fn shim_source(ports: usize, trace: bool) -> String {
 #include "Vtop.h"
 #include "verilated.h"
 #include <cstdint>
+#include <deque>
+#include <vector>
 {trace_include}
+
+// A frame to drive on GMII receive: its bytes (preamble to FCS) from edge `start` on.
+struct RxFrame {{
+    uint64_t start;
+    std::vector<uint8_t> bytes;
+}};
 
 struct Dut {{
     VerilatedContext* ctx;
     Vtop* top;
     CData* rx[{ports}];
     uint64_t time;
+    // rising edges so far, and the receive frames not yet (completely) driven
+    uint64_t edges;
+    std::deque<RxFrame> rx_frames;
+    size_t rx_at;
     {vcd_member}
 }};
 
@@ -467,7 +479,12 @@ void* skinbox_new(const char* vcd_path) {{
     top->reset = 1;
     top->link_up = {link_up};
     top->link_speed = {link_speed};
+    top->gmii_rxd = 0;
+    top->gmii_rx_dv = 0;
+    top->gmii_rx_er = 0;
     d->time = 0;
+    d->edges = 0;
+    d->rx_at = 0;
     {vcd_init}
     {trace_open}
     top->eval();
@@ -490,12 +507,26 @@ void skinbox_set_rx(void* p, uint32_t port, uint8_t level) {{
 
 void skinbox_set_reset(void* p, uint8_t on) {{ ((Dut*)p)->top->reset = on ? 1 : 0; }}
 
+void skinbox_queue_rx(void* p, uint64_t start, const uint8_t* bytes, uint64_t len) {{
+    Dut* d = (Dut*)p;
+    d->rx_frames.push_back(RxFrame{{start, std::vector<uint8_t>(bytes, bytes + len)}});
+}}
+
 uint64_t skinbox_run(void* p, uint64_t cycles, uint32_t* offsets, uint8_t* bytes,
                      uint64_t capacity, uint64_t* stored, uint64_t* tx_errors) {{
     Dut* d = (Dut*)p;
     Vtop* top = d->top;
     uint64_t n = 0, k = 0;
     for (; n < cycles && k < capacity; n++) {{
+        // the receive byte of this edge (queued frames are in edge order, apart)
+        d->edges++;
+        top->gmii_rx_dv = 0;
+        if (!d->rx_frames.empty() && d->edges >= d->rx_frames.front().start) {{
+            RxFrame& f = d->rx_frames.front();
+            top->gmii_rx_dv = 1;
+            top->gmii_rxd = f.bytes[d->rx_at++];
+            if (d->rx_at == f.bytes.size()) {{ d->rx_frames.pop_front(); d->rx_at = 0; }}
+        }}
         top->clock = 1;
         top->eval();
         d->time += 4;

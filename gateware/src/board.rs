@@ -336,6 +336,9 @@ module {top} (
         .reset(!released),{uart}
         .link_up(link_up),
         .link_speed(link_speed),
+        .gmii_rxd(8'd0),
+        .gmii_rx_dv(1'b0),
+        .gmii_rx_er(1'b0),
         .gmii_txd(gmii_txd),
         .gmii_tx_en(gmii_tx_en),
         .gmii_tx_er(gmii_tx_er)

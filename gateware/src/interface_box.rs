@@ -206,6 +206,13 @@ pub struct InterfaceBox {
     /// The link's speed as the PHY reports it: 0 = 10, 1 = 100, 2 = 1000 Mbit/s, 3 = not
     /// known (hold it at 3 without a PHY).
     pub link_speed: Signal<In, Bits<2>>,
+    /// GMII receive data, in the box clock (the board top's clock crossing; in
+    /// co-simulation the harness drives it at 125 MHz).
+    pub gmii_rxd: Signal<In, Bits<8>>,
+    /// GMII receive data valid.
+    pub gmii_rx_dv: Signal<In, Bit>,
+    /// GMII receive error.
+    pub gmii_rx_er: Signal<In, Bit>,
     /// GMII transmit data.
     pub gmii_txd: Signal<Out, Bits<8>>,
     /// GMII transmit enable.
@@ -247,6 +254,9 @@ impl InterfaceBox {
             uart_rx: (0..n).map(|_| Default::default()).collect(),
             link_up: Default::default(),
             link_speed: Default::default(),
+            gmii_rxd: Default::default(),
+            gmii_rx_dv: Default::default(),
+            gmii_rx_er: Default::default(),
             gmii_txd: Default::default(),
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
