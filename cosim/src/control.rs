@@ -137,6 +137,8 @@ pub struct BoxControl {
     pub counters: BoxCounters,
     /// (host IPv4 address, last accepted sequence), accepted longest ago first.
     hosts: Vec<([u8; 4], u32)>,
+    /// The frame being received could be stored for a reply (the previous reply left).
+    reply_slot_free: bool,
 }
 
 impl BoxControl {
@@ -158,6 +160,7 @@ impl BoxControl {
                 ..BoxCounters::default()
             },
             hosts: Vec::with_capacity(HOST_SLOTS),
+            reply_slot_free: true,
         }
     }
 
@@ -169,6 +172,20 @@ impl BoxControl {
     /// Takes one received frame (destination MAC to FCS, no preamble) whose last byte
     /// arrived at `receive_tick`.
     pub fn receive(&mut self, frame: &[u8], receive_tick: u64) -> Outcome {
+        self.receive_with_slot(frame, receive_tick, true)
+    }
+
+    /// As [`BoxControl::receive`], for a frame that found the box's reply buffer free
+    /// (`reply_slot_free`) or still holding the previous reply: then a frame that would be
+    /// answered (an ARP request for the box, an echo request, a command past step 16) is
+    /// `reply_busy`: not answered, not carried out, its sequence number not taken.
+    pub fn receive_with_slot(
+        &mut self,
+        frame: &[u8],
+        receive_tick: u64,
+        reply_slot_free: bool,
+    ) -> Outcome {
+        self.reply_slot_free = reply_slot_free;
         self.counters.bump(BoxCounter::FramesReceived);
         let outcome = self.classify(frame, receive_tick);
         self.counters.bump(outcome.fate);
@@ -208,6 +225,7 @@ impl BoxControl {
         let payload = &body[ETHERNET_HEADER_LEN..];
         match ethertype {
             ETHERTYPE_ARP => match arp_reply(&link, payload) {
+                Some(_) if !self.reply_slot_free => fate(BoxCounter::ReplyBusy),
                 Some(reply) => Outcome {
                     fate: BoxCounter::ArpAnswered,
                     reply: Some(Reply::Arp(reply)),
@@ -260,6 +278,9 @@ impl BoxControl {
                 if message[0] != 8 || message[1] != 0 {
                     return fate(BoxCounter::NotForUs);
                 }
+                if !self.reply_slot_free {
+                    return fate(BoxCounter::ReplyBusy);
+                }
                 Outcome {
                     fate: BoxCounter::PingsAnswered,
                     reply: Some(Reply::Echo(echo_reply(
@@ -304,6 +325,9 @@ impl BoxControl {
         let Ok(command) = Command::new_checked(payload) else {
             return refuse(BoxCounter::RefusedMalformed);
         };
+        if !self.reply_slot_free {
+            return refuse(BoxCounter::ReplyBusy);
+        }
         let slot = self.hosts.iter().position(|(ip, _)| *ip == sender.ip);
         let last = slot.map(|i| self.hosts[i].1);
         let sequence = command.sequence();

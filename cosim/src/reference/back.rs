@@ -180,6 +180,8 @@ pub(super) struct Back<'a> {
     status_body: Option<StatusRepr>,
     /// As `records_body_until`, for the status datagram sent last.
     status_body_until: u64,
+    /// A cycle in which the status timer is zero (its zeros are a period apart from it).
+    period_origin: u64,
     /// Frames sent, in order.
     pub frames: Vec<SentFrame>,
 }
@@ -225,6 +227,7 @@ impl<'a> Back<'a> {
                 ..Default::default()
             })
             .collect();
+        let period_origin = t.tick_offset;
         Back {
             buffers: (0..t.ports).map(|_| Buffer::default()).collect(),
             counting,
@@ -262,6 +265,7 @@ impl<'a> Back<'a> {
             report_tick: 0,
             status_body: None,
             status_body_until: 0,
+            period_origin,
             frames: vec![],
         }
     }
@@ -275,22 +279,26 @@ impl<'a> Back<'a> {
     pub(super) fn set_flush_timeout(&mut self, ticks: u64) {
         self.t.flush_timeout = ticks;
     }
-    pub(super) fn set_status_period(&mut self, ticks: u64) {
+    /// The status period becomes `ticks` in cycle `c`: the timer restarts, the next
+    /// report is due a period later.
+    pub(super) fn set_status_period(&mut self, ticks: u64, c: u64) {
         self.t.status_period = ticks;
+        self.period_origin = c + ticks;
     }
     pub(super) fn request_status(&mut self) {
         self.due = true;
     }
 
-    /// The status timer reaches zero in cycle `c` (every period from the end of reset).
+    /// The status timer reaches zero in cycle `c` (every period from the end of reset, or
+    /// from the last change of the period).
     fn timer_zero(&self, c: u64) -> bool {
-        c >= self.t.tick_offset && (c - self.t.tick_offset).is_multiple_of(self.t.status_period)
+        c >= self.period_origin && (c - self.period_origin).is_multiple_of(self.t.status_period)
     }
 
     /// First cycle at or after `c` in which the status timer is zero.
     fn next_timer_zero(&self, c: u64) -> u64 {
-        let c = c.max(self.t.tick_offset);
-        let since = (c - self.t.tick_offset) % self.t.status_period;
+        let c = c.max(self.period_origin);
+        let since = (c - self.period_origin) % self.t.status_period;
         if since == 0 {
             c
         } else {

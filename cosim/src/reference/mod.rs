@@ -168,9 +168,9 @@ impl SlicedReference<'_> {
         self.back.set_flush_timeout(ticks);
     }
 
-    /// Status reports every `ticks` from now on (on the grid of that period from tick 0).
+    /// Status reports every `ticks` from now on: the next one a period from now.
     pub fn set_status_period_ticks(&mut self, ticks: u64) {
-        self.back.set_status_period(ticks);
+        self.back.set_status_period(ticks, self.done);
     }
 
     /// A status report as soon as the reporter is idle.
