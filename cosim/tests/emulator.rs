@@ -170,6 +170,11 @@ fn commands_change_the_stream_from_their_tick() {
 
     // a 1 ms status period from 31 ms on: the timer restarts, reports every ms from 32 ms
     // (it was 5 ms)
+    assert!(emulated
+        .advance(31 * MS)
+        .iter()
+        .all(|o| DatagramRepr::parse(&o.payload)
+            .is_ok_and(|d| matches!(d.body, DatagramBody::Records(_)))));
     let ack = emulated
         .command(
             host,
