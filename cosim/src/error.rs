@@ -22,6 +22,9 @@ pub enum CosimError {
         step: &'static str,
         source: skinbox_frame_check::FrameError,
     },
+    /// The host frames of a spec cannot be driven as given.
+    #[error("host frames: {0}")]
+    HostFrames(String),
     /// The box sent something a box of its configuration cannot send.
     #[error("the box sent {0}")]
     BoxOutput(String),

@@ -50,3 +50,25 @@ pub fn min_gap(frames: &[Frame]) -> Option<u64> {
 }
 
 pub use skinbox_frame_check::{check, FrameError};
+
+/// Whether a frame the box sent (preamble to FCS) is an answer to the host rather than
+/// one of its datagrams: an ARP frame, an ICMP message, or a UDP payload of the
+/// acknowledgement kind. Looks at the type fields only; the frame is not checked.
+pub fn is_reply(frame: &[u8]) -> bool {
+    use skinbox_protocol::command::{peek_kind, KIND_ACK};
+    const ETHERTYPE: usize = 8 + 12;
+    const IP_PROTOCOL: usize = 8 + 14 + 9;
+    const UDP_PAYLOAD: usize = 8 + 14 + 20 + 8;
+    match frame.get(ETHERTYPE..ETHERTYPE + 2) {
+        Some([0x08, 0x06]) => true,
+        Some([0x08, 0x00]) => match frame.get(IP_PROTOCOL) {
+            Some(1) => true,
+            Some(17) => frame
+                .get(UDP_PAYLOAD..)
+                .and_then(peek_kind)
+                .is_some_and(|k| k == KIND_ACK),
+            _ => false,
+        },
+        _ => false,
+    }
+}

@@ -3,7 +3,7 @@
 //! runner ([`crate::sim`]) and the reference model ([`crate::reference`]).
 
 use crate::error::CosimError;
-use crate::frames::{check, min_gap, Frame};
+use crate::frames::{check, is_reply, min_gap, Frame};
 use crate::line::{back_to_back, jittered_transitions, Jitter, Transition, UartByte};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::cell::PACKET_LEN;
@@ -25,6 +25,31 @@ pub struct SentPacket {
     pub bit_ns: f64,
 }
 
+/// A frame the host sends to the box, on GMII receive.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HostFrame {
+    /// The rising edge that samples its first preamble byte (cycles as in
+    /// [`crate::GmiiByte`]).
+    pub edge: u64,
+    /// The frame: destination MAC to FCS.
+    pub frame: Vec<u8>,
+}
+
+impl HostFrame {
+    /// The frame as it is on the wire: preamble, SFD, frame.
+    pub fn wire(&self) -> Vec<u8> {
+        let mut w = vec![0x55; 7];
+        w.push(0xD5);
+        w.extend(&self.frame);
+        w
+    }
+
+    /// The rising edge that samples its last byte.
+    pub fn last_edge(&self) -> u64 {
+        self.edge + 8 + self.frame.len() as u64 - 1
+    }
+}
+
 /// What to simulate.
 #[derive(Debug, Clone)]
 pub struct SimSpec {
@@ -40,6 +65,9 @@ pub struct SimSpec {
     pub vcd: Option<PathBuf>,
     /// Edge jitter of every line (seeded per port from `jitter.seed`).
     pub jitter: Jitter,
+    /// Frames the host sends to the box, in edge order, each starting after the one
+    /// before it ended.
+    pub host_frames: Vec<HostFrame>,
 }
 
 /// Clock cycles the box is held in reset at the start.
@@ -66,6 +94,9 @@ pub struct SimReport {
     /// The frame still going out when the run ended, cut there (0 or 1): not checked, its
     /// records not delivered.
     pub frames_cut_at_end: u64,
+    /// Answers to the host's frames (ARP, echo replies, acknowledgements), not checked
+    /// here: the receive path's tests compare them with the control model.
+    pub replies: u64,
     /// Records datagrams.
     pub record_datagrams: u64,
     /// Status datagrams.
@@ -110,6 +141,9 @@ pub struct SimRun {
     pub datagrams: Vec<DatagramRepr>,
     /// The frames as sent, preamble to FCS, with the cycle of their first byte.
     pub frames: Vec<Frame>,
+    /// The box's answers to the host's frames, in the order sent: ARP replies, echo
+    /// replies and command acknowledgements (preamble to FCS).
+    pub replies: Vec<Frame>,
 }
 
 /// Every port's pin transitions (each line with its own seeded jitter) and the true,
@@ -177,7 +211,18 @@ pub(crate) fn analyse(
     let mut last_status: Vec<PortCounters> = vec![PortCounters::default(); spec.config.ports];
     let (mut error_sum, mut error_count) = (0.0, 0u64);
     let mut datagrams = Vec::with_capacity(frames.len());
+    let mut replies = vec![];
     for frame in frames {
+        if is_reply(&frame.bytes) {
+            if let Some(pcap) = &mut pcap {
+                let ethernet = &frame.bytes[8..frame.bytes.len() - 4];
+                pcap.write_frame(Duration::from_nanos(frame.first_cycle * TICK_NS), ethernet)
+                    .map_err(pcap_error)?;
+            }
+            report.replies += 1;
+            replies.push(frame.clone());
+            continue;
+        }
         let (ethernet, payload) = match check(&frame.bytes) {
             Ok(checked) => checked,
             // the last frame, cut where the run ended (it reaches the last cycle)
@@ -270,6 +315,7 @@ pub(crate) fn analyse(
         report,
         datagrams,
         frames: frames.to_vec(),
+        replies,
     })
 }
 
@@ -290,6 +336,7 @@ mod tests {
             pcap: None,
             vcd: None,
             jitter: Jitter::NONE,
+            host_frames: vec![],
         }
     }
 

@@ -52,6 +52,7 @@ pub fn spec(generated: &Generated, config: BoxConfig, from_ns: u64, duration_ns:
         pcap: None,
         vcd: None,
         jitter: Jitter::NONE,
+        host_frames: vec![],
     }
 }
 

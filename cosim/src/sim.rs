@@ -8,7 +8,7 @@ use crate::harness::play_with_progress;
 use crate::model::{default_cache_dir, Model};
 use crate::run::analyse;
 pub use crate::run::{
-    cycles, lines, SentPacket, SimReport, SimRun, SimSpec, RESET_CYCLES, TICK_ZERO_CYCLE,
+    cycles, lines, HostFrame, SentPacket, SimReport, SimRun, SimSpec, RESET_CYCLES, TICK_ZERO_CYCLE,
 };
 use crate::Dut;
 use std::time::Instant;
@@ -50,6 +50,10 @@ pub fn run_rtl_with_progress(
     let mut dut = Dut::new(&model, spec.vcd.as_deref())?;
     let (lines, true_starts) = lines(spec);
     let cycles = cycles(spec);
+    for f in &spec.host_frames {
+        dut.queue_rx_frame(f.edge, &f.wire())
+            .map_err(CosimError::HostFrames)?;
+    }
     let started = Instant::now();
     let out = play_with_progress(&mut dut, &lines, RESET_CYCLES, cycles, &mut |done| {
         progress(done, cycles)

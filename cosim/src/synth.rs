@@ -280,6 +280,7 @@ pub fn generate(config: &SynthConfig) -> Result<SynthCapture, CosimError> {
         pcap: None,
         vcd: None,
         jitter: Jitter::NONE,
+        host_frames: vec![],
     };
     let run = run_reference(&spec)?;
     let r = &run.report;

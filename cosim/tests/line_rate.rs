@@ -71,6 +71,7 @@ fn at_line_rate(ports: usize, per_port: usize, spread: f64) {
             peak_ns: 10.0,
             seed: 42,
         },
+        host_frames: vec![],
     };
     let run = run_rtl(&spec).unwrap();
     assert!(

@@ -47,6 +47,7 @@ fn busy_ports_fill_datagrams_a_lull_flushes_by_timeout() {
         pcap: None,
         vcd: None,
         jitter: skinbox_cosim::line::Jitter::NONE,
+        host_frames: vec![],
     };
     let run = run_rtl(&spec).unwrap();
     assert!(

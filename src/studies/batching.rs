@@ -447,6 +447,7 @@ mod tests {
             pcap: None,
             vcd: None,
             jitter: Jitter::NONE,
+            host_frames: vec![],
         }
     }
 

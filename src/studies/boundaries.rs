@@ -123,6 +123,7 @@ fn baud_point(error_pct: f64, packets: &[[u8; PACKET_LEN]]) -> anyhow::Result<[f
         pcap: None,
         vcd: None,
         jitter: Jitter::NONE,
+        host_frames: vec![],
     };
     let r = run_rtl(&spec)?.report;
     let n = r.packets_sent.max(1) as f64;

@@ -192,6 +192,11 @@ pub fn run_reference_with_progress(
     spec: &SimSpec,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<SimRun, CosimError> {
+    if !spec.host_frames.is_empty() {
+        return Err(CosimError::HostFrames(
+            "the reference model predicts the uplink only: run host frames on the RTL".into(),
+        ));
+    }
     let started = Instant::now();
     let (lines, true_starts) = lines(spec);
     let frames = predict_frames_with_progress(&spec.config, &lines, cycles(spec), progress)?;
