@@ -173,6 +173,37 @@ pub struct FrameParser {
     beat_length_error: DFF<Bit>,
     beat_data: DFF<Bits<8>>,
     beat_index: DFF<Bits<11>>,
+    // where the registered beat is in the frame
+    at_first: DFF<Bit>,
+    at_destination: DFF<Bit>,
+    at_source: DFF<Bit>,
+    at_ethertype: DFF<Bit>,
+    at_14: DFF<Bit>,
+    at_header_bytes: DFF<Bit>,
+    at_total: DFF<Bit>,
+    at_18: DFF<Bit>,
+    at_19: DFF<Bit>,
+    at_arp_sender_mac: DFF<Bit>,
+    at_23: DFF<Bit>,
+    at_ip_source: DFF<Bit>,
+    at_arp_sender_ip: DFF<Bit>,
+    at_ip_destination: DFF<Bit>,
+    at_arp_target_ip: DFF<Bit>,
+    at_transport: DFF<Bit>,
+    at_command_head: DFF<Bit>,
+    at_sequence: DFF<Bit>,
+    at_host_time: DFF<Bit>,
+    at_argument_length: DFF<Bit>,
+    at_reserved: DFF<Bit>,
+    at_65: DFF<Bit>,
+    at_ip_header: DFF<Bit>,
+    at_pseudo_header: DFF<Bit>,
+    at_from_34: DFF<Bit>,
+    at_from_38: DFF<Bit>,
+    beat_word: DFF<Bits<16>>,
+    transport_word: DFF<Bits<16>>,
+    index_in: Signal<Local, Bits<11>>,
+    word_in: Signal<Local, Bits<16>>,
     // captures
     destination_mac: DFF<Bits<48>>,
     ethertype: DFF<Bits<16>>,
@@ -216,9 +247,6 @@ pub struct FrameParser {
     transport_carry: DFF<Bit>,
     rest_sum: DFF<Bits<16>>,
     rest_carry: DFF<Bit>,
-    byte_word: Signal<Local, Bits<16>>,
-    transport_byte: Signal<Local, Bits<8>>,
-    transport_word: Signal<Local, Bits<16>>,
     header_next: Signal<Local, Bits<17>>,
     transport_next: Signal<Local, Bits<17>>,
     rest_next: Signal<Local, Bits<17>>,
@@ -382,6 +410,36 @@ impl FrameParser {
             beat_length_error: Default::default(),
             beat_data: Default::default(),
             beat_index: Default::default(),
+            at_first: Default::default(),
+            at_destination: Default::default(),
+            at_source: Default::default(),
+            at_ethertype: Default::default(),
+            at_14: Default::default(),
+            at_header_bytes: Default::default(),
+            at_total: Default::default(),
+            at_18: Default::default(),
+            at_19: Default::default(),
+            at_arp_sender_mac: Default::default(),
+            at_23: Default::default(),
+            at_ip_source: Default::default(),
+            at_arp_sender_ip: Default::default(),
+            at_ip_destination: Default::default(),
+            at_arp_target_ip: Default::default(),
+            at_transport: Default::default(),
+            at_command_head: Default::default(),
+            at_sequence: Default::default(),
+            at_host_time: Default::default(),
+            at_argument_length: Default::default(),
+            at_reserved: Default::default(),
+            at_65: Default::default(),
+            at_ip_header: Default::default(),
+            at_pseudo_header: Default::default(),
+            at_from_34: Default::default(),
+            at_from_38: Default::default(),
+            beat_word: Default::default(),
+            transport_word: Default::default(),
+            index_in: Default::default(),
+            word_in: Default::default(),
             destination_mac: Default::default(),
             ethertype: Default::default(),
             is_arp: Default::default(),
@@ -422,9 +480,6 @@ impl FrameParser {
             transport_carry: Default::default(),
             rest_sum: Default::default(),
             rest_carry: Default::default(),
-            byte_word: Default::default(),
-            transport_byte: Default::default(),
-            transport_word: Default::default(),
             header_next: Default::default(),
             transport_next: Default::default(),
             rest_next: Default::default(),
@@ -533,6 +588,34 @@ impl Logic for FrameParser {
             beat_length_error,
             beat_data,
             beat_index,
+            at_first,
+            at_destination,
+            at_source,
+            at_ethertype,
+            at_14,
+            at_header_bytes,
+            at_total,
+            at_18,
+            at_19,
+            at_arp_sender_mac,
+            at_23,
+            at_ip_source,
+            at_arp_sender_ip,
+            at_ip_destination,
+            at_arp_target_ip,
+            at_transport,
+            at_command_head,
+            at_sequence,
+            at_host_time,
+            at_argument_length,
+            at_reserved,
+            at_65,
+            at_ip_header,
+            at_pseudo_header,
+            at_from_34,
+            at_from_38,
+            beat_word,
+            transport_word,
             destination_mac,
             ethertype,
             is_arp,
@@ -658,6 +741,51 @@ impl Logic for FrameParser {
         self.beat_error.d.next = self.frame.error.val();
         self.beat_length_error.d.next = self.length_error.val();
         self.beat_data.d.next = self.frame.data.val();
+        self.index_in.next = 0.into();
+        if self.in_frame.q.val() {
+            self.index_in.next = self.next_index.q.val();
+        }
+        self.at_first.d.next = self.index_in.val() == 0;
+        self.at_destination.d.next = self.index_in.val() < 6;
+        self.at_source.d.next = (self.index_in.val() >= 6) & (self.index_in.val() < 12);
+        self.at_ethertype.d.next = (self.index_in.val() >= 12) & (self.index_in.val() < 14);
+        self.at_14.d.next = self.index_in.val() == 14;
+        self.at_header_bytes.d.next = (self.index_in.val() >= 14) & (self.index_in.val() < 22);
+        self.at_total.d.next = (self.index_in.val() >= 16) & (self.index_in.val() < 18);
+        self.at_18.d.next = self.index_in.val() == 18;
+        self.at_19.d.next = self.index_in.val() == 19;
+        self.at_arp_sender_mac.d.next = (self.index_in.val() >= 22) & (self.index_in.val() < 28);
+        self.at_23.d.next = self.index_in.val() == 23;
+        self.at_ip_source.d.next = (self.index_in.val() >= 26) & (self.index_in.val() < 30);
+        self.at_arp_sender_ip.d.next = (self.index_in.val() >= 28) & (self.index_in.val() < 32);
+        self.at_ip_destination.d.next = (self.index_in.val() >= 30) & (self.index_in.val() < 34);
+        self.at_arp_target_ip.d.next = (self.index_in.val() >= 38) & (self.index_in.val() < 42);
+        self.at_transport.d.next = (self.index_in.val() >= 34) & (self.index_in.val() < 42);
+        self.at_command_head.d.next = (self.index_in.val() >= 42) & (self.index_in.val() < 50);
+        self.at_sequence.d.next = (self.index_in.val() >= 50) & (self.index_in.val() < 54);
+        self.at_host_time.d.next = (self.index_in.val() >= 54) & (self.index_in.val() < 62);
+        self.at_argument_length.d.next = (self.index_in.val() >= 62) & (self.index_in.val() < 64);
+        self.at_reserved.d.next = (self.index_in.val() >= 64) & (self.index_in.val() < 66);
+        self.at_65.d.next = self.index_in.val() == 65;
+        self.at_ip_header.d.next = (self.index_in.val() >= 14) & (self.index_in.val() < 34);
+        self.at_pseudo_header.d.next = (self.index_in.val() >= 24) & (self.index_in.val() < 34);
+        self.at_from_34.d.next = self.index_in.val() >= 34;
+        self.at_from_38.d.next = self.index_in.val() >= 38;
+        // the byte as a 16-bit word: even frame positions are high bytes
+        self.word_in.next = bit_cast::<16, 8>(self.frame.data.val()) << 8;
+        if self.index_in.val().get_bit(0) {
+            self.word_in.next = bit_cast::<16, 8>(self.frame.data.val());
+        }
+        self.beat_word.d.next = self.word_in.val();
+        // UDP pseudo header: the UDP length (the IPv4 payload length) in the clock of byte
+        // 24, nothing in that of byte 25 (the IPv4 checksum), then the addresses
+        self.transport_word.d.next = self.word_in.val();
+        if self.index_in.val() == 24 {
+            self.transport_word.d.next = self.payload_length.q.val();
+        }
+        if self.index_in.val() == 25 {
+            self.transport_word.d.next = 0.into();
+        }
         if self.frame.valid.val() {
             if self.in_frame.q.val() {
                 self.beat_index.d.next = self.next_index.q.val();
@@ -679,117 +807,87 @@ impl Logic for FrameParser {
         self.buffer_write_data.next = self.beat_data.q.val();
 
         // ---- captures by byte position ----
-        // the byte as a 16-bit word: even frame positions are high bytes
-        self.byte_word.next = bit_cast::<16, 8>(self.beat_data.q.val()) << 8;
-        if self.beat_index.q.val().get_bit(0) {
-            self.byte_word.next = bit_cast::<16, 8>(self.beat_data.q.val());
-        }
         self.argument_byte.next = 0.into();
         if self.in_ip.q.val() {
             self.argument_byte.next = self.beat_data.q.val();
         }
         self.header_next.next = bit_cast::<17, 16>(self.header_sum.q.val())
-            + bit_cast::<17, 16>(self.byte_word.val())
+            + bit_cast::<17, 16>(self.beat_word.q.val())
             + bit_cast::<17, 1>(self.header_carry.q.val().into());
         self.rest_next.next = bit_cast::<17, 16>(self.rest_sum.q.val())
-            + bit_cast::<17, 16>(self.byte_word.val())
+            + bit_cast::<17, 16>(self.beat_word.q.val())
             + bit_cast::<17, 1>(self.rest_carry.q.val().into());
-        // UDP pseudo header: the UDP length (IPv4 payload length) in the clocks of bytes
-        // 24 and 25 (the IPv4 checksum, not summed here), then the addresses
-        self.transport_byte.next = self.beat_data.q.val();
-        if self.beat_index.q.val() == 24 {
-            self.transport_byte.next = self.payload_length.q.val().get_bits::<8>(8);
-        }
-        if self.beat_index.q.val() == 25 {
-            self.transport_byte.next = self.payload_length.q.val().get_bits::<8>(0);
-        }
-        self.transport_word.next = bit_cast::<16, 8>(self.transport_byte.val()) << 8;
-        if self.beat_index.q.val().get_bit(0) {
-            self.transport_word.next = bit_cast::<16, 8>(self.transport_byte.val());
-        }
         self.transport_next.next = bit_cast::<17, 16>(self.transport_sum.q.val())
-            + bit_cast::<17, 16>(self.transport_word.val())
+            + bit_cast::<17, 16>(self.transport_word.q.val())
             + bit_cast::<17, 1>(self.transport_carry.q.val().into());
 
         if self.beat_valid.q.val() {
-            if self.beat_index.q.val() < 6 {
+            if self.at_destination.q.val() {
                 self.destination_mac.d.next =
                     (self.destination_mac.q.val() << 8) | bit_cast::<48, 8>(self.beat_data.q.val());
             }
-            if ((self.beat_index.q.val() >= 6) & (self.beat_index.q.val() < 12))
-                | (self.is_arp.q.val()
-                    & (self.beat_index.q.val() >= 22)
-                    & (self.beat_index.q.val() < 28))
-            {
+            if (self.at_source.q.val()) | (self.is_arp.q.val() & self.at_arp_sender_mac.q.val()) {
                 self.source_mac.d.next =
                     (self.source_mac.q.val() << 8) | bit_cast::<48, 8>(self.beat_data.q.val());
             }
-            if (self.beat_index.q.val() >= 12) & (self.beat_index.q.val() < 14) {
+            if self.at_ethertype.q.val() {
                 self.ethertype.d.next =
                     (self.ethertype.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
             }
-            if self.beat_index.q.val() == 14 {
+            if self.at_14.q.val() {
                 self.is_arp.d.next = self.ethertype.q.val() == self.ethertype_arp.val();
             }
-            if (self.beat_index.q.val() >= 14) & (self.beat_index.q.val() < 22) {
+            if self.at_header_bytes.q.val() {
                 self.header.d.next =
                     (self.header.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
             }
-            if (self.beat_index.q.val() >= 16) & (self.beat_index.q.val() < 18) {
+            if self.at_total.q.val() {
                 self.total_length.d.next =
                     (self.total_length.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
             }
-            if self.beat_index.q.val() == 23 {
+            if self.at_23.q.val() {
                 self.protocol.d.next = self.beat_data.q.val();
                 self.is_udp.d.next = self.beat_data.q.val() == self.protocol_udp.val();
             }
-            if (!self.is_arp.q.val()
-                & (self.beat_index.q.val() >= 26)
-                & (self.beat_index.q.val() < 30))
-                | (self.is_arp.q.val()
-                    & (self.beat_index.q.val() >= 28)
-                    & (self.beat_index.q.val() < 32))
+            if (!self.is_arp.q.val() & self.at_ip_source.q.val())
+                | (self.is_arp.q.val() & self.at_arp_sender_ip.q.val())
             {
                 self.source_ip.d.next =
                     (self.source_ip.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
             }
-            if (!self.is_arp.q.val()
-                & (self.beat_index.q.val() >= 30)
-                & (self.beat_index.q.val() < 34))
-                | (self.is_arp.q.val()
-                    & (self.beat_index.q.val() >= 38)
-                    & (self.beat_index.q.val() < 42))
+            if (!self.is_arp.q.val() & self.at_ip_destination.q.val())
+                | (self.is_arp.q.val() & self.at_arp_target_ip.q.val())
             {
                 self.target_ip.d.next =
                     (self.target_ip.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
             }
-            if (self.beat_index.q.val() >= 34) & (self.beat_index.q.val() < 42) {
+            if self.at_transport.q.val() {
                 self.transport.d.next =
                     (self.transport.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
             }
-            if (self.beat_index.q.val() >= 42) & (self.beat_index.q.val() < 50) {
+            if self.at_command_head.q.val() {
                 self.command_head.d.next =
                     (self.command_head.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
             }
-            if (self.beat_index.q.val() >= 50) & (self.beat_index.q.val() < 54) {
+            if self.at_sequence.q.val() {
                 self.sequence_number.d.next =
                     (self.sequence_number.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
             }
-            if (self.beat_index.q.val() >= 54) & (self.beat_index.q.val() < 62) {
+            if self.at_host_time.q.val() {
                 self.host_time.d.next =
                     (self.host_time.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
             }
-            if (self.beat_index.q.val() >= 62) & (self.beat_index.q.val() < 64) {
+            if self.at_argument_length.q.val() {
                 self.argument_length.d.next =
                     (self.argument_length.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
             }
-            if (self.beat_index.q.val() >= 64) & (self.beat_index.q.val() < 66) {
+            if self.at_reserved.q.val() {
                 self.reserved.d.next =
                     (self.reserved.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
             }
             // arguments: one slot per byte from 66, inside the IPv4 packet only
             self.argument_slot.d.next = self.argument_slot.q.val() >> 1;
-            if self.beat_index.q.val() == 65 {
+            if self.at_65.q.val() {
                 self.argument_slot.d.next = 0x800.into();
             }
             if self.argument_slot.q.val().get_bit(11) {
@@ -835,29 +933,27 @@ impl Logic for FrameParser {
                 self.ip_left.d.next = self.ip_left.q.val() - 1;
                 self.in_ip.d.next = self.ip_left.q.val() != 1;
             }
-            if self.beat_index.q.val() == 18 {
+            if self.at_18.q.val() {
                 self.ip_left.d.next = self.total_length.q.val() - 5;
                 self.in_ip.d.next = self.total_length.q.val() > 5;
                 self.payload_length.d.next = self.total_length.q.val() - 20;
             }
-            if self.beat_index.q.val() == 19 {
+            if self.at_19.q.val() {
                 // a command's arguments: the payload after the UDP and command headers
                 self.arguments_expected.d.next = self.total_length.q.val() - 52;
             }
             // sums
-            if (self.beat_index.q.val() >= 14) & (self.beat_index.q.val() < 34) {
+            if self.at_ip_header.q.val() {
                 self.header_sum.d.next = self.header_next.val().get_bits::<16>(0);
                 self.header_carry.d.next = self.header_next.val().get_bit(16);
             }
-            if (self.is_udp.q.val()
-                & (self.beat_index.q.val() >= 24)
-                & (self.beat_index.q.val() < 34))
-                | (self.in_ip.q.val() & (self.beat_index.q.val() >= 34))
+            if (self.is_udp.q.val() & self.at_pseudo_header.q.val())
+                | (self.in_ip.q.val() & (self.at_from_34.q.val()))
             {
                 self.transport_sum.d.next = self.transport_next.val().get_bits::<16>(0);
                 self.transport_carry.d.next = self.transport_next.val().get_bit(16);
             }
-            if self.beat_index.q.val() == 23 {
+            if self.at_23.q.val() {
                 // UDP: the pseudo header's protocol word
                 self.transport_sum.d.next = 0.into();
                 if self.beat_data.q.val() == self.protocol_udp.val() {
@@ -865,11 +961,11 @@ impl Logic for FrameParser {
                 }
                 self.transport_carry.d.next = false;
             }
-            if self.in_ip.q.val() & (self.beat_index.q.val() >= 38) {
+            if self.in_ip.q.val() & (self.at_from_38.q.val()) {
                 self.rest_sum.d.next = self.rest_next.val().get_bits::<16>(0);
                 self.rest_carry.d.next = self.rest_next.val().get_bit(16);
             }
-            if self.beat_index.q.val() == 0 {
+            if self.at_first.q.val() {
                 self.is_arp.d.next = false;
                 self.is_udp.d.next = false;
                 self.in_ip.d.next = false;
