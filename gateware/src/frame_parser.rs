@@ -745,32 +745,72 @@ impl Logic for FrameParser {
         if self.in_frame.q.val() {
             self.index_in.next = self.next_index.q.val();
         }
-        self.at_first.d.next = self.index_in.val() == 0;
-        self.at_destination.d.next = self.index_in.val() < 6;
-        self.at_source.d.next = (self.index_in.val() >= 6) & (self.index_in.val() < 12);
-        self.at_ethertype.d.next = (self.index_in.val() >= 12) & (self.index_in.val() < 14);
-        self.at_14.d.next = self.index_in.val() == 14;
-        self.at_header_bytes.d.next = (self.index_in.val() >= 14) & (self.index_in.val() < 22);
-        self.at_total.d.next = (self.index_in.val() >= 16) & (self.index_in.val() < 18);
-        self.at_18.d.next = self.index_in.val() == 18;
-        self.at_19.d.next = self.index_in.val() == 19;
-        self.at_arp_sender_mac.d.next = (self.index_in.val() >= 22) & (self.index_in.val() < 28);
-        self.at_23.d.next = self.index_in.val() == 23;
-        self.at_ip_source.d.next = (self.index_in.val() >= 26) & (self.index_in.val() < 30);
-        self.at_arp_sender_ip.d.next = (self.index_in.val() >= 28) & (self.index_in.val() < 32);
-        self.at_ip_destination.d.next = (self.index_in.val() >= 30) & (self.index_in.val() < 34);
-        self.at_arp_target_ip.d.next = (self.index_in.val() >= 38) & (self.index_in.val() < 42);
-        self.at_transport.d.next = (self.index_in.val() >= 34) & (self.index_in.val() < 42);
-        self.at_command_head.d.next = (self.index_in.val() >= 42) & (self.index_in.val() < 50);
-        self.at_sequence.d.next = (self.index_in.val() >= 50) & (self.index_in.val() < 54);
-        self.at_host_time.d.next = (self.index_in.val() >= 54) & (self.index_in.val() < 62);
-        self.at_argument_length.d.next = (self.index_in.val() >= 62) & (self.index_in.val() < 64);
-        self.at_reserved.d.next = (self.index_in.val() >= 64) & (self.index_in.val() < 66);
-        self.at_65.d.next = self.index_in.val() == 65;
-        self.at_ip_header.d.next = (self.index_in.val() >= 14) & (self.index_in.val() < 34);
-        self.at_pseudo_header.d.next = (self.index_in.val() >= 24) & (self.index_in.val() < 34);
-        self.at_from_34.d.next = self.index_in.val() >= 34;
-        self.at_from_38.d.next = self.index_in.val() >= 38;
+        // position flags of the next registered beat: equality decodes only (a range
+        // starts at its first byte and ends at the byte after it or at a frame's start)
+        if self.frame.valid.val() {
+            self.at_first.d.next = self.index_in.val() == 0;
+            self.at_destination.d.next =
+                !self.in_frame.q.val() | (self.at_destination.q.val() & (self.index_in.val() != 6));
+            self.at_source.d.next = (self.index_in.val() == 6)
+                | (self.at_source.q.val() & (self.index_in.val() != 12) & self.in_frame.q.val());
+            self.at_ethertype.d.next = (self.index_in.val() == 12)
+                | (self.at_ethertype.q.val() & (self.index_in.val() != 14) & self.in_frame.q.val());
+            self.at_14.d.next = self.index_in.val() == 14;
+            self.at_header_bytes.d.next = (self.index_in.val() == 14)
+                | (self.at_header_bytes.q.val()
+                    & (self.index_in.val() != 22)
+                    & self.in_frame.q.val());
+            self.at_total.d.next = (self.index_in.val() == 16)
+                | (self.at_total.q.val() & (self.index_in.val() != 18) & self.in_frame.q.val());
+            self.at_18.d.next = self.index_in.val() == 18;
+            self.at_19.d.next = self.index_in.val() == 19;
+            self.at_arp_sender_mac.d.next = (self.index_in.val() == 22)
+                | (self.at_arp_sender_mac.q.val()
+                    & (self.index_in.val() != 28)
+                    & self.in_frame.q.val());
+            self.at_23.d.next = self.index_in.val() == 23;
+            self.at_ip_source.d.next = (self.index_in.val() == 26)
+                | (self.at_ip_source.q.val() & (self.index_in.val() != 30) & self.in_frame.q.val());
+            self.at_arp_sender_ip.d.next = (self.index_in.val() == 28)
+                | (self.at_arp_sender_ip.q.val()
+                    & (self.index_in.val() != 32)
+                    & self.in_frame.q.val());
+            self.at_ip_destination.d.next = (self.index_in.val() == 30)
+                | (self.at_ip_destination.q.val()
+                    & (self.index_in.val() != 34)
+                    & self.in_frame.q.val());
+            self.at_arp_target_ip.d.next = (self.index_in.val() == 38)
+                | (self.at_arp_target_ip.q.val()
+                    & (self.index_in.val() != 42)
+                    & self.in_frame.q.val());
+            self.at_transport.d.next = (self.index_in.val() == 34)
+                | (self.at_transport.q.val() & (self.index_in.val() != 42) & self.in_frame.q.val());
+            self.at_command_head.d.next = (self.index_in.val() == 42)
+                | (self.at_command_head.q.val()
+                    & (self.index_in.val() != 50)
+                    & self.in_frame.q.val());
+            self.at_sequence.d.next = (self.index_in.val() == 50)
+                | (self.at_sequence.q.val() & (self.index_in.val() != 54) & self.in_frame.q.val());
+            self.at_host_time.d.next = (self.index_in.val() == 54)
+                | (self.at_host_time.q.val() & (self.index_in.val() != 62) & self.in_frame.q.val());
+            self.at_argument_length.d.next = (self.index_in.val() == 62)
+                | (self.at_argument_length.q.val()
+                    & (self.index_in.val() != 64)
+                    & self.in_frame.q.val());
+            self.at_reserved.d.next = (self.index_in.val() == 64)
+                | (self.at_reserved.q.val() & (self.index_in.val() != 66) & self.in_frame.q.val());
+            self.at_65.d.next = self.index_in.val() == 65;
+            self.at_ip_header.d.next = (self.index_in.val() == 14)
+                | (self.at_ip_header.q.val() & (self.index_in.val() != 34) & self.in_frame.q.val());
+            self.at_pseudo_header.d.next = (self.index_in.val() == 24)
+                | (self.at_pseudo_header.q.val()
+                    & (self.index_in.val() != 34)
+                    & self.in_frame.q.val());
+            self.at_from_34.d.next =
+                (self.index_in.val() == 34) | (self.at_from_34.q.val() & self.in_frame.q.val());
+            self.at_from_38.d.next =
+                (self.index_in.val() == 38) | (self.at_from_38.q.val() & self.in_frame.q.val());
+        }
         // the byte as a 16-bit word: even frame positions are high bytes
         self.word_in.next = bit_cast::<16, 8>(self.frame.data.val()) << 8;
         if self.index_in.val().get_bit(0) {
