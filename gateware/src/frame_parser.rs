@@ -2,9 +2,12 @@
 //! to 16) on the fly, one beat per clock, and writes it into the reply frame buffer.
 //!
 //! The frame arrives from the MAC receiver (destination MAC to FCS; `error` and
-//! `length_error` with the last beat). Each beat is registered first; the registered beat
-//! (index `i` from 0) is written into the frame buffer at address `i` when the frame is
-//! STORED (`buffer_locked` was low in the clock its first beat was on `frame`), and feeds:
+//! `length_error` with the last beat). Each beat is registered first, with flags saying
+//! where it lies in the frame (set and cleared by equality decodes of the beat index, so no
+//! range compare sits in front of the per-beat logic) and its 16-bit checksum word. The
+//! registered beat (index `i` from 0) is written into the frame buffer at address `i` one
+//! clock after it was on `frame` when the frame is STORED (`buffer_locked` was low in the
+//! clock its first beat was on `frame`), and feeds:
 //!
 //! - field captures by byte position (shift registers enabled over their bytes): the
 //!   destination MAC, the EtherType, bytes 14..22 (the ARP request header, or IPv4
@@ -63,9 +66,6 @@ const _: () = assert!(UDP_HEADER_LEN == 8);
 const _: () = assert!(HEADER_LEN == 24);
 // the ARP body (28 bytes) ends at byte 42, inside the 60 bytes every frame has
 const _: () = assert!(ETHERNET_HEADER_LEN + 28 <= skinbox_protocol::link::MIN_FRAME_LEN);
-
-/// Frame byte of the IPv4 total length's low byte: the IP down-counter starts a byte later.
-const _: () = assert!(ETHERNET_HEADER_LEN + 3 == 17);
 
 fn be(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0, |v, &b| v << 8 | u64::from(b))
