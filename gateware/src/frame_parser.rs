@@ -183,6 +183,7 @@ pub struct FrameParser {
     at_total: DFF<Bit>,
     at_18: DFF<Bit>,
     at_19: DFF<Bit>,
+    at_33: DFF<Bit>,
     at_arp_sender_mac: DFF<Bit>,
     at_23: DFF<Bit>,
     at_ip_source: DFF<Bit>,
@@ -234,7 +235,8 @@ pub struct FrameParser {
     argument_9: DFF<Bits<8>>,
     argument_10: DFF<Bits<8>>,
     argument_11: DFF<Bits<8>>,
-    // the IPv4 packet's bytes after the current one, and whether the current one is in it
+    // the IPv4 payload's bytes after the current one, and whether the current one (from
+    // byte 34) is in it
     ip_left: DFF<Bits<16>>,
     in_ip: DFF<Bit>,
     in_ip_history: DFF<Bits<3>>,
@@ -419,6 +421,7 @@ impl FrameParser {
             at_total: Default::default(),
             at_18: Default::default(),
             at_19: Default::default(),
+            at_33: Default::default(),
             at_arp_sender_mac: Default::default(),
             at_23: Default::default(),
             at_ip_source: Default::default(),
@@ -597,6 +600,7 @@ impl Logic for FrameParser {
             at_total,
             at_18,
             at_19,
+            at_33,
             at_arp_sender_mac,
             at_23,
             at_ip_source,
@@ -764,6 +768,7 @@ impl Logic for FrameParser {
                 | (self.at_total.q.val() & (self.index_in.val() != 18) & self.in_frame.q.val());
             self.at_18.d.next = self.index_in.val() == 18;
             self.at_19.d.next = self.index_in.val() == 19;
+            self.at_33.d.next = self.index_in.val() == 33;
             self.at_arp_sender_mac.d.next = (self.index_in.val() == 22)
                 | (self.at_arp_sender_mac.q.val()
                     & (self.index_in.val() != 28)
@@ -966,7 +971,7 @@ impl Logic for FrameParser {
             if self.argument_slot.q.val().get_bit(0) {
                 self.argument_11.d.next = self.argument_byte.val();
             }
-            // the IPv4 packet's extent (its total length is complete from byte 18)
+            // the IPv4 payload's extent: whether the beat (from byte 34) is inside it
             self.in_ip_history.d.next =
                 (self.in_ip_history.q.val() << 1) | bit_cast::<3, 1>(self.in_ip.q.val().into());
             if self.in_ip.q.val() {
@@ -974,13 +979,16 @@ impl Logic for FrameParser {
                 self.in_ip.d.next = self.ip_left.q.val() != 1;
             }
             if self.at_18.q.val() {
-                self.ip_left.d.next = self.total_length.q.val() - 5;
-                self.in_ip.d.next = self.total_length.q.val() > 5;
                 self.payload_length.d.next = self.total_length.q.val() - 20;
             }
             if self.at_19.q.val() {
                 // a command's arguments: the payload after the UDP and command headers
-                self.arguments_expected.d.next = self.total_length.q.val() - 52;
+                self.arguments_expected.d.next = self.payload_length.q.val() - 32;
+            }
+            if self.at_33.q.val() {
+                // the IPv4 payload's bytes from 34 on
+                self.ip_left.d.next = self.payload_length.q.val();
+                self.in_ip.d.next = self.payload_length.q.val() != 0;
             }
             // sums
             if self.at_ip_header.q.val() {
