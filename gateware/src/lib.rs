@@ -24,6 +24,7 @@ pub mod cell_deframer;
 pub mod counter_file;
 pub mod crc32;
 pub mod datagram_arbiter;
+pub mod frame_parser;
 pub mod frame_transmitter;
 pub mod hdl;
 pub mod interface_box;

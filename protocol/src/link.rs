@@ -85,6 +85,19 @@ pub const MIN_FRAME_LEN: usize = 60;
 pub const INTER_FRAME_GAP: usize = 12;
 /// IPv4 time to live of the box's packets.
 pub const IPV4_TTL: u8 = 64;
+/// EtherType of ARP.
+pub const ETHERTYPE_ARP: u16 = 0x0806;
+/// EtherType of IPv4.
+pub const ETHERTYPE_IPV4: u16 = 0x0800;
+/// IP protocol number of ICMP.
+pub const IP_PROTOCOL_ICMP: u8 = 1;
+/// IP protocol number of UDP.
+pub const IP_PROTOCOL_UDP: u8 = 17;
+/// ICMP type of an echo request (code 0).
+pub const ICMP_ECHO_REQUEST: u8 = 8;
+/// The first 8 bytes of an ARP request for IPv4 over Ethernet (RFC 826): hardware type 1,
+/// protocol type 0x0800, address lengths 6 and 4, operation 1 (request).
+pub const ARP_REQUEST_HEADER: [u8; 8] = [0, 1, 8, 0, 6, 4, 0, 1];
 
 #[cfg(test)]
 mod tests {
