@@ -273,4 +273,19 @@ mod tests {
             assert_eq!(read_both(&mut bench, c, c), (0, 0), "counter {c}");
         }
     }
+
+    #[test]
+    fn verilog_lints_clean() {
+        let mut uut = BoxCounterFile::default();
+        uut.connect_all();
+        let text = generate_verilog(&uut);
+        let dir = std::env::temp_dir().join(format!(
+            "skinbox-lint-box-counter-file-{}",
+            std::process::id()
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        let report = crate::verilog::lint(&text, &dir).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(report.clean, "{}", report.output);
+    }
 }

@@ -1215,4 +1215,17 @@ mod tests {
         // every result came up often
         assert!(results.iter().all(|&n| n >= 10), "results {results:?}");
     }
+
+    #[test]
+    fn verilog_lints_clean() {
+        let mut uut = CommandUnit::new(config());
+        uut.connect_all();
+        let text = generate_verilog(&uut);
+        let dir =
+            std::env::temp_dir().join(format!("skinbox-lint-command-unit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let report = crate::verilog::lint(&text, &dir).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(report.clean, "{}", report.output);
+    }
 }
