@@ -11,7 +11,8 @@
 //!
 //! Limit: the last write of a count comes four clocks after `count`, so counts must be at
 //! least [`COUNT_SPACING`] clocks apart (a received frame takes at least 72 clocks, so
-//! the receive path needs at most one per frame). After reset the file first clears
+//! the receive path needs at most one per frame). A count with `counter` 0
+//! (`FramesReceived`) adds one to it, not two. After reset the file first clears
 //! its RAMs ([`CLEAR_CLOCKS`] clocks) with `ready` low; counts in that time are lost.
 
 use crate::block_ram::BlockRam;

@@ -19,7 +19,9 @@
 //! `last_accepted` (held until the next `done`). The table and the configuration
 //! registers change at the same edge: in the `done` clock they already hold the new
 //! values, and `status_period_set` / `status_now` are high in that clock only.
-//! Commands must come at least `COMMAND_LATENCY` clocks apart (a frame takes at least 72).
+//! Commands must come at least `COMMAND_LATENCY` clocks apart (a frame takes at least 72),
+//! and the parser's fields must stay steady from `command` to `done` (it holds them until
+//! the next stored frame's decision).
 //!
 //! `last_accepted` is the sequence number the table holds for the sender after the
 //! command: the command's own when it was taken, else the one it holds (0 for a host
