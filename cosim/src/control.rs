@@ -47,8 +47,7 @@ use skinbox_protocol::link::{
 };
 use skinbox_protocol::Error;
 
-/// Hosts whose last accepted sequence number the box remembers.
-pub const HOST_SLOTS: usize = 4;
+pub use skinbox_protocol::command::HOST_SLOTS;
 /// Shortest frame the MAC takes, FCS included (IEEE 802.3).
 pub const MIN_RECEIVE_LEN: usize = MIN_FRAME_LEN + FCS_LEN;
 /// Longest frame the MAC takes, FCS included (1500-byte MTU, no VLAN tag).

@@ -20,7 +20,9 @@
 pub mod block_ram;
 pub mod board;
 pub mod body_reader;
+pub mod box_counter_file;
 pub mod cell_deframer;
+pub mod command_unit;
 pub mod counter_file;
 pub mod crc32;
 pub mod datagram_arbiter;

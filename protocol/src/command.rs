@@ -42,6 +42,8 @@ pub const KIND_ACK: u8 = 4;
 pub const ANY_BOX: u16 = 0xFFFF;
 /// Port of a cell-network command meant for every port.
 pub const ALL_PORTS: u8 = 0xFF;
+/// Hosts whose last accepted sequence number the box remembers (docs/control.md).
+pub const HOST_SLOTS: usize = 4;
 /// Shortest status period a command may set: 1 ms (125,000 ticks), so status reports
 /// never take more than a small share of the link.
 pub const MIN_STATUS_PERIOD_TICKS: u32 = 125_000;

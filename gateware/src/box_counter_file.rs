@@ -1,0 +1,292 @@
+//! BoxCounterFile: the box counters (`skinbox_protocol::box_counters::BoxCounter`) as
+//! 32-bit words in block RAM.
+//!
+//! Every received frame raises `count` for one clock with its fate in `counter` (a
+//! `BoxCounter` index other than `FramesReceived`); the file adds one to
+//! `FramesReceived` and to that counter, each a read-modify-write in the counting RAM:
+//! `FramesReceived` is read in the clock of `count`, the fate's counter a clock later,
+//! and each is written, incremented, three clocks after its read. Two more RAMs take the
+//! same writes and serve the reporter's and the reply builder's read ports, so reading
+//! never delays counting.
+//!
+//! Limit: the last write of a count comes four clocks after `count`, so counts must be at
+//! least [`COUNT_SPACING`] clocks apart (a received frame takes at least 72 clocks, so
+//! the receive path needs at most one per frame). A count with `counter` 0
+//! (`FramesReceived`) adds one to it, not two. After reset the file first clears
+//! its RAMs ([`CLEAR_CLOCKS`] clocks) with `ready` low; counts in that time are lost.
+
+use crate::block_ram::BlockRam;
+use crate::hdl::*;
+use skinbox_protocol::box_counters::BoxCounter;
+
+/// Counters in the file (`BoxCounter::ALL`).
+pub const COUNTERS: usize = BoxCounter::ALL.len();
+/// Clocks the file spends clearing its memories after reset (`ready` low).
+pub const CLEAR_CLOCKS: u64 = 32;
+/// Fewest clocks between two counts (the read-modify-writes of one count must be over
+/// before the next reads).
+pub const COUNT_SPACING: u64 = 5;
+
+/// The box counters, counted by fate, with two read ports.
+#[derive(LogicBlock, Default)]
+pub struct BoxCounterFile {
+    /// The box clock.
+    pub clock: Signal<In, Clock>,
+    /// Synchronous reset: clears every counter.
+    pub reset: Signal<In, Bit>,
+    /// One clock per received frame: count it in `FramesReceived` and in `counter`.
+    pub count: Signal<In, Bit>,
+    /// The frame's fate: a `BoxCounter` index, not `FramesReceived` (0).
+    pub counter: Signal<In, Bits<5>>,
+    /// Counter read by the status reporter (`BoxCounter` index).
+    pub reporter_address: Signal<In, Bits<5>>,
+    /// The counter at `reporter_address` two clocks ago.
+    pub reporter_data: Signal<Out, Bits<32>>,
+    /// Counter read by the reply builder (`BoxCounter` index).
+    pub reply_address: Signal<In, Bits<5>>,
+    /// The counter at `reply_address` two clocks ago.
+    pub reply_data: Signal<Out, Bits<32>>,
+    /// Counting: the clearing after reset is over.
+    pub ready: Signal<Out, Bit>,
+    clearing: DFF<Bit>,
+    clear_address: DFF<Bits<5>>,
+    // the fate's read is one clock after the count
+    fate_read: DFF<Bit>,
+    fate_address: DFF<Bits<5>>,
+    // reads in flight: (valid, address) for the two clocks of the RAM's latency
+    read_1: DFF<Bit>,
+    read_1_address: DFF<Bits<5>>,
+    read_2: DFF<Bit>,
+    read_2_address: DFF<Bits<5>>,
+    // the incremented word, written a clock after the addition
+    increment_pending: DFF<Bit>,
+    increment_address: DFF<Bits<5>>,
+    increment_value: DFF<Bits<32>>,
+    counting_memory: BlockRam<32, 5>,
+    reporter_memory: BlockRam<32, 5>,
+    reply_memory: BlockRam<32, 5>,
+    write_enable: Signal<Local, Bit>,
+    write_address: Signal<Local, Bits<5>>,
+    write_data: Signal<Local, Bits<32>>,
+}
+
+impl Logic for BoxCounterFile {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(
+            self,
+            clock,
+            clearing,
+            clear_address,
+            fate_read,
+            fate_address,
+            read_1,
+            read_1_address,
+            read_2,
+            read_2_address,
+            increment_pending,
+            increment_address,
+            increment_value
+        );
+        self.counting_memory.clock.next = self.clock.val();
+        self.reporter_memory.clock.next = self.clock.val();
+        self.reply_memory.clock.next = self.clock.val();
+
+        // FramesReceived is read in the clock of the count, the fate's counter a clock later.
+        self.fate_read.d.next = self.count.val() & !self.clearing.q.val();
+        self.fate_address.d.next = self.counter.val();
+        self.counting_memory.read_address.next = 0.into();
+        self.read_1.d.next = self.count.val() & !self.clearing.q.val();
+        if self.fate_read.q.val() {
+            self.counting_memory.read_address.next = self.fate_address.q.val();
+            self.read_1.d.next = true;
+        }
+        self.read_1_address.d.next = self.counting_memory.read_address.val();
+        self.read_2.d.next = self.read_1.q.val();
+        self.read_2_address.d.next = self.read_1_address.q.val();
+        self.increment_pending.d.next = self.read_2.q.val();
+        self.increment_address.d.next = self.read_2_address.q.val();
+        self.increment_value.d.next = self.counting_memory.read_data.val() + 1;
+
+        self.write_enable.next = self.increment_pending.q.val();
+        self.write_address.next = self.increment_address.q.val();
+        self.write_data.next = self.increment_value.q.val();
+        if self.clearing.q.val() {
+            self.write_enable.next = true;
+            self.write_address.next = self.clear_address.q.val();
+            self.write_data.next = 0.into();
+            self.clear_address.d.next = self.clear_address.q.val() + 1;
+            if self.clear_address.q.val() == 31 {
+                self.clearing.d.next = false;
+            }
+        }
+        self.counting_memory.write_enable.next = self.write_enable.val();
+        self.counting_memory.write_address.next = self.write_address.val();
+        self.counting_memory.write_data.next = self.write_data.val();
+        self.reporter_memory.write_enable.next = self.write_enable.val();
+        self.reporter_memory.write_address.next = self.write_address.val();
+        self.reporter_memory.write_data.next = self.write_data.val();
+        self.reply_memory.write_enable.next = self.write_enable.val();
+        self.reply_memory.write_address.next = self.write_address.val();
+        self.reply_memory.write_data.next = self.write_data.val();
+        self.reporter_memory.read_address.next = self.reporter_address.val();
+        self.reporter_data.next = self.reporter_memory.read_data.val();
+        self.reply_memory.read_address.next = self.reply_address.val();
+        self.reply_data.next = self.reply_memory.read_data.val();
+        self.ready.next = !self.clearing.q.val();
+
+        if self.reset.val() {
+            self.clearing.d.next = true;
+            self.clear_address.d.next = 0.into();
+            self.fate_read.d.next = false;
+            self.read_1.d.next = false;
+            self.read_2.d.next = false;
+            self.increment_pending.d.next = false;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::{Bench, TestRng};
+    use std::collections::HashMap;
+
+    fn reset(bench: &mut Bench<BoxCounterFile>) {
+        bench.uut.reset.next = true;
+        bench.cycle();
+        bench.uut.reset.next = false;
+        let start = bench.cycles;
+        while !bench.uut.ready.val() {
+            bench.cycle();
+        }
+        assert_eq!(
+            bench.cycles - start,
+            CLEAR_CLOCKS,
+            "clearing takes 32 clocks"
+        );
+    }
+
+    /// Both read ports, each at a different counter, two clocks after the address.
+    fn read_both(bench: &mut Bench<BoxCounterFile>, reporter: usize, reply: usize) -> (u32, u32) {
+        bench.uut.reporter_address.next = (reporter as u64).into();
+        bench.uut.reply_address.next = (reply as u64).into();
+        bench.cycles(2);
+        (
+            bench.uut.reporter_data.val().to_u32(),
+            bench.uut.reply_data.val().to_u32(),
+        )
+    }
+
+    #[test]
+    fn counts_random_fates_while_both_ports_read() {
+        let mut bench = Bench::new(BoxCounterFile::default(), |b| &mut b.clock);
+        reset(&mut bench);
+        let mut rng = TestRng::new(17);
+        let mut expected: HashMap<usize, u32> = HashMap::new();
+        let mut gap = 0;
+        for clock in 0..40_000u64 {
+            // the read ports sweep all the time; counting must not care
+            bench.uut.reporter_address.next = (clock % COUNTERS as u64).into();
+            bench.uut.reply_address.next = ((clock * 7) % COUNTERS as u64).into();
+            let count = gap == 0;
+            if count {
+                let fate = 1 + (rng.next_u64() % (COUNTERS as u64 - 1)) as usize;
+                *expected.entry(fate).or_default() += 1;
+                *expected
+                    .entry(BoxCounter::FramesReceived as usize)
+                    .or_default() += 1;
+                bench.uut.counter.next = (fate as u64).into();
+                gap = COUNT_SPACING - 1 + rng.next_u64() % 12;
+            } else {
+                gap -= 1;
+                bench.uut.counter.next = (rng.next_u64() % 32).into();
+            }
+            bench.uut.count.next = count;
+            bench.cycle();
+        }
+        bench.uut.count.next = false;
+        bench.cycles(8);
+        let frames = expected[&(BoxCounter::FramesReceived as usize)];
+        assert!(frames > 2_000, "{frames} counts");
+        for c in 0..COUNTERS {
+            let want = expected.get(&c).copied().unwrap_or(0);
+            let (reporter, reply) = read_both(&mut bench, c, COUNTERS - 1 - c);
+            assert_eq!(reporter, want, "counter {c} on the reporter port");
+            let other = expected.get(&(COUNTERS - 1 - c)).copied().unwrap_or(0);
+            assert_eq!(
+                reply,
+                other,
+                "counter {} on the reply port",
+                COUNTERS - 1 - c
+            );
+        }
+    }
+
+    #[test]
+    fn counts_at_the_closest_spacing() {
+        let mut bench = Bench::new(BoxCounterFile::default(), |b| &mut b.clock);
+        reset(&mut bench);
+        let fates = [
+            BoxCounter::BadFcs,
+            BoxCounter::BadFcs,
+            BoxCounter::ReplyBusy,
+            BoxCounter::CommandsAccepted,
+            BoxCounter::BadFcs,
+        ];
+        for fate in fates {
+            bench.uut.count.next = true;
+            bench.uut.counter.next = (fate as u64).into();
+            bench.cycle();
+            bench.uut.count.next = false;
+            bench.cycles(COUNT_SPACING - 1);
+        }
+        bench.cycles(8);
+        let counts = [
+            (BoxCounter::FramesReceived, 5),
+            (BoxCounter::BadFcs, 3),
+            (BoxCounter::ReplyBusy, 1),
+            (BoxCounter::CommandsAccepted, 1),
+            (BoxCounter::NotForUs, 0),
+        ];
+        for (counter, want) in counts {
+            let (reporter, reply) = read_both(&mut bench, counter as usize, counter as usize);
+            assert_eq!((reporter, reply), (want, want), "{counter:?}");
+        }
+    }
+
+    #[test]
+    fn reset_clears_the_counters() {
+        let mut bench = Bench::new(BoxCounterFile::default(), |b| &mut b.clock);
+        reset(&mut bench);
+        for _ in 0..3 {
+            bench.uut.count.next = true;
+            bench.uut.counter.next = (BoxCounter::NotForUs as u64).into();
+            bench.cycle();
+            bench.uut.count.next = false;
+            bench.cycles(10);
+        }
+        let notforus = BoxCounter::NotForUs as usize;
+        assert_eq!(read_both(&mut bench, 0, notforus), (3, 3));
+        reset(&mut bench);
+        assert_eq!(read_both(&mut bench, 0, notforus), (0, 0));
+        for c in 0..COUNTERS {
+            assert_eq!(read_both(&mut bench, c, c), (0, 0), "counter {c}");
+        }
+    }
+
+    #[test]
+    fn verilog_lints_clean() {
+        let mut uut = BoxCounterFile::default();
+        uut.connect_all();
+        let text = generate_verilog(&uut);
+        let dir = std::env::temp_dir().join(format!(
+            "skinbox-lint-box-counter-file-{}",
+            std::process::id()
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        let report = crate::verilog::lint(&text, &dir).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(report.clean, "{}", report.output);
+    }
+}

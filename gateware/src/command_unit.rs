@@ -1,0 +1,1233 @@
+//! CommandUnit: steps 17-22 of the box's control rules (docs/control.md,
+//! `cosim::control`) for a well-formed command from the host subnet, and the run-time
+//! configuration the accepted commands set.
+//!
+//! The frame parser raises `command` for one clock with the command's fields held on its
+//! outputs. The unit checks, in this order: the box id (the box's or `ANY_BOX`, else
+//! `OtherBox`); the sequence number against the last one accepted from the sender's IPv4
+//! address, in a table of `HOST_SLOTS` hosts ("newer" in serial-number arithmetic,
+//! `(sequence - last) as i32 > 0`; a host not in the table may start anywhere), else
+//! `Replay`; then the sequence number is taken (the host's slot, or for a new host the
+//! slot of the host accepted longest ago) whatever the opcode and arguments say; an
+//! unknown opcode, bad arguments (as `skinbox_protocol::command::Request::parse`) and a
+//! cell command (no downlink yet) are refused, everything else is carried out.
+//!
+//! The work is a pipeline of registers, one stage per clock: the host match and the
+//! argument checks; the matched host's last sequence, the oldest slot and the result of
+//! the arguments; the serial-number difference; the decision. `done` is high in the
+//! clock [`COMMAND_LATENCY`] clocks after `command`, with `fate`, `result` and
+//! `last_accepted` (held until the next `done`). The table and the configuration
+//! registers change at the same edge: in the `done` clock they already hold the new
+//! values, and `status_period_set` / `status_now` are high in that clock only.
+//! Commands must come at least `COMMAND_LATENCY` clocks apart (a frame takes at least 72),
+//! and the parser's fields must stay steady from `command` to `done` (it holds them until
+//! the next stored frame's decision).
+//!
+//! `last_accepted` is the sequence number the table holds for the sender after the
+//! command: the command's own when it was taken, else the one it holds (0 for a host
+//! not in the table, which only a command for another box can leave there).
+
+use crate::hdl::*;
+use skinbox_protocol::box_counters::BoxCounter;
+use skinbox_protocol::command::{
+    AckResult, Opcode, ALL_PORTS, ANY_BOX, CELL_COMMAND_LEN, DESTINATION_LEN, HOST_SLOTS,
+    MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS,
+};
+use skinbox_protocol::link::LinkConfig;
+
+/// Clocks from `command` to `done`.
+pub const COMMAND_LATENCY: u64 = 4;
+
+/// Build-time parameters of the command unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CommandUnitConfig {
+    /// The destination after reset: `host_mac`, `host_ip`, `host_port`.
+    pub link: LinkConfig,
+    /// The box id.
+    pub box_id: u16,
+    /// Ports of the box (a cell command's port must be below, or `ALL_PORTS`).
+    pub port_count: u8,
+    /// Flush timeout after reset, ticks.
+    pub flush_timeout_ticks: u32,
+    /// Status period after reset, ticks.
+    pub status_period_ticks: u32,
+}
+
+fn constant<const N: usize>(value: u64) -> Constant<Bits<N>> {
+    Constant::new(value.into())
+}
+
+fn many<T: Default>(n: usize) -> Vec<T> {
+    (0..n).map(|_| T::default()).collect()
+}
+
+fn mac_number(mac: [u8; 6]) -> u64 {
+    mac.iter().fold(0, |n, b| n << 8 | u64::from(*b))
+}
+
+/// The decision of steps 17-22 and the run-time configuration.
+#[derive(LogicBlock)]
+pub struct CommandUnit {
+    /// The box clock.
+    pub clock: Signal<In, Clock>,
+    /// Synchronous reset: forgets every host, configuration back to the build-time values.
+    pub reset: Signal<In, Bit>,
+    /// One clock: a command passed steps 1-16 and was stored (its fields are held).
+    pub command: Signal<In, Bit>,
+    /// The sender's MAC (the Ethernet source).
+    pub peer_mac: Signal<In, Bits<48>>,
+    /// The sender's IPv4 address.
+    pub peer_ip: Signal<In, Bits<32>>,
+    /// The sender's UDP port.
+    pub peer_port: Signal<In, Bits<16>>,
+    /// The command's box id.
+    pub command_box_id: Signal<In, Bits<16>>,
+    /// The command's opcode.
+    pub command_opcode: Signal<In, Bits<8>>,
+    /// The command's sequence number.
+    pub command_sequence: Signal<In, Bits<32>>,
+    /// The command's argument length, bytes.
+    pub command_argument_length: Signal<In, Bits<16>>,
+    /// The first 12 argument bytes, the first in bits 95..88, bytes past the arguments 0.
+    pub command_arguments: Signal<In, Bits<96>>,
+    /// One clock, `COMMAND_LATENCY` clocks after `command`.
+    pub done: Signal<Out, Bit>,
+    /// The command's fate: a `BoxCounter` index (held until the next `done`).
+    pub fate: Signal<Out, Bits<5>>,
+    /// The acknowledgement's result: an `AckResult` (held until the next `done`).
+    pub result: Signal<Out, Bits<8>>,
+    /// The acknowledgement's last accepted sequence number (held until the next `done`).
+    pub last_accepted: Signal<Out, Bits<32>>,
+    /// Datagrams' destination MAC.
+    pub destination_mac: Signal<Out, Bits<48>>,
+    /// Datagrams' destination IPv4 address.
+    pub destination_ip: Signal<Out, Bits<32>>,
+    /// Datagrams' destination UDP port.
+    pub destination_port: Signal<Out, Bits<16>>,
+    /// Flush timeout, ticks.
+    pub flush_timeout_ticks: Signal<Out, Bits<32>>,
+    /// Status period, ticks.
+    pub status_period_ticks: Signal<Out, Bits<32>>,
+    /// One clock (the `done` clock): a set-status-period was carried out.
+    pub status_period_set: Signal<Out, Bit>,
+    /// One clock (the `done` clock): a status-now was carried out.
+    pub status_now: Signal<Out, Bit>,
+    // build-time values
+    box_id: Constant<Bits<16>>,
+    any_box: Constant<Bits<16>>,
+    all_ports: Constant<Bits<8>>,
+    port_count: Constant<Bits<8>>,
+    max_flush_timeout: Constant<Bits<32>>,
+    min_status_period: Constant<Bits<32>>,
+    destination_length: Constant<Bits<16>>,
+    value_length: Constant<Bits<16>>,
+    cell_command_length: Constant<Bits<16>>,
+    opcode_stream_to: Constant<Bits<8>>,
+    opcode_set_flush_timeout: Constant<Bits<8>>,
+    opcode_set_status_period: Constant<Bits<8>>,
+    opcode_status_now: Constant<Bits<8>>,
+    opcode_read_tick: Constant<Bits<8>>,
+    opcode_cell_command: Constant<Bits<8>>,
+    fate_accepted: Constant<Bits<5>>,
+    fate_replay: Constant<Bits<5>>,
+    fate_other_box: Constant<Bits<5>>,
+    fate_unknown_opcode: Constant<Bits<5>>,
+    fate_bad_argument: Constant<Bits<5>>,
+    fate_no_downlink: Constant<Bits<5>>,
+    result_ok: Constant<Bits<8>>,
+    result_replay: Constant<Bits<8>>,
+    result_other_box: Constant<Bits<8>>,
+    result_unknown_opcode: Constant<Bits<8>>,
+    result_bad_argument: Constant<Bits<8>>,
+    result_no_downlink: Constant<Bits<8>>,
+    default_mac: Constant<Bits<48>>,
+    default_ip: Constant<Bits<32>>,
+    default_port: Constant<Bits<16>>,
+    default_flush_timeout: Constant<Bits<32>>,
+    default_status_period: Constant<Bits<32>>,
+    // the host table: slot i is valid, its IPv4 address, its last accepted sequence
+    // number, and its age rank (0: accepted last, HOST_SLOTS - 1: accepted longest ago;
+    // the empty slots are always the oldest)
+    slot_valid: Vec<DFF<Bit>>,
+    slot_ip: Vec<DFF<Bits<32>>>,
+    slot_sequence: Vec<DFF<Bits<32>>>,
+    slot_rank: Vec<DFF<Bits<2>>>,
+    slot_initial_rank: Vec<Constant<Bits<2>>>,
+    oldest_rank: Constant<Bits<2>>,
+    // stage 1: host match and argument checks
+    stage_1: DFF<Bit>,
+    matched: Vec<DFF<Bit>>,
+    box_ok: DFF<Bit>,
+    is_stream_to: DFF<Bit>,
+    is_set_flush_timeout: DFF<Bit>,
+    is_set_status_period: DFF<Bit>,
+    is_status_now: DFF<Bit>,
+    is_read_tick: DFF<Bit>,
+    is_cell_command: DFF<Bit>,
+    length_0: DFF<Bit>,
+    length_value: DFF<Bit>,
+    length_destination: DFF<Bit>,
+    length_cell_command: DFF<Bit>,
+    destination_ok: DFF<Bit>,
+    flush_timeout_ok: DFF<Bit>,
+    status_period_ok: DFF<Bit>,
+    cell_port_ok: DFF<Bit>,
+    reserved_zero: DFF<Bit>,
+    // stage 2: the matched host's sequence, the oldest slot, the arguments' verdict
+    stage_2: DFF<Bit>,
+    hit: DFF<Bit>,
+    hit_sequence: DFF<Bits<32>>,
+    oldest: Vec<DFF<Bit>>,
+    arguments_ok: DFF<Bit>,
+    arguments_fate: DFF<Bits<5>>,
+    arguments_result: DFF<Bits<8>>,
+    // stage 3: the serial-number difference
+    stage_3: DFF<Bit>,
+    difference: DFF<Bits<32>>,
+    // stage 4: outputs
+    done_out: DFF<Bit>,
+    fate_out: DFF<Bits<5>>,
+    result_out: DFF<Bits<8>>,
+    last_accepted_out: DFF<Bits<32>>,
+    destination_mac_out: DFF<Bits<48>>,
+    destination_ip_out: DFF<Bits<32>>,
+    destination_port_out: DFF<Bits<16>>,
+    flush_timeout_out: DFF<Bits<32>>,
+    status_period_out: DFF<Bits<32>>,
+    status_period_set_out: DFF<Bit>,
+    status_now_out: DFF<Bit>,
+    // decision signals
+    sequence_term: Signal<Local, Bits<32>>,
+    any_match: Signal<Local, Bit>,
+    not_newer: Signal<Local, Bit>,
+    taken: Signal<Local, Bit>,
+    target: Vec<Signal<Local, Bit>>,
+    target_rank: Signal<Local, Bits<2>>,
+    value: Signal<Local, Bits<32>>,
+    arguments_good: Signal<Local, Bit>,
+}
+
+impl CommandUnit {
+    /// A command unit with the build-time values of `config`.
+    pub fn new(config: CommandUnitConfig) -> Self {
+        let link = config.link;
+        let slots = HOST_SLOTS;
+        Self {
+            clock: Default::default(),
+            reset: Default::default(),
+            command: Default::default(),
+            peer_mac: Default::default(),
+            peer_ip: Default::default(),
+            peer_port: Default::default(),
+            command_box_id: Default::default(),
+            command_opcode: Default::default(),
+            command_sequence: Default::default(),
+            command_argument_length: Default::default(),
+            command_arguments: Default::default(),
+            done: Default::default(),
+            fate: Default::default(),
+            result: Default::default(),
+            last_accepted: Default::default(),
+            destination_mac: Default::default(),
+            destination_ip: Default::default(),
+            destination_port: Default::default(),
+            flush_timeout_ticks: Default::default(),
+            status_period_ticks: Default::default(),
+            status_period_set: Default::default(),
+            status_now: Default::default(),
+            box_id: constant(config.box_id.into()),
+            any_box: constant(ANY_BOX.into()),
+            all_ports: constant(ALL_PORTS.into()),
+            port_count: constant(config.port_count.into()),
+            max_flush_timeout: constant(MAX_FLUSH_TIMEOUT_TICKS.into()),
+            min_status_period: constant(MIN_STATUS_PERIOD_TICKS.into()),
+            destination_length: constant(DESTINATION_LEN as u64),
+            value_length: constant(4),
+            cell_command_length: constant(CELL_COMMAND_LEN as u64),
+            opcode_stream_to: constant(Opcode::StreamTo as u64),
+            opcode_set_flush_timeout: constant(Opcode::SetFlushTimeout as u64),
+            opcode_set_status_period: constant(Opcode::SetStatusPeriod as u64),
+            opcode_status_now: constant(Opcode::StatusNow as u64),
+            opcode_read_tick: constant(Opcode::ReadTick as u64),
+            opcode_cell_command: constant(Opcode::CellCommand as u64),
+            fate_accepted: constant(BoxCounter::CommandsAccepted as u64),
+            fate_replay: constant(BoxCounter::RefusedReplay as u64),
+            fate_other_box: constant(BoxCounter::RefusedOtherBox as u64),
+            fate_unknown_opcode: constant(BoxCounter::RefusedUnknownOpcode as u64),
+            fate_bad_argument: constant(BoxCounter::RefusedBadArgument as u64),
+            fate_no_downlink: constant(BoxCounter::RefusedNoDownlink as u64),
+            result_ok: constant(AckResult::Ok as u64),
+            result_replay: constant(AckResult::Replay as u64),
+            result_other_box: constant(AckResult::OtherBox as u64),
+            result_unknown_opcode: constant(AckResult::UnknownOpcode as u64),
+            result_bad_argument: constant(AckResult::BadArgument as u64),
+            result_no_downlink: constant(AckResult::NoDownlink as u64),
+            default_mac: constant(mac_number(link.host_mac)),
+            default_ip: constant(u32::from_be_bytes(link.host_ip).into()),
+            default_port: constant(link.host_port.into()),
+            default_flush_timeout: constant(config.flush_timeout_ticks.into()),
+            default_status_period: constant(config.status_period_ticks.into()),
+            slot_valid: many(slots),
+            slot_ip: many(slots),
+            slot_sequence: many(slots),
+            slot_rank: many(slots),
+            slot_initial_rank: (0..slots)
+                .map(|i| constant((slots - 1 - i) as u64))
+                .collect(),
+            oldest_rank: constant(slots as u64 - 1),
+            stage_1: Default::default(),
+            matched: many(slots),
+            box_ok: Default::default(),
+            is_stream_to: Default::default(),
+            is_set_flush_timeout: Default::default(),
+            is_set_status_period: Default::default(),
+            is_status_now: Default::default(),
+            is_read_tick: Default::default(),
+            is_cell_command: Default::default(),
+            length_0: Default::default(),
+            length_value: Default::default(),
+            length_destination: Default::default(),
+            length_cell_command: Default::default(),
+            destination_ok: Default::default(),
+            flush_timeout_ok: Default::default(),
+            status_period_ok: Default::default(),
+            cell_port_ok: Default::default(),
+            reserved_zero: Default::default(),
+            stage_2: Default::default(),
+            hit: Default::default(),
+            hit_sequence: Default::default(),
+            oldest: many(slots),
+            arguments_ok: Default::default(),
+            arguments_fate: Default::default(),
+            arguments_result: Default::default(),
+            stage_3: Default::default(),
+            difference: Default::default(),
+            done_out: Default::default(),
+            fate_out: Default::default(),
+            result_out: Default::default(),
+            last_accepted_out: Default::default(),
+            destination_mac_out: Default::default(),
+            destination_ip_out: Default::default(),
+            destination_port_out: Default::default(),
+            flush_timeout_out: Default::default(),
+            status_period_out: Default::default(),
+            status_period_set_out: Default::default(),
+            status_now_out: Default::default(),
+            sequence_term: Default::default(),
+            any_match: Default::default(),
+            not_newer: Default::default(),
+            taken: Default::default(),
+            target: many(slots),
+            target_rank: Default::default(),
+            value: Default::default(),
+            arguments_good: Default::default(),
+        }
+    }
+}
+
+impl Logic for CommandUnit {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(
+            self,
+            clock,
+            stage_1,
+            box_ok,
+            is_stream_to,
+            is_set_flush_timeout,
+            is_set_status_period,
+            is_status_now,
+            is_read_tick,
+            is_cell_command,
+            length_0,
+            length_value,
+            length_destination,
+            length_cell_command,
+            destination_ok,
+            flush_timeout_ok,
+            status_period_ok,
+            cell_port_ok,
+            reserved_zero,
+            stage_2,
+            hit,
+            hit_sequence,
+            arguments_ok,
+            arguments_fate,
+            arguments_result,
+            stage_3,
+            difference,
+            done_out,
+            fate_out,
+            result_out,
+            last_accepted_out,
+            destination_mac_out,
+            destination_ip_out,
+            destination_port_out,
+            flush_timeout_out,
+            status_period_out,
+            status_period_set_out,
+            status_now_out
+        );
+        for i in 0..self.slot_valid.len() {
+            self.slot_valid[i].clock.next = self.clock.val();
+            self.slot_ip[i].clock.next = self.clock.val();
+            self.slot_sequence[i].clock.next = self.clock.val();
+            self.slot_rank[i].clock.next = self.clock.val();
+            self.matched[i].clock.next = self.clock.val();
+            self.oldest[i].clock.next = self.clock.val();
+            self.slot_valid[i].d.next = self.slot_valid[i].q.val();
+            self.slot_ip[i].d.next = self.slot_ip[i].q.val();
+            self.slot_sequence[i].d.next = self.slot_sequence[i].q.val();
+            self.slot_rank[i].d.next = self.slot_rank[i].q.val();
+        }
+
+        // Stage 1: the sender against every slot, the arguments against the rules (the
+        // parser holds the fields, so these registers are steady from the clock after
+        // `command` on).
+        self.stage_1.d.next = self.command.val();
+        for i in 0..self.matched.len() {
+            self.matched[i].d.next =
+                self.slot_valid[i].q.val() & (self.slot_ip[i].q.val() == self.peer_ip.val());
+        }
+        self.box_ok.d.next = (self.command_box_id.val() == self.box_id.val())
+            | (self.command_box_id.val() == self.any_box.val());
+        self.is_stream_to.d.next = self.command_opcode.val() == self.opcode_stream_to.val();
+        self.is_set_flush_timeout.d.next =
+            self.command_opcode.val() == self.opcode_set_flush_timeout.val();
+        self.is_set_status_period.d.next =
+            self.command_opcode.val() == self.opcode_set_status_period.val();
+        self.is_status_now.d.next = self.command_opcode.val() == self.opcode_status_now.val();
+        self.is_read_tick.d.next = self.command_opcode.val() == self.opcode_read_tick.val();
+        self.is_cell_command.d.next = self.command_opcode.val() == self.opcode_cell_command.val();
+        self.length_0.d.next = self.command_argument_length.val() == 0;
+        self.length_value.d.next = self.command_argument_length.val() == self.value_length.val();
+        self.length_destination.d.next =
+            self.command_argument_length.val() == self.destination_length.val();
+        self.length_cell_command.d.next =
+            self.command_argument_length.val() == self.cell_command_length.val();
+        // stream-to: MAC in bytes 0..6, IP 6..10, port 10..12
+        self.destination_ok.d.next = (self.command_arguments.val().get_bits::<32>(16) != 0)
+            & (self.command_arguments.val().get_bits::<16>(0) != 0);
+        // set-flush-timeout and set-status-period: a u32 in bytes 0..4
+        self.value.next = self.command_arguments.val().get_bits::<32>(64);
+        self.flush_timeout_ok.d.next =
+            (self.value.val() != 0) & (self.value.val() <= self.max_flush_timeout.val());
+        self.status_period_ok.d.next = self.value.val() >= self.min_status_period.val();
+        // cell command: the port in byte 0, three reserved bytes
+        self.cell_port_ok.d.next = (self.command_arguments.val().get_bits::<8>(88)
+            == self.all_ports.val())
+            | (self.command_arguments.val().get_bits::<8>(88) < self.port_count.val());
+        self.reserved_zero.d.next = self.command_arguments.val().get_bits::<24>(64) == 0;
+
+        // Stage 2: the matched slot's sequence number, the oldest slot, the arguments'
+        // verdict.
+        self.stage_2.d.next = self.stage_1.q.val();
+        self.any_match.next = false;
+        self.sequence_term.next = 0.into();
+        for i in 0..self.matched.len() {
+            if self.matched[i].q.val() {
+                self.any_match.next = true;
+                self.sequence_term.next = self.sequence_term.val() | self.slot_sequence[i].q.val();
+            }
+            self.oldest[i].d.next = self.slot_rank[i].q.val() == self.oldest_rank.val();
+        }
+        self.hit.d.next = self.any_match.val();
+        self.hit_sequence.d.next = self.sequence_term.val();
+        self.arguments_good.next = false;
+        self.arguments_fate.d.next = self.fate_bad_argument.val();
+        self.arguments_result.d.next = self.result_bad_argument.val();
+        if self.is_stream_to.q.val() {
+            if self.length_0.q.val()
+                | (self.length_destination.q.val() & self.destination_ok.q.val())
+            {
+                self.arguments_good.next = true;
+            }
+        } else if self.is_set_flush_timeout.q.val() {
+            if self.length_value.q.val() & self.flush_timeout_ok.q.val() {
+                self.arguments_good.next = true;
+            }
+        } else if self.is_set_status_period.q.val() {
+            if self.length_value.q.val() & self.status_period_ok.q.val() {
+                self.arguments_good.next = true;
+            }
+        } else if self.is_status_now.q.val() | self.is_read_tick.q.val() {
+            if self.length_0.q.val() {
+                self.arguments_good.next = true;
+            }
+        } else if self.is_cell_command.q.val() {
+            if self.length_cell_command.q.val()
+                & self.cell_port_ok.q.val()
+                & self.reserved_zero.q.val()
+            {
+                self.arguments_fate.d.next = self.fate_no_downlink.val();
+                self.arguments_result.d.next = self.result_no_downlink.val();
+            }
+        } else {
+            self.arguments_fate.d.next = self.fate_unknown_opcode.val();
+            self.arguments_result.d.next = self.result_unknown_opcode.val();
+        }
+        if self.arguments_good.val() {
+            self.arguments_fate.d.next = self.fate_accepted.val();
+            self.arguments_result.d.next = self.result_ok.val();
+        }
+        self.arguments_ok.d.next = self.arguments_good.val();
+
+        // Stage 3: the serial-number difference to the host's last accepted sequence.
+        self.stage_3.d.next = self.stage_2.q.val();
+        self.difference.d.next = self.command_sequence.val() - self.hit_sequence.q.val();
+
+        // Stage 4: the decision, the table and the configuration.
+        self.done_out.d.next = self.stage_3.q.val();
+        self.status_period_set_out.d.next = false;
+        self.status_now_out.d.next = false;
+        self.not_newer.next = self.hit.q.val()
+            & ((self.difference.q.val() == 0) | self.difference.q.val().get_bit(31));
+        self.taken.next = self.stage_3.q.val() & self.box_ok.q.val() & !self.not_newer.val();
+        self.target_rank.next = 0.into();
+        for i in 0..self.target.len() {
+            self.target[i].next = self.oldest[i].q.val();
+            if self.hit.q.val() {
+                self.target[i].next = self.matched[i].q.val();
+            }
+            if self.target[i].val() {
+                self.target_rank.next = self.target_rank.val() | self.slot_rank[i].q.val();
+            }
+        }
+        if self.stage_3.q.val() {
+            if !self.box_ok.q.val() {
+                self.fate_out.d.next = self.fate_other_box.val();
+                self.result_out.d.next = self.result_other_box.val();
+                self.last_accepted_out.d.next = self.hit_sequence.q.val();
+            } else if self.not_newer.val() {
+                self.fate_out.d.next = self.fate_replay.val();
+                self.result_out.d.next = self.result_replay.val();
+                self.last_accepted_out.d.next = self.hit_sequence.q.val();
+            } else {
+                self.fate_out.d.next = self.arguments_fate.q.val();
+                self.result_out.d.next = self.arguments_result.q.val();
+                self.last_accepted_out.d.next = self.command_sequence.val();
+            }
+        }
+        if self.taken.val() {
+            for i in 0..self.target.len() {
+                if self.target[i].val() {
+                    self.slot_valid[i].d.next = true;
+                    self.slot_ip[i].d.next = self.peer_ip.val();
+                    self.slot_sequence[i].d.next = self.command_sequence.val();
+                    self.slot_rank[i].d.next = 0.into();
+                } else if self.slot_rank[i].q.val() < self.target_rank.val() {
+                    self.slot_rank[i].d.next = self.slot_rank[i].q.val() + 1;
+                }
+            }
+            if self.arguments_ok.q.val() {
+                if self.is_stream_to.q.val() {
+                    if self.length_0.q.val() {
+                        self.destination_mac_out.d.next = self.peer_mac.val();
+                        self.destination_ip_out.d.next = self.peer_ip.val();
+                        self.destination_port_out.d.next = self.peer_port.val();
+                    } else {
+                        self.destination_mac_out.d.next =
+                            self.command_arguments.val().get_bits::<48>(48);
+                        self.destination_ip_out.d.next =
+                            self.command_arguments.val().get_bits::<32>(16);
+                        self.destination_port_out.d.next =
+                            self.command_arguments.val().get_bits::<16>(0);
+                    }
+                }
+                if self.is_set_flush_timeout.q.val() {
+                    self.flush_timeout_out.d.next = self.value.val();
+                }
+                if self.is_set_status_period.q.val() {
+                    self.status_period_out.d.next = self.value.val();
+                    self.status_period_set_out.d.next = true;
+                }
+                if self.is_status_now.q.val() {
+                    self.status_now_out.d.next = true;
+                }
+            }
+        }
+
+        self.done.next = self.done_out.q.val();
+        self.fate.next = self.fate_out.q.val();
+        self.result.next = self.result_out.q.val();
+        self.last_accepted.next = self.last_accepted_out.q.val();
+        self.destination_mac.next = self.destination_mac_out.q.val();
+        self.destination_ip.next = self.destination_ip_out.q.val();
+        self.destination_port.next = self.destination_port_out.q.val();
+        self.flush_timeout_ticks.next = self.flush_timeout_out.q.val();
+        self.status_period_ticks.next = self.status_period_out.q.val();
+        self.status_period_set.next = self.status_period_set_out.q.val();
+        self.status_now.next = self.status_now_out.q.val();
+
+        if self.reset.val() {
+            for i in 0..self.slot_valid.len() {
+                self.slot_valid[i].d.next = false;
+                self.slot_ip[i].d.next = 0.into();
+                self.slot_sequence[i].d.next = 0.into();
+                self.slot_rank[i].d.next = self.slot_initial_rank[i].val();
+            }
+            self.stage_1.d.next = false;
+            self.stage_2.d.next = false;
+            self.stage_3.d.next = false;
+            self.done_out.d.next = false;
+            self.fate_out.d.next = 0.into();
+            self.result_out.d.next = 0.into();
+            self.last_accepted_out.d.next = 0.into();
+            self.destination_mac_out.d.next = self.default_mac.val();
+            self.destination_ip_out.d.next = self.default_ip.val();
+            self.destination_port_out.d.next = self.default_port.val();
+            self.flush_timeout_out.d.next = self.default_flush_timeout.val();
+            self.status_period_out.d.next = self.default_status_period.val();
+            self.status_period_set_out.d.next = false;
+            self.status_now_out.d.next = false;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::{Bench, TestRng};
+    use skinbox_protocol::command::Request;
+    use skinbox_protocol::Error;
+
+    const BOX_ID: u16 = 0x0102;
+    const PORTS: u8 = 8;
+    const FLUSH: u32 = 12_500;
+    const PERIOD: u32 = 125_000_000;
+
+    fn config() -> CommandUnitConfig {
+        CommandUnitConfig {
+            link: LinkConfig::DEFAULT,
+            box_id: BOX_ID,
+            port_count: PORTS,
+            flush_timeout_ticks: FLUSH,
+            status_period_ticks: PERIOD,
+        }
+    }
+
+    /// A command as the parser holds it: sender and header fields, all its argument bytes.
+    #[derive(Debug, Clone)]
+    struct Cmd {
+        mac: u64,
+        ip: u32,
+        port: u16,
+        box_id: u16,
+        opcode: u8,
+        sequence: u32,
+        args: Vec<u8>,
+    }
+
+    fn cmd(ip: u32, sequence: u32, opcode: u8, args: &[u8]) -> Cmd {
+        Cmd {
+            mac: 0x0200_0000_0000 | u64::from(ip),
+            ip,
+            port: 40_000 + (ip % 1000) as u16,
+            box_id: BOX_ID,
+            opcode,
+            sequence,
+            args: args.to_vec(),
+        }
+    }
+
+    /// What the unit shows in the `done` clock.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    struct Seen {
+        fate: usize,
+        result: u8,
+        last_accepted: u32,
+        destination: (u64, u32, u16),
+        flush_timeout: u32,
+        status_period: u32,
+        status_period_set: bool,
+        status_now: bool,
+    }
+
+    /// The rules of steps 17-22, written from docs/control.md; the arguments are judged by
+    /// `Request::parse`.
+    struct Model {
+        /// (IPv4 address, last accepted sequence), accepted longest ago first.
+        hosts: Vec<(u32, u32)>,
+        destination: (u64, u32, u16),
+        flush_timeout: u32,
+        status_period: u32,
+    }
+
+    impl Model {
+        fn new() -> Model {
+            let link = LinkConfig::DEFAULT;
+            Model {
+                hosts: Vec::new(),
+                destination: (
+                    mac_number(link.host_mac),
+                    u32::from_be_bytes(link.host_ip),
+                    link.host_port,
+                ),
+                flush_timeout: FLUSH,
+                status_period: PERIOD,
+            }
+        }
+
+        fn apply(&mut self, c: &Cmd) -> Seen {
+            let known = self.hosts.iter().position(|h| h.0 == c.ip);
+            let last = known.map(|i| self.hosts[i].1);
+            let seen = Seen {
+                fate: BoxCounter::CommandsAccepted as usize,
+                result: AckResult::Ok as u8,
+                last_accepted: c.sequence,
+                destination: self.destination,
+                flush_timeout: self.flush_timeout,
+                status_period: self.status_period,
+                status_period_set: false,
+                status_now: false,
+            };
+            let refuse = |seen: Seen, fate: BoxCounter, result: AckResult, last: u32| Seen {
+                fate: fate as usize,
+                result: result as u8,
+                last_accepted: last,
+                ..seen
+            };
+            if c.box_id != BOX_ID && c.box_id != 0xFFFF {
+                let last = last.unwrap_or(0);
+                return refuse(seen, BoxCounter::RefusedOtherBox, AckResult::OtherBox, last);
+            }
+            if let Some(last) = last {
+                if (c.sequence.wrapping_sub(last) as i32) <= 0 {
+                    return refuse(seen, BoxCounter::RefusedReplay, AckResult::Replay, last);
+                }
+            }
+            match known {
+                Some(i) => {
+                    self.hosts.remove(i);
+                }
+                None if self.hosts.len() == 4 => {
+                    self.hosts.remove(0);
+                }
+                None => {}
+            }
+            self.hosts.push((c.ip, c.sequence));
+            let s = c.sequence;
+            match Request::parse(c.opcode, &c.args, PORTS) {
+                Err(Error::UnknownOpcode { .. }) => refuse(
+                    seen,
+                    BoxCounter::RefusedUnknownOpcode,
+                    AckResult::UnknownOpcode,
+                    s,
+                ),
+                Err(_) => refuse(
+                    seen,
+                    BoxCounter::RefusedBadArgument,
+                    AckResult::BadArgument,
+                    s,
+                ),
+                Ok(Request::CellCommand { .. }) => refuse(
+                    seen,
+                    BoxCounter::RefusedNoDownlink,
+                    AckResult::NoDownlink,
+                    s,
+                ),
+                Ok(Request::StreamTo { to }) => {
+                    self.destination = match to {
+                        Some(d) => (mac_number(d.mac), u32::from_be_bytes(d.ip), d.port),
+                        None => (c.mac, c.ip, c.port),
+                    };
+                    Seen {
+                        destination: self.destination,
+                        ..seen
+                    }
+                }
+                Ok(Request::SetFlushTimeout { ticks }) => {
+                    self.flush_timeout = ticks;
+                    Seen {
+                        flush_timeout: ticks,
+                        ..seen
+                    }
+                }
+                Ok(Request::SetStatusPeriod { ticks }) => {
+                    self.status_period = ticks;
+                    Seen {
+                        status_period: ticks,
+                        status_period_set: true,
+                        ..seen
+                    }
+                }
+                Ok(Request::StatusNow) => Seen {
+                    status_now: true,
+                    ..seen
+                },
+                Ok(Request::ReadTick) => seen,
+            }
+        }
+    }
+
+    struct Fixture {
+        bench: Bench<CommandUnit>,
+        model: Model,
+    }
+
+    impl Fixture {
+        fn new() -> Fixture {
+            let mut bench = Bench::new(CommandUnit::new(config()), |b| &mut b.clock);
+            bench.uut.reset.next = true;
+            bench.cycle();
+            bench.uut.reset.next = false;
+            bench.cycles(2);
+            Fixture {
+                bench,
+                model: Model::new(),
+            }
+        }
+
+        fn seen(&self) -> Seen {
+            let u = &self.bench.uut;
+            Seen {
+                fate: u.fate.val().to_u64() as usize,
+                result: u.result.val().to_u64() as u8,
+                last_accepted: u.last_accepted.val().to_u32(),
+                destination: (
+                    u.destination_mac.val().to_u64(),
+                    u.destination_ip.val().to_u32(),
+                    u.destination_port.val().to_u64() as u16,
+                ),
+                flush_timeout: u.flush_timeout_ticks.val().to_u32(),
+                status_period: u.status_period_ticks.val().to_u32(),
+                status_period_set: u.status_period_set.val(),
+                status_now: u.status_now.val(),
+            }
+        }
+
+        /// Sends `c`, checks `done` comes exactly COMMAND_LATENCY clocks later with what
+        /// the model says, and that the pulses last one clock; returns what the unit showed.
+        fn run(&mut self, c: &Cmd) -> Seen {
+            let u = &mut self.bench.uut;
+            u.peer_mac.next = c.mac.into();
+            u.peer_ip.next = u64::from(c.ip).into();
+            u.peer_port.next = u64::from(c.port).into();
+            u.command_box_id.next = u64::from(c.box_id).into();
+            u.command_opcode.next = u64::from(c.opcode).into();
+            u.command_sequence.next = u64::from(c.sequence).into();
+            u.command_argument_length.next = (c.args.len() as u64).into();
+            let mut first = [0u8; 12];
+            let n = c.args.len().min(12);
+            first[..n].copy_from_slice(&c.args[..n]);
+            let high: Bits<96> = u64::from_be_bytes(first[..8].try_into().unwrap()).into();
+            let low: Bits<96> =
+                u64::from(u32::from_be_bytes(first[8..].try_into().unwrap())).into();
+            u.command_arguments.next = (high << 32) | low;
+            u.command.next = true;
+            self.bench.cycle();
+            self.bench.uut.command.next = false;
+            for _ in 1..COMMAND_LATENCY {
+                assert!(!self.bench.uut.done.val(), "done early for {c:?}");
+                self.bench.cycle();
+            }
+            assert!(self.bench.uut.done.val(), "no done for {c:?}");
+            let seen = self.seen();
+            let want = self.model.apply(c);
+            assert_eq!(seen, want, "for {c:?}");
+            // hold the fields a while, as the parser does until the next frame
+            self.bench.cycle();
+            let after = self.seen();
+            assert!(!self.bench.uut.done.val(), "done lasts one clock");
+            assert!(
+                !after.status_period_set && !after.status_now,
+                "pulses last one clock"
+            );
+            assert_eq!(
+                Seen {
+                    status_period_set: seen.status_period_set,
+                    status_now: seen.status_now,
+                    ..after
+                },
+                seen,
+                "outputs held after done"
+            );
+            self.bench.cycles(3);
+            seen
+        }
+
+        fn expect(&mut self, c: &Cmd, result: AckResult, fate: BoxCounter) -> Seen {
+            let seen = self.run(c);
+            assert_eq!(
+                (seen.result, seen.fate),
+                (result as u8, fate as usize),
+                "for {c:?}"
+            );
+            seen
+        }
+    }
+
+    fn u32_arg(v: u32) -> Vec<u8> {
+        v.to_be_bytes().to_vec()
+    }
+
+    fn destination_arg(mac: u64, ip: u32, port: u16) -> Vec<u8> {
+        let mut a = mac.to_be_bytes()[2..].to_vec();
+        a.extend(ip.to_be_bytes());
+        a.extend(port.to_be_bytes());
+        a
+    }
+
+    fn cell_arg(port: u8, reserved: [u8; 3]) -> Vec<u8> {
+        let mut a = vec![port];
+        a.extend(reserved);
+        a.extend((0..20).map(|i| 0xA0 + i as u8));
+        a
+    }
+
+    const HOST: u32 = 0xC0A8_0A02;
+
+    #[test]
+    fn every_result_of_every_opcode() {
+        use AckResult::*;
+        let mut f = Fixture::new();
+        let ok = BoxCounter::CommandsAccepted;
+        let bad = BoxCounter::RefusedBadArgument;
+        let stream = Opcode::StreamTo as u8;
+        let flush = Opcode::SetFlushTimeout as u8;
+        let period = Opcode::SetStatusPeriod as u8;
+        let now = Opcode::StatusNow as u8;
+        let tick = Opcode::ReadTick as u8;
+        let cell = Opcode::CellCommand as u8;
+        let cases: Vec<(u8, Vec<u8>, AckResult, BoxCounter)> = vec![
+            (stream, vec![], Ok, ok),
+            (
+                stream,
+                destination_arg(0x0A0B_0C0D_0E0F, 0x0A00_0001, 9000),
+                Ok,
+                ok,
+            ),
+            (
+                stream,
+                destination_arg(0x0A0B_0C0D_0E0F, 0, 9000),
+                BadArgument,
+                bad,
+            ),
+            (
+                stream,
+                destination_arg(0x0A0B_0C0D_0E0F, 0x0A00_0001, 0),
+                BadArgument,
+                bad,
+            ),
+            (stream, vec![1; 4], BadArgument, bad),
+            (stream, vec![1; 11], BadArgument, bad),
+            (stream, vec![1; 13], BadArgument, bad),
+            (stream, vec![1; 24], BadArgument, bad),
+            (flush, u32_arg(0), BadArgument, bad),
+            (flush, u32_arg(1), Ok, ok),
+            (flush, u32_arg((1 << 31) - 1), Ok, ok),
+            (flush, u32_arg(1 << 31), BadArgument, bad),
+            (flush, u32_arg(u32::MAX), BadArgument, bad),
+            (flush, vec![0, 0, 1], BadArgument, bad),
+            (flush, vec![], BadArgument, bad),
+            (flush, vec![0, 0, 0, 1, 0], BadArgument, bad),
+            (period, u32_arg(124_999), BadArgument, bad),
+            (period, u32_arg(0), BadArgument, bad),
+            (period, u32_arg(125_000), Ok, ok),
+            (period, u32_arg(u32::MAX), Ok, ok),
+            (period, vec![0, 1, 0xE8, 0x48, 0], BadArgument, bad),
+            (now, vec![], Ok, ok),
+            (now, vec![0], BadArgument, bad),
+            (now, vec![0; 12], BadArgument, bad),
+            (tick, vec![], Ok, ok),
+            (tick, vec![0; 4], BadArgument, bad),
+            (
+                cell,
+                cell_arg(0, [0; 3]),
+                NoDownlink,
+                BoxCounter::RefusedNoDownlink,
+            ),
+            (
+                cell,
+                cell_arg(PORTS - 1, [0; 3]),
+                NoDownlink,
+                BoxCounter::RefusedNoDownlink,
+            ),
+            (
+                cell,
+                cell_arg(0xFF, [0; 3]),
+                NoDownlink,
+                BoxCounter::RefusedNoDownlink,
+            ),
+            (cell, cell_arg(PORTS, [0; 3]), BadArgument, bad),
+            (cell, cell_arg(0xFE, [0; 3]), BadArgument, bad),
+            (cell, cell_arg(0, [0, 0, 1]), BadArgument, bad),
+            (cell, cell_arg(0, [0x80, 0, 0]), BadArgument, bad),
+            (cell, cell_arg(0, [0; 3])[..23].to_vec(), BadArgument, bad),
+            (cell, vec![], BadArgument, bad),
+        ];
+        let mut sequence = 100;
+        for (opcode, args, result, fate) in cases {
+            let seen = f.expect(&cmd(HOST, sequence, opcode, &args), result, fate);
+            assert_eq!(
+                seen.last_accepted, sequence,
+                "every such result takes the number"
+            );
+            sequence += 1;
+        }
+        for opcode in std::iter::once(0).chain(7..=255) {
+            let c = cmd(HOST, sequence, opcode, &[]);
+            f.expect(&c, UnknownOpcode, BoxCounter::RefusedUnknownOpcode);
+            sequence += 1;
+        }
+    }
+
+    #[test]
+    fn another_box_id_is_refused_and_any_box_accepted() {
+        let mut f = Fixture::new();
+        let tick = Opcode::ReadTick as u8;
+        let other = |sequence| Cmd {
+            box_id: BOX_ID + 1,
+            ..cmd(HOST, sequence, tick, &[])
+        };
+        // unknown host: last accepted 0, the table is not touched
+        let seen = f.expect(&other(50), AckResult::OtherBox, BoxCounter::RefusedOtherBox);
+        assert_eq!(seen.last_accepted, 0);
+        f.expect(
+            &cmd(HOST, 10, tick, &[]),
+            AckResult::Ok,
+            BoxCounter::CommandsAccepted,
+        );
+        let seen = f.expect(&other(11), AckResult::OtherBox, BoxCounter::RefusedOtherBox);
+        assert_eq!(seen.last_accepted, 10);
+        // even a replayed number: the box id comes first
+        let seen = f.expect(&other(3), AckResult::OtherBox, BoxCounter::RefusedOtherBox);
+        assert_eq!(seen.last_accepted, 10);
+        let any = Cmd {
+            box_id: ANY_BOX,
+            ..cmd(HOST, 11, tick, &[])
+        };
+        let seen = f.expect(&any, AckResult::Ok, BoxCounter::CommandsAccepted);
+        assert_eq!(seen.last_accepted, 11);
+        // a stream-to for another box changes nothing
+        let before = f.seen().destination;
+        let stream = Cmd {
+            box_id: 0,
+            ..cmd(HOST, 12, Opcode::StreamTo as u8, &[])
+        };
+        let seen = f.expect(&stream, AckResult::OtherBox, BoxCounter::RefusedOtherBox);
+        assert_eq!(seen.destination, before);
+    }
+
+    #[test]
+    fn replays_are_refused_in_serial_number_arithmetic() {
+        let mut f = Fixture::new();
+        let tick = Opcode::ReadTick as u8;
+        let replay = (AckResult::Replay, BoxCounter::RefusedReplay);
+        let ok = (AckResult::Ok, BoxCounter::CommandsAccepted);
+        let steps: [(u32, (AckResult, BoxCounter), u32); 10] = [
+            (0xFFFF_FFF0, ok, 0xFFFF_FFF0),
+            (0xFFFF_FFF0, replay, 0xFFFF_FFF0),     // equal
+            (0xFFFF_FFEF, replay, 0xFFFF_FFF0),     // older
+            (0x7FFF_FFF0, replay, 0xFFFF_FFF0),     // 2^31 ahead: not newer
+            (5, ok, 5),                             // across the wrap
+            (0xFFFF_FFFF, replay, 5),               // older across the wrap
+            (5 + 0x7FFF_FFFF, ok, 5 + 0x7FFF_FFFF), // 2^31 - 1 ahead: newer
+            (5, replay, 5 + 0x7FFF_FFFF),
+            (0x8000_0005, ok, 0x8000_0005),
+            (0x8000_0005, replay, 0x8000_0005),
+        ];
+        for (sequence, (result, fate), last) in steps {
+            let seen = f.expect(&cmd(HOST, sequence, tick, &[]), result, fate);
+            assert_eq!(seen.last_accepted, last, "sequence {sequence:#x}");
+        }
+        // a refused argument takes the number too
+        let bad = cmd(HOST, 0x8000_0006, Opcode::SetFlushTimeout as u8, &[]);
+        f.expect(&bad, AckResult::BadArgument, BoxCounter::RefusedBadArgument);
+        let again = cmd(HOST, 0x8000_0006, tick, &[]);
+        f.expect(&again, replay.0, replay.1);
+    }
+
+    #[test]
+    fn five_hosts_share_four_slots() {
+        let mut f = Fixture::new();
+        let tick = Opcode::ReadTick as u8;
+        let hosts: Vec<u32> = (0..5).map(|i| HOST + i * 17).collect();
+        let ok = (AckResult::Ok, BoxCounter::CommandsAccepted);
+        // A B C D fill the table, each starting anywhere
+        for (i, &h) in hosts[..4].iter().enumerate() {
+            f.expect(&cmd(h, 1000 * i as u32 + 7, tick, &[]), ok.0, ok.1);
+        }
+        // A again: now B is the one accepted longest ago
+        f.expect(&cmd(hosts[0], 8, tick, &[]), ok.0, ok.1);
+        // E takes B's slot; B is forgotten and may start anywhere, even lower
+        f.expect(&cmd(hosts[4], 42, tick, &[]), ok.0, ok.1);
+        let seen = f.expect(&cmd(hosts[1], 3, tick, &[]), ok.0, ok.1);
+        assert_eq!(seen.last_accepted, 3);
+        // B took C's slot; A, D, E are still remembered
+        for (h, old) in [(hosts[0], 8), (hosts[3], 3007), (hosts[4], 42)] {
+            let seen = f.expect(
+                &cmd(h, old, tick, &[]),
+                AckResult::Replay,
+                BoxCounter::RefusedReplay,
+            );
+            assert_eq!(seen.last_accepted, old);
+        }
+        f.expect(&cmd(hosts[2], 0, tick, &[]), ok.0, ok.1);
+        // table A E B C (oldest first); cycling D A E B C, each host comes back after four
+        // others took a slot, so it is new every time and may go back to any number
+        for round in 0..4u32 {
+            for h in [3, 0, 4, 1, 2].map(|i| hosts[i]) {
+                let seen = f.expect(&cmd(h, round, tick, &[]), ok.0, ok.1);
+                assert_eq!(seen.last_accepted, round);
+            }
+        }
+    }
+
+    #[test]
+    fn effects_on_the_configuration() {
+        let mut f = Fixture::new();
+        let link = LinkConfig::DEFAULT;
+        let reset_state = f.seen();
+        assert_eq!(
+            reset_state.destination,
+            (
+                mac_number(link.host_mac),
+                u32::from_be_bytes(link.host_ip),
+                link.host_port
+            )
+        );
+        assert_eq!(reset_state.flush_timeout, FLUSH);
+        assert_eq!(reset_state.status_period, PERIOD);
+        let ok = (AckResult::Ok, BoxCounter::CommandsAccepted);
+        let c = cmd(HOST, 1, Opcode::StreamTo as u8, &[]);
+        let seen = f.expect(&c, ok.0, ok.1);
+        assert_eq!(seen.destination, (c.mac, c.ip, c.port));
+        let args = destination_arg(0x0253_4B00_00AA, 0x0A01_0203, 0xBEEF);
+        let seen = f.expect(&cmd(HOST, 2, Opcode::StreamTo as u8, &args), ok.0, ok.1);
+        assert_eq!(seen.destination, (0x0253_4B00_00AA, 0x0A01_0203, 0xBEEF));
+        let seen = f.expect(
+            &cmd(HOST, 3, Opcode::SetFlushTimeout as u8, &u32_arg(77)),
+            ok.0,
+            ok.1,
+        );
+        assert_eq!(seen.flush_timeout, 77);
+        assert!(!seen.status_period_set && !seen.status_now);
+        let c = cmd(HOST, 4, Opcode::SetStatusPeriod as u8, &u32_arg(250_000));
+        let seen = f.expect(&c, ok.0, ok.1);
+        assert_eq!(
+            (seen.status_period, seen.status_period_set),
+            (250_000, true)
+        );
+        // the same period again: set again (the status timer restarts)
+        let c = cmd(HOST, 5, Opcode::SetStatusPeriod as u8, &u32_arg(250_000));
+        assert!(f.expect(&c, ok.0, ok.1).status_period_set);
+        let seen = f.expect(&cmd(HOST, 6, Opcode::StatusNow as u8, &[]), ok.0, ok.1);
+        assert!(seen.status_now && !seen.status_period_set);
+        // refused commands change nothing and pulse nothing
+        let before = f.seen();
+        for c in [
+            cmd(HOST, 6, Opcode::StatusNow as u8, &[]),
+            cmd(HOST, 7, Opcode::SetStatusPeriod as u8, &u32_arg(5)),
+            cmd(HOST, 8, Opcode::StatusNow as u8, &[1]),
+            cmd(HOST, 9, Opcode::StreamTo as u8, &[1, 2]),
+        ] {
+            let seen = f.run(&c);
+            assert_eq!(
+                (seen.destination, seen.flush_timeout, seen.status_period),
+                (
+                    before.destination,
+                    before.flush_timeout,
+                    before.status_period
+                )
+            );
+            assert!(!seen.status_now && !seen.status_period_set);
+        }
+        // reset brings back the build-time values and forgets the hosts
+        f.bench.uut.reset.next = true;
+        f.bench.cycle();
+        f.bench.uut.reset.next = false;
+        f.bench.cycle();
+        f.model = Model::new();
+        let after = f.seen();
+        assert_eq!(
+            (after.destination, after.flush_timeout, after.status_period),
+            (reset_state.destination, FLUSH, PERIOD)
+        );
+        f.expect(&cmd(HOST, 1, Opcode::ReadTick as u8, &[]), ok.0, ok.1);
+    }
+
+    #[test]
+    fn random_commands_follow_the_rules() {
+        let mut f = Fixture::new();
+        let mut rng = TestRng::new(0x5EED);
+        let hosts: Vec<u32> = (0..6).map(|i| HOST + i).collect();
+        let mut next = [0u32; 6];
+        let mut results = [0usize; 6];
+        for _ in 0..1000 {
+            let r = rng.next_u64();
+            let h = (r % 6) as usize;
+            next[h] = match (r >> 8) % 8 {
+                0 => next[h],                                    // a replay of the last
+                1 => next[h].wrapping_sub((r >> 16) as u32 % 5), // older
+                2 => (r >> 32) as u32,                           // anywhere
+                _ => next[h].wrapping_add(1 + (r >> 16) as u32 % 3),
+            };
+            let opcode = match (r >> 20) % 11 {
+                0 => (r >> 24) as u8,
+                k => (k % 7) as u8,
+            };
+            let length = match (r >> 28) % 8 {
+                0 => (r >> 32) as usize % 30,
+                1 | 2 => 0,
+                3 => 4,
+                4 => 12,
+                5 => 24,
+                _ => match opcode {
+                    1 => 12,
+                    2 | 3 => 4,
+                    6 => 24,
+                    _ => 0,
+                },
+            };
+            let mut args: Vec<u8> = (0..length).map(|_| rng.byte()).collect();
+            // interesting values
+            match (r >> 36) % 6 {
+                0 if length >= 4 => args[..4].copy_from_slice(
+                    &match (r >> 40) % 5 {
+                        0 => 0u32,
+                        1 => 1,
+                        2 => (1 << 31) - 1,
+                        3 => 124_999 + (r >> 44) as u32 % 3,
+                        _ => 1 << 31,
+                    }
+                    .to_be_bytes(),
+                ),
+                1 | 4 if length >= 4 => {
+                    args[0] = (r >> 40) as u8 % (PORTS + 2);
+                    args[1..4].fill(0);
+                }
+                2 if length >= 12 => args[6 + (r >> 40) as usize % 6] = 0,
+                3 if length >= 12 => args[6..10].fill(0),
+                _ => {}
+            }
+            if opcode == Opcode::CellCommand as u8 && length >= 4 && (r >> 56) & 1 == 0 {
+                args[0] = [0, PORTS - 1, ALL_PORTS][(r >> 57) as usize % 3];
+                args[1..4].fill(0);
+            }
+            let mut c = cmd(hosts[h], next[h], opcode, &args);
+            c.box_id = match (r >> 48) % 12 {
+                0 => BOX_ID ^ 1,
+                1 => ANY_BOX,
+                _ => BOX_ID,
+            };
+            let seen = f.run(&c);
+            results[seen.result as usize] += 1;
+        }
+        // every result came up often
+        assert!(results.iter().all(|&n| n >= 10), "results {results:?}");
+    }
+
+    #[test]
+    fn verilog_lints_clean() {
+        let mut uut = CommandUnit::new(config());
+        uut.connect_all();
+        let text = generate_verilog(&uut);
+        let dir =
+            std::env::temp_dir().join(format!("skinbox-lint-command-unit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let report = crate::verilog::lint(&text, &dir).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(report.clean, "{}", report.output);
+    }
+}
