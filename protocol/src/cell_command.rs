@@ -238,6 +238,35 @@ pub struct ModalityThresholds {
 }
 
 impl ModalityThresholds {
+    /// The papers' Table I: 0.02 g, 0.001, 0.0001, 0.5 C: 5, 1, 6 and 1 raw steps.
+    pub fn table_i() -> ModalityThresholds {
+        ModalityThresholds {
+            raw: Modality::ALL.map(|m| Self::first_channel(m).table_i_threshold_raw()),
+        }
+    }
+
+    /// Thresholds from host units (g, normalised force, normalised proximity, C) rounded
+    /// down to whole raw steps as [`crate::Channel::table_i_threshold_raw`] does; `None` when
+    /// one is negative, not a number or above 65,535 steps.
+    pub fn from_units(units: [f64; 4]) -> Option<ModalityThresholds> {
+        let mut raw = [0u16; 4];
+        for ((r, m), u) in raw.iter_mut().zip(Modality::ALL).zip(units) {
+            let steps = (u / Self::first_channel(m).units_per_lsb() + 1e-9).floor();
+            if !(0.0..=65_535.0).contains(&steps) {
+                return None;
+            }
+            *r = steps as u16;
+        }
+        Some(ModalityThresholds { raw })
+    }
+
+    fn first_channel(modality: Modality) -> crate::Channel {
+        crate::Channel::ALL
+            .into_iter()
+            .find(|c| c.modality() == modality)
+            .unwrap_or(crate::Channel::AccelX)
+    }
+
     /// The threshold of one modality, raw steps.
     pub fn of(&self, modality: Modality) -> u16 {
         let i = Modality::ALL
@@ -585,6 +614,12 @@ mod tests {
         }
         assert_eq!(SampleRate::from_hz(62.5), Some(SampleRate::Hz62_5));
         assert_eq!(SampleRate::from_hz(100.0), None);
+        assert_eq!(ModalityThresholds::table_i().raw, [5, 1, 6, 1]);
+        assert_eq!(
+            ModalityThresholds::from_units([0.02, 0.001, 0.0001, 0.5]),
+            Some(ModalityThresholds::table_i())
+        );
+        assert_eq!(ModalityThresholds::from_units([-0.1, 0.0, 0.0, 0.0]), None);
     }
 
     fn with(mut bytes: [u8; 20], at: usize, value: u8) -> [u8; 20] {
