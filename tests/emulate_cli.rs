@@ -291,3 +291,73 @@ fn a_host_outside_the_subnet_is_refused_and_counted() {
     assert_eq!(summary["box_counters"]["counters"]["commands_accepted"], 0);
     assert_eq!(summary["acks_sent"], 0);
 }
+
+#[test]
+fn cells_commands_build_cell_command_packets_and_the_box_answers_no_downlink() {
+    let emulator = Emulator::start(&[], 4000);
+    let addr = emulator.addr.clone();
+    // (arguments, the packet written by hand from docs/wire-format.md, the port)
+    let cases: [(&[&str], &str, serde_json::Value); 5] = [
+        (
+            &["cells", "mode", "event", "--port", "1", "--cell", "7"],
+            "A500070101000000000000000000000000000055",
+            1.into(),
+        ),
+        (
+            &["cells", "rate", "250"],
+            "A53FFF0202000000000000000000000000000055",
+            "all".into(),
+        ),
+        (
+            &["cells", "--port", "0", "thresholds", "--accel-g", "0.04"],
+            "A53FFF03000A0001000600010000000000000055",
+            0.into(),
+        ),
+        (
+            &["cells", "enable", "accel_x", "proximity"],
+            "A53FFF0400410000000000000000000000000055",
+            "all".into(),
+        ),
+        (
+            &["cells", "sync", "4660"],
+            "A53FFF0500000000000012340000000000000055",
+            "all".into(),
+        ),
+    ];
+    for (args, packet, port) in &cases {
+        let out = ctl(&addr, args);
+        assert!(!out.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("no downlink") && err.contains("no_downlink"),
+            "{err}"
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["result"], "no_downlink", "{args:?}");
+        assert_eq!(v["command"], "cell_command");
+        assert_eq!(v["cell_packet"], *packet, "{args:?}");
+        assert_eq!(v["port"], *port, "{args:?}");
+    }
+    // bad arguments never reach the box
+    for (args, says) in [
+        (&["cells", "rate", "100"][..], "62.5, 125, 250, 500 or 1000"),
+        (
+            &["cells", "mode", "event", "--cell", "16383"][..],
+            "1..=16382",
+        ),
+        (
+            &["cells", "enable", "accel_w"][..],
+            "unknown channel accel_w",
+        ),
+    ] {
+        let out = ctl(&addr, args);
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    let status = json(&ctl(&addr, &["status"]));
+    assert_eq!(
+        status["box_counters"]["counters"]["refused_no_downlink"],
+        cases.len()
+    );
+}

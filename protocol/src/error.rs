@@ -9,6 +9,8 @@ pub enum Format {
     DataPacket,
     /// The cell event packet (header 0xA2).
     EventPacket,
+    /// The cell command packet (header 0xA5, box to cells).
+    CellCommandPacket,
     /// The box datagram header.
     Datagram,
     /// One record of a records datagram.
@@ -31,6 +33,7 @@ impl fmt::Display for Format {
             Format::CellPacket => "cell packet",
             Format::DataPacket => "data packet",
             Format::EventPacket => "event packet",
+            Format::CellCommandPacket => "cell command packet",
             Format::Datagram => "box datagram",
             Format::Record => "record",
             Format::Status => "status datagram",

@@ -6,6 +6,7 @@
 //! Formats, in the order a cell packet travels:
 //! - [`data`]: the cell's 20-byte data packet (every sample, header 0xA1);
 //! - [`event`]: the cell's 20-byte event packet (send-on-delta, header 0xA2);
+//! - [`cell_command`]: the box's 20-byte command packet down a bus to the cells (header 0xA5);
 //! - [`datagram`]: the box's UDP payload: a 24-byte header, then 26-byte [`record`]s or a
 //!   [`status`] body with per-port counters, and optionally the [`box_counters`] block;
 //! - [`command`]: commands to the box (kind 3) and its acknowledgements (kind 4).
@@ -23,6 +24,7 @@
 
 pub mod box_counters;
 pub mod cell;
+pub mod cell_command;
 pub mod channel;
 pub mod command;
 pub mod data;
@@ -35,6 +37,7 @@ pub mod status;
 
 pub use box_counters::{BoxCounter, BoxCounters};
 pub use cell::{CellFraming, CellRepr};
+pub use cell_command::{CellCommand, CellCommandRepr, CellMode, SampleRate};
 pub use channel::{Channel, ChannelMask, Modality};
 pub use command::{AckRepr, AckResult, CommandRepr, Request};
 pub use data::DataRepr;

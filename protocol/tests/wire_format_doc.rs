@@ -1,7 +1,7 @@
 //! docs/wire-format.md and the code describe the same bytes.
 
 use skinbox_protocol::{
-    box_counters, cell, command, data, datagram, event, record, status, LayoutRow,
+    box_counters, cell, cell_command, command, data, datagram, event, record, status, LayoutRow,
 };
 
 /// The rows of the table marked `<!-- layout: NAME -->`, as (field, first byte, last byte).
@@ -53,9 +53,15 @@ fn every_documented_table_matches_the_code() {
         ("cell_command", command::cell_command_layout()),
         ("ack", command::ack_layout()),
         ("ack_body", command::ack_body_layout()),
+        ("cell_command_packet", cell_command::layout()),
     ];
     for (name, rows) in formats {
         assert_eq!(doc_table(&doc, name), code_table(rows), "table {name}");
+    }
+    for code in cell_command::CommandCode::ALL {
+        let name = format!("cell_command_{}", code.name());
+        let rows = cell_command::arguments_layout(code);
+        assert_eq!(doc_table(&doc, &name), code_table(rows), "table {name}");
     }
 }
 
@@ -74,6 +80,7 @@ fn layouts_are_contiguous_and_fill_their_format() {
         (command::ack_body_layout(), command::ACK_FIXED_LEN),
         (command::destination_layout(), command::DESTINATION_LEN),
         (command::cell_command_layout(), command::CELL_COMMAND_LEN),
+        (cell_command::layout(), cell::PACKET_LEN),
     ];
     for (rows, len) in formats {
         let mut at = 0;

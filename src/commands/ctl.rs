@@ -2,8 +2,11 @@
 
 use anyhow::Context;
 use skinbox_host::control::{BoxClient, Exchange};
+use skinbox_protocol::cell_command::{
+    CellCommand, CellCommandRepr, CellMode, ModalityThresholds, SampleRate, ALL_CELLS,
+};
 use skinbox_protocol::command::{AckReply, AckResult, Destination, Opcode, Request, ALL_PORTS};
-use skinbox_protocol::TICKS_PER_SECOND;
+use skinbox_protocol::{Channel, ChannelMask, TICKS_PER_SECOND};
 use std::net::{SocketAddr, SocketAddrV4, ToSocketAddrs, UdpSocket};
 use std::time::Duration;
 
@@ -68,6 +71,116 @@ pub enum CtlCommand {
         /// The 20-byte cell command packet, 40 hex digits.
         packet: String,
     },
+    /// Command the cells through the box's downlink (a cell command packet,
+    /// docs/wire-format.md): mode, sample rate, thresholds, enabled channels, time sync.
+    Cells {
+        /// Box port (bus) to send on; default all ports.
+        #[arg(long, global = true)]
+        port: Option<u8>,
+        /// Cell id to address (1..=16382); default every cell.
+        #[arg(long, global = true)]
+        cell: Option<u16>,
+        #[command(subcommand)]
+        command: CellsCommand,
+    },
+}
+
+/// What to ask the cells.
+#[derive(Debug, clap::Subcommand)]
+pub enum CellsCommand {
+    /// Data mode (a data packet per sample) or event mode (send-on-delta).
+    Mode {
+        /// `data` or `event`.
+        mode: ModeArg,
+    },
+    /// Sample rate: 62.5, 125, 250, 500 or 1000 Hz.
+    Rate {
+        /// Hz.
+        hz: f64,
+    },
+    /// Send-on-delta thresholds per modality in host units (default: Table I).
+    Thresholds {
+        /// Acceleration, g.
+        #[arg(long, default_value_t = 0.02)]
+        accel_g: f64,
+        /// Force, normalised.
+        #[arg(long, default_value_t = 0.001)]
+        force: f64,
+        /// Proximity, normalised.
+        #[arg(long, default_value_t = 0.0001)]
+        proximity: f64,
+        /// Temperature, C.
+        #[arg(long, default_value_t = 0.5)]
+        temperature_c: f64,
+    },
+    /// Channels that send events, by name (accel_x .. temperature_2); none: no channel.
+    Enable {
+        /// Channel names.
+        channels: Vec<String>,
+    },
+    /// Time sync: the box tick at which the packet leaves the box.
+    Sync {
+        /// Box tick (8 ns).
+        tick: u64,
+    },
+}
+
+/// `cells mode` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModeArg {
+    /// One data packet per sample.
+    Data,
+    /// Send-on-delta event packets.
+    Event,
+}
+
+/// The cell command packet of a `cells` command.
+fn cell_command_of(cell: Option<u16>, command: &CellsCommand) -> anyhow::Result<CellCommandRepr> {
+    let cell_id = match cell {
+        None => ALL_CELLS,
+        Some(id @ 1..=16_382) => id,
+        Some(id) => anyhow::bail!("--cell {id}: cell ids are 1..=16382 (omit --cell for all)"),
+    };
+    let command = match command {
+        CellsCommand::Mode {
+            mode: ModeArg::Data,
+        } => CellCommand::Mode(CellMode::Data),
+        CellsCommand::Mode {
+            mode: ModeArg::Event,
+        } => CellCommand::Mode(CellMode::Event),
+        CellsCommand::Rate { hz } => {
+            CellCommand::SampleRate(SampleRate::from_hz(*hz).with_context(|| {
+                format!("rate {hz} Hz: the cells run at 62.5, 125, 250, 500 or 1000 Hz")
+            })?)
+        }
+        CellsCommand::Thresholds {
+            accel_g,
+            force,
+            proximity,
+            temperature_c,
+        } => CellCommand::Thresholds(
+            ModalityThresholds::from_units([*accel_g, *force, *proximity, *temperature_c])
+                .context("thresholds: each must be >= 0 and at most 65535 raw steps")?,
+        ),
+        CellsCommand::Enable { channels } => {
+            let mut mask = ChannelMask::EMPTY;
+            for name in channels {
+                let channel = Channel::ALL
+                    .into_iter()
+                    .find(|c| c.name() == name)
+                    .with_context(|| {
+                        format!(
+                            "unknown channel {name}; channels are {}",
+                            Channel::ALL.map(|c| c.name()).join(", ")
+                        )
+                    })?;
+                mask.insert(channel);
+            }
+            CellCommand::EnableMask(mask)
+        }
+        CellsCommand::Sync { tick } => CellCommand::TimeSync { box_tick: *tick },
+    };
+    Ok(CellCommandRepr { cell_id, command })
 }
 
 fn parse_mac(s: &str) -> anyhow::Result<[u8; 6]> {
@@ -131,6 +244,14 @@ fn request_of(command: &CtlCommand) -> anyhow::Result<Request> {
                 packet: bytes,
             }
         }
+        CtlCommand::Cells {
+            port,
+            cell,
+            command,
+        } => Request::CellCommand {
+            port: port.unwrap_or(ALL_PORTS),
+            packet: cell_command_of(*cell, command)?.to_bytes(),
+        },
     })
 }
 
@@ -193,8 +314,24 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         exchanges.push(client.send(request)?);
     }
     let refused = exchanges.iter().find(|e| e.ack.result != AckResult::Ok);
+    let cell_packet = match request {
+        Request::CellCommand { port, packet } => Some((port, packet)),
+        _ => None,
+    };
     if json {
-        let values: Vec<_> = exchanges.iter().map(exchange_json).collect();
+        let mut values: Vec<_> = exchanges.iter().map(exchange_json).collect();
+        if let (Some((port, packet)), [one]) = (cell_packet, values.as_mut_slice()) {
+            one["cell_packet"] = packet
+                .iter()
+                .map(|b| format!("{b:02X}"))
+                .collect::<String>()
+                .into();
+            one["port"] = if port == ALL_PORTS {
+                "all".into()
+            } else {
+                port.into()
+            };
+        }
         if let [one] = values.as_slice() {
             super::print_json(one)?;
         } else {
@@ -229,6 +366,20 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
                 _ => println!("{}", e.ack),
             }
         }
+        if let CtlCommand::Cells { .. } = args.command {
+            if let Some((_, packet)) = cell_packet {
+                if let Ok(repr) = CellCommandRepr::parse(&packet) {
+                    println!("{repr}");
+                }
+            }
+        }
+    }
+    if let Some(e) = refused.filter(|e| e.ack.result == AckResult::NoDownlink) {
+        anyhow::bail!(
+            "the box has no downlink to the cells yet (no_downlink): the cell command was \
+             acknowledged but not sent down a bus (sequence {})",
+            e.ack.sequence
+        );
     }
     if let Some(e) = refused {
         anyhow::bail!(

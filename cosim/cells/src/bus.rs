@@ -9,6 +9,10 @@
 //!
 //! The box pin is driven by the root cell's UART, so every packet of a bus reaches the pin
 //! with the root cell's bit period (its own clock error).
+//!
+//! The way down ([`downlink_arrival_ns`]): a cell command packet leaves the box's UART, is
+//! complete in the root cell 50 us later, and each cell relays it outward after the same hop
+//! latency as the uplink.
 
 use skinbox_protocol::cell::PACKET_LEN;
 use std::collections::VecDeque;
@@ -21,6 +25,17 @@ pub const BITS_PER_PACKET: u64 = skinbox_protocol::cell::UART_BITS_PER_PACKET;
 pub const NOMINAL_BIT_PERIOD_PS: u64 = 1_000_000_000_000 / UART_BAUD;
 /// Most cells on one bus (Bergner et al.).
 pub const MAX_CELLS_PER_BUS: usize = 66;
+
+/// Time a 20-byte cell command packet takes on the box's UART to the root cell, ns (the box
+/// sends at the nominal 4 Mbit/s: 200 bits of 250 ns, 50 us).
+pub const DOWNLINK_PACKET_NS: u64 = BITS_PER_PACKET * NOMINAL_BIT_PERIOD_PS / 1000;
+
+/// When a cell command packet whose first start bit leaves the box at `leave_box_ns` is
+/// complete in the cell at `position` (0 = the root): the packet time to the root, then one
+/// store-and-forward hop per cell outward, the uplink's hop latency.
+pub fn downlink_arrival_ns(leave_box_ns: u64, position: usize, hop_latency_ns: u64) -> u64 {
+    leave_box_ns + DOWNLINK_PACKET_NS + position as u64 * hop_latency_ns
+}
 
 /// Bit period of a UART whose clock is `error_ppm` fast (positive) or slow (negative).
 pub fn bit_period_ps(error_ppm: f64) -> u32 {
@@ -139,6 +154,14 @@ mod tests {
     use super::*;
 
     const US: u64 = 1_000_000; // ps
+
+    #[test]
+    fn a_command_reaches_the_root_after_50_us_and_each_cell_one_hop_later() {
+        assert_eq!(DOWNLINK_PACKET_NS, 50_000);
+        assert_eq!(downlink_arrival_ns(1_000, 0, 52_000), 51_000);
+        // The 66th cell: 65 hops of 52 us after the root.
+        assert_eq!(downlink_arrival_ns(0, 65, 52_000), 50_000 + 65 * 52_000);
+    }
 
     #[test]
     fn nominal_packet_takes_50_us() {

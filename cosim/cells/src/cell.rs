@@ -17,6 +17,7 @@
 //! true state again after at most one refresh period.
 
 use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::cell_command::{CellCommand, CellMode};
 use skinbox_protocol::{Channel, ChannelMask, DataRepr, EventRepr, Modality};
 
 /// What a cell sends: every sample, or send-on-delta events.
@@ -27,6 +28,15 @@ pub enum Mode {
     Data,
     /// Event mode: send-on-delta (Algorithm 1).
     Event,
+}
+
+impl From<CellMode> for Mode {
+    fn from(m: CellMode) -> Mode {
+        match m {
+            CellMode::Data => Mode::Data,
+            CellMode::Event => Mode::Event,
+        }
+    }
 }
 
 /// Raw values the cell's sensors produce (docs/design.md section 2): acceleration 10-bit signed
@@ -239,6 +249,39 @@ impl Cell {
             config,
             next_sequence: 0,
             samples: 0,
+        }
+    }
+
+    /// Applies a cell command at a sample boundary (before the sample): a mode change
+    /// starts Algorithm 1 afresh, so the next sample sends every channel as at start-up;
+    /// thresholds keep the values sent; a newly enabled channel fires at the next sample.
+    /// Sample rate and time sync concern the cell's clock, which the caller runs
+    /// ([`crate::Scene::generate`]); here they change nothing.
+    pub fn apply(&mut self, command: &CellCommand) {
+        match *command {
+            CellCommand::Mode(m) => {
+                let mode = Mode::from(m);
+                if mode != self.config.mode {
+                    self.config.mode = mode;
+                    self.send_on_delta =
+                        SendOnDelta::new(self.config.thresholds, self.config.enabled);
+                }
+            }
+            CellCommand::Thresholds(t) => {
+                let raw = Channel::ALL.map(|c| t.of(c.modality()));
+                self.config.thresholds = Thresholds { raw };
+                self.send_on_delta.thresholds = self.config.thresholds;
+            }
+            CellCommand::EnableMask(mask) => {
+                for c in mask.iter() {
+                    if !self.config.enabled.contains(c) {
+                        self.send_on_delta.last_sent[c.index()] = None;
+                    }
+                }
+                self.config.enabled = mask;
+                self.send_on_delta.enabled = mask;
+            }
+            CellCommand::SampleRate(_) | CellCommand::TimeSync { .. } => {}
         }
     }
 
@@ -590,6 +633,48 @@ mod tests {
         assert_eq!(quantise(Channel::Proximity, f64::INFINITY), 65_535);
         assert_eq!(full_range_units(Channel::AccelY), 4.0);
         assert_eq!(full_range_units(Channel::Temperature2), 128.0);
+    }
+
+    #[test]
+    fn commands_switch_mode_thresholds_and_channels() {
+        use skinbox_protocol::cell_command::ModalityThresholds;
+        let mut cell = Cell::new(CellConfig {
+            cell_id: 3,
+            mode: Mode::Data,
+            thresholds: Thresholds::table_i(),
+            enabled: ChannelMask::ALL,
+            refresh_every_samples: 0,
+        });
+        assert_eq!(cell.sample_raw(&BASE).as_slice()[0][0], 0xA1);
+        // To event mode: the next sample sends all nine channels, as at start-up.
+        cell.apply(&CellCommand::Mode(CellMode::Event));
+        let p = events(&cell.sample_raw(&BASE));
+        assert_eq!(p.iter().map(|e| e.channels.len()).sum::<usize>(), 9);
+        assert!(cell.sample_raw(&BASE).as_slice().is_empty());
+        // Force threshold 1 -> 60 steps: a jump of 50 no longer fires.
+        cell.apply(&CellCommand::Thresholds(ModalityThresholds {
+            raw: [5, 60, 6, 1],
+        }));
+        assert!(cell
+            .sample_raw(&with(Channel::Force1, 150))
+            .as_slice()
+            .is_empty());
+        assert_eq!(
+            events(&cell.sample_raw(&with(Channel::Force1, 161)))[0]
+                .events()
+                .collect::<Vec<_>>(),
+            vec![(Channel::Force1, 161)]
+        );
+        // Only proximity enabled: accel jumps are not sent.
+        let prox: ChannelMask = [Channel::Proximity].into_iter().collect();
+        cell.apply(&CellCommand::EnableMask(prox));
+        let mut s = with(Channel::Force1, 161);
+        s[0] += 100;
+        assert!(cell.sample_raw(&s).as_slice().is_empty());
+        // Back to data mode: every sample again.
+        cell.apply(&CellCommand::Mode(CellMode::Data));
+        let d = DataRepr::parse(&cell.sample_raw(&s).as_slice()[0]).unwrap();
+        assert_eq!(d.raw_values(), s);
     }
 
     #[test]

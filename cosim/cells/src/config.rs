@@ -261,6 +261,57 @@ pub struct ForceStandConfig {
     pub proximity: f64,
 }
 
+/// `[[commands]]`: a cell command the box sends down a bus at a time. Exactly one of
+/// `mode`, `rate_hz`, `thresholds`, `enabled`, `time_sync` and `raw`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommandConfig {
+    /// When the box sends it, s from the scene start.
+    pub time_s: f64,
+    /// Box port (bus) it is sent on; omitted: every bus.
+    pub port: Option<usize>,
+    /// Cell id it addresses; omitted: every cell.
+    pub cell: Option<u16>,
+    /// `"data"` or `"event"`.
+    pub mode: Option<Mode>,
+    /// Sample rate: 62.5, 125, 250, 500 or 1000 Hz.
+    pub rate_hz: Option<f64>,
+    /// Send-on-delta thresholds in host units, as `[thresholds]` (keys left out: Table I).
+    pub thresholds: Option<CommandThresholds>,
+    /// Channels enabled for events, by name.
+    pub enabled: Option<Vec<String>>,
+    /// `true`: a time-sync command carrying the box tick at which it leaves the box.
+    pub time_sync: Option<bool>,
+    /// The 20 packet bytes as 40 hex digits, sent as they are (to test the cells with
+    /// malformed or unknown commands).
+    pub raw: Option<String>,
+}
+
+/// The thresholds of a `[[commands]]` entry, host units; Table I for keys left out.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CommandThresholds {
+    /// Acceleration, g.
+    pub accel_g: f64,
+    /// Force, normalised.
+    pub force: f64,
+    /// Proximity, normalised.
+    pub proximity: f64,
+    /// Temperature, C.
+    pub temperature_c: f64,
+}
+
+impl Default for CommandThresholds {
+    fn default() -> Self {
+        CommandThresholds {
+            accel_g: 0.02,
+            force: 0.001,
+            proximity: 0.0001,
+            temperature_c: 0.5,
+        }
+    }
+}
+
 /// A whole scene file.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -287,4 +338,7 @@ pub struct SceneConfig {
     pub crosstalk: Option<CrosstalkConfig>,
     /// `[force_stand]`.
     pub force_stand: Option<ForceStandConfig>,
+    /// `[[commands]]`, in any order.
+    #[serde(default)]
+    pub commands: Vec<CommandConfig>,
 }

@@ -44,8 +44,8 @@ pub mod time_sync;
 pub use bus::{BusPacket, BusStats, RootFifo};
 pub use cell::{Cell, CellConfig, Mode, SendOnDelta, Thresholds};
 pub use scene::{
-    BusStream, CellClock, CellTruth, ClockWander, GenerateOptions, Generated, Scene, SceneError,
-    SceneStats,
+    BusStream, CellClock, CellCommandCounts, CellTruth, ClockWander, GenerateOptions, Generated,
+    Scene, SceneError, SceneStats,
 };
 pub use time_sync::TimeSync;
 

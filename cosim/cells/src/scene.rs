@@ -5,17 +5,31 @@
 //! `[noise]`, `[temperature]`, `[motion]`, `[hammer]`, `[stroke]`, `[crosstalk]` and
 //! `[force_stand]` (see `cosim/scenes/*.toml` and `docs/scenes.md`). Unknown keys are errors;
 //! every error names the file, the line and what is wrong.
+//!
+//! `[[commands]]` entries are cell commands the box sends down a bus at a time
+//! ([`CommandConfig`]): each leaves the box's UART at its time (after the previous command
+//! on that bus), is complete in the root cell 50 us later and one hop latency later in each
+//! next cell ([`crate::bus::downlink_arrival_ns`]); a cell takes it at its first sample at or
+//! after that, applies it when it is addressed to it or to every cell, and ignores and
+//! counts it when it is malformed ([`CellCommandCounts`]). A rate change sets the cell's
+//! period from that sample on, with its own clock drift; cells on the box's time grid
+//! ([`GenerateOptions::time_sync`]) keep the grid's rate.
 
-use crate::bus::{bit_period_ps, BusPacket, BusStats, RootFifo};
-use crate::cell::{full_range_units, Cell, CellConfig, Thresholds};
+use crate::bus::DOWNLINK_PACKET_NS;
+use crate::bus::{bit_period_ps, downlink_arrival_ns, BusPacket, BusStats, RootFifo};
+use crate::cell::{full_range_units, Cell, CellConfig, Mode, Thresholds};
 pub use crate::config::{
-    BusConfig, CrosstalkConfig, ForceStandConfig, HammerConfig, MotionConfig, NoiseConfig,
-    SceneConfig, SceneTable, StrokeConfig, TemperatureConfig, ThresholdConfig,
+    BusConfig, CommandConfig, CommandThresholds, CrosstalkConfig, ForceStandConfig, HammerConfig,
+    MotionConfig, NoiseConfig, SceneConfig, SceneTable, StrokeConfig, TemperatureConfig,
+    ThresholdConfig,
 };
 use crate::rng::Rng;
 use crate::signal::SignalModel;
 use crate::time_sync::{SyncedClock, TimeSync};
 use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::cell_command::{
+    CellCommand, CellCommandRepr, CellMode, ModalityThresholds, SampleRate, ALL_CELLS,
+};
 use skinbox_protocol::{CellFraming, CellRepr, Channel, ChannelMask, Modality};
 use std::cmp::Reverse;
 use std::fmt;
@@ -70,6 +84,52 @@ fn line_of(text: &str, table: &str, key: &str) -> Option<usize> {
         }
     }
     None
+}
+
+/// The line of `key` in the `n`th `[[commands]]` entry of `text` (or of the entry's header).
+fn line_of_command(text: &str, n: usize, key: &str) -> Option<usize> {
+    let mut entry = None;
+    let mut header = None;
+    for (i, line) in text.lines().enumerate() {
+        let l = line.trim();
+        if l.starts_with('[') {
+            entry = if l.replace(' ', "") == "[[commands]]" {
+                Some(entry.map_or(0, |e: usize| e + 1))
+            } else {
+                entry.map(|e| e + 1_000_000)
+            };
+            if entry == Some(n) {
+                header = Some(i + 1);
+            }
+            continue;
+        }
+        if entry == Some(n) {
+            if let Some(rest) = l.strip_prefix(key) {
+                if rest.trim_start().starts_with('=') {
+                    return Some(i + 1);
+                }
+            }
+        }
+    }
+    header
+}
+
+/// What a `[[commands]]` entry sends: a command, or raw bytes.
+#[derive(Debug, Clone, Copy)]
+enum Downlink {
+    Command(CellCommandRepr),
+    Raw([u8; PACKET_LEN]),
+}
+
+/// What the cells of a run did with the cell command packets that reached them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct CellCommandCounts {
+    /// Packets taken at a sample boundary (every packet passes every cell of its bus).
+    pub received: u64,
+    /// Well-formed commands addressed to the cell or to every cell, applied.
+    pub applied: u64,
+    /// Malformed packets or unknown commands, ignored.
+    pub malformed: u64,
 }
 
 /// One problem found by [`Scene::check`]: table, key, message.
@@ -147,19 +207,200 @@ impl Scene {
                 message: format!("[{table}] {message}"),
             });
         }
+        if let Some((n, key, message)) = scene.command_problems().into_iter().next() {
+            return Err(SceneError {
+                file: file.to_string(),
+                line: line_of_command(text, n, key),
+                message: format!("[[commands]] #{}: {message}", n + 1),
+            });
+        }
         Ok(scene)
     }
 
     /// Checks the settings after a change: the first problem, without a line.
     pub fn check(&self) -> Result<(), SceneError> {
-        match self.problems().into_iter().next() {
-            None => Ok(()),
-            Some((table, _, message)) => Err(SceneError {
+        if let Some((table, _, message)) = self.problems().into_iter().next() {
+            return Err(SceneError {
                 file: self.file.clone(),
                 line: None,
                 message: format!("[{table}] {message}"),
+            });
+        }
+        match self.command_problems().into_iter().next() {
+            None => Ok(()),
+            Some((n, _, message)) => Err(SceneError {
+                file: self.file.clone(),
+                line: None,
+                message: format!("[[commands]] #{}: {message}", n + 1),
             }),
         }
+    }
+
+    /// What a `[[commands]]` entry sends, or the key that is wrong and why.
+    fn downlink_of(c: &CommandConfig) -> Result<Downlink, (&'static str, String)> {
+        let given = [
+            c.mode.is_some(),
+            c.rate_hz.is_some(),
+            c.thresholds.is_some(),
+            c.enabled.is_some(),
+            c.time_sync.is_some(),
+            c.raw.is_some(),
+        ]
+        .into_iter()
+        .filter(|g| *g)
+        .count();
+        if given != 1 {
+            return Err((
+                "time_s",
+                format!(
+                    "a command has exactly one of `mode`, `rate_hz`, `thresholds`, `enabled`, \
+                     `time_sync`, `raw`; found {given}"
+                ),
+            ));
+        }
+        let command = if let Some(m) = c.mode {
+            CellCommand::Mode(match m {
+                Mode::Data => CellMode::Data,
+                Mode::Event => CellMode::Event,
+            })
+        } else if let Some(hz) = c.rate_hz {
+            CellCommand::SampleRate(SampleRate::from_hz(hz).ok_or((
+                "rate_hz",
+                format!("`rate_hz` must be 62.5, 125, 250, 500 or 1000, found {hz}"),
+            ))?)
+        } else if let Some(t) = &c.thresholds {
+            CellCommand::Thresholds(
+                ModalityThresholds::from_units([t.accel_g, t.force, t.proximity, t.temperature_c])
+                    .ok_or((
+                        "thresholds",
+                        "`thresholds` must each be >= 0 and at most 65535 raw steps".to_string(),
+                    ))?,
+            )
+        } else if let Some(names) = &c.enabled {
+            let mut mask = ChannelMask::EMPTY;
+            for name in names {
+                let channel = Channel::ALL
+                    .into_iter()
+                    .find(|ch| ch.name() == name)
+                    .ok_or((
+                        "enabled",
+                        format!(
+                            "unknown channel `{name}` in `enabled`; channels are {}",
+                            Channel::ALL.map(|c| c.name()).join(", ")
+                        ),
+                    ))?;
+                mask.insert(channel);
+            }
+            CellCommand::EnableMask(mask)
+        } else if let Some(sync) = c.time_sync {
+            if !sync {
+                return Err(("time_sync", "`time_sync` must be true".to_string()));
+            }
+            // The tick is the one at which the packet leaves the box (set in generate).
+            CellCommand::TimeSync { box_tick: 0 }
+        } else {
+            let hex = c.raw.as_deref().unwrap_or_default();
+            let bad = || {
+                (
+                    "raw",
+                    format!("`raw` must be 40 hex digits (20 bytes), found \"{hex}\""),
+                )
+            };
+            if hex.len() != 2 * PACKET_LEN || !hex.is_ascii() {
+                return Err(bad());
+            }
+            let mut bytes = [0u8; PACKET_LEN];
+            for (i, b) in bytes.iter_mut().enumerate() {
+                *b = u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).map_err(|_| bad())?;
+            }
+            return Ok(Downlink::Raw(bytes));
+        };
+        Ok(Downlink::Command(CellCommandRepr {
+            cell_id: c.cell.unwrap_or(ALL_CELLS),
+            command,
+        }))
+    }
+
+    fn command_problems(&self) -> Vec<(usize, &'static str, String)> {
+        let s = &self.config.scene;
+        let buses = self.bus_cells();
+        let mut p = Vec::new();
+        for (n, c) in self.config.commands.iter().enumerate() {
+            if !(c.time_s.is_finite() && c.time_s >= 0.0 && c.time_s < s.duration_s) {
+                p.push((
+                    n,
+                    "time_s",
+                    format!(
+                        "`time_s` must be in 0..{} (the scene's duration), found {}",
+                        s.duration_s, c.time_s
+                    ),
+                ));
+            }
+            if let Some(port) = c.port.filter(|&port| port >= s.buses) {
+                p.push((
+                    n,
+                    "port",
+                    format!("`port` {port}: the scene has buses 0..{}", s.buses),
+                ));
+            }
+            if let Some(id) = c.cell {
+                let index = usize::from(id).wrapping_sub(1);
+                if id == 0 || usize::from(id) > s.cells {
+                    p.push((
+                        n,
+                        "cell",
+                        format!("`cell` {id}: the scene has cells 1..={}", s.cells),
+                    ));
+                } else if let Some(port) = c.port.filter(|&port| port < s.buses) {
+                    if !buses[port].contains(&index) {
+                        p.push((
+                            n,
+                            "cell",
+                            format!(
+                                "`cell` {id} is not on bus {port} (cells {}..={})",
+                                buses[port].start + 1,
+                                buses[port].end
+                            ),
+                        ));
+                    }
+                }
+            }
+            if let Err((key, message)) = Self::downlink_of(c) {
+                p.push((n, key, message));
+            }
+        }
+        p
+    }
+
+    /// The cell command packets of bus `bus`: (time the first start bit leaves the box, ns;
+    /// the bytes), in sending order, one after the other on the box's UART.
+    fn downlink(&self, bus: usize) -> Vec<(u64, [u8; PACKET_LEN])> {
+        let mut entries: Vec<_> = self
+            .config
+            .commands
+            .iter()
+            .filter(|c| c.port.is_none_or(|p| p == bus))
+            .filter_map(|c| Some(((c.time_s * 1e9).round() as u64, Self::downlink_of(c).ok()?)))
+            .collect();
+        entries.sort_by_key(|e| e.0);
+        let mut line_free_ns = 0;
+        entries
+            .into_iter()
+            .map(|(time_ns, downlink)| {
+                let leave_ns = time_ns.max(line_free_ns);
+                line_free_ns = leave_ns + DOWNLINK_PACKET_NS;
+                let bytes = match downlink {
+                    Downlink::Raw(bytes) => bytes,
+                    Downlink::Command(mut repr) => {
+                        if let CellCommand::TimeSync { box_tick } = &mut repr.command {
+                            *box_tick = leave_ns / skinbox_protocol::TICK_NS;
+                        }
+                        repr.to_bytes()
+                    }
+                };
+                (leave_ns, bytes)
+            })
+            .collect()
     }
 
     /// The scene's name.
@@ -425,6 +666,12 @@ impl Scene {
             run_ends.clear();
             let mut root_error_ppm = 0.0;
             let mut cell_uart_error_ppm = Vec::with_capacity(cells.len());
+            let downlink = self.downlink(bus_index);
+            let commands: Vec<Option<CellCommandRepr>> = downlink
+                .iter()
+                .map(|(_, bytes)| CellCommandRepr::parse(bytes).ok())
+                .collect();
+            let mut cell_commands = Vec::with_capacity(cells.len());
             for (position, index) in cells.clone().enumerate() {
                 let cell_id = (index + 1) as u16;
                 let clock = self.cell_clock(index);
@@ -433,7 +680,12 @@ impl Scene {
                 }
                 cell_uart_error_ppm.push(clock.uart_error_ppm);
                 let phase_s = clock.phase_s;
-                let cell_period_s = period_s / (1.0 + clock.drift_ppm * 1e-6);
+                let mut nominal_period_s = period_s;
+                let mut cell_period_s = period_s / (1.0 + clock.drift_ppm * 1e-6);
+                // The free-running clock in closed form from the last rate change on.
+                let (mut segment_start_s, mut segment_k) = (phase_s, 0u64);
+                let mut counts = CellCommandCounts::default();
+                let mut next_command = 0;
                 let mut cell = Cell::new(CellConfig {
                     cell_id,
                     mode: s.mode,
@@ -480,14 +732,44 @@ impl Scene {
                         (Some(clock), _) => clock.sample_time_s(k),
                         (None, Some((w, angle, next_s))) => {
                             let t = *next_s;
-                            *next_s +=
-                                period_s / (1.0 + w.drift_ppm(clock.drift_ppm, *angle, t) * 1e-6);
+                            *next_s += nominal_period_s
+                                / (1.0 + w.drift_ppm(clock.drift_ppm, *angle, t) * 1e-6);
                             t
                         }
-                        (None, None) => phase_s + k as f64 * cell_period_s,
+                        (None, None) => segment_start_s + (k - segment_k) as f64 * cell_period_s,
                     };
                     if t_s >= s.duration_s {
                         break;
+                    }
+                    // Commands complete in this cell by now, at this sample boundary.
+                    let t_ns = (t_s * 1e9).round() as u64;
+                    while let Some(&(leave_ns, _)) = downlink.get(next_command) {
+                        if downlink_arrival_ns(leave_ns, position, c.bus.hop_latency_ns) > t_ns {
+                            break;
+                        }
+                        counts.received += 1;
+                        match &commands[next_command] {
+                            None => counts.malformed += 1,
+                            Some(repr) if repr.addresses(cell_id) => {
+                                counts.applied += 1;
+                                cell.apply(&repr.command);
+                                if let CellCommand::SampleRate(rate) = repr.command {
+                                    nominal_period_s = 1.0 / rate.hz();
+                                    cell_period_s =
+                                        nominal_period_s / (1.0 + clock.drift_ppm * 1e-6);
+                                    (segment_start_s, segment_k) = (t_s, k);
+                                    if let Some((w, angle, next_s)) = &mut wander {
+                                        *next_s = t_s
+                                            + nominal_period_s
+                                                / (1.0
+                                                    + w.drift_ppm(clock.drift_ppm, *angle, t_s)
+                                                        * 1e-6);
+                                    }
+                                }
+                            }
+                            Some(_) => {}
+                        }
+                        next_command += 1;
                     }
                     k += 1;
                     let (value, noise) = model.sample(&mut signal, t_s);
@@ -528,6 +810,10 @@ impl Scene {
                 if keep_truth {
                     truth.push(trace);
                 }
+                stats.commands.received += counts.received;
+                stats.commands.applied += counts.applied;
+                stats.commands.malformed += counts.malformed;
+                cell_commands.push(counts);
                 run_ends.push(pending.len());
             }
             let bit_period = bit_period_ps(root_error_ppm);
@@ -554,6 +840,8 @@ impl Scene {
                 stats: fifo.stats().clone(),
                 dropped_per_cell,
                 dropped_sample_time_ns,
+                downlink,
+                cell_commands,
             });
         }
         Generated {
@@ -715,6 +1003,11 @@ pub struct BusStream {
     /// Sample times of the dropped packets, ns, in order of their arrival at the root (to
     /// tell a warm-up's drops from a measurement window's).
     pub dropped_sample_time_ns: Vec<u64>,
+    /// The cell command packets sent down this bus: the time their first start bit left the
+    /// box, ns, and their bytes, in sending order.
+    pub downlink: Vec<(u64, [u8; PACKET_LEN])>,
+    /// What each cell did with them, in chain order.
+    pub cell_commands: Vec<CellCommandCounts>,
 }
 
 impl BusStream {
@@ -767,6 +1060,8 @@ pub struct SceneStats {
     pub offered: u64,
     /// Packets of the window lost on the way to the host ([`GenerateOptions::packet_loss`]).
     pub packets_lost: u64,
+    /// Cell command packets over the whole run, summed over the cells.
+    pub commands: CellCommandCounts,
     squared_error: [f64; Channel::COUNT],
 }
 
@@ -780,6 +1075,7 @@ impl SceneStats {
             events: [0; Channel::COUNT],
             offered: 0,
             packets_lost: 0,
+            commands: CellCommandCounts::default(),
             squared_error: [0.0; Channel::COUNT],
         }
     }

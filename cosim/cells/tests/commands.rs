@@ -1,0 +1,231 @@
+//! Cell commands down the buses: arrival per hop, application at the sample boundary, mode
+//! and rate switches seen in the packets, malformed packets counted, scene errors.
+//!
+//! The oracle is the downlink's arithmetic written out here from docs/wire-format.md and the
+//! bus model (20 bytes at 4 Mbit/s: 50 us to the root, then 52 us per hop) and the packets'
+//! own bytes, parsed by the protocol crate.
+
+use skinbox_cells::{scenes_dir, GenerateOptions, Generated, Scene};
+use skinbox_protocol::cell_command::{CellCommand, CellCommandRepr};
+use skinbox_protocol::{CellRepr, Channel};
+
+const PACKET_NS: u64 = 50_000;
+const HOP_NS: u64 = 52_000;
+
+fn load(name: &str) -> Scene {
+    Scene::load(&scenes_dir().join(format!("{name}.toml"))).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// When a command that left the box at `leave_ns` is complete in the cell at `position`.
+fn arrival_ns(leave_ns: u64, position: usize) -> u64 {
+    leave_ns + PACKET_NS + position as u64 * HOP_NS
+}
+
+/// (sample time ns, header byte) of every packet of cell `id`, in sample order.
+fn packets_of(g: &Generated, id: u16) -> Vec<(u64, u8)> {
+    let mut p: Vec<_> = g
+        .buses
+        .iter()
+        .flat_map(|b| b.packets.iter())
+        .filter(|p| p.cell_id == id)
+        .map(|p| (p.sample_time_ns, p.bytes[0]))
+        .collect();
+    p.sort();
+    p
+}
+
+#[test]
+fn mode_switch_turns_data_into_events_at_each_cells_next_sample_after_its_hop() {
+    let scene = load("mode_switch");
+    let g = scene.generate(&GenerateOptions::default());
+    let mut before = 0;
+    let mut after = 0;
+    for bus in &g.buses {
+        assert_eq!(bus.downlink.len(), 1);
+        let (leave_ns, bytes) = bus.downlink[0];
+        assert_eq!(leave_ns, 1_500_000_000);
+        assert_eq!(bytes[..4], [0xA5, 0x3F, 0xFF, 0x01]);
+        assert_eq!(bytes[4], 1);
+        for (position, &id) in bus.cell_ids.iter().enumerate() {
+            let arrival = arrival_ns(leave_ns, position);
+            let p = packets_of(&g, id);
+            let first_event = p.iter().position(|&(_, h)| h == 0xA2).unwrap();
+            // Data packets up to the arrival, events from the first sample at or after it.
+            assert!(p[..first_event]
+                .iter()
+                .all(|&(t, h)| h == 0xA1 && t < arrival));
+            assert!(p[first_event..]
+                .iter()
+                .all(|&(t, h)| h == 0xA2 && t >= arrival));
+            let last_data = p[first_event - 1].0;
+            // The first event sample is the next sample boundary: one period (8 ms +- drift)
+            // after the last data sample, and the switch resends all nine channels.
+            let period = p[first_event].0 - last_data;
+            assert!(
+                (7_998_000..=8_002_000).contains(&period),
+                "cell {id}: {period}"
+            );
+            let first: Vec<_> = p[first_event..]
+                .iter()
+                .take_while(|&&(t, _)| t == p[first_event].0)
+                .collect();
+            assert_eq!(first.len(), 2, "cell {id}: nine events in two packets");
+            before += p[..first_event]
+                .iter()
+                .filter(|(t, _)| *t >= 500_000_000)
+                .count();
+            after += p.len() - first_event;
+        }
+        assert!(bus
+            .cell_commands
+            .iter()
+            .all(|c| c.applied == 1 && c.malformed == 0));
+    }
+    assert_eq!(g.stats.commands.applied, 260);
+    let data_rate = before as f64 / (260.0 * 1.0);
+    let event_rate = after as f64 / (260.0 * 1.5);
+    println!(
+        "mode_switch: data mode {data_rate:.2} packets/cell/s, event mode {event_rate:.2} \
+         packets/cell/s (including the switch's full resend)"
+    );
+    assert!((124.5..=125.5).contains(&data_rate), "{data_rate}");
+    assert!(event_rate < 12.5, "{event_rate}");
+}
+
+#[test]
+fn rate_sweep_changes_each_cells_period_at_its_sample_boundary() {
+    let scene = load("rate_sweep");
+    let g = scene.generate(&GenerateOptions::default());
+    let steps = [
+        (0u64, 62.5),
+        (1_000_000_000, 125.0),
+        (2_000_000_000, 250.0),
+        (3_000_000_000, 500.0),
+    ];
+    let mut per_step = [0usize; 4];
+    for bus in &g.buses {
+        let leaves: Vec<u64> = bus.downlink.iter().map(|d| d.0).collect();
+        assert_eq!(leaves, vec![1_000_000_000, 2_000_000_000, 3_000_000_000]);
+        for (position, &id) in bus.cell_ids.iter().enumerate() {
+            let p = packets_of(&g, id);
+            assert!(p.iter().all(|&(_, h)| h == 0xA1));
+            for pair in p.windows(2) {
+                let (t0, t1) = (pair[0].0, pair[1].0);
+                // The rate in force for the interval after t0: the last command whose
+                // arrival at this cell is at or before t0.
+                let step = steps
+                    .iter()
+                    .rposition(|&(leave, _)| leave == 0 || arrival_ns(leave, position) <= t0)
+                    .unwrap();
+                let period = 1e9 / steps[step].1;
+                let ratio = (t1 - t0) as f64 / period;
+                // Clock drift is at most 100 ppm; 1 ns rounding on the sample times.
+                assert!(
+                    (ratio - 1.0).abs() < 1.2e-4 + 2.0 / period,
+                    "cell {id}: {t0} -> {t1}, step {step}, ratio {ratio}"
+                );
+            }
+            for (t, _) in &p {
+                let second = (*t / 1_000_000_000) as usize;
+                if second < 4 {
+                    per_step[second] += 1;
+                }
+            }
+        }
+    }
+    let rates: Vec<f64> = per_step.iter().map(|n| *n as f64 / 40.0).collect();
+    println!("rate_sweep: packets per cell in each second: {rates:?}");
+    for (r, (_, hz)) in rates.iter().zip(steps) {
+        // Each second holds its rate but for the few samples before the command's hops.
+        assert!((r - hz).abs() <= 2.0, "{rates:?}");
+    }
+}
+
+fn base(commands: &str) -> String {
+    format!(
+        "[scene]\nduration_s = 1.0\nwarmup_s = 0.1\nseed = 3\ncells = 10\nbuses = 2\n\
+         mode = \"data\"\nsample_rate_hz = 125.0\n\n[noise]\naccel_g = 0.005\nforce = 0.0002\n\
+         proximity = 3e-5\ntemperature_c = 0.1\n{commands}"
+    )
+}
+
+#[test]
+fn malformed_and_unknown_packets_are_ignored_and_counted_by_every_cell_they_pass() {
+    let text = base(
+        "\n[[commands]]\ntime_s = 0.2\nport = 0\nraw = \"A13FFF0101000000000000000000000000000055\"\n\
+         \n[[commands]]\ntime_s = 0.2\nport = 0\nraw = \"A53FFF0901000000000000000000000000000055\"\n\
+         \n[[commands]]\ntime_s = 0.3\nport = 0\ncell = 3\nmode = \"event\"\n\
+         \n[[commands]]\ntime_s = 0.4\ntime_sync = true\n",
+    );
+    let scene = Scene::parse(&text, "bad_commands.toml").unwrap_or_else(|e| panic!("{e}"));
+    let g = scene.generate(&GenerateOptions::default());
+    let bus0 = &g.buses[0];
+    // Two packets at 0.2 s: the second leaves when the first has left the box's UART.
+    let leaves: Vec<u64> = bus0.downlink.iter().map(|d| d.0).collect();
+    assert_eq!(
+        leaves,
+        vec![200_000_000, 200_050_000, 300_000_000, 400_000_000]
+    );
+    // The time sync carries the box tick (8 ns) at which it leaves.
+    match CellCommandRepr::parse(&bus0.downlink[3].1).unwrap().command {
+        CellCommand::TimeSync { box_tick } => assert_eq!(box_tick, 400_000_000 / 8),
+        other => panic!("{other:?}"),
+    }
+    for (position, c) in bus0.cell_commands.iter().enumerate() {
+        let id = bus0.cell_ids[position];
+        assert_eq!(c.received, 4, "cell {id}");
+        assert_eq!(c.malformed, 2, "cell {id}");
+        assert_eq!(c.applied, if id == 3 { 2 } else { 1 }, "cell {id}");
+        let events = packets_of(&g, id).iter().filter(|p| p.1 == 0xA2).count();
+        assert_eq!(events > 0, id == 3, "cell {id}");
+    }
+    for c in &g.buses[1].cell_commands {
+        assert_eq!((c.received, c.applied, c.malformed), (1, 1, 0));
+    }
+    assert_eq!(g.stats.commands.malformed, 10);
+    // Every packet the cells sent is still a valid data or event packet.
+    for p in g.buses.iter().flat_map(|b| &b.packets) {
+        CellRepr::parse(&p.bytes, &Default::default()).unwrap();
+    }
+}
+
+#[test]
+fn thresholds_and_enable_mask_reach_the_cells() {
+    let text = base(
+        "\n[[commands]]\ntime_s = 0.0\nmode = \"event\"\n\
+         \n[[commands]]\ntime_s = 0.0\nenabled = [\"temperature_1\"]\n",
+    );
+    let g = Scene::parse(&text, "t.toml")
+        .unwrap()
+        .generate(&GenerateOptions::default());
+    // After the switch only temperature 1 may fire.
+    for p in g.buses.iter().flat_map(|b| &b.packets) {
+        if let Ok(CellRepr::Event(e)) = CellRepr::parse(&p.bytes, &Default::default()) {
+            if p.sample_time_ns > 20_000_000 {
+                assert!(e.events().all(|(c, _)| c == Channel::Temperature1), "{e:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn command_errors_name_the_line_and_the_entry() {
+    let cases = [
+        ("\n[[commands]]\ntime_s = 0.5\nrate_hz = 100\n", 18, "62.5, 125, 250, 500 or 1000"),
+        ("\n[[commands]]\ntime_s = 0.5\nmode = \"event\"\n\n[[commands]]\ntime_s = 0.6\nport = 2\nmode = \"data\"\n", 22, "`port` 2"),
+        ("\n[[commands]]\ntime_s = 0.5\nport = 1\ncell = 2\nmode = \"data\"\n", 19, "not on bus 1"),
+        ("\n[[commands]]\ntime_s = 0.5\nmode = \"data\"\nrate_hz = 250\n", 17, "exactly one of"),
+        ("\n[[commands]]\ntime_s = 2.0\nmode = \"data\"\n", 17, "`time_s`"),
+        ("\n[[commands]]\ntime_s = 0.5\nenabled = [\"accel_w\"]\n", 18, "unknown channel `accel_w`"),
+        ("\n[[commands]]\ntime_s = 0.5\nraw = \"A5\"\n", 18, "40 hex digits"),
+    ];
+    for (commands, line, says) in cases {
+        let e = Scene::parse(&base(commands), "c.toml").unwrap_err();
+        assert_eq!(e.line, Some(line), "{e}");
+        assert!(e.message.contains(says), "{e}");
+        assert!(e.message.starts_with("[[commands]] #"), "{e}");
+    }
+    // An unknown key is refused by the schema, with its line.
+    let e = Scene::parse(&base("\n[[commands]]\ntime_s = 0.5\nspeed = 3\n"), "c.toml").unwrap_err();
+    assert_eq!(e.line, Some(18), "{e}");
+}
