@@ -52,6 +52,14 @@ use skinbox_protocol::link::*;
 /// The ARP message of a reply up to the sender's addresses (RFC 826): hardware Ethernet
 /// (1), protocol IPv4, address lengths 6 and 4, operation 2 (reply).
 const ARP_REPLY_HEADER: [u8; 8] = [0, 1, 0x08, 0x00, 6, 4, 0, 2];
+/// Offsets in the ARP message (RFC 826): the sender's MAC (its IP follows), the target's
+/// MAC (its IP follows).
+const ARP_SENDER_MAC: usize = 8;
+const ARP_TARGET_MAC: usize = 18;
+/// Frame positions of the request's Ethernet source, IPv4 source and destination.
+const ETHERNET_SOURCE_AT: usize = 6;
+const IP_SOURCE_AT: usize = IP_AT + 12;
+const IP_DESTINATION_AT: usize = IP_AT + 16;
 /// ICMP type of an echo reply (RFC 792); its code is 0.
 const ICMP_ECHO_REPLY: u8 = 0;
 
@@ -77,26 +85,21 @@ const START_TO_STEP: u64 = 1 + READ_LATENCY;
 /// registered twice, summed, then folded twice and complemented.
 const CHECKSUM_DISTANCE: usize = 5;
 
-/// Byte positions of the held fields in the field multiplexer (eight 64-bit words, most
-/// significant byte first).
+/// Byte positions of the held fields in the field multiplexer (five 64-bit words, most
+/// significant byte first). The request's own fields (addresses, port, sequence number,
+/// host time, opcode) are not among them: the builder copies them in the buffer or leaves
+/// them where they are.
 mod field_byte {
-    pub const PEER_MAC: u8 = 0;
-    pub const PEER_PORT: u8 = 6;
-    pub const PEER_IP: u8 = 8;
-    pub const IP_TOTAL_LENGTH: u8 = 12;
-    pub const ICMP_CHECKSUM: u8 = 14;
-    pub const SEQUENCE: u8 = 16;
-    pub const LAST_ACCEPTED: u8 = 20;
-    pub const HOST_TIME: u8 = 24;
-    pub const RECEIVE_TICK: u8 = 32;
-    pub const SEND_TICK: u8 = 40;
-    pub const DESTINATION_MAC: u8 = 48;
-    pub const DESTINATION_PORT: u8 = 54;
-    pub const DESTINATION_IP: u8 = 56;
-    pub const OPCODE: u8 = 60;
-    pub const RESULT: u8 = 61;
-    pub const LINK_UP: u8 = 62;
-    pub const LINK_SPEED: u8 = 63;
+    pub const DESTINATION_MAC: u8 = 0;
+    pub const DESTINATION_PORT: u8 = 6;
+    pub const DESTINATION_IP: u8 = 8;
+    pub const LAST_ACCEPTED: u8 = 12;
+    pub const RECEIVE_TICK: u8 = 16;
+    pub const SEND_TICK: u8 = 24;
+    pub const ICMP_CHECKSUM: u8 = 32;
+    pub const RESULT: u8 = 34;
+    pub const LINK_UP: u8 = 35;
+    pub const LINK_SPEED: u8 = 36;
 }
 
 /// Where a step's byte comes from.
@@ -118,6 +121,11 @@ enum Source {
 struct Step {
     address: usize,
     value: u8,
+    /// The buffer address read (with `from_buffer`).
+    read: usize,
+    /// The byte is the buffer's at `read` (the source is ignored): a copy, or with
+    /// `write` false a byte left in place and summed.
+    from_buffer: bool,
     source: Source,
     write: bool,
     sum_ip: bool,
@@ -126,22 +134,44 @@ struct Step {
     end: bool,
 }
 
-/// Bits of a ROM word: address 0..8, value 8..16, source 16..18, write 18, sum_ip 19,
-/// sum_udp 20, pad 21, end 22.
-const STEP_BITS: usize = 23;
+/// Bits of a ROM word: address 0..8, value 8..16, read 16..24, source 24..26, write 26,
+/// sum_ip 27, sum_udp 28, pad 29, end 30, from_buffer 31.
+const STEP_BITS: usize = 32;
+const READ_AT: usize = 16;
+const SOURCE_AT: usize = 24;
+const WRITE_BIT: usize = 26;
+const SUM_IP_BIT: usize = 27;
+const SUM_UDP_BIT: usize = 28;
+const PAD_BIT: usize = 29;
+const END_BIT: usize = 30;
+const FROM_BUFFER_BIT: usize = 31;
+// (the logic below spells these bit numbers out)
+const _: () = assert!(
+    READ_AT == 16
+        && SOURCE_AT == 24
+        && WRITE_BIT == 26
+        && SUM_IP_BIT == 27
+        && SUM_UDP_BIT == 28
+        && PAD_BIT == 29
+        && END_BIT == 30
+        && FROM_BUFFER_BIT == 31
+);
 const ROM_ADDRESS_BITS: usize = 10;
 
 impl Step {
     fn word(&self) -> u64 {
         assert!(self.address < 256, "step address {}", self.address);
+        assert!(self.read < 256, "step read address {}", self.read);
         self.address as u64
             | u64::from(self.value) << 8
-            | (self.source as u64) << 16
-            | u64::from(self.write) << 18
-            | u64::from(self.sum_ip) << 19
-            | u64::from(self.sum_udp) << 20
-            | u64::from(self.pad) << 21
-            | u64::from(self.end) << 22
+            | (self.read as u64) << READ_AT
+            | (self.source as u64) << SOURCE_AT
+            | u64::from(self.write) << WRITE_BIT
+            | u64::from(self.sum_ip) << SUM_IP_BIT
+            | u64::from(self.sum_udp) << SUM_UDP_BIT
+            | u64::from(self.pad) << PAD_BIT
+            | u64::from(self.end) << END_BIT
+            | u64::from(self.from_buffer) << FROM_BUFFER_BIT
     }
 }
 
@@ -175,6 +205,8 @@ impl Program {
         self.steps.push(Step {
             address,
             value,
+            read: 0,
+            from_buffer: false,
             source,
             write: true,
             sum_ip,
@@ -196,6 +228,18 @@ impl Program {
         }
     }
 
+    /// Copies `len` bytes of the request from `from` to `at` (`at == from` and no
+    /// `write`: leaves them in place, to be summed).
+    fn copy(&mut self, at: usize, from: usize, len: usize, sum: Sum, write: bool) {
+        for i in 0..len {
+            self.push(at + i, 0, Source::Constant, sum);
+            let step = self.steps.last_mut().expect("pushed");
+            step.read = from + i;
+            step.from_buffer = true;
+            step.write = write;
+        }
+    }
+
     /// A byte summed into the UDP checksum only (the pseudo header), not written; `at`
     /// says its place in a 16-bit word (even: high byte).
     fn udp_sum_only(&mut self, at: usize, byte: u8) {
@@ -210,6 +254,8 @@ impl Program {
                 self.steps.push(Step {
                     address: 0,
                     value: 0,
+                    read: 0,
+                    from_buffer: false,
                     source: Source::Constant,
                     write: false,
                     sum_ip: false,
@@ -230,9 +276,21 @@ impl Program {
     }
 
     fn end(mut self) -> Vec<Step> {
+        // a byte of the request is read before any step writes over it
+        for (i, r) in self.steps.iter().enumerate().filter(|(_, r)| r.from_buffer) {
+            assert!(
+                !self.steps[..i]
+                    .iter()
+                    .any(|w| w.write && w.address == r.read),
+                "step {i} reads byte {} after it was written",
+                r.read
+            );
+        }
         self.steps.push(Step {
             address: 0,
             value: 0,
+            read: 0,
+            from_buffer: false,
             source: Source::Constant,
             write: false,
             sum_ip: false,
@@ -294,16 +352,23 @@ pub enum ReplyKind {
 
 fn arp_program(link: &LinkConfig) -> Vec<Step> {
     let mut p = Program::default();
-    p.fields(0, field_byte::PEER_MAC, 6, Sum::None);
+    let arp = ETHERNET_HEADER_LEN;
+    // the requester's addresses (the request's sender) become the Ethernet destination
+    // and the target
+    p.copy(0, arp + ARP_SENDER_MAC, 6, Sum::None, true);
+    p.copy(
+        arp + ARP_TARGET_MAC,
+        arp + ARP_SENDER_MAC,
+        6 + 4,
+        Sum::None,
+        true,
+    );
     p.constants(6, &link.box_mac, Sum::None);
     p.constants(12, &ETHERTYPE_ARP.to_be_bytes(), Sum::None);
-    let arp = ETHERNET_HEADER_LEN;
     p.constants(arp, &ARP_REPLY_HEADER, Sum::None);
-    p.constants(arp + 8, &link.box_mac, Sum::None);
-    p.constants(arp + 14, &link.box_ip, Sum::None);
-    p.fields(arp + 18, field_byte::PEER_MAC, 6, Sum::None);
-    p.fields(arp + 24, field_byte::PEER_IP, 4, Sum::None);
-    let end = arp + 28;
+    p.constants(arp + ARP_SENDER_MAC, &link.box_mac, Sum::None);
+    p.constants(arp + ARP_SENDER_MAC + 6, &link.box_ip, Sum::None);
+    let end = arp + ARP_TARGET_MAC + 6 + 4;
     p.constants(end, &vec![0; MIN_FRAME_LEN - end], Sum::None);
     p.end()
 }
@@ -319,24 +384,30 @@ fn ipv4_header(
     peer_sum: Sum,
 ) {
     p.constants(IP_AT, &[0x45, 0x00], Sum::Ip);
+    let total_at = IP_AT + IPV4_TOTAL_LEN.start;
     match total_len {
-        Some(len) => p.constants(IP_AT + 2, &len.to_be_bytes(), Sum::Ip),
-        None => p.fields(IP_AT + 2, field_byte::IP_TOTAL_LENGTH, 2, Sum::Ip),
+        Some(len) => p.constants(total_at, &len.to_be_bytes(), Sum::Ip),
+        None => p.copy(total_at, total_at, 2, Sum::Ip, false),
     }
     // identification 0, don't fragment, TTL, protocol
     p.constants(IP_AT + 4, &[0, 0, 0x40, 0x00, IPV4_TTL, protocol], Sum::Ip);
-    p.constants(IP_AT + 12, &link.box_ip, peer_sum);
-    p.fields(IP_AT + 16, field_byte::PEER_IP, 4, peer_sum);
+    p.constants(IP_SOURCE_AT, &link.box_ip, peer_sum);
+}
+
+/// The request's sender becomes the destination: the first steps of an IPv4 reply.
+fn copy_addresses(p: &mut Program, peer_sum: Sum) {
+    p.copy(0, ETHERNET_SOURCE_AT, 6, Sum::None, true);
+    p.copy(IP_DESTINATION_AT, IP_SOURCE_AT, 4, peer_sum, true);
 }
 
 fn ethernet_header(p: &mut Program, link: &LinkConfig, ethertype: u16) {
-    p.fields(0, field_byte::PEER_MAC, 6, Sum::None);
     p.constants(6, &link.box_mac, Sum::None);
     p.constants(12, &ethertype.to_be_bytes(), Sum::None);
 }
 
 fn echo_program(link: &LinkConfig) -> Vec<Step> {
     let mut p = Program::default();
+    copy_addresses(&mut p, Sum::Ip);
     ethernet_header(&mut p, link, ETHERTYPE_IPV4);
     ipv4_header(&mut p, link, IP_PROTOCOL_ICMP, None, Sum::Ip);
     p.constants(ICMP_AT, &[ICMP_ECHO_REPLY, 0], Sum::None);
@@ -354,6 +425,17 @@ fn echo_program(link: &LinkConfig) -> Vec<Step> {
 fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKind) -> Vec<Step> {
     let mut p = Program::default();
     let udp_len = (UDP_HEADER_LEN + reply.payload_len()) as u16;
+    use command::field;
+    // the request's fields kept: its sender, source port and opcode are copied, its
+    // sequence number and host time stay where they are (the same place in the ack)
+    copy_addresses(&mut p, Sum::Both);
+    p.copy(UDP_AT + 2, UDP_AT, 2, Sum::Udp, true);
+    let opcode_at = ACK_BODY_AT + ack_field::OPCODE;
+    p.copy(opcode_at, ACK_AT + field::OPCODE, 1, Sum::Udp, true);
+    let sequence_at = ACK_AT + field::SEQUENCE.start;
+    p.copy(sequence_at, sequence_at, 4, Sum::Udp, false);
+    let host_time_at = ACK_AT + field::HOST_TIME.start;
+    p.copy(host_time_at, host_time_at, 8, Sum::Udp, false);
     ethernet_header(&mut p, link, ETHERTYPE_IPV4);
     ipv4_header(
         &mut p,
@@ -368,10 +450,8 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
     p.udp_sum_only(0, (udp_len >> 8) as u8);
     p.udp_sum_only(1, udp_len as u8);
     p.constants(UDP_AT, &link.box_port.to_be_bytes(), Sum::Udp);
-    p.fields(UDP_AT + 2, field_byte::PEER_PORT, 2, Sum::Udp);
     p.constants(UDP_AT + UDP_LEN.start, &udp_len.to_be_bytes(), Sum::Udp);
     // (the UDP checksum and the send tick are written at the take)
-    use command::field;
     p.constants(ACK_AT + field::MAGIC.start, &MAGIC, Sum::Udp);
     p.constants(ACK_AT + field::VERSION, &[VERSION, KIND_ACK], Sum::Udp);
     p.constants(
@@ -380,18 +460,6 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
         Sum::Udp,
     );
     p.constants(ACK_AT + ack_field::PORT_COUNT, &[port_count, 0], Sum::Udp);
-    p.fields(
-        ACK_AT + field::SEQUENCE.start,
-        field_byte::SEQUENCE,
-        4,
-        Sum::Udp,
-    );
-    p.fields(
-        ACK_AT + field::HOST_TIME.start,
-        field_byte::HOST_TIME,
-        8,
-        Sum::Udp,
-    );
     let body_len = (ACK_FIXED_LEN + reply.len()) as u16;
     p.constants(
         ACK_AT + field::LENGTH.start,
@@ -399,12 +467,6 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
         Sum::Udp,
     );
     p.constants(ACK_AT + field::RESERVED.start, &[0, 0], Sum::Udp);
-    p.fields(
-        ACK_BODY_AT + ack_field::OPCODE,
-        field_byte::OPCODE,
-        1,
-        Sum::Udp,
-    );
     p.fields(
         ACK_BODY_AT + ack_field::RESULT,
         field_byte::RESULT,
@@ -571,22 +633,12 @@ pub struct ReplyBuilder {
     pub start_echo: Signal<In, Bit>,
     /// One clock: build a command acknowledgement.
     pub start_ack: Signal<In, Bit>,
-    /// The requester's MAC (ARP: sender hardware address; else the Ethernet source).
-    pub peer_mac: Signal<In, Bits<48>>,
-    /// The requester's IPv4 address.
-    pub peer_ip: Signal<In, Bits<32>>,
-    /// The command's UDP source port.
-    pub peer_port: Signal<In, Bits<16>>,
     /// Tick of the request's last byte.
     pub receive_tick: Signal<In, Bits<64>>,
     /// The echo request's IPv4 total length.
     pub ip_total_length: Signal<In, Bits<16>>,
     /// Folded ones'-complement sum of the echo request's ICMP message from byte 4.
     pub icmp_rest_sum: Signal<In, Bits<16>>,
-    /// The command's sequence number.
-    pub command_sequence: Signal<In, Bits<32>>,
-    /// The command's host time.
-    pub command_host_time: Signal<In, Bits<64>>,
     /// The command's opcode byte.
     pub command_opcode: Signal<In, Bits<8>>,
     /// The command's result (`AckResult`).
@@ -663,6 +715,9 @@ pub struct ReplyBuilder {
     s4_write: DFF<Bit>,
     s4_address: DFF<Bits<8>>,
     s4_byte: DFF<Bits<8>>,
+    s3_from_buffer: DFF<Bit>,
+    s4_from_buffer: DFF<Bit>,
+    written: Signal<Local, Bits<8>>,
     s4_sum_ip: DFF<Bit>,
     s4_sum_udp: DFF<Bit>,
     ip_sum: DFF<Bits<20>>,
@@ -699,14 +754,9 @@ impl ReplyBuilder {
             start_arp: Default::default(),
             start_echo: Default::default(),
             start_ack: Default::default(),
-            peer_mac: Default::default(),
-            peer_ip: Default::default(),
-            peer_port: Default::default(),
             receive_tick: Default::default(),
             ip_total_length: Default::default(),
             icmp_rest_sum: Default::default(),
-            command_sequence: Default::default(),
-            command_host_time: Default::default(),
             command_opcode: Default::default(),
             result: Default::default(),
             last_accepted: Default::default(),
@@ -765,6 +815,9 @@ impl ReplyBuilder {
             s4_write: Default::default(),
             s4_address: Default::default(),
             s4_byte: Default::default(),
+            s3_from_buffer: Default::default(),
+            s4_from_buffer: Default::default(),
+            written: Default::default(),
             s4_sum_ip: Default::default(),
             s4_sum_udp: Default::default(),
             ip_sum: Default::default(),
@@ -818,6 +871,8 @@ impl Logic for ReplyBuilder {
             s4_write,
             s4_address,
             s4_byte,
+            s3_from_buffer,
+            s4_from_buffer,
             s4_sum_ip,
             s4_sum_udp,
             ip_sum,
@@ -846,7 +901,7 @@ impl Logic for ReplyBuilder {
         if self.running.q.val() {
             self.step.d.next = self.step.q.val() + 1;
         }
-        if self.read_2.q.val() & self.rom.read_data.val().get_bit(22) {
+        if self.read_2.q.val() & self.rom.read_data.val().get_bit(30) {
             self.running.d.next = false;
             self.read_1.d.next = false;
             self.read_2.d.next = false;
@@ -858,49 +913,41 @@ impl Logic for ReplyBuilder {
             }
         }
 
-        // Stage 2 -> 3: the field byte (eight words of held fields, then the byte in the
-        // word), and the counter loaded at its byte 0 (the next counter's read starts).
-        self.field_word.next = (bit_cast::<64, 48>(self.peer_mac.val()) << 16)
-            | bit_cast::<64, 16>(self.peer_port.val());
+        // Stage 2 -> 3: the field byte (five words of held fields, then the byte in the
+        // word), the buffer read of a copy, and the counter loaded at its byte 0 (the next
+        // counter's read starts).
+        self.field_word.next = (bit_cast::<64, 48>(self.destination_mac.val()) << 16)
+            | bit_cast::<64, 16>(self.destination_port.val());
         if self.rom.read_data.val().get_bits::<3>(11) == 1 {
-            self.field_word.next = (bit_cast::<64, 32>(self.peer_ip.val()) << 32)
-                | (bit_cast::<64, 16>(self.ip_total_length.val()) << 16)
-                | bit_cast::<64, 16>(!self.icmp_rest_sum.val());
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 2 {
-            self.field_word.next = (bit_cast::<64, 32>(self.command_sequence.val()) << 32)
-                | bit_cast::<64, 32>(self.last_accepted.val());
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 3 {
-            self.field_word.next = self.command_host_time.val();
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 4 {
-            self.field_word.next = self.receive_tick.val();
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 5 {
-            self.field_word.next = self.send_tick.q.val();
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 6 {
-            self.field_word.next = (bit_cast::<64, 48>(self.destination_mac.val()) << 16)
-                | bit_cast::<64, 16>(self.destination_port.val());
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 7 {
             self.field_word.next = (bit_cast::<64, 32>(self.destination_ip.val()) << 32)
-                | (bit_cast::<64, 8>(self.command_opcode.val()) << 24)
-                | (bit_cast::<64, 8>(self.result.val()) << 16)
-                | (bit_cast::<64, 1>(self.link_up.val().into()) << 8)
-                | bit_cast::<64, 2>(self.link_speed.val());
+                | bit_cast::<64, 32>(self.last_accepted.val());
+        } else if self.rom.read_data.val().get_bits::<3>(11) == 2 {
+            self.field_word.next = self.receive_tick.val();
+        } else if self.rom.read_data.val().get_bits::<3>(11) == 3 {
+            self.field_word.next = self.send_tick.q.val();
+        } else if self.rom.read_data.val().get_bits::<3>(11) == 4 {
+            self.field_word.next = (bit_cast::<64, 16>(!self.icmp_rest_sum.val()) << 48)
+                | (bit_cast::<64, 8>(self.result.val()) << 40)
+                | (bit_cast::<64, 1>(self.link_up.val().into()) << 32)
+                | (bit_cast::<64, 2>(self.link_speed.val()) << 24);
         }
         self.field_word_shifted.next = self.field_word.val()
             << (bit_cast::<64, 3>(self.rom.read_data.val().get_bits::<3>(8)) << 3);
         self.s3_field_byte.d.next = self.field_word_shifted.val().get_bits::<8>(56);
         self.s3_write.d.next = self.read_2.q.val()
-            & self.rom.read_data.val().get_bit(18)
-            & (!self.rom.read_data.val().get_bit(21)
+            & self.rom.read_data.val().get_bit(26)
+            & (!self.rom.read_data.val().get_bit(29)
                 | (bit_cast::<BODY_ADDRESS_BITS, 8>(self.rom.read_data.val().get_bits::<8>(0))
                     >= self.frame_end.q.val()));
-        self.s3_sum_ip.d.next = self.read_2.q.val() & self.rom.read_data.val().get_bit(19);
-        self.s3_sum_udp.d.next = self.read_2.q.val() & self.rom.read_data.val().get_bit(20);
+        self.s3_sum_ip.d.next = self.read_2.q.val() & self.rom.read_data.val().get_bit(27);
+        self.s3_sum_udp.d.next = self.read_2.q.val() & self.rom.read_data.val().get_bit(28);
+        self.s3_from_buffer.d.next = self.rom.read_data.val().get_bit(31);
         self.s3_address.d.next = self.rom.read_data.val().get_bits::<8>(0);
         self.s3_value.d.next = self.rom.read_data.val().get_bits::<8>(8);
-        self.s3_source.d.next = self.rom.read_data.val().get_bits::<2>(16);
+        self.s3_source.d.next = self.rom.read_data.val().get_bits::<2>(24);
         self.counters_address.next = self.counter_address.q.val();
         if self.read_2.q.val()
-            & (self.rom.read_data.val().get_bits::<2>(16) == 2)
+            & (self.rom.read_data.val().get_bits::<2>(24) == 2)
             & (self.rom.read_data.val().get_bits::<2>(8) == 0)
         {
             self.counter_word.d.next = self.counters_data.val();
@@ -931,11 +978,17 @@ impl Logic for ReplyBuilder {
         self.s4_address.d.next = self.s3_address.q.val();
         self.s4_sum_ip.d.next = self.s3_sum_ip.q.val();
         self.s4_sum_udp.d.next = self.s3_sum_udp.q.val();
+        self.s4_from_buffer.d.next = self.s3_from_buffer.q.val();
 
-        // Stage 4: write and sum (an even frame position is a word's high byte).
-        self.summand.next = bit_cast::<16, 8>(self.s4_byte.q.val());
+        // Stage 4: write and sum (an even frame position is a word's high byte); a copy's
+        // byte is the buffer's, read two clocks ago.
+        self.written.next = self.s4_byte.q.val();
+        if self.s4_from_buffer.q.val() {
+            self.written.next = self.buffer.read_data.val();
+        }
+        self.summand.next = bit_cast::<16, 8>(self.written.val());
         if !self.s4_address.q.val().get_bit(0) {
-            self.summand.next = bit_cast::<16, 8>(self.s4_byte.q.val()) << 8;
+            self.summand.next = bit_cast::<16, 8>(self.written.val()) << 8;
         }
         if self.s4_sum_ip.q.val() {
             self.ip_sum.d.next = self.ip_sum.q.val() + bit_cast::<20, 16>(self.summand.val());
@@ -965,7 +1018,7 @@ impl Logic for ReplyBuilder {
             self.buffer.write_enable.next = true;
             self.buffer.write_address.next =
                 bit_cast::<BODY_ADDRESS_BITS, 8>(self.s4_address.q.val());
-            self.buffer.write_data.next = self.s4_byte.q.val();
+            self.buffer.write_data.next = self.written.val();
         }
 
         // Starts: only when no reply is under way.
@@ -1038,7 +1091,12 @@ impl Logic for ReplyBuilder {
         }
 
         // The body, straight from the reader.
+        // (the reader reads from the clock after the take on; a build reads before)
         self.buffer.read_address.next = self.reader.read_address.val();
+        if !self.reader.busy.val() {
+            self.buffer.read_address.next =
+                bit_cast::<BODY_ADDRESS_BITS, 8>(self.rom.read_data.val().get_bits::<8>(16));
+        }
         self.reader.read_data.next = self.buffer.read_data.val();
         self.replies.body.valid.next = self.reader.body.valid.val();
         self.replies.body.data.next = self.reader.body.data.val();
@@ -1189,16 +1247,9 @@ mod tests {
         }
         bench.uut.receive_write_enable.next = false;
         let u = &mut bench.uut;
-        u.peer_mac.next = number(&PEER_MAC).into();
-        u.peer_ip.next = number(&PEER_IP).into();
-        u.peer_port.next = u64::from(held.peer_port).into();
         u.receive_tick.next = held.receive_tick.into();
         u.ip_total_length.next = u64::from(held.ip_total_length).into();
         u.icmp_rest_sum.next = u64::from(held.icmp_rest_sum).into();
-        if let Some(c) = &held.command {
-            u.command_sequence.next = u64::from(c.sequence).into();
-            u.command_host_time.next = c.host_time.into();
-        }
         u.command_opcode.next = u64::from(held.opcode).into();
         u.result.next = u64::from(held.result as u8).into();
         u.last_accepted.next = u64::from(held.last_accepted).into();
