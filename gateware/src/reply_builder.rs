@@ -730,9 +730,15 @@ pub struct ReplyBuilder {
     udp_checksum: DFF<Bits<16>>,
     idle: Signal<Local, Bit>,
     take: Signal<Local, Bit>,
-    field_word: Signal<Local, Bits<64>>,
+    icmp_checksum: Signal<Local, Bits<16>>,
+    field_byte_index: Signal<Local, Bits<3>>,
+    field_word_index: Signal<Local, Bits<3>>,
+    word_bytes_0: Signal<Local, Bits<8>>,
+    word_bytes_1: Signal<Local, Bits<8>>,
+    word_bytes_2: Signal<Local, Bits<8>>,
+    word_bytes_3: Signal<Local, Bits<8>>,
+    word_bytes_4: Signal<Local, Bits<8>>,
     reply_byte: Signal<Local, Bits<8>>,
-    field_word_shifted: Signal<Local, Bits<64>>,
     counter_word_shifted: Signal<Local, Bits<32>>,
     summand: Signal<Local, Bits<16>>,
 }
@@ -830,9 +836,15 @@ impl ReplyBuilder {
             udp_checksum: Default::default(),
             idle: Default::default(),
             take: Default::default(),
-            field_word: Default::default(),
+            icmp_checksum: Default::default(),
+            field_byte_index: Default::default(),
+            field_word_index: Default::default(),
+            word_bytes_0: Default::default(),
+            word_bytes_1: Default::default(),
+            word_bytes_2: Default::default(),
+            word_bytes_3: Default::default(),
+            word_bytes_4: Default::default(),
             reply_byte: Default::default(),
-            field_word_shifted: Default::default(),
             counter_word_shifted: Default::default(),
             summand: Default::default(),
         }
@@ -916,24 +928,75 @@ impl Logic for ReplyBuilder {
         // Stage 2 -> 3: the field byte (five words of held fields, then the byte in the
         // word), the buffer read of a copy, and the counter loaded at its byte 0 (the next
         // counter's read starts).
-        self.field_word.next = (bit_cast::<64, 48>(self.destination_mac.val()) << 16)
-            | bit_cast::<64, 16>(self.destination_port.val());
-        if self.rom.read_data.val().get_bits::<3>(11) == 1 {
-            self.field_word.next = (bit_cast::<64, 32>(self.destination_ip.val()) << 32)
-                | bit_cast::<64, 32>(self.last_accepted.val());
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 2 {
-            self.field_word.next = self.receive_tick.val();
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 3 {
-            self.field_word.next = self.send_tick.q.val();
-        } else if self.rom.read_data.val().get_bits::<3>(11) == 4 {
-            self.field_word.next = (bit_cast::<64, 16>(!self.icmp_rest_sum.val()) << 48)
-                | (bit_cast::<64, 8>(self.result.val()) << 40)
-                | (bit_cast::<64, 1>(self.link_up.val().into()) << 32)
-                | (bit_cast::<64, 2>(self.link_speed.val()) << 24);
+        // (byte in the word first, then the word: two parallel multiplexers)
+        self.icmp_checksum.next = !self.icmp_rest_sum.val();
+        self.field_byte_index.next = self.rom.read_data.val().get_bits::<3>(8);
+        self.field_word_index.next = self.rom.read_data.val().get_bits::<3>(11);
+        match self.field_byte_index.val().index() {
+            0 => {
+                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(40);
+                self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(24);
+                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(56);
+                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(56);
+                self.word_bytes_4.next = self.icmp_checksum.val().get_bits::<8>(8);
+            }
+            1 => {
+                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(32);
+                self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(16);
+                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(48);
+                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(48);
+                self.word_bytes_4.next = self.icmp_checksum.val().get_bits::<8>(0);
+            }
+            2 => {
+                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(24);
+                self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(8);
+                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(40);
+                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(40);
+                self.word_bytes_4.next = self.result.val();
+            }
+            3 => {
+                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(16);
+                self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(0);
+                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(32);
+                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(32);
+                self.word_bytes_4.next = bit_cast::<8, 1>(self.link_up.val().into());
+            }
+            4 => {
+                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(8);
+                self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(24);
+                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(24);
+                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(24);
+                self.word_bytes_4.next = bit_cast::<8, 2>(self.link_speed.val());
+            }
+            5 => {
+                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(0);
+                self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(16);
+                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(16);
+                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(16);
+                self.word_bytes_4.next = 0.into();
+            }
+            6 => {
+                self.word_bytes_0.next = self.destination_port.val().get_bits::<8>(8);
+                self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(8);
+                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(8);
+                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(8);
+                self.word_bytes_4.next = 0.into();
+            }
+            _ => {
+                self.word_bytes_0.next = self.destination_port.val().get_bits::<8>(0);
+                self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(0);
+                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(0);
+                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(0);
+                self.word_bytes_4.next = 0.into();
+            }
         }
-        self.field_word_shifted.next = self.field_word.val()
-            << (bit_cast::<64, 3>(self.rom.read_data.val().get_bits::<3>(8)) << 3);
-        self.s3_field_byte.d.next = self.field_word_shifted.val().get_bits::<8>(56);
+        match self.field_word_index.val().index() {
+            0 => self.s3_field_byte.d.next = self.word_bytes_0.val(),
+            1 => self.s3_field_byte.d.next = self.word_bytes_1.val(),
+            2 => self.s3_field_byte.d.next = self.word_bytes_2.val(),
+            3 => self.s3_field_byte.d.next = self.word_bytes_3.val(),
+            _ => self.s3_field_byte.d.next = self.word_bytes_4.val(),
+        }
         self.s3_write.d.next = self.read_2.q.val()
             & self.rom.read_data.val().get_bit(26)
             & (!self.rom.read_data.val().get_bit(29)
