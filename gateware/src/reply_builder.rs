@@ -928,74 +928,85 @@ impl Logic for ReplyBuilder {
         // Stage 2 -> 3: the field byte (five words of held fields, then the byte in the
         // word), the buffer read of a copy, and the counter loaded at its byte 0 (the next
         // counter's read starts).
-        // (byte in the word first, then the word: two parallel multiplexers)
+        // (byte in the word first, then the word: balanced trees of two-way multiplexers,
+        // which map onto the LUTs and the slices' PFUMX/L6MUX)
         self.icmp_checksum.next = !self.icmp_rest_sum.val();
         self.field_byte_index.next = self.rom.read_data.val().get_bits::<3>(8);
         self.field_word_index.next = self.rom.read_data.val().get_bits::<3>(11);
-        match self.field_byte_index.val().index() {
-            0 => {
-                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(40);
-                self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(24);
-                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(56);
-                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(56);
-                self.word_bytes_4.next = self.icmp_checksum.val().get_bits::<8>(8);
+        if self.field_byte_index.val().get_bit(2) {
+            if self.field_byte_index.val().get_bit(1) {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.next = self.destination_port.val().get_bits::<8>(0);
+                    self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(0);
+                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(0);
+                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(0);
+                    self.word_bytes_4.next = 0.into();
+                } else {
+                    self.word_bytes_0.next = self.destination_port.val().get_bits::<8>(8);
+                    self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(8);
+                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(8);
+                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(8);
+                    self.word_bytes_4.next = 0.into();
+                }
+            } else {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(0);
+                    self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(16);
+                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(16);
+                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(16);
+                    self.word_bytes_4.next = 0.into();
+                } else {
+                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(8);
+                    self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(24);
+                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(24);
+                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(24);
+                    self.word_bytes_4.next = bit_cast::<8, 2>(self.link_speed.val());
+                }
             }
-            1 => {
-                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(32);
-                self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(16);
-                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(48);
-                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(48);
-                self.word_bytes_4.next = self.icmp_checksum.val().get_bits::<8>(0);
-            }
-            2 => {
-                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(24);
-                self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(8);
-                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(40);
-                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(40);
-                self.word_bytes_4.next = self.result.val();
-            }
-            3 => {
-                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(16);
-                self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(0);
-                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(32);
-                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(32);
-                self.word_bytes_4.next = bit_cast::<8, 1>(self.link_up.val().into());
-            }
-            4 => {
-                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(8);
-                self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(24);
-                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(24);
-                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(24);
-                self.word_bytes_4.next = bit_cast::<8, 2>(self.link_speed.val());
-            }
-            5 => {
-                self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(0);
-                self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(16);
-                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(16);
-                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(16);
-                self.word_bytes_4.next = 0.into();
-            }
-            6 => {
-                self.word_bytes_0.next = self.destination_port.val().get_bits::<8>(8);
-                self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(8);
-                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(8);
-                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(8);
-                self.word_bytes_4.next = 0.into();
-            }
-            _ => {
-                self.word_bytes_0.next = self.destination_port.val().get_bits::<8>(0);
-                self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(0);
-                self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(0);
-                self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(0);
-                self.word_bytes_4.next = 0.into();
+        } else {
+            if self.field_byte_index.val().get_bit(1) {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(16);
+                    self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(0);
+                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(32);
+                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(32);
+                    self.word_bytes_4.next = bit_cast::<8, 1>(self.link_up.val().into());
+                } else {
+                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(24);
+                    self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(8);
+                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(40);
+                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(40);
+                    self.word_bytes_4.next = self.result.val();
+                }
+            } else {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(32);
+                    self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(16);
+                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(48);
+                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(48);
+                    self.word_bytes_4.next = self.icmp_checksum.val().get_bits::<8>(0);
+                } else {
+                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(40);
+                    self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(24);
+                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(56);
+                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(56);
+                    self.word_bytes_4.next = self.icmp_checksum.val().get_bits::<8>(8);
+                }
             }
         }
-        match self.field_word_index.val().index() {
-            0 => self.s3_field_byte.d.next = self.word_bytes_0.val(),
-            1 => self.s3_field_byte.d.next = self.word_bytes_1.val(),
-            2 => self.s3_field_byte.d.next = self.word_bytes_2.val(),
-            3 => self.s3_field_byte.d.next = self.word_bytes_3.val(),
-            _ => self.s3_field_byte.d.next = self.word_bytes_4.val(),
+        // (words 5 to 7 do not exist)
+        if self.field_word_index.val().get_bit(2) {
+            self.s3_field_byte.d.next = self.word_bytes_4.val();
+        } else if self.field_word_index.val().get_bit(1) {
+            if self.field_word_index.val().get_bit(0) {
+                self.s3_field_byte.d.next = self.word_bytes_3.val();
+            } else {
+                self.s3_field_byte.d.next = self.word_bytes_2.val();
+            }
+        } else if self.field_word_index.val().get_bit(0) {
+            self.s3_field_byte.d.next = self.word_bytes_1.val();
+        } else {
+            self.s3_field_byte.d.next = self.word_bytes_0.val();
         }
         self.s3_write.d.next = self.read_2.q.val()
             & self.rom.read_data.val().get_bit(26)
