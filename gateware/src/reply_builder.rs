@@ -26,11 +26,11 @@
 //!
 //! The builder is a sequencer stepping through a program in a ROM (one step per clock:
 //! a frame position, and a constant byte, a held-field byte, a counter byte, a checksum
-//! byte or a byte of the buffer); a byte goes through three registers (the ROM's output,
-//! the field byte, the written byte) and is summed into the IPv4 or UDP checksum as it is
+//! byte or a byte of the buffer); a byte goes through four registers (the ROM's output,
+//! the ROM word's parts, the byte in each field word, the written byte) and is summed into the IPv4 or UDP checksum as it is
 //! written; the checksums are folded in three more registers and written last. Build
-//! durations: [`build_clocks`] (64 clocks for ARP, 60 for an echo of any length, 92, 104
-//! and 176 for acknowledgements without a reply, with a destination, with the counters).
+//! durations: [`build_clocks`] (64 clocks for ARP, 60 for an echo of any length, 93, 105
+//! and 177 for acknowledgements without a reply, with a destination, with the counters).
 //! The counters are read one per four clocks from `counters_address` 0 on (a read's data
 //! is taken four clocks after its address: a counter file with the block RAM's two-clock
 //! latency fits).
@@ -92,8 +92,9 @@ const REPLY_AT: usize = ACK_BODY_AT + ACK_FIXED_LEN;
 const START_TO_STEP: u64 = 1 + READ_LATENCY;
 
 /// Steps from the last step summed into a checksum to a step that writes it: the byte is
-/// registered twice, summed, then folded twice and complemented.
-const CHECKSUM_DISTANCE: usize = 5;
+/// summed after stage 5, folded twice and complemented; the checksum byte is taken in
+/// stage 4.
+const CHECKSUM_DISTANCE: usize = 6;
 
 /// Byte positions of the held fields in the field multiplexer (five 64-bit words, most
 /// significant byte first). The request's own fields (addresses, port, sequence number,
@@ -559,10 +560,10 @@ pub fn build_clocks(kind: ReplyKind) -> u64 {
 }
 
 /// Clocks from the take (clock T) to the patch's last write (the UDP checksum's low byte
-/// is written at the edge ending clock T + this): a step's ROM word, then two registers,
+/// is written at the edge ending clock T + this): a step's ROM word, then three registers,
 /// for every step but the end marker.
 pub fn patch_clocks() -> u64 {
-    START_TO_STEP + patch_program().len() as u64
+    START_TO_STEP + patch_program().len() as u64 + 1
 }
 
 /// The earliest clock (counted from the take's) in which the body reader puts the first
@@ -720,16 +721,26 @@ pub struct ReplyBuilder {
     s3_source: DFF<Bits<2>>,
     s3_sum_ip: DFF<Bit>,
     s3_sum_udp: DFF<Bit>,
-    s3_field_byte: DFF<Bits<8>>,
-    // stage 4: the byte written and summed
+    s3_read: DFF<Bits<8>>,
+    s6_summand: DFF<Bits<16>>,
+    s6_sum_ip: DFF<Bit>,
+    s6_sum_udp: DFF<Bit>,
     s4_write: DFF<Bit>,
     s4_address: DFF<Bits<8>>,
-    s4_byte: DFF<Bits<8>>,
-    s3_from_buffer: DFF<Bit>,
-    s4_from_buffer: DFF<Bit>,
-    written: Signal<Local, Bits<8>>,
+    s4_value: DFF<Bits<8>>,
+    s4_source: DFF<Bits<2>>,
     s4_sum_ip: DFF<Bit>,
     s4_sum_udp: DFF<Bit>,
+    s4_from_buffer: DFF<Bit>,
+    // stage 4: the byte written and summed
+    s5_write: DFF<Bit>,
+    s5_address: DFF<Bits<8>>,
+    s5_byte: DFF<Bits<8>>,
+    s3_from_buffer: DFF<Bit>,
+    s5_from_buffer: DFF<Bit>,
+    written: Signal<Local, Bits<8>>,
+    s5_sum_ip: DFF<Bit>,
+    s5_sum_udp: DFF<Bit>,
     ip_sum: DFF<Bits<20>>,
     udp_sum: DFF<Bits<24>>,
     ip_fold: DFF<Bits<17>>,
@@ -742,12 +753,11 @@ pub struct ReplyBuilder {
     take: Signal<Local, Bit>,
     icmp_checksum: Signal<Local, Bits<16>>,
     field_byte_index: Signal<Local, Bits<3>>,
-    field_word_index: Signal<Local, Bits<3>>,
-    word_bytes_0: Signal<Local, Bits<8>>,
-    word_bytes_1: Signal<Local, Bits<8>>,
-    word_bytes_2: Signal<Local, Bits<8>>,
-    word_bytes_3: Signal<Local, Bits<8>>,
-    word_bytes_4: Signal<Local, Bits<8>>,
+    word_bytes_0: DFF<Bits<8>>,
+    word_bytes_1: DFF<Bits<8>>,
+    word_bytes_2: DFF<Bits<8>>,
+    word_bytes_3: DFF<Bits<8>>,
+    word_bytes_4: DFF<Bits<8>>,
     reply_byte: Signal<Local, Bits<8>>,
     counter_word_shifted: Signal<Local, Bits<32>>,
     summand: Signal<Local, Bits<16>>,
@@ -827,15 +837,25 @@ impl ReplyBuilder {
             s3_source: Default::default(),
             s3_sum_ip: Default::default(),
             s3_sum_udp: Default::default(),
-            s3_field_byte: Default::default(),
+            s3_read: Default::default(),
+            s6_summand: Default::default(),
+            s6_sum_ip: Default::default(),
+            s6_sum_udp: Default::default(),
             s4_write: Default::default(),
             s4_address: Default::default(),
-            s4_byte: Default::default(),
-            s3_from_buffer: Default::default(),
-            s4_from_buffer: Default::default(),
-            written: Default::default(),
+            s4_value: Default::default(),
+            s4_source: Default::default(),
             s4_sum_ip: Default::default(),
             s4_sum_udp: Default::default(),
+            s4_from_buffer: Default::default(),
+            s5_write: Default::default(),
+            s5_address: Default::default(),
+            s5_byte: Default::default(),
+            s3_from_buffer: Default::default(),
+            s5_from_buffer: Default::default(),
+            written: Default::default(),
+            s5_sum_ip: Default::default(),
+            s5_sum_udp: Default::default(),
             ip_sum: Default::default(),
             udp_sum: Default::default(),
             ip_fold: Default::default(),
@@ -848,7 +868,6 @@ impl ReplyBuilder {
             take: Default::default(),
             icmp_checksum: Default::default(),
             field_byte_index: Default::default(),
-            field_word_index: Default::default(),
             word_bytes_0: Default::default(),
             word_bytes_1: Default::default(),
             word_bytes_2: Default::default(),
@@ -889,14 +908,29 @@ impl Logic for ReplyBuilder {
             s3_source,
             s3_sum_ip,
             s3_sum_udp,
-            s3_field_byte,
+            s3_read,
+            s6_summand,
+            s6_sum_ip,
+            s6_sum_udp,
             s4_write,
             s4_address,
-            s4_byte,
-            s3_from_buffer,
-            s4_from_buffer,
+            s4_value,
+            s4_source,
             s4_sum_ip,
             s4_sum_udp,
+            s4_from_buffer,
+            word_bytes_0,
+            word_bytes_1,
+            word_bytes_2,
+            word_bytes_3,
+            word_bytes_4,
+            s5_write,
+            s5_address,
+            s5_byte,
+            s3_from_buffer,
+            s5_from_buffer,
+            s5_sum_ip,
+            s5_sum_udp,
             ip_sum,
             udp_sum,
             ip_fold,
@@ -935,89 +969,8 @@ impl Logic for ReplyBuilder {
             }
         }
 
-        // Stage 2 -> 3: the field byte (five words of held fields, then the byte in the
-        // word), the buffer read of a copy, and the counter loaded at its byte 0 (the next
-        // counter's read starts).
-        // (byte in the word first, then the word: balanced trees of two-way multiplexers,
-        // which map onto the LUTs and the slices' PFUMX/L6MUX)
-        self.icmp_checksum.next = !self.icmp_rest_sum.val();
-        self.field_byte_index.next = self.rom.read_data.val().get_bits::<3>(8);
-        self.field_word_index.next = self.rom.read_data.val().get_bits::<3>(11);
-        if self.field_byte_index.val().get_bit(2) {
-            if self.field_byte_index.val().get_bit(1) {
-                if self.field_byte_index.val().get_bit(0) {
-                    self.word_bytes_0.next = self.destination_port.val().get_bits::<8>(0);
-                    self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(0);
-                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(0);
-                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(0);
-                    self.word_bytes_4.next = 0.into();
-                } else {
-                    self.word_bytes_0.next = self.destination_port.val().get_bits::<8>(8);
-                    self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(8);
-                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(8);
-                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(8);
-                    self.word_bytes_4.next = 0.into();
-                }
-            } else {
-                if self.field_byte_index.val().get_bit(0) {
-                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(0);
-                    self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(16);
-                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(16);
-                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(16);
-                    self.word_bytes_4.next = 0.into();
-                } else {
-                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(8);
-                    self.word_bytes_1.next = self.last_accepted.val().get_bits::<8>(24);
-                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(24);
-                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(24);
-                    self.word_bytes_4.next = bit_cast::<8, 2>(self.link_speed.val());
-                }
-            }
-        } else {
-            if self.field_byte_index.val().get_bit(1) {
-                if self.field_byte_index.val().get_bit(0) {
-                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(16);
-                    self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(0);
-                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(32);
-                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(32);
-                    self.word_bytes_4.next = bit_cast::<8, 1>(self.link_up.val().into());
-                } else {
-                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(24);
-                    self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(8);
-                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(40);
-                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(40);
-                    self.word_bytes_4.next = self.result.val();
-                }
-            } else {
-                if self.field_byte_index.val().get_bit(0) {
-                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(32);
-                    self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(16);
-                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(48);
-                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(48);
-                    self.word_bytes_4.next = self.icmp_checksum.val().get_bits::<8>(0);
-                } else {
-                    self.word_bytes_0.next = self.destination_mac.val().get_bits::<8>(40);
-                    self.word_bytes_1.next = self.destination_ip.val().get_bits::<8>(24);
-                    self.word_bytes_2.next = self.receive_tick.val().get_bits::<8>(56);
-                    self.word_bytes_3.next = self.send_tick.q.val().get_bits::<8>(56);
-                    self.word_bytes_4.next = self.icmp_checksum.val().get_bits::<8>(8);
-                }
-            }
-        }
-        // (words 5 to 7 do not exist)
-        if self.field_word_index.val().get_bit(2) {
-            self.s3_field_byte.d.next = self.word_bytes_4.val();
-        } else if self.field_word_index.val().get_bit(1) {
-            if self.field_word_index.val().get_bit(0) {
-                self.s3_field_byte.d.next = self.word_bytes_3.val();
-            } else {
-                self.s3_field_byte.d.next = self.word_bytes_2.val();
-            }
-        } else if self.field_word_index.val().get_bit(0) {
-            self.s3_field_byte.d.next = self.word_bytes_1.val();
-        } else {
-            self.s3_field_byte.d.next = self.word_bytes_0.val();
-        }
+        // Stage 2 -> 3: the ROM word's parts, registered (the buffer read of a copy is
+        // issued from them: its byte is there in stage 5).
         self.s3_write.d.next = self.read_2.q.val()
             & self.rom.read_data.val().get_bit(26)
             & (!self.rom.read_data.val().get_bit(29)
@@ -1029,56 +982,150 @@ impl Logic for ReplyBuilder {
         self.s3_address.d.next = self.rom.read_data.val().get_bits::<8>(0);
         self.s3_value.d.next = self.rom.read_data.val().get_bits::<8>(8);
         self.s3_source.d.next = self.rom.read_data.val().get_bits::<2>(24);
+        self.s3_read.d.next = self.rom.read_data.val().get_bits::<8>(16);
+
+        // Stage 3 -> 4: the byte in each of the five words of held fields; the counter
+        // loaded at its byte 0 (the next counter's read starts).
+        // (byte in the word first, then the word: balanced trees of two-way multiplexers,
+        // which map onto the LUTs and the slices' PFUMX/L6MUX)
+        self.icmp_checksum.next = !self.icmp_rest_sum.val();
+        self.field_byte_index.next = self.s3_value.q.val().get_bits::<3>(0);
+        if self.field_byte_index.val().get_bit(2) {
+            if self.field_byte_index.val().get_bit(1) {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.d.next = self.destination_port.val().get_bits::<8>(0);
+                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(0);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(0);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(0);
+                    self.word_bytes_4.d.next = 0.into();
+                } else {
+                    self.word_bytes_0.d.next = self.destination_port.val().get_bits::<8>(8);
+                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(8);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(8);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(8);
+                    self.word_bytes_4.d.next = 0.into();
+                }
+            } else {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(0);
+                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(16);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(16);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(16);
+                    self.word_bytes_4.d.next = 0.into();
+                } else {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(8);
+                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(24);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(24);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(24);
+                    self.word_bytes_4.d.next = bit_cast::<8, 2>(self.link_speed.val());
+                }
+            }
+        } else {
+            if self.field_byte_index.val().get_bit(1) {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(16);
+                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(0);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(32);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(32);
+                    self.word_bytes_4.d.next = bit_cast::<8, 1>(self.link_up.val().into());
+                } else {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(24);
+                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(8);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(40);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(40);
+                    self.word_bytes_4.d.next = self.result.val();
+                }
+            } else {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(32);
+                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(16);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(48);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(48);
+                    self.word_bytes_4.d.next = self.icmp_checksum.val().get_bits::<8>(0);
+                } else {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(40);
+                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(24);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(56);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(56);
+                    self.word_bytes_4.d.next = self.icmp_checksum.val().get_bits::<8>(8);
+                }
+            }
+        }
+        self.s4_write.d.next = self.s3_write.q.val();
+        self.s4_address.d.next = self.s3_address.q.val();
+        self.s4_value.d.next = self.s3_value.q.val();
+        self.s4_source.d.next = self.s3_source.q.val();
+        self.s4_sum_ip.d.next = self.s3_sum_ip.q.val();
+        self.s4_sum_udp.d.next = self.s3_sum_udp.q.val();
+        self.s4_from_buffer.d.next = self.s3_from_buffer.q.val();
         self.counters_address.next = self.counter_address.q.val();
-        if self.read_2.q.val()
-            & (self.rom.read_data.val().get_bits::<2>(24) == 2)
-            & (self.rom.read_data.val().get_bits::<2>(8) == 0)
+        if self.s3_write.q.val()
+            & (self.s3_source.q.val() == 2)
+            & (self.s3_value.q.val().get_bits::<2>(0) == 0)
         {
             self.counter_word.d.next = self.counters_data.val();
             self.counter_address.d.next = self.counter_address.q.val() + 1;
         }
 
-        // Stage 3 -> 4: the byte by its source.
-        self.reply_byte.next = self.s3_value.q.val();
+        // Stage 4 -> 5: the byte by its source (a field byte: its word).
+        self.reply_byte.next = self.s4_value.q.val();
         self.counter_word_shifted.next = self.counter_word.q.val()
-            << (bit_cast::<32, 2>(self.s3_value.q.val().get_bits::<2>(0)) << 3);
-        if self.s3_source.q.val() == 1 {
-            self.reply_byte.next = self.s3_field_byte.q.val();
-        } else if self.s3_source.q.val() == 2 {
+            << (bit_cast::<32, 2>(self.s4_value.q.val().get_bits::<2>(0)) << 3);
+        if self.s4_source.q.val() == 1 {
+            // (words 5 to 7 do not exist)
+            if self.s4_value.q.val().get_bit(5) {
+                self.reply_byte.next = self.word_bytes_4.q.val();
+            } else if self.s4_value.q.val().get_bit(4) {
+                if self.s4_value.q.val().get_bit(3) {
+                    self.reply_byte.next = self.word_bytes_3.q.val();
+                } else {
+                    self.reply_byte.next = self.word_bytes_2.q.val();
+                }
+            } else if self.s4_value.q.val().get_bit(3) {
+                self.reply_byte.next = self.word_bytes_1.q.val();
+            } else {
+                self.reply_byte.next = self.word_bytes_0.q.val();
+            }
+        } else if self.s4_source.q.val() == 2 {
             self.reply_byte.next = self.counter_word_shifted.val().get_bits::<8>(24);
-        } else if self.s3_source.q.val() == 3 {
-            if self.s3_value.q.val().get_bits::<2>(0) == 0 {
+        } else if self.s4_source.q.val() == 3 {
+            if self.s4_value.q.val().get_bits::<2>(0) == 0 {
                 self.reply_byte.next = self.ip_checksum.q.val().get_bits::<8>(8);
-            } else if self.s3_value.q.val().get_bits::<2>(0) == 1 {
+            } else if self.s4_value.q.val().get_bits::<2>(0) == 1 {
                 self.reply_byte.next = self.ip_checksum.q.val().get_bits::<8>(0);
-            } else if self.s3_value.q.val().get_bits::<2>(0) == 2 {
+            } else if self.s4_value.q.val().get_bits::<2>(0) == 2 {
                 self.reply_byte.next = self.udp_checksum.q.val().get_bits::<8>(8);
             } else {
                 self.reply_byte.next = self.udp_checksum.q.val().get_bits::<8>(0);
             }
         }
-        self.s4_byte.d.next = self.reply_byte.val();
-        self.s4_write.d.next = self.s3_write.q.val();
-        self.s4_address.d.next = self.s3_address.q.val();
-        self.s4_sum_ip.d.next = self.s3_sum_ip.q.val();
-        self.s4_sum_udp.d.next = self.s3_sum_udp.q.val();
-        self.s4_from_buffer.d.next = self.s3_from_buffer.q.val();
+        self.s5_byte.d.next = self.reply_byte.val();
+        self.s5_write.d.next = self.s4_write.q.val();
+        self.s5_address.d.next = self.s4_address.q.val();
+        self.s5_sum_ip.d.next = self.s4_sum_ip.q.val();
+        self.s5_sum_udp.d.next = self.s4_sum_udp.q.val();
+        self.s5_from_buffer.d.next = self.s4_from_buffer.q.val();
 
-        // Stage 4: write and sum (an even frame position is a word's high byte); a copy's
+        // Stage 5: write and sum (an even frame position is a word's high byte); a copy's
         // byte is the buffer's, read two clocks ago.
-        self.written.next = self.s4_byte.q.val();
-        if self.s4_from_buffer.q.val() {
+        self.written.next = self.s5_byte.q.val();
+        if self.s5_from_buffer.q.val() {
             self.written.next = self.buffer.read_data.val();
         }
         self.summand.next = bit_cast::<16, 8>(self.written.val());
-        if !self.s4_address.q.val().get_bit(0) {
+        if !self.s5_address.q.val().get_bit(0) {
             self.summand.next = bit_cast::<16, 8>(self.written.val()) << 8;
         }
-        if self.s4_sum_ip.q.val() {
-            self.ip_sum.d.next = self.ip_sum.q.val() + bit_cast::<20, 16>(self.summand.val());
+        // (summed a clock later, from a register: the buffer's output feeds no adder)
+        self.s6_summand.d.next = self.summand.val();
+        self.s6_sum_ip.d.next = self.s5_sum_ip.q.val();
+        self.s6_sum_udp.d.next = self.s5_sum_udp.q.val();
+        if self.s6_sum_ip.q.val() {
+            self.ip_sum.d.next = self.ip_sum.q.val() + bit_cast::<20, 16>(self.s6_summand.q.val());
         }
-        if self.s4_sum_udp.q.val() {
-            self.udp_sum.d.next = self.udp_sum.q.val() + bit_cast::<24, 16>(self.summand.val());
+        if self.s6_sum_udp.q.val() {
+            self.udp_sum.d.next =
+                self.udp_sum.q.val() + bit_cast::<24, 16>(self.s6_summand.q.val());
         }
         self.ip_fold.d.next = bit_cast::<17, 16>(self.ip_sum.q.val().get_bits::<16>(0))
             + bit_cast::<17, 4>(self.ip_sum.q.val().get_bits::<4>(16));
@@ -1098,10 +1145,10 @@ impl Logic for ReplyBuilder {
         self.buffer.write_enable.next = self.receive_write_enable.val() & !self.locked_now.q.val();
         self.buffer.write_address.next = self.receive_write_address.val();
         self.buffer.write_data.next = self.receive_write_data.val();
-        if self.s4_write.q.val() {
+        if self.s5_write.q.val() {
             self.buffer.write_enable.next = true;
             self.buffer.write_address.next =
-                bit_cast::<BODY_ADDRESS_BITS, 8>(self.s4_address.q.val());
+                bit_cast::<BODY_ADDRESS_BITS, 8>(self.s5_address.q.val());
             self.buffer.write_data.next = self.written.val();
         }
 
@@ -1178,8 +1225,7 @@ impl Logic for ReplyBuilder {
         // (the reader reads from the clock after the take on; a build reads before)
         self.buffer.read_address.next = self.reader.read_address.val();
         if !self.reader.busy.val() {
-            self.buffer.read_address.next =
-                bit_cast::<BODY_ADDRESS_BITS, 8>(self.rom.read_data.val().get_bits::<8>(16));
+            self.buffer.read_address.next = bit_cast::<BODY_ADDRESS_BITS, 8>(self.s3_read.q.val());
         }
         self.reader.read_data.next = self.buffer.read_data.val();
         self.replies.body.valid.next = self.reader.body.valid.val();
@@ -1212,6 +1258,11 @@ impl Logic for ReplyBuilder {
             self.sizing_echo.d.next = false;
             self.s3_write.d.next = false;
             self.s4_write.d.next = false;
+            self.s4_sum_ip.d.next = false;
+            self.s4_sum_udp.d.next = false;
+            self.s5_write.d.next = false;
+            self.s6_sum_ip.d.next = false;
+            self.s6_sum_udp.d.next = false;
             self.s3_sum_ip.d.next = false;
             self.s3_sum_udp.d.next = false;
         }
@@ -1408,7 +1459,7 @@ mod tests {
             }
             // while locked only the builder writes
             assert!(
-                !u.buffer.write_enable.val() || u.s4_write.q.val(),
+                !u.buffer.write_enable.val() || u.s5_write.q.val(),
                 "clock {clock}"
             );
             let beat = u.replies.body.valid.val() && u.replies.body.ready.val();
@@ -1675,8 +1726,8 @@ mod tests {
             ReplyKind::Ack(AckReplyKind::Counters),
         ]
         .map(build_clocks);
-        assert_eq!(clocks, [64, 60, 92, 104, 176]);
-        assert_eq!((patch_clocks(), patch_margin_clocks()), (18, 23));
+        assert_eq!(clocks, [64, 60, 93, 105, 177]);
+        assert_eq!((patch_clocks(), patch_margin_clocks()), (20, 21));
     }
 
     #[test]
