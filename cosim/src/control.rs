@@ -45,6 +45,9 @@ use skinbox_protocol::link::{
     LinkConfig, ETHERNET_HEADER_LEN, FCS_LEN, IPV4_HEADER_LEN, IPV4_TTL, MIN_FRAME_LEN,
     PREAMBLE_LEN, UDP_HEADER_LEN,
 };
+pub use skinbox_protocol::link::{
+    ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP,
+};
 use skinbox_protocol::Error;
 
 pub use skinbox_protocol::command::HOST_SLOTS;
@@ -52,14 +55,6 @@ pub use skinbox_protocol::command::HOST_SLOTS;
 pub const MIN_RECEIVE_LEN: usize = MIN_FRAME_LEN + FCS_LEN;
 /// Longest frame the MAC takes, FCS included (1500-byte MTU, no VLAN tag).
 pub const MAX_RECEIVE_LEN: usize = 1518;
-/// EtherType of ARP.
-pub const ETHERTYPE_ARP: u16 = 0x0806;
-/// EtherType of IPv4.
-pub const ETHERTYPE_IPV4: u16 = 0x0800;
-/// IP protocol number of ICMP.
-pub const IP_PROTOCOL_ICMP: u8 = 1;
-/// IP protocol number of UDP.
-pub const IP_PROTOCOL_UDP: u8 = 17;
 /// Length of an ARP message for Ethernet and IPv4 (RFC 826).
 pub const ARP_LEN: usize = 28;
 /// Length of the ICMP echo header (type, code, checksum, identifier, sequence).

@@ -36,6 +36,7 @@ pub mod port_slots;
 pub mod record_arbiter;
 pub mod record_batcher;
 pub mod replica_register;
+pub mod reply_builder;
 pub mod status_reporter;
 pub mod stream;
 pub mod stream_fifo;

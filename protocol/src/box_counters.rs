@@ -19,11 +19,16 @@
 use crate::{check_len, get_u32, Error, Format, LayoutRow, Result};
 use core::fmt;
 
-pub(crate) mod field {
+/// Byte offsets in the block.
+pub mod field {
     use crate::Field;
+    /// Link state byte.
     pub const LINK_UP: usize = 0;
+    /// Link speed byte.
     pub const LINK_SPEED: usize = 1;
+    /// Reserved, 0.
     pub const RESERVED: Field = 2..4;
+    /// The first counter.
     pub const FIRST_COUNTER: usize = 4;
 }
 

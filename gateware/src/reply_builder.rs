@@ -1,0 +1,1744 @@
+//! ReplyBuilder: writes the box's reply to a received frame (ARP reply, ICMP echo reply or
+//! command acknowledgement) into the frame buffer that holds the request, and sends it as
+//! a raw frame.
+//!
+//! It owns the frame buffer (2 KB of block RAM): the frame parser writes every stored frame
+//! into it through the receive write port, which is shut while `locked`. `reserve` locks
+//! it (a reply will follow, the request must stay); `start_arp`, `start_echo` or
+//! `start_ack` then builds the reply in place, one byte per clock, from the request
+//! itself, the parser's and the command unit's held fields and constants. The request's
+//! own fields are not taken from the parser: the sender's MAC, IPv4 address and UDP port
+//! and the command's opcode are copied inside the buffer (read two clocks before they are
+//! written), the command's sequence number and host time and the echo request's total
+//! length stay where they are (at the same place in the reply) and are read to be summed.
+//! So the peer_* and command_sequence/host_time fields of the parser need not reach this
+//! block; a 64-byte field multiplexer would cost more LUTs than the copies.
+//!
+//! - ARP reply (RFC 826): all 60 bytes.
+//! - Echo reply: bytes 0..38 (MACs, the IPv4 header anew with identification 0, don't
+//!   fragment, TTL 64 and its checksum; ICMP type 0, code 0 and the checksum
+//!   `!icmp_rest_sum`); identifier, sequence and data stay where they were received, and
+//!   the bytes from 14 + total length up to 60 are zeroed (the received padding may not be).
+//! - Acknowledgement: the whole UDP frame to the command's sender, as
+//!   `skinbox_protocol::command::AckRepr::emit` lays out the payload, with the destination
+//!   now in effect (stream-to ok) or the box counter block (status-now ok) after the fixed
+//!   body. Its send tick and UDP checksum are written when the descriptor is taken.
+//!
+//! The builder is a sequencer stepping through a program in a ROM (one step per clock:
+//! a frame position, and a constant byte, a held-field byte, a counter byte, a checksum
+//! byte or a byte of the buffer); a byte goes through four registers (the ROM's output,
+//! the ROM word's parts, the byte in each field word, the written byte) and is summed into the IPv4 or UDP checksum as it is
+//! written; the checksums are folded in three more registers and written last. Build
+//! durations: [`build_clocks`] (64 clocks for ARP, 60 for an echo of any length, 93, 105
+//! and 177 for acknowledgements without a reply, with a destination, with the counters).
+//! The counters are read one per four clocks from `counters_address` 0 on (a read's data
+//! is taken four clocks after its address: a counter file with the block RAM's two-clock
+//! latency fits).
+//!
+//! Then it offers a descriptor of kind [`RAW_FRAME_KIND`] with the frame's length (padded
+//! to 60). At the take (valid & ready at an edge, tick T in that clock) its
+//! [`BodyReader`] starts reading the frame from byte 0, and for an acknowledgement the
+//! patch program writes the send tick T + [`TAKE_TO_FIRST_BYTE`] (8 bytes) and the UDP
+//! checksum, which are done [`patch_margin_clocks`] clocks before the reader can reach the
+//! first of them. `locked` falls the clock after the last body beat was taken.
+//!
+//! Use: `reserve`, then one `start_*` (a `start_*` while a reply is under way is ignored;
+//! a `reserve` must always be followed by a `start_*`, or the buffer stays locked). For
+//! a status-now acknowledgement the command must have been counted in the box counter
+//! file before `start_ack` (the block says "this command counted").
+
+use crate::block_ram::{BlockRam, READ_LATENCY};
+use crate::body_reader::{BodyReader, BODY_ADDRESS_BITS};
+use crate::frame_transmitter::TAKE_TO_FIRST_BYTE;
+use crate::hdl::*;
+use crate::stream::{DatagramSource, RAW_FRAME_KIND};
+use skinbox_protocol::box_counters::{self, BoxCounter, BOX_COUNTERS_LEN};
+use skinbox_protocol::command::{
+    self, ack_field, destination_field, AckResult, Opcode, ACK_FIXED_LEN, DESTINATION_LEN, KIND_ACK,
+};
+use skinbox_protocol::datagram::{MAGIC, VERSION};
+use skinbox_protocol::link::*;
+
+/// The ARP message of a reply up to the sender's addresses (RFC 826): hardware Ethernet
+/// (1), protocol IPv4, address lengths 6 and 4, operation 2 (reply).
+const ARP_REPLY_HEADER: [u8; 8] = [0, 1, 0x08, 0x00, 6, 4, 0, 2];
+/// Offsets in the ARP message (RFC 826): the sender's MAC (its IP follows), the target's
+/// MAC (its IP follows).
+const ARP_SENDER_MAC: usize = 8;
+const ARP_TARGET_MAC: usize = 18;
+/// Frame positions of the request's Ethernet source, IPv4 source and destination.
+const ETHERNET_SOURCE_AT: usize = 6;
+const IP_SOURCE_AT: usize = IP_AT + 12;
+const IP_DESTINATION_AT: usize = IP_AT + 16;
+/// ICMP type of an echo reply (RFC 792); its code is 0.
+const ICMP_ECHO_REPLY: u8 = 0;
+
+/// Frame positions (from the destination MAC).
+const IP_AT: usize = ETHERNET_HEADER_LEN;
+const IP_CHECKSUM_AT: usize = IP_AT + IPV4_CHECKSUM.start;
+const ICMP_AT: usize = IP_AT + IPV4_HEADER_LEN;
+/// ICMP type, code and checksum: the part of the echo reply the builder writes.
+const ICMP_WRITTEN: usize = 4;
+const UDP_AT: usize = IP_AT + IPV4_HEADER_LEN;
+const UDP_CHECKSUM_AT: usize = UDP_AT + UDP_CHECKSUM.start;
+const ACK_AT: usize = UDP_AT + UDP_HEADER_LEN;
+const ACK_BODY_AT: usize = ACK_AT + command::HEADER_LEN;
+/// Frame position of an acknowledgement's send tick.
+pub const SEND_TICK_AT: usize = ACK_BODY_AT + ack_field::SEND_TICK.start;
+const REPLY_AT: usize = ACK_BODY_AT + ACK_FIXED_LEN;
+
+/// Clocks from a `start_*` to the first step's ROM word (the step register, the ROM's
+/// two-clock read).
+const START_TO_STEP: u64 = 1 + READ_LATENCY;
+
+/// Steps from the last step summed into a checksum to a step that writes it: the byte is
+/// summed after stage 5, folded twice and complemented; the checksum byte is taken in
+/// stage 4.
+const CHECKSUM_DISTANCE: usize = 6;
+
+/// Byte positions of the held fields in the field multiplexer (five 64-bit words, most
+/// significant byte first). The request's own fields (addresses, port, sequence number,
+/// host time, opcode) are not among them: the builder copies them in the buffer or leaves
+/// them where they are.
+mod field_byte {
+    pub const DESTINATION_MAC: u8 = 0;
+    pub const DESTINATION_PORT: u8 = 6;
+    pub const DESTINATION_IP: u8 = 8;
+    pub const LAST_ACCEPTED: u8 = 12;
+    pub const RECEIVE_TICK: u8 = 16;
+    pub const SEND_TICK: u8 = 24;
+    pub const ICMP_CHECKSUM: u8 = 32;
+    pub const RESULT: u8 = 34;
+    pub const LINK_UP: u8 = 35;
+    pub const LINK_SPEED: u8 = 36;
+}
+
+/// Where a step's byte comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Source {
+    /// The step's value.
+    Constant = 0,
+    /// The held-field byte the value names ([`field_byte`]).
+    Field = 1,
+    /// Byte `value & 3` (0 = most significant) of the counter read; byte 0 loads the
+    /// counter and reads the next.
+    Counter = 2,
+    /// A checksum byte: value bit 1 the UDP checksum (else IPv4), bit 0 the low byte.
+    Checksum = 3,
+}
+
+/// One step of a build program: a ROM word.
+#[derive(Debug, Clone, Copy)]
+struct Step {
+    address: usize,
+    value: u8,
+    /// The buffer address read (with `from_buffer`).
+    read: usize,
+    /// The byte is the buffer's at `read` (the source is ignored): a copy, or with
+    /// `write` false a byte left in place and summed.
+    from_buffer: bool,
+    source: Source,
+    write: bool,
+    sum_ip: bool,
+    sum_udp: bool,
+    pad: bool,
+    end: bool,
+}
+
+/// Bits of a ROM word: address 0..8, value 8..16, read 16..24, source 24..26, write 26,
+/// sum_ip 27, sum_udp 28, pad 29, end 30, from_buffer 31.
+const STEP_BITS: usize = 32;
+const READ_AT: usize = 16;
+const SOURCE_AT: usize = 24;
+const WRITE_BIT: usize = 26;
+const SUM_IP_BIT: usize = 27;
+const SUM_UDP_BIT: usize = 28;
+const PAD_BIT: usize = 29;
+const END_BIT: usize = 30;
+const FROM_BUFFER_BIT: usize = 31;
+// (the logic below spells these bit numbers out)
+const _: () = assert!(
+    READ_AT == 16
+        && SOURCE_AT == 24
+        && WRITE_BIT == 26
+        && SUM_IP_BIT == 27
+        && SUM_UDP_BIT == 28
+        && PAD_BIT == 29
+        && END_BIT == 30
+        && FROM_BUFFER_BIT == 31
+);
+const ROM_ADDRESS_BITS: usize = 10;
+
+impl Step {
+    fn word(&self) -> u64 {
+        assert!(self.address < 256, "step address {}", self.address);
+        assert!(self.read < 256, "step read address {}", self.read);
+        self.address as u64
+            | u64::from(self.value) << 8
+            | (self.read as u64) << READ_AT
+            | (self.source as u64) << SOURCE_AT
+            | u64::from(self.write) << WRITE_BIT
+            | u64::from(self.sum_ip) << SUM_IP_BIT
+            | u64::from(self.sum_udp) << SUM_UDP_BIT
+            | u64::from(self.pad) << PAD_BIT
+            | u64::from(self.end) << END_BIT
+            | u64::from(self.from_buffer) << FROM_BUFFER_BIT
+    }
+}
+
+/// Which checksums a written byte is summed into.
+#[derive(Clone, Copy)]
+enum Sum {
+    None,
+    Ip,
+    Udp,
+    Both,
+}
+
+/// A build program under construction.
+#[derive(Default)]
+struct Program {
+    steps: Vec<Step>,
+    last_summed: Option<usize>,
+}
+
+impl Program {
+    fn push(&mut self, address: usize, value: u8, source: Source, sum: Sum) {
+        let (sum_ip, sum_udp) = match sum {
+            Sum::None => (false, false),
+            Sum::Ip => (true, false),
+            Sum::Udp => (false, true),
+            Sum::Both => (true, true),
+        };
+        if sum_ip || sum_udp {
+            self.last_summed = Some(self.steps.len());
+        }
+        self.steps.push(Step {
+            address,
+            value,
+            read: 0,
+            from_buffer: false,
+            source,
+            write: true,
+            sum_ip,
+            sum_udp,
+            pad: false,
+            end: false,
+        });
+    }
+
+    fn constants(&mut self, at: usize, bytes: &[u8], sum: Sum) {
+        for (i, &b) in bytes.iter().enumerate() {
+            self.push(at + i, b, Source::Constant, sum);
+        }
+    }
+
+    fn fields(&mut self, at: usize, first: u8, len: usize, sum: Sum) {
+        for i in 0..len {
+            self.push(at + i, first + i as u8, Source::Field, sum);
+        }
+    }
+
+    /// Copies `len` bytes of the request from `from` to `at` (`at == from` and no
+    /// `write`: leaves them in place, to be summed).
+    fn copy(&mut self, at: usize, from: usize, len: usize, sum: Sum, write: bool) {
+        for i in 0..len {
+            self.push(at + i, 0, Source::Constant, sum);
+            let step = self.steps.last_mut().expect("pushed");
+            step.read = from + i;
+            step.from_buffer = true;
+            step.write = write;
+        }
+    }
+
+    /// A byte summed into the UDP checksum only (the pseudo header), not written; `at`
+    /// says its place in a 16-bit word (even: high byte).
+    fn udp_sum_only(&mut self, at: usize, byte: u8) {
+        self.push(at, byte, Source::Constant, Sum::Udp);
+        self.steps.last_mut().expect("pushed").write = false;
+    }
+
+    /// Writes a checksum (`udp` or IPv4) at `at`, after idle steps until it is final.
+    fn checksum(&mut self, at: usize, udp: bool) {
+        if let Some(last) = self.last_summed {
+            while self.steps.len() < last + CHECKSUM_DISTANCE {
+                self.steps.push(Step {
+                    address: 0,
+                    value: 0,
+                    read: 0,
+                    from_buffer: false,
+                    source: Source::Constant,
+                    write: false,
+                    sum_ip: false,
+                    sum_udp: false,
+                    pad: false,
+                    end: false,
+                });
+            }
+        }
+        for low in [false, true] {
+            self.push(
+                at + usize::from(low),
+                u8::from(udp) << 1 | u8::from(low),
+                Source::Checksum,
+                Sum::None,
+            );
+        }
+    }
+
+    fn end(mut self) -> Vec<Step> {
+        // a byte of the request is read before any step writes over it
+        for (i, r) in self.steps.iter().enumerate().filter(|(_, r)| r.from_buffer) {
+            assert!(
+                !self.steps[..i]
+                    .iter()
+                    .any(|w| w.write && w.address == r.read),
+                "step {i} reads byte {} after it was written",
+                r.read
+            );
+        }
+        self.steps.push(Step {
+            address: 0,
+            value: 0,
+            read: 0,
+            from_buffer: false,
+            source: Source::Constant,
+            write: false,
+            sum_ip: false,
+            sum_udp: false,
+            pad: false,
+            end: true,
+        });
+        self.steps
+    }
+}
+
+/// The reply an acknowledgement carries after its fixed body.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AckReplyKind {
+    /// Nothing.
+    None,
+    /// Stream-to ok: the destination now in effect.
+    Destination,
+    /// Status-now ok: the box counter block.
+    Counters,
+}
+
+impl AckReplyKind {
+    /// Bytes after the fixed body.
+    pub fn len(self) -> usize {
+        match self {
+            AckReplyKind::None => 0,
+            AckReplyKind::Destination => DESTINATION_LEN,
+            AckReplyKind::Counters => BOX_COUNTERS_LEN,
+        }
+    }
+
+    /// Whether no bytes follow the fixed body.
+    pub fn is_empty(self) -> bool {
+        self == AckReplyKind::None
+    }
+
+    /// UDP payload length of the acknowledgement.
+    pub fn payload_len(self) -> usize {
+        command::HEADER_LEN + ACK_FIXED_LEN + self.len()
+    }
+
+    /// Frame length of the acknowledgement, destination MAC to the last payload byte.
+    pub fn frame_len(self) -> usize {
+        ACK_AT + self.payload_len()
+    }
+}
+
+/// A reply the builder makes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReplyKind {
+    /// ARP reply.
+    Arp,
+    /// ICMP echo reply.
+    Echo,
+    /// Command acknowledgement.
+    Ack(AckReplyKind),
+}
+
+fn arp_program(link: &LinkConfig) -> Vec<Step> {
+    let mut p = Program::default();
+    let arp = ETHERNET_HEADER_LEN;
+    // the requester's addresses (the request's sender) become the Ethernet destination
+    // and the target
+    p.copy(0, arp + ARP_SENDER_MAC, 6, Sum::None, true);
+    p.copy(
+        arp + ARP_TARGET_MAC,
+        arp + ARP_SENDER_MAC,
+        6 + 4,
+        Sum::None,
+        true,
+    );
+    p.constants(6, &link.box_mac, Sum::None);
+    p.constants(12, &ETHERTYPE_ARP.to_be_bytes(), Sum::None);
+    p.constants(arp, &ARP_REPLY_HEADER, Sum::None);
+    p.constants(arp + ARP_SENDER_MAC, &link.box_mac, Sum::None);
+    p.constants(arp + ARP_SENDER_MAC + 6, &link.box_ip, Sum::None);
+    let end = arp + ARP_TARGET_MAC + 6 + 4;
+    p.constants(end, &vec![0; MIN_FRAME_LEN - end], Sum::None);
+    p.end()
+}
+
+/// The IPv4 header's bytes except the checksum: `total_len` None takes the held total
+/// length; the destination is the peer's IP. `peer_sum` says what the peer IP and the box
+/// IP are summed into (the UDP pseudo header has them too).
+fn ipv4_header(
+    p: &mut Program,
+    link: &LinkConfig,
+    protocol: u8,
+    total_len: Option<u16>,
+    peer_sum: Sum,
+) {
+    p.constants(IP_AT, &[0x45, 0x00], Sum::Ip);
+    let total_at = IP_AT + IPV4_TOTAL_LEN.start;
+    match total_len {
+        Some(len) => p.constants(total_at, &len.to_be_bytes(), Sum::Ip),
+        None => p.copy(total_at, total_at, 2, Sum::Ip, false),
+    }
+    // identification 0, don't fragment, TTL, protocol
+    p.constants(IP_AT + 4, &[0, 0, 0x40, 0x00, IPV4_TTL, protocol], Sum::Ip);
+    p.constants(IP_SOURCE_AT, &link.box_ip, peer_sum);
+}
+
+/// The request's sender becomes the destination: the first steps of an IPv4 reply.
+fn copy_addresses(p: &mut Program, peer_sum: Sum) {
+    p.copy(0, ETHERNET_SOURCE_AT, 6, Sum::None, true);
+    p.copy(IP_DESTINATION_AT, IP_SOURCE_AT, 4, peer_sum, true);
+}
+
+fn ethernet_header(p: &mut Program, link: &LinkConfig, ethertype: u16) {
+    p.constants(6, &link.box_mac, Sum::None);
+    p.constants(12, &ethertype.to_be_bytes(), Sum::None);
+}
+
+fn echo_program(link: &LinkConfig) -> Vec<Step> {
+    let mut p = Program::default();
+    copy_addresses(&mut p, Sum::Ip);
+    ethernet_header(&mut p, link, ETHERTYPE_IPV4);
+    ipv4_header(&mut p, link, IP_PROTOCOL_ICMP, None, Sum::Ip);
+    p.constants(ICMP_AT, &[ICMP_ECHO_REPLY, 0], Sum::None);
+    p.fields(ICMP_AT + 2, field_byte::ICMP_CHECKSUM, 2, Sum::None);
+    // zero padding to the minimum frame, written where the request ended before it
+    let shortest_end = ICMP_AT + ICMP_WRITTEN + 4;
+    for at in shortest_end..MIN_FRAME_LEN {
+        p.constants(at, &[0], Sum::None);
+        p.steps.last_mut().expect("pushed").pad = true;
+    }
+    p.checksum(IP_CHECKSUM_AT, false);
+    p.end()
+}
+
+fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKind) -> Vec<Step> {
+    let mut p = Program::default();
+    let udp_len = (UDP_HEADER_LEN + reply.payload_len()) as u16;
+    use command::field;
+    // the request's fields kept: its sender, source port and opcode are copied, its
+    // sequence number and host time stay where they are (the same place in the ack)
+    copy_addresses(&mut p, Sum::Both);
+    p.copy(UDP_AT + 2, UDP_AT, 2, Sum::Udp, true);
+    let opcode_at = ACK_BODY_AT + ack_field::OPCODE;
+    p.copy(opcode_at, ACK_AT + field::OPCODE, 1, Sum::Udp, true);
+    let sequence_at = ACK_AT + field::SEQUENCE.start;
+    p.copy(sequence_at, sequence_at, 4, Sum::Udp, false);
+    let host_time_at = ACK_AT + field::HOST_TIME.start;
+    p.copy(host_time_at, host_time_at, 8, Sum::Udp, false);
+    ethernet_header(&mut p, link, ETHERTYPE_IPV4);
+    ipv4_header(
+        &mut p,
+        link,
+        IP_PROTOCOL_UDP,
+        Some(IPV4_HEADER_LEN as u16 + udp_len),
+        Sum::Both,
+    );
+    // the rest of the pseudo header: zero, protocol, UDP length
+    p.udp_sum_only(0, 0);
+    p.udp_sum_only(1, IP_PROTOCOL_UDP);
+    p.udp_sum_only(0, (udp_len >> 8) as u8);
+    p.udp_sum_only(1, udp_len as u8);
+    p.constants(UDP_AT, &link.box_port.to_be_bytes(), Sum::Udp);
+    p.constants(UDP_AT + UDP_LEN.start, &udp_len.to_be_bytes(), Sum::Udp);
+    // (the UDP checksum and the send tick are written at the take)
+    p.constants(ACK_AT + field::MAGIC.start, &MAGIC, Sum::Udp);
+    p.constants(ACK_AT + field::VERSION, &[VERSION, KIND_ACK], Sum::Udp);
+    p.constants(
+        ACK_AT + field::BOX_ID.start,
+        &box_id.to_be_bytes(),
+        Sum::Udp,
+    );
+    p.constants(ACK_AT + ack_field::PORT_COUNT, &[port_count, 0], Sum::Udp);
+    let body_len = (ACK_FIXED_LEN + reply.len()) as u16;
+    p.constants(
+        ACK_AT + field::LENGTH.start,
+        &body_len.to_be_bytes(),
+        Sum::Udp,
+    );
+    p.constants(ACK_AT + field::RESERVED.start, &[0, 0], Sum::Udp);
+    p.fields(
+        ACK_BODY_AT + ack_field::RESULT,
+        field_byte::RESULT,
+        1,
+        Sum::Udp,
+    );
+    p.constants(ACK_BODY_AT + ack_field::RESERVED.start, &[0, 0], Sum::Udp);
+    let last_accepted = ACK_BODY_AT + ack_field::LAST_ACCEPTED.start;
+    p.fields(last_accepted, field_byte::LAST_ACCEPTED, 4, Sum::Udp);
+    let receive_tick = ACK_BODY_AT + ack_field::RECEIVE_TICK.start;
+    p.fields(receive_tick, field_byte::RECEIVE_TICK, 8, Sum::Udp);
+    match reply {
+        AckReplyKind::None => {}
+        AckReplyKind::Destination => {
+            let at = |f: std::ops::Range<usize>| REPLY_AT + f.start;
+            p.fields(
+                at(destination_field::MAC),
+                field_byte::DESTINATION_MAC,
+                6,
+                Sum::Udp,
+            );
+            p.fields(
+                at(destination_field::IP),
+                field_byte::DESTINATION_IP,
+                4,
+                Sum::Udp,
+            );
+            p.fields(
+                at(destination_field::PORT),
+                field_byte::DESTINATION_PORT,
+                2,
+                Sum::Udp,
+            );
+        }
+        AckReplyKind::Counters => {
+            use box_counters::field as block;
+            p.fields(REPLY_AT + block::LINK_UP, field_byte::LINK_UP, 1, Sum::Udp);
+            p.fields(
+                REPLY_AT + block::LINK_SPEED,
+                field_byte::LINK_SPEED,
+                1,
+                Sum::Udp,
+            );
+            p.constants(REPLY_AT + block::RESERVED.start, &[0, 0], Sum::Udp);
+            // counter c is read at address c (the reads start at 0 with the program)
+            for counter in BoxCounter::ALL {
+                let at = REPLY_AT + counter.bytes().start;
+                for k in 0..4 {
+                    p.push(at + k, k as u8, Source::Counter, Sum::Udp);
+                }
+            }
+        }
+    }
+    p.checksum(IP_CHECKSUM_AT, false);
+    p.end()
+}
+
+/// Writes the send tick and then the UDP checksum (the build summed everything else).
+fn patch_program() -> Vec<Step> {
+    let mut p = Program::default();
+    p.fields(SEND_TICK_AT, field_byte::SEND_TICK, 8, Sum::Udp);
+    p.checksum(UDP_CHECKSUM_AT, true);
+    p.end()
+}
+
+/// Steps of the build program of a reply (its last step the end marker).
+fn program(kind: ReplyKind) -> Vec<Step> {
+    let link = LinkConfig::DEFAULT;
+    match kind {
+        ReplyKind::Arp => arp_program(&link),
+        ReplyKind::Echo => echo_program(&link),
+        ReplyKind::Ack(reply) => ack_program(&link, 0, 1, reply),
+    }
+}
+
+/// Clocks from a `start_*` (high in clock s) to the descriptor's `valid` (high from clock
+/// s + this on). The same for every length of an echo request.
+pub fn build_clocks(kind: ReplyKind) -> u64 {
+    START_TO_STEP + program(kind).len() as u64
+}
+
+/// Clocks from the take (clock T) to the patch's last write (the UDP checksum's low byte
+/// is written at the edge ending clock T + this): a step's ROM word, then three registers,
+/// for every step but the end marker.
+pub fn patch_clocks() -> u64 {
+    START_TO_STEP + patch_program().len() as u64 + 1
+}
+
+/// The earliest clock (counted from the take's) in which the body reader puts the first
+/// patched byte's address (the UDP checksum's; the send tick comes after it) on the
+/// buffer: its reads start two clocks after the take, one address per clock from 0.
+pub const FIRST_PATCHED_READ: u64 = 2 + UDP_CHECKSUM_AT as u64;
+
+/// Clocks to spare between the patch's last write and the reader's first read of a
+/// patched byte, under the fastest take and read (a read sees writes of earlier clocks).
+pub fn patch_margin_clocks() -> u64 {
+    FIRST_PATCHED_READ - patch_clocks() - 1
+}
+
+/// The ROM of every program, with the start address of each.
+struct Rom {
+    words: Vec<u64>,
+    arp: usize,
+    echo: usize,
+    ack: [usize; 3],
+    patch: usize,
+}
+
+fn rom(link: &LinkConfig, box_id: u16, port_count: u8) -> Rom {
+    let mut words = vec![];
+    let mut add = |steps: Vec<Step>| {
+        let at = words.len();
+        words.extend(steps.iter().map(Step::word));
+        at
+    };
+    let arp = add(arp_program(link));
+    let echo = add(echo_program(link));
+    let ack = [
+        AckReplyKind::None,
+        AckReplyKind::Destination,
+        AckReplyKind::Counters,
+    ]
+    .map(|r| add(ack_program(link, box_id, port_count, r)));
+    let patch = add(patch_program());
+    assert!(
+        words.len() <= 1 << ROM_ADDRESS_BITS,
+        "{} steps",
+        words.len()
+    );
+    Rom {
+        words,
+        arp,
+        echo,
+        ack,
+        patch,
+    }
+}
+
+fn constant<const N: usize>(value: usize) -> Constant<Bits<N>> {
+    assert!(N >= 64 || value < 1 << N, "{value} does not fit {N} bits");
+    Constant::new((value as u64).into())
+}
+
+/// Builds the box's replies in the frame buffer and sends them as raw frames.
+#[derive(LogicBlock)]
+pub struct ReplyBuilder {
+    /// The box clock.
+    pub clock: Signal<In, Clock>,
+    /// Synchronous reset: abandons a reply and unlocks the buffer.
+    pub reset: Signal<In, Bit>,
+    /// Box time.
+    pub tick: Signal<In, Bits<64>>,
+    /// The parser writes a received byte (ignored while `locked`).
+    pub receive_write_enable: Signal<In, Bit>,
+    /// Its frame position.
+    pub receive_write_address: Signal<In, Bits<BODY_ADDRESS_BITS>>,
+    /// The byte.
+    pub receive_write_data: Signal<In, Bits<8>>,
+    /// One clock: a reply follows; the buffer is locked from the next clock.
+    pub reserve: Signal<In, Bit>,
+    /// One clock: build an ARP reply.
+    pub start_arp: Signal<In, Bit>,
+    /// One clock: build an ICMP echo reply.
+    pub start_echo: Signal<In, Bit>,
+    /// One clock: build a command acknowledgement.
+    pub start_ack: Signal<In, Bit>,
+    /// Tick of the request's last byte.
+    pub receive_tick: Signal<In, Bits<64>>,
+    /// The echo request's IPv4 total length.
+    pub ip_total_length: Signal<In, Bits<16>>,
+    /// Folded ones'-complement sum of the echo request's ICMP message from byte 4.
+    pub icmp_rest_sum: Signal<In, Bits<16>>,
+    /// The command's opcode byte.
+    pub command_opcode: Signal<In, Bits<8>>,
+    /// The command's result (`AckResult`).
+    pub result: Signal<In, Bits<8>>,
+    /// The last sequence number accepted from the command's sender.
+    pub last_accepted: Signal<In, Bits<32>>,
+    /// The datagrams' destination now in effect: MAC...
+    pub destination_mac: Signal<In, Bits<48>>,
+    /// ...IPv4 address...
+    pub destination_ip: Signal<In, Bits<32>>,
+    /// ...and UDP port.
+    pub destination_port: Signal<In, Bits<16>>,
+    /// The PHY reports the link up.
+    pub link_up: Signal<In, Bit>,
+    /// The link speed (`LinkSpeed` wire value).
+    pub link_speed: Signal<In, Bits<2>>,
+    /// Box counter to read (`BoxCounter` index).
+    pub counters_address: Signal<Out, Bits<5>>,
+    /// The counter, two clocks after its address.
+    pub counters_data: Signal<In, Bits<32>>,
+    /// The buffer holds a request or a reply: the parser must not store a frame.
+    pub locked: Signal<Out, Bit>,
+    /// The replies, raw frames.
+    pub replies: DatagramSource,
+    buffer: BlockRam<8, BODY_ADDRESS_BITS>,
+    reader: BodyReader,
+    rom: BlockRam<STEP_BITS, ROM_ADDRESS_BITS>,
+    arp_start: Constant<Bits<ROM_ADDRESS_BITS>>,
+    echo_start: Constant<Bits<ROM_ADDRESS_BITS>>,
+    ack_none_start: Constant<Bits<ROM_ADDRESS_BITS>>,
+    ack_destination_start: Constant<Bits<ROM_ADDRESS_BITS>>,
+    ack_counters_start: Constant<Bits<ROM_ADDRESS_BITS>>,
+    patch_start: Constant<Bits<ROM_ADDRESS_BITS>>,
+    arp_len: Constant<Bits<BODY_ADDRESS_BITS>>,
+    ack_none_len: Constant<Bits<BODY_ADDRESS_BITS>>,
+    ack_destination_len: Constant<Bits<BODY_ADDRESS_BITS>>,
+    ack_counters_len: Constant<Bits<BODY_ADDRESS_BITS>>,
+    min_frame_len: Constant<Bits<BODY_ADDRESS_BITS>>,
+    ethernet_header_len: Constant<Bits<BODY_ADDRESS_BITS>>,
+    opcode_stream_to: Constant<Bits<8>>,
+    opcode_status_now: Constant<Bits<8>>,
+    result_ok: Constant<Bits<8>>,
+    send_tick_offset: Constant<Bits<64>>,
+    raw_frame_kind: Constant<Bits<8>>,
+    // the sequencer: ROM address, a program is running, ROM words in flight
+    step: DFF<Bits<ROM_ADDRESS_BITS>>,
+    running: DFF<Bit>,
+    read_1: DFF<Bit>,
+    read_2: DFF<Bit>,
+    // the descriptor is offered; the reply is an acknowledgement (patch at the take)
+    offering: DFF<Bit>,
+    is_ack: DFF<Bit>,
+    patching: DFF<Bit>,
+    locked_now: DFF<Bit>,
+    body_len: DFF<Bits<BODY_ADDRESS_BITS>>,
+    // echo: the request's end (padding from there), the body length a clock later
+    frame_end: DFF<Bits<BODY_ADDRESS_BITS>>,
+    sizing_echo: DFF<Bit>,
+    // the take: tick then, the send tick a clock later
+    took: DFF<Bit>,
+    tick_taken: DFF<Bits<64>>,
+    send_tick: DFF<Bits<64>>,
+    counter_address: DFF<Bits<5>>,
+    counter_word: DFF<Bits<32>>,
+    // stage 3: the ROM word's parts and the field byte, registered
+    s3_write: DFF<Bit>,
+    s3_address: DFF<Bits<8>>,
+    s3_value: DFF<Bits<8>>,
+    s3_source: DFF<Bits<2>>,
+    s3_sum_ip: DFF<Bit>,
+    s3_sum_udp: DFF<Bit>,
+    s3_read: DFF<Bits<8>>,
+    s6_summand: DFF<Bits<16>>,
+    s6_sum_ip: DFF<Bit>,
+    s6_sum_udp: DFF<Bit>,
+    s4_write: DFF<Bit>,
+    s4_address: DFF<Bits<8>>,
+    s4_value: DFF<Bits<8>>,
+    s4_source: DFF<Bits<2>>,
+    s4_sum_ip: DFF<Bit>,
+    s4_sum_udp: DFF<Bit>,
+    s4_from_buffer: DFF<Bit>,
+    // stage 4: the byte written and summed
+    s5_write: DFF<Bit>,
+    s5_address: DFF<Bits<8>>,
+    s5_byte: DFF<Bits<8>>,
+    s3_from_buffer: DFF<Bit>,
+    s5_from_buffer: DFF<Bit>,
+    written: Signal<Local, Bits<8>>,
+    s5_sum_ip: DFF<Bit>,
+    s5_sum_udp: DFF<Bit>,
+    ip_sum: DFF<Bits<20>>,
+    udp_sum: DFF<Bits<24>>,
+    ip_fold: DFF<Bits<17>>,
+    ip_folded: DFF<Bits<16>>,
+    udp_fold: DFF<Bits<17>>,
+    udp_folded: DFF<Bits<16>>,
+    ip_checksum: DFF<Bits<16>>,
+    udp_checksum: DFF<Bits<16>>,
+    idle: Signal<Local, Bit>,
+    take: Signal<Local, Bit>,
+    icmp_checksum: Signal<Local, Bits<16>>,
+    field_byte_index: Signal<Local, Bits<3>>,
+    word_bytes_0: DFF<Bits<8>>,
+    word_bytes_1: DFF<Bits<8>>,
+    word_bytes_2: DFF<Bits<8>>,
+    word_bytes_3: DFF<Bits<8>>,
+    word_bytes_4: DFF<Bits<8>>,
+    reply_byte: Signal<Local, Bits<8>>,
+    counter_word_shifted: Signal<Local, Bits<32>>,
+    summand: Signal<Local, Bits<16>>,
+}
+
+impl ReplyBuilder {
+    /// A builder for the box at `link`'s addresses with box id `box_id` and `port_count`
+    /// ports (both in acknowledgements).
+    pub fn new(link: &LinkConfig, box_id: u16, port_count: u8) -> Self {
+        let rom_contents = rom(link, box_id, port_count);
+        let [ack_none, ack_destination, ack_counters] = rom_contents.ack;
+        Self {
+            clock: Default::default(),
+            reset: Default::default(),
+            tick: Default::default(),
+            receive_write_enable: Default::default(),
+            receive_write_address: Default::default(),
+            receive_write_data: Default::default(),
+            reserve: Default::default(),
+            start_arp: Default::default(),
+            start_echo: Default::default(),
+            start_ack: Default::default(),
+            receive_tick: Default::default(),
+            ip_total_length: Default::default(),
+            icmp_rest_sum: Default::default(),
+            command_opcode: Default::default(),
+            result: Default::default(),
+            last_accepted: Default::default(),
+            destination_mac: Default::default(),
+            destination_ip: Default::default(),
+            destination_port: Default::default(),
+            link_up: Default::default(),
+            link_speed: Default::default(),
+            counters_address: Default::default(),
+            counters_data: Default::default(),
+            locked: Default::default(),
+            replies: Default::default(),
+            buffer: Default::default(),
+            reader: Default::default(),
+            rom: BlockRam::with_contents(&rom_contents.words),
+            arp_start: constant(rom_contents.arp),
+            echo_start: constant(rom_contents.echo),
+            ack_none_start: constant(ack_none),
+            ack_destination_start: constant(ack_destination),
+            ack_counters_start: constant(ack_counters),
+            patch_start: constant(rom_contents.patch),
+            arp_len: constant(MIN_FRAME_LEN),
+            ack_none_len: constant(AckReplyKind::None.frame_len()),
+            ack_destination_len: constant(AckReplyKind::Destination.frame_len()),
+            ack_counters_len: constant(AckReplyKind::Counters.frame_len()),
+            min_frame_len: constant(MIN_FRAME_LEN),
+            ethernet_header_len: constant(ETHERNET_HEADER_LEN),
+            opcode_stream_to: constant(Opcode::StreamTo as usize),
+            opcode_status_now: constant(Opcode::StatusNow as usize),
+            result_ok: constant(AckResult::Ok as usize),
+            send_tick_offset: constant(TAKE_TO_FIRST_BYTE as usize),
+            raw_frame_kind: constant(usize::from(RAW_FRAME_KIND)),
+            step: Default::default(),
+            running: Default::default(),
+            read_1: Default::default(),
+            read_2: Default::default(),
+            offering: Default::default(),
+            is_ack: Default::default(),
+            patching: Default::default(),
+            locked_now: Default::default(),
+            body_len: Default::default(),
+            frame_end: Default::default(),
+            sizing_echo: Default::default(),
+            took: Default::default(),
+            tick_taken: Default::default(),
+            send_tick: Default::default(),
+            counter_address: Default::default(),
+            counter_word: Default::default(),
+            s3_write: Default::default(),
+            s3_address: Default::default(),
+            s3_value: Default::default(),
+            s3_source: Default::default(),
+            s3_sum_ip: Default::default(),
+            s3_sum_udp: Default::default(),
+            s3_read: Default::default(),
+            s6_summand: Default::default(),
+            s6_sum_ip: Default::default(),
+            s6_sum_udp: Default::default(),
+            s4_write: Default::default(),
+            s4_address: Default::default(),
+            s4_value: Default::default(),
+            s4_source: Default::default(),
+            s4_sum_ip: Default::default(),
+            s4_sum_udp: Default::default(),
+            s4_from_buffer: Default::default(),
+            s5_write: Default::default(),
+            s5_address: Default::default(),
+            s5_byte: Default::default(),
+            s3_from_buffer: Default::default(),
+            s5_from_buffer: Default::default(),
+            written: Default::default(),
+            s5_sum_ip: Default::default(),
+            s5_sum_udp: Default::default(),
+            ip_sum: Default::default(),
+            udp_sum: Default::default(),
+            ip_fold: Default::default(),
+            ip_folded: Default::default(),
+            udp_fold: Default::default(),
+            udp_folded: Default::default(),
+            ip_checksum: Default::default(),
+            udp_checksum: Default::default(),
+            idle: Default::default(),
+            take: Default::default(),
+            icmp_checksum: Default::default(),
+            field_byte_index: Default::default(),
+            word_bytes_0: Default::default(),
+            word_bytes_1: Default::default(),
+            word_bytes_2: Default::default(),
+            word_bytes_3: Default::default(),
+            word_bytes_4: Default::default(),
+            reply_byte: Default::default(),
+            counter_word_shifted: Default::default(),
+            summand: Default::default(),
+        }
+    }
+}
+
+impl Logic for ReplyBuilder {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(
+            self,
+            clock,
+            step,
+            running,
+            read_1,
+            read_2,
+            offering,
+            is_ack,
+            patching,
+            locked_now,
+            body_len,
+            frame_end,
+            sizing_echo,
+            took,
+            tick_taken,
+            send_tick,
+            counter_address,
+            counter_word,
+            s3_write,
+            s3_address,
+            s3_value,
+            s3_source,
+            s3_sum_ip,
+            s3_sum_udp,
+            s3_read,
+            s6_summand,
+            s6_sum_ip,
+            s6_sum_udp,
+            s4_write,
+            s4_address,
+            s4_value,
+            s4_source,
+            s4_sum_ip,
+            s4_sum_udp,
+            s4_from_buffer,
+            word_bytes_0,
+            word_bytes_1,
+            word_bytes_2,
+            word_bytes_3,
+            word_bytes_4,
+            s5_write,
+            s5_address,
+            s5_byte,
+            s3_from_buffer,
+            s5_from_buffer,
+            s5_sum_ip,
+            s5_sum_udp,
+            ip_sum,
+            udp_sum,
+            ip_fold,
+            ip_folded,
+            udp_fold,
+            udp_folded,
+            ip_checksum,
+            udp_checksum
+        );
+        self.buffer.clock.next = self.clock.val();
+        self.rom.clock.next = self.clock.val();
+        self.reader.clock.next = self.clock.val();
+        self.reader.reset.next = self.reset.val();
+        self.rom.write_enable.next = false;
+        self.rom.write_address.next = 0.into();
+        self.rom.write_data.next = 0.into();
+
+        // The sequencer: one ROM word per clock from `step`; a word is valid two clocks
+        // after its address (`read_2`); the end marker stops the program and drops the
+        // two words read after it.
+        self.rom.read_address.next = self.step.q.val();
+        self.read_1.d.next = self.running.q.val();
+        self.read_2.d.next = self.read_1.q.val();
+        if self.running.q.val() {
+            self.step.d.next = self.step.q.val() + 1;
+        }
+        if self.read_2.q.val() & self.rom.read_data.val().get_bit(30) {
+            self.running.d.next = false;
+            self.read_1.d.next = false;
+            self.read_2.d.next = false;
+            // a build ends with the descriptor, the patch with nothing
+            if self.patching.q.val() {
+                self.patching.d.next = false;
+            } else {
+                self.offering.d.next = true;
+            }
+        }
+
+        // Stage 2 -> 3: the ROM word's parts, registered (the buffer read of a copy is
+        // issued from them: its byte is there in stage 5).
+        self.s3_write.d.next = self.read_2.q.val()
+            & self.rom.read_data.val().get_bit(26)
+            & (!self.rom.read_data.val().get_bit(29)
+                | (bit_cast::<BODY_ADDRESS_BITS, 8>(self.rom.read_data.val().get_bits::<8>(0))
+                    >= self.frame_end.q.val()));
+        self.s3_sum_ip.d.next = self.read_2.q.val() & self.rom.read_data.val().get_bit(27);
+        self.s3_sum_udp.d.next = self.read_2.q.val() & self.rom.read_data.val().get_bit(28);
+        self.s3_from_buffer.d.next = self.rom.read_data.val().get_bit(31);
+        self.s3_address.d.next = self.rom.read_data.val().get_bits::<8>(0);
+        self.s3_value.d.next = self.rom.read_data.val().get_bits::<8>(8);
+        self.s3_source.d.next = self.rom.read_data.val().get_bits::<2>(24);
+        self.s3_read.d.next = self.rom.read_data.val().get_bits::<8>(16);
+
+        // Stage 3 -> 4: the byte in each of the five words of held fields; the counter
+        // loaded at its byte 0 (the next counter's read starts).
+        // (byte in the word first, then the word: balanced trees of two-way multiplexers,
+        // which map onto the LUTs and the slices' PFUMX/L6MUX)
+        self.icmp_checksum.next = !self.icmp_rest_sum.val();
+        self.field_byte_index.next = self.s3_value.q.val().get_bits::<3>(0);
+        if self.field_byte_index.val().get_bit(2) {
+            if self.field_byte_index.val().get_bit(1) {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.d.next = self.destination_port.val().get_bits::<8>(0);
+                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(0);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(0);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(0);
+                    self.word_bytes_4.d.next = 0.into();
+                } else {
+                    self.word_bytes_0.d.next = self.destination_port.val().get_bits::<8>(8);
+                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(8);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(8);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(8);
+                    self.word_bytes_4.d.next = 0.into();
+                }
+            } else {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(0);
+                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(16);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(16);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(16);
+                    self.word_bytes_4.d.next = 0.into();
+                } else {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(8);
+                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(24);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(24);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(24);
+                    self.word_bytes_4.d.next = bit_cast::<8, 2>(self.link_speed.val());
+                }
+            }
+        } else {
+            if self.field_byte_index.val().get_bit(1) {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(16);
+                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(0);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(32);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(32);
+                    self.word_bytes_4.d.next = bit_cast::<8, 1>(self.link_up.val().into());
+                } else {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(24);
+                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(8);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(40);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(40);
+                    self.word_bytes_4.d.next = self.result.val();
+                }
+            } else {
+                if self.field_byte_index.val().get_bit(0) {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(32);
+                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(16);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(48);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(48);
+                    self.word_bytes_4.d.next = self.icmp_checksum.val().get_bits::<8>(0);
+                } else {
+                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(40);
+                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(24);
+                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(56);
+                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(56);
+                    self.word_bytes_4.d.next = self.icmp_checksum.val().get_bits::<8>(8);
+                }
+            }
+        }
+        self.s4_write.d.next = self.s3_write.q.val();
+        self.s4_address.d.next = self.s3_address.q.val();
+        self.s4_value.d.next = self.s3_value.q.val();
+        self.s4_source.d.next = self.s3_source.q.val();
+        self.s4_sum_ip.d.next = self.s3_sum_ip.q.val();
+        self.s4_sum_udp.d.next = self.s3_sum_udp.q.val();
+        self.s4_from_buffer.d.next = self.s3_from_buffer.q.val();
+        self.counters_address.next = self.counter_address.q.val();
+        if self.s3_write.q.val()
+            & (self.s3_source.q.val() == 2)
+            & (self.s3_value.q.val().get_bits::<2>(0) == 0)
+        {
+            self.counter_word.d.next = self.counters_data.val();
+            self.counter_address.d.next = self.counter_address.q.val() + 1;
+        }
+
+        // Stage 4 -> 5: the byte by its source (a field byte: its word).
+        self.reply_byte.next = self.s4_value.q.val();
+        self.counter_word_shifted.next = self.counter_word.q.val()
+            << (bit_cast::<32, 2>(self.s4_value.q.val().get_bits::<2>(0)) << 3);
+        if self.s4_source.q.val() == 1 {
+            // (words 5 to 7 do not exist)
+            if self.s4_value.q.val().get_bit(5) {
+                self.reply_byte.next = self.word_bytes_4.q.val();
+            } else if self.s4_value.q.val().get_bit(4) {
+                if self.s4_value.q.val().get_bit(3) {
+                    self.reply_byte.next = self.word_bytes_3.q.val();
+                } else {
+                    self.reply_byte.next = self.word_bytes_2.q.val();
+                }
+            } else if self.s4_value.q.val().get_bit(3) {
+                self.reply_byte.next = self.word_bytes_1.q.val();
+            } else {
+                self.reply_byte.next = self.word_bytes_0.q.val();
+            }
+        } else if self.s4_source.q.val() == 2 {
+            self.reply_byte.next = self.counter_word_shifted.val().get_bits::<8>(24);
+        } else if self.s4_source.q.val() == 3 {
+            if self.s4_value.q.val().get_bits::<2>(0) == 0 {
+                self.reply_byte.next = self.ip_checksum.q.val().get_bits::<8>(8);
+            } else if self.s4_value.q.val().get_bits::<2>(0) == 1 {
+                self.reply_byte.next = self.ip_checksum.q.val().get_bits::<8>(0);
+            } else if self.s4_value.q.val().get_bits::<2>(0) == 2 {
+                self.reply_byte.next = self.udp_checksum.q.val().get_bits::<8>(8);
+            } else {
+                self.reply_byte.next = self.udp_checksum.q.val().get_bits::<8>(0);
+            }
+        }
+        self.s5_byte.d.next = self.reply_byte.val();
+        self.s5_write.d.next = self.s4_write.q.val();
+        self.s5_address.d.next = self.s4_address.q.val();
+        self.s5_sum_ip.d.next = self.s4_sum_ip.q.val();
+        self.s5_sum_udp.d.next = self.s4_sum_udp.q.val();
+        self.s5_from_buffer.d.next = self.s4_from_buffer.q.val();
+
+        // Stage 5: write and sum (an even frame position is a word's high byte); a copy's
+        // byte is the buffer's, read two clocks ago.
+        self.written.next = self.s5_byte.q.val();
+        if self.s5_from_buffer.q.val() {
+            self.written.next = self.buffer.read_data.val();
+        }
+        self.summand.next = bit_cast::<16, 8>(self.written.val());
+        if !self.s5_address.q.val().get_bit(0) {
+            self.summand.next = bit_cast::<16, 8>(self.written.val()) << 8;
+        }
+        // (summed a clock later, from a register: the buffer's output feeds no adder)
+        self.s6_summand.d.next = self.summand.val();
+        self.s6_sum_ip.d.next = self.s5_sum_ip.q.val();
+        self.s6_sum_udp.d.next = self.s5_sum_udp.q.val();
+        if self.s6_sum_ip.q.val() {
+            self.ip_sum.d.next = self.ip_sum.q.val() + bit_cast::<20, 16>(self.s6_summand.q.val());
+        }
+        if self.s6_sum_udp.q.val() {
+            self.udp_sum.d.next =
+                self.udp_sum.q.val() + bit_cast::<24, 16>(self.s6_summand.q.val());
+        }
+        self.ip_fold.d.next = bit_cast::<17, 16>(self.ip_sum.q.val().get_bits::<16>(0))
+            + bit_cast::<17, 4>(self.ip_sum.q.val().get_bits::<4>(16));
+        // (at most 0x1000E: adding its carry bit cannot carry again)
+        self.ip_folded.d.next = self.ip_fold.q.val().get_bits::<16>(0)
+            + bit_cast::<16, 1>(self.ip_fold.q.val().get_bits::<1>(16));
+        self.ip_checksum.d.next = !self.ip_folded.q.val();
+        self.udp_fold.d.next = bit_cast::<17, 16>(self.udp_sum.q.val().get_bits::<16>(0))
+            + bit_cast::<17, 8>(self.udp_sum.q.val().get_bits::<8>(16));
+        self.udp_folded.d.next = self.udp_fold.q.val().get_bits::<16>(0)
+            + bit_cast::<16, 1>(self.udp_fold.q.val().get_bits::<1>(16));
+        self.udp_checksum.d.next = !self.udp_folded.q.val();
+        if self.udp_folded.q.val() == 0xFFFF {
+            // a computed 0 is sent as 0xFFFF (RFC 768)
+            self.udp_checksum.d.next = 0xFFFF.into();
+        }
+        self.buffer.write_enable.next = self.receive_write_enable.val() & !self.locked_now.q.val();
+        self.buffer.write_address.next = self.receive_write_address.val();
+        self.buffer.write_data.next = self.receive_write_data.val();
+        if self.s5_write.q.val() {
+            self.buffer.write_enable.next = true;
+            self.buffer.write_address.next =
+                bit_cast::<BODY_ADDRESS_BITS, 8>(self.s5_address.q.val());
+            self.buffer.write_data.next = self.written.val();
+        }
+
+        // Starts: only when no reply is under way.
+        self.sizing_echo.d.next = false;
+        self.idle.next = !self.running.q.val()
+            & !self.read_2.q.val()
+            & !self.offering.q.val()
+            & !self.reader.busy.val();
+        if self.idle.val() & (self.start_arp.val() | self.start_echo.val() | self.start_ack.val()) {
+            self.running.d.next = true;
+            self.ip_sum.d.next = 0.into();
+            self.udp_sum.d.next = 0.into();
+            self.counter_address.d.next = 0.into();
+            self.is_ack.d.next = self.start_ack.val();
+            self.sizing_echo.d.next = self.start_echo.val();
+            self.frame_end.d.next = self.ip_total_length.val().get_bits::<BODY_ADDRESS_BITS>(0)
+                + self.ethernet_header_len.val();
+            if self.start_arp.val() {
+                self.step.d.next = self.arp_start.val();
+                self.body_len.d.next = self.arp_len.val();
+            } else if self.start_echo.val() {
+                self.step.d.next = self.echo_start.val();
+            } else if (self.command_opcode.val() == self.opcode_stream_to.val())
+                & (self.result.val() == self.result_ok.val())
+            {
+                self.step.d.next = self.ack_destination_start.val();
+                self.body_len.d.next = self.ack_destination_len.val();
+            } else if (self.command_opcode.val() == self.opcode_status_now.val())
+                & (self.result.val() == self.result_ok.val())
+            {
+                self.step.d.next = self.ack_counters_start.val();
+                self.body_len.d.next = self.ack_counters_len.val();
+            } else {
+                self.step.d.next = self.ack_none_start.val();
+                self.body_len.d.next = self.ack_none_len.val();
+            }
+        }
+        // an echo reply is the request's length, at least the minimum frame
+        if self.sizing_echo.q.val() {
+            self.body_len.d.next = self.frame_end.q.val();
+            if self.frame_end.q.val() < self.min_frame_len.val() {
+                self.body_len.d.next = self.min_frame_len.val();
+            }
+        }
+
+        // The descriptor; at its take the reader starts and an acknowledgement's patch.
+        self.replies.valid.next = self.offering.q.val();
+        self.replies.kind.next = self.raw_frame_kind.val();
+        self.replies.flags.next = 0.into();
+        self.replies.entry_count.next = 0.into();
+        self.replies.base_tick.next = 0.into();
+        self.replies.body_len.next = self.body_len.q.val();
+        self.replies.body_sum.next = 0.into();
+        self.take.next = self.offering.q.val() & self.replies.ready.val();
+        self.reader.start.next = self.take.val();
+        self.reader.length.next = self.body_len.q.val();
+        self.took.d.next = false;
+        if self.take.val() {
+            self.offering.d.next = false;
+            self.tick_taken.d.next = self.tick.val();
+            if self.is_ack.q.val() {
+                self.took.d.next = true;
+                self.patching.d.next = true;
+                self.step.d.next = self.patch_start.val();
+                self.running.d.next = true;
+            }
+        }
+        if self.took.q.val() {
+            self.send_tick.d.next = self.tick_taken.q.val() + self.send_tick_offset.val();
+        }
+
+        // The body, straight from the reader.
+        // (the reader reads from the clock after the take on; a build reads before)
+        self.buffer.read_address.next = self.reader.read_address.val();
+        if !self.reader.busy.val() {
+            self.buffer.read_address.next = bit_cast::<BODY_ADDRESS_BITS, 8>(self.s3_read.q.val());
+        }
+        self.reader.read_data.next = self.buffer.read_data.val();
+        self.replies.body.valid.next = self.reader.body.valid.val();
+        self.replies.body.data.next = self.reader.body.data.val();
+        self.replies.body.last.next = self.reader.body.last.val();
+        self.replies.body.error.next = self.reader.body.error.val();
+        self.reader.body.ready.next = self.replies.body.ready.val();
+
+        // Locked from the clock after `reserve` until the clock after the last beat moved.
+        self.locked.next = self.locked_now.q.val();
+        if self.reader.body.valid.val()
+            & self.reader.body.last.val()
+            & self.replies.body.ready.val()
+        {
+            self.locked_now.d.next = false;
+        }
+        if self.reserve.val() {
+            self.locked_now.d.next = true;
+        }
+
+        if self.reset.val() {
+            self.running.d.next = false;
+            self.read_1.d.next = false;
+            self.read_2.d.next = false;
+            self.offering.d.next = false;
+            self.is_ack.d.next = false;
+            self.patching.d.next = false;
+            self.locked_now.d.next = false;
+            self.took.d.next = false;
+            self.sizing_echo.d.next = false;
+            self.s3_write.d.next = false;
+            self.s4_write.d.next = false;
+            self.s4_sum_ip.d.next = false;
+            self.s4_sum_udp.d.next = false;
+            self.s5_write.d.next = false;
+            self.s6_sum_ip.d.next = false;
+            self.s6_sum_udp.d.next = false;
+            self.s3_sum_ip.d.next = false;
+            self.s3_sum_udp.d.next = false;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::{Bench, TestRng};
+    use etherparse::{
+        ArpPacket, Icmpv4Type, NetHeaders, PacketBuilder, PacketHeaders, TransportHeader,
+    };
+    use skinbox_protocol::box_counters::{BoxCounters, LinkSpeed};
+    use skinbox_protocol::command::{AckReply, AckRepr, CommandRepr, Destination, Request};
+
+    const BOX_ID: u16 = 0x0102;
+    const PORTS: u8 = 8;
+    const PEER_MAC: [u8; 6] = [0x3C, 0x7C, 0x3F, 0x01, 0x02, 0x03];
+    const PEER_IP: [u8; 4] = [192, 0, 2, 77];
+
+    fn number(bytes: &[u8]) -> u64 {
+        bytes.iter().fold(0, |n, &b| n << 8 | u64::from(b))
+    }
+
+    /// Folded ones'-complement sum of big-endian words, odd length padded (RFC 1071).
+    fn ones_sum(bytes: &[u8]) -> u16 {
+        let mut sum: u64 = bytes
+            .chunks(2)
+            .map(|w| u64::from(w[0]) << 8 | u64::from(*w.get(1).unwrap_or(&0)))
+            .sum();
+        while sum > 0xFFFF {
+            sum = (sum & 0xFFFF) + (sum >> 16);
+        }
+        sum as u16
+    }
+
+    /// What the test drives besides the request: the parser's and the command unit's
+    /// held fields, the run-time destination, the link and the box counters.
+    #[derive(Clone)]
+    struct Held {
+        peer_port: u16,
+        ip_total_length: u16,
+        icmp_rest_sum: u16,
+        command: Option<CommandRepr>,
+        opcode: u8,
+        result: AckResult,
+        last_accepted: u32,
+        receive_tick: u64,
+        destination: Destination,
+        counters: BoxCounters,
+    }
+
+    impl Held {
+        fn new(rng: &mut TestRng) -> Held {
+            let mut counts = [0u32; BoxCounter::ALL.len()];
+            for c in &mut counts {
+                *c = rng.next_u64() as u32;
+            }
+            Held {
+                peer_port: rng.next_u64() as u16,
+                ip_total_length: 0,
+                icmp_rest_sum: 0,
+                command: None,
+                opcode: 0,
+                result: AckResult::Ok,
+                last_accepted: rng.next_u64() as u32,
+                receive_tick: rng.next_u64() >> 8,
+                destination: Destination {
+                    mac: [0x02, 0, 0, 0, rng.byte(), rng.byte()],
+                    ip: [10, rng.byte(), rng.byte(), rng.byte()],
+                    port: rng.next_u64() as u16,
+                },
+                counters: BoxCounters {
+                    link_up: rng.chance(0.5),
+                    link_speed: [
+                        LinkSpeed::Mbit10,
+                        LinkSpeed::Mbit100,
+                        LinkSpeed::Mbit1000,
+                        LinkSpeed::Unknown,
+                    ][(rng.next_u64() % 4) as usize],
+                    counts,
+                },
+            }
+        }
+    }
+
+    /// What one reply run saw.
+    struct Run {
+        frame: Vec<u8>,
+        tick_at_take: u64,
+        build_clocks: u64,
+        /// Clocks from the take to the last write of a patched byte, and to the first read
+        /// of one (fastest take and read only).
+        last_patch_write: Option<u64>,
+        first_patched_read: Option<u64>,
+    }
+
+    /// Writes `request` through the receive port, sets the held fields, reserves and
+    /// starts; takes the descriptor after a random delay (none with `fastest`) and reads
+    /// the body with random `ready` (always with `fastest`). Meanwhile the receive port
+    /// writes garbage (the buffer is locked), and `locked` is checked clock by clock.
+    fn run(kind: ReplyKind, request: &[u8], held: &Held, seed: u64, fastest: bool) -> Run {
+        let link = LinkConfig::DEFAULT;
+        let mut rng = TestRng::new(seed);
+        let mut bench = Bench::new(ReplyBuilder::new(&link, BOX_ID, PORTS), |b| &mut b.clock);
+        let tick_base = rng.next_u64() >> 4;
+        bench.uut.reset.next = true;
+        bench.cycle();
+        bench.uut.reset.next = false;
+        for (a, &b) in request.iter().enumerate() {
+            bench.uut.receive_write_enable.next = true;
+            bench.uut.receive_write_address.next = (a as u64).into();
+            bench.uut.receive_write_data.next = u64::from(b).into();
+            bench.cycle();
+            assert!(!bench.uut.locked.val());
+        }
+        bench.uut.receive_write_enable.next = false;
+        let u = &mut bench.uut;
+        u.receive_tick.next = held.receive_tick.into();
+        u.ip_total_length.next = u64::from(held.ip_total_length).into();
+        u.icmp_rest_sum.next = u64::from(held.icmp_rest_sum).into();
+        u.command_opcode.next = u64::from(held.opcode).into();
+        u.result.next = u64::from(held.result as u8).into();
+        u.last_accepted.next = u64::from(held.last_accepted).into();
+        u.destination_mac.next = number(&held.destination.mac).into();
+        u.destination_ip.next = number(&held.destination.ip).into();
+        u.destination_port.next = u64::from(held.destination.port).into();
+        u.link_up.next = held.counters.link_up;
+        u.link_speed.next = u64::from(held.counters.link_speed as u8).into();
+        for _ in 0..rng.next_u64() % 3 {
+            bench.cycle();
+        }
+        bench.uut.reserve.next = true;
+        bench.cycle();
+        bench.uut.reserve.next = false;
+        assert!(bench.uut.locked.val(), "locked the clock after reserve");
+        bench.cycle();
+        match kind {
+            ReplyKind::Arp => bench.uut.start_arp.next = true,
+            ReplyKind::Echo => bench.uut.start_echo.next = true,
+            ReplyKind::Ack(_) => bench.uut.start_ack.next = true,
+        }
+        let start = bench.cycles;
+        let take_delay = if fastest { 0 } else { rng.next_u64() % 20 };
+        let take_p = if fastest {
+            1.0
+        } else {
+            [1.0, 0.7, 0.2][(seed % 3) as usize]
+        };
+        let mut counter_addresses = [0usize; 2];
+        let mut valid_at = None;
+        let mut take_at = None;
+        let mut tick_at_take = 0;
+        let mut frame = vec![];
+        let mut last_patch_write = None;
+        let mut first_patched_read = None;
+        let patched = |a: usize| {
+            (UDP_CHECKSUM_AT..UDP_CHECKSUM_AT + 2).contains(&a)
+                || (SEND_TICK_AT..SEND_TICK_AT + 8).contains(&a)
+        };
+        loop {
+            let clock = bench.cycles;
+            let u = &mut bench.uut;
+            u.tick.next = (tick_base + clock).into();
+            u.counters_data.next = u64::from(held.counters.counts[counter_addresses[0]]).into();
+            // the parser keeps writing: the lock must keep it out
+            u.receive_write_enable.next = rng.chance(0.5);
+            u.receive_write_address.next = (rng.next_u64() % 256).into();
+            u.receive_write_data.next = u64::from(rng.byte()).into();
+            let take = rng.chance(take_p);
+            let offered_for = valid_at.map_or(0, |v| clock - v);
+            u.replies.ready.next = valid_at.is_some() && offered_for >= take_delay && take;
+            u.replies.body.ready.next = take;
+            bench.settle();
+            let u = &bench.uut;
+            assert!(u.locked.val(), "locked until the last beat was taken");
+            if u.replies.valid.val() {
+                valid_at.get_or_insert(clock);
+                assert_eq!(u.replies.kind.val().to_u8(), RAW_FRAME_KIND);
+                if u.replies.ready.val() {
+                    assert!(take_at.is_none(), "one descriptor");
+                    take_at = Some(clock);
+                    tick_at_take = tick_base + clock;
+                }
+            }
+            if let Some(t) = take_at {
+                if u.buffer.write_enable.val() && patched(u.buffer.write_address.val().index()) {
+                    last_patch_write = Some(clock - t);
+                }
+                if u.reader.busy.val() && patched(u.buffer.read_address.val().index()) {
+                    first_patched_read.get_or_insert(clock - t);
+                }
+            }
+            // while locked only the builder writes
+            assert!(
+                !u.buffer.write_enable.val() || u.s5_write.q.val(),
+                "clock {clock}"
+            );
+            let beat = u.replies.body.valid.val() && u.replies.body.ready.val();
+            let last = beat && u.replies.body.last.val();
+            if beat {
+                assert!(take_at.is_some(), "no body before the take");
+                frame.push(u.replies.body.data.val().to_u8());
+                assert_eq!(last, frame.len() == u.replies.body_len.val().index());
+            }
+            counter_addresses = [counter_addresses[1], u.counters_address.val().index() % 20];
+            bench.cycle();
+            let u = &mut bench.uut;
+            u.start_arp.next = false;
+            u.start_echo.next = false;
+            u.start_ack.next = false;
+            if last {
+                break;
+            }
+            assert!(clock - start < 10_000, "no reply");
+        }
+        assert!(!bench.uut.locked.val(), "unlocked after the last beat");
+        Run {
+            frame,
+            tick_at_take,
+            build_clocks: valid_at.expect("offered") - start,
+            last_patch_write,
+            first_patched_read,
+        }
+    }
+
+    fn check_ipv4(frame: &[u8], protocol: u8) -> (PacketHeaders<'_>, etherparse::Ipv4Header) {
+        let headers = PacketHeaders::from_ethernet_slice(frame).expect("an Ethernet frame");
+        let eth = headers
+            .link
+            .clone()
+            .unwrap()
+            .ethernet2()
+            .expect("Ethernet II");
+        assert_eq!(eth.source, link().box_mac);
+        assert_eq!(eth.destination, PEER_MAC);
+        let Some(NetHeaders::Ipv4(ip, ext)) = &headers.net else {
+            panic!("IPv4")
+        };
+        assert!(ext.is_empty());
+        assert_eq!(ip.protocol.0, protocol);
+        assert_eq!(ip.source, link().box_ip);
+        assert_eq!(ip.destination, PEER_IP);
+        assert_eq!(
+            (ip.identification, ip.dont_fragment, ip.more_fragments),
+            (0, true, false)
+        );
+        assert_eq!(ip.time_to_live, IPV4_TTL);
+        assert_eq!(
+            ip.header_checksum,
+            ip.calc_header_checksum(),
+            "IPv4 checksum"
+        );
+        // and with our own sum
+        assert_eq!(ones_sum(&frame[IP_AT..IP_AT + IPV4_HEADER_LEN]), 0xFFFF);
+        let ip = ip.clone();
+        (headers, ip)
+    }
+
+    fn link() -> LinkConfig {
+        LinkConfig::DEFAULT
+    }
+
+    fn arp_request(rng: &mut TestRng) -> Vec<u8> {
+        let mut f = vec![0xFF; 6];
+        f.extend(PEER_MAC);
+        f.extend(ETHERTYPE_ARP.to_be_bytes());
+        f.extend([0, 1, 8, 0, 6, 4, 0, 1]);
+        f.extend(PEER_MAC);
+        f.extend(PEER_IP);
+        f.extend([0; 6]);
+        f.extend(link().box_ip);
+        f.extend((0..22).map(|_| rng.byte()));
+        f
+    }
+
+    #[test]
+    fn arp_replies_answer_the_requester() {
+        for seed in 0..6 {
+            let mut rng = TestRng::new(seed);
+            let held = Held::new(&mut rng);
+            let request = arp_request(&mut rng);
+            let r = run(ReplyKind::Arp, &request, &held, seed, seed == 0);
+            assert_eq!(r.build_clocks, build_clocks(ReplyKind::Arp));
+            assert_eq!(r.frame.len(), MIN_FRAME_LEN);
+            let (eth, rest) = etherparse::Ethernet2Header::from_slice(&r.frame).unwrap();
+            assert_eq!(eth.destination, PEER_MAC);
+            assert_eq!(eth.source, link().box_mac);
+            assert_eq!(eth.ether_type.0, ETHERTYPE_ARP);
+            let arp = ArpPacket::from_slice(rest).unwrap();
+            let arp = arp.try_eth_ipv4().expect("Ethernet/IPv4 ARP");
+            assert_eq!(arp.operation, etherparse::ArpOperation::REPLY);
+            assert_eq!(arp.sender_mac, link().box_mac);
+            assert_eq!(arp.sender_ipv4, link().box_ip);
+            assert_eq!(arp.target_mac, PEER_MAC);
+            assert_eq!(arp.target_ipv4, PEER_IP);
+            assert!(
+                r.frame[ETHERNET_HEADER_LEN + 28..].iter().all(|&b| b == 0),
+                "padding"
+            );
+        }
+    }
+
+    #[test]
+    fn echo_replies_of_every_edge_length_carry_the_data_and_zero_padding() {
+        for (k, data_len) in [0usize, 1, 17, 18, 1472].into_iter().enumerate() {
+            for fastest in [true, false] {
+                let seed = k as u64 * 2 + u64::from(fastest);
+                let mut rng = TestRng::new(seed);
+                let mut held = Held::new(&mut rng);
+                let data: Vec<u8> = (0..data_len).map(|_| rng.byte()).collect();
+                let (id, seq) = (rng.next_u64() as u16, rng.next_u64() as u16);
+                let mut request = vec![];
+                PacketBuilder::ethernet2(PEER_MAC, link().box_mac)
+                    .ipv4(PEER_IP, link().box_ip, 55)
+                    .icmpv4_echo_request(id, seq)
+                    .write(&mut request, &data)
+                    .unwrap();
+                // a short request's padding is not zero, then the FCS (any bytes here)
+                while request.len() < MIN_FRAME_LEN {
+                    request.push(0xA5);
+                }
+                request.extend([0x11, 0x22, 0x33, 0x44]);
+                let icmp = &request[ICMP_AT..ICMP_AT + 8 + data_len];
+                held.ip_total_length = (IPV4_HEADER_LEN + 8 + data_len) as u16;
+                held.icmp_rest_sum = ones_sum(&icmp[4..]);
+                let r = run(ReplyKind::Echo, &request, &held, seed, fastest);
+                assert_eq!(r.build_clocks, build_clocks(ReplyKind::Echo), "{data_len}");
+                let end = ICMP_AT + 8 + data_len;
+                assert_eq!(r.frame.len(), end.max(MIN_FRAME_LEN), "{data_len}");
+                let (headers, ip) = check_ipv4(&r.frame, IP_PROTOCOL_ICMP);
+                assert_eq!(usize::from(ip.total_len), end - IP_AT);
+                let Some(TransportHeader::Icmpv4(h)) = &headers.transport else {
+                    panic!("ICMP")
+                };
+                let Icmpv4Type::EchoReply(echo) = h.icmp_type else {
+                    panic!("an echo reply: {:?}", h.icmp_type)
+                };
+                assert_eq!((echo.id, echo.seq), (id, seq));
+                assert_eq!(h.checksum, h.icmp_type.calc_checksum(&data), "{data_len}");
+                assert_eq!(ones_sum(&r.frame[ICMP_AT..end]), 0xFFFF, "ICMP checksum");
+                assert_eq!(&r.frame[ICMP_AT + 8..end], data);
+                assert!(r.frame[end..].iter().all(|&b| b == 0), "padding {data_len}");
+            }
+        }
+    }
+
+    fn command_frame(c: &CommandRepr, port: u16) -> Vec<u8> {
+        let mut f = vec![];
+        PacketBuilder::ethernet2(PEER_MAC, link().box_mac)
+            .ipv4(PEER_IP, link().box_ip, 64)
+            .udp(port, link().box_port)
+            .write(&mut f, &c.to_bytes())
+            .unwrap();
+        f.extend([0; 4]);
+        f
+    }
+
+    /// Acknowledgements of every result and reply, read back by the protocol crate.
+    #[test]
+    fn acknowledgements_carry_every_field_and_their_send_tick() {
+        let cases = [
+            (
+                Request::StreamTo { to: None },
+                AckResult::Ok,
+                AckReplyKind::Destination,
+            ),
+            (Request::StatusNow, AckResult::Ok, AckReplyKind::Counters),
+            (
+                Request::SetFlushTimeout { ticks: 99 },
+                AckResult::Ok,
+                AckReplyKind::None,
+            ),
+            (Request::StatusNow, AckResult::Replay, AckReplyKind::None),
+            (
+                Request::StreamTo { to: None },
+                AckResult::OtherBox,
+                AckReplyKind::None,
+            ),
+            (
+                Request::ReadTick,
+                AckResult::BadArgument,
+                AckReplyKind::None,
+            ),
+        ];
+        for (k, (request, result, reply)) in cases.into_iter().enumerate() {
+            for fastest in [true, false] {
+                let seed = 100 + k as u64 * 2 + u64::from(fastest);
+                let mut rng = TestRng::new(seed);
+                let mut held = Held::new(&mut rng);
+                let command = CommandRepr {
+                    box_id: BOX_ID,
+                    sequence: rng.next_u64() as u32,
+                    host_time: rng.next_u64(),
+                    request,
+                };
+                held.opcode = request.opcode() as u8;
+                held.result = result;
+                held.command = Some(command);
+                let frame = command_frame(&command, held.peer_port);
+                let kind = ReplyKind::Ack(reply);
+                let r = run(kind, &frame, &held, seed, fastest);
+                assert_eq!(r.build_clocks, build_clocks(kind), "{k}");
+                assert_eq!(r.frame.len(), reply.frame_len());
+                let (headers, ip) = check_ipv4(&r.frame, IP_PROTOCOL_UDP);
+                let Some(TransportHeader::Udp(udp)) = &headers.transport else {
+                    panic!("UDP")
+                };
+                let payload = headers.payload.slice();
+                assert_eq!(
+                    (udp.source_port, udp.destination_port),
+                    (link().box_port, held.peer_port)
+                );
+                assert_eq!(usize::from(udp.length), UDP_HEADER_LEN + payload.len());
+                assert_eq!(
+                    udp.checksum,
+                    udp.calc_checksum_ipv4(&ip, payload).unwrap(),
+                    "UDP checksum {k}"
+                );
+                let ack = skinbox_protocol::command::Ack::new_checked(payload).expect("an ack");
+                assert_eq!(ack.send_tick(), r.tick_at_take + TAKE_TO_FIRST_BYTE);
+                let expected = AckRepr {
+                    box_id: BOX_ID,
+                    port_count: PORTS,
+                    sequence: command.sequence,
+                    host_time: command.host_time,
+                    opcode: held.opcode,
+                    result,
+                    last_accepted: held.last_accepted,
+                    receive_tick: held.receive_tick,
+                    send_tick: r.tick_at_take + TAKE_TO_FIRST_BYTE,
+                    reply: match reply {
+                        AckReplyKind::None => AckReply::None,
+                        AckReplyKind::Destination => AckReply::Destination(held.destination),
+                        AckReplyKind::Counters => AckReply::Counters(held.counters),
+                    },
+                };
+                assert_eq!(AckRepr::parse(payload).expect("parses"), expected, "{k}");
+                assert_eq!(payload, expected.to_bytes());
+                if fastest {
+                    let write = r.last_patch_write.expect("patched");
+                    let read = r.first_patched_read.expect("read");
+                    assert_eq!(write, patch_clocks());
+                    assert_eq!(read, FIRST_PATCHED_READ);
+                    assert!(write < read, "patch done before the reader reaches it");
+                    assert_eq!(read - write - 1, patch_margin_clocks());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn build_durations_and_margin() {
+        // the figures of the module doc
+        let clocks = [
+            ReplyKind::Arp,
+            ReplyKind::Echo,
+            ReplyKind::Ack(AckReplyKind::None),
+            ReplyKind::Ack(AckReplyKind::Destination),
+            ReplyKind::Ack(AckReplyKind::Counters),
+        ]
+        .map(build_clocks);
+        assert_eq!(clocks, [64, 60, 93, 105, 177]);
+        assert_eq!((patch_clocks(), patch_margin_clocks()), (20, 21));
+    }
+
+    #[test]
+    fn verilog_lints_clean() {
+        let mut uut = ReplyBuilder::new(&LinkConfig::DEFAULT, BOX_ID, PORTS);
+        uut.connect_all();
+        let text = generate_verilog(&uut);
+        let dir = std::env::temp_dir().join(format!("skinbox-reply-lint-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let report = crate::verilog::lint(&text, &dir).expect("verilator runs");
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(report.clean, "{}", report.output);
+    }
+}
