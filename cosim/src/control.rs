@@ -49,10 +49,7 @@ use skinbox_protocol::Error;
 
 /// Hosts whose last accepted sequence number the box remembers.
 pub const HOST_SLOTS: usize = 4;
-/// Shortest frame the MAC takes, FCS included (IEEE 802.3).
-pub const MIN_RECEIVE_LEN: usize = MIN_FRAME_LEN + FCS_LEN;
-/// Longest frame the MAC takes, FCS included (1500-byte MTU, no VLAN tag).
-pub const MAX_RECEIVE_LEN: usize = 1518;
+pub use skinbox_protocol::link::{MAX_RECEIVE_LEN, MIN_RECEIVE_LEN};
 /// EtherType of ARP.
 pub const ETHERTYPE_ARP: u16 = 0x0806;
 /// EtherType of IPv4.

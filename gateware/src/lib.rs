@@ -27,6 +27,7 @@ pub mod datagram_arbiter;
 pub mod frame_transmitter;
 pub mod hdl;
 pub mod interface_box;
+pub mod mac_receiver;
 pub mod mdio;
 pub mod packet_store;
 pub mod port_slots;
