@@ -17,6 +17,7 @@
 //! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
 //! over the interfaces of [`stream`]: bytes, and datagrams (a descriptor, then bytes).
 
+pub mod async_fifo;
 pub mod block_ram;
 pub mod board;
 pub mod body_reader;
@@ -34,6 +35,7 @@ pub mod port_slots;
 pub mod record_arbiter;
 pub mod record_batcher;
 pub mod replica_register;
+pub mod rx_clock_crossing;
 pub mod status_reporter;
 pub mod stream;
 pub mod stream_fifo;
