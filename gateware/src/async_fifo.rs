@@ -12,8 +12,9 @@
 //!
 //! The read side is first-word-fall-through: while `empty` is low, `read_data` is the
 //! oldest word, and `read_enable` takes it. `read_level` is the number of words the read
-//! side sees (a clock late: it may be one less than the words left after a take in the
-//! previous clock, never more). Each side has its own synchronous reset: reset both
+//! side saw a clock earlier (registered): after a take in the previous clock it counts
+//! that word too, so only a reader that waits without taking may trust it as a lower
+//! bound. Each side has its own synchronous reset: reset both
 //! together (hold both for a few clocks of the slower clock); a word written while
 //! `full` is high is dropped (the writer must look at `full`).
 
@@ -51,7 +52,7 @@ pub struct AsyncFifo<const D: usize> {
     pub read_enable: Signal<In, Bit>,
     /// No word, as the read side sees it.
     pub empty: Signal<Out, Bit>,
-    /// Words the read side sees, registered (see the module documentation).
+    /// Words the read side saw a clock earlier (see the module documentation).
     pub read_level: Signal<Out, Pointer>,
     ram: RAM<Bits<D>, ADDRESS_BITS>,
     write_pointer: DFF<Pointer>,

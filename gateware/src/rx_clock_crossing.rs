@@ -232,6 +232,16 @@ impl Logic for RxClockCrossing {
     }
 }
 
+/// The crossing as a Verilog module called `name`, for a board top.
+pub fn module_verilog(name: &str) -> String {
+    let mut crossing = RxClockCrossing::default();
+    crossing.connect_all();
+    check_all(&crossing).expect("the crossing is a complete block");
+    let mut defines = ModuleDefines::default();
+    crossing.accept(name, &mut defines);
+    defines.defines()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
