@@ -178,3 +178,86 @@ impl<const D: usize> Logic for AsyncFifo<D> {
         self.read_data.next = self.ram.read_data.val();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::TestRng;
+    use std::collections::VecDeque;
+
+    /// Words written at random under `full` at one clock, read at random at another (both
+    /// orders of speed): every word comes out once and in order; `full` and `empty` are
+    /// never wrong in the unsafe direction (no word lost, none read that was not written);
+    /// the FIFO fills up when the writer is the faster side.
+    #[test]
+    fn words_cross_in_order_between_unrelated_clocks() {
+        for (seed, write_period, read_period, write_p, read_p) in [
+            (1, 8000.0, 8001.0, 0.9, 0.95),
+            (2, 8000.0, 13_000.0, 1.0, 1.0),
+            (3, 13_000.0, 8000.0, 1.0, 1.0),
+            (4, 7000.0, 9000.0, 0.5, 0.3),
+        ] {
+            let mut rng = TestRng::new(seed);
+            let mut uut = AsyncFifo::<10>::default();
+            uut.connect_all();
+            let sent: Vec<u64> = (0..1500).map(|_| rng.next_u64() & 0x3FF).collect();
+            let (mut next, mut got) = (0usize, Vec::new());
+            let mut model: VecDeque<u64> = VecDeque::new();
+            let mut was_full = false;
+            let (mut write_edge, mut read_edge) = (0u64, 0u64);
+            let write_time = |e: u64| 500.0 + e as f64 * write_period / 2.0;
+            let read_time = |e: u64| 2345.0 + e as f64 * read_period / 2.0;
+            uut.write_reset.next = true;
+            uut.read_reset.next = true;
+            assert!(simulate(&mut uut, 1000));
+            while got.len() < sent.len() && read_edge < 2_000_000 {
+                if write_time(write_edge) <= read_time(read_edge) {
+                    let rising = write_edge % 2 == 0;
+                    uut.write_clock.next = rising.into();
+                    assert!(simulate(&mut uut, 1000));
+                    if !rising {
+                        uut.write_reset.next = write_edge < 8;
+                        // the word of the next rising edge, if any and there is room
+                        let offer = next < sent.len() && rng.chance(write_p) && write_edge >= 8;
+                        assert!(simulate(&mut uut, 1000));
+                        let full = uut.full.val();
+                        was_full |= full;
+                        assert!(model.len() < DEPTH || full, "full missed");
+                        uut.write_enable.next = offer && !full;
+                        uut.write_data.next = sent.get(next).copied().unwrap_or(0).into();
+                        if offer && !full {
+                            model.push_back(sent[next]);
+                            next += 1;
+                        }
+                        assert!(simulate(&mut uut, 1000));
+                    }
+                    write_edge += 1;
+                } else {
+                    let rising = read_edge % 2 == 0;
+                    uut.read_clock.next = rising.into();
+                    assert!(simulate(&mut uut, 1000));
+                    if !rising {
+                        uut.read_reset.next = read_edge < 8;
+                        assert!(simulate(&mut uut, 1000));
+                        let take = rng.chance(read_p) && read_edge >= 8;
+                        let empty = uut.empty.val();
+                        assert!(
+                            !model.is_empty() || empty,
+                            "a word read that was not written"
+                        );
+                        if !empty && take {
+                            assert_eq!(Some(uut.read_data.val().to_u64()), model.pop_front());
+                            got.push(uut.read_data.val().to_u64());
+                        }
+                        uut.read_enable.next = take;
+                        assert!(simulate(&mut uut, 1000));
+                    }
+                    read_edge += 1;
+                }
+            }
+            assert_eq!(got, sent, "seed {seed}");
+            let writes_faster = write_p / write_period > read_p / read_period;
+            assert_eq!(was_full, writes_faster, "seed {seed}: full seen");
+        }
+    }
+}

@@ -23,7 +23,9 @@
 //! `last`, `error` and `length_error`. A carrier that ends right after the SFD gives that
 //! beat alone. So every frame that began with an SFD ends with one `last` beat and can be
 //! counted. The MAC never waits: a beat is valid for one clock and `frame.ready` is not
-//! read. Cost: the CRC's XOR network and about 75 flip-flops; every output is a register.
+//! read. Every output is a register. Cost (yosys `synth_ecp5` of the block alone): 106 LUT4,
+//! 6 carry cells and 77 flip-flops, most of the LUT4 the CRC's XOR network; 179 MHz placed
+//! alone on the ECP5-25 speed 6.
 
 use crate::crc32::Crc32Byte;
 use crate::hdl::*;
