@@ -50,8 +50,9 @@ fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
         "the framer's payload buffers are block RAM"
     );
     assert!(count("lut4_sites") <= count("lut4_sites_available"));
-    // clk25, the UART pins, TX clock, TX_CTL, 4 TX data, PHY reset, MDC, MDIO, LED.
-    assert_eq!(count("io"), PORTS as u64 + 11);
+    // clk25, the UART pins, TX clock, TX_CTL, 4 TX data, RX clock, RX_CTL, 4 RX data, PHY
+    // reset, MDC, MDIO, LED.
+    assert_eq!(count("io"), PORTS as u64 + 17);
     assert_eq!(count("pll"), 1);
     assert_eq!(report["target_mhz"], 125.0);
     let fmax = report["fmax_mhz"].as_f64().expect("fmax_mhz");
@@ -162,6 +163,10 @@ fn two_port_box_synthesises_places_routes_and_meets_125_mhz() {
     assert!(merged_bits.windows(4).take(4096).any(|w| w == preamble));
 
     // The target: 125 MHz met, and the command says so with its exit status.
+    let rx_fmax = report["rx_clock_fmax_mhz"]
+        .as_f64()
+        .expect("rx_clock_fmax_mhz");
+    assert!(rx_fmax >= 125.0, "PHY receive clock: {rx_fmax:.1} MHz");
     assert!(
         report["timing_met"] == true && fmax >= 125.0,
         "125 MHz not met: Fmax {fmax:.1} MHz; critical paths: {:#}",

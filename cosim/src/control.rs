@@ -51,10 +51,7 @@ pub use skinbox_protocol::link::{
 use skinbox_protocol::Error;
 
 pub use skinbox_protocol::command::HOST_SLOTS;
-/// Shortest frame the MAC takes, FCS included (IEEE 802.3).
-pub const MIN_RECEIVE_LEN: usize = MIN_FRAME_LEN + FCS_LEN;
-/// Longest frame the MAC takes, FCS included (1500-byte MTU, no VLAN tag).
-pub const MAX_RECEIVE_LEN: usize = 1518;
+pub use skinbox_protocol::link::{MAX_RECEIVE_LEN, MIN_RECEIVE_LEN};
 /// Length of an ARP message for Ethernet and IPv4 (RFC 826).
 pub const ARP_LEN: usize = 28;
 /// Length of the ICMP echo header (type, code, checksum, identifier, sequence).

@@ -13,6 +13,15 @@
 //!   Colorlight boards delay their GTXCLK by about 1.9 ns internally by default, which puts
 //!   the sampling edge inside the data eye (see `constraints/colorlight_i5.lpf` for the
 //!   source). A PHY without that delay would need the clock shifted by 90 degrees (2 ns).
+//! - RGMII receive: RX_CTL and RXD[3:0] each through a `DELAYG` of 2 ns ([`RX_DELAY_TAPS`])
+//!   into an `IDDRX1F` (the ECP5 DDR input primitive) in the PHY's receive clock
+//!   `eth_rx_clk`, the second clock of the design: Q0 (the rising edge) holds RXD[3:0] and
+//!   rx_dv, Q1 (the falling edge) RXD[7:4] and rx_dv XOR rx_er (RGMII 2.0, section 3.4).
+//!   The delay is what LiteEth's ECP5 RGMII PHY (`liteeth/phy/ecp5rgmii.py`) applies by
+//!   default and litex-boards' `targets/colorlight_i5.py` keeps for this board: the
+//!   B50612D sends RXC edge-aligned with the data, and 2 ns put the edge inside the data
+//!   eye. [`crate::rx_clock_crossing::RxClockCrossing`] (module [`RX_CROSSING_MODULE`])
+//!   takes the bytes into the box clock as `gmii_rxd`, `gmii_rx_dv` and `gmii_rx_er`.
 //! - PHY reset: `eth_rst_n` stays low until the PLL has been locked for [`PHY_RESET_CLOCKS`]
 //!   clocks (16.8 ms, more than the 10 ms of docs/design.md section 9), and the box stays in
 //!   reset until then too, so its first status datagram is not sent into a PHY in reset.
@@ -23,8 +32,8 @@
 //!   [`MDIO_POLL_CLOCKS`]. Its `link_up` and `link_speed` outputs go to the box, which
 //!   reports them in every status datagram's box counter block.
 //! - one status LED (active low): dark until the PHY reset ends; then a 1 Hz heartbeat (bit 26
-//!   of a free-running counter) that each frame start inverts for 2^19 clocks (4.2 ms), so
-//!   traffic shows as flicker.
+//!   of a free-running counter) that each frame start, sent or received, inverts for 2^19
+//!   clocks (4.2 ms), so traffic shows as flicker.
 //! - the UART inputs, straight from the pins: the box's `UartRx` synchronises them.
 //!
 //! Pins and the clock constraint are in `constraints/` ([`Board::lpf`]).
@@ -52,6 +61,23 @@ pub const MDIO_POLL_CLOCKS: u64 = 1 << 24;
 
 /// Name of the MDIO master's module in the board top's Verilog.
 pub const MDIO_MODULE: &str = "skinbox_mdio";
+
+/// Name of the receive clock crossing's module in the board top's Verilog.
+pub const RX_CROSSING_MODULE: &str = "skinbox_rx_crossing";
+
+/// The board top's input of the PHY's receive clock, 125 MHz (nextpnr names the clock
+/// after it).
+pub const RX_CLOCK_PORT: &str = "eth_rx_clk";
+
+/// `DELAYG` taps (25 ps each) on the RGMII receive pins: 2 ns, LiteEth's default
+/// `rx_delay`, which litex-boards keeps for the Colorlight i5.
+pub const RX_DELAY_TAPS: u32 = 80;
+
+/// The board top's wires of the received GMII in the box clock (the crossing's outputs),
+/// named as the box's receive inputs: the box's `top` instance connects each to its port
+/// of the same name once the box has a receive path. Until then they are kept (`keep`)
+/// so that synthesis keeps the receive logic and reports its cost.
+pub const RX_GMII_WIRES: [&str; 3] = ["gmii_rxd", "gmii_rx_dv", "gmii_rx_er"];
 
 /// A board the box can be synthesised for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -154,8 +180,9 @@ impl Board {
             ),
             MDIO_MODULE,
         );
+        let rx_crossing = crate::rx_clock_crossing::module_verilog(RX_CROSSING_MODULE);
         Ok(format!(
-            "{box_verilog}\n{mdio}\n{}",
+            "{box_verilog}\n{mdio}\n{rx_crossing}\n{}",
             board_top(self, config.ports, self.oscillator_hz(), &pll)
         ))
     }
@@ -259,6 +286,16 @@ fn board_top(board: Board, ports: usize, oscillator_hz: u64, pll: &Pll) -> Strin
             )
         })
         .collect();
+    let rx_nibbles: String = (0..4)
+        .map(|i| {
+            format!(
+                "    DELAYG #(.DEL_MODE(\"SCLK_ALIGNED\"), .DEL_VALUE({RX_DELAY_TAPS})) \
+                 rx_data_delay_{i} (.A(eth_rx_data[{i}]), .Z(rx_data_delayed[{i}]));\n\
+                 \x20   IDDRX1F rx_data_{i} (.SCLK(eth_rx_clk), .RST(1'b0), \
+                 .D(rx_data_delayed[{i}]), .Q0(rx_data_rise[{i}]), .Q1(rx_data_fall[{i}]));\n"
+            )
+        })
+        .collect();
     let reset_bits = PHY_RESET_CLOCKS.trailing_zeros() + 1;
     format!(
         r#"// Board top for the {name} ({part}), written by skinbox (gateware/src/board.rs).
@@ -269,6 +306,9 @@ module {top} (
     input  wire [{last_port}:0] uart_rx,
     output wire eth_tx_clk,
     output wire eth_tx_ctl,
+    input  wire eth_rx_clk,
+    input  wire eth_rx_ctl,
+    input  wire [3:0] eth_rx_data,
     output wire [3:0] eth_tx_data,
     output wire eth_rst_n,
     output wire eth_mdc,
@@ -360,18 +400,50 @@ module {top} (
     );
     assign eth_mdio = mdio_oe ? mdio_out : 1'bz;
 
+    // RGMII receive: each pin delayed by {rx_delay_taps} taps of 25 ps, then sampled on both edges
+    // of the PHY's receive clock: Q0 (rising edge) RXD[3:0] and rx_dv, Q1 (falling edge)
+    // RXD[7:4] and rx_dv ^ rx_er.
+    wire rx_ctl_delayed;
+    wire [3:0] rx_data_delayed;
+    wire rx_ctl_rise;
+    wire rx_ctl_fall;
+    wire [3:0] rx_data_rise;
+    wire [3:0] rx_data_fall;
+    DELAYG #(.DEL_MODE("SCLK_ALIGNED"), .DEL_VALUE({rx_delay_taps})) rx_ctl_delay (.A(eth_rx_ctl), .Z(rx_ctl_delayed));
+    IDDRX1F rx_ctl (.SCLK(eth_rx_clk), .RST(1'b0), .D(rx_ctl_delayed), .Q0(rx_ctl_rise), .Q1(rx_ctl_fall));
+{rx_nibbles}
+    // The receive bytes into the box clock. gmii_rxd, gmii_rx_dv and gmii_rx_er are the
+    // box's receive inputs: connect them to the box's ports of the same names (top
+    // instance above) once it has them; until then `keep` holds the receive logic.
+    (* keep *) wire [7:0] gmii_rxd;
+    (* keep *) wire gmii_rx_dv;
+    (* keep *) wire gmii_rx_er;
+    {rx_crossing_module} rx_crossing (
+        .rx_clock(eth_rx_clk),
+        .rx_data({{rx_data_fall, rx_data_rise}}),
+        .rx_dv(rx_ctl_rise),
+        .rx_er(rx_ctl_rise ^ rx_ctl_fall),
+        .clock(clk125),
+        .reset(!released),
+        .gmii_rxd(gmii_rxd),
+        .gmii_rx_dv(gmii_rx_dv),
+        .gmii_rx_er(gmii_rx_er)
+    );
+
     // RGMII: D0 leaves with the rising edge of the forwarded clock, D1 with the falling edge.
     ODDRX1F tx_clk (.SCLK(clk125), .RST(1'b0), .D0(1'b1), .D1(1'b0), .Q(eth_tx_clk));
     ODDRX1F tx_ctl (.SCLK(clk125), .RST(1'b0), .D0(gmii_tx_en), .D1(gmii_tx_en ^ gmii_tx_er), .Q(eth_tx_ctl));
 {nibbles}
-    // LED: heartbeat, inverted for a moment at each frame start.
+    // LED: heartbeat, inverted for a moment at each frame start, sent or received.
     reg [26:0] heartbeat = 0;
     reg [18:0] activity = 0;
     reg tx_en_before = 1'b0;
+    reg rx_dv_before = 1'b0;
     always @(posedge clk125) begin
         heartbeat <= heartbeat + 1'b1;
         tx_en_before <= gmii_tx_en;
-        if (gmii_tx_en && !tx_en_before)
+        rx_dv_before <= gmii_rx_dv;
+        if ((gmii_tx_en && !tx_en_before) || (gmii_rx_dv && !rx_dv_before))
             activity <= 19'h7ffff;
         else if (activity != 0)
             activity <= activity - 1'b1;
@@ -392,6 +464,8 @@ endmodule
         last_port = ports - 1,
         reset_top = reset_bits - 1,
         mdio_module = MDIO_MODULE,
+        rx_crossing_module = RX_CROSSING_MODULE,
+        rx_delay_taps = RX_DELAY_TAPS,
     )
 }
 
@@ -456,6 +530,10 @@ mod tests {
                 "led_n",
                 "eth_tx_clk",
                 "eth_tx_ctl",
+                "eth_rx_clk",
+                "eth_rx_ctl",
+                "eth_rx_data[0]",
+                "eth_rx_data[3]",
                 "eth_rst_n",
                 "eth_mdc",
                 "eth_mdio",
@@ -507,6 +585,18 @@ mod tests {
         assert!(text.contains("module skinbox_mdio("));
         assert!(text.contains("skinbox_mdio mdio ("));
         assert!(text.contains("assign eth_mdio = mdio_oe ? mdio_out : 1'bz;"));
+        // RGMII receive: delayed pins into IDDRX1Fs, low nibble and rx_dv on the rising
+        // edge, into the crossing in the PHY's receive clock, out in the box clock.
+        assert!(text.contains("module skinbox_rx_crossing("));
+        assert!(text.contains(".D(rx_ctl_delayed), .Q0(rx_ctl_rise), .Q1(rx_ctl_fall)"));
+        assert!(text.contains(".D(rx_data_delayed[3]), .Q0(rx_data_rise[3]), .Q1(rx_data_fall[3])"));
+        assert!(text.contains(".DEL_VALUE(80)) rx_data_delay_0 (.A(eth_rx_data[0])"));
+        assert!(text.contains(".rx_data({rx_data_fall, rx_data_rise}),"));
+        assert!(text.contains(".rx_er(rx_ctl_rise ^ rx_ctl_fall),"));
+        assert!(text.contains(".rx_clock(eth_rx_clk),"));
+        for wire in RX_GMII_WIRES {
+            assert!(text.contains(&format!(".{wire}({wire})")), "{wire}");
+        }
     }
 
     #[test]
@@ -534,7 +624,7 @@ mod tests {
         );
     }
 
-    /// Behavioural stand-ins for the two ECP5 primitives, only for Verilator's lint.
+    /// Behavioural stand-ins for the ECP5 primitives, only for Verilator's lint.
     const PRIMITIVE_STUBS: &str = r#"
 module EHXPLLL #(
     parameter PLLRST_ENA = "DISABLED", parameter INTFB_WAKE = "DISABLED",
@@ -554,6 +644,13 @@ module EHXPLLL #(
 endmodule
 module ODDRX1F (input SCLK, input RST, input D0, input D1, output Q);
     assign Q = SCLK ? D0 : D1;
+endmodule
+module IDDRX1F (input SCLK, input RST, input D, output reg Q0, output reg Q1);
+    always @(posedge SCLK) Q0 <= D;
+    always @(negedge SCLK) Q1 <= D;
+endmodule
+module DELAYG #(parameter DEL_MODE = "USER_DEFINED", parameter DEL_VALUE = 0) (input A, output Z);
+    assign Z = A;
 endmodule
 "#;
 

@@ -17,6 +17,7 @@
 //! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
 //! over the interfaces of [`stream`]: bytes, and datagrams (a descriptor, then bytes).
 
+pub mod async_fifo;
 pub mod block_ram;
 pub mod board;
 pub mod body_reader;
@@ -30,6 +31,7 @@ pub mod frame_parser;
 pub mod frame_transmitter;
 pub mod hdl;
 pub mod interface_box;
+pub mod mac_receiver;
 pub mod mdio;
 pub mod packet_store;
 pub mod port_slots;
@@ -37,6 +39,7 @@ pub mod record_arbiter;
 pub mod record_batcher;
 pub mod replica_register;
 pub mod reply_builder;
+pub mod rx_clock_crossing;
 pub mod status_reporter;
 pub mod stream;
 pub mod stream_fifo;

@@ -81,6 +81,10 @@ pub const PREAMBLE_LEN: usize = 8;
 pub const FCS_LEN: usize = 4;
 /// Smallest Ethernet frame without FCS.
 pub const MIN_FRAME_LEN: usize = 60;
+/// Shortest frame the box's MAC takes, FCS included (IEEE 802.3).
+pub const MIN_RECEIVE_LEN: usize = MIN_FRAME_LEN + FCS_LEN;
+/// Longest frame the box's MAC takes, FCS included (1500-byte MTU, no VLAN tag).
+pub const MAX_RECEIVE_LEN: usize = ETHERNET_HEADER_LEN + MTU + FCS_LEN;
 /// Idle bytes the box leaves between frames (the IEEE 802.3 inter-packet gap).
 pub const INTER_FRAME_GAP: usize = 12;
 /// IPv4 time to live of the box's packets.

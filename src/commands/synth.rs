@@ -221,10 +221,11 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     }
     if !report.timing_met {
         anyhow::bail!(
-            "timing not met: the {} MHz box clock reaches {:.1} MHz after place and route \
-             (bitstream written anyway; critical paths in {})",
+            "timing not met: the {} MHz box clock reaches {:.1} MHz, the PHY receive clock \
+             {:?} MHz after place and route (bitstream written anyway; critical paths in {})",
             report.target_mhz,
             report.fmax_mhz,
+            report.rx_clock_fmax_mhz,
             report.out_dir.join("report.json").display()
         );
     }
@@ -319,6 +320,9 @@ fn print_report(r: &SynthReport) {
         r.target_mhz,
         if r.timing_met { "met" } else { "NOT MET" }
     );
+    if let Some(rx) = r.rx_clock_fmax_mhz {
+        println!("  Fmax    {rx:.1} MHz for the 125 MHz PHY receive clock");
+    }
     for path in &r.critical_paths {
         println!(
             "  path    {:.2} ns ({:.2} ns routing, {} logic levels) {} -> {}: {}",

@@ -9,7 +9,7 @@ use crate::report::{utilisation_line, ClockFmax, CriticalPath, NextpnrReport, Yo
 use crate::toolchain::{run_logged, Toolchain, PACKAGES};
 use crate::SynthError;
 use serde::{Deserialize, Serialize};
-use skinbox_gateware::board::Board;
+use skinbox_gateware::board::{Board, RX_CLOCK_PORT};
 use skinbox_gateware::interface_box::BoxConfig;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -139,10 +139,13 @@ pub struct SynthReport {
     pub fmax_mhz: f64,
     /// The box clock, MHz.
     pub target_mhz: f64,
-    /// `fmax_mhz >= target_mhz`.
+    /// `fmax_mhz >= target_mhz`, and the receive clock's Fmax at least its frequency.
     pub timing_met: bool,
     /// nextpnr's name of the box clock net.
     pub clock_net: String,
+    /// Fmax of the PHY's receive clock (`eth_rx_clk`, 125 MHz) after place and route, MHz;
+    /// `None` when the design has no logic in that clock.
+    pub rx_clock_fmax_mhz: Option<f64>,
     /// Worst path of each clock pair.
     pub critical_paths: Vec<CriticalPath>,
     /// The bitstream for the SRAM or flash of the FPGA.
@@ -314,6 +317,7 @@ fn finish(
 
     let stats = YosysStats::parse(&read(dir, "yosys-stat.json")?)?;
     let (clock_net, fmax) = box_clock(&pnr, target_mhz)?;
+    let rx_clock_fmax = rx_clock(&pnr);
     seconds.total += started.elapsed().as_secs_f64();
     let report = SynthReport {
         board: board.name().to_string(),
@@ -333,8 +337,10 @@ fn finish(
         pll: pnr.usage("EHXPLLL").used,
         fmax_mhz: fmax.achieved,
         target_mhz,
-        timing_met: fmax.achieved >= target_mhz,
+        timing_met: fmax.achieved >= target_mhz
+            && rx_clock_fmax.is_none_or(|rx| rx.achieved >= rx.constraint),
         clock_net: clock_net.to_string(),
+        rx_clock_fmax_mhz: rx_clock_fmax.map(|rx| rx.achieved),
         critical_paths: pnr.critical_paths.clone(),
         bitstream,
         svf,
@@ -689,17 +695,27 @@ fn place_and_route(
     )
 }
 
-/// The box clock's net and Fmax in nextpnr's report: the clock constrained to the target.
+/// The box clock's net and Fmax in nextpnr's report: the clock constrained to the target
+/// that is not the PHY's receive clock (which has the same frequency).
 fn box_clock(pnr: &NextpnrReport, target_mhz: f64) -> Result<(&str, ClockFmax), SynthError> {
-    pnr.clock_at(target_mhz).ok_or_else(|| {
-        SynthError::Report(crate::report::ReportError {
-            tool: "nextpnr",
-            what: format!(
-                "no clock constrained to {target_mhz} MHz (clocks: {:?})",
-                pnr.fmax.keys().collect::<Vec<_>>()
-            ),
+    pnr.clock_at(target_mhz, Some(RX_CLOCK_PORT))
+        .ok_or_else(|| {
+            SynthError::Report(crate::report::ReportError {
+                tool: "nextpnr",
+                what: format!(
+                    "no clock constrained to {target_mhz} MHz (clocks: {:?})",
+                    pnr.fmax.keys().collect::<Vec<_>>()
+                ),
+            })
         })
-    })
+}
+
+/// The PHY receive clock's Fmax in nextpnr's report (its net is named after the pin).
+fn rx_clock(pnr: &NextpnrReport) -> Option<ClockFmax> {
+    pnr.fmax
+        .iter()
+        .find(|(name, _)| name.contains(RX_CLOCK_PORT))
+        .map(|(_, f)| *f)
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> Result<(), SynthError> {

@@ -12,7 +12,8 @@
 //! - Verilator builds the netlist with `netlist_sim/harness.cpp`, which plays the UART pin
 //!   changes moved to the netlist's reset release, receives RGMII on both edges of the
 //!   forwarded TX clock (TX_CTL: TX_EN on the rising half, TX_EN xor TX_ER on the falling),
-//!   answers MDIO as a PHY register model and logs LED changes.
+//!   answers MDIO as a PHY register model and logs LED changes. The RGMII receive pins
+//!   are held low (no receive clock): the receive path is tested in the gateware crate.
 //! - The same spec runs through the RTL co-simulation (`skinbox_cosim::sim::run_rtl`); every
 //!   frame must come out of the netlist with the same bytes, one clock later (the ODDRX1F
 //!   register) relative to the box's reset release.
@@ -224,7 +225,8 @@ fn sim_top(board: Board, ports: usize) -> String {
          \x20   pullup (eth_mdio);\n\
          \x20   {top} board (.clk25(clk), .uart_rx(uart_rx), .eth_tx_clk(eth_tx_clk),\n\
          \x20       .eth_tx_ctl(eth_tx_ctl), .eth_tx_data(eth_tx_data), .eth_rst_n(eth_rst_n),\n\
-         \x20       .eth_mdc(eth_mdc), .eth_mdio(eth_mdio), .led_n(led_n));\n\
+         \x20       .eth_mdc(eth_mdc), .eth_mdio(eth_mdio), .led_n(led_n),\n\
+         \x20       .eth_rx_clk(1'b0), .eth_rx_ctl(1'b0), .eth_rx_data(4'b0));\n\
          \x20   assign mdio_line = eth_mdio;\n\
          endmodule\n",
         last = ports - 1,

@@ -161,12 +161,14 @@ impl NextpnrReport {
         self.utilization.get(kind).copied().unwrap_or_default()
     }
 
-    /// The clock constrained to `target_mhz` (within 0.1 %) and its Fmax. nextpnr names a
-    /// clock after the net that its global buffer drives, which need not be the net the
-    /// constraint named, so the constraint, not the name, identifies the domain.
-    pub fn clock_at(&self, target_mhz: f64) -> Option<(&str, ClockFmax)> {
+    /// The clock constrained to `target_mhz` (within 0.1 %) and its Fmax, leaving out a
+    /// clock whose name contains `except` (another clock of the same frequency, named after
+    /// its pin). nextpnr names a clock after the net that its global buffer drives, which
+    /// need not be the net the constraint named, so the constraint identifies the domain.
+    pub fn clock_at(&self, target_mhz: f64, except: Option<&str>) -> Option<(&str, ClockFmax)> {
         self.fmax
             .iter()
+            .filter(|(name, _)| except.is_none_or(|e| !name.contains(e)))
             .find(|(_, f)| (f.constraint - target_mhz).abs() <= target_mhz * 1e-3)
             .map(|(name, f)| (name.as_str(), *f))
     }
@@ -291,6 +293,7 @@ mod tests {
  ],
  "fmax": {
   "$glbnet$clk125": { "achieved": 68.7, "constraint": 125 },
+  "$glbnet$eth_rx_clk": { "achieved": 210.5, "constraint": 125 },
   "clk25": { "achieved": 400.0, "constraint": 25 }
  },
  "utilization": {
@@ -322,10 +325,17 @@ mod tests {
         );
         assert_eq!(report.usage("TRELLIS_IO").used, 17);
         assert_eq!(report.usage("MULT18X18D"), Use::default());
-        let (clock, fmax) = report.clock_at(125.0).unwrap();
+        let (clock, fmax) = report.clock_at(125.0, None).unwrap();
         assert_eq!(clock, "$glbnet$clk125");
         assert_eq!(fmax.achieved, 68.7);
-        assert!(report.clock_at(100.0).is_none());
+        assert!(report.clock_at(100.0, None).is_none());
+        // another clock of the same frequency is told apart by its name
+        let (rx, rx_fmax) = report.clock_at(125.0, Some("clk125")).unwrap();
+        assert_eq!((rx, rx_fmax.achieved), ("$glbnet$eth_rx_clk", 210.5));
+        assert_eq!(
+            report.clock_at(125.0, Some("eth_rx_clk")).unwrap().0,
+            "$glbnet$clk125"
+        );
 
         let path = &report.critical_paths[0];
         assert_eq!(path.from_clock, "posedge clk125");

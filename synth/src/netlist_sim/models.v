@@ -79,6 +79,32 @@ module ODDRX1F (input SCLK, input RST, input D0, input D1, output Q);
     assign Q = SCLK ? rise_data : fall_out;
 endmodule
 
+// DDR input: D sampled at the rising edge (Q0) and at the falling edge (Q1) of SCLK, both
+// presented at the next rising edge (TN1265, the IDDRX1F timing diagram). The netlist
+// simulation drives no receive clock; the model is here so the board top elaborates.
+module IDDRX1F (input SCLK, input RST, input D, output reg Q0, output reg Q1);
+    parameter GSR = "ENABLED";
+    reg rise_data = 1'b0;
+    reg fall_data = 1'b0;
+    initial begin
+        Q0 = 1'b0;
+        Q1 = 1'b0;
+    end
+    always @(posedge SCLK) rise_data <= RST ? 1'b0 : D;
+    always @(negedge SCLK) fall_data <= RST ? 1'b0 : D;
+    always @(posedge SCLK) begin
+        Q0 <= RST ? 1'b0 : rise_data;
+        Q1 <= RST ? 1'b0 : fall_data;
+    end
+endmodule
+
+// Input delay element: no delay in a cycle-based simulation.
+module DELAYG (input A, output Z);
+    parameter DEL_MODE = "USER_DEFINED";
+    parameter DEL_VALUE = 0;
+    assign Z = A;
+endmodule
+
 // 18 kbit true dual-port block RAM in the modes the box uses: 1024 x 18 (address bits
 // 13:4, byte enables on address bits 1:0 for writes), 2048 x 9 (address bits 13:3) and,
 // for RAMs that start empty, 4096 x 4 (address bits 13:2; its packing into the rows is
