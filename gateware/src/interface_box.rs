@@ -16,7 +16,12 @@ use crate::datagram_arbiter::DatagramArbiter;
 use crate::frame_transmitter::FrameTransmitter;
 use crate::hdl::*;
 use crate::packet_store::{group_onehot, PacketStore, GROUP_PORTS, MAX_PORTS};
+use crate::box_counter_file::BoxCounterFile;
+use crate::command_unit::{CommandUnit, CommandUnitConfig};
+use crate::frame_parser::{FrameParser, ACTION_ARP, ACTION_COMMAND, ACTION_ECHO, ACTION_NONE};
+use crate::mac_receiver::MacReceiver;
 use crate::record_batcher::RecordBatcher;
+use crate::reply_builder::ReplyBuilder;
 use crate::replica_register::ReplicaRegister;
 use crate::status_reporter::StatusReporter;
 use crate::stream::{ByteStreamSource, DatagramSource};
@@ -26,7 +31,7 @@ use skinbox_protocol::{CellFraming, LinkConfig};
 
 /// The datagram arbiter's sources, in their order of precedence after reset: records
 /// datagrams (source 0), status datagrams (source 1).
-pub const DATAGRAM_SOURCES: usize = 2;
+pub const DATAGRAM_SOURCES: usize = 3;
 
 /// Parameters of the box.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
@@ -228,9 +233,16 @@ pub struct InterfaceBox {
     batcher: RecordBatcher,
     arbiter: DatagramArbiter,
     transmitter: FrameTransmitter,
-    // the run-time configuration's build-time values
-    flush_timeout_ticks: Constant<Bits<32>>,
-    status_period_ticks: Constant<Bits<32>>,
+    // the receive path: MAC, parser, command unit, box counters, replies
+    mac: MacReceiver,
+    parser: FrameParser,
+    commands: CommandUnit,
+    box_counters: BoxCounterFile,
+    replies: ReplyBuilder,
+    action_none: Constant<Bits<2>>,
+    action_arp: Constant<Bits<2>>,
+    action_echo: Constant<Bits<2>>,
+    action_command: Constant<Bits<2>>,
     core_reset: DFF<Bit>,
     /// The ports' reset before its copies.
     port_reset: Signal<Local, Bit>,
@@ -273,8 +285,21 @@ impl InterfaceBox {
             batcher: RecordBatcher::new(),
             arbiter: DatagramArbiter::new(DATAGRAM_SOURCES),
             transmitter: FrameTransmitter::new(&config.link, config.box_id, n as u8),
-            flush_timeout_ticks: Constant::new(config.flush_timeout_ticks.into()),
-            status_period_ticks: Constant::new(config.status_period_ticks.into()),
+            mac: Default::default(),
+            parser: FrameParser::new(&config.link),
+            commands: CommandUnit::new(CommandUnitConfig {
+                link: config.link,
+                box_id: config.box_id,
+                port_count: n as u8,
+                flush_timeout_ticks: config.flush_timeout_ticks as u32,
+                status_period_ticks: config.status_period_ticks as u32,
+            }),
+            box_counters: Default::default(),
+            replies: ReplyBuilder::new(&config.link, config.box_id, n as u8),
+            action_none: Constant::new(u64::from(ACTION_NONE).into()),
+            action_arp: Constant::new(u64::from(ACTION_ARP).into()),
+            action_echo: Constant::new(u64::from(ACTION_ECHO).into()),
+            action_command: Constant::new(u64::from(ACTION_COMMAND).into()),
             core_reset: Default::default(),
             port_reset: Default::default(),
             group_resets: (0..n.div_ceil(GROUP_PORTS))
@@ -349,7 +374,7 @@ impl Logic for InterfaceBox {
         self.batcher.clock.next = self.clock.val();
         self.batcher.reset.next = self.core_reset.q.val();
         self.batcher.tick.next = self.timestamp.tick.val();
-        self.batcher.flush_timeout_ticks.next = self.flush_timeout_ticks.val();
+        self.batcher.flush_timeout_ticks.next = self.commands.flush_timeout_ticks.val();
         ByteStreamSource::join(&mut self.store.records, &mut self.batcher.records);
 
         self.status.clock.next = self.clock.val();
@@ -361,16 +386,80 @@ impl Logic for InterfaceBox {
         self.status.counter_data.next = self.counters.read_data.val();
         self.status.link_up.next = self.link_up.val();
         self.status.link_speed.next = self.link_speed.val();
-        self.status.status_period_ticks.next = self.status_period_ticks.val();
-        self.status.restart_period.next = false;
-        self.status.report_now.next = false;
-        self.status.box_counter_data.next = 0.into();
+        self.status.status_period_ticks.next = self.commands.status_period_ticks.val();
+        self.status.restart_period.next = self.commands.status_period_set.val();
+        self.status.report_now.next = self.commands.status_now.val();
+        self.box_counters.reporter_address.next = self.status.box_counter_address.val();
+        self.status.box_counter_data.next = self.box_counters.reporter_data.val();
+
+        // the receive path: GMII -> MAC -> parser (which stores the frame in the reply
+        // buffer) -> command unit; replies built in the buffer go out as raw frames
+        self.mac.clock.next = self.clock.val();
+        self.mac.reset.next = self.core_reset.q.val();
+        self.mac.gmii_rxd.next = self.gmii_rxd.val();
+        self.mac.gmii_rx_dv.next = self.gmii_rx_dv.val();
+        self.mac.gmii_rx_er.next = self.gmii_rx_er.val();
+        self.parser.clock.next = self.clock.val();
+        self.parser.reset.next = self.core_reset.q.val();
+        ByteStreamSource::join(&mut self.mac.frame, &mut self.parser.frame);
+        self.parser.length_error.next = self.mac.length_error.val();
+        self.parser.tick.next = self.timestamp.tick.val();
+        self.parser.buffer_locked.next = self.replies.locked.val();
+        self.commands.clock.next = self.clock.val();
+        self.commands.reset.next = self.core_reset.q.val();
+        self.commands.command.next =
+            self.parser.decided.val() & (self.parser.action.val() == self.action_command.val());
+        self.commands.peer_mac.next = self.parser.peer_mac.val();
+        self.commands.peer_ip.next = self.parser.peer_ip.val();
+        self.commands.peer_port.next = self.parser.peer_port.val();
+        self.commands.command_box_id.next = self.parser.command_box_id.val();
+        self.commands.command_opcode.next = self.parser.command_opcode.val();
+        self.commands.command_sequence.next = self.parser.command_sequence.val();
+        self.commands.command_argument_length.next = self.parser.command_argument_length.val();
+        self.commands.command_arguments.next = self.parser.command_arguments.val();
+        // every frame is counted once: by the parser, or for a command by the command unit
+        self.box_counters.clock.next = self.clock.val();
+        self.box_counters.reset.next = self.core_reset.q.val();
+        self.box_counters.count.next = self.commands.done.val()
+            | (self.parser.decided.val()
+                & (self.parser.action.val() != self.action_command.val()));
+        self.box_counters.counter.next = self.parser.fate.val();
+        if self.commands.done.val() {
+            self.box_counters.counter.next = self.commands.fate.val();
+        }
+        self.replies.clock.next = self.clock.val();
+        self.replies.reset.next = self.core_reset.q.val();
+        self.replies.tick.next = self.timestamp.tick.val();
+        self.replies.receive_write_enable.next = self.parser.buffer_write_enable.val();
+        self.replies.receive_write_address.next = self.parser.buffer_write_address.val();
+        self.replies.receive_write_data.next = self.parser.buffer_write_data.val();
+        self.replies.reserve.next =
+            self.parser.decided.val() & (self.parser.action.val() != self.action_none.val());
+        self.replies.start_arp.next =
+            self.parser.decided.val() & (self.parser.action.val() == self.action_arp.val());
+        self.replies.start_echo.next =
+            self.parser.decided.val() & (self.parser.action.val() == self.action_echo.val());
+        self.replies.start_ack.next = self.commands.done.val();
+        self.replies.receive_tick.next = self.parser.receive_tick.val();
+        self.replies.ip_total_length.next = self.parser.ip_total_length.val();
+        self.replies.icmp_rest_sum.next = self.parser.icmp_rest_sum.val();
+        self.replies.command_opcode.next = self.parser.command_opcode.val();
+        self.replies.result.next = self.commands.result.val();
+        self.replies.last_accepted.next = self.commands.last_accepted.val();
+        self.replies.destination_mac.next = self.commands.destination_mac.val();
+        self.replies.destination_ip.next = self.commands.destination_ip.val();
+        self.replies.destination_port.next = self.commands.destination_port.val();
+        self.replies.link_up.next = self.link_up.val();
+        self.replies.link_speed.next = self.link_speed.val();
+        self.box_counters.reply_address.next = self.replies.counters_address.val();
+        self.replies.counters_data.next = self.box_counters.reply_data.val();
 
         // records and status datagrams -> arbiter -> transmitter
         self.arbiter.clock.next = self.clock.val();
         self.arbiter.reset.next = self.core_reset.q.val();
         DatagramSource::join(&mut self.batcher.datagrams, &mut self.arbiter.sources[0]);
         DatagramSource::join(&mut self.status.datagrams, &mut self.arbiter.sources[1]);
+        DatagramSource::join(&mut self.replies.replies, &mut self.arbiter.sources[2]);
         self.transmitter.clock.next = self.clock.val();
         self.transmitter.reset.next = self.core_reset.q.val();
         DatagramSource::join(&mut self.arbiter.datagrams, &mut self.transmitter.datagrams);
