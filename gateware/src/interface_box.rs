@@ -13,7 +13,7 @@
 use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
 use crate::counter_file::CounterFile;
 use crate::datagram_arbiter::DatagramArbiter;
-use crate::frame_transmitter::FrameTransmitter;
+use crate::frame_transmitter::{big_endian, FrameTransmitter};
 use crate::hdl::*;
 use crate::packet_store::{group_onehot, PacketStore, GROUP_PORTS, MAX_PORTS};
 use crate::record_batcher::RecordBatcher;
@@ -231,6 +231,9 @@ pub struct InterfaceBox {
     // the run-time configuration's build-time values
     flush_timeout_ticks: Constant<Bits<32>>,
     status_period_ticks: Constant<Bits<32>>,
+    destination_mac: Constant<Bits<48>>,
+    destination_ip: Constant<Bits<32>>,
+    destination_port: Constant<Bits<16>>,
     core_reset: DFF<Bit>,
     /// The ports' reset before its copies.
     port_reset: Signal<Local, Bit>,
@@ -275,6 +278,9 @@ impl InterfaceBox {
             transmitter: FrameTransmitter::new(&config.link, config.box_id, n as u8),
             flush_timeout_ticks: Constant::new(config.flush_timeout_ticks.into()),
             status_period_ticks: Constant::new(config.status_period_ticks.into()),
+            destination_mac: Constant::new(big_endian(&config.link.host_mac).into()),
+            destination_ip: Constant::new(big_endian(&config.link.host_ip).into()),
+            destination_port: Constant::new(u64::from(config.link.host_port).into()),
             core_reset: Default::default(),
             port_reset: Default::default(),
             group_resets: (0..n.div_ceil(GROUP_PORTS))
@@ -373,6 +379,9 @@ impl Logic for InterfaceBox {
         DatagramSource::join(&mut self.status.datagrams, &mut self.arbiter.sources[1]);
         self.transmitter.clock.next = self.clock.val();
         self.transmitter.reset.next = self.core_reset.q.val();
+        self.transmitter.destination_mac.next = self.destination_mac.val();
+        self.transmitter.destination_ip.next = self.destination_ip.val();
+        self.transmitter.destination_port.next = self.destination_port.val();
         DatagramSource::join(&mut self.arbiter.datagrams, &mut self.transmitter.datagrams);
 
         self.gmii_txd.next = self.transmitter.gmii_txd.val();
