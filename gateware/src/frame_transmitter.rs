@@ -46,6 +46,12 @@ use skinbox_protocol::link::*;
 /// then the byte, then the output (with the FCS).
 pub const TAKE_TO_FIRST_BYTE: u64 = 3;
 
+/// Clocks from the clock a raw frame's descriptor is taken to the clock its first body
+/// beat is taken (`ready`): the body follows the preamble and the SFD, then one beat per
+/// clock. (A datagram's first body beat is taken [`BODY_START`] - [`PREAMBLE_LEN`] clocks
+/// later.)
+pub const TAKE_TO_RAW_BODY: u64 = TAKE_TO_FIRST_BYTE - 2 + PREAMBLE_LEN as u64;
+
 /// Frame byte where the datagram body starts (preamble, Ethernet, IPv4, UDP, box header).
 pub const BODY_START: usize =
     PREAMBLE_LEN + ETHERNET_HEADER_LEN + IPV4_HEADER_LEN + UDP_HEADER_LEN + HEADER_LEN;
@@ -1141,6 +1147,13 @@ mod tests {
     /// destination on the destination inputs only at the clock its descriptor is taken
     /// (the decoy on every other clock). Returns the frames and the take clocks.
     fn send_items(items: &[Item]) -> (GmiiCapture, Vec<u64>) {
+        send_items_with_body_starts(items).0
+    }
+
+    /// [`send_items`], with the clock of each item's first body beat taken.
+    fn send_items_with_body_starts(items: &[Item]) -> ((GmiiCapture, Vec<u64>), Vec<u64>) {
+        let mut body_starts = vec![];
+        let mut body_started = false;
         let mut bench = Bench::new(
             FrameTransmitter::new(&LinkConfig::DEFAULT, 0x0102, 8),
             |b| &mut b.clock,
@@ -1198,6 +1211,7 @@ mod tests {
                     bench.settle();
                 }
                 body = offered_body.into_iter().collect();
+                body_started = false;
                 takes.push(clock);
                 next += 1;
             }
@@ -1208,6 +1222,10 @@ mod tests {
                     "clock {clock}: body not ready"
                 );
                 body.pop_front();
+                if !body_started {
+                    body_starts.push(clock);
+                    body_started = true;
+                }
             }
             capture.clock(
                 clock,
@@ -1221,7 +1239,7 @@ mod tests {
             }
         }
         assert_eq!(capture.frames.len(), items.len(), "every item sent");
-        (capture, takes)
+        ((capture, takes), body_starts)
     }
 
     /// The frame on GMII as an independent model has it: preamble, SFD, the bytes, and the
@@ -1297,9 +1315,10 @@ mod tests {
         lengths.extend((0..10).map(|_| 60 + (rng.next_u64() % (1514 - 60 + 1)) as usize));
         let frames: Vec<_> = lengths.iter().map(|&n| raw_frame(&mut rng, n)).collect();
         let items: Vec<_> = frames.iter().cloned().map(Item::Raw).collect();
-        let (capture, takes) = send_items(&items);
+        let ((capture, takes), body_starts) = send_items_with_body_starts(&items);
         for (i, frame) in frames.iter().enumerate() {
             assert_eq!(capture.frames[i], on_the_wire(frame), "raw frame {i}");
+            assert_eq!(body_starts[i] - takes[i], TAKE_TO_RAW_BODY, "raw frame {i}");
             assert_eq!(
                 capture.starts[i] - takes[i],
                 TAKE_TO_FIRST_BYTE,
