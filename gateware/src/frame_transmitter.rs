@@ -223,6 +223,9 @@ pub struct FrameTransmitter {
     gap: DFF<Bits<4>>,
     // gap == 0, kept in a register (`idle` is one gate from registers)
     gap_done: DFF<Bit>,
+    // `!sending & gap_done`, the descriptor's `ready`, as a register of its own (no gate
+    // between it and the arbiter's handshake)
+    idle: DFF<Bit>,
     kind_held: DFF<Bits<8>>,
     body_len_held: DFF<Bits<11>>,
     // the descriptor is a raw frame's (its kind is `RAW_FRAME_KIND`)
@@ -380,6 +383,7 @@ impl FrameTransmitter {
             index: Default::default(),
             gap: Default::default(),
             gap_done: Default::default(),
+            idle: Default::default(),
             kind_held: Default::default(),
             body_len_held: Default::default(),
             raw_held: Default::default(),
@@ -460,6 +464,7 @@ impl Logic for FrameTransmitter {
             index,
             gap,
             gap_done,
+            idle,
             kind_held,
             body_len_held,
             fields_high,
@@ -824,7 +829,18 @@ impl Logic for FrameTransmitter {
                 | bit_cast::<64, 8>(self.destination_low.q.val().get_bits::<8>(24));
             self.destination_low.d.next = self.destination_low.q.val() << 8;
         }
+        // `!sending & gap_done` of the next clock: a frame goes on or ends (then the gap
+        // starts), the gap's last clock, or idle and no descriptor taken
+        self.idle.d.next = false;
+        if !self.sending.q.val() {
+            if self.gap_done.q.val() {
+                self.idle.d.next = !self.datagrams.valid.val();
+            } else {
+                self.idle.d.next = self.gap.q.val() == 1;
+            }
+        }
         if self.reset.val() {
+            self.idle.d.next = true;
             self.term_is_destination.d.next = false;
             self.sending.d.next = false;
             self.stage_valid.d.next = false;
@@ -845,7 +861,7 @@ impl Logic for FrameTransmitter {
             self.in_body.d.next = false;
             self.tx_er.d.next = false;
         }
-        self.datagrams.ready.next = !self.sending.q.val() & self.gap_done.q.val();
+        self.datagrams.ready.next = self.idle.q.val();
         self.gmii_txd.next = self.txd.q.val();
         self.gmii_tx_en.next = self.tx_en.q.val();
         self.gmii_tx_er.next = self.tx_er.q.val();
