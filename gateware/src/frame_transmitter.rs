@@ -8,6 +8,17 @@
 //! 12 idle clocks. (The headers alone exceed the 60-byte minimum frame: no padding is
 //! needed.)
 //!
+//! A descriptor of kind [`RAW_FRAME_KIND`] is a raw frame: its body is the frame itself
+//! from the destination MAC on, sent right after the SFD (its source pads it to the 60-byte
+//! minimum; `body_len` 60..=1514), then the FCS and the gap; its other descriptor fields are
+//! ignored and the datagram sequence number does not advance.
+//!
+//! A datagram goes to the destination (MAC, IPv4 address, UDP port) on the
+//! `destination_*` inputs at the clock its descriptor is taken: the 12 bytes are loaded
+//! into a shift register then and sent from it, the IPv4 checksum adds the address's words
+//! to the total length, and the UDP checksum adds the address's and the port's words as its
+//! last term (index 18).
+//!
 //! The checksums are finished long before they are sent: the UDP sum starts from the
 //! constant words (addresses, ports, magic, box id) plus the body sum, and adds the UDP
 //! length, the kind and then the 16 bytes of the header fields (flags, sequence, base tick,
@@ -26,7 +37,7 @@
 use crate::block_ram::BlockRam;
 use crate::crc32::Crc32Byte;
 use crate::hdl::*;
-use crate::stream::DatagramSink;
+use crate::stream::{DatagramSink, RAW_FRAME_KIND};
 use skinbox_protocol::datagram::{self, field, HEADER_LEN};
 use skinbox_protocol::link::*;
 
@@ -34,6 +45,12 @@ use skinbox_protocol::link::*;
 /// the frame's first preamble byte is on `gmii_txd`: the transmitter registers `sending`,
 /// then the byte, then the output (with the FCS).
 pub const TAKE_TO_FIRST_BYTE: u64 = 3;
+
+/// Clocks from the clock a raw frame's descriptor is taken to the clock its first body
+/// beat is taken (`ready`): the body follows the preamble and the SFD, then one beat per
+/// clock. (A datagram's first body beat is taken [`BODY_START`] - [`PREAMBLE_LEN`] clocks
+/// later.)
+pub const TAKE_TO_RAW_BODY: u64 = TAKE_TO_FIRST_BYTE - 2 + PREAMBLE_LEN as u64;
 
 /// Frame byte where the datagram body starts (preamble, Ethernet, IPv4, UDP, box header).
 pub const BODY_START: usize =
@@ -55,25 +72,36 @@ const KIND_AT: usize = BOX_HEADER_AT + field::KIND;
 const FIELDS_AT: usize = BOX_HEADER_AT + field::FLAGS;
 const FIELDS_LEN: usize = field::ENTRY_COUNT.end - field::FLAGS;
 
+// The destination's bytes (RFC 894 / RFC 791 / RFC 768): the destination MAC, the IPv4
+// destination address and the UDP destination port, sent from the `destination` shift
+// registers.
+const DESTINATION_MAC_AT: usize = PREAMBLE_LEN;
+const DESTINATION_IP_AT: usize = IP_AT + 16;
+const DESTINATION_PORT_AT: usize = UDP_AT + 2;
+const DESTINATION_MAC_LEN: usize = 6;
+const DESTINATION_IP_LEN: usize = 4;
+const DESTINATION_PORT_LEN: usize = 2;
+
 /// A frame position (or length) as a kernel constant; panics if it does not fit.
 fn position<const N: usize>(at: usize) -> Constant<Bits<N>> {
     assert!(at < 1 << N, "position {at} does not fit {N} bits");
     Constant::new((at as u64).into())
 }
 
-/// The constant bytes of a frame up to the body; variable fields are 0 here.
+/// The constant bytes of a frame up to the body; variable fields (the destination's too)
+/// are 0 here.
 fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
     let mut t = vec![0x55; 7];
     t.push(0xD5);
-    t.extend(link.host_mac);
+    t.extend([0; 6]); // destination MAC
     t.extend(link.box_mac);
     t.extend([0x08, 0x00]);
     // IPv4: version 4, IHL 5, no DSCP, total length, id 0, DF, TTL, UDP, checksum
     t.extend([0x45, 0x00, 0, 0, 0, 0, 0x40, 0x00, IPV4_TTL, 17, 0, 0]);
     t.extend(link.box_ip);
-    t.extend(link.host_ip);
+    t.extend([0; 4]); // destination IP
     t.extend(link.box_port.to_be_bytes());
-    t.extend(link.host_port.to_be_bytes());
+    t.extend([0, 0]); // destination port
     t.extend([0, 0, 0, 0]); // UDP length and checksum
     t.extend(datagram::MAGIC);
     t.push(datagram::VERSION);
@@ -106,6 +134,13 @@ fn template_table(t: &[u8]) -> Vec<u64> {
     table
 }
 
+/// The number whose big-endian bytes these are (at most 8): an address or port as the
+/// transmitter's destination inputs take it.
+pub fn big_endian(bytes: &[u8]) -> u64 {
+    assert!(bytes.len() <= 8, "{} bytes do not fit 64 bits", bytes.len());
+    bytes.iter().fold(0, |n, &b| n << 8 | u64::from(b))
+}
+
 /// Sum of the big-endian 16-bit words of `bytes` (odd length padded with 0), not folded.
 pub fn word_sum(bytes: &[u8]) -> u64 {
     bytes
@@ -129,6 +164,12 @@ pub struct FrameTransmitter {
     pub gmii_tx_en: Signal<Out, Bit>,
     /// GMII transmit error: a body beat was missing when due.
     pub gmii_tx_er: Signal<Out, Bit>,
+    /// Destination MAC of the datagram frames, read at the clock a descriptor is taken.
+    pub destination_mac: Signal<In, Bits<48>>,
+    /// Destination IPv4 address of the datagram frames, read like `destination_mac`.
+    pub destination_ip: Signal<In, Bits<32>>,
+    /// Destination UDP port of the datagram frames, read like `destination_mac`.
+    pub destination_port: Signal<In, Bits<16>>,
     // the template in block RAM, read two clocks ahead: byte i + 2 at address i, and at
     // `TEMPLATE_IDLE` the first byte (the preamble's, also the second), read between frames
     template: BlockRam<8, 7>,
@@ -143,9 +184,13 @@ pub struct FrameTransmitter {
     sfd_ahead: Constant<Bits<11>>,
     crc_from: Constant<Bits<11>>,
     // the body's first byte; the frame's last byte minus one, less the body length (from it
-    // `end_minus_one`); the body's first byte - 2 (the payload is read two clocks ahead)
+    // `end_minus_one`); the body's first byte - 2 (the payload is read two clocks ahead);
+    // the same two for a raw frame (its body follows the SFD)
     body_start: Constant<Bits<11>>,
     frame_end_over_body: Constant<Bits<11>>,
+    raw_body_start: Constant<Bits<11>>,
+    raw_frame_end_over_body: Constant<Bits<11>>,
+    raw_kind: Constant<Bits<8>>,
     // IPv4 total length and UDP length minus the body length
     ip_len_over_body: Constant<Bits<16>>,
     udp_len_over_body: Constant<Bits<16>>,
@@ -161,18 +206,46 @@ pub struct FrameTransmitter {
     kind_ahead: Constant<Bits<7>>,
     fields_ahead: Constant<Bits<7>>,
     fields_end_ahead: Constant<Bits<7>>,
+    // the destination's bytes, first and past the last, two lower like the others
+    destination_mac_ahead: Constant<Bits<7>>,
+    destination_mac_end_ahead: Constant<Bits<7>>,
+    destination_ip_ahead: Constant<Bits<7>>,
+    destination_ip_end_ahead: Constant<Bits<7>>,
+    destination_port_ahead: Constant<Bits<7>>,
+    destination_port_end_ahead: Constant<Bits<7>>,
     template_idle: Constant<Bits<7>>,
     // the byte sources, one bit each (see `byte_source`)
-    source_template: Constant<Bits<12>>,
-    source_body: Constant<Bits<12>>,
+    source_template: Constant<Bits<13>>,
+    source_body: Constant<Bits<13>>,
     crc: Crc32Byte,
     sending: DFF<Bit>,
     index: DFF<Bits<11>>,
     gap: DFF<Bits<4>>,
     // gap == 0, kept in a register (`idle` is one gate from registers)
     gap_done: DFF<Bit>,
+    // `!sending & gap_done`, the descriptor's `ready`, as a register of its own (no gate
+    // between it and the arbiter's handshake)
+    idle: DFF<Bit>,
     kind_held: DFF<Bits<8>>,
     body_len_held: DFF<Bits<11>>,
+    // the descriptor is a raw frame's (its kind is `RAW_FRAME_KIND`)
+    raw_held: DFF<Bit>,
+    // the destination's 12 bytes (MAC, IP, port), most significant first, loaded at the
+    // take and shifted a byte up as each goes out (cut in two like the fields)
+    destination_high: DFF<Bits<64>>,
+    destination_low: DFF<Bits<32>>,
+    // the destination IP and port held for the checksums, their words' sums (the IP's, then
+    // with the port), and the IPv4 header's variable words (total length, destination)
+    destination_ip_held: DFF<Bits<32>>,
+    destination_port_held: DFF<Bits<16>>,
+    destination_ip_sum: DFF<Bits<17>>,
+    destination_sum: DFF<Bits<18>>,
+    ip_variable: DFF<Bits<18>>,
+    // the checksum's term is the destination's sum (index 18), registered like `term_is_kind`
+    term_is_destination: DFF<Bit>,
+    // the body's first byte and the frame's end over the body, of the held kind
+    geometry_start: Signal<Local, Bits<11>>,
+    geometry_end_over_body: Signal<Local, Bits<11>>,
     // the 15 header bytes (flags, sequence, base tick, entry count), most significant
     // first, and a zero byte, held while the frame goes out (cut in two: no word over 64
     // bits to simulate); `field_byte` steps through them, once to sum their words and
@@ -232,15 +305,15 @@ pub struct FrameTransmitter {
     // where the byte at `index` comes from, and the template byte, both looked up ahead:
     // bit 0 template (all through the header: it is 0 at the other sources' bytes), 1/2
     // IPv4 total length high/low, 3/4 IPv4 checksum, 5/6 UDP length, 7/8 UDP checksum,
-    // 9 kind, 10 header fields, 11 body
-    byte_source: DFF<Bits<12>>,
+    // 9 kind, 10 header fields, 11 body, 12 destination
+    byte_source: DFF<Bits<13>>,
     // `byte_source` of the next clock, looked up a clock earlier still
-    source_ahead: DFF<Bits<12>>,
+    source_ahead: DFF<Bits<13>>,
     // the index is 72 or more: the next index's following byte is in the body
     body_follows: Signal<Local, Bit>,
     // sending, and the next index is this one + 1 (otherwise it is 0)
     frame_goes_on: Signal<Local, Bit>,
-    source_next: Signal<Local, Bits<12>>,
+    source_next: Signal<Local, Bits<13>>,
     udp_checksum_held: DFF<Bits<16>>,
     tx_byte: Signal<Local, Bits<8>>,
     ip_sum: Signal<Local, Bits<32>>,
@@ -258,7 +331,8 @@ impl FrameTransmitter {
         // ports, and the constant words of the datagram header (magic, version, box id,
         // port count). Variable words are added while the preamble and the Ethernet header
         // go out.
-        let pseudo = word_sum(&link.box_ip) + word_sum(&link.host_ip) + 17;
+        // (the destination's words are added at run time)
+        let pseudo = word_sum(&link.box_ip) + 17;
         let udp_constant = pseudo
             + word_sum(&t[UDP_AT..UDP_AT + 4])
             + word_sum(&t[BOX_HEADER_AT..BOX_HEADER_AT + 8]);
@@ -270,6 +344,9 @@ impl FrameTransmitter {
             gmii_txd: Default::default(),
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
+            destination_mac: Default::default(),
+            destination_ip: Default::default(),
+            destination_port: Default::default(),
             template: BlockRam::with_contents(&template_table(&t)),
             udp_term_constant: Constant::new(
                 (udp_constant + 2 * (BODY_START - UDP_AT) as u64).into(),
@@ -279,6 +356,9 @@ impl FrameTransmitter {
             crc_from: position(PREAMBLE_LEN),
             body_start: position(BODY_START),
             frame_end_over_body: position(BODY_START + FCS_LEN - 2),
+            raw_body_start: position(PREAMBLE_LEN),
+            raw_frame_end_over_body: position(PREAMBLE_LEN + FCS_LEN - 2),
+            raw_kind: Constant::new(u64::from(RAW_FRAME_KIND).into()),
             ip_len_over_body: position(BODY_START - IP_AT),
             udp_len_over_body: position(BODY_START - UDP_AT),
             gap_clocks: position(INTER_FRAME_GAP - 1),
@@ -289,6 +369,12 @@ impl FrameTransmitter {
             kind_ahead: position(KIND_AT - 2),
             fields_ahead: position(FIELDS_AT - 2),
             fields_end_ahead: position(FIELDS_AT + FIELDS_LEN - 2),
+            destination_mac_ahead: position(DESTINATION_MAC_AT - 2),
+            destination_mac_end_ahead: position(DESTINATION_MAC_AT + DESTINATION_MAC_LEN - 2),
+            destination_ip_ahead: position(DESTINATION_IP_AT - 2),
+            destination_ip_end_ahead: position(DESTINATION_IP_AT + DESTINATION_IP_LEN - 2),
+            destination_port_ahead: position(DESTINATION_PORT_AT - 2),
+            destination_port_end_ahead: position(DESTINATION_PORT_AT + DESTINATION_PORT_LEN - 2),
             template_idle: position(TEMPLATE_IDLE),
             source_template: Constant::new(1u64.into()),
             source_body: Constant::new((1u64 << 11).into()),
@@ -297,8 +383,20 @@ impl FrameTransmitter {
             index: Default::default(),
             gap: Default::default(),
             gap_done: Default::default(),
+            idle: Default::default(),
             kind_held: Default::default(),
             body_len_held: Default::default(),
+            raw_held: Default::default(),
+            destination_high: Default::default(),
+            destination_low: Default::default(),
+            destination_ip_held: Default::default(),
+            destination_port_held: Default::default(),
+            destination_ip_sum: Default::default(),
+            destination_sum: Default::default(),
+            ip_variable: Default::default(),
+            term_is_destination: Default::default(),
+            geometry_start: Default::default(),
+            geometry_end_over_body: Default::default(),
             fields_high: Default::default(),
             fields_low: Default::default(),
             next_field_position: Default::default(),
@@ -366,6 +464,7 @@ impl Logic for FrameTransmitter {
             index,
             gap,
             gap_done,
+            idle,
             kind_held,
             body_len_held,
             fields_high,
@@ -404,11 +503,29 @@ impl Logic for FrameTransmitter {
             term_is_kind,
             term_is_udp_len,
             udp_term,
-            ip_fold
+            ip_fold,
+            raw_held,
+            destination_high,
+            destination_low,
+            destination_ip_held,
+            destination_port_held,
+            destination_ip_sum,
+            destination_sum,
+            ip_variable,
+            term_is_destination
         );
         // Frame geometry: registered at the start from the body length (lengths), two clocks
         // later the IPv4 checksum (needed from byte 32 on), through its first fold.
-        self.ip_sum.next = self.ip_constant_sum.val() + bit_cast::<32, 16>(self.total_len.q.val());
+        // (the destination's words a clock after the take, with the total length a clock later)
+        self.destination_ip_sum.d.next =
+            bit_cast::<17, 16>(self.destination_ip_held.q.val().get_bits::<16>(16))
+                + bit_cast::<17, 16>(self.destination_ip_held.q.val().get_bits::<16>(0));
+        self.destination_sum.d.next = bit_cast::<18, 17>(self.destination_ip_sum.q.val())
+            + bit_cast::<18, 16>(self.destination_port_held.q.val());
+        self.ip_variable.d.next = bit_cast::<18, 16>(self.total_len.q.val())
+            + bit_cast::<18, 17>(self.destination_ip_sum.q.val());
+        self.ip_sum.next =
+            self.ip_constant_sum.val() + bit_cast::<32, 18>(self.ip_variable.q.val());
         self.ip_fold.d.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
         self.ip_checksum.d.next =
             !bit_cast::<16, 32>((self.ip_fold.q.val() & 0xFFFF) + (self.ip_fold.q.val() >> 16));
@@ -446,6 +563,10 @@ impl Logic for FrameTransmitter {
         if self.term_is_udp_len.q.val() {
             self.checksum_word.next = self.checksum_word.val() | self.udp_term.q.val();
         }
+        if self.term_is_destination.q.val() {
+            self.checksum_word.next =
+                self.checksum_word.val() | bit_cast::<32, 18>(self.destination_sum.q.val());
+        }
         if self.term_from_fields.q.val() {
             if self.index.q.val().get_bit(0) {
                 self.checksum_word.next =
@@ -474,10 +595,14 @@ impl Logic for FrameTransmitter {
         if self.sending.q.val() {
             self.template.read_address.next = self.header_index.val();
         }
-        // index >= 72, from its bits: 72 is 0b100_1000
+        // index >= 72, from its bits: 72 is 0b100_1000; for a raw frame index >= 6
         self.body_follows.next = (self.index.q.val().get_bits::<4>(7) != 0)
             | (self.header_index.val().get_bit(6)
                 & (self.header_index.val().get_bits::<3>(3) != 0));
+        if self.raw_held.q.val() {
+            self.body_follows.next = (self.index.q.val().get_bits::<8>(3) != 0)
+                | (self.index.q.val().get_bit(2) & self.index.q.val().get_bit(1));
+        }
         // The template holds 0 at every variable byte, so it is ORed in all through the
         // header (bit 0 is "not the body") and the header's sources are independent tests.
         self.frame_goes_on.next = self.sending.q.val() & !self.frame_ends.q.val();
@@ -518,6 +643,15 @@ impl Logic for FrameTransmitter {
                 & (self.header_index.val() < self.fields_end_ahead.val())
             {
                 self.source_next.next = self.source_next.val() | 1024;
+            }
+            if ((self.header_index.val() >= self.destination_mac_ahead.val())
+                & (self.header_index.val() < self.destination_mac_end_ahead.val()))
+                | ((self.header_index.val() >= self.destination_ip_ahead.val())
+                    & (self.header_index.val() < self.destination_ip_end_ahead.val()))
+                | ((self.header_index.val() >= self.destination_port_ahead.val())
+                    & (self.header_index.val() < self.destination_port_end_ahead.val()))
+            {
+                self.source_next.next = self.source_next.val() | 4096;
             }
         }
         self.source_ahead.d.next = self.source_next.val();
@@ -563,6 +697,10 @@ impl Logic for FrameTransmitter {
         if self.byte_source.q.val().get_bit(11) {
             self.tx_byte.next = self.tx_byte.val() | self.datagrams.body.data.val();
         }
+        if self.byte_source.q.val().get_bit(12) {
+            self.tx_byte.next =
+                self.tx_byte.val() | self.destination_high.q.val().get_bits::<8>(56);
+        }
         // The body beat is taken at its index: `in_body` is set a clock ahead, from the
         // source looked up for the next index (`source_ahead`) and the body's end.
         self.datagrams.body.ready.next = self.in_body.q.val();
@@ -597,7 +735,8 @@ impl Logic for FrameTransmitter {
             self.sending.q.val() & (self.index.q.val() == self.sfd_ahead.val());
         self.term_from_fields.d.next =
             self.sending.q.val() & (self.index.q.val() >= 1) & (self.index.q.val() < 17);
-        self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 18);
+        self.term_is_destination.d.next = self.sending.q.val() & (self.index.q.val() == 17);
+        self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 19);
         // the next index is 0 unless the frame goes on, 1 after 0
         self.term_is_kind.d.next = !self.frame_goes_on.val();
         self.term_is_udp_len.d.next = self.frame_goes_on.val() & self.term_is_kind.q.val();
@@ -633,7 +772,10 @@ impl Logic for FrameTransmitter {
             if self.frame_ends.q.val() {
                 self.sending.d.next = false;
                 self.index.d.next = 0.into();
-                self.next_sequence.d.next = self.next_sequence.q.val() + 1;
+                if !self.raw_held.q.val() {
+                    // (a raw frame is no datagram: the sequence stays)
+                    self.next_sequence.d.next = self.next_sequence.q.val() + 1;
+                }
                 self.gap.d.next = self.gap_clocks.val();
                 self.gap_done.d.next = false;
             }
@@ -645,9 +787,15 @@ impl Logic for FrameTransmitter {
         }
         // The frame geometry follows the held body length a clock later: it is valid from
         // index 1 on (nothing reads it at index 0).
-        self.body_end.d.next = self.body_len_held.q.val() + self.body_start.val();
-        self.body_end_less_one.d.next = self.body_len_held.q.val() + self.body_start.val() - 1;
-        self.end_minus_one.d.next = self.body_len_held.q.val() + self.frame_end_over_body.val();
+        self.geometry_start.next = self.body_start.val();
+        self.geometry_end_over_body.next = self.frame_end_over_body.val();
+        if self.raw_held.q.val() {
+            self.geometry_start.next = self.raw_body_start.val();
+            self.geometry_end_over_body.next = self.raw_frame_end_over_body.val();
+        }
+        self.body_end.d.next = self.body_len_held.q.val() + self.geometry_start.val();
+        self.body_end_less_one.d.next = self.body_len_held.q.val() + self.geometry_start.val() - 1;
+        self.end_minus_one.d.next = self.body_len_held.q.val() + self.geometry_end_over_body.val();
         self.total_len.d.next =
             bit_cast::<16, 11>(self.body_len_held.q.val()) + self.ip_len_over_body.val();
         self.udp_len.d.next =
@@ -659,6 +807,14 @@ impl Logic for FrameTransmitter {
         if !self.sending.q.val() {
             self.kind_held.d.next = self.datagrams.kind.val();
             self.body_len_held.d.next = self.datagrams.body_len.val();
+            self.raw_held.d.next = self.datagrams.kind.val() == self.raw_kind.val();
+            self.destination_high.d.next = (bit_cast::<64, 48>(self.destination_mac.val()) << 16)
+                | bit_cast::<64, 16>(self.destination_ip.val().get_bits::<16>(16));
+            self.destination_low.d.next =
+                (bit_cast::<32, 16>(self.destination_ip.val().get_bits::<16>(0)) << 16)
+                    | bit_cast::<32, 16>(self.destination_port.val());
+            self.destination_ip_held.d.next = self.destination_ip.val();
+            self.destination_port_held.d.next = self.destination_port.val();
             self.checksum.d.next = self.datagrams.body_sum.val();
             self.fields_high.d.next = (bit_cast::<64, 8>(self.datagrams.flags.val()) << 56)
                 | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
@@ -667,7 +823,25 @@ impl Logic for FrameTransmitter {
                 (bit_cast::<64, 40>(self.datagrams.base_tick.val().get_bits::<40>(0)) << 24)
                     | (bit_cast::<64, 16>(self.datagrams.entry_count.val()) << 8);
         }
+        // a destination byte leaves: the next one moves up
+        if self.sending.q.val() & self.byte_source.q.val().get_bit(12) {
+            self.destination_high.d.next = (self.destination_high.q.val() << 8)
+                | bit_cast::<64, 8>(self.destination_low.q.val().get_bits::<8>(24));
+            self.destination_low.d.next = self.destination_low.q.val() << 8;
+        }
+        // `!sending & gap_done` of the next clock: a frame goes on or ends (then the gap
+        // starts), the gap's last clock, or idle and no descriptor taken
+        self.idle.d.next = false;
+        if !self.sending.q.val() {
+            if self.gap_done.q.val() {
+                self.idle.d.next = !self.datagrams.valid.val();
+            } else {
+                self.idle.d.next = self.gap.q.val() == 1;
+            }
+        }
         if self.reset.val() {
+            self.idle.d.next = true;
+            self.term_is_destination.d.next = false;
             self.sending.d.next = false;
             self.stage_valid.d.next = false;
             self.crc_starts.d.next = false;
@@ -687,7 +861,7 @@ impl Logic for FrameTransmitter {
             self.in_body.d.next = false;
             self.tx_er.d.next = false;
         }
-        self.datagrams.ready.next = !self.sending.q.val() & self.gap_done.q.val();
+        self.datagrams.ready.next = self.idle.q.val();
         self.gmii_txd.next = self.txd.q.val();
         self.gmii_tx_en.next = self.tx_en.q.val();
         self.gmii_tx_er.next = self.tx_er.q.val();
@@ -697,7 +871,7 @@ impl Logic for FrameTransmitter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{check_frame, Bench, GmiiCapture};
+    use crate::testbench::{check_frame, Bench, GmiiCapture, TestRng};
     use skinbox_protocol::datagram::DatagramBody;
     use skinbox_protocol::{DataRepr, DatagramRepr, PortCounters, RecordRepr, StatusRepr};
     use std::collections::VecDeque;
@@ -755,6 +929,10 @@ mod tests {
             FrameTransmitter::new(&LinkConfig::DEFAULT, 0x0102, 8),
             |b| &mut b.clock,
         );
+        let link = LinkConfig::DEFAULT;
+        bench.uut.destination_mac.next = big_endian(&link.host_mac).into();
+        bench.uut.destination_ip.next = big_endian(&link.host_ip).into();
+        bench.uut.destination_port.next = u64::from(link.host_port).into();
         bench.uut.reset.next = true;
         bench.cycles(2);
         bench.uut.reset.next = false;
@@ -949,5 +1127,292 @@ mod tests {
         // the byte with tx_er is body byte 10 of the second frame
         let second_start = capture.starts[0] + capture.frames[0].len() as u64;
         assert!(errors[0] > second_start + BODY_START as u64);
+    }
+
+    /// Where a datagram frame goes.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    struct Destination {
+        mac: [u8; 6],
+        ip: [u8; 4],
+        port: u16,
+    }
+
+    /// What the bench offers: a datagram to a destination or a raw frame (its bytes from
+    /// the destination MAC on, at least 60).
+    #[derive(Clone, Debug)]
+    enum Item {
+        Datagram(DatagramRepr, Destination),
+        Raw(Vec<u8>),
+    }
+
+    /// The destination the inputs show on every clock but the take of a datagram's
+    /// descriptor.
+    const DECOY: Destination = Destination {
+        mac: [0xDE, 0xC0, 0x1D, 0xDE, 0xC0, 0x1D],
+        ip: [203, 0, 113, 99],
+        port: 0xDEC0,
+    };
+
+    fn drive_destination(u: &mut FrameTransmitter, d: Destination) {
+        u.destination_mac.next = big_endian(&d.mac).into();
+        u.destination_ip.next = big_endian(&d.ip).into();
+        u.destination_port.next = u64::from(d.port).into();
+    }
+
+    /// Offers the items in turn, each body's beats always valid (no gaps), the datagram's
+    /// destination on the destination inputs only at the clock its descriptor is taken
+    /// (the decoy on every other clock). Returns the frames and the take clocks.
+    fn send_items(items: &[Item]) -> (GmiiCapture, Vec<u64>) {
+        send_items_with_body_starts(items).0
+    }
+
+    /// [`send_items`], with the clock of each item's first body beat taken.
+    fn send_items_with_body_starts(items: &[Item]) -> ((GmiiCapture, Vec<u64>), Vec<u64>) {
+        let mut body_starts = vec![];
+        let mut body_started = false;
+        let mut bench = Bench::new(
+            FrameTransmitter::new(&LinkConfig::DEFAULT, 0x0102, 8),
+            |b| &mut b.clock,
+        );
+        bench.uut.reset.next = true;
+        bench.cycles(2);
+        bench.uut.reset.next = false;
+        let mut capture = GmiiCapture::default();
+        let mut takes = vec![];
+        let mut next = 0;
+        let mut body: VecDeque<u8> = VecDeque::new();
+        for clock in 0..200_000u64 {
+            let u = &mut bench.uut;
+            u.datagrams.body.valid.next = !body.is_empty();
+            u.datagrams.body.data.next = u64::from(*body.front().unwrap_or(&0xEE)).into();
+            u.datagrams.body.last.next = body.len() == 1;
+            u.datagrams.body.error.next = false;
+            u.datagrams.valid.next = false;
+            drive_destination(u, DECOY);
+            let offered = items.get(next).filter(|_| body.is_empty());
+            let mut destination = None;
+            let mut offered_body = vec![];
+            match offered {
+                Some(Item::Datagram(d, to)) => {
+                    let bytes = d.to_bytes();
+                    offered_body = bytes[HEADER_LEN..].to_vec();
+                    u.datagrams.kind.next = (d.kind() as u64).into();
+                    u.datagrams.flags.next = u64::from(d.flags).into();
+                    u.datagrams.entry_count.next =
+                        (u64::from(bytes[20]) << 8 | u64::from(bytes[21])).into();
+                    u.datagrams.base_tick.next = d.base_tick.into();
+                    destination = Some(*to);
+                }
+                Some(Item::Raw(frame)) => {
+                    offered_body = frame.clone();
+                    u.datagrams.kind.next = u64::from(RAW_FRAME_KIND).into();
+                    // (a raw frame's descriptor carries no header fields: noise here)
+                    u.datagrams.flags.next = 0xA5.into();
+                    u.datagrams.entry_count.next = 0x5A5A.into();
+                    u.datagrams.base_tick.next = 0x0123_4567_89AB_CDEF_u64.into();
+                }
+                None => {}
+            }
+            if offered.is_some() {
+                u.datagrams.valid.next = true;
+                u.datagrams.body_len.next = (offered_body.len() as u64).into();
+                u.datagrams.body_sum.next = word_sum(&offered_body).into();
+            }
+            bench.settle();
+            let taken = bench.uut.datagrams.valid.val() && bench.uut.datagrams.ready.val();
+            if taken {
+                if let Some(to) = destination {
+                    // the datagram's destination at the take clock only
+                    drive_destination(&mut bench.uut, to);
+                    bench.settle();
+                }
+                body = offered_body.into_iter().collect();
+                body_started = false;
+                takes.push(clock);
+                next += 1;
+            }
+            let u = &bench.uut;
+            if u.datagrams.body.ready.val() {
+                assert!(
+                    u.datagrams.body.valid.val(),
+                    "clock {clock}: body not ready"
+                );
+                body.pop_front();
+                if !body_started {
+                    body_starts.push(clock);
+                    body_started = true;
+                }
+            }
+            capture.clock(
+                clock,
+                u.gmii_tx_en.val(),
+                u.gmii_txd.val().to_u8(),
+                u.gmii_tx_er.val(),
+            );
+            bench.cycle();
+            if next == items.len() && body.is_empty() && capture.frames.len() == items.len() {
+                break;
+            }
+        }
+        assert_eq!(capture.frames.len(), items.len(), "every item sent");
+        ((capture, takes), body_starts)
+    }
+
+    /// The frame on GMII as an independent model has it: preamble, SFD, the bytes, and the
+    /// CRC-32 (IEEE 802.3, the `crc` crate) least significant byte first.
+    fn on_the_wire(frame: &[u8]) -> Vec<u8> {
+        let fcs = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(frame);
+        let mut wire = vec![0x55; 7];
+        wire.push(0xD5);
+        wire.extend(frame);
+        wire.extend(fcs.to_le_bytes());
+        wire
+    }
+
+    /// Checks a datagram frame independently: FCS (crc), headers and both checksums
+    /// (etherparse), addresses; returns the datagram.
+    fn check_datagram_frame(wire: &[u8], to: Destination) -> DatagramRepr {
+        assert_eq!(
+            &wire[..8],
+            &[0x55, 0x55, 0x55, 0x55, 0x55, 0x55, 0x55, 0xD5]
+        );
+        let frame = &wire[8..wire.len() - 4];
+        assert_eq!(on_the_wire(frame), wire, "FCS");
+        let h = etherparse::SlicedPacket::from_ethernet(frame).expect("etherparse parses it");
+        let Some(etherparse::LinkSlice::Ethernet2(eth)) = h.link else {
+            panic!("not Ethernet II")
+        };
+        let link = LinkConfig::DEFAULT;
+        assert_eq!((eth.destination(), eth.source()), (to.mac, link.box_mac));
+        let Some(etherparse::NetSlice::Ipv4(ip)) = h.net else {
+            panic!("not IPv4")
+        };
+        let ip_header = ip.header().to_header();
+        assert_eq!(
+            (ip_header.source, ip_header.destination),
+            (link.box_ip, to.ip)
+        );
+        assert_eq!(
+            ip_header.header_checksum,
+            ip_header.calc_header_checksum(),
+            "IPv4 checksum"
+        );
+        let Some(etherparse::TransportSlice::Udp(udp)) = h.transport else {
+            panic!("not UDP")
+        };
+        let udp_header = udp.to_header();
+        assert_eq!(
+            (udp_header.source_port, udp_header.destination_port),
+            (link.box_port, to.port)
+        );
+        let expected = udp_header
+            .calc_checksum_ipv4(&ip_header, udp.payload())
+            .expect("UDP checksum");
+        assert_eq!(udp_header.checksum, expected, "UDP checksum");
+        DatagramRepr::parse(udp.payload()).expect("a datagram")
+    }
+
+    fn raw_frame(rng: &mut TestRng, len: usize) -> Vec<u8> {
+        (0..len).map(|_| rng.byte()).collect()
+    }
+
+    fn host(n: u8) -> Destination {
+        Destination {
+            mac: [0x02, 0x48, 0x4F, 0x53, 0x54, n],
+            ip: [10, 20, n, 200u8.wrapping_add(n)],
+            port: 40_000 + u16::from(n),
+        }
+    }
+
+    #[test]
+    fn raw_frames_go_out_byte_for_byte_with_their_fcs() {
+        let mut rng = TestRng::new(0x4A57);
+        let mut lengths = vec![60, 61, 1514, 1513, 64];
+        lengths.extend((0..10).map(|_| 60 + (rng.next_u64() % (1514 - 60 + 1)) as usize));
+        let frames: Vec<_> = lengths.iter().map(|&n| raw_frame(&mut rng, n)).collect();
+        let items: Vec<_> = frames.iter().cloned().map(Item::Raw).collect();
+        let ((capture, takes), body_starts) = send_items_with_body_starts(&items);
+        for (i, frame) in frames.iter().enumerate() {
+            assert_eq!(capture.frames[i], on_the_wire(frame), "raw frame {i}");
+            assert_eq!(body_starts[i] - takes[i], TAKE_TO_RAW_BODY, "raw frame {i}");
+            assert_eq!(
+                capture.starts[i] - takes[i],
+                TAKE_TO_FIRST_BYTE,
+                "raw frame {i}"
+            );
+        }
+        assert!(capture.min_gap.unwrap() >= INTER_FRAME_GAP as u64);
+    }
+
+    #[test]
+    fn raw_frames_do_not_advance_the_sequence_number() {
+        let mut rng = TestRng::new(7);
+        let items = vec![
+            Item::Datagram(records(2, 5), host(1)),
+            Item::Raw(raw_frame(&mut rng, 60)),
+            Item::Datagram(status(3), host(1)),
+            Item::Raw(raw_frame(&mut rng, 98)),
+            Item::Raw(raw_frame(&mut rng, 342)),
+            Item::Datagram(records(1, 9), host(1)),
+        ];
+        let (capture, takes) = send_items(&items);
+        let mut sequence = 0;
+        for (i, item) in items.iter().enumerate() {
+            assert_eq!(capture.starts[i] - takes[i], TAKE_TO_FIRST_BYTE, "item {i}");
+            match item {
+                Item::Datagram(d, to) => {
+                    let got = check_datagram_frame(&capture.frames[i], *to);
+                    assert_eq!(
+                        got,
+                        DatagramRepr {
+                            sequence,
+                            ..d.clone()
+                        },
+                        "item {i}"
+                    );
+                    sequence += 1;
+                }
+                Item::Raw(frame) => assert_eq!(capture.frames[i], on_the_wire(frame)),
+            }
+        }
+    }
+
+    #[test]
+    fn a_destination_changed_between_two_descriptors_takes_effect_from_the_next_take() {
+        // every descriptor is offered as soon as the previous frame's body was taken, the
+        // destination differs from one to the next and is right at the take clock only
+        let items: Vec<_> = (0..6u8)
+            .map(|n| {
+                let d = if n % 2 == 0 {
+                    records(usize::from(n) + 1, u64::from(n))
+                } else {
+                    status(usize::from(n))
+                };
+                Item::Datagram(d, host(n))
+            })
+            .chain([Item::Datagram(
+                records(4, 77),
+                Destination {
+                    mac: [0xFF; 6],
+                    ip: [255, 255, 255, 255],
+                    port: 0xFFFF,
+                },
+            )])
+            .collect();
+        let (capture, takes) = send_items(&items);
+        for (i, item) in items.iter().enumerate() {
+            let Item::Datagram(d, to) = item else {
+                unreachable!()
+            };
+            let got = check_datagram_frame(&capture.frames[i], *to);
+            assert_eq!(
+                got,
+                DatagramRepr {
+                    sequence: i as u32,
+                    ..d.clone()
+                }
+            );
+            assert_eq!(capture.starts[i] - takes[i], TAKE_TO_FIRST_BYTE);
+        }
     }
 }

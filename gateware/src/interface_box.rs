@@ -462,6 +462,9 @@ impl Logic for InterfaceBox {
         DatagramSource::join(&mut self.replies.replies, &mut self.arbiter.sources[2]);
         self.transmitter.clock.next = self.clock.val();
         self.transmitter.reset.next = self.core_reset.q.val();
+        self.transmitter.destination_mac.next = self.commands.destination_mac.val();
+        self.transmitter.destination_ip.next = self.commands.destination_ip.val();
+        self.transmitter.destination_port.next = self.commands.destination_port.val();
         DatagramSource::join(&mut self.arbiter.datagrams, &mut self.transmitter.datagrams);
 
         self.gmii_txd.next = self.transmitter.gmii_txd.val();
