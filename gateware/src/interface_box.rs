@@ -10,19 +10,19 @@
 //! Timestamps: a record's tick is the tick of the first clock edge that sampled its
 //! packet's first start bit low at the pin (the true falling edge lies in the tick before).
 
+use crate::box_counter_file::BoxCounterFile;
 use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
+use crate::command_unit::{CommandUnit, CommandUnitConfig};
 use crate::counter_file::CounterFile;
 use crate::datagram_arbiter::DatagramArbiter;
+use crate::frame_parser::{FrameParser, ACTION_ARP, ACTION_COMMAND, ACTION_ECHO, ACTION_NONE};
 use crate::frame_transmitter::FrameTransmitter;
 use crate::hdl::*;
-use crate::packet_store::{group_onehot, PacketStore, GROUP_PORTS, MAX_PORTS};
-use crate::box_counter_file::BoxCounterFile;
-use crate::command_unit::{CommandUnit, CommandUnitConfig};
-use crate::frame_parser::{FrameParser, ACTION_ARP, ACTION_COMMAND, ACTION_ECHO, ACTION_NONE};
 use crate::mac_receiver::MacReceiver;
+use crate::packet_store::{group_onehot, PacketStore, GROUP_PORTS, MAX_PORTS};
 use crate::record_batcher::RecordBatcher;
-use crate::reply_builder::ReplyBuilder;
 use crate::replica_register::ReplicaRegister;
+use crate::reply_builder::ReplyBuilder;
 use crate::status_reporter::StatusReporter;
 use crate::stream::{ByteStreamSource, DatagramSource};
 use crate::timestamp::TimestampCounter;
@@ -196,6 +196,11 @@ impl BoxConfig {
 /// Clocks from the `reset` pin to the blocks (one register): box tick 0 is the clock
 /// `RESET_LATENCY` after the pin goes low.
 pub const RESET_LATENCY: u64 = 1;
+
+/// Clocks from the rising edge that samples a received frame's last byte on `gmii_rxd` to
+/// the clock whose tick is the frame's receive tick (the tick of its last beat out of the
+/// MAC, which the acknowledgement of a command carries).
+pub const RECEIVE_TICK_LAG: u64 = crate::mac_receiver::MAC_LATENCY;
 
 /// The interface box.
 #[derive(LogicBlock)]
@@ -421,8 +426,7 @@ impl Logic for InterfaceBox {
         self.box_counters.clock.next = self.clock.val();
         self.box_counters.reset.next = self.core_reset.q.val();
         self.box_counters.count.next = self.commands.done.val()
-            | (self.parser.decided.val()
-                & (self.parser.action.val() != self.action_command.val()));
+            | (self.parser.decided.val() & (self.parser.action.val() != self.action_command.val()));
         self.box_counters.counter.next = self.parser.fate.val();
         if self.commands.done.val() {
             self.box_counters.counter.next = self.commands.fate.val();

@@ -1,0 +1,348 @@
+//! The box's receive path at RTL: frames built with etherparse and the crc crate are driven
+//! on the verilated box's GMII receive while its ports carry cell traffic, and every answer
+//! it sends (ARP reply, echo reply, acknowledgement) must equal, byte for byte, what the
+//! control model (`skinbox_cosim::control`, itself held to independent oracles in
+//! tests/control.rs) answers to the same frames; the box counters in its status-now
+//! acknowledgements must equal the model's. The uplink meanwhile loses nothing.
+
+mod support;
+
+use skinbox_cosim::control::{BoxControl, ControlConfig, Reply};
+use skinbox_cosim::frames::Frame;
+use skinbox_cosim::harness::{LINK_SPEED, LINK_UP};
+use skinbox_cosim::run::{HostFrame, SentPacket, SimRun, SimSpec, TICK_ZERO_CYCLE};
+use skinbox_cosim::sim::run_rtl;
+use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
+use skinbox_protocol::box_counters::BoxCounter;
+use skinbox_protocol::command::{AckRepr, Request};
+use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT};
+use skinbox_protocol::cell::{UART_BAUD, UART_BITS_PER_PACKET};
+use skinbox_protocol::{DataRepr, DatagramRepr, TICKS_PER_SECOND, TICK_NS};
+use std::collections::BTreeMap;
+use support::*;
+
+/// Ticks of one cell packet on its 4 Mbit/s line.
+const PACKET_TICKS: u64 = UART_BITS_PER_PACKET * TICKS_PER_SECOND / UART_BAUD;
+
+/// The box of the support module's control configuration.
+fn box_config() -> BoxConfig {
+    let c = config();
+    BoxConfig {
+        ports: usize::from(c.port_count),
+        box_id: c.box_id,
+        link: c.link,
+        flush_timeout_ticks: u64::from(c.flush_timeout_ticks),
+        status_period_ticks: u64::from(c.status_period_ticks),
+        ..BoxConfig::default()
+    }
+}
+
+/// The control model as the co-simulated box starts: its link as the harness drives it.
+fn model(config: ControlConfig) -> BoxControl {
+    let mut m = BoxControl::new(config);
+    m.counters.link_up = LINK_UP;
+    m.counters.link_speed = LINK_SPEED;
+    m
+}
+
+/// Cell packets on every port: one every `every_ns` from `from_ns` to `until_ns`.
+fn traffic(ports: usize, from_ns: f64, until_ns: f64, every_ns: f64) -> Vec<Vec<SentPacket>> {
+    let bit_ns = 250.0;
+    (0..ports)
+        .map(|port| {
+            let mut out = vec![];
+            let mut t = from_ns + port as f64 * 1_100.0;
+            let mut n = 0u16;
+            while t < until_ns {
+                let bytes = DataRepr::from_raw(
+                    (port as u16) << 8 | (n & 0xFF),
+                    [i32::from(n), 1, 2, 3, 4, 5, 6, 7, 8],
+                )
+                .unwrap()
+                .to_bytes();
+                out.push(SentPacket {
+                    bytes,
+                    start_ns: t,
+                    bit_ns,
+                });
+                t += every_ns;
+                n = n.wrapping_add(1);
+            }
+            out
+        })
+        .collect()
+}
+
+fn spec(
+    config: BoxConfig,
+    ports: Vec<Vec<SentPacket>>,
+    host_frames: Vec<HostFrame>,
+    duration_ns: u64,
+) -> SimSpec {
+    SimSpec {
+        config,
+        ports,
+        duration_ns,
+        pcap: None,
+        vcd: None,
+        jitter: skinbox_cosim::line::Jitter::NONE,
+        host_frames,
+    }
+}
+
+/// The tick the box gives a host frame's arrival (its last byte).
+fn receive_tick(f: &HostFrame) -> u64 {
+    f.last_edge() + RECEIVE_TICK_LAG - TICK_ZERO_CYCLE
+}
+
+/// The tick of a sent frame's first byte.
+fn send_tick(f: &Frame) -> u64 {
+    f.first_cycle - TICK_ZERO_CYCLE
+}
+
+/// Feeds the host frames to the model and checks the box's answers against the model's,
+/// in order, byte for byte (an acknowledgement's send tick is the tick its frame started
+/// at). Returns the model.
+fn check_answers(
+    run: &SimRun,
+    host_frames: &[HostFrame],
+    mut m: BoxControl,
+    slot_free: impl Fn(usize) -> bool,
+) -> BoxControl {
+    let mut answers = run.replies.iter();
+    for (i, f) in host_frames.iter().enumerate() {
+        let outcome = m.receive_with_slot(&f.frame, receive_tick(f), slot_free(i));
+        let Some(reply) = outcome.reply else {
+            continue;
+        };
+        let got = answers
+            .next()
+            .unwrap_or_else(|| panic!("frame {i} ({:?}) was not answered", outcome.fate));
+        let expected = match &reply {
+            Reply::Arp(bytes) | Reply::Echo(bytes) => bytes.clone(),
+            Reply::Ack { .. } => reply.frame(&m.config().link, send_tick(got)),
+        };
+        if got.bytes != expected {
+            let ack = |b: &[u8]| AckRepr::parse(&b[8 + 42..b.len() - 4]).ok();
+            panic!(
+                "frame {i} ({:?}): answer differs\n box:   {:02x?}\n model: {:02x?}\n acks: {:?} / {:?}",
+                outcome.fate,
+                got.bytes,
+                expected,
+                ack(&got.bytes),
+                ack(&expected)
+            );
+        }
+    }
+    assert!(
+        answers.next().is_none(),
+        "the box answered more than the model"
+    );
+    m
+}
+
+#[test]
+fn answers_equal_the_control_model_on_random_good_and_bad_frames() {
+    let config = box_config();
+    let mut rng = Rng(0x005E_C04D);
+    let mut next_sequence = BTreeMap::new();
+    let mut accepted = vec![];
+    let mut host_frames = vec![];
+    let mut fates: BTreeMap<&str, u32> = BTreeMap::new();
+    // frames 40 us apart: every answer has left before the next frame comes
+    let mut edge = 20_000;
+    while host_frames.len() < 240 {
+        let case = random_case(&mut rng, &mut next_sequence, &mut accepted);
+        *fates.entry(case.fate.name()).or_default() += 1;
+        host_frames.push(HostFrame {
+            edge,
+            frame: case.frame,
+        });
+        edge += 5_000;
+    }
+    // a status-now at the end: its acknowledgement carries every counter
+    host_frames.push(HostFrame {
+        edge,
+        frame: command(HOST_IP, u32::MAX / 2, Request::StatusNow),
+    });
+    let duration_ns = (edge + 10_000) * TICK_NS;
+    let ports = traffic(
+        config.ports,
+        30_000.0,
+        duration_ns as f64 - 200_000.0,
+        400_000.0,
+    );
+    let run = run_rtl(&spec(
+        config.clone(),
+        ports,
+        host_frames.clone(),
+        duration_ns,
+    ))
+    .unwrap();
+    let m = check_answers(&run, &host_frames, model(config_for(&config)), |_| true);
+    // every kind of fate the generator makes occurred and was counted, and the status
+    // report after the last frame carries the same counters
+    assert!(fates.len() >= 15, "fates {fates:?}");
+    for c in BoxCounter::ALL {
+        if c != BoxCounter::FramesReceived && c != BoxCounter::ReplyBusy {
+            assert_eq!(
+                m.counters.get(c),
+                fates.get(c.name()).copied().unwrap_or(0)
+                    + u32::from(c == BoxCounter::CommandsAccepted),
+                "{}",
+                c.name()
+            );
+        }
+    }
+    let r = &run.report;
+    assert_eq!(
+        (r.packets_delivered, r.records_corrupted, r.records_mistimed),
+        (r.packets_sent, 0, 0),
+        "the uplink lost nothing: {r:?}"
+    );
+}
+
+/// The control configuration of a box configuration.
+fn config_for(c: &BoxConfig) -> ControlConfig {
+    ControlConfig {
+        link: c.link,
+        box_id: c.box_id,
+        port_count: c.ports as u8,
+        flush_timeout_ticks: c.flush_timeout_ticks as u32,
+        status_period_ticks: c.status_period_ticks as u32,
+    }
+}
+
+#[test]
+fn commands_reconfigure_the_uplink_under_line_rate_traffic() {
+    let config = box_config();
+    let link = config.link;
+    let ms = 125_000;
+    // every port at line rate (a packet every 200 bits) for 6 ms
+    let ports = traffic(config.ports, 30_000.0, 6_000_000.0, 50_000.0);
+    let sequence = 10;
+    let at = |ms_: f64| (ms_ * ms as f64) as u64;
+    let host_frames = vec![
+        // who has the box's IP; ping it
+        HostFrame {
+            edge: at(0.5),
+            frame: arp_request(link.box_ip, HOST_MAC, HOST_IP),
+        },
+        HostFrame {
+            edge: at(0.6),
+            frame: ping(link.box_mac, link.box_ip, 0x1234, 1, &[0xAB; 56]),
+        },
+        // claim the stream: datagrams go to the sender from then on
+        HostFrame {
+            edge: at(1.0),
+            frame: command(HOST_IP, sequence, Request::StreamTo { to: None }),
+        },
+        // flush after 10 us
+        HostFrame {
+            edge: at(2.0),
+            frame: command(
+                HOST_IP,
+                sequence + 1,
+                Request::SetFlushTimeout { ticks: 1_250 },
+            ),
+        },
+        // a status report every ms, counted from 3 ms
+        HostFrame {
+            edge: at(3.0),
+            frame: command(
+                HOST_IP,
+                sequence + 2,
+                Request::SetStatusPeriod { ticks: ms as u32 },
+            ),
+        },
+        // a status report now
+        HostFrame {
+            edge: at(4.5),
+            frame: command(HOST_IP, sequence + 3, Request::StatusNow),
+        },
+        // a replay: refused and counted
+        HostFrame {
+            edge: at(5.0),
+            frame: command(HOST_IP, sequence + 3, Request::ReadTick),
+        },
+    ];
+    let duration_ns = at(7.0) * TICK_NS;
+    let run = run_rtl(&spec(
+        config.clone(),
+        ports,
+        host_frames.clone(),
+        duration_ns,
+    ))
+    .unwrap();
+    let m = check_answers(&run, &host_frames, model(config_for(&config)), |_| true);
+    assert_eq!(m.counters.get(BoxCounter::ArpAnswered), 1);
+    assert_eq!(m.counters.get(BoxCounter::PingsAnswered), 1);
+    assert_eq!(m.counters.get(BoxCounter::CommandsAccepted), 4);
+    assert_eq!(m.counters.get(BoxCounter::RefusedReplay), 1);
+    let r = &run.report;
+    assert_eq!(
+        (r.packets_delivered, r.records_corrupted, r.records_mistimed),
+        (r.packets_sent, 0, 0),
+        "no record lost while the box answered: {r:?}"
+    );
+
+    // the frames' destinations and the datagrams' timing, tick by tick
+    let mut status_ticks = vec![];
+    for frame in run.frames.iter().filter(|f| !run.replies.contains(f)) {
+        let (ethernet, payload) = skinbox_cosim::frames::check(&frame.bytes).unwrap();
+        let d = DatagramRepr::parse(payload).unwrap();
+        let tick = send_tick(frame);
+        let claimed = tick > receive_tick(&host_frames[2]) + 1_000;
+        let destination_mac = &ethernet[0..6];
+        let destination_ip = &ethernet[30..34];
+        if claimed {
+            assert_eq!(destination_mac, HOST_MAC, "tick {tick}");
+            assert_eq!(destination_ip, HOST_IP, "tick {tick}");
+            assert_eq!(&ethernet[36..38], HOST_PORT.to_be_bytes(), "tick {tick}");
+        } else if tick < receive_tick(&host_frames[2]) {
+            assert_eq!(destination_mac, link.host_mac, "tick {tick}");
+            assert_eq!(destination_ip, link.host_ip, "tick {tick}");
+        }
+        match &d.body {
+            DatagramBody::Records(records) => {
+                // after the new flush timeout every datagram closed within 10 us of its
+                // first record's arrival (its stamp is its start bit, a packet's time on
+                // the line earlier), and went out soon after
+                let opened = d.base_tick;
+                if opened > receive_tick(&host_frames[3]) + 1_000 {
+                    assert_ne!(d.flags & FLAG_FLUSH_TIMEOUT, 0, "tick {tick}");
+                    assert!(
+                        tick - opened < PACKET_TICKS + 1_250 + 1_000,
+                        "opened {opened}, sent {tick}"
+                    );
+                    assert!(!records.is_empty());
+                } else if opened + 12_500 < receive_tick(&host_frames[3]) {
+                    assert!(tick - opened >= 1_250, "opened {opened}, sent {tick}");
+                }
+            }
+            DatagramBody::Status(_) => status_ticks.push(d.base_tick),
+        }
+    }
+    // reports at reset, every ms from 4 ms on, and one right after the status-now
+    let set = receive_tick(&host_frames[4]);
+    let now = receive_tick(&host_frames[5]);
+    let after: Vec<u64> = status_ticks.iter().copied().filter(|&t| t > set).collect();
+    assert!(
+        after.iter().any(|&t| t > now && t < now + 2_000),
+        "a report right after status-now: {status_ticks:?}"
+    );
+    let periodic: Vec<u64> = after
+        .iter()
+        .copied()
+        .filter(|&t| t < now || t > now + 2_000)
+        .collect();
+    assert_eq!(
+        periodic.len(),
+        3,
+        "reports a ms apart after the change: {status_ticks:?}"
+    );
+    for (k, t) in periodic.iter().enumerate() {
+        let due = set + (k as u64 + 1) * ms;
+        assert!((due..due + 200).contains(t), "{status_ticks:?}");
+    }
+}
