@@ -10,13 +10,14 @@ mod support;
 use skinbox_cosim::control::{BoxControl, ControlConfig, Reply};
 use skinbox_cosim::frames::Frame;
 use skinbox_cosim::harness::{LINK_SPEED, LINK_UP};
+use skinbox_cosim::reference::run_reference;
 use skinbox_cosim::run::{HostFrame, SentPacket, SimRun, SimSpec, TICK_ZERO_CYCLE};
 use skinbox_cosim::sim::run_rtl;
 use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
 use skinbox_protocol::box_counters::BoxCounter;
+use skinbox_protocol::cell::{UART_BAUD, UART_BITS_PER_PACKET};
 use skinbox_protocol::command::{AckRepr, Request};
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT};
-use skinbox_protocol::cell::{UART_BAUD, UART_BITS_PER_PACKET};
 use skinbox_protocol::{DataRepr, DatagramRepr, TICKS_PER_SECOND, TICK_NS};
 use std::collections::BTreeMap;
 use support::*;
@@ -100,6 +101,27 @@ fn send_tick(f: &Frame) -> u64 {
     f.first_cycle - TICK_ZERO_CYCLE
 }
 
+/// Runs `spec` on the RTL and on the reference model, which must agree on every frame
+/// (replies included) and the cycle of its first byte.
+fn run_both(spec: &SimSpec) -> SimRun {
+    let run = run_rtl(spec).unwrap();
+    let predicted = run_reference(spec).unwrap();
+    for (i, (r, p)) in run.frames.iter().zip(&predicted.frames).enumerate() {
+        assert!(
+            r == p,
+            "frame {i}: RTL at cycle {} ({} bytes), reference at {} ({} bytes)\n RTL: {:02x?}\n ref: {:02x?}",
+            r.first_cycle,
+            r.bytes.len(),
+            p.first_cycle,
+            p.bytes.len(),
+            &r.bytes[..r.bytes.len().min(120)],
+            &p.bytes[..p.bytes.len().min(120)]
+        );
+    }
+    assert_eq!(run.frames.len(), predicted.frames.len(), "frames sent");
+    run
+}
+
 /// Feeds the host frames to the model and checks the box's answers against the model's,
 /// in order, byte for byte (an acknowledgement's send tick is the tick its frame started
 /// at). Returns the model.
@@ -172,13 +194,12 @@ fn answers_equal_the_control_model_on_random_good_and_bad_frames() {
         duration_ns as f64 - 200_000.0,
         400_000.0,
     );
-    let run = run_rtl(&spec(
+    let run = run_both(&spec(
         config.clone(),
         ports,
         host_frames.clone(),
         duration_ns,
-    ))
-    .unwrap();
+    ));
     let m = check_answers(&run, &host_frames, model(config_for(&config)), |_| true);
     // every kind of fate the generator makes occurred and was counted, and the status
     // report after the last frame carries the same counters
@@ -267,13 +288,12 @@ fn commands_reconfigure_the_uplink_under_line_rate_traffic() {
         },
     ];
     let duration_ns = at(7.0) * TICK_NS;
-    let run = run_rtl(&spec(
+    let run = run_both(&spec(
         config.clone(),
         ports,
         host_frames.clone(),
         duration_ns,
-    ))
-    .unwrap();
+    ));
     let m = check_answers(&run, &host_frames, model(config_for(&config)), |_| true);
     assert_eq!(m.counters.get(BoxCounter::ArpAnswered), 1);
     assert_eq!(m.counters.get(BoxCounter::PingsAnswered), 1);

@@ -594,7 +594,11 @@ mod tests {
         assert!(text.contains(".rx_clock(eth_rx_clk),"));
         // both ends of each received GMII wire: the crossing's output, the box's input
         for wire in RX_GMII_WIRES {
-            assert_eq!(text.matches(&format!(".{wire}({wire})")).count(), 2, "{wire}");
+            assert_eq!(
+                text.matches(&format!(".{wire}({wire})")).count(),
+                2,
+                "{wire}"
+            );
         }
     }
 

@@ -4,16 +4,21 @@
 //! ending) and jumps over every stretch in which only free-running counters advance.
 
 use super::front::{PortFront, StartedPacket};
+use super::receive::ReceiveSide;
+use crate::control::Effect;
 use crate::harness::{LINK_SPEED, LINK_UP};
 use skinbox_gateware::cell_deframer::TICK_BEATS;
 use skinbox_gateware::counter_file::scan_period;
+use skinbox_gateware::frame_transmitter::TAKE_TO_RAW_BODY;
 use skinbox_gateware::packet_store::{FIFO_DEPTH, RECORD_BEATS};
 use skinbox_gateware::status_reporter::{
     BOX_COUNTER_WORDS, CLOCKS_PER_WORD, HEADER_WORDS, WORD_VALUE_CLOCK,
 };
-use skinbox_protocol::box_counters::{BoxCounters, BOX_COUNTERS_LEN};
+use skinbox_protocol::box_counters::{BoxCounter, BoxCounters, BOX_COUNTERS_LEN};
 use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::command::Destination;
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAX_RECORDS};
+use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::{DatagramRepr, PortCounters, RecordRepr, StatusRepr};
 use std::collections::VecDeque;
@@ -56,10 +61,21 @@ pub(super) struct BackTiming {
 pub(super) struct SentFrame {
     /// Cycle of its first preamble byte on GMII.
     pub first_cycle: u64,
-    /// The datagram.
-    pub datagram: DatagramRepr,
-    /// A status datagram's box counter block.
-    pub box_counters: Option<BoxCounters>,
+    /// What it carries.
+    pub content: Sent,
+}
+
+/// What a sent frame carries.
+#[derive(Debug, Clone)]
+pub(super) enum Sent {
+    /// A box datagram to `destination`, a status datagram with its box counter block.
+    Datagram {
+        datagram: DatagramRepr,
+        box_counters: Option<BoxCounters>,
+        destination: Destination,
+    },
+    /// A reply of the receive path, preamble to FCS.
+    Reply(Vec<u8>),
 }
 
 /// Last issue of a store record (port, flags, 4 tick bytes, 20 cell bytes).
@@ -162,9 +178,9 @@ pub(super) struct Back<'a> {
     /// First cycle after the last body byte of the records datagram sent last was taken
     /// (its buffer is free from then on).
     records_body_until: u64,
-    // datagram arbiter: the last grant went to the records datagrams (the status
-    // datagram goes first when both wait)
-    last_grant_records: bool,
+    // datagram arbiter: the source granted last (records 0, status 1, replies 2); the
+    // first waiting source after it goes next, else the lowest waiting
+    last_grant: Option<usize>,
     /// Cycles from which each records datagram counts as sent, and the records sum.
     started_records: Vec<(u64, u64)>,
     records_sent: u64,
@@ -178,16 +194,27 @@ pub(super) struct Back<'a> {
     page_ports: usize,
     report_tick: u64,
     status_body: Option<StatusRepr>,
+    /// Its box counter block, read with it.
+    status_block: Option<BoxCounters>,
     /// As `records_body_until`, for the status datagram sent last.
     status_body_until: u64,
     /// A cycle in which the status timer is zero (its zeros are a period apart from it).
     period_origin: u64,
+    /// The receive path, when the host sends frames.
+    receive: Option<ReceiveSide>,
+    /// Where the datagrams go (stream-to changes it).
+    destination: Destination,
     /// Frames sent, in order.
     pub frames: Vec<SentFrame>,
 }
 
 impl<'a> Back<'a> {
-    pub(super) fn new(t: BackTiming, fronts: &'a [PortFront]) -> Self {
+    pub(super) fn new(
+        t: BackTiming,
+        fronts: &'a [PortFront],
+        destination: Destination,
+        receive: Option<ReceiveSide>,
+    ) -> Self {
         // The store's write ring takes a port's beat only on its visits: the first beat at
         // the first visit from its cycle on; the tick beats and the header byte follow one
         // visit each, and the last beat waits for them (it is the header byte itself when
@@ -253,7 +280,7 @@ impl<'a> Back<'a> {
             deadline_passed: false,
             pending: None,
             records_body_until: 0,
-            last_grant_records: false,
+            last_grant: None,
             started_records: vec![],
             records_sent: 0,
             idle_from: 0,
@@ -264,8 +291,11 @@ impl<'a> Back<'a> {
             page_ports: 0,
             report_tick: 0,
             status_body: None,
+            status_block: None,
             status_body_until: 0,
             period_origin,
+            receive,
+            destination,
             frames: vec![],
         }
     }
@@ -348,6 +378,10 @@ impl<'a> Back<'a> {
                 Report::Sending => c < self.status_body_until,
             }
             && self.beats.get(self.next_beat).is_none_or(|b| b.cycle > c)
+            && self
+                .receive
+                .as_ref()
+                .is_none_or(|r| r.next_event(c) > c && !(idle && r.reply_waits(c)))
     }
 
     /// The earliest cycle after `c` at which something may change.
@@ -369,6 +403,9 @@ impl<'a> Back<'a> {
             // deadline_passed rises one clock after the tick reaches the deadline
             let due = self.deadline_cycle() + 1;
             next = next.min(due.max(c + 1));
+        }
+        if let Some(r) = &self.receive {
+            next = next.min(r.next_event(c).max(c + 1));
         }
         match self.report {
             Report::Wait => {
@@ -420,6 +457,17 @@ impl<'a> Back<'a> {
         let n = self.t.ports;
         let tick = self.tick(c);
         let idle = c >= self.idle_from;
+
+        // the receive side: frames decided, the configuration changing in this clock
+        let effects = self.receive.as_mut().map_or(vec![], |r| r.step(c));
+        for effect in effects {
+            match effect {
+                Effect::StreamTo(d) => self.destination = d,
+                Effect::SetFlushTimeout(t) => self.t.flush_timeout = t.into(),
+                Effect::SetStatusPeriod(t) => self.set_status_period(t.into(), c),
+                Effect::StatusNow => self.due = true,
+            }
+        }
 
         // framer input control
         let closing = self.close_now(c);
@@ -510,48 +558,65 @@ impl<'a> Back<'a> {
         let next_deadline_passed = (tick as u32).wrapping_sub(self.deadline) as i32 >= 0;
         self.deadline = next_deadline;
 
-        // arbiter and transmitter: of two waiting datagrams the one whose source was not
-        // granted last (decided on the registers as they are: a datagram closing now waits
-        // a clock)
-        let records_wait = self.pending.is_some();
-        let status_waits = self.report == Report::Request;
-        let status_first = status_waits && (!records_wait || self.last_grant_records);
-        let start_records = idle && records_wait && !status_first;
-        let start_status = idle && status_first;
+        // arbiter and transmitter: of the waiting datagrams the first after the source
+        // granted last, else the lowest (decided on the registers as they are: a datagram
+        // closing now waits a clock)
+        let waiting = [
+            self.pending.is_some(),
+            self.report == Report::Request,
+            self.receive.as_ref().is_some_and(|r| r.reply_waits(c)),
+        ];
+        let after_last = |i: usize| self.last_grant.is_some_and(|last| i > last);
+        let grant = (0..waiting.len())
+            .find(|&i| waiting[i] && after_last(i))
+            .or_else(|| (0..waiting.len()).find(|&i| waiting[i]))
+            .filter(|_| idle);
 
-        self.step_report(c, tick, start_status);
+        self.step_report(c, tick, grant == Some(1));
 
-        if start_records {
-            let mut d = self.pending.take().expect("checked");
-            if let DatagramBody::Records(r) = &d.body {
-                self.records_sent += r.len() as u64;
+        match grant {
+            Some(0) => {
+                let mut d = self.pending.take().expect("checked");
+                if let DatagramBody::Records(r) = &d.body {
+                    self.records_sent += r.len() as u64;
+                }
+                // (the batcher counts it a clock after the take)
+                self.started_records.push((c + 2, self.records_sent));
+                d.sequence = self.sequence;
+                self.records_body_until = self.send(c, d, None);
             }
-            // (the batcher counts it a clock after the take)
-            self.started_records.push((c + 2, self.records_sent));
-            d.sequence = self.sequence;
-            self.records_body_until = self.send(c, d, None);
-            self.last_grant_records = true;
-        } else if start_status {
-            let status = self
-                .status_body
-                .take()
-                .expect("a requested report has a body");
-            let d = DatagramRepr {
-                box_id: self.t.box_id,
-                port_count: self.t.ports as u8,
-                flags: 0,
-                sequence: self.sequence,
-                base_tick: self.report_tick,
-                body: DatagramBody::Status(status),
-            };
-            // the link as the harness drives it; the box has no receive path to count
-            let block = BoxCounters {
-                link_up: LINK_UP,
-                link_speed: LINK_SPEED,
-                ..BoxCounters::default()
-            };
-            self.status_body_until = self.send(c, d, Some(block));
-            self.last_grant_records = false;
+            Some(1) => {
+                let status = self
+                    .status_body
+                    .take()
+                    .expect("a requested report has a body");
+                let d = DatagramRepr {
+                    box_id: self.t.box_id,
+                    port_count: self.t.ports as u8,
+                    flags: 0,
+                    sequence: self.sequence,
+                    base_tick: self.report_tick,
+                    body: DatagramBody::Status(status),
+                };
+                let block = self.status_block.take().expect("built with the body");
+                self.status_body_until = self.send(c, d, Some(block));
+            }
+            Some(_) => {
+                let receive = self.receive.as_mut().expect("a reply waits");
+                let wire = receive.take_reply(c, self.t.start_to_first_byte);
+                let body_len = ReceiveSide::body_len(&wire);
+                let last_take = c + TAKE_TO_RAW_BODY + body_len - 1;
+                receive.reply_sent(last_take);
+                self.idle_from = c + PREAMBLE_LEN as u64 + body_len + self.t.frame_tail;
+                self.frames.push(SentFrame {
+                    first_cycle: c + self.t.start_to_first_byte,
+                    content: Sent::Reply(wire),
+                });
+            }
+            None => {}
+        }
+        if grant.is_some() {
+            self.last_grant = grant;
         }
         if closing {
             let records = std::mem::take(&mut self.fill);
@@ -620,8 +685,11 @@ impl<'a> Back<'a> {
         self.sequence = self.sequence.wrapping_add(1);
         self.frames.push(SentFrame {
             first_cycle: c + self.t.start_to_first_byte,
-            datagram: d,
-            box_counters,
+            content: Sent::Datagram {
+                datagram: d,
+                box_counters,
+                destination: self.destination,
+            },
         });
         c + 1 + self.t.body_start + body_len
     }
@@ -661,6 +729,7 @@ impl<'a> Back<'a> {
             Report::Build { from, request_at } => {
                 if c + 1 == request_at {
                     self.status_body = Some(self.status_body(from));
+                    self.status_block = Some(self.status_block(from));
                     self.report = Report::Request;
                 }
             }
@@ -681,6 +750,25 @@ impl<'a> Back<'a> {
             }
         }
         self.due = due;
+    }
+
+    /// The box counter block of the body written from cycle `from` (its words after the
+    /// port counters, each read as a port counter is): the link as the harness drives it,
+    /// the receive side's counters as its reads see them.
+    fn status_block(&self, from: u64) -> BoxCounters {
+        let mut block = BoxCounters {
+            link_up: LINK_UP,
+            link_speed: LINK_SPEED,
+            ..BoxCounters::default()
+        };
+        if let Some(receive) = &self.receive {
+            let block_start = (HEADER_WORDS + 8 * self.page_ports) as u64;
+            for (i, counter) in BoxCounter::ALL.iter().enumerate() {
+                let read = from + CLOCKS_PER_WORD * (block_start + 1 + i as u64);
+                block.counts[i] = receive.counters_at(read).get(*counter);
+            }
+        }
+        block
     }
 
     /// The body written from cycle `from`: word `w` takes its value in cycle

@@ -21,19 +21,29 @@
 
 mod back;
 mod front;
+mod receive;
 
+use crate::control::{BoxControl, ControlConfig};
 use crate::error::CosimError;
 use crate::frames::Frame;
+use crate::harness::{LINK_SPEED, LINK_UP};
 use crate::line::Transition;
-use crate::run::{analyse, cycles, lines, SimRun, SimSpec, TICK_ZERO_CYCLE};
-use back::{Back, BackTiming};
+use crate::run::{analyse, cycles, lines, HostFrame, SimRun, SimSpec, TICK_ZERO_CYCLE};
+use back::{Back, BackTiming, Sent};
 use front::{port_front, FrontTiming, PortFront};
+use receive::{ReceiveSide, ReceiveTiming};
 use skinbox_frame_check::{encode, UdpAddresses};
+use skinbox_gateware::command_unit::COMMAND_LATENCY;
 use skinbox_gateware::counter_file::CLEAR_CLOCKS;
+use skinbox_gateware::frame_parser::DECISION_LATENCY;
 use skinbox_gateware::frame_transmitter::BODY_START;
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_gateware::interface_box::RECEIVE_TICK_LAG;
+use skinbox_gateware::mac_receiver::MAC_LATENCY;
 use skinbox_gateware::status_reporter::PORTS_PER_STATUS;
 use skinbox_gateware::uart_rx::{phase_increment, PHASE_START};
+use skinbox_protocol::command::Destination;
+use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP};
 use std::time::Instant;
 
@@ -80,6 +90,7 @@ fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
 pub struct PreparedReference {
     fronts: Vec<PortFront>,
     back_timing: BackTiming,
+    destination: Destination,
 }
 
 /// Prepares the reference model of `config` for pins carrying `lines` up to cycle `end`
@@ -96,9 +107,15 @@ pub fn prepare(
         .map(|l| port_front(l, &front_timing, end))
         .collect();
     fronts.resize_with(config.ports, PortFront::default);
+    let link = &config.link;
     Ok(PreparedReference {
         fronts,
         back_timing,
+        destination: Destination {
+            mac: link.host_mac,
+            ip: link.host_ip,
+            port: link.host_port,
+        },
     })
 }
 
@@ -106,7 +123,12 @@ impl PreparedReference {
     /// The box leaving reset: a back end at cycle [`TICK_ZERO_CYCLE`].
     pub fn start(&self) -> SlicedReference<'_> {
         SlicedReference {
-            back: Back::new(self.back_timing.clone(), &self.fronts),
+            back: Back::new(
+                self.back_timing.clone(),
+                &self.fronts,
+                self.destination,
+                None,
+            ),
             done: TICK_ZERO_CYCLE,
             taken: 0,
         }
@@ -148,10 +170,18 @@ impl SlicedReference<'_> {
         }
         let new = self.back.frames[self.taken..]
             .iter()
-            .map(|f| SlicedDatagram {
-                first_cycle: f.first_cycle,
-                datagram: f.datagram.clone(),
-                box_counters: f.box_counters,
+            .filter_map(|f| match &f.content {
+                Sent::Datagram {
+                    datagram,
+                    box_counters,
+                    ..
+                } => Some(SlicedDatagram {
+                    first_cycle: f.first_cycle,
+                    datagram: datagram.clone(),
+                    box_counters: *box_counters,
+                }),
+                // (the sliced reference has no receive side: the emulator answers)
+                Sent::Reply(_) => None,
             })
             .collect();
         self.taken = self.back.frames.len();
@@ -179,6 +209,36 @@ impl SlicedReference<'_> {
     }
 }
 
+/// The receive path's fixed numbers, from the gateware's blocks.
+fn receive_timing() -> ReceiveTiming {
+    use skinbox_gateware::reply_builder::{build_clocks, AckReplyKind, ReplyKind};
+    ReceiveTiming {
+        // the preamble and SFD, then the MAC's registers
+        first_beat_after_edge: PREAMBLE_LEN as u64 + MAC_LATENCY,
+        decided_after_last_edge: MAC_LATENCY + DECISION_LATENCY,
+        receive_tick_after_last_edge: RECEIVE_TICK_LAG,
+        command_latency: COMMAND_LATENCY,
+        // the box counter file reads `frames_received` in the clock of the count and the
+        // fate's counter a clock later, and writes each three clocks after its read
+        frames_received_visible_after: 4,
+        fate_visible_after: 5,
+        // the command unit's registers hold the new values in its `done` clock; the
+        // status reporter registers a report asked for now
+        config_after_done: 0,
+        report_now_after_done: 1,
+        build_arp: build_clocks(ReplyKind::Arp),
+        build_echo: build_clocks(ReplyKind::Echo),
+        build_ack: [
+            AckReplyKind::None,
+            AckReplyKind::Destination,
+            AckReplyKind::Counters,
+        ]
+        .map(|r| build_clocks(ReplyKind::Ack(r))),
+        // `locked` falls the clock after the last body beat was taken
+        unlock_after_last_take: 1,
+    }
+}
+
 /// Clocks from the cycle a transmitter start is decided to the first GMII byte.
 const START_TO_FIRST_BYTE: u64 = skinbox_gateware::frame_transmitter::TAKE_TO_FIRST_BYTE;
 
@@ -192,14 +252,15 @@ pub fn run_reference_with_progress(
     spec: &SimSpec,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<SimRun, CosimError> {
-    if !spec.host_frames.is_empty() {
-        return Err(CosimError::HostFrames(
-            "the reference model predicts the uplink only: run host frames on the RTL".into(),
-        ));
-    }
     let started = Instant::now();
     let (lines, true_starts) = lines(spec);
-    let frames = predict_frames_with_progress(&spec.config, &lines, cycles(spec), progress)?;
+    let frames = predict_frames_with_progress(
+        &spec.config,
+        &lines,
+        &spec.host_frames,
+        cycles(spec),
+        progress,
+    )?;
     let wall = started.elapsed().as_secs_f64();
     analyse(spec, &frames, &true_starts, wall)
 }
@@ -212,17 +273,40 @@ pub fn predict_frames(
     lines: &[Vec<Transition>],
     cycles: u64,
 ) -> Result<Vec<Frame>, CosimError> {
-    predict_frames_with_progress(config, lines, cycles, &mut |_, _| {})
+    predict_frames_with_progress(config, lines, &[], cycles, &mut |_, _| {})
 }
 
 fn predict_frames_with_progress(
     config: &BoxConfig,
     lines: &[Vec<Transition>],
+    host_frames: &[HostFrame],
     end: u64,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Vec<Frame>, CosimError> {
     let prepared = prepare(config, lines, end)?;
-    let mut back = Back::new(prepared.back_timing.clone(), &prepared.fronts);
+    let receive = (!host_frames.is_empty()).then(|| {
+        let mut control = BoxControl::new(ControlConfig {
+            link: config.link,
+            box_id: config.box_id,
+            port_count: config.ports as u8,
+            flush_timeout_ticks: config.flush_timeout_ticks as u32,
+            status_period_ticks: config.status_period_ticks as u32,
+        });
+        control.counters.link_up = LINK_UP;
+        control.counters.link_speed = LINK_SPEED;
+        ReceiveSide::new(
+            receive_timing(),
+            TICK_ZERO_CYCLE,
+            control,
+            host_frames.to_vec(),
+        )
+    });
+    let mut back = Back::new(
+        prepared.back_timing.clone(),
+        &prepared.fronts,
+        prepared.destination,
+        receive,
+    );
     let step = 1 << 24;
     let mut done = TICK_ZERO_CYCLE;
     while done < end {
@@ -232,21 +316,31 @@ fn predict_frames_with_progress(
         progress(done, end);
     }
     let link = &config.link;
-    let addresses = UdpAddresses {
-        source_mac: link.box_mac,
-        destination_mac: link.host_mac,
-        source_ip: link.box_ip,
-        destination_ip: link.host_ip,
-        source_port: link.box_port,
-        destination_port: link.host_port,
-    };
     let mut frames = Vec::with_capacity(back.frames.len());
     for f in &back.frames {
-        let mut bytes = encode(&addresses, &payload(&f.datagram, f.box_counters.as_ref()))
-            .map_err(|source| CosimError::Frame {
-                step: "encoding a predicted frame",
-                source,
-            })?;
+        let mut bytes = match &f.content {
+            Sent::Datagram {
+                datagram,
+                box_counters,
+                destination,
+            } => {
+                let addresses = UdpAddresses {
+                    source_mac: link.box_mac,
+                    destination_mac: destination.mac,
+                    source_ip: link.box_ip,
+                    destination_ip: destination.ip,
+                    source_port: link.box_port,
+                    destination_port: destination.port,
+                };
+                encode(&addresses, &payload(datagram, box_counters.as_ref())).map_err(|source| {
+                    CosimError::Frame {
+                        step: "encoding a predicted frame",
+                        source,
+                    }
+                })?
+            }
+            Sent::Reply(wire) => wire.clone(),
+        };
         // the run ends at cycle `end`: a frame still going is cut there, as on the pins
         let room = (end + 1).saturating_sub(f.first_cycle) as usize;
         bytes.truncate(room);
