@@ -366,3 +366,122 @@ fn commands_reconfigure_the_uplink_under_line_rate_traffic() {
         assert!((due..due + 200).contains(t), "{status_ticks:?}");
     }
 }
+
+/// Reply latency when the transmitter is idle: from the edge that samples a command's
+/// last byte to its acknowledgement's first byte on GMII, per acknowledgement kind. The
+/// blocks' latencies add up to it: the MAC and the parser decide, the command unit
+/// carries the command out, the builder writes the reply, the arbiter grants it in the
+/// clock it is offered, the transmitter starts.
+#[test]
+fn reply_latency_is_the_sum_of_the_blocks_latencies() {
+    use skinbox_gateware::command_unit::COMMAND_LATENCY;
+    use skinbox_gateware::frame_parser::DECISION_LATENCY;
+    use skinbox_gateware::frame_transmitter::TAKE_TO_FIRST_BYTE;
+    use skinbox_gateware::mac_receiver::MAC_LATENCY;
+    use skinbox_gateware::reply_builder::{build_clocks, AckReplyKind, ReplyKind};
+    let config = box_config();
+    let requests = [
+        (Request::ReadTick, AckReplyKind::None),
+        (Request::StreamTo { to: None }, AckReplyKind::Destination),
+        (Request::StatusNow, AckReplyKind::Counters),
+    ];
+    // no cell traffic, commands 0.2 ms apart (status reports only every 100 ms)
+    let host_frames: Vec<HostFrame> = requests
+        .iter()
+        .enumerate()
+        .map(|(i, (r, _))| HostFrame {
+            edge: 20_000 + 25_000 * i as u64,
+            frame: command(HOST_IP, 100 + i as u32, *r),
+        })
+        .collect();
+    let duration_ns = 120_000 * TICK_NS;
+    let run = run_both(&spec(
+        config.clone(),
+        vec![vec![]; config.ports],
+        host_frames.clone(),
+        duration_ns,
+    ));
+    check_answers(&run, &host_frames, model(config_for(&config)), |_| true);
+    assert_eq!(run.replies.len(), 3);
+    for ((f, (_, kind)), ack) in host_frames.iter().zip(requests).zip(&run.replies) {
+        let latency = ack.first_cycle - f.last_edge();
+        let expected = MAC_LATENCY
+            + DECISION_LATENCY
+            + COMMAND_LATENCY
+            + build_clocks(ReplyKind::Ack(kind))
+            + TAKE_TO_FIRST_BYTE;
+        eprintln!(
+            "acknowledgement ({kind:?}): {latency} clocks = {:.3} us from the command's last byte",
+            latency as f64 * TICK_NS as f64 / 1000.0
+        );
+        assert_eq!(latency, expected, "{kind:?}");
+    }
+}
+
+/// Requests that come while the previous reply still holds the buffer are counted
+/// `reply_busy` and not answered; once the reply has left, the next is answered. The
+/// reference model predicts which (RTL == reference), and the status-now acknowledgement at
+/// the end counts them.
+#[test]
+fn requests_while_a_reply_waits_are_counted_busy() {
+    let config = box_config();
+    let link = config.link;
+    let mut host_frames = vec![];
+    let mut edge = 20_000;
+    // bursts of pings with the minimum gap, each longer than a reply's build
+    for burst in 0..4u16 {
+        for k in 0..6u16 {
+            let frame = if k % 3 == 2 {
+                arp_request(link.box_ip, HOST_MAC, HOST_IP)
+            } else {
+                ping(
+                    link.box_mac,
+                    link.box_ip,
+                    burst,
+                    k,
+                    &vec![k as u8; 40 + 300 * k as usize],
+                )
+            };
+            let len = frame.len() as u64;
+            host_frames.push(HostFrame { edge, frame });
+            edge += 8 + len + 12;
+        }
+        edge += 30_000;
+    }
+    host_frames.push(HostFrame {
+        edge,
+        frame: command(HOST_IP, 7, Request::StatusNow),
+    });
+    let duration_ns = (edge + 10_000) * TICK_NS;
+    let ports = traffic(
+        config.ports,
+        30_000.0,
+        duration_ns as f64 - 100_000.0,
+        100_000.0,
+    );
+    let run = run_both(&spec(
+        config.clone(),
+        ports,
+        host_frames.clone(),
+        duration_ns,
+    ));
+    let last = run.replies.last().expect("the status-now acknowledgement");
+    let ack = AckRepr::parse(&last.bytes[8 + 42..last.bytes.len() - 4]).unwrap();
+    let skinbox_protocol::command::AckReply::Counters(counters) = ack.reply else {
+        panic!("status-now answered with {:?}", ack.reply)
+    };
+    let busy = counters.get(BoxCounter::ReplyBusy);
+    let answered = counters.get(BoxCounter::PingsAnswered) + counters.get(BoxCounter::ArpAnswered);
+    eprintln!("{answered} answered, {busy} busy of 24 requests");
+    assert_eq!(answered + busy, 24);
+    assert!(
+        busy >= 8 && answered >= 4,
+        "{answered} answered, {busy} busy"
+    );
+    assert_eq!(run.replies.len() as u32, answered + 1);
+    let r = &run.report;
+    assert_eq!(
+        (r.packets_delivered, r.records_corrupted),
+        (r.packets_sent, 0)
+    );
+}
