@@ -13,10 +13,10 @@
 //!   Colorlight boards delay their GTXCLK by about 1.9 ns internally by default, which puts
 //!   the sampling edge inside the data eye (see `constraints/colorlight_i5.lpf` for the
 //!   source). A PHY without that delay would need the clock shifted by 90 degrees (2 ns).
-//! - RGMII receive: RX_CTL and RXD[3:0] each through a `DELAYG` of 2 ns ([`RX_DELAY_TAPS`])
+//! - RGMII receive: RX_CTL and `RXD[3:0]` each through a `DELAYG` of 2 ns ([`RX_DELAY_TAPS`])
 //!   into an `IDDRX1F` (the ECP5 DDR input primitive) in the PHY's receive clock
-//!   `eth_rx_clk`, the second clock of the design: Q0 (the rising edge) holds RXD[3:0] and
-//!   rx_dv, Q1 (the falling edge) RXD[7:4] and rx_dv XOR rx_er (RGMII 2.0, section 3.4).
+//!   `eth_rx_clk`, the second clock of the design: Q0 (the rising edge) holds `RXD[3:0]` and
+//!   rx_dv, Q1 (the falling edge) `RXD[7:4]` and rx_dv XOR rx_er (RGMII 2.0, section 3.4).
 //!   The delay is what LiteEth's ECP5 RGMII PHY (`liteeth/phy/ecp5rgmii.py`) applies by
 //!   default and litex-boards' `targets/colorlight_i5.py` keeps for this board: the
 //!   B50612D sends RXC edge-aligned with the data, and 2 ns put the edge inside the data
@@ -48,7 +48,7 @@ pub const COLORLIGHT_I5_LPF: &str = include_str!("../../constraints/colorlight_i
 /// Clocks the PHY stays in reset after PLL lock: 2^21 at 125 MHz is 16.8 ms.
 pub const PHY_RESET_CLOCKS: u64 = 1 << 21;
 
-/// MDIO address of the PHY the box sends through: LiteX's `eth` 0, whose PHYA[0] strap
+/// MDIO address of the PHY the box sends through: LiteX's `eth` 0, whose `PHYA[0]` strap
 /// is 0 (litex-boards, `platforms/colorlight_i5.py`).
 pub const PHY_ADDRESS: u8 = 0;
 

@@ -697,7 +697,7 @@ mod tests {
                         .as_ref()
                         .expect("a status datagram's box counter block");
                     assert_eq!((b.link_up, b.link_speed), (true, LinkSpeed::Mbit100));
-                    assert!(b.counts.iter().all(|&c| c == 0), "no receive path");
+                    assert!(b.counts.iter().all(|&c| c == 0), "no frame received");
                 }
                 DatagramBody::Records(_) => assert!(block.is_none()),
             }

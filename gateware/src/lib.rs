@@ -16,6 +16,12 @@
 //!
 //! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
 //! over the interfaces of [`stream`]: bytes, and datagrams (a descriptor, then bytes).
+//!
+//! The receive path (docs/control.md): GMII receive (on the board, RGMII through
+//! [`rx_clock_crossing::RxClockCrossing`] into the box clock) -> [`mac_receiver::MacReceiver`]
+//! -> [`frame_parser::FrameParser`] -> [`command_unit::CommandUnit`]; the fates counted in
+//! [`box_counter_file::BoxCounterFile`]; ARP, echo and command replies built by
+//! [`reply_builder::ReplyBuilder`] and sent as the datagram arbiter's third source.
 
 pub mod async_fifo;
 pub mod block_ram;

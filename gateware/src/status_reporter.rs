@@ -5,7 +5,7 @@
 //! records sent, first port, then the eight counters of up to 32 ports (one datagram per
 //! 32 ports), then the box counter block (`skinbox_protocol::box_counters`, header flag
 //! `FLAG_BOX_COUNTERS`): the link state from `link_up` and `link_speed`, and the receive
-//! side's counters, 0 while the box has no receive path. It sums the body's 16-bit words while writing, offers the datagram's
+//! side's counters, read from the box counter file like the port counters. It sums the body's 16-bit words while writing, offers the datagram's
 //! descriptor on `datagrams`, streams the body from its memory once the descriptor was
 //! taken ([`BodyReader`]), and after the last body byte was taken goes on with the next
 //! ports or waits for the next period. Building a page of 32 ports takes 1,960 clocks
@@ -291,7 +291,7 @@ impl Logic for StatusReporter {
             self.header_word.d.next = self.records_sent.val();
         }
         // the box counter block after the port blocks: the link word, then the receive
-        // side's counters (0: the box has no receive path yet)
+        // side's counters (from the box counter file)
         self.block_start.d.next =
             (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + self.first_counter_word.val();
         // (the word's tests against the block are registered: a word holds for seven
