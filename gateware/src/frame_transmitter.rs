@@ -1415,4 +1415,19 @@ mod tests {
             assert_eq!(capture.starts[i] - takes[i], TAKE_TO_FIRST_BYTE);
         }
     }
+
+    /// The block's Verilog (with the destination inputs) passes Verilator's lint with the
+    /// box's waivers.
+    #[test]
+    fn verilog_lints_clean() {
+        let mut uut = FrameTransmitter::new(&LinkConfig::DEFAULT, 0x0102, 8);
+        uut.connect_all();
+        let text = generate_verilog(&uut);
+        let dir =
+            std::env::temp_dir().join(format!("skinbox-frame-transmitter-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let report = crate::verilog::lint(&text, &dir).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(report.clean, "{}", report.output);
+    }
 }
