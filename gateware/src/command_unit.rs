@@ -14,12 +14,14 @@
 //!
 //! The work is a pipeline of registers, one stage per clock: the host match and the
 //! argument checks; the matched host's last sequence, the oldest slot and the result of
-//! the arguments; the serial-number difference; the decision. `done` is high in the
-//! clock [`COMMAND_LATENCY`] clocks after `command`, with `fate`, `result` and
-//! `last_accepted` (held until the next `done`). The table and the configuration
-//! registers change at the same edge: in the `done` clock they already hold the new
-//! values, and `status_period_set` / `status_now` are high in that clock only.
-//! Commands must come at least `COMMAND_LATENCY` clocks apart (a frame takes at least 72),
+//! the arguments; the serial-number test (newer or not, registered); the decision. `done`
+//! is high in the clock [`COMMAND_LATENCY`] clocks after `command`, with `fate`, `result`
+//! and `last_accepted` (held until the next `done`). The configuration registers change at
+//! the same edge: in the `done` clock they already hold the new values, and
+//! `status_period_set` / `status_now` are high in that clock only. The table is written a
+//! clock later, from registers (its write enables reach about 270 flip-flops: no logic in
+//! front of them). Commands must come at least `COMMAND_LATENCY` + 1 clocks apart (a frame
+//! takes at least 72),
 //! and the parser's fields must stay steady from `command` to `done` (it holds them until
 //! the next stored frame's decision).
 //!
@@ -181,9 +183,14 @@ pub struct CommandUnit {
     arguments_ok: DFF<Bit>,
     arguments_fate: DFF<Bits<5>>,
     arguments_result: DFF<Bits<8>>,
-    // stage 3: the serial-number difference
+    // stage 3: the matched host's sequence is not older than the command's
     stage_3: DFF<Bit>,
-    difference: DFF<Bits<32>>,
+    not_newer: DFF<Bit>,
+    // stage 5: the table write a clock after the decision: the slot (one-hot) and the rank
+    // it had
+    write_table: DFF<Bit>,
+    write_target: Vec<DFF<Bit>>,
+    write_rank: DFF<Bits<2>>,
     // stage 4: outputs
     done_out: DFF<Bit>,
     fate_out: DFF<Bits<5>>,
@@ -199,7 +206,7 @@ pub struct CommandUnit {
     // decision signals
     sequence_term: Signal<Local, Bits<32>>,
     any_match: Signal<Local, Bit>,
-    not_newer: Signal<Local, Bit>,
+    difference: Signal<Local, Bits<32>>,
     taken: Signal<Local, Bit>,
     target: Vec<Signal<Local, Bit>>,
     target_rank: Signal<Local, Bits<2>>,
@@ -301,7 +308,10 @@ impl CommandUnit {
             arguments_fate: Default::default(),
             arguments_result: Default::default(),
             stage_3: Default::default(),
-            difference: Default::default(),
+            not_newer: Default::default(),
+            write_table: Default::default(),
+            write_target: (0..slots).map(|_| Default::default()).collect(),
+            write_rank: Default::default(),
             done_out: Default::default(),
             fate_out: Default::default(),
             result_out: Default::default(),
@@ -315,7 +325,7 @@ impl CommandUnit {
             status_now_out: Default::default(),
             sequence_term: Default::default(),
             any_match: Default::default(),
-            not_newer: Default::default(),
+            difference: Default::default(),
             taken: Default::default(),
             target: many(slots),
             target_rank: Default::default(),
@@ -355,7 +365,9 @@ impl Logic for CommandUnit {
             arguments_fate,
             arguments_result,
             stage_3,
-            difference,
+            not_newer,
+            write_table,
+            write_rank,
             done_out,
             fate_out,
             result_out,
@@ -375,6 +387,7 @@ impl Logic for CommandUnit {
             self.slot_rank[i].clock.next = self.clock.val();
             self.matched[i].clock.next = self.clock.val();
             self.oldest[i].clock.next = self.clock.val();
+            self.write_target[i].clock.next = self.clock.val();
             self.slot_valid[i].d.next = self.slot_valid[i].q.val();
             self.slot_ip[i].d.next = self.slot_ip[i].q.val();
             self.slot_sequence[i].d.next = self.slot_sequence[i].q.val();
@@ -474,15 +487,16 @@ impl Logic for CommandUnit {
 
         // Stage 3: the serial-number difference to the host's last accepted sequence.
         self.stage_3.d.next = self.stage_2.q.val();
-        self.difference.d.next = self.command_sequence.val() - self.hit_sequence.q.val();
+        self.difference.next = self.command_sequence.val() - self.hit_sequence.q.val();
+        self.not_newer.d.next = self.hit.q.val()
+            & ((self.command_sequence.val() == self.hit_sequence.q.val())
+                | self.difference.val().get_bit(31));
 
         // Stage 4: the decision, the table and the configuration.
         self.done_out.d.next = self.stage_3.q.val();
         self.status_period_set_out.d.next = false;
         self.status_now_out.d.next = false;
-        self.not_newer.next = self.hit.q.val()
-            & ((self.difference.q.val() == 0) | self.difference.q.val().get_bit(31));
-        self.taken.next = self.stage_3.q.val() & self.box_ok.q.val() & !self.not_newer.val();
+        self.taken.next = self.stage_3.q.val() & self.box_ok.q.val() & !self.not_newer.q.val();
         self.target_rank.next = 0.into();
         for i in 0..self.target.len() {
             self.target[i].next = self.oldest[i].q.val();
@@ -498,7 +512,7 @@ impl Logic for CommandUnit {
                 self.fate_out.d.next = self.fate_other_box.val();
                 self.result_out.d.next = self.result_other_box.val();
                 self.last_accepted_out.d.next = self.hit_sequence.q.val();
-            } else if self.not_newer.val() {
+            } else if self.not_newer.q.val() {
                 self.fate_out.d.next = self.fate_replay.val();
                 self.result_out.d.next = self.result_replay.val();
                 self.last_accepted_out.d.next = self.hit_sequence.q.val();
@@ -508,17 +522,26 @@ impl Logic for CommandUnit {
                 self.last_accepted_out.d.next = self.command_sequence.val();
             }
         }
-        if self.taken.val() {
+        // Stage 5: the table, from the registered decision (the parser still holds the
+        // sender and the sequence number)
+        self.write_table.d.next = self.taken.val();
+        self.write_rank.d.next = self.target_rank.val();
+        for i in 0..self.target.len() {
+            self.write_target[i].d.next = self.target[i].val();
+        }
+        if self.write_table.q.val() {
             for i in 0..self.target.len() {
-                if self.target[i].val() {
+                if self.write_target[i].q.val() {
                     self.slot_valid[i].d.next = true;
                     self.slot_ip[i].d.next = self.peer_ip.val();
                     self.slot_sequence[i].d.next = self.command_sequence.val();
                     self.slot_rank[i].d.next = 0.into();
-                } else if self.slot_rank[i].q.val() < self.target_rank.val() {
+                } else if self.slot_rank[i].q.val() < self.write_rank.q.val() {
                     self.slot_rank[i].d.next = self.slot_rank[i].q.val() + 1;
                 }
             }
+        }
+        if self.taken.val() {
             if self.arguments_ok.q.val() {
                 if self.is_stream_to.q.val() {
                     if self.length_0.q.val() {
@@ -569,6 +592,7 @@ impl Logic for CommandUnit {
             self.stage_1.d.next = false;
             self.stage_2.d.next = false;
             self.stage_3.d.next = false;
+            self.write_table.d.next = false;
             self.done_out.d.next = false;
             self.fate_out.d.next = 0.into();
             self.result_out.d.next = 0.into();
