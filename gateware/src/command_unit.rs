@@ -541,32 +541,30 @@ impl Logic for CommandUnit {
                 }
             }
         }
-        if self.taken.val() {
-            if self.arguments_ok.q.val() {
-                if self.is_stream_to.q.val() {
-                    if self.length_0.q.val() {
-                        self.destination_mac_out.d.next = self.peer_mac.val();
-                        self.destination_ip_out.d.next = self.peer_ip.val();
-                        self.destination_port_out.d.next = self.peer_port.val();
-                    } else {
-                        self.destination_mac_out.d.next =
-                            self.command_arguments.val().get_bits::<48>(48);
-                        self.destination_ip_out.d.next =
-                            self.command_arguments.val().get_bits::<32>(16);
-                        self.destination_port_out.d.next =
-                            self.command_arguments.val().get_bits::<16>(0);
-                    }
+        if self.taken.val() & self.arguments_ok.q.val() {
+            if self.is_stream_to.q.val() {
+                if self.length_0.q.val() {
+                    self.destination_mac_out.d.next = self.peer_mac.val();
+                    self.destination_ip_out.d.next = self.peer_ip.val();
+                    self.destination_port_out.d.next = self.peer_port.val();
+                } else {
+                    self.destination_mac_out.d.next =
+                        self.command_arguments.val().get_bits::<48>(48);
+                    self.destination_ip_out.d.next =
+                        self.command_arguments.val().get_bits::<32>(16);
+                    self.destination_port_out.d.next =
+                        self.command_arguments.val().get_bits::<16>(0);
                 }
-                if self.is_set_flush_timeout.q.val() {
-                    self.flush_timeout_out.d.next = self.value.val();
-                }
-                if self.is_set_status_period.q.val() {
-                    self.status_period_out.d.next = self.value.val();
-                    self.status_period_set_out.d.next = true;
-                }
-                if self.is_status_now.q.val() {
-                    self.status_now_out.d.next = true;
-                }
+            }
+            if self.is_set_flush_timeout.q.val() {
+                self.flush_timeout_out.d.next = self.value.val();
+            }
+            if self.is_set_status_period.q.val() {
+                self.status_period_out.d.next = self.value.val();
+                self.status_period_set_out.d.next = true;
+            }
+            if self.is_status_now.q.val() {
+                self.status_now_out.d.next = true;
             }
         }
 
