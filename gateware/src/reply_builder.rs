@@ -36,8 +36,9 @@
 //! latency fits).
 //!
 //! Then it offers a descriptor of kind [`RAW_FRAME_KIND`] with the frame's length (padded
-//! to 60). At the take (valid & ready at an edge, tick T in that clock) its
-//! [`BodyReader`] starts reading the frame from byte 0, and for an acknowledgement the
+//! to 60). The take (valid & ready at an edge, tick T in that clock) is registered; a
+//! clock later its [`BodyReader`] starts reading the frame from byte 0, and for an
+//! acknowledgement the
 //! patch program writes the send tick T + [`TAKE_TO_FIRST_BYTE`] (8 bytes) and the UDP
 //! checksum, which are done [`patch_margin_clocks`] clocks before the reader can reach the
 //! first of them. `locked` falls the clock after the last body beat was taken.
@@ -560,16 +561,17 @@ pub fn build_clocks(kind: ReplyKind) -> u64 {
 }
 
 /// Clocks from the take (clock T) to the patch's last write (the UDP checksum's low byte
-/// is written at the edge ending clock T + this): a step's ROM word, then three registers,
-/// for every step but the end marker.
+/// is written at the edge ending clock T + this): the registered take, a step's ROM word,
+/// then three registers, for every step but the end marker.
 pub fn patch_clocks() -> u64 {
-    START_TO_STEP + patch_program().len() as u64 + 1
+    START_TO_STEP + patch_program().len() as u64 + 2
 }
 
 /// The earliest clock (counted from the take's) in which the body reader puts the first
 /// patched byte's address (the UDP checksum's; the send tick comes after it) on the
-/// buffer: its reads start two clocks after the take, one address per clock from 0.
-pub const FIRST_PATCHED_READ: u64 = 2 + UDP_CHECKSUM_AT as u64;
+/// buffer: the take is registered, the reader starts a clock later and reads from the
+/// clock after that, one address per clock from 0.
+pub const FIRST_PATCHED_READ: u64 = 3 + UDP_CHECKSUM_AT as u64;
 
 /// Clocks to spare between the patch's last write and the reader's first read of a
 /// patched byte, under the fastest take and read (a read sees writes of earlier clocks).
@@ -1203,21 +1205,21 @@ impl Logic for ReplyBuilder {
         self.replies.base_tick.next = 0.into();
         self.replies.body_len.next = self.body_len.q.val();
         self.replies.body_sum.next = 0.into();
+        // (the take is registered first: the arbiter's grant reaches two flip-flops and
+        // nothing else, and the reader and the patch start a clock later)
         self.take.next = self.offering.q.val() & self.replies.ready.val();
-        self.reader.start.next = self.take.val();
+        self.reader.start.next = self.took.q.val();
         self.reader.length.next = self.body_len.q.val();
         self.took.d.next = false;
         if self.take.val() {
             self.offering.d.next = false;
             self.tick_taken.d.next = self.tick.val();
-            if self.is_ack.q.val() {
-                self.took.d.next = true;
-                self.patching.d.next = true;
-                self.step.d.next = self.patch_start.val();
-                self.running.d.next = true;
-            }
+            self.took.d.next = true;
         }
-        if self.took.q.val() {
+        if self.took.q.val() & self.is_ack.q.val() {
+            self.patching.d.next = true;
+            self.step.d.next = self.patch_start.val();
+            self.running.d.next = true;
             self.send_tick.d.next = self.tick_taken.q.val() + self.send_tick_offset.val();
         }
 
@@ -1727,7 +1729,7 @@ mod tests {
         ]
         .map(build_clocks);
         assert_eq!(clocks, [64, 60, 93, 105, 177]);
-        assert_eq!((patch_clocks(), patch_margin_clocks()), (20, 21));
+        assert_eq!((patch_clocks(), patch_margin_clocks()), (21, 21));
     }
 
     #[test]
