@@ -101,7 +101,12 @@ impl<'s> BoxClient<'s> {
             box_id: ANY_BOX,
             timeout: DEFAULT_TIMEOUT,
             retries: DEFAULT_RETRIES,
-            next_sequence: (unix_ns() / 1_000_000) as u32,
+            // the host clock in microseconds: a client made after another one on this host
+            // (a second `skinbox ctl`, even one started in the same millisecond as the
+            // first one's last retry) starts past the first one's numbers (the numbers wrap
+            // every 71.6 minutes, so a client after 35.8 minutes of silence may be taken
+            // for a replay once: it then goes on past the box's number)
+            next_sequence: (unix_ns() / 1_000) as u32,
         }
     }
 
