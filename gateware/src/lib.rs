@@ -51,6 +51,7 @@ pub mod stream;
 pub mod stream_fifo;
 pub mod timestamp;
 pub mod uart_rx;
+pub mod uart_tx;
 pub mod verilog;
 
 #[cfg(test)]
