@@ -29,6 +29,7 @@ pub mod board;
 pub mod body_reader;
 pub mod box_counter_file;
 pub mod cell_deframer;
+pub mod cell_downlink;
 pub mod command_unit;
 pub mod counter_file;
 pub mod crc32;
