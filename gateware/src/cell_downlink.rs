@@ -15,6 +15,10 @@
 //!   port's one-byte holding register, which feeds the port's [`UartTx`]; the scan comes back
 //!   every `ports` clocks, well within a byte time (312.5 clocks), so a port's packets go out
 //!   back to back, in order.
+//!
+//! Cost (yosys `synth_ecp5` of the block alone, `read_verilog -DSKINBOX_ECP5_BRAM`): 8 ports
+//! 847 LUT4, 112 CCU2C, 626 FF, 2 DP16KD; 64 ports 4,328 LUT4, 782 CCU2C, 3,426 FF, 2 DP16KD.
+//! The queues in registers instead would take 320 FF per port (two 20-byte packets).
 
 use crate::block_ram::{BlockRam, READ_LATENCY};
 use crate::hdl::*;

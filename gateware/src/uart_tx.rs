@@ -10,6 +10,7 @@
 //!   goes out with no idle time after the previous one.
 //!
 //! [`bit_edges`] gives the clock edge of every bit of a burst, for reference models.
+//! Cost (yosys `synth_ecp5` of the block alone): 69 LUT4, 9 CCU2C, 32 FF.
 
 use crate::hdl::*;
 use crate::stream::ByteStreamSink;
