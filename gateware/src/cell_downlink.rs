@@ -578,7 +578,21 @@ mod tests {
     }
 
     #[test]
-    fn random_traffic_on_eight_ports_and_verilog_passes_lint() {
+    fn a_one_port_box_takes_all_ports_packets() {
+        let mut rng = TestRng::new(5);
+        let mut run = Run::new(1);
+        let sent: Vec<[u8; 20]> = (0..3).map(|_| packet(&mut rng)).collect();
+        for p in &sent {
+            run.send(ALL_PORTS, p, false);
+        }
+        assert_eq!(run.refused, vec![1]);
+        run.drain();
+        assert_eq!(run.queued, vec![vec![sent[0], sent[1]]]);
+        run.check_pins();
+    }
+
+    #[test]
+    fn random_traffic_on_eight_ports_and_verilog_of_1_8_64_ports_passes_lint() {
         let mut rng = TestRng::new(4);
         let mut run = Run::new(8);
         let mut sent = 0;
@@ -604,13 +618,17 @@ mod tests {
         assert!(refused > 0 && queued > 0);
         run.check_pins();
 
-        let mut uut = CellDownlink::new(8, CLOCK_HZ, CELL_BAUD);
-        uut.connect_all();
-        let dir =
-            std::env::temp_dir().join(format!("skinbox-downlink-lint-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let report = crate::verilog::lint(&generate_verilog(&uut), &dir).unwrap();
-        std::fs::remove_dir_all(&dir).ok();
-        assert!(report.clean, "{}", report.output);
+        for ports in [1, 8, 64] {
+            let mut uut = CellDownlink::new(ports, CLOCK_HZ, CELL_BAUD);
+            uut.connect_all();
+            let dir = std::env::temp_dir().join(format!(
+                "skinbox-downlink-lint-{}-{ports}",
+                std::process::id()
+            ));
+            std::fs::create_dir_all(&dir).unwrap();
+            let report = crate::verilog::lint(&generate_verilog(&uut), &dir).unwrap();
+            std::fs::remove_dir_all(&dir).ok();
+            assert!(report.clean, "{ports} ports: {}", report.output);
+        }
     }
 }
