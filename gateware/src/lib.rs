@@ -29,6 +29,7 @@ pub mod board;
 pub mod body_reader;
 pub mod box_counter_file;
 pub mod cell_deframer;
+pub mod cell_downlink;
 pub mod command_unit;
 pub mod counter_file;
 pub mod crc32;
@@ -51,6 +52,7 @@ pub mod stream;
 pub mod stream_fifo;
 pub mod timestamp;
 pub mod uart_rx;
+pub mod uart_tx;
 pub mod verilog;
 
 #[cfg(test)]

@@ -112,6 +112,27 @@ pub fn bit_period(error_ppm: f64) -> f64 {
     crate::CLOCK_HZ as f64 / crate::CELL_BAUD as f64 / (1.0 + error_ppm * 1e-6)
 }
 
+/// An independent line model: finds each falling edge, then reads the pin in the middle
+/// of each bit from the exact bit period (31.25 clocks); returns (start edge, byte, stop
+/// bit high).
+pub fn decode_uart_line(levels: &[bool]) -> Vec<(u64, u8, bool)> {
+    let period = bit_period(0.0);
+    let mut out = vec![];
+    let mut e = 1;
+    while e < levels.len() {
+        if levels[e - 1] && !levels[e] {
+            let at = |bit: f64| levels[(e as f64 + (bit + 0.5) * period) as usize];
+            assert!(!at(0.0), "start bit low in its middle at edge {e}");
+            let byte = (0..8).fold(0u8, |b, i| b | (at(1.0 + i as f64) as u8) << i);
+            out.push((e as u64, byte, at(9.0)));
+            e = (e as f64 + 9.5 * period) as usize;
+        } else {
+            e += 1;
+        }
+    }
+    out
+}
+
 /// Collects GMII bytes into frames: one frame per run of `tx_en`.
 #[derive(Debug, Default)]
 pub struct GmiiCapture {
