@@ -1,5 +1,5 @@
 //! CellDownlink: queues whole 20-byte cell command packets per port and sends them on each
-//! port's UART pin (DESIGN section 11, the way back to the cells).
+//! port's UART pin, the way back to the cells (the packet: docs/wire-format.md).
 //!
 //! - A command is a target `port` (or `ALL_PORTS`) and its packet on `packet`. The packet is
 //!   staged whole in a 160-bit register first; one that is not exactly

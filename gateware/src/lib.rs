@@ -22,6 +22,10 @@
 //! -> [`frame_parser::FrameParser`] -> [`command_unit::CommandUnit`]; the fates counted in
 //! [`box_counter_file::BoxCounterFile`]; ARP, echo and command replies built by
 //! [`reply_builder::ReplyBuilder`] and sent as the datagram arbiter's third source.
+//!
+//! The downlink to the cells, built and tested but not yet part of the box:
+//! [`cell_downlink::CellDownlink`] queues cell command packets per port and sends them
+//! with a [`uart_tx::UartTx`] per port.
 
 pub mod async_fifo;
 pub mod block_ram;
