@@ -23,6 +23,12 @@ use skinbox_protocol::box_counters::BoxCounter;
 pub const COUNTERS: usize = BoxCounter::ALL.len();
 /// Clocks the file spends clearing its memories after reset (`ready` low).
 pub const CLEAR_CLOCKS: u64 = 32;
+/// Clocks from a `count` (high in clock c) to the first clock whose read address sees
+/// `FramesReceived` counted: read in clock c, written at the edge ending clock c + 3.
+pub const FRAMES_RECEIVED_VISIBLE_AFTER: u64 = 4;
+/// As [`FRAMES_RECEIVED_VISIBLE_AFTER`], for the fate's counter (read a clock later).
+pub const FATE_VISIBLE_AFTER: u64 = 5;
+
 /// Fewest clocks between two counts (the read-modify-writes of one count must be over
 /// before the next reads).
 pub const COUNT_SPACING: u64 = 5;
@@ -149,6 +155,7 @@ impl Logic for BoxCounterFile {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::block_ram::READ_LATENCY;
     use crate::testbench::{Bench, TestRng};
     use std::collections::HashMap;
 
@@ -220,6 +227,32 @@ mod tests {
                 "counter {} on the reply port",
                 COUNTERS - 1 - c
             );
+        }
+    }
+
+    /// The first clock whose read address sees a count is the one the reference model
+    /// uses: read data comes two clocks after its address.
+    #[test]
+    fn a_count_is_visible_after_the_named_clocks() {
+        for (counter, after) in [
+            (BoxCounter::FramesReceived, FRAMES_RECEIVED_VISIBLE_AFTER),
+            (BoxCounter::BadFcs, FATE_VISIBLE_AFTER),
+        ] {
+            let mut bench = Bench::new(BoxCounterFile::default(), |b| &mut b.clock);
+            reset(&mut bench);
+            let mut first = None;
+            for clock in 0..16u64 {
+                bench.uut.count.next = clock == 0;
+                bench.uut.counter.next = (BoxCounter::BadFcs as u64).into();
+                bench.uut.reporter_address.next = (counter as u64).into();
+                bench.cycle();
+                // after this clock's edge: the data of the next clock, which answers the
+                // address of READ_LATENCY clocks before it
+                if first.is_none() && bench.uut.reporter_data.val().to_u64() == 1 {
+                    first = Some(clock + 1 - READ_LATENCY);
+                }
+            }
+            assert_eq!(first, Some(after), "{counter:?}");
         }
     }
 

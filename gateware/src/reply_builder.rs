@@ -554,6 +554,10 @@ fn program(kind: ReplyKind) -> Vec<Step> {
     }
 }
 
+/// Clocks from the clock the reply's last body beat is taken to the first clock `locked`
+/// is low (the clock after).
+pub const UNLOCK_AFTER_LAST_TAKE: u64 = 1;
+
 /// Clocks from a `start_*` (high in clock s) to the descriptor's `valid` (high from clock
 /// s + this on). The same for every length of an echo request.
 pub fn build_clocks(kind: ReplyKind) -> u64 {

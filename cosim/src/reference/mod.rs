@@ -211,17 +211,18 @@ impl SlicedReference<'_> {
 
 /// The receive path's fixed numbers, from the gateware's blocks.
 fn receive_timing() -> ReceiveTiming {
-    use skinbox_gateware::reply_builder::{build_clocks, AckReplyKind, ReplyKind};
+    use skinbox_gateware::box_counter_file::{FATE_VISIBLE_AFTER, FRAMES_RECEIVED_VISIBLE_AFTER};
+    use skinbox_gateware::reply_builder::{
+        build_clocks, AckReplyKind, ReplyKind, UNLOCK_AFTER_LAST_TAKE,
+    };
     ReceiveTiming {
         // the preamble and SFD, then the MAC's registers
         first_beat_after_edge: PREAMBLE_LEN as u64 + MAC_LATENCY,
         decided_after_last_edge: MAC_LATENCY + DECISION_LATENCY,
         receive_tick_after_last_edge: RECEIVE_TICK_LAG,
         command_latency: COMMAND_LATENCY,
-        // the box counter file reads `frames_received` in the clock of the count and the
-        // fate's counter a clock later, and writes each three clocks after its read
-        frames_received_visible_after: 4,
-        fate_visible_after: 5,
+        frames_received_visible_after: FRAMES_RECEIVED_VISIBLE_AFTER,
+        fate_visible_after: FATE_VISIBLE_AFTER,
         // the command unit's registers hold the new values in its `done` clock; the
         // status reporter registers a report asked for now
         config_after_done: 0,
@@ -234,8 +235,7 @@ fn receive_timing() -> ReceiveTiming {
             AckReplyKind::Counters,
         ]
         .map(|r| build_clocks(ReplyKind::Ack(r))),
-        // `locked` falls the clock after the last body beat was taken
-        unlock_after_last_take: 1,
+        unlock_after_last_take: UNLOCK_AFTER_LAST_TAKE,
     }
 }
 
