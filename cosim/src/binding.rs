@@ -17,6 +17,7 @@ type QueueRx = unsafe extern "C" fn(*mut c_void, u64, *const u8, u64);
 type Run =
     unsafe extern "C" fn(*mut c_void, u64, *mut u32, *mut u8, u64, *mut u64, *mut u64) -> u64;
 type Ports = unsafe extern "C" fn() -> u32;
+type TakeTx = unsafe extern "C" fn(*mut c_void, *mut u64, *mut u32, *mut u8, u64) -> u64;
 
 /// A loaded model library with its entry points.
 pub(crate) struct Library {
@@ -26,6 +27,7 @@ pub(crate) struct Library {
     set_reset: SetReset,
     queue_rx: QueueRx,
     run: Run,
+    take_tx: TakeTx,
     // keeps the code mapped while the function pointers above are in use
     _library: libloading::Library,
 }
@@ -56,6 +58,7 @@ impl Library {
                 )?),
                 queue_rx: std::mem::transmute::<*const c_void, QueueRx>(get(b"skinbox_queue_rx")?),
                 run: std::mem::transmute::<*const c_void, Run>(get(b"skinbox_run")?),
+                take_tx: std::mem::transmute::<*const c_void, TakeTx>(get(b"skinbox_take_tx")?),
                 _library: library,
             };
             let ports_fn = std::mem::transmute::<*const c_void, Ports>(
@@ -136,6 +139,30 @@ impl Instance {
             )
         };
         (run, stored as usize, errors)
+    }
+
+    /// Moves up to the buffers' length of the UART transmit pin changes recorded so far
+    /// (rising edge, port, new level), oldest first, into the buffers; returns how many.
+    pub(crate) fn take_tx(
+        &mut self,
+        library: &Library,
+        edges: &mut [u64],
+        ports: &mut [u32],
+        levels: &mut [u8],
+    ) -> usize {
+        let capacity = edges.len().min(ports.len()).min(levels.len()) as u64;
+        // SAFETY: valid handle; the three buffers hold `capacity` elements each; the shim
+        // writes at most `capacity` of each.
+        let n = unsafe {
+            (library.take_tx)(
+                self.handle,
+                edges.as_mut_ptr(),
+                ports.as_mut_ptr(),
+                levels.as_mut_ptr(),
+                capacity,
+            )
+        };
+        n as usize
     }
 
     pub(crate) fn free(&mut self, library: &Library) {

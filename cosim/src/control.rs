@@ -27,15 +27,17 @@
 //!    `refused_malformed` (neither is answered). Then, each answered with its result: another
 //!    box id (`refused_other_box`); a sequence number not newer than the last accepted from
 //!    this host (`refused_replay`); an unknown opcode, bad arguments or a cell-network command
-//!    while there is no downlink (`refused_unknown_opcode`, `refused_bad_argument`,
-//!    `refused_no_downlink`: these three take the sequence number, so none can be replayed);
-//!    else the command is carried out (`commands_accepted`).
+//!    the downlink has no room for ([`DownlinkModel::offer`]) (`refused_unknown_opcode`,
+//!    `refused_bad_argument`, `refused_downlink_full`: these three take the sequence
+//!    number, so none can be replayed); else the command is carried out
+//!    (`commands_accepted`; a cell command is queued on the downlink).
 //!
 //! The box remembers the last accepted sequence number of [`HOST_SLOTS`] hosts (by IPv4
 //! address); a host it does not remember may start at any sequence number and takes the
 //! slot of the host accepted longest ago. "Newer" is serial-number arithmetic (RFC 1982):
 //! `(sequence - last) as i32 > 0`.
 
+use crate::downlink::DownlinkModel;
 use skinbox_gateware::crc32::POLYNOMIAL_REFLECTED;
 use skinbox_protocol::box_counters::{BoxCounter, BoxCounters, LinkSpeed};
 use skinbox_protocol::command::{
@@ -71,7 +73,32 @@ pub struct ControlConfig {
     pub flush_timeout_ticks: u32,
     /// Status period after reset, ticks.
     pub status_period_ticks: u32,
+    /// The box clock, Hz (the downlink's bit times).
+    pub clock_hz: u64,
+    /// The cells' UART baud rate (the downlink's).
+    pub cell_baud: u64,
 }
+
+impl ControlConfig {
+    /// The control parameters of a box built with `config`.
+    pub fn of(config: &skinbox_gateware::interface_box::BoxConfig) -> ControlConfig {
+        ControlConfig {
+            link: config.link,
+            box_id: config.box_id,
+            port_count: config.ports as u8,
+            flush_timeout_ticks: config.flush_timeout_ticks as u32,
+            status_period_ticks: config.status_period_ticks as u32,
+            clock_hz: config.clock_hz,
+            cell_baud: config.baud,
+        }
+    }
+}
+
+/// Ticks from a command's receive tick to the clock in which the command unit offers a
+/// cell command to the downlink: the parser's decision, then the command unit's pipeline
+/// up to the clock before `done`.
+pub const DOWNLINK_OFFER_AFTER_RECEIVE_TICK: u64 = skinbox_gateware::frame_parser::DECISION_LATENCY
+    + skinbox_gateware::command_unit::DOWNLINK_OFFER_AFTER_COMMAND;
 
 /// What a carried-out command changes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -130,6 +157,10 @@ pub struct BoxControl {
     hosts: Vec<([u8; 4], u32)>,
     /// The frame being received could be stored for a reply (the previous reply left).
     reply_slot_free: bool,
+    /// The downlink to the cells: its queues and pins, clock by clock.
+    pub downlink: DownlinkModel,
+    /// The receive tick of the frame being decided.
+    receive_tick: u64,
 }
 
 impl BoxControl {
@@ -152,6 +183,12 @@ impl BoxControl {
             },
             hosts: Vec::with_capacity(HOST_SLOTS),
             reply_slot_free: true,
+            downlink: DownlinkModel::new(
+                usize::from(config.port_count),
+                config.clock_hz,
+                config.cell_baud,
+            ),
+            receive_tick: 0,
         }
     }
 
@@ -177,6 +214,7 @@ impl BoxControl {
         reply_slot_free: bool,
     ) -> Outcome {
         self.reply_slot_free = reply_slot_free;
+        self.receive_tick = receive_tick;
         self.counters.bump(BoxCounter::FramesReceived);
         let outcome = self.classify(frame, receive_tick);
         self.counters.bump(outcome.fate);
@@ -429,12 +467,19 @@ impl BoxControl {
                 AckReply::Counters(BoxCounters::default()),
             ),
             Request::ReadTick => (ok, AckResult::Ok, None, AckReply::None),
-            Request::CellCommand { .. } => (
-                BoxCounter::RefusedNoDownlink,
-                AckResult::NoDownlink,
-                None,
-                AckReply::None,
-            ),
+            Request::CellCommand { port, packet } => {
+                let offer_tick = self.receive_tick + DOWNLINK_OFFER_AFTER_RECEIVE_TICK;
+                if self.downlink.offer(offer_tick, port, packet) {
+                    (ok, AckResult::Ok, None, AckReply::None)
+                } else {
+                    (
+                        BoxCounter::RefusedDownlinkFull,
+                        AckResult::DownlinkFull,
+                        None,
+                        AckReply::None,
+                    )
+                }
+            }
         }
     }
 }

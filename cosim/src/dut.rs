@@ -15,6 +15,17 @@ pub struct GmiiByte {
     pub data: u8,
 }
 
+/// A change of one UART transmit pin (the downlink to the cells).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UartTxEdge {
+    /// Rising clock edge (numbered as [`GmiiByte::cycle`]) after which the pin has `level`.
+    pub edge: u64,
+    /// The port.
+    pub port: usize,
+    /// The pin's new level.
+    pub level: bool,
+}
+
 /// One simulated interface box: UART pins and reset in, GMII bytes out.
 pub struct Dut {
     model: Arc<Model>,
@@ -99,6 +110,26 @@ impl Dut {
         self.instance.queue_rx(&self.model.library, start, wire);
         self.rx_free_from = start + wire.len() as u64;
         Ok(())
+    }
+
+    /// The UART transmit pin changes since the last call, oldest first (the first calls
+    /// show the pins going high at reset).
+    pub fn take_uart_tx_edges(&mut self) -> Vec<UartTxEdge> {
+        let mut out = Vec::new();
+        let (mut edges, mut ports, mut levels) = (vec![0; 4096], vec![0; 4096], vec![0; 4096]);
+        loop {
+            let n = self
+                .instance
+                .take_tx(&self.model.library, &mut edges, &mut ports, &mut levels);
+            out.extend((0..n).map(|i| UartTxEdge {
+                edge: edges[i],
+                port: ports[i] as usize,
+                level: levels[i] != 0,
+            }));
+            if n < edges.len() {
+                return out;
+            }
+        }
     }
 
     /// Runs `cycles` clock cycles with the inputs held, passing every GMII byte to `sink`.

@@ -62,13 +62,7 @@ pub struct EmulatedBox<'a> {
 
 /// The control parameters of a box built with `config`.
 pub fn control_config(config: &BoxConfig) -> ControlConfig {
-    ControlConfig {
-        link: config.link,
-        box_id: config.box_id,
-        port_count: config.ports as u8,
-        flush_timeout_ticks: config.flush_timeout_ticks as u32,
-        status_period_ticks: config.status_period_ticks as u32,
-    }
+    ControlConfig::of(config)
 }
 
 impl<'a> EmulatedBox<'a> {
@@ -137,6 +131,8 @@ impl<'a> EmulatedBox<'a> {
         };
         let frame = command_frame(&self.control.config().link, &sender, payload);
         let outcome = self.control.receive(&frame, tick);
+        // the pins of an emulated box go nowhere
+        self.control.downlink.take_changes();
         match outcome.effect {
             Some(Effect::StreamTo(_)) => self.claimed = true,
             Some(Effect::SetFlushTimeout(t)) => self.reference.set_flush_timeout_ticks(t.into()),

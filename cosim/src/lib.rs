@@ -16,6 +16,7 @@ pub mod bench;
 mod binding;
 pub mod cache_lock;
 pub mod control;
+pub mod downlink;
 pub mod dut;
 pub mod emulator;
 pub mod error;
@@ -30,6 +31,6 @@ pub mod sim;
 pub mod synth;
 pub mod traffic;
 
-pub use dut::{Dut, GmiiByte};
+pub use dut::{Dut, GmiiByte, UartTxEdge};
 pub use error::CosimError;
 pub use model::Model;

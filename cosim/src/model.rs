@@ -416,6 +416,9 @@ fn shim_source(ports: usize, trace: bool) -> String {
     let pins: Vec<String> = (0..ports)
         .map(|p| format!("&top->uart_rx__024{p}"))
         .collect();
+    let tx_pins: Vec<String> = (0..ports)
+        .map(|p| format!("&top->uart_tx__024{p}"))
+        .collect();
     let trace_include = if trace {
         "#include \"verilated_vcd_c.h\""
     } else {
@@ -451,10 +454,20 @@ struct RxFrame {{
     std::vector<uint8_t> bytes;
 }};
 
+struct TxEdge {{
+    uint64_t edge;
+    uint32_t port;
+    uint8_t level;
+}};
+
 struct Dut {{
     VerilatedContext* ctx;
     Vtop* top;
     CData* rx[{ports}];
+    CData* tx[{ports}];
+    uint8_t tx_level[{ports}];
+    std::vector<TxEdge> tx_edges;
+    size_t tx_taken;
     uint64_t time;
     // rising edges so far, and the receive frames not yet (completely) driven
     uint64_t edges;
@@ -475,6 +488,9 @@ void* skinbox_new(const char* vcd_path) {{
     d->top = top;
     CData* pins[{ports}] = {{ {pins} }};
     for (int i = 0; i < {ports}; i++) {{ d->rx[i] = pins[i]; *pins[i] = 1; }}
+    CData* tx_pins[{ports}] = {{ {tx_pins} }};
+    for (int i = 0; i < {ports}; i++) {{ d->tx[i] = tx_pins[i]; d->tx_level[i] = 1; }}
+    d->tx_taken = 0;
     top->clock = 0;
     top->reset = 1;
     top->link_up = {link_up};
@@ -532,6 +548,12 @@ uint64_t skinbox_run(void* p, uint64_t cycles, uint32_t* offsets, uint8_t* bytes
         d->time += 4;
         {trace_dump}
         if (top->gmii_tx_en) {{ offsets[k] = (uint32_t)n; bytes[k] = top->gmii_txd; k++; }}
+        for (int i = 0; i < {ports}; i++) {{
+            if (*d->tx[i] != d->tx_level[i]) {{
+                d->tx_level[i] = *d->tx[i];
+                d->tx_edges.push_back(TxEdge{{d->edges, (uint32_t)i, d->tx_level[i]}});
+            }}
+        }}
         if (top->gmii_tx_er) (*tx_errors)++;
         top->clock = 0;
         top->eval();
@@ -542,9 +564,22 @@ uint64_t skinbox_run(void* p, uint64_t cycles, uint32_t* offsets, uint8_t* bytes
     return n;
 }}
 
+uint64_t skinbox_take_tx(void* p, uint64_t* edges, uint32_t* ports, uint8_t* levels,
+                         uint64_t capacity) {{
+    Dut* d = (Dut*)p;
+    uint64_t n = 0;
+    while (n < capacity && d->tx_taken < d->tx_edges.size()) {{
+        const TxEdge& e = d->tx_edges[d->tx_taken++];
+        edges[n] = e.edge; ports[n] = e.port; levels[n] = e.level; n++;
+    }}
+    if (d->tx_taken == d->tx_edges.size()) {{ d->tx_edges.clear(); d->tx_taken = 0; }}
+    return n;
+}}
+
 }}
 "#,
         pins = pins.join(", "),
+        tx_pins = tx_pins.join(", "),
         link_up = u8::from(crate::harness::LINK_UP),
         link_speed = crate::harness::LINK_SPEED as u8,
         vcd_member = if trace { "VerilatedVcdC* vcd;" } else { "" },

@@ -2,6 +2,7 @@
 //! pin lines it makes, and the analysis of the frames (every one checked), shared by the RTL
 //! runner ([`crate::sim`]) and the reference model ([`crate::reference`]).
 
+use crate::downlink::PinChange;
 use crate::error::CosimError;
 use crate::frames::{check, is_reply, min_gap, Frame};
 use crate::line::{back_to_back, jittered_transitions, Jitter, Transition, UartByte};
@@ -144,6 +145,8 @@ pub struct SimRun {
     /// The box's answers to the host's frames, in the order sent: ARP replies, echo
     /// replies and command acknowledgements (preamble to FCS).
     pub replies: Vec<Frame>,
+    /// The downlink: every change of a UART transmit pin, in tick order (ties by port).
+    pub uart_tx: Vec<PinChange>,
 }
 
 /// Every port's pin transitions (each line with its own seeded jitter) and the true,
@@ -316,6 +319,7 @@ pub(crate) fn analyse(
         datagrams,
         frames: frames.to_vec(),
         replies,
+        uart_tx: Vec::new(),
     })
 }
 

@@ -1,10 +1,21 @@
 //! A scene of the cell models on the box's pins: one bus per port.
 
+use crate::control::{udp_frame, BoxControl, ControlConfig};
+use crate::downlink::{PacketStart, PinChange};
 use crate::line::Jitter;
-use crate::run::{SentPacket, SimSpec};
-use skinbox_cells::scene::{GenerateOptions, Generated, Scene};
-use skinbox_gateware::interface_box::BoxConfig;
+use crate::run::{HostFrame, SentPacket, SimSpec, TICK_ZERO_CYCLE};
+use skinbox_cells::bus::DOWNLINK_PACKET_NS;
+use skinbox_cells::scene::{BusDownlink, GenerateOptions, Generated, Scene};
+use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
+use skinbox_protocol::box_counters::BoxCounter;
+use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::cell_command::{CellCommand, CellCommandRepr};
+use skinbox_protocol::command::{CommandRepr, Destination, Request, ALL_PORTS};
+use skinbox_protocol::link::{LinkConfig, PREAMBLE_LEN};
 use skinbox_protocol::TICK_NS;
+
+/// Idle clocks between two frames the host sends back to back (12 bytes).
+const INTER_FRAME_GAP: u64 = 12;
 
 /// Time the box gets after the scene's last packet, besides one status period: the flush
 /// timeout and the frames out.
@@ -63,11 +74,20 @@ pub fn generate(
     scene: &Scene,
     duration_s: f64,
 ) -> Result<Generated, skinbox_cells::scene::SceneError> {
+    generate_with(scene, duration_s, &GenerateOptions::default())
+}
+
+/// As [`generate`], with `options` (a box's downlink, say).
+pub fn generate_with(
+    scene: &Scene,
+    duration_s: f64,
+    options: &GenerateOptions,
+) -> Result<Generated, skinbox_cells::scene::SceneError> {
     let mut scene = scene.clone();
     scene.config.scene.duration_s = duration_s;
     scene.config.scene.warmup_s = 0.0;
     scene.check()?;
-    Ok(scene.generate(&GenerateOptions::default()))
+    Ok(scene.generate(options))
 }
 
 /// The built-in scene `name` (a file in `skinbox_cells::scenes_dir()`) from scene time
@@ -87,4 +107,175 @@ pub fn builtin_spec(
         ..BoxConfig::default()
     };
     Ok(spec(&generated, config, from_ns, duration_ns))
+}
+
+/// A scene's `[[commands]]` sent by the host to the co-simulated box, and the downlink they
+/// make: what the cells receive.
+#[derive(Debug, Clone, Default)]
+pub struct DownlinkPlan {
+    /// The command frames on GMII receive (those inside the simulated window).
+    pub host_frames: Vec<HostFrame>,
+    /// Per bus, (scene time the first start bit leaves the box, ns; the bytes): the cell
+    /// command packets the bus's root receives (before the window each at its own time,
+    /// as without a box).
+    pub per_bus: Vec<BusDownlink>,
+    /// Commands the box queued.
+    pub accepted: usize,
+    /// Commands the box refused (`downlink_full`).
+    pub refused: usize,
+    /// Every change of the box's transmit pins, box ticks.
+    pub pin_changes: Vec<PinChange>,
+    /// Every packet the box's pins send, box ticks.
+    pub starts: Vec<PacketStart>,
+}
+
+/// The scene time of box tick `tick` in a simulation of the window from `from_ns`.
+pub fn scene_ns_of_tick(tick: u64, from_ns: u64) -> u64 {
+    ((tick + TICK_ZERO_CYCLE) * TICK_NS + from_ns).saturating_sub(PORTS_READY_NS)
+}
+
+/// Plans `scene`'s cell commands through a box of `config` simulated from scene time
+/// `from_ns` for `duration_ns`: each command inside the window becomes a command frame
+/// from the host (the link's host address, sequence numbers from 1) at its time on GMII
+/// receive; the box's rules and downlink (the control model with its clock model of the
+/// downlink, [`crate::downlink`]) say which it queues and when each packet leaves which
+/// pin. A time sync carries the tick at which its packet's first start bit leaves the box.
+/// Commands before the window reach the cells at their own time.
+pub fn plan_downlink(
+    scene: &Scene,
+    config: &BoxConfig,
+    from_ns: u64,
+    duration_ns: u64,
+) -> DownlinkPlan {
+    let commands = scene.command_packets();
+    let ports = config.ports;
+    let mut per_bus: Vec<BusDownlink> = vec![vec![]; ports];
+    // before the window: at their own time, one after the other on each bus
+    for &(time_ns, port, bytes, _) in commands.iter().filter(|c| c.0 < from_ns) {
+        for (bus, list) in per_bus.iter_mut().enumerate() {
+            if port.is_none_or(|p| p == bus) {
+                let free = list.last().map_or(0, |l| l.0 + DOWNLINK_PACKET_NS);
+                list.push((time_ns.max(free), bytes));
+            }
+        }
+    }
+    let window: Vec<_> = commands
+        .iter()
+        .filter(|c| (from_ns..from_ns + duration_ns).contains(&c.0))
+        .collect();
+    let mut packets: Vec<[u8; PACKET_LEN]> = window.iter().map(|c| c.2).collect();
+    // twice: the time syncs' ticks come from the first pass (the timing does not depend
+    // on the bytes)
+    let mut plan = DownlinkPlan::default();
+    for pass in 0..2 {
+        let host_frames = command_frames(config, from_ns, &window, &packets);
+        let mut control = BoxControl::new(ControlConfig::of(config));
+        let (mut accepted, mut refused) = (0, 0);
+        let mut queued: Vec<Vec<usize>> = vec![vec![]; ports];
+        for (i, f) in host_frames.iter().enumerate() {
+            let receive_tick = f.last_edge() + RECEIVE_TICK_LAG - TICK_ZERO_CYCLE;
+            match control.receive(&f.frame, receive_tick).fate {
+                BoxCounter::CommandsAccepted => {
+                    accepted += 1;
+                    for (p, q) in queued.iter_mut().enumerate() {
+                        if window[i].1.is_none_or(|w| w == p) {
+                            q.push(i);
+                        }
+                    }
+                }
+                _ => refused += 1,
+            }
+        }
+        control.downlink.drain();
+        let starts = control.downlink.starts().to_vec();
+        if pass == 0 {
+            for (p, commands) in queued.iter().enumerate() {
+                let on_port = starts.iter().filter(|s| s.port == p);
+                for (&i, start) in commands.iter().zip(on_port) {
+                    if window[i].3 {
+                        let tick = start.tick.min(sync_tick(&packets[i]).unwrap_or(u64::MAX));
+                        set_sync_tick(&mut packets[i], tick);
+                    }
+                }
+            }
+            continue;
+        }
+        for s in &starts {
+            per_bus[s.port].push((scene_ns_of_tick(s.tick, from_ns), s.bytes));
+        }
+        plan = DownlinkPlan {
+            host_frames,
+            per_bus: per_bus.clone(),
+            accepted,
+            refused,
+            pin_changes: control.downlink.changes().to_vec(),
+            starts,
+        };
+    }
+    plan
+}
+
+/// The tick a time-sync packet carries, if it is one and it was set.
+fn sync_tick(packet: &[u8; PACKET_LEN]) -> Option<u64> {
+    match CellCommandRepr::parse(packet).ok()?.command {
+        CellCommand::TimeSync { box_tick } if box_tick != 0 => Some(box_tick),
+        _ => None,
+    }
+}
+
+fn set_sync_tick(packet: &mut [u8; PACKET_LEN], tick: u64) {
+    if let Ok(mut repr) = CellCommandRepr::parse(packet) {
+        if let CellCommand::TimeSync { box_tick } = &mut repr.command {
+            *box_tick = tick;
+            *packet = repr.to_bytes();
+        }
+    }
+}
+
+/// The host's command frames for `window` (scene time, port, _, _) with `packets`: from
+/// the link's host address to the box, each at its time, or right after the frame before
+/// it (an inter-frame gap later) when that one is still on the wire.
+fn command_frames(
+    config: &BoxConfig,
+    from_ns: u64,
+    window: &[&(u64, Option<usize>, [u8; PACKET_LEN], bool)],
+    packets: &[[u8; PACKET_LEN]],
+) -> Vec<HostFrame> {
+    let link = &config.link;
+    let host = LinkConfig {
+        box_mac: link.host_mac,
+        box_ip: link.host_ip,
+        box_port: link.host_port,
+        ..*link
+    };
+    let to_box = Destination {
+        mac: link.box_mac,
+        ip: link.box_ip,
+        port: link.box_port,
+    };
+    let mut free_edge = 0;
+    window
+        .iter()
+        .zip(packets)
+        .enumerate()
+        .map(|(i, (c, packet))| {
+            let payload = CommandRepr {
+                box_id: config.box_id,
+                sequence: i as u32 + 1,
+                host_time: 0,
+                request: Request::CellCommand {
+                    port: c.1.map_or(ALL_PORTS, |p| p as u8),
+                    packet: *packet,
+                },
+            }
+            .to_bytes();
+            let wire = udp_frame(&host, &to_box, &payload);
+            let edge = ((c.0 - from_ns + PORTS_READY_NS) / TICK_NS).max(free_edge);
+            free_edge = edge + wire.len() as u64 + INTER_FRAME_GAP;
+            HostFrame {
+                edge,
+                frame: wire[PREAMBLE_LEN..].to_vec(),
+            }
+        })
+        .collect()
 }

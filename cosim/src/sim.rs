@@ -2,6 +2,7 @@
 //! The spec and the analysis are in [`crate::run`] (re-exported here); this module runs the
 //! verilated box and chooses between it and the reference model.
 
+use crate::downlink::PinChange;
 use crate::error::CosimError;
 use crate::frames::assemble;
 use crate::harness::play_with_progress;
@@ -60,5 +61,24 @@ pub fn run_rtl_with_progress(
     });
     let wall = started.elapsed().as_secs_f64();
     let (frames, _) = assemble(&out);
-    analyse(spec, &frames, &true_starts, wall)
+    let mut run = analyse(spec, &frames, &true_starts, wall)?;
+    run.uart_tx = uart_tx_changes(&mut dut);
+    Ok(run)
+}
+
+/// The box's transmit pin changes as box ticks (the pins going high at reset left out),
+/// in tick order, ties by port.
+fn uart_tx_changes(dut: &mut Dut) -> Vec<PinChange> {
+    let mut changes: Vec<PinChange> = dut
+        .take_uart_tx_edges()
+        .into_iter()
+        .filter(|e| e.edge >= TICK_ZERO_CYCLE)
+        .map(|e| PinChange {
+            tick: e.edge - TICK_ZERO_CYCLE,
+            port: e.port,
+            level: e.level,
+        })
+        .collect();
+    changes.sort_by_key(|c| (c.tick, c.port));
+    changes
 }

@@ -200,7 +200,12 @@ fn answers_equal_the_control_model_on_random_good_and_bad_frames() {
         host_frames.clone(),
         duration_ns,
     ));
-    let m = check_answers(&run, &host_frames, model(config_for(&config)), |_| true);
+    let m = check_answers(
+        &run,
+        &host_frames,
+        model(skinbox_cosim::emulator::control_config(&config)),
+        |_| true,
+    );
     // every kind of fate the generator makes occurred and was counted, and the status
     // report after the last frame carries the same counters
     assert!(fates.len() >= 15, "fates {fates:?}");
@@ -221,17 +226,6 @@ fn answers_equal_the_control_model_on_random_good_and_bad_frames() {
         (r.packets_sent, 0, 0),
         "the uplink lost nothing: {r:?}"
     );
-}
-
-/// The control configuration of a box configuration.
-fn config_for(c: &BoxConfig) -> ControlConfig {
-    ControlConfig {
-        link: c.link,
-        box_id: c.box_id,
-        port_count: c.ports as u8,
-        flush_timeout_ticks: c.flush_timeout_ticks as u32,
-        status_period_ticks: c.status_period_ticks as u32,
-    }
 }
 
 #[test]
@@ -294,7 +288,12 @@ fn commands_reconfigure_the_uplink_under_line_rate_traffic() {
         host_frames.clone(),
         duration_ns,
     ));
-    let m = check_answers(&run, &host_frames, model(config_for(&config)), |_| true);
+    let m = check_answers(
+        &run,
+        &host_frames,
+        model(skinbox_cosim::emulator::control_config(&config)),
+        |_| true,
+    );
     assert_eq!(m.counters.get(BoxCounter::ArpAnswered), 1);
     assert_eq!(m.counters.get(BoxCounter::PingsAnswered), 1);
     assert_eq!(m.counters.get(BoxCounter::CommandsAccepted), 4);
@@ -401,7 +400,12 @@ fn reply_latency_is_the_sum_of_the_blocks_latencies() {
         host_frames.clone(),
         duration_ns,
     ));
-    check_answers(&run, &host_frames, model(config_for(&config)), |_| true);
+    check_answers(
+        &run,
+        &host_frames,
+        model(skinbox_cosim::emulator::control_config(&config)),
+        |_| true,
+    );
     assert_eq!(run.replies.len(), 3);
     for ((f, (_, kind)), ack) in host_frames.iter().zip(requests).zip(&run.replies) {
         let latency = ack.first_cycle - f.last_edge();

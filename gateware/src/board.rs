@@ -148,12 +148,12 @@ impl Board {
         }
     }
 
-    /// UART input pins the constraints assign: the most ports the board top can have.
+    /// Ports the constraints give a receive and a transmit pin: the most ports the board
+    /// top can have.
     pub fn uart_pins(self) -> usize {
-        lpf_sites(&self.lpf())
-            .iter()
-            .filter(|(port, _)| port.starts_with("uart_rx["))
-            .count()
+        let sites = lpf_sites(&self.lpf());
+        let count = |prefix: &str| sites.iter().filter(|(p, _)| p.starts_with(prefix)).count();
+        count("uart_rx[").min(count("uart_tx["))
     }
 
     /// The box and its board top as one Verilog text; the top module is
@@ -275,6 +275,7 @@ fn board_top(board: Board, ports: usize, oscillator_hz: u64, pll: &Pll) -> Strin
     let mut uart = String::new();
     for i in 0..ports {
         write!(uart, "\n        .uart_rx${i}(uart_rx[{i}]),").unwrap();
+        write!(uart, "\n        .uart_tx${i}(uart_tx[{i}]),").unwrap();
     }
     let nibbles: String = (0..4)
         .map(|i| {
@@ -303,6 +304,7 @@ fn board_top(board: Board, ports: usize, oscillator_hz: u64, pll: &Pll) -> Strin
 module {top} (
     input  wire clk25,
     input  wire [{last_port}:0] uart_rx,
+    output wire [{last_port}:0] uart_tx,
     output wire eth_tx_clk,
     output wire eth_tx_ctl,
     input  wire eth_rx_clk,
@@ -509,10 +511,10 @@ mod tests {
     }
 
     #[test]
-    fn constraints_place_64_uarts_on_distinct_pins_apart_from_the_board_signals() {
+    fn constraints_place_45_uart_pairs_on_distinct_pins_apart_from_the_board_signals() {
         for board in Board::ALL {
             let sites = lpf_sites(&board.lpf());
-            assert_eq!(board.uart_pins(), 64, "{board:?}");
+            assert_eq!(board.uart_pins(), 45, "{board:?}");
             let mut seen = HashSet::new();
             for (port, site) in &sites {
                 assert!(
@@ -520,8 +522,18 @@ mod tests {
                     "{board:?}: {site} used twice ({port})"
                 );
             }
-            for i in 0..64 {
+            for i in 0..45 {
                 assert!(sites.iter().any(|(p, _)| *p == format!("uart_rx[{i}]")));
+                assert!(sites.iter().any(|(p, _)| *p == format!("uart_tx[{i}]")));
+            }
+            // the button, the i9's LED and the debugger's links stay free
+            for ball in ["K18", "L2", "F18", "H16", "G18", "H17", "H18", "J17"] {
+                assert!(
+                    !sites
+                        .iter()
+                        .any(|(p, b)| b == ball && p.starts_with("uart_")),
+                    "{board:?}: {ball}"
+                );
             }
             for port in [
                 "clk25",
@@ -567,8 +579,10 @@ mod tests {
         let text = Board::ColorlightI5.verilog(&config).unwrap();
         assert!(text.contains("module skinbox_colorlight_i5 ("));
         assert!(text.contains("input  wire [2:0] uart_rx,"));
+        assert!(text.contains("output wire [2:0] uart_tx,"));
         for i in 0..3 {
             assert!(text.contains(&format!(".uart_rx${i}(uart_rx[{i}]),")));
+            assert!(text.contains(&format!(".uart_tx${i}(uart_tx[{i}]),")));
         }
         assert!(!text.contains(".uart_rx$3("));
         assert!(text.contains(".D0(gmii_txd[0]), .D1(gmii_txd[4]), .Q(eth_tx_data[0])"));

@@ -1,34 +1,50 @@
 //! CellDownlink: queues whole 20-byte cell command packets per port and sends them on each
 //! port's UART pin, the way back to the cells (the packet: docs/wire-format.md).
 //!
-//! - A command is a target `port` (or `ALL_PORTS`) and its packet on `packet`. The packet is
-//!   staged whole in a 160-bit register first; one that is not exactly
-//!   [`PACKET_LEN`] bytes, carries `error` on its last beat or names a port the box does not
-//!   have is dropped whole with a `malformed` pulse.
-//! - A staged packet is then copied, a byte a clock, into the target port's queue (two
-//!   packet slots per port in one [`BlockRam`]: port, slot and byte index form the address);
-//!   for `ALL_PORTS` into every port in turn. A port whose two slots are full refuses it:
-//!   `refused` pulses with `refused_port`; a copy that goes in pulses `accepted` with
-//!   `accepted_port`. A packet is queued whole or not at all. `packet.ready` is low while a
-//!   packet is copied (21 clocks per port).
-//! - A scan visits one port per clock and reads the next byte of its oldest packet into the
-//!   port's one-byte holding register, which feeds the port's [`UartTx`]; the scan comes back
-//!   every `ports` clocks, well within a byte time (312.5 clocks), so a port's packets go out
-//!   back to back, in order.
+//! - The packet is captured as the frame parser writes a received frame into the reply
+//!   buffer: the bytes written at frame offsets [`PACKET_OFFSET`].. (where a cell command
+//!   carries its packet) go into a 160-bit register, whatever the frame is.
+//! - `busy` (the previous packet is still being copied into the queues) and `full_ports`
+//!   (bit `p`: port `p` holds [`QUEUE_PACKETS`] packets) come straight from registers. The
+//!   command unit `offer`s the captured packet for a port (or `ALL_PORTS`) in the clock it
+//!   decides a cell command, only when neither says no: a packet is queued whole in every
+//!   target port or not at all, and nothing waits outside the queues.
+//! - An accepted packet moves to the staging register and is copied, a byte a clock, into
+//!   each target port's queue (two packet slots per port in one [`BlockRam`]: port, slot
+//!   and byte index form the address), port after port for `ALL_PORTS`:
+//!   [`COPY_CLOCKS_PER_PORT`] clocks each. `accepted` pulses with `accepted_port` as each
+//!   copy is committed.
+//! - A scan visits one port per clock (port `n` in the clocks `n`, `n + ports`, ... after
+//!   reset) and reads the next byte of its oldest packet into the port's one-byte holding
+//!   register, which feeds the port's [`UartTx`]; the scan comes back every `ports`
+//!   clocks, well within a byte time (312.5 clocks), so a port's packets go out back to
+//!   back, in order. A slot is free in the clock after its last byte was read.
 //!
 //! Cost (yosys `synth_ecp5` of the block alone, `read_verilog -DSKINBOX_ECP5_BRAM`): 8 ports
-//! 847 LUT4, 112 CCU2C, 626 FF, 2 DP16KD; 64 ports 4,328 LUT4, 782 CCU2C, 3,426 FF, 2 DP16KD.
+//! 847 LUT4, 112 CCU2C, 626 FF, 2 DP16KD; 64 ports 4,328 LUT4, 782 CCU2C, 3,426 FF, 2 DP16KD
+//! (measured with a byte-stream input in place of the capture register).
 //! The queues in registers instead would take 320 FF per port (two 20-byte packets).
 
 use crate::block_ram::{BlockRam, READ_LATENCY};
 use crate::hdl::*;
-use crate::stream::ByteStreamSink;
 use crate::uart_tx::UartTx;
 use skinbox_protocol::cell::PACKET_LEN;
-use skinbox_protocol::command::ALL_PORTS;
+use skinbox_protocol::command::{cell_command_field, ALL_PORTS, HEADER_LEN};
+use skinbox_protocol::link::{ETHERNET_HEADER_LEN, IPV4_HEADER_LEN, UDP_HEADER_LEN};
 
 /// Packets each port can hold.
 pub const QUEUE_PACKETS: u64 = 2;
+
+/// Clocks the copy of a packet into one port's queue takes.
+pub const COPY_CLOCKS_PER_PORT: u64 = PACKET_LEN as u64;
+
+/// Frame offset of the cell packet in a cell command frame: Ethernet, IPv4 (no options)
+/// and UDP headers, the command header, then the arguments' packet field.
+pub const PACKET_OFFSET: usize = ETHERNET_HEADER_LEN
+    + IPV4_HEADER_LEN
+    + UDP_HEADER_LEN
+    + HEADER_LEN
+    + cell_command_field::PACKET.start;
 
 /// Largest port count.
 pub const MAX_PORTS: usize = 64;
@@ -43,43 +59,46 @@ pub struct CellDownlink {
     pub clock: Signal<In, Clock>,
     /// Synchronous reset: queues emptied, pins idle.
     pub reset: Signal<In, Bit>,
-    /// Target of the packet on `packet`: a port, or `ALL_PORTS` (0xFF); read with the last
-    /// beat.
-    pub port: Signal<In, Bits<8>>,
-    /// The 20-byte cell command packet.
-    pub packet: ByteStreamSink,
+    /// A byte of a received frame is written into the reply buffer (the parser's write
+    /// port): `capture_address` is its frame offset, `capture_data` the byte.
+    pub capture: Signal<In, Bit>,
+    /// Frame offset of the byte on `capture_data`.
+    pub capture_address: Signal<In, Bits<11>>,
+    /// The byte written.
+    pub capture_data: Signal<In, Bits<8>>,
+    /// One clock: queue the captured packet for `offer_port` (a port, or `ALL_PORTS`);
+    /// only while not `busy` and no target port is full.
+    pub offer: Signal<In, Bit>,
+    /// Target of the offer.
+    pub offer_port: Signal<In, Bits<8>>,
+    /// A packet is being copied into the queues: no offer now.
+    pub busy: Signal<Out, Bit>,
+    /// Bit `p`: port `p`'s queue is full (bits of ports the box does not have are 0).
+    pub full_ports: Signal<Out, Bits<64>>,
     /// One UART pin per port, idle high.
     pub uart_tx: Vec<Signal<Out, Bit>>,
-    /// High for one clock when a port queued a packet, with `accepted_port`.
+    /// High for one clock when a port's copy of an accepted packet is committed, with
+    /// `accepted_port`.
     pub accepted: Signal<Out, Bit>,
-    /// The port that queued it.
+    /// The port of that copy.
     pub accepted_port: Signal<Out, Bits<8>>,
-    /// High for one clock when a full port refused a packet, with `refused_port`.
-    pub refused: Signal<Out, Bit>,
-    /// The port that refused it.
-    pub refused_port: Signal<Out, Bits<8>>,
-    /// High for one clock when a packet was dropped as malformed (length, error flag or
-    /// no such port).
-    pub malformed: Signal<Out, Bit>,
     ram: BlockRam<8, ADDRESS_BITS>,
     uarts: Vec<UartTx>,
     port_number: Vec<Constant<Bits<8>>>,
-    port_count: Constant<Bits<8>>,
+    port_bit: Vec<Constant<Bits<64>>>,
     last_port: Constant<Bits<8>>,
+    packet_first: Constant<Bits<11>>,
+    packet_last: Constant<Bits<11>>,
     all_ports: Constant<Bits<8>>,
     // receive and copy
+    captured: DFF<Bits<160>>,
     staging: DFF<Bits<160>>,
-    received: DFF<Bits<5>>,
-    overlong: DFF<Bit>,
     copying: DFF<Bit>,
     broadcast: DFF<Bit>,
     copy_port: DFF<Bits<8>>,
     copy_index: DFF<Bits<5>>,
     accepted_out: DFF<Bit>,
     accepted_port_out: DFF<Bits<8>>,
-    refused_out: DFF<Bit>,
-    refused_port_out: DFF<Bits<8>>,
-    malformed_out: DFF<Bit>,
     // per port
     count: Vec<DFF<Bits<2>>>,
     head: Vec<DFF<Bit>>,
@@ -93,11 +112,9 @@ pub struct CellDownlink {
     read_valid: DFF<Bits<2>>,
     read_port_1: DFF<Bits<8>>,
     read_port_2: DFF<Bits<8>>,
-    take: Signal<Local, Bit>,
-    good_packet: Signal<Local, Bit>,
+    full: Signal<Local, Bits<64>>,
     copy_count: Signal<Local, Bits<2>>,
     copy_head: Signal<Local, Bit>,
-    copy_full: Signal<Local, Bit>,
     commit: Signal<Local, Bit>,
     advance: Signal<Local, Bit>,
     issue: Signal<Local, Bit>,
@@ -115,34 +132,36 @@ impl CellDownlink {
         Self {
             clock: Default::default(),
             reset: Default::default(),
-            port: Default::default(),
-            packet: Default::default(),
+            capture: Default::default(),
+            capture_address: Default::default(),
+            capture_data: Default::default(),
+            offer: Default::default(),
+            offer_port: Default::default(),
+            busy: Default::default(),
+            full_ports: Default::default(),
             uart_tx: (0..ports).map(|_| Default::default()).collect(),
             accepted: Default::default(),
             accepted_port: Default::default(),
-            refused: Default::default(),
-            refused_port: Default::default(),
-            malformed: Default::default(),
             ram: Default::default(),
             uarts: (0..ports).map(|_| UartTx::new(clock_hz, baud)).collect(),
             port_number: (0..ports)
                 .map(|p| Constant::new((p as u64).into()))
                 .collect(),
-            port_count: Constant::new((ports as u64).into()),
+            port_bit: (0..ports)
+                .map(|p| Constant::new((1u64 << p).into()))
+                .collect(),
             last_port: Constant::new((ports as u64 - 1).into()),
+            packet_first: Constant::new((PACKET_OFFSET as u64).into()),
+            packet_last: Constant::new(((PACKET_OFFSET + PACKET_LEN - 1) as u64).into()),
             all_ports: Constant::new(u64::from(ALL_PORTS).into()),
+            captured: Default::default(),
             staging: Default::default(),
-            received: Default::default(),
-            overlong: Default::default(),
             copying: Default::default(),
             broadcast: Default::default(),
             copy_port: Default::default(),
             copy_index: Default::default(),
             accepted_out: Default::default(),
             accepted_port_out: Default::default(),
-            refused_out: Default::default(),
-            refused_port_out: Default::default(),
-            malformed_out: Default::default(),
             count: (0..ports).map(|_| Default::default()).collect(),
             head: (0..ports).map(|_| Default::default()).collect(),
             read_index: (0..ports).map(|_| Default::default()).collect(),
@@ -153,11 +172,9 @@ impl CellDownlink {
             read_valid: Default::default(),
             read_port_1: Default::default(),
             read_port_2: Default::default(),
-            take: Default::default(),
-            good_packet: Default::default(),
+            full: Default::default(),
             copy_count: Default::default(),
             copy_head: Default::default(),
-            copy_full: Default::default(),
             commit: Default::default(),
             advance: Default::default(),
             issue: Default::default(),
@@ -173,18 +190,14 @@ impl Logic for CellDownlink {
         dff_setup!(
             self,
             clock,
+            captured,
             staging,
-            received,
-            overlong,
             copying,
             broadcast,
             copy_port,
             copy_index,
             accepted_out,
             accepted_port_out,
-            refused_out,
-            refused_port_out,
-            malformed_out,
             scan,
             read_valid,
             read_port_1,
@@ -196,39 +209,33 @@ impl Logic for CellDownlink {
         self.ram.write_data.next = self.staging.q.val().get_bits::<8>(0);
         self.ram.read_address.next = 0.into();
         self.accepted_out.d.next = false;
-        self.refused_out.d.next = false;
-        self.malformed_out.d.next = false;
 
-        // receive: stage the packet whole
-        self.packet.ready.next = !self.copying.q.val();
-        self.take.next = self.packet.valid.val() & !self.copying.q.val();
-        self.good_packet.next = (self.received.q.val() == 19)
-            & !self.overlong.q.val()
-            & !self.packet.error.val()
-            & ((self.port.val() < self.port_count.val())
-                | (self.port.val() == self.all_ports.val()));
-        if self.take.val() {
-            self.staging.d.next =
-                (self.staging.q.val() >> 8) | (bit_cast::<160, 8>(self.packet.data.val()) << 152);
-            if self.received.q.val() == 20 {
-                self.overlong.d.next = true;
-            } else {
-                self.received.d.next = self.received.q.val() + 1;
+        // capture: the bytes at the packet's frame offsets, the first ending in bits 7..0
+        if self.capture.val()
+            & (self.capture_address.val() >= self.packet_first.val())
+            & (self.capture_address.val() <= self.packet_last.val())
+        {
+            self.captured.d.next =
+                (self.captured.q.val() >> 8) | (bit_cast::<160, 8>(self.capture_data.val()) << 152);
+        }
+
+        // room: from registers only (the command unit decides from them)
+        self.full.next = 0.into();
+        for i in 0..self.uarts.len() {
+            if self.count[i].q.val() == 2 {
+                self.full.next = self.full.val() | self.port_bit[i].val();
             }
-            if self.packet.last.val() {
-                self.received.d.next = 0.into();
-                self.overlong.d.next = false;
-                if self.good_packet.val() {
-                    self.copying.d.next = true;
-                    self.copy_index.d.next = 0.into();
-                    self.broadcast.d.next = self.port.val() == self.all_ports.val();
-                    self.copy_port.d.next = self.port.val();
-                    if self.port.val() == self.all_ports.val() {
-                        self.copy_port.d.next = 0.into();
-                    }
-                } else {
-                    self.malformed_out.d.next = true;
-                }
+        }
+        self.full_ports.next = self.full.val();
+        self.busy.next = self.copying.q.val();
+        if self.offer.val() {
+            self.staging.d.next = self.captured.q.val();
+            self.copying.d.next = true;
+            self.copy_index.d.next = 0.into();
+            self.broadcast.d.next = self.offer_port.val() == self.all_ports.val();
+            self.copy_port.d.next = self.offer_port.val();
+            if self.offer_port.val() == self.all_ports.val() {
+                self.copy_port.d.next = 0.into();
             }
         }
 
@@ -241,31 +248,24 @@ impl Logic for CellDownlink {
                 self.copy_head.next = self.head[i].q.val();
             }
         }
-        self.copy_full.next = self.copy_count.val() == 2;
         self.commit.next = false;
         self.advance.next = false;
         if self.copying.q.val() {
-            if (self.copy_index.q.val() == 0) & self.copy_full.val() {
-                self.refused_out.d.next = true;
-                self.refused_port_out.d.next = self.copy_port.q.val();
+            self.ram.write_enable.next = true;
+            self.ram.write_address.next = (bit_cast::<ADDRESS_BITS, 8>(self.copy_port.q.val())
+                << 6)
+                | (bit_cast::<ADDRESS_BITS, 1>(
+                    (self.copy_head.val() ^ (self.copy_count.val() == 1)).into(),
+                ) << 5)
+                | bit_cast::<ADDRESS_BITS, 5>(self.copy_index.q.val());
+            self.staging.d.next = (self.staging.q.val() >> 8)
+                | (bit_cast::<160, 8>(self.staging.q.val().get_bits::<8>(0)) << 152);
+            self.copy_index.d.next = self.copy_index.q.val() + 1;
+            if self.copy_index.q.val() == 19 {
+                self.commit.next = true;
+                self.accepted_out.d.next = true;
+                self.accepted_port_out.d.next = self.copy_port.q.val();
                 self.advance.next = true;
-            } else {
-                self.ram.write_enable.next = true;
-                self.ram.write_address.next = (bit_cast::<ADDRESS_BITS, 8>(self.copy_port.q.val())
-                    << 6)
-                    | (bit_cast::<ADDRESS_BITS, 1>(
-                        (self.copy_head.val() ^ (self.copy_count.val() == 1)).into(),
-                    ) << 5)
-                    | bit_cast::<ADDRESS_BITS, 5>(self.copy_index.q.val());
-                self.staging.d.next = (self.staging.q.val() >> 8)
-                    | (bit_cast::<160, 8>(self.staging.q.val().get_bits::<8>(0)) << 152);
-                self.copy_index.d.next = self.copy_index.q.val() + 1;
-                if self.copy_index.q.val() == 19 {
-                    self.commit.next = true;
-                    self.accepted_out.d.next = true;
-                    self.accepted_port_out.d.next = self.copy_port.q.val();
-                    self.advance.next = true;
-                }
             }
         }
         if self.advance.val() {
@@ -361,18 +361,12 @@ impl Logic for CellDownlink {
             (self.read_valid.q.val() << 1) | bit_cast::<2, 1>(self.issue.val().into());
         if self.reset.val() {
             self.copying.d.next = false;
-            self.received.d.next = 0.into();
-            self.overlong.d.next = false;
+            self.scan.d.next = 0.into();
             self.read_valid.d.next = 0.into();
             self.accepted_out.d.next = false;
-            self.refused_out.d.next = false;
-            self.malformed_out.d.next = false;
         }
         self.accepted.next = self.accepted_out.q.val();
         self.accepted_port.next = self.accepted_port_out.q.val();
-        self.refused.next = self.refused_out.q.val();
-        self.refused_port.next = self.refused_port_out.q.val();
-        self.malformed.next = self.malformed_out.q.val();
     }
 }
 
@@ -391,12 +385,12 @@ mod tests {
         bench: Bench<CellDownlink>,
         /// Every port's pin after each edge.
         pins: Vec<Vec<bool>>,
-        /// The packets each port accepted, in order.
+        /// The packets each port committed, in order.
         queued: Vec<Vec<[u8; 20]>>,
-        refused: Vec<u64>,
-        malformed: u64,
-        /// The last packet sent in full.
-        last_sent: [u8; 20],
+        /// Offers refused.
+        refused: u64,
+        /// The last packet offered.
+        last_offered: [u8; 20],
     }
 
     impl Run {
@@ -411,9 +405,8 @@ mod tests {
                 bench,
                 pins: vec![vec![]; ports],
                 queued: vec![vec![]; ports],
-                refused: vec![0; ports],
-                malformed: 0,
-                last_sent: [0; 20],
+                refused: 0,
+                last_offered: [0; 20],
             }
         }
 
@@ -425,48 +418,64 @@ mod tests {
             }
             if uut.accepted.val() {
                 let p = uut.accepted_port.val().index();
-                self.queued[p].push(self.last_sent);
-            }
-            if uut.refused.val() {
-                self.refused[uut.refused_port.val().index()] += 1;
-            }
-            if uut.malformed.val() {
-                self.malformed += 1;
+                self.queued[p].push(self.last_offered);
             }
         }
 
-        /// Offers `bytes` for `port` as fast as taken, the last with `error`, and waits
-        /// until the packet is queued or refused.
-        fn send(&mut self, port: u8, bytes: &[u8], error: bool) {
-            self.bench.uut.port.next = u64::from(port).into();
-            for (i, b) in bytes.iter().enumerate() {
-                let last = i + 1 == bytes.len();
-                self.bench.uut.packet.valid.next = true;
-                self.bench.uut.packet.data.next = u64::from(*b).into();
-                self.bench.uut.packet.last.next = last;
-                self.bench.uut.packet.error.next = last && error;
-                loop {
-                    self.bench.settle();
-                    let took = self.bench.uut.packet.ready.val();
-                    self.cycle();
-                    if took {
-                        break;
-                    }
-                }
-            }
-            self.bench.uut.packet.valid.next = false;
-            if bytes.len() == 20 && !error {
-                self.last_sent.copy_from_slice(bytes);
-            }
-            // until the copy is over: its accepted and refused pulses are seen by then
-            self.cycle();
-            loop {
-                self.bench.settle();
-                if self.bench.uut.packet.ready.val() {
-                    break;
-                }
+        /// Writes a 90-byte frame whose bytes at the packet offsets are `packet` (the
+        /// others random), as the parser writes the reply buffer, one byte a clock.
+        fn capture(&mut self, packet: &[u8; 20], rng: &mut TestRng) {
+            for offset in 0..PACKET_OFFSET + PACKET_LEN + 4 {
+                let byte = match offset.checked_sub(PACKET_OFFSET) {
+                    Some(i) if i < PACKET_LEN => packet[i],
+                    _ => rng.byte(),
+                };
+                self.bench.uut.capture.next = true;
+                self.bench.uut.capture_address.next = (offset as u64).into();
+                self.bench.uut.capture_data.next = u64::from(byte).into();
                 self.cycle();
             }
+            self.bench.uut.capture.next = false;
+        }
+
+        /// Offers the captured packet for `port` when `busy` and `full_ports` leave room,
+        /// as the command unit does; true when offered.
+        fn offer(&mut self, port: u8) -> bool {
+            self.bench.settle();
+            let full = self.bench.uut.full_ports.val().to_u64();
+            let room = !self.bench.uut.busy.val()
+                && if port == ALL_PORTS {
+                    full == 0
+                } else {
+                    full >> port & 1 == 0
+                };
+            self.bench.uut.offer.next = room;
+            self.bench.uut.offer_port.next = u64::from(port).into();
+            self.cycle();
+            self.bench.uut.offer.next = false;
+            if !room {
+                self.refused += 1;
+            }
+            room
+        }
+
+        /// Captures `packet`, offers it for `port` and, when accepted, waits until every
+        /// copy is committed; true when accepted.
+        fn send(&mut self, port: u8, packet: &[u8; 20], rng: &mut TestRng) -> bool {
+            self.capture(packet, rng);
+            let before = self.last_offered;
+            self.last_offered = *packet;
+            if !self.offer(port) {
+                self.last_offered = before;
+                return false;
+            }
+            let copies = if port == ALL_PORTS {
+                self.pins.len()
+            } else {
+                1
+            };
+            self.idle(copies as u64 * COPY_CLOCKS_PER_PORT + 1);
+            true
         }
 
         fn idle(&mut self, clocks: u64) {
@@ -525,11 +534,11 @@ mod tests {
         let mut rng = TestRng::new(1);
         let mut run = Run::new(8);
         let (a, b) = (packet(&mut rng), packet(&mut rng));
-        run.send(3, &a, false);
-        run.send(3, &b, false);
+        assert!(run.send(3, &a, &mut rng));
+        assert!(run.send(3, &b, &mut rng));
         run.drain();
         assert_eq!(run.queued[3], vec![a, b]);
-        assert_eq!(run.refused, vec![0; 8]);
+        assert_eq!(run.refused, 0);
         run.check_pins();
         // the two packets form one burst of 40 frames
         let frames = decode_uart_line(&run.pins[3]);
@@ -539,41 +548,58 @@ mod tests {
     }
 
     #[test]
-    fn a_full_queue_refuses_whole_packets_and_takes_again_once_drained() {
+    fn a_full_queue_refuses_whole_packets_and_takes_again_once_a_slot_is_free() {
         let mut rng = TestRng::new(2);
         let mut run = Run::new(2);
         let sent: Vec<[u8; 20]> = (0..5).map(|_| packet(&mut rng)).collect();
-        for p in &sent[..4] {
-            run.send(1, p, false);
-        }
-        assert_eq!(run.refused, vec![0, 2]);
+        let accepted: Vec<bool> = sent[..4].iter().map(|p| run.send(1, p, &mut rng)).collect();
+        assert_eq!(accepted, [true, true, false, false]);
+        assert_eq!(run.refused, 2);
         run.drain();
-        run.send(1, &sent[4], false);
+        assert!(run.send(1, &sent[4], &mut rng));
         run.drain();
         assert_eq!(run.queued[1], vec![sent[0], sent[1], sent[4]]);
-        assert_eq!(run.refused, vec![0, 2]);
         assert!(run.queued[0].is_empty());
         run.check_pins();
     }
 
     #[test]
-    fn all_ports_goes_to_every_port_with_room_and_malformed_packets_are_dropped() {
+    fn all_ports_is_queued_in_every_port_or_in_none() {
         let mut rng = TestRng::new(3);
         let mut run = Run::new(4);
         let (a, b, c) = (packet(&mut rng), packet(&mut rng), packet(&mut rng));
-        run.send(2, &a, false);
-        run.send(2, &b, false);
-        run.send(ALL_PORTS, &c, false);
-        assert_eq!(run.refused, vec![0, 0, 1, 0]);
-        // a short, a long, a flagged packet and one for a port the box does not have
-        run.send(0, &c[..19], false);
-        let long: Vec<u8> = c.iter().copied().chain([0x00]).collect();
-        run.send(0, &long, false);
-        run.send(0, &c, true);
-        run.send(4, &c, false);
-        assert_eq!(run.malformed, 4);
+        assert!(run.send(2, &a, &mut rng));
+        assert!(run.send(2, &b, &mut rng));
+        // port 2 is full: the broadcast goes nowhere
+        assert!(!run.send(ALL_PORTS, &c, &mut rng));
         run.drain();
-        assert_eq!(run.queued, vec![vec![c], vec![c], vec![a, b], vec![c]]);
+        assert!(run.send(ALL_PORTS, &c, &mut rng));
+        run.drain();
+        assert_eq!(run.queued, vec![vec![c], vec![c], vec![a, b, c], vec![c]]);
+        assert_eq!(run.refused, 1);
+        run.check_pins();
+    }
+
+    #[test]
+    fn an_offer_while_a_copy_is_under_way_is_refused() {
+        let mut rng = TestRng::new(6);
+        let mut run = Run::new(4);
+        let (a, b) = (packet(&mut rng), packet(&mut rng));
+        run.capture(&a, &mut rng);
+        run.last_offered = a;
+        assert!(run.offer(ALL_PORTS));
+        // the copy into 4 ports takes 80 clocks; offers in all of them are refused
+        for _ in 0..4 * COPY_CLOCKS_PER_PORT {
+            assert!(!run.offer(0));
+        }
+        assert!(run.offer(1), "the clock after the last copy");
+        run.idle(COPY_CLOCKS_PER_PORT + 1);
+        run.drain();
+        assert_eq!(run.queued, vec![vec![a], vec![a, a], vec![a], vec![a]]);
+        // a capture between offers replaces the packet
+        assert!(run.send(0, &b, &mut rng));
+        run.drain();
+        assert_eq!(run.queued[0], vec![a, b]);
         run.check_pins();
     }
 
@@ -583,9 +609,9 @@ mod tests {
         let mut run = Run::new(1);
         let sent: Vec<[u8; 20]> = (0..3).map(|_| packet(&mut rng)).collect();
         for p in &sent {
-            run.send(ALL_PORTS, p, false);
+            run.send(ALL_PORTS, p, &mut rng);
         }
-        assert_eq!(run.refused, vec![1]);
+        assert_eq!(run.refused, 1);
         run.drain();
         assert_eq!(run.queued, vec![vec![sent[0], sent[1]]]);
         run.check_pins();
@@ -595,7 +621,7 @@ mod tests {
     fn random_traffic_on_eight_ports_and_verilog_of_1_8_64_ports_passes_lint() {
         let mut rng = TestRng::new(4);
         let mut run = Run::new(8);
-        let mut sent = 0;
+        let (mut offered, mut copies) = (0, 0);
         for _ in 0..24 {
             let port = if rng.chance(0.2) {
                 ALL_PORTS
@@ -603,19 +629,16 @@ mod tests {
                 (rng.next_u64() % 8) as u8
             };
             let p = packet(&mut rng);
-            run.send(port, &p, false);
-            sent += if port == ALL_PORTS { 8 } else { 1 };
+            offered += 1;
+            if run.send(port, &p, &mut rng) {
+                copies += if port == ALL_PORTS { 8 } else { 1 };
+            }
             run.idle(rng.next_u64() % 2000);
         }
         run.drain();
         let queued: usize = run.queued.iter().map(Vec::len).sum();
-        let refused: u64 = run.refused.iter().sum();
-        assert_eq!(
-            queued as u64 + refused,
-            sent,
-            "every packet queued or refused"
-        );
-        assert!(refused > 0 && queued > 0);
+        assert_eq!(queued, copies, "every accepted packet queued in its ports");
+        assert!(run.refused > 0 && run.refused < offered);
         run.check_pins();
 
         for ports in [1, 8, 64] {

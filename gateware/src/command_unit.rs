@@ -9,8 +9,11 @@
 //! `(sequence - last) as i32 > 0`; a host not in the table may start anywhere), else
 //! `Replay`; then the sequence number is taken (the host's slot, or for a new host the
 //! slot of the host accepted longest ago) whatever the opcode and arguments say; an
-//! unknown opcode, bad arguments (as `skinbox_protocol::command::Request::parse`) and a
-//! cell command (no downlink yet) are refused, everything else is carried out.
+//! unknown opcode and bad arguments (as `skinbox_protocol::command::Request::parse`) are
+//! refused; a cell command is refused as `DownlinkFull` when the downlink is `busy` or a
+//! target port's queue is full (`downlink_full_ports`, any bit for `ALL_PORTS`), as they
+//! are in the clock before `done`, else offered to it (`downlink_offer` in that clock,
+//! with `downlink_port`); everything else is carried out.
 //!
 //! The work is a pipeline of registers, one stage per clock: the host match and the
 //! argument checks; the matched host's last sequence, the oldest slot and the result of
@@ -39,6 +42,9 @@ use skinbox_protocol::link::LinkConfig;
 
 /// Clocks from `command` to `done`.
 pub const COMMAND_LATENCY: u64 = 4;
+
+/// Clocks from `command` to `downlink_offer`: the clock before `done`.
+pub const DOWNLINK_OFFER_AFTER_COMMAND: u64 = COMMAND_LATENCY - 1;
 
 /// Build-time parameters of the command unit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -92,6 +98,15 @@ pub struct CommandUnit {
     pub command_argument_length: Signal<In, Bits<16>>,
     /// The first 12 argument bytes, the first in bits 95..88, bytes past the arguments 0.
     pub command_arguments: Signal<In, Bits<96>>,
+    /// One clock, the clock before `done`: a cell command is carried out; the downlink
+    /// queues the packet it captured.
+    pub downlink_offer: Signal<Out, Bit>,
+    /// The cell command's port (or `ALL_PORTS`), with `downlink_offer`.
+    pub downlink_port: Signal<Out, Bits<8>>,
+    /// The downlink is copying a packet into its queues.
+    pub downlink_busy: Signal<In, Bit>,
+    /// Bit `p`: port `p`'s downlink queue is full.
+    pub downlink_full_ports: Signal<In, Bits<64>>,
     /// One clock, `COMMAND_LATENCY` clocks after `command`.
     pub done: Signal<Out, Bit>,
     /// The command's fate: a `BoxCounter` index (held until the next `done`).
@@ -135,13 +150,13 @@ pub struct CommandUnit {
     fate_other_box: Constant<Bits<5>>,
     fate_unknown_opcode: Constant<Bits<5>>,
     fate_bad_argument: Constant<Bits<5>>,
-    fate_no_downlink: Constant<Bits<5>>,
+    fate_downlink_full: Constant<Bits<5>>,
     result_ok: Constant<Bits<8>>,
     result_replay: Constant<Bits<8>>,
     result_other_box: Constant<Bits<8>>,
     result_unknown_opcode: Constant<Bits<8>>,
     result_bad_argument: Constant<Bits<8>>,
-    result_no_downlink: Constant<Bits<8>>,
+    result_downlink_full: Constant<Bits<8>>,
     default_mac: Constant<Bits<48>>,
     default_ip: Constant<Bits<32>>,
     default_port: Constant<Bits<16>>,
@@ -212,6 +227,9 @@ pub struct CommandUnit {
     target_rank: Signal<Local, Bits<2>>,
     value: Signal<Local, Bits<32>>,
     arguments_good: Signal<Local, Bit>,
+    cell_command_taken: Signal<Local, Bit>,
+    downlink_room: Signal<Local, Bit>,
+    full_shifted: Signal<Local, Bits<64>>,
 }
 
 impl CommandUnit {
@@ -231,6 +249,10 @@ impl CommandUnit {
             command_sequence: Default::default(),
             command_argument_length: Default::default(),
             command_arguments: Default::default(),
+            downlink_offer: Default::default(),
+            downlink_port: Default::default(),
+            downlink_busy: Default::default(),
+            downlink_full_ports: Default::default(),
             done: Default::default(),
             fate: Default::default(),
             result: Default::default(),
@@ -262,13 +284,13 @@ impl CommandUnit {
             fate_other_box: constant(BoxCounter::RefusedOtherBox as u64),
             fate_unknown_opcode: constant(BoxCounter::RefusedUnknownOpcode as u64),
             fate_bad_argument: constant(BoxCounter::RefusedBadArgument as u64),
-            fate_no_downlink: constant(BoxCounter::RefusedNoDownlink as u64),
+            fate_downlink_full: constant(BoxCounter::RefusedDownlinkFull as u64),
             result_ok: constant(AckResult::Ok as u64),
             result_replay: constant(AckResult::Replay as u64),
             result_other_box: constant(AckResult::OtherBox as u64),
             result_unknown_opcode: constant(AckResult::UnknownOpcode as u64),
             result_bad_argument: constant(AckResult::BadArgument as u64),
-            result_no_downlink: constant(AckResult::NoDownlink as u64),
+            result_downlink_full: constant(AckResult::DownlinkFull as u64),
             default_mac: constant(mac_number(link.host_mac)),
             default_ip: constant(u32::from_be_bytes(link.host_ip).into()),
             default_port: constant(link.host_port.into()),
@@ -331,6 +353,9 @@ impl CommandUnit {
             target_rank: Default::default(),
             value: Default::default(),
             arguments_good: Default::default(),
+            cell_command_taken: Default::default(),
+            downlink_room: Default::default(),
+            full_shifted: Default::default(),
         }
     }
 }
@@ -472,8 +497,7 @@ impl Logic for CommandUnit {
                 & self.cell_port_ok.q.val()
                 & self.reserved_zero.q.val()
             {
-                self.arguments_fate.d.next = self.fate_no_downlink.val();
-                self.arguments_result.d.next = self.result_no_downlink.val();
+                self.arguments_good.next = true;
             }
         } else {
             self.arguments_fate.d.next = self.fate_unknown_opcode.val();
@@ -507,6 +531,17 @@ impl Logic for CommandUnit {
                 self.target_rank.next = self.target_rank.val() | self.slot_rank[i].q.val();
             }
         }
+        self.cell_command_taken.next =
+            self.taken.val() & self.arguments_ok.q.val() & self.is_cell_command.q.val();
+        self.downlink_port.next = self.command_arguments.val().get_bits::<8>(88);
+        self.full_shifted.next =
+            self.downlink_full_ports.val() >> bit_cast::<64, 8>(self.downlink_port.val());
+        self.downlink_room.next = !self.downlink_busy.val() & !self.full_shifted.val().get_bit(0);
+        if self.downlink_port.val() == self.all_ports.val() {
+            self.downlink_room.next =
+                !self.downlink_busy.val() & (self.downlink_full_ports.val() == 0);
+        }
+        self.downlink_offer.next = self.cell_command_taken.val() & self.downlink_room.val();
         if self.stage_3.q.val() {
             if !self.box_ok.q.val() {
                 self.fate_out.d.next = self.fate_other_box.val();
@@ -520,6 +555,10 @@ impl Logic for CommandUnit {
                 self.fate_out.d.next = self.arguments_fate.q.val();
                 self.result_out.d.next = self.arguments_result.q.val();
                 self.last_accepted_out.d.next = self.command_sequence.val();
+                if self.cell_command_taken.val() & !self.downlink_room.val() {
+                    self.fate_out.d.next = self.fate_downlink_full.val();
+                    self.result_out.d.next = self.result_downlink_full.val();
+                }
             }
         }
         // Stage 5: the table, from the registered decision (the parser still holds the
@@ -690,7 +729,15 @@ mod tests {
             }
         }
 
-        fn apply(&mut self, c: &Cmd) -> Seen {
+        /// What the unit shows, and the port it offers the downlink (with a full downlink
+        /// the offer is refused).
+        fn apply(&mut self, c: &Cmd, downlink_full: bool) -> (Seen, Option<u8>) {
+            let mut offer = None;
+            let seen = self.decide(c, downlink_full, &mut offer);
+            (seen, offer)
+        }
+
+        fn decide(&mut self, c: &Cmd, downlink_full: bool, offer: &mut Option<u8>) -> Seen {
             let known = self.hosts.iter().position(|h| h.0 == c.ip);
             let last = known.map(|i| self.hosts[i].1);
             let seen = Seen {
@@ -742,12 +789,21 @@ mod tests {
                     AckResult::BadArgument,
                     s,
                 ),
-                Ok(Request::CellCommand { .. }) => refuse(
-                    seen,
-                    BoxCounter::RefusedNoDownlink,
-                    AckResult::NoDownlink,
-                    s,
-                ),
+                Ok(Request::CellCommand { port, .. }) => {
+                    if !downlink_full {
+                        *offer = Some(port);
+                    }
+                    if downlink_full {
+                        refuse(
+                            seen,
+                            BoxCounter::RefusedDownlinkFull,
+                            AckResult::DownlinkFull,
+                            s,
+                        )
+                    } else {
+                        seen
+                    }
+                }
                 Ok(Request::StreamTo { to }) => {
                     self.destination = match to {
                         Some(d) => (mac_number(d.mac), u32::from_be_bytes(d.ip), d.port),
@@ -785,6 +841,8 @@ mod tests {
     struct Fixture {
         bench: Bench<CommandUnit>,
         model: Model,
+        /// The downlink has no room: busy, or every port full (alternately).
+        downlink_full: bool,
     }
 
     impl Fixture {
@@ -797,6 +855,7 @@ mod tests {
             Fixture {
                 bench,
                 model: Model::new(),
+                downlink_full: false,
             }
         }
 
@@ -836,17 +895,38 @@ mod tests {
             let low: Bits<96> =
                 u64::from(u32::from_be_bytes(first[8..].try_into().unwrap())).into();
             u.command_arguments.next = (high << 32) | low;
+            let busy = self.downlink_full && c.sequence.is_multiple_of(2);
+            u.downlink_busy.next = busy;
+            let every_port = (1u64 << PORTS) - 1;
+            u.downlink_full_ports.next = match Request::parse(c.opcode, &c.args, PORTS) {
+                _ if self.downlink_full && !busy => every_port.into(),
+                // the other ports being full does not matter to a command for one port
+                Ok(Request::CellCommand { port, .. }) if port != ALL_PORTS => {
+                    (every_port & !(1u64 << port)).into()
+                }
+                _ => 0.into(),
+            };
             u.command.next = true;
             self.bench.cycle();
             self.bench.uut.command.next = false;
-            for _ in 1..COMMAND_LATENCY {
+            let mut offers = vec![];
+            for clock in 1..COMMAND_LATENCY {
                 assert!(!self.bench.uut.done.val(), "done early for {c:?}");
+                self.bench.settle();
+                if self.bench.uut.downlink_offer.val() {
+                    offers.push((clock, self.bench.uut.downlink_port.val().to_u64() as u8));
+                }
                 self.bench.cycle();
             }
             assert!(self.bench.uut.done.val(), "no done for {c:?}");
             let seen = self.seen();
-            let want = self.model.apply(c);
+            let (want, offer) = self.model.apply(c, self.downlink_full);
             assert_eq!(seen, want, "for {c:?}");
+            let want_offers: Vec<(u64, u8)> = offer
+                .map(|p| (DOWNLINK_OFFER_AFTER_COMMAND, p))
+                .into_iter()
+                .collect();
+            assert_eq!(offers, want_offers, "offers for {c:?}");
             // hold the fields a while, as the parser does until the next frame
             self.bench.cycle();
             let after = self.seen();
@@ -953,24 +1033,9 @@ mod tests {
             (now, vec![0; 12], BadArgument, bad),
             (tick, vec![], Ok, ok),
             (tick, vec![0; 4], BadArgument, bad),
-            (
-                cell,
-                cell_arg(0, [0; 3]),
-                NoDownlink,
-                BoxCounter::RefusedNoDownlink,
-            ),
-            (
-                cell,
-                cell_arg(PORTS - 1, [0; 3]),
-                NoDownlink,
-                BoxCounter::RefusedNoDownlink,
-            ),
-            (
-                cell,
-                cell_arg(0xFF, [0; 3]),
-                NoDownlink,
-                BoxCounter::RefusedNoDownlink,
-            ),
+            (cell, cell_arg(0, [0; 3]), Ok, ok),
+            (cell, cell_arg(PORTS - 1, [0; 3]), Ok, ok),
+            (cell, cell_arg(0xFF, [0; 3]), Ok, ok),
             (cell, cell_arg(PORTS, [0; 3]), BadArgument, bad),
             (cell, cell_arg(0xFE, [0; 3]), BadArgument, bad),
             (cell, cell_arg(0, [0, 0, 1]), BadArgument, bad),
@@ -987,6 +1052,23 @@ mod tests {
             );
             sequence += 1;
         }
+        // a full downlink refuses good cell commands only; the number is taken
+        f.downlink_full = true;
+        for port in [0, PORTS - 1, 0xFF] {
+            let c = cmd(HOST, sequence, cell, &cell_arg(port, [0; 3]));
+            let seen = f.expect(&c, DownlinkFull, BoxCounter::RefusedDownlinkFull);
+            assert_eq!(seen.last_accepted, sequence);
+            sequence += 1;
+        }
+        f.expect(
+            &cmd(HOST, sequence, cell, &cell_arg(PORTS, [0; 3])),
+            BadArgument,
+            bad,
+        );
+        sequence += 1;
+        f.expect(&cmd(HOST, sequence, tick, &[]), Ok, ok);
+        sequence += 1;
+        f.downlink_full = false;
         for opcode in std::iter::once(0).chain(7..=255) {
             let c = cmd(HOST, sequence, opcode, &[]);
             f.expect(&c, UnknownOpcode, BoxCounter::RefusedUnknownOpcode);
@@ -1187,6 +1269,7 @@ mod tests {
             };
             let opcode = match (r >> 20) % 11 {
                 0 => (r >> 24) as u8,
+                7 | 8 => Opcode::CellCommand as u8,
                 k => (k % 7) as u8,
             };
             let length = match (r >> 28) % 8 {
@@ -1233,6 +1316,7 @@ mod tests {
                 1 => ANY_BOX,
                 _ => BOX_ID,
             };
+            f.downlink_full = (r >> 60) & 1 == 1;
             let seen = f.run(&c);
             results[seen.result as usize] += 1;
         }

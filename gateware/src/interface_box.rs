@@ -12,6 +12,7 @@
 
 use crate::box_counter_file::BoxCounterFile;
 use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
+use crate::cell_downlink::CellDownlink;
 use crate::command_unit::{CommandUnit, CommandUnitConfig};
 use crate::counter_file::CounterFile;
 use crate::datagram_arbiter::DatagramArbiter;
@@ -211,6 +212,8 @@ pub struct InterfaceBox {
     pub reset: Signal<In, Bit>,
     /// The UART pins of the ports, idle high.
     pub uart_rx: Vec<Signal<In, Bit>>,
+    /// The UART transmit pins of the ports, the downlink to the cells, idle high.
+    pub uart_tx: Vec<Signal<Out, Bit>>,
     /// The PHY reports the link up (the board top's MDIO master; held low without a PHY).
     pub link_up: Signal<In, Bit>,
     /// The link's speed as the PHY reports it: 0 = 10, 1 = 100, 2 = 1000 Mbit/s, 3 = not
@@ -244,6 +247,7 @@ pub struct InterfaceBox {
     commands: CommandUnit,
     box_counters: BoxCounterFile,
     replies: ReplyBuilder,
+    downlink: CellDownlink,
     action_none: Constant<Bits<2>>,
     action_arp: Constant<Bits<2>>,
     action_echo: Constant<Bits<2>>,
@@ -269,6 +273,7 @@ impl InterfaceBox {
             clock: Default::default(),
             reset: Default::default(),
             uart_rx: (0..n).map(|_| Default::default()).collect(),
+            uart_tx: (0..n).map(|_| Default::default()).collect(),
             link_up: Default::default(),
             link_speed: Default::default(),
             gmii_rxd: Default::default(),
@@ -301,6 +306,7 @@ impl InterfaceBox {
             }),
             box_counters: Default::default(),
             replies: ReplyBuilder::new(&config.link, config.box_id, n as u8),
+            downlink: CellDownlink::new(n, config.clock_hz, config.baud),
             action_none: Constant::new(u64::from(ACTION_NONE).into()),
             action_arp: Constant::new(u64::from(ACTION_ARP).into()),
             action_echo: Constant::new(u64::from(ACTION_ECHO).into()),
@@ -455,6 +461,20 @@ impl Logic for InterfaceBox {
         self.replies.destination_port.next = self.commands.destination_port.val();
         self.replies.link_up.next = self.link_up.val();
         self.replies.link_speed.next = self.link_speed.val();
+        // cell commands: the downlink captures the packet as the frame is stored and queues
+        // it when the command unit offers it
+        self.downlink.clock.next = self.clock.val();
+        self.downlink.reset.next = self.core_reset.q.val();
+        self.downlink.capture.next = self.parser.buffer_write_enable.val();
+        self.downlink.capture_address.next = self.parser.buffer_write_address.val();
+        self.downlink.capture_data.next = self.parser.buffer_write_data.val();
+        self.downlink.offer.next = self.commands.downlink_offer.val();
+        self.downlink.offer_port.next = self.commands.downlink_port.val();
+        self.commands.downlink_busy.next = self.downlink.busy.val();
+        self.commands.downlink_full_ports.next = self.downlink.full_ports.val();
+        for i in 0..self.uart_tx.len() {
+            self.uart_tx[i].next = self.downlink.uart_tx[i].val();
+        }
         self.box_counters.reply_address.next = self.replies.counters_address.val();
         self.replies.counters_data.next = self.box_counters.reply_data.val();
 

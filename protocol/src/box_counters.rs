@@ -80,8 +80,9 @@ pub enum BoxCounter {
     RefusedUnknownOpcode,
     /// Commands with arguments of the wrong length or out of range.
     RefusedBadArgument,
-    /// Cell-network commands while the box has no downlink to the cells.
-    RefusedNoDownlink,
+    /// Cell-network commands refused because the downlink had no room for them (a target
+    /// port's queue full, or the previous cell command still being queued).
+    RefusedDownlinkFull,
     /// Frames that would be answered (ARP request, echo request, command) while the
     /// previous reply had not left yet: the box holds one frame for its reply, so these
     /// are neither stored, carried out nor answered.
@@ -109,7 +110,7 @@ impl BoxCounter {
         BoxCounter::RefusedOtherBox,
         BoxCounter::RefusedUnknownOpcode,
         BoxCounter::RefusedBadArgument,
-        BoxCounter::RefusedNoDownlink,
+        BoxCounter::RefusedDownlinkFull,
         BoxCounter::ReplyBusy,
     ];
 
@@ -145,7 +146,7 @@ impl BoxCounter {
             BoxCounter::RefusedOtherBox => "refused_other_box",
             BoxCounter::RefusedUnknownOpcode => "refused_unknown_opcode",
             BoxCounter::RefusedBadArgument => "refused_bad_argument",
-            BoxCounter::RefusedNoDownlink => "refused_no_downlink",
+            BoxCounter::RefusedDownlinkFull => "refused_downlink_full",
             BoxCounter::ReplyBusy => "reply_busy",
         }
     }

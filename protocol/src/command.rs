@@ -581,8 +581,9 @@ pub enum AckResult {
     UnknownOpcode = 3,
     /// Refused: arguments of the wrong length or out of range.
     BadArgument = 4,
-    /// Refused: the box has no downlink to the cells yet.
-    NoDownlink = 5,
+    /// Refused: the downlink queue of the target port (of some port, for all ports) is full,
+    /// or the downlink is still queueing the previous cell command; nothing was queued.
+    DownlinkFull = 5,
 }
 
 impl AckResult {
@@ -593,7 +594,7 @@ impl AckResult {
         AckResult::OtherBox,
         AckResult::UnknownOpcode,
         AckResult::BadArgument,
-        AckResult::NoDownlink,
+        AckResult::DownlinkFull,
     ];
 
     /// The result of a wire value.
@@ -609,7 +610,7 @@ impl AckResult {
             AckResult::OtherBox => "other_box",
             AckResult::UnknownOpcode => "unknown_opcode",
             AckResult::BadArgument => "bad_argument",
-            AckResult::NoDownlink => "no_downlink",
+            AckResult::DownlinkFull => "downlink_full",
         }
     }
 }

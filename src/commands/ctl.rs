@@ -374,10 +374,11 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             }
         }
     }
-    if let Some(e) = refused.filter(|e| e.ack.result == AckResult::NoDownlink) {
+    if let Some(e) = refused.filter(|e| e.ack.result == AckResult::DownlinkFull) {
         anyhow::bail!(
-            "the box has no downlink to the cells yet (no_downlink): the cell command was \
-             acknowledged but not sent down a bus (sequence {})",
+            "the box's downlink had no room (downlink_full): a target port already queues two \
+             packets, or the previous cell command was still being queued; nothing was sent \
+             down (sequence {}); send it again once the queue has drained (50 us a packet)",
             e.ack.sequence
         );
     }

@@ -142,6 +142,25 @@ struct Output {
     sample_time_error_us: SampleTimeError,
     /// The same for the arrival stamp as the sample time.
     arrival_stamp_error_us: SampleTimeError,
+    /// The scene's cell commands through the box.
+    downlink: DownlinkOutput,
+}
+
+/// The scene's `[[commands]]` in the window, sent by the host to the box, and what the box
+/// sent down its UART pins.
+#[derive(Serialize)]
+struct DownlinkOutput {
+    /// Command frames the host sent.
+    commands_sent: usize,
+    /// Queued by the box (ack `ok`).
+    commands_accepted: usize,
+    /// Refused by the box (`downlink_full`).
+    commands_refused: usize,
+    /// Cell command packets that left the box's pins in the window.
+    packets_on_pins: usize,
+    /// Transmit pin changes in the window, checked equal to the plan the cells were
+    /// driven with.
+    pin_changes: usize,
 }
 
 /// Sample time error figures, us (absolute).
@@ -206,9 +225,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         "--from-ms {} must not be negative",
         args.from_ms
     );
-    let generated =
-        skinbox_cosim::scene::generate(&scene, (args.from_ms + args.duration_ms) * 1e-3)?;
-    let buses = generated.buses.len();
+    let buses = scene.config.scene.buses;
     anyhow::ensure!(
         (1..=64).contains(&buses),
         "the scene has {buses} buses; the box has 1 to 64 ports, one per bus"
@@ -219,6 +236,17 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         status_period_ticks: (args.status_period_ms * 125_000.0).round() as u64,
         ..BoxConfig::default()
     };
+    // the scene's cell commands go from the host through the box's downlink to the cells
+    let window_ns = ((args.from_ms * 1e6) as u64, (args.duration_ms * 1e6) as u64);
+    let plan = skinbox_cosim::scene::plan_downlink(&scene, &config, window_ns.0, window_ns.1);
+    let generated = skinbox_cosim::scene::generate_with(
+        &scene,
+        (args.from_ms + args.duration_ms) * 1e-3,
+        &skinbox_cells::GenerateOptions {
+            downlink: Some(plan.per_bus.clone()),
+            ..Default::default()
+        },
+    )?;
     let pcap = args
         .pcap
         .clone()
@@ -231,6 +259,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     );
     spec.pcap = Some(pcap.clone());
     spec.vcd = args.vcd.clone();
+    spec.host_frames = plan.host_frames.clone();
     anyhow::ensure!(
         (0.0..=50.0).contains(&args.jitter_ns),
         "--jitter-ns {} must be 0 to 50 (a fifth of a bit)",
@@ -254,12 +283,13 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         fidelity == Fidelity::Rtl || args.vcd.is_none(),
         "--vcd traces the RTL; it needs --fidelity rtl"
     );
-    let report = run_with_progress(&spec, fidelity, &mut |done, _| {
+    let run = run_with_progress(&spec, fidelity, &mut |done, _| {
         bar.set_message("simulating");
         bar.set_position(done);
-    })?
-    .report;
+    })?;
     bar.finish_and_clear();
+    let downlink = check_downlink(&plan, &run.uart_tx, &spec)?;
+    let report = run.report;
 
     // the host told the scene's true sample rate and cell count, so its "% of data mode"
     // and per-cell rates are over the whole skin
@@ -316,12 +346,42 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         host,
         sample_time_error_us,
         arrival_stamp_error_us,
+        downlink,
     };
     if json {
         return super::print_json(&out);
     }
     print_summary(&out);
     Ok(())
+}
+
+/// The box's transmit pins must be as planned: the cells were driven with the plan.
+fn check_downlink(
+    plan: &skinbox_cosim::scene::DownlinkPlan,
+    pins: &[skinbox_cosim::downlink::PinChange],
+    spec: &skinbox_cosim::run::SimSpec,
+) -> anyhow::Result<DownlinkOutput> {
+    let last_tick = skinbox_cosim::run::cycles(spec) - skinbox_cosim::run::TICK_ZERO_CYCLE;
+    let planned: Vec<_> = plan
+        .pin_changes
+        .iter()
+        .filter(|c| c.tick <= last_tick)
+        .copied()
+        .collect();
+    if let Some(i) = (0..planned.len().max(pins.len())).find(|&i| planned.get(i) != pins.get(i)) {
+        anyhow::bail!(
+            "the box's downlink differs from the plan the cells were driven with at pin change              {i}: box {:?}, plan {:?}",
+            pins.get(i),
+            planned.get(i)
+        );
+    }
+    Ok(DownlinkOutput {
+        commands_sent: plan.host_frames.len(),
+        commands_accepted: plan.accepted,
+        commands_refused: plan.refused,
+        packets_on_pins: plan.starts.iter().filter(|s| s.tick <= last_tick).count(),
+        pin_changes: pins.len(),
+    })
 }
 
 /// The sample time errors of the arrival stamp and of the host's estimate over the
@@ -407,6 +467,13 @@ fn print_summary(o: &Output) {
         "        timestamps: stamp - true start edge {:.3} ticks max, {:.3} mean (8 ns ticks)",
         s.ts_error_max_ticks, s.ts_error_mean_ticks
     );
+    let d = &o.downlink;
+    if d.commands_sent > 0 {
+        println!(
+            "        downlink: {} cell commands from the host, {} queued, {} refused (downlink_full); {} packets on the UART transmit pins, every pin change as the cells were driven",
+            d.commands_sent, d.commands_accepted, d.commands_refused, d.packets_on_pins
+        );
+    }
     let h = &o.host;
     println!(
         "host:   {} records ({} data, {} event), {} cells active, {:.1} % of data mode over {} cells ({})",

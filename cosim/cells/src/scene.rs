@@ -114,6 +114,10 @@ fn line_of_command(text: &str, n: usize, key: &str) -> Option<usize> {
     header
 }
 
+/// The cell command packets one bus's root receives: (scene time the first start bit
+/// leaves the box, ns; the bytes), in order.
+pub type BusDownlink = Vec<(u64, [u8; PACKET_LEN])>;
+
 /// What a `[[commands]]` entry sends: a command, or raw bytes.
 #[derive(Debug, Clone, Copy)]
 enum Downlink {
@@ -372,9 +376,36 @@ impl Scene {
         p
     }
 
+    /// The `[[commands]]` entries as the host sends them, in time order: (scene time, ns;
+    /// the port, `None` for every port; the packet, a time sync's tick 0; whether it is a
+    /// time sync, whose tick the sender fills in).
+    pub fn command_packets(&self) -> Vec<(u64, Option<usize>, [u8; PACKET_LEN], bool)> {
+        let mut out: Vec<_> = self
+            .config
+            .commands
+            .iter()
+            .filter_map(|c| {
+                let (bytes, sync) = match Self::downlink_of(c).ok()? {
+                    Downlink::Raw(bytes) => (bytes, false),
+                    Downlink::Command(repr) => (
+                        repr.to_bytes(),
+                        matches!(repr.command, CellCommand::TimeSync { .. }),
+                    ),
+                };
+                Some(((c.time_s * 1e9).round() as u64, c.port, bytes, sync))
+            })
+            .collect();
+        out.sort_by_key(|e| e.0);
+        out
+    }
+
     /// The cell command packets of bus `bus`: (time the first start bit leaves the box, ns;
-    /// the bytes), in sending order, one after the other on the box's UART.
-    fn downlink(&self, bus: usize) -> Vec<(u64, [u8; PACKET_LEN])> {
+    /// the bytes), in sending order, one after the other on the box's UART: given by
+    /// `options` (a box's downlink), or each at its `[[commands]]` time.
+    fn downlink(&self, bus: usize, options: &GenerateOptions) -> BusDownlink {
+        if let Some(given) = &options.downlink {
+            return given.get(bus).cloned().unwrap_or_default();
+        }
         let mut entries: Vec<_> = self
             .config
             .commands
@@ -666,7 +697,7 @@ impl Scene {
             run_ends.clear();
             let mut root_error_ppm = 0.0;
             let mut cell_uart_error_ppm = Vec::with_capacity(cells.len());
-            let downlink = self.downlink(bus_index);
+            let downlink = self.downlink(bus_index, options);
             let commands: Vec<Option<CellCommandRepr>> = downlink
                 .iter()
                 .map(|(_, bytes)| CellCommandRepr::parse(bytes).ok())
@@ -950,6 +981,10 @@ pub struct GenerateOptions {
     /// The free-running clocks' drift wanders (temperature) around each cell's own;
     /// `None`: steady.
     pub clock_wander: Option<ClockWander>,
+    /// The cell command packets each bus's root receives from the box, as a box's downlink
+    /// sends them: per bus, (scene time the first start bit leaves the box, ns; the bytes).
+    /// `None`: each `[[commands]]` entry leaves at its own time.
+    pub downlink: Option<Vec<BusDownlink>>,
 }
 
 /// A sample clock whose drift wanders: `drift + amplitude * sin(2 pi t / period + angle)`,
@@ -979,6 +1014,7 @@ impl Default for GenerateOptions {
             packet_loss: 0.0,
             time_sync: None,
             clock_wander: None,
+            downlink: None,
         }
     }
 }

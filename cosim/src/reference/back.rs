@@ -6,6 +6,7 @@
 use super::front::{PortFront, StartedPacket};
 use super::receive::ReceiveSide;
 use crate::control::Effect;
+use crate::downlink::PinChange;
 use crate::harness::{LINK_SPEED, LINK_UP};
 use skinbox_gateware::cell_deframer::TICK_BEATS;
 use skinbox_gateware::counter_file::scan_period;
@@ -869,5 +870,23 @@ impl PortCounting {
     /// The counter as a read whose address is taken at the edge after cycle `read` sees it.
     fn value(&self, counter: usize, read: u64) -> u32 {
         self.writes[counter].partition_point(|w| *w <= read) as u32
+    }
+}
+
+impl Back<'_> {
+    /// The downlink's pin changes up to and including tick `last` (none without a
+    /// receive side).
+    pub(crate) fn downlink_changes(&mut self, last: u64) -> Vec<PinChange> {
+        let Some(receive) = self.receive.as_mut() else {
+            return Vec::new();
+        };
+        let downlink = &mut receive.control.downlink;
+        downlink.advance_to(last);
+        downlink
+            .changes()
+            .iter()
+            .filter(|c| c.tick <= last)
+            .copied()
+            .collect()
     }
 }

@@ -24,6 +24,7 @@ mod front;
 mod receive;
 
 use crate::control::{BoxControl, ControlConfig};
+use crate::downlink::PinChange;
 use crate::error::CosimError;
 use crate::frames::Frame;
 use crate::harness::{LINK_SPEED, LINK_UP};
@@ -254,7 +255,7 @@ pub fn run_reference_with_progress(
 ) -> Result<SimRun, CosimError> {
     let started = Instant::now();
     let (lines, true_starts) = lines(spec);
-    let frames = predict_frames_with_progress(
+    let (frames, uart_tx) = predict_frames_with_progress(
         &spec.config,
         &lines,
         &spec.host_frames,
@@ -262,7 +263,9 @@ pub fn run_reference_with_progress(
         progress,
     )?;
     let wall = started.elapsed().as_secs_f64();
-    analyse(spec, &frames, &true_starts, wall)
+    let mut run = analyse(spec, &frames, &true_starts, wall)?;
+    run.uart_tx = uart_tx;
+    Ok(run)
 }
 
 /// The frames the box sends when its pins carry `lines` (one transition list per port, as
@@ -273,7 +276,7 @@ pub fn predict_frames(
     lines: &[Vec<Transition>],
     cycles: u64,
 ) -> Result<Vec<Frame>, CosimError> {
-    predict_frames_with_progress(config, lines, &[], cycles, &mut |_, _| {})
+    Ok(predict_frames_with_progress(config, lines, &[], cycles, &mut |_, _| {})?.0)
 }
 
 fn predict_frames_with_progress(
@@ -282,16 +285,10 @@ fn predict_frames_with_progress(
     host_frames: &[HostFrame],
     end: u64,
     progress: &mut dyn FnMut(u64, u64),
-) -> Result<Vec<Frame>, CosimError> {
+) -> Result<(Vec<Frame>, Vec<PinChange>), CosimError> {
     let prepared = prepare(config, lines, end)?;
     let receive = (!host_frames.is_empty()).then(|| {
-        let mut control = BoxControl::new(ControlConfig {
-            link: config.link,
-            box_id: config.box_id,
-            port_count: config.ports as u8,
-            flush_timeout_ticks: config.flush_timeout_ticks as u32,
-            status_period_ticks: config.status_period_ticks as u32,
-        });
+        let mut control = BoxControl::new(ControlConfig::of(config));
         control.counters.link_up = LINK_UP;
         control.counters.link_speed = LINK_SPEED;
         ReceiveSide::new(
@@ -315,6 +312,7 @@ fn predict_frames_with_progress(
         done = to;
         progress(done, end);
     }
+    let uart_tx = back.downlink_changes(end - TICK_ZERO_CYCLE);
     let link = &config.link;
     let mut frames = Vec::with_capacity(back.frames.len());
     for f in &back.frames {
@@ -351,7 +349,7 @@ fn predict_frames_with_progress(
             });
         }
     }
-    Ok(frames)
+    Ok((frames, uart_tx))
 }
 
 /// The UDP payload of a predicted datagram, with its box counter block if it has one.

@@ -149,7 +149,7 @@ impl ReceiveSide {
                     | BoxCounter::RefusedOtherBox
                     | BoxCounter::RefusedUnknownOpcode
                     | BoxCounter::RefusedBadArgument
-                    | BoxCounter::RefusedNoDownlink
+                    | BoxCounter::RefusedDownlinkFull
             );
             let counted = if command {
                 decided + self.t.command_latency

@@ -1,0 +1,418 @@
+//! The downlink at RTL: cell commands sent by the host on GMII leave the verilated box on
+//! its UART transmit pins. Every pin change must equal the reference model's (the clock
+//! model of the downlink inside the control model), the acknowledgements the control
+//! model's, and the pins, decoded here by sampling each bit in its middle, must carry
+//! exactly the packets the box accepted, port by port, in order. The uplink meanwhile runs
+//! at line rate and loses nothing.
+
+mod support;
+
+use skinbox_cosim::control::{BoxControl, ControlConfig, DOWNLINK_OFFER_AFTER_RECEIVE_TICK};
+use skinbox_cosim::downlink::{DownlinkModel, PinChange};
+use skinbox_cosim::harness::{LINK_SPEED, LINK_UP};
+use skinbox_cosim::reference::run_reference;
+use skinbox_cosim::run::{HostFrame, SentPacket, SimSpec, TICK_ZERO_CYCLE};
+use skinbox_cosim::sim::run_rtl;
+use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
+use skinbox_protocol::box_counters::BoxCounter;
+use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::command::{AckRepr, AckResult, Request, ALL_PORTS};
+use skinbox_protocol::{DataRepr, TICKS_PER_SECOND};
+use support::*;
+
+/// Ticks per bit at 4 Mbit/s.
+const BIT_TICKS: f64 = TICKS_PER_SECOND as f64 / 4_000_000.0;
+
+/// The box of the support module's control configuration.
+fn box_config() -> BoxConfig {
+    let c = config();
+    BoxConfig {
+        ports: usize::from(c.port_count),
+        box_id: c.box_id,
+        link: c.link,
+        flush_timeout_ticks: u64::from(c.flush_timeout_ticks),
+        status_period_ticks: u64::from(c.status_period_ticks),
+        ..BoxConfig::default()
+    }
+}
+
+/// Every port at line rate: a cell packet every 200 bits from 20 us to `until_ns`.
+fn line_rate(ports: usize, until_ns: f64) -> Vec<Vec<SentPacket>> {
+    (0..ports)
+        .map(|port| {
+            let mut t = 20_000.0 + port as f64 * 1_100.0;
+            let mut out = vec![];
+            let mut n = 0u16;
+            while t < until_ns {
+                out.push(SentPacket {
+                    bytes: DataRepr::from_raw(
+                        (port as u16) << 8 | (n & 0xFF),
+                        [i32::from(n), 1, 2, 3, 4, 5, 6, 7, 8],
+                    )
+                    .unwrap()
+                    .to_bytes(),
+                    start_ns: t,
+                    bit_ns: 250.0,
+                });
+                t += 50_000.0;
+                n = n.wrapping_add(1);
+            }
+            out
+        })
+        .collect()
+}
+
+/// The bytes on each port's pin: a start bit is a fall from high; each bit is sampled in
+/// its middle, the stop bit must be high.
+fn decode_pins(changes: &[PinChange], ports: usize) -> Vec<Vec<(u64, u8)>> {
+    (0..ports)
+        .map(|port| {
+            let mine: Vec<&PinChange> = changes.iter().filter(|c| c.port == port).collect();
+            let level_at = |t: f64| {
+                let t = t as u64;
+                mine.iter()
+                    .take_while(|c| c.tick <= t)
+                    .last()
+                    .is_none_or(|c| c.level)
+            };
+            let mut out = vec![];
+            let mut free_from = 0.0;
+            for c in &mine {
+                if c.level || (c.tick as f64) < free_from {
+                    continue;
+                }
+                let start = c.tick as f64;
+                let byte = (0..8).fold(0u8, |b, i| {
+                    b | u8::from(level_at(start + (1.5 + i as f64) * BIT_TICKS)) << i
+                });
+                assert!(
+                    level_at(start + 9.5 * BIT_TICKS),
+                    "port {port}: stop bit low at {start}"
+                );
+                out.push((c.tick, byte));
+                free_from = start + 9.5 * BIT_TICKS;
+            }
+            out
+        })
+        .collect()
+}
+
+fn cell_packet(n: u8) -> [u8; PACKET_LEN] {
+    let mut p = [0u8; PACKET_LEN];
+    for (i, b) in p.iter_mut().enumerate() {
+        *b = n.wrapping_mul(37).wrapping_add(i as u8 * 11);
+    }
+    p[0] = skinbox_protocol::cell_command::COMMAND_HEADER;
+    p
+}
+
+#[test]
+fn cell_commands_leave_on_the_uart_pins_as_the_reference_says_while_the_uplink_runs_at_line_rate() {
+    let config = box_config();
+    let us = 125u64;
+    // (time, port, packet, the result the rules give: two slots a port, a packet queued
+    // in every target port or in none). 12 us apart: an acknowledgement waits for the
+    // uplink's datagram on the wire, and holds the reply buffer until it has left.
+    // (Offers while a packet is still being copied, 20 clocks a port, are refused too: at
+    // 8 ports the copy ends before the buffer is free again; the block's and the model's
+    // tests show it.)
+    let schedule: Vec<(u64, u8, u8, AckResult)> = vec![
+        (50 * us, 3, 1, AckResult::Ok),
+        (62 * us, 3, 2, AckResult::Ok),
+        // port 3 holds two: the broadcast goes nowhere, the next for port 3 neither
+        (74 * us, ALL_PORTS, 3, AckResult::DownlinkFull),
+        (86 * us, 3, 4, AckResult::DownlinkFull),
+        // port 3 has drained (two packets take 100 us)
+        (200 * us, ALL_PORTS, 5, AckResult::Ok),
+        (215 * us, 1, 6, AckResult::Ok),
+        (230 * us, ALL_PORTS, 7, AckResult::DownlinkFull),
+        (245 * us, 0, 8, AckResult::Ok),
+    ];
+    let mut host_frames: Vec<HostFrame> = schedule
+        .iter()
+        .enumerate()
+        .map(|(i, &(edge, port, n, _))| HostFrame {
+            edge,
+            frame: command(
+                HOST_IP,
+                100 + i as u32,
+                Request::CellCommand {
+                    port,
+                    packet: cell_packet(n),
+                },
+            ),
+        })
+        .collect();
+    host_frames.push(HostFrame {
+        edge: 420 * us,
+        frame: command(HOST_IP, 1000, Request::StatusNow),
+    });
+    let duration_ns = 440_000;
+    let spec = SimSpec {
+        config: config.clone(),
+        ports: line_rate(config.ports, 300_000.0),
+        duration_ns,
+        pcap: None,
+        vcd: None,
+        jitter: skinbox_cosim::line::Jitter::NONE,
+        host_frames: host_frames.clone(),
+    };
+    let run = run_rtl(&spec).unwrap();
+    let predicted = run_reference(&spec).unwrap();
+    assert_eq!(
+        run.frames, predicted.frames,
+        "frames: RTL against reference"
+    );
+    assert!(!run.uart_tx.is_empty());
+    for (i, (r, p)) in run.uart_tx.iter().zip(&predicted.uart_tx).enumerate() {
+        assert_eq!(r, p, "pin change {i}: RTL against reference");
+    }
+    assert_eq!(run.uart_tx.len(), predicted.uart_tx.len(), "pin changes");
+
+    // the acknowledgements: the control model's, with the results the rules give
+    let mut m = BoxControl::new(ControlConfig::of(&config));
+    m.counters.link_up = LINK_UP;
+    m.counters.link_speed = LINK_SPEED;
+    let receive_tick = |f: &HostFrame| f.last_edge() + RECEIVE_TICK_LAG - TICK_ZERO_CYCLE;
+    let acks: Vec<AckRepr> = run
+        .replies
+        .iter()
+        .map(|f| AckRepr::parse(&f.bytes[8 + 42..f.bytes.len() - 4]).unwrap())
+        .collect();
+    assert_eq!(acks.len(), host_frames.len());
+    for (i, f) in host_frames.iter().enumerate() {
+        let outcome = m.receive(&f.frame, receive_tick(f));
+        let Some(skinbox_cosim::control::Reply::Ack { ack, .. }) = outcome.reply else {
+            panic!("frame {i}: no acknowledgement from the model");
+        };
+        assert_eq!(acks[i].result, ack.result, "frame {i}");
+        if let Some(&(_, _, _, result)) = schedule.get(i) {
+            assert_eq!(acks[i].result, result, "frame {i}");
+        }
+    }
+    let counters = match acks.last().unwrap().reply {
+        skinbox_protocol::command::AckReply::Counters(c) => c,
+        r => panic!("status now answered {r:?}"),
+    };
+    // five cell commands and the status now
+    assert_eq!(counters.get(BoxCounter::CommandsAccepted), 6);
+    assert_eq!(counters.get(BoxCounter::RefusedDownlinkFull), 3);
+
+    // the pins carry the accepted packets, whole, port by port, in order
+    let mut expected: Vec<Vec<u8>> = vec![vec![]; config.ports];
+    for &(_, port, n, result) in &schedule {
+        if result == AckResult::Ok {
+            for (p, bytes) in expected.iter_mut().enumerate() {
+                if port == ALL_PORTS || usize::from(port) == p {
+                    bytes.extend(cell_packet(n));
+                }
+            }
+        }
+    }
+    let decoded = decode_pins(&run.uart_tx, config.ports);
+    for (p, bytes) in decoded.iter().enumerate() {
+        let got: Vec<u8> = bytes.iter().map(|b| b.1).collect();
+        assert_eq!(got, expected[p], "port {p}");
+    }
+    // an accepted command's first start bit leaves within the offer, the copy of its
+    // ports, a scan round and the read
+    let first_ok = &host_frames[0];
+    let start = decoded[3][0].0;
+    let earliest = receive_tick(first_ok) + DOWNLINK_OFFER_AFTER_RECEIVE_TICK;
+    assert!(
+        start > earliest && start <= earliest + 20 + config.ports as u64 + 4,
+        "first start bit at {start}, offer at {earliest}"
+    );
+    // two queued packets go out back to back: 400 bits
+    let second = decoded[3][20].0;
+    assert!(((second - start) as f64 - 200.0 * BIT_TICKS).abs() <= 1.0);
+
+    let r = &run.report;
+    assert_eq!(
+        (r.packets_delivered, r.records_corrupted, r.records_mistimed),
+        (r.packets_sent, 0, 0),
+        "no record lost while commands went down: {r:?}"
+    );
+}
+
+#[test]
+fn a_command_flood_to_one_port_is_refused_and_counted_not_queued() {
+    // the model of the downlink the RTL test holds to the gateware: 2,000 commands to one
+    // port, one every 0.8 us, for 1.6 ms; the port carries one every 50 us
+    let config = config();
+    let mut m = BoxControl::new(config);
+    let mut results = [0u32; 2];
+    let mut tick = 1_000;
+    for i in 0..2_000u32 {
+        let frame = command(
+            HOST_IP,
+            i + 1,
+            Request::CellCommand {
+                port: 5,
+                packet: cell_packet(i as u8),
+            },
+        );
+        let out = m.receive(&frame, tick);
+        match out.fate {
+            BoxCounter::CommandsAccepted => results[0] += 1,
+            BoxCounter::RefusedDownlinkFull => results[1] += 1,
+            f => panic!("command {i}: {f:?}"),
+        }
+        tick += 100;
+    }
+    let end = m.downlink.drain();
+    // two queued at once, then one each time a packet's last byte has been read
+    let line_ticks = (200.0 * BIT_TICKS) as u64;
+    let carried = 2 + (tick - 1_000) / line_ticks;
+    assert!(
+        (i64::from(results[0]) - carried as i64).abs() <= 1,
+        "accepted {}, the line carries {carried}",
+        results[0]
+    );
+    assert_eq!(results[0] + results[1], 2_000);
+    assert_eq!(m.counters.get(BoxCounter::RefusedDownlinkFull), results[1]);
+    // all of them went out, back to back, and nothing else
+    let decoded = decode_pins(m.downlink.changes(), 8);
+    assert_eq!(decoded[5].len(), results[0] as usize * PACKET_LEN);
+    assert!(decoded
+        .iter()
+        .enumerate()
+        .all(|(p, d)| p == 5 || d.is_empty()));
+    assert!(end < tick + 3 * line_ticks);
+}
+
+#[test]
+fn the_downlink_model_is_idle_cheap_and_starts_each_packet_on_the_scan() {
+    // a packet offered on an idle 64-port downlink leaves after its copy (20 clocks) once
+    // the scan reaches its port, a read (2 clocks) and the holding register (1 clock)
+    for port in [0u8, 17, 63] {
+        let mut d = DownlinkModel::new(64, 125_000_000, 4_000_000);
+        let offer = 1_000_000_007;
+        assert!(d.offer(offer, port, cell_packet(1)));
+        d.drain();
+        let first = d.changes()[0];
+        assert_eq!(first.port, usize::from(port));
+        assert!(!first.level);
+        let committed = offer + 1 + 20;
+        let scan = (committed..).find(|t| t % 64 == u64::from(port)).unwrap();
+        assert_eq!(first.tick, scan + 3 + 1, "port {port}");
+    }
+}
+
+#[test]
+fn scene_commands_sent_by_the_host_switch_the_cells_rate_and_mode_at_rtl() {
+    use skinbox_cells::scene::Scene;
+    use skinbox_cells::GenerateOptions;
+    use skinbox_protocol::datagram::DatagramBody;
+    use skinbox_protocol::CellRepr;
+    // 8 idle cells on 2 buses in data mode at 125 Hz; the host sends "250 Hz" to bus 1 at
+    // 30 ms and "event mode" to every cell at 60 ms
+    let text = std::fs::read_to_string(skinbox_cells::scenes_dir().join("mode_switch.toml"))
+        .unwrap()
+        .replace("duration_s = 3.0", "duration_s = 0.09")
+        .replace("warmup_s = 0.5", "warmup_s = 0.0")
+        .replace("cells = 260", "cells = 8")
+        .replace("buses = 4", "buses = 2")
+        .replace(
+            "time_s = 1.5\nmode = \"event\"",
+            "time_s = 0.06\nmode = \"event\"\n\n[[commands]]\ntime_s = 0.03\nport = 1\nrate_hz = 250.0",
+        );
+    let scene = Scene::parse(&text, "small_switch.toml").unwrap();
+    let config = BoxConfig {
+        ports: 2,
+        ..BoxConfig::default()
+    };
+    let (from_ns, duration_ns) = (10_000_000, 70_000_000);
+    let plan = skinbox_cosim::scene::plan_downlink(&scene, &config, from_ns, duration_ns);
+    assert_eq!(
+        (plan.host_frames.len(), plan.accepted, plan.refused),
+        (2, 2, 0)
+    );
+    // the rate change leaves on port 1 only, the mode change on both
+    let starts: Vec<(usize, u64)> = plan.starts.iter().map(|s| (s.port, s.tick)).collect();
+    assert_eq!(starts.iter().filter(|s| s.0 == 1).count(), 2);
+    assert_eq!(starts.iter().filter(|s| s.0 == 0).count(), 1);
+    let generated = skinbox_cosim::scene::generate_with(
+        &scene,
+        0.08,
+        &GenerateOptions {
+            downlink: Some(plan.per_bus.clone()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mut spec = skinbox_cosim::scene::spec(&generated, config.clone(), from_ns, duration_ns);
+    spec.host_frames = plan.host_frames.clone();
+    let run = run_rtl(&spec).unwrap();
+    let last = skinbox_cosim::run::cycles(&spec) - TICK_ZERO_CYCLE;
+    let planned: Vec<PinChange> = plan
+        .pin_changes
+        .iter()
+        .filter(|c| c.tick <= last)
+        .copied()
+        .collect();
+    assert_eq!(
+        run.uart_tx, planned,
+        "the box's pins are the plan the cells were driven with"
+    );
+
+    // the decoded records: (cell id, bus, box tick, data or event)
+    let framing = skinbox_protocol::CellFraming::default();
+    let mut records = vec![];
+    for d in &run.datagrams {
+        if let DatagramBody::Records(rs) = &d.body {
+            for r in rs {
+                let tick = (d.base_tick as i64 + i64::from(r.tick_offset)) as u64;
+                match CellRepr::parse(&r.cell_packet, &framing).unwrap() {
+                    CellRepr::Data(p) => records.push((p.cell_id, r.port, tick, true)),
+                    CellRepr::Event(p) => records.push((p.cell_id, r.port, tick, false)),
+                }
+            }
+        }
+    }
+    // the latest a command can take effect: its packet on the line, 4 hops, the cell's
+    // next sample (8 ms at 125 Hz), relayed back (4 hops and the root's queue, < 1 ms)
+    let ms = 125_000u64;
+    let bound = |start: u64| start + 50 * 125 + 4 * 52 * 125 + 8 * ms + ms;
+    let rate_start = plan.starts.iter().find(|s| s.port == 1).unwrap().tick;
+    let mode_start = plan.starts.iter().rfind(|s| s.port == 0).unwrap().tick;
+    // the median time between one cell's data records on a bus, in a window of ticks
+    let spacing_ms = |port: u8, from: u64, to: u64| {
+        let mut gaps = vec![];
+        for cell in records
+            .iter()
+            .filter(|r| r.1 == port)
+            .map(|r| r.0)
+            .collect::<std::collections::BTreeSet<_>>()
+        {
+            let ticks: Vec<u64> = records
+                .iter()
+                .filter(|r| r.0 == cell && r.3 && r.2 >= from && r.2 < to)
+                .map(|r| r.2)
+                .collect();
+            gaps.extend(ticks.windows(2).map(|w| (w[1] - w[0]) as f64 / ms as f64));
+        }
+        gaps.sort_by(f64::total_cmp);
+        assert!(gaps.len() >= 4, "port {port}: {} gaps", gaps.len());
+        gaps[gaps.len() / 2]
+    };
+    // before the rate command both buses sample every 8 ms
+    for port in [0, 1] {
+        let gap = spacing_ms(port, 0, rate_start);
+        assert!((gap - 8.0).abs() < 0.1, "port {port}: {gap} ms before");
+    }
+    // once the rate command took effect, bus 1 every 4 ms, bus 0 still every 8 ms
+    let gap_1 = spacing_ms(1, bound(rate_start), mode_start);
+    let gap_0 = spacing_ms(0, bound(rate_start), mode_start);
+    assert!(
+        (gap_1 - 4.0).abs() < 0.1,
+        "bus 1: {gap_1} ms after the rate command"
+    );
+    assert!((gap_0 - 8.0).abs() < 0.1, "bus 0: {gap_0} ms");
+    // no event packet before the mode command left the box, no data packet once it took
+    // effect; events after it (the switch re-sends every channel once)
+    assert!(records.iter().all(|r| r.3 || r.2 >= mode_start));
+    let late = bound(mode_start);
+    assert!(records.iter().all(|r| !r.3 || r.2 < late));
+    assert!(records.iter().filter(|r| !r.3).count() >= 8);
+}
