@@ -150,12 +150,19 @@ pub fn plan_downlink(
     let commands = scene.command_packets();
     let ports = config.ports;
     let mut per_bus: Vec<BusDownlink> = vec![vec![]; ports];
-    // before the window: at their own time, one after the other on each bus
-    for &(time_ns, port, bytes, _) in commands.iter().filter(|c| c.0 < from_ns) {
+    // before the window: at their own time, one after the other on each bus, a time sync
+    // carrying scene time (the simulated box starts counting at the window: the cells
+    // take its time base from its first sync on)
+    for &(time_ns, port, bytes, sync) in commands.iter().filter(|c| c.0 < from_ns) {
         for (bus, list) in per_bus.iter_mut().enumerate() {
             if port.is_none_or(|p| p == bus) {
                 let free = list.last().map_or(0, |l| l.0 + DOWNLINK_PACKET_NS);
-                list.push((time_ns.max(free), bytes));
+                let leave_ns = time_ns.max(free);
+                let mut bytes = bytes;
+                if sync {
+                    set_sync_tick(&mut bytes, leave_ns / TICK_NS);
+                }
+                list.push((leave_ns, bytes));
             }
         }
     }

@@ -142,6 +142,9 @@ struct Output {
     sample_time_error_us: SampleTimeError,
     /// The same for the arrival stamp as the sample time.
     arrival_stamp_error_us: SampleTimeError,
+    /// The same for (c), the grid point of the box's time the cells sample on, when the
+    /// scene's cells are time-synced through the box (`[time_sync]` or sync commands).
+    synced_sample_time_error_us: Option<SampleTimeError>,
     /// The scene's cell commands through the box.
     downlink: DownlinkOutput,
 }
@@ -312,6 +315,15 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         from_ns,
         args.duration_ms,
     );
+    let synced_sample_time_error_us = plan.starts.iter().any(|s| is_sync(&s.bytes)).then(|| {
+        synced_sample_time_error(
+            &generated,
+            &decoded.records,
+            &scene,
+            (from_ns, args.duration_ms),
+            &plan,
+        )
+    });
     let dropped: u64 = generated.buses.iter().map(|b| b.stats.dropped).sum();
     let dropped_window: u64 = generated
         .buses
@@ -346,6 +358,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         host,
         sample_time_error_us,
         arrival_stamp_error_us,
+        synced_sample_time_error_us,
         downlink,
     };
     if json {
@@ -353,6 +366,70 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     }
     print_summary(&out);
     Ok(())
+}
+
+/// Method (c) over the delivered records: the grid point of box time the stamp minus the
+/// cell's half round trip falls on (`assign_synced`, in box time), taken to scene time.
+/// Counted from when the box's first sync on the port has reached the bus's last cell and
+/// a sample period has passed: the simulated box starts its time base at the window, so
+/// cells sample on the scene's time until then.
+fn synced_sample_time_error(
+    generated: &skinbox_cells::Generated,
+    records: &[skinbox_host::DecodedRecord],
+    scene: &Scene,
+    (from_ns, duration_ms): (u64, f64),
+    plan: &skinbox_cosim::scene::DownlinkPlan,
+) -> SampleTimeError {
+    use skinbox::studies::sample_time::{assign_synced, errors, matched, Method};
+    use skinbox_protocol::TICK_NS;
+    let window = from_ns..from_ns + (duration_ms * 1e6) as u64;
+    let offset_ns = skinbox_cosim::scene::scene_ns_of_tick(0, from_ns) as f64;
+    let buses = matched(generated, records, window, |tick| tick * TICK_NS);
+    let b = &scene.config.bus;
+    let cells_per_bus = scene.config.scene.cells.div_ceil(buses.len().max(1)) as u64;
+    let settled_ns = |port: usize| {
+        plan.starts
+            .iter()
+            .find(|s| s.port == port && is_sync(&s.bytes))
+            .map_or(u64::MAX, |s| {
+                s.tick * TICK_NS
+                    + b.processing_ns
+                    + cells_per_bus * b.hop_latency_ns
+                    + (1e9 / scene.config.scene.sample_rate_hz) as u64
+            })
+    };
+    let settled: Vec<Vec<_>> = buses
+        .iter()
+        .enumerate()
+        .map(|(port, bus)| {
+            let from = settled_ns(port);
+            bus.iter().copied().filter(|p| p.stamp_ns >= from).collect()
+        })
+        .collect();
+    let (packets, assigned): (Vec<_>, Vec<_>) = settled
+        .iter()
+        .flat_map(|bus| {
+            let box_grid = assign_synced(
+                bus,
+                scene.config.scene.sample_rate_hz,
+                b.processing_ns,
+                b.hop_latency_ns,
+                b.hop_latency_ns,
+            );
+            bus.iter()
+                .copied()
+                .zip(box_grid.into_iter().map(move |g| g + offset_ns))
+        })
+        .unzip();
+    SampleTimeError::of(Method::Synced.name(), &errors(&packets, &assigned, 0))
+}
+
+/// A time-sync cell command packet.
+fn is_sync(bytes: &[u8; skinbox_protocol::cell::PACKET_LEN]) -> bool {
+    matches!(
+        skinbox_protocol::cell_command::CellCommandRepr::parse(bytes).map(|r| r.command),
+        Ok(skinbox_protocol::cell_command::CellCommand::TimeSync { .. })
+    )
 }
 
 /// The box's transmit pins must be as planned: the cells were driven with the plan.
@@ -494,6 +571,12 @@ fn print_summary(o: &Output) {
         "        sample time - true sample time: {} p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} p50 {:.0} us, p99 {:.0} us)",
         b.method, b.p50, b.p99, b.max, a.method, a.p50, a.p99
     );
+    if let Some(c) = &o.synced_sample_time_error_us {
+        println!(
+            "        {} through the box's downlink: p50 {:.1} us, p99 {:.1} us, max {:.1} us, worst cell p99 {:.1} us",
+            c.method, c.p50, c.p99, c.max, c.worst_cell_p99
+        );
+    }
     println!(
         "speed:  {:.2} M cycles/s, {:.2} s wall for {:.1} ms simulated",
         s.cycles_per_second / 1e6,

@@ -341,4 +341,19 @@ pub struct SceneConfig {
     /// `[[commands]]`, in any order.
     #[serde(default)]
     pub commands: Vec<CommandConfig>,
+    /// `[time_sync]`: the box sends a time-sync command down every bus periodically and the
+    /// cells sample on its time grid.
+    pub time_sync: Option<TimeSyncConfig>,
+}
+
+/// `[time_sync]`: a time-sync command to every cell of every bus every `interval_s`, the
+/// first at `start_s` (docs/time.md, method c).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeSyncConfig {
+    /// Time between sync commands, s.
+    pub interval_s: f64,
+    /// The first one, s from the scene start.
+    #[serde(default)]
+    pub start_s: f64,
 }

@@ -21,7 +21,7 @@ use crate::cell::{full_range_units, Cell, CellConfig, Mode, Thresholds};
 pub use crate::config::{
     BusConfig, CommandConfig, CommandThresholds, CrosstalkConfig, ForceStandConfig, HammerConfig,
     MotionConfig, NoiseConfig, SceneConfig, SceneTable, StrokeConfig, TemperatureConfig,
-    ThresholdConfig,
+    ThresholdConfig, TimeSyncConfig,
 };
 use crate::rng::Rng;
 use crate::signal::SignalModel;
@@ -376,48 +376,73 @@ impl Scene {
         p
     }
 
-    /// The `[[commands]]` entries as the host sends them, in time order: (scene time, ns;
-    /// the port, `None` for every port; the packet, a time sync's tick 0; whether it is a
-    /// time sync, whose tick the sender fills in).
-    pub fn command_packets(&self) -> Vec<(u64, Option<usize>, [u8; PACKET_LEN], bool)> {
+    /// Every command the box sends, in time order: the `[[commands]]` entries and the
+    /// `[time_sync]` table's sync commands (scene time, ns; the port, `None` for every
+    /// port; what it sends).
+    fn scheduled(&self) -> Vec<(u64, Option<usize>, Downlink)> {
         let mut out: Vec<_> = self
             .config
             .commands
             .iter()
             .filter_map(|c| {
-                let (bytes, sync) = match Self::downlink_of(c).ok()? {
-                    Downlink::Raw(bytes) => (bytes, false),
-                    Downlink::Command(repr) => (
-                        repr.to_bytes(),
-                        matches!(repr.command, CellCommand::TimeSync { .. }),
-                    ),
-                };
-                Some(((c.time_s * 1e9).round() as u64, c.port, bytes, sync))
+                Some((
+                    (c.time_s * 1e9).round() as u64,
+                    c.port,
+                    Self::downlink_of(c).ok()?,
+                ))
             })
             .collect();
+        if let Some(t) = &self.config.time_sync {
+            let sync = Downlink::Command(CellCommandRepr {
+                cell_id: ALL_CELLS,
+                command: CellCommand::TimeSync { box_tick: 0 },
+            });
+            let mut k = 0;
+            loop {
+                let time_s = t.start_s + k as f64 * t.interval_s;
+                if time_s >= self.config.scene.duration_s || time_s.is_nan() || t.interval_s <= 0.0
+                {
+                    break;
+                }
+                out.push(((time_s * 1e9).round() as u64, None, sync));
+                k += 1;
+            }
+        }
         out.sort_by_key(|e| e.0);
         out
     }
 
+    /// The commands as the host sends them, in time order: (scene time, ns; the port,
+    /// `None` for every port; the packet, a time sync's tick 0; whether it is a time sync,
+    /// whose tick the sender fills in).
+    pub fn command_packets(&self) -> Vec<(u64, Option<usize>, [u8; PACKET_LEN], bool)> {
+        self.scheduled()
+            .into_iter()
+            .map(|(time_ns, port, downlink)| match downlink {
+                Downlink::Raw(bytes) => (time_ns, port, bytes, false),
+                Downlink::Command(repr) => (
+                    time_ns,
+                    port,
+                    repr.to_bytes(),
+                    matches!(repr.command, CellCommand::TimeSync { .. }),
+                ),
+            })
+            .collect()
+    }
+
     /// The cell command packets of bus `bus`: (time the first start bit leaves the box, ns;
     /// the bytes), in sending order, one after the other on the box's UART: given by
-    /// `options` (a box's downlink), or each at its `[[commands]]` time.
+    /// `options` (a box's downlink), or each at its time (a time sync carrying the tick it
+    /// leaves at, box time being scene time).
     fn downlink(&self, bus: usize, options: &GenerateOptions) -> BusDownlink {
         if let Some(given) = &options.downlink {
             return given.get(bus).cloned().unwrap_or_default();
         }
-        let mut entries: Vec<_> = self
-            .config
-            .commands
-            .iter()
-            .filter(|c| c.port.is_none_or(|p| p == bus))
-            .filter_map(|c| Some(((c.time_s * 1e9).round() as u64, Self::downlink_of(c).ok()?)))
-            .collect();
-        entries.sort_by_key(|e| e.0);
         let mut line_free_ns = 0;
-        entries
+        self.scheduled()
             .into_iter()
-            .map(|(time_ns, downlink)| {
+            .filter(|c| c.1.is_none_or(|p| p == bus))
+            .map(|(time_ns, _, downlink)| {
                 let leave_ns = time_ns.max(line_free_ns);
                 line_free_ns = leave_ns + DOWNLINK_PACKET_NS;
                 let bytes = match downlink {
@@ -443,6 +468,25 @@ impl Scene {
         let c = &self.config;
         let s = &c.scene;
         let mut p = Vec::new();
+        if let Some(t) = &c.time_sync {
+            if !(t.interval_s.is_finite() && t.interval_s >= 0.001) {
+                p.push((
+                    "time_sync",
+                    "interval_s",
+                    format!(
+                        "`interval_s` must be at least 0.001 s, found {}",
+                        t.interval_s
+                    ),
+                ));
+            }
+            if !(t.start_s.is_finite() && t.start_s >= 0.0) {
+                p.push((
+                    "time_sync",
+                    "start_s",
+                    format!("`start_s` must be 0 or more, found {}", t.start_s),
+                ));
+            }
+        }
         positive("scene", "duration_s", s.duration_s, &mut p);
         if s.duration_s > 3_600.0 {
             p.push((
@@ -702,6 +746,18 @@ impl Scene {
                 .iter()
                 .map(|(_, bytes)| CellCommandRepr::parse(bytes).ok())
                 .collect();
+            // the time syncs on this bus: (scene time it left the box, s; box time it carries)
+            let sync_schedule: Vec<(f64, f64)> = downlink
+                .iter()
+                .zip(&commands)
+                .filter_map(|((leave_ns, _), c)| match c.as_ref()?.command {
+                    CellCommand::TimeSync { box_tick } => Some((
+                        *leave_ns as f64 * 1e-9,
+                        (box_tick * skinbox_protocol::TICK_NS) as f64 * 1e-9,
+                    )),
+                    _ => None,
+                })
+                .collect();
             let mut cell_commands = Vec::with_capacity(cells.len());
             for (position, index) in cells.clone().enumerate() {
                 let cell_id = (index + 1) as u16;
@@ -736,9 +792,10 @@ impl Scene {
                 let mut held = [None; Channel::COUNT];
                 let mut loss_rng = Rng::for_stream(s.seed ^ 0x1055, index as u64);
                 let delay_ns = c.bus.processing_ns + position as u64 * c.bus.hop_latency_ns;
-                // Method c of docs/time.md: the cell samples on the box's grid instead.
-                let mut synced = options.time_sync.as_ref().map(|sync| {
-                    SyncedClock::new(
+                // Method c of docs/time.md: the cell samples on the box's grid instead: every
+                // `options.time_sync` interval, or as the sync commands on its bus say.
+                let mut synced = match &options.time_sync {
+                    Some(sync) => Some(SyncedClock::new(
                         sync,
                         &c.bus,
                         position,
@@ -746,8 +803,17 @@ impl Scene {
                         s.sample_rate_hz,
                         s.seed,
                         index as u64,
-                    )
-                });
+                    )),
+                    None if !sync_schedule.is_empty() => SyncedClock::scheduled(
+                        &TimeSync::every(0.0, &c.bus),
+                        &c.bus,
+                        position,
+                        (clock.drift_ppm, s.sample_rate_hz),
+                        (s.seed, index as u64),
+                        sync_schedule.clone(),
+                    ),
+                    None => None,
+                };
                 // A wandering clock (its drift changing over time) is stepped sample by
                 // sample; a steady one in closed form.
                 let mut wander = options.clock_wander.map(|w| {

@@ -59,10 +59,15 @@ pub struct SyncedClock {
     /// Index of the sync the clock runs from, and the next one not yet decided.
     current: Option<u64>,
     next: u64,
-    /// First grid point the cell samples (the first after the first sync arrives).
-    first_grid: u64,
+    /// Grid point of the cell's sample 0 (the first after the first sync arrives; moved
+    /// when a sync brings a new time base, a box reset).
+    first_grid: i64,
     /// The clock's drift wander and this cell's angle of it.
     wander: Option<(ClockWander, f64)>,
+    /// The sync commands as a box sent them: (scene time the command left the box, s;
+    /// the box time it carries, s). `None`: every `interval_s` from scene time 0, box
+    /// time being scene time.
+    schedule: Option<Vec<(f64, f64)>>,
 }
 
 impl SyncedClock {
@@ -78,6 +83,46 @@ impl SyncedClock {
         seed: u64,
         stream: u64,
     ) -> SyncedClock {
+        Self::build(
+            sync,
+            bus,
+            position,
+            (drift_ppm, sample_rate_hz),
+            (seed, stream),
+            None,
+        )
+        .expect("a sync every interval reaches every cell")
+    }
+
+    /// The clock of a cell that obeys the sync commands a box sent, `schedule`: (scene
+    /// time each left the box, s; the box time it carries, s), in order. `None` when none
+    /// of them reaches the cell (all lost): it keeps its free-running clock.
+    pub fn scheduled(
+        sync: &TimeSync,
+        bus: &BusConfig,
+        position: usize,
+        (drift_ppm, sample_rate_hz): (f64, f64),
+        (seed, stream): (u64, u64),
+        schedule: Vec<(f64, f64)>,
+    ) -> Option<SyncedClock> {
+        Self::build(
+            sync,
+            bus,
+            position,
+            (drift_ppm, sample_rate_hz),
+            (seed, stream),
+            Some(schedule),
+        )
+    }
+
+    fn build(
+        sync: &TimeSync,
+        bus: &BusConfig,
+        position: usize,
+        (drift_ppm, sample_rate_hz): (f64, f64),
+        (seed, stream): (u64, u64),
+        schedule: Option<Vec<(f64, f64)>>,
+    ) -> Option<SyncedClock> {
         let hops = position as f64;
         let down_ns = bus.processing_ns as f64 + hops * sync.downlink_hop_latency_ns as f64;
         let up_ns = bus.processing_ns as f64 + hops * bus.hop_latency_ns as f64;
@@ -94,14 +139,33 @@ impl SyncedClock {
             next: 0,
             first_grid: 0,
             wander: None,
+            schedule,
         };
         // The cell starts sampling on the grid after the first sync it receives.
         while clock.current.is_none() {
+            if let Some(s) = &clock.schedule {
+                if clock.next as usize >= s.len() {
+                    return None;
+                }
+            }
             clock.advance();
         }
-        let first_arrival = clock.arrival_s(clock.current.unwrap_or(0));
-        clock.first_grid = (first_arrival / period_s).ceil() as u64;
-        clock
+        // (box time: the first sync's arrival, as the cell believes it)
+        let first = clock.current.unwrap_or(0);
+        let first_box_s = match clock.schedule {
+            Some(_) => clock.sent_box_s(first) + clock.believed_down_s,
+            None => clock.arrival_s(first),
+        };
+        clock.first_grid = (first_box_s / period_s).ceil() as i64;
+        Some(clock)
+    }
+
+    /// The box time sync `j` carries, s.
+    fn sent_box_s(&self, j: u64) -> f64 {
+        match &self.schedule {
+            Some(s) => s.get(j as usize).map_or(f64::INFINITY, |e| e.1),
+            None => j as f64 * self.interval_s,
+        }
     }
 
     /// The same clock with its drift wandering ([`ClockWander`], this cell's `angle`).
@@ -120,13 +184,15 @@ impl SyncedClock {
     }
 
     fn arrival_s(&self, j: u64) -> f64 {
-        j as f64 * self.interval_s + self.down_s
+        match &self.schedule {
+            Some(s) => s.get(j as usize).map_or(f64::INFINITY, |e| e.0) + self.down_s,
+            None => j as f64 * self.interval_s + self.down_s,
+        }
     }
 
     /// True time of the sample for grid point `first + n` under sync `j`.
     fn time_under(&self, j: u64, grid_s: f64) -> f64 {
-        let sent_s = j as f64 * self.interval_s;
-        let set_to_s = sent_s + self.believed_down_s;
+        let set_to_s = self.sent_box_s(j) + self.believed_down_s;
         // A wandering drift, taken at the middle of the stretch since the sync (its mean
         // there, to second order).
         let drift = match self.wander {
@@ -138,20 +204,37 @@ impl SyncedClock {
         self.arrival_s(j) + (grid_s - set_to_s) / (1.0 + drift)
     }
 
+    /// After taking sync `new` (under `old` until then) before sample `n`: a clock set
+    /// more than half a period from where it ran is a new time base (the box was reset),
+    /// and the cell's next sample is the first grid point after it.
+    fn rebase(&mut self, old: u64, new: u64, n: u64) {
+        let arrival = self.arrival_s(new);
+        let ran_to = self.sent_box_s(old)
+            + self.believed_down_s
+            + (arrival - self.arrival_s(old)) * (1.0 + self.drift);
+        let set_to = self.sent_box_s(new) + self.believed_down_s;
+        if (ran_to - set_to).abs() > self.period_s / 2.0 {
+            self.first_grid = (set_to / self.period_s).ceil() as i64 - n as i64;
+        }
+    }
+
     /// The grid point (box time, s) of the cell's sample `n` (0 = its first).
     pub fn grid_s(&self, n: u64) -> f64 {
-        (self.first_grid + n) as f64 * self.period_s
+        (self.first_grid + n as i64) as f64 * self.period_s
     }
 
     /// The true time of the cell's sample `n` (0 = its first), s; call with `n` rising.
     pub fn sample_time_s(&mut self, n: u64) -> f64 {
-        let grid_s = self.grid_s(n);
         loop {
             let j = self.current.unwrap_or(0);
-            let t = self.time_under(j, grid_s);
+            let t = self.time_under(j, self.grid_s(n));
             // A sync arriving before this sample resets the clock first.
             if self.arrival_s(self.next) <= t {
+                let before = self.current;
                 self.advance();
+                if let (Some(old), Some(new)) = (before, self.current) {
+                    self.rebase(old, new, n);
+                }
                 continue;
             }
             return t;
@@ -221,5 +304,37 @@ mod tests {
             .fold(0.0f64, f64::max);
         // slow clock: late; with half the syncs lost some gaps are several intervals
         assert!(worst > 20e-6, "worst {worst}");
+    }
+}
+
+#[cfg(test)]
+mod scheduled_tests {
+    use super::*;
+
+    #[test]
+    fn a_new_time_base_moves_the_samples_onto_its_grid_at_the_next_sync() {
+        // syncs at scene 0, 0.1, 0.2 s; the third carries box time 0.0537 s (a box reset):
+        // from its arrival on, samples fall on grid points of the new base, 8 ms apart
+        let bus = BusConfig::default();
+        let sync = TimeSync::every(0.1, &bus);
+        let schedule = vec![(0.0, 0.0), (0.1, 0.1), (0.2, 0.0537)];
+        let mut clock = SyncedClock::scheduled(&sync, &bus, 3, (0.0, 125.0), (1, 0), schedule)
+            .expect("syncs reach the cell");
+        let times: Vec<f64> = (0..40).map(|n| clock.sample_time_s(n)).collect();
+        assert!(times.windows(2).all(|w| w[1] > w[0]), "{times:?}");
+        let down = (bus.processing_ns + 3 * bus.hop_latency_ns) as f64 * 1e-9;
+        let arrival = 0.2 + down;
+        let after: Vec<f64> = times.iter().copied().filter(|t| *t > arrival).collect();
+        assert!(after.len() >= 10, "{times:?}");
+        for t in &after {
+            // scene time t is box time t - 0.2 + 0.0537 (the same down, believed exactly)
+            let box_s = t - 0.2 + 0.0537;
+            let off_grid = (box_s / 0.008 - (box_s / 0.008).round()).abs() * 0.008;
+            assert!(
+                off_grid < 1e-9,
+                "sample at {t}: {off_grid} s off the new grid"
+            );
+        }
+        assert!((after[1] - after[0] - 0.008).abs() < 1e-9);
     }
 }

@@ -229,3 +229,66 @@ fn command_errors_name_the_line_and_the_entry() {
     let e = Scene::parse(&base("\n[[commands]]\ntime_s = 0.5\nspeed = 3\n"), "c.toml").unwrap_err();
     assert_eq!(e.line, Some(18), "{e}");
 }
+
+#[test]
+fn a_time_sync_table_puts_every_cell_on_the_box_grid() {
+    // synced_bus: 66 cells, 250 Hz, a sync every 0.1 s; without a box, box time is scene
+    // time and each sync carries the tick it leaves at
+    let scene = load("synced_bus");
+    let g = scene.generate(&GenerateOptions {
+        truth_cells: vec![1, 33, 66],
+        ..Default::default()
+    });
+    let bus = &g.buses[0];
+    let syncs = bus
+        .downlink
+        .iter()
+        .filter(|d| {
+            matches!(
+                CellCommandRepr::parse(&d.1).map(|r| r.command),
+                Ok(CellCommand::TimeSync { .. })
+            )
+        })
+        .count();
+    assert_eq!(syncs, 20, "2 s at 0.1 s");
+    // after the first sync has reached the chain's end, every sample of every cell is
+    // within 20 us of a 4 ms grid point (half its round trip believed, 100 ppm drift over
+    // at most 0.1 s)
+    let period_ns = 4_000_000.0;
+    let settled_ns = 20_000 + 66 * 52_000 + 4_000_000;
+    let mut checked = 0;
+    for t in &g.truth {
+        for &ns in t.sample_time_ns.iter().filter(|&&ns| ns > settled_ns) {
+            let off = (ns as f64 / period_ns - (ns as f64 / period_ns).round()).abs() * period_ns;
+            assert!(
+                off < 20_000.0,
+                "cell {}: sample at {ns} ns, {off} ns off",
+                t.cell_id
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 1000, "{checked}");
+    // a free-running scene's samples are not on that grid
+    let free = load("idle").generate(&GenerateOptions {
+        truth_cells: vec![1],
+        ..Default::default()
+    });
+    let off_grid = free.truth[0]
+        .sample_time_ns
+        .iter()
+        .filter(|&&ns| {
+            let p = 8_000_000.0;
+            (ns as f64 / p - (ns as f64 / p).round()).abs() * p > 20_000.0
+        })
+        .count();
+    assert!(off_grid > free.truth[0].sample_time_ns.len() / 2);
+    // the table is checked
+    let text = std::fs::read_to_string(scenes_dir().join("synced_bus.toml"))
+        .unwrap()
+        .replace("interval_s = 0.1", "interval_s = 0.0001");
+    let err = Scene::parse(&text, "fast_sync.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("interval_s") && err.contains("0.001"), "{err}");
+}
