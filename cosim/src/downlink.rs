@@ -66,13 +66,16 @@ pub struct DownlinkModel {
     staging: [u8; PACKET_LEN],
     /// The packet being copied, whole.
     copy_packet: [u8; PACKET_LEN],
+    /// The offer taken in the previous clock (registered: its copy starts now).
+    offered: Option<(u8, [u8; PACKET_LEN])>,
     copying: bool,
     broadcast: bool,
     copy_port: usize,
     copy_index: usize,
     scan: usize,
-    /// Reads in flight: (clock whose data it is, port, slot, byte index).
-    reads: [Option<(usize, bool, usize)>; 2],
+    /// Reads in flight, newest first: (port, slot, byte index); the oldest's data arrives
+    /// in this clock (address register, then the RAM's two clocks).
+    reads: [Option<(usize, bool, usize)>; 3],
     changes: Vec<PinChange>,
     starts: Vec<PacketStart>,
     /// Per port, the packets committed and not yet fully taken, oldest first.
@@ -95,12 +98,13 @@ impl DownlinkModel {
             ram: vec![[[0; PACKET_LEN]; 2]; ports],
             staging: [0; PACKET_LEN],
             copy_packet: [0; PACKET_LEN],
+            offered: None,
             copying: false,
             broadcast: false,
             copy_port: 0,
             copy_index: 0,
             scan: 0,
-            reads: [None; 2],
+            reads: [None; 3],
             changes: Vec::new(),
             starts: Vec::new(),
             packets: vec![std::collections::VecDeque::new(); ports],
@@ -110,6 +114,7 @@ impl DownlinkModel {
     /// Nothing under way: the state only changes by the scan's position.
     fn idle(&self) -> bool {
         !self.copying
+            && self.offered.is_none()
             && self.reads.iter().all(Option::is_none)
             && self
                 .ports
@@ -137,6 +142,7 @@ impl DownlinkModel {
         self.advance_to(tick);
         let full = |p: &Port| p.count == QUEUE_PACKETS;
         let refused = self.copying
+            || self.offered.is_some()
             || if port == ALL_PORTS {
                 self.ports.iter().any(full)
             } else {
@@ -175,6 +181,7 @@ impl DownlinkModel {
 
     /// One clock, with an accepted offer in it.
     fn clock(&mut self, offer: Option<(u8, [u8; PACKET_LEN])>) {
+        let offered = std::mem::replace(&mut self.offered, offer);
         let n = self.ports.len();
         let tick = self.tick;
         // the copy (registers as they were at the start of the clock)
@@ -202,7 +209,7 @@ impl DownlinkModel {
                 }
             }
         }
-        if let Some((port, packet)) = offer {
+        if let Some((port, packet)) = offered {
             next_staging = packet;
             self.copy_packet = packet;
             next_copying = true;
@@ -211,7 +218,7 @@ impl DownlinkModel {
             next_copy_port = if port == ALL_PORTS { 0 } else { port as usize };
         }
         // the scan, and the read whose data arrives in this clock
-        let arriving = self.reads[1];
+        let arriving = self.reads[2];
         let mut issued = None;
         for (i, p) in self.ports.iter_mut().enumerate() {
             // the transmitter (its `ready`/take, from the registers)
@@ -287,7 +294,7 @@ impl DownlinkModel {
             }
             *p = next;
         }
-        self.reads = [issued, self.reads[0]];
+        self.reads = [issued, self.reads[0], self.reads[1]];
         self.scan = if self.scan == n - 1 { 0 } else { self.scan + 1 };
         self.staging = next_staging;
         self.copying = next_copying;

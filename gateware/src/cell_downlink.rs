@@ -9,7 +9,8 @@
 //!   command unit `offer`s the captured packet for a port (or `ALL_PORTS`) in the clock it
 //!   decides a cell command, only when neither says no: a packet is queued whole in every
 //!   target port or not at all, and nothing waits outside the queues.
-//! - An accepted packet moves to the staging register and is copied, a byte a clock, into
+//! - An accepted packet moves to the staging register (a clock after the offer) and is
+//!   copied, a byte a clock, into
 //!   each target port's queue (two packet slots per port in one [`BlockRam`]: port, slot
 //!   and byte index form the address), port after port for `ALL_PORTS`:
 //!   [`COPY_CLOCKS_PER_PORT`] clocks each. `accepted` pulses with `accepted_port` as each
@@ -71,7 +72,7 @@ pub struct CellDownlink {
     pub offer: Signal<In, Bit>,
     /// Target of the offer.
     pub offer_port: Signal<In, Bits<8>>,
-    /// A packet is being copied into the queues: no offer now.
+    /// An offer was taken or a packet is being copied into the queues: no offer now.
     pub busy: Signal<Out, Bit>,
     /// Bit `p`: port `p`'s queue is full (bits of ports the box does not have are 0).
     pub full_ports: Signal<Out, Bits<64>>,
@@ -92,6 +93,9 @@ pub struct CellDownlink {
     all_ports: Constant<Bits<8>>,
     // receive and copy
     captured: DFF<Bits<160>>,
+    /// The offer, registered: the copy starts a clock after it.
+    offered: DFF<Bit>,
+    offered_port: DFF<Bits<8>>,
     staging: DFF<Bits<160>>,
     copying: DFF<Bit>,
     broadcast: DFF<Bit>,
@@ -108,10 +112,16 @@ pub struct CellDownlink {
     holding: Vec<DFF<Bits<8>>>,
     // read scan and the RAM's read pipeline
     scan: DFF<Bits<8>>,
-    /// Reads in flight: bit 1 marks the data of the read issued two clocks ago.
-    read_valid: DFF<Bits<2>>,
+    /// Reads in flight: bit 2 marks the data of the read issued three clocks ago (the
+    /// address is registered before the RAM).
+    read_valid: DFF<Bits<3>>,
+    read_address: DFF<Bits<ADDRESS_BITS>>,
+    write_enable: DFF<Bit>,
+    write_address: DFF<Bits<ADDRESS_BITS>>,
+    write_data: DFF<Bits<8>>,
     read_port_1: DFF<Bits<8>>,
     read_port_2: DFF<Bits<8>>,
+    read_port_3: DFF<Bits<8>>,
     full: Signal<Local, Bits<64>>,
     copy_count: Signal<Local, Bits<2>>,
     copy_head: Signal<Local, Bit>,
@@ -155,6 +165,8 @@ impl CellDownlink {
             packet_last: Constant::new(((PACKET_OFFSET + PACKET_LEN - 1) as u64).into()),
             all_ports: Constant::new(u64::from(ALL_PORTS).into()),
             captured: Default::default(),
+            offered: Default::default(),
+            offered_port: Default::default(),
             staging: Default::default(),
             copying: Default::default(),
             broadcast: Default::default(),
@@ -170,8 +182,13 @@ impl CellDownlink {
             holding: (0..ports).map(|_| Default::default()).collect(),
             scan: Default::default(),
             read_valid: Default::default(),
+            read_address: Default::default(),
+            write_enable: Default::default(),
+            write_address: Default::default(),
+            write_data: Default::default(),
             read_port_1: Default::default(),
             read_port_2: Default::default(),
+            read_port_3: Default::default(),
             full: Default::default(),
             copy_count: Default::default(),
             copy_head: Default::default(),
@@ -191,6 +208,8 @@ impl Logic for CellDownlink {
             self,
             clock,
             captured,
+            offered,
+            offered_port,
             staging,
             copying,
             broadcast,
@@ -200,14 +219,23 @@ impl Logic for CellDownlink {
             accepted_port_out,
             scan,
             read_valid,
+            read_address,
+            write_enable,
+            write_address,
+            write_data,
             read_port_1,
-            read_port_2
+            read_port_2,
+            read_port_3
         );
         self.ram.clock.next = self.clock.val();
-        self.ram.write_enable.next = false;
-        self.ram.write_address.next = 0.into();
-        self.ram.write_data.next = self.staging.q.val().get_bits::<8>(0);
-        self.ram.read_address.next = 0.into();
+        // the writes are registered: no copy logic in front of the RAM (a slot's last byte
+        // lands a clock after its commit, long before a read can reach it)
+        self.write_enable.d.next = false;
+        self.write_address.d.next = self.write_address.q.val();
+        self.write_data.d.next = self.staging.q.val().get_bits::<8>(0);
+        self.ram.write_enable.next = self.write_enable.q.val();
+        self.ram.write_address.next = self.write_address.q.val();
+        self.ram.write_data.next = self.write_data.q.val();
         self.accepted_out.d.next = false;
 
         // capture: the bytes at the packet's frame offsets, the first ending in bits 7..0
@@ -227,14 +255,17 @@ impl Logic for CellDownlink {
             }
         }
         self.full_ports.next = self.full.val();
-        self.busy.next = self.copying.q.val();
-        if self.offer.val() {
+        self.busy.next = self.copying.q.val() | self.offered.q.val();
+        // (registered: the offer reaches two flip-flops, the copy starts a clock later)
+        self.offered.d.next = self.offer.val();
+        self.offered_port.d.next = self.offer_port.val();
+        if self.offered.q.val() {
             self.staging.d.next = self.captured.q.val();
             self.copying.d.next = true;
             self.copy_index.d.next = 0.into();
-            self.broadcast.d.next = self.offer_port.val() == self.all_ports.val();
-            self.copy_port.d.next = self.offer_port.val();
-            if self.offer_port.val() == self.all_ports.val() {
+            self.broadcast.d.next = self.offered_port.q.val() == self.all_ports.val();
+            self.copy_port.d.next = self.offered_port.q.val();
+            if self.offered_port.q.val() == self.all_ports.val() {
                 self.copy_port.d.next = 0.into();
             }
         }
@@ -251,8 +282,8 @@ impl Logic for CellDownlink {
         self.commit.next = false;
         self.advance.next = false;
         if self.copying.q.val() {
-            self.ram.write_enable.next = true;
-            self.ram.write_address.next = (bit_cast::<ADDRESS_BITS, 8>(self.copy_port.q.val())
+            self.write_enable.d.next = true;
+            self.write_address.d.next = (bit_cast::<ADDRESS_BITS, 8>(self.copy_port.q.val())
                 << 6)
                 | (bit_cast::<ADDRESS_BITS, 1>(
                     (self.copy_head.val() ^ (self.copy_count.val() == 1)).into(),
@@ -288,6 +319,7 @@ impl Logic for CellDownlink {
         self.read_valid.d.next = self.read_valid.q.val() << 1;
         self.read_port_1.d.next = self.scan.q.val();
         self.read_port_2.d.next = self.read_port_1.q.val();
+        self.read_port_3.d.next = self.read_port_2.q.val();
         for i in 0..self.uarts.len() {
             self.count[i].clock.next = self.clock.val();
             self.head[i].clock.next = self.clock.val();
@@ -339,8 +371,8 @@ impl Logic for CellDownlink {
             {
                 self.count[i].d.next = self.count[i].q.val() + 1;
             }
-            if self.read_valid.q.val().get_bit(1)
-                & (self.read_port_2.q.val() == self.port_number[i].val())
+            if self.read_valid.q.val().get_bit(2)
+                & (self.read_port_3.q.val() == self.port_number[i].val())
             {
                 self.holding[i].d.next = self.ram.read_data.val();
                 self.holding_valid[i].d.next = true;
@@ -354,13 +386,17 @@ impl Logic for CellDownlink {
                 self.holding_valid[i].d.next = false;
             }
         }
-        self.ram.read_address.next = (bit_cast::<ADDRESS_BITS, 8>(self.scan.q.val()) << 6)
+        // the address is registered: no scan logic in front of the RAM
+        self.read_address.d.next = (bit_cast::<ADDRESS_BITS, 8>(self.scan.q.val()) << 6)
             | (bit_cast::<ADDRESS_BITS, 1>(self.scan_head.val().into()) << 5)
             | bit_cast::<ADDRESS_BITS, 5>(self.scan_index.val());
+        self.ram.read_address.next = self.read_address.q.val();
         self.read_valid.d.next =
-            (self.read_valid.q.val() << 1) | bit_cast::<2, 1>(self.issue.val().into());
+            (self.read_valid.q.val() << 1) | bit_cast::<3, 1>(self.issue.val().into());
         if self.reset.val() {
             self.copying.d.next = false;
+            self.offered.d.next = false;
+            self.write_enable.d.next = false;
             self.scan.d.next = 0.into();
             self.read_valid.d.next = 0.into();
             self.accepted_out.d.next = false;
@@ -371,7 +407,7 @@ impl Logic for CellDownlink {
 }
 
 // the staging register and byte indices are sized for 20-byte packets, the read pipeline
-// (`read_valid` bit 1) for the RAM's read latency
+// (`read_valid` bit 2) for the address register and the RAM's read latency
 const _: () = assert!(PACKET_LEN == 20 && READ_LATENCY == 2);
 
 #[cfg(test)]
@@ -474,7 +510,7 @@ mod tests {
             } else {
                 1
             };
-            self.idle(copies as u64 * COPY_CLOCKS_PER_PORT + 1);
+            self.idle(copies as u64 * COPY_CLOCKS_PER_PORT + 2);
             true
         }
 
@@ -588,12 +624,13 @@ mod tests {
         run.capture(&a, &mut rng);
         run.last_offered = a;
         assert!(run.offer(ALL_PORTS));
-        // the copy into 4 ports takes 80 clocks; offers in all of them are refused
-        for _ in 0..4 * COPY_CLOCKS_PER_PORT {
+        // the registered offer and the copy into 4 ports take 81 clocks; offers in all of
+        // them are refused
+        for _ in 0..4 * COPY_CLOCKS_PER_PORT + 1 {
             assert!(!run.offer(0));
         }
         assert!(run.offer(1), "the clock after the last copy");
-        run.idle(COPY_CLOCKS_PER_PORT + 1);
+        run.idle(COPY_CLOCKS_PER_PORT + 2);
         run.drain();
         assert_eq!(run.queued, vec![vec![a], vec![a, a], vec![a], vec![a]]);
         // a capture between offers replaces the packet

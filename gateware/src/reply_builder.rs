@@ -37,8 +37,9 @@
 //!
 //! Then it offers a descriptor of kind [`RAW_FRAME_KIND`] with the frame's length (padded
 //! to 60). The take (valid & ready at an edge, tick T in that clock) is registered; a
-//! clock later its [`BodyReader`] starts reading the frame from byte 0, and for an
-//! acknowledgement the
+//! clock later the offer ends (`valid` stays high that one clock after the take: the
+//! arbiter holds the granted body open and takes no descriptor then), its [`BodyReader`]
+//! starts reading the frame from byte 0, and for an acknowledgement the
 //! patch program writes the send tick T + [`TAKE_TO_FIRST_BYTE`] (8 bytes) and the UDP
 //! checksum, which are done [`patch_margin_clocks`] clocks before the reader can reach the
 //! first of them. `locked` falls the clock after the last body beat was taken.
@@ -716,7 +717,6 @@ pub struct ReplyBuilder {
     sizing_echo: DFF<Bit>,
     // the take: tick then, the send tick a clock later
     took: DFF<Bit>,
-    tick_taken: DFF<Bits<64>>,
     send_tick: DFF<Bits<64>>,
     counter_address: DFF<Bits<5>>,
     counter_word: DFF<Bits<32>>,
@@ -819,7 +819,8 @@ impl ReplyBuilder {
             opcode_stream_to: constant(Opcode::StreamTo as usize),
             opcode_status_now: constant(Opcode::StatusNow as usize),
             result_ok: constant(AckResult::Ok as usize),
-            send_tick_offset: constant(TAKE_TO_FIRST_BYTE as usize),
+            // (the tick of the clock after the take)
+            send_tick_offset: constant(TAKE_TO_FIRST_BYTE as usize - 1),
             raw_frame_kind: constant(usize::from(RAW_FRAME_KIND)),
             step: Default::default(),
             running: Default::default(),
@@ -833,7 +834,6 @@ impl ReplyBuilder {
             frame_end: Default::default(),
             sizing_echo: Default::default(),
             took: Default::default(),
-            tick_taken: Default::default(),
             send_tick: Default::default(),
             counter_address: Default::default(),
             counter_word: Default::default(),
@@ -904,7 +904,6 @@ impl Logic for ReplyBuilder {
             frame_end,
             sizing_echo,
             took,
-            tick_taken,
             send_tick,
             counter_address,
             counter_word,
@@ -1209,22 +1208,21 @@ impl Logic for ReplyBuilder {
         self.replies.base_tick.next = 0.into();
         self.replies.body_len.next = self.body_len.q.val();
         self.replies.body_sum.next = 0.into();
-        // (the take is registered first: the arbiter's grant reaches two flip-flops and
-        // nothing else, and the reader and the patch start a clock later)
+        // (the take is registered first: the arbiter's grant reaches one flip-flop and
+        // nothing else; the offer ends, the reader and the patch start a clock later,
+        // while the arbiter holds the granted body open)
         self.take.next = self.offering.q.val() & self.replies.ready.val();
         self.reader.start.next = self.took.q.val();
         self.reader.length.next = self.body_len.q.val();
-        self.took.d.next = false;
-        if self.take.val() {
+        self.took.d.next = self.take.val();
+        if self.took.q.val() {
             self.offering.d.next = false;
-            self.tick_taken.d.next = self.tick.val();
-            self.took.d.next = true;
         }
         if self.took.q.val() & self.is_ack.q.val() {
             self.patching.d.next = true;
             self.step.d.next = self.patch_start.val();
             self.running.d.next = true;
-            self.send_tick.d.next = self.tick_taken.q.val() + self.send_tick_offset.val();
+            self.send_tick.d.next = self.tick.val() + self.send_tick_offset.val();
         }
 
         // The body, straight from the reader.
@@ -1441,11 +1439,19 @@ mod tests {
             u.receive_write_data.next = u64::from(rng.byte()).into();
             let take = rng.chance(take_p);
             let offered_for = valid_at.map_or(0, |v| clock - v);
-            u.replies.ready.next = valid_at.is_some() && offered_for >= take_delay && take;
+            // (as the arbiter: no descriptor taken while the body is open)
+            u.replies.ready.next =
+                take_at.is_none() && valid_at.is_some() && offered_for >= take_delay && take;
             u.replies.body.ready.next = take;
             bench.settle();
             let u = &bench.uut;
             assert!(u.locked.val(), "locked until the last beat was taken");
+            if let Some(t) = take_at {
+                assert!(
+                    !u.replies.valid.val() || clock == t + 1,
+                    "the offer ends the clock after the take"
+                );
+            }
             if u.replies.valid.val() {
                 valid_at.get_or_insert(clock);
                 assert_eq!(u.replies.kind.val().to_u8(), RAW_FRAME_KIND);

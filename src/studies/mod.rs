@@ -21,6 +21,7 @@ pub mod batching;
 pub mod boundaries;
 pub mod chart;
 pub mod fidelity;
+pub mod mode_rate;
 pub mod points;
 pub mod rate_model;
 pub mod sample_rate;
@@ -147,6 +148,7 @@ pub fn steps(quick: bool) -> u64 {
         + boundaries::steps(quick)
         + sample_time::steps(quick)
         + sample_rate::steps(quick)
+        + mode_rate::steps(quick)
         + 1
 }
 
@@ -167,6 +169,7 @@ pub fn run(options: &Options, progress: &mut Progress) -> anyhow::Result<Written
     sections.extend(boundaries::study(q, progress, &mut grid)?);
     sections.push(sample_time::study(q, progress, &mut grid)?);
     sections.push(sample_rate::study(q, progress, &mut grid)?);
+    sections.push(mode_rate::study(q, progress, &mut grid)?);
     let points = grid.len();
     if grid.shard_of().is_some() {
         progress.step("writing the shard's points");
