@@ -283,8 +283,7 @@ impl Logic for CellDownlink {
         self.advance.next = false;
         if self.copying.q.val() {
             self.write_enable.d.next = true;
-            self.write_address.d.next = (bit_cast::<ADDRESS_BITS, 8>(self.copy_port.q.val())
-                << 6)
+            self.write_address.d.next = (bit_cast::<ADDRESS_BITS, 8>(self.copy_port.q.val()) << 6)
                 | (bit_cast::<ADDRESS_BITS, 1>(
                     (self.copy_head.val() ^ (self.copy_count.val() == 1)).into(),
                 ) << 5)
