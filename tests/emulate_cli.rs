@@ -279,6 +279,57 @@ fn ctl_and_capture_against_the_emulator() {
     );
 }
 
+/// A claiming capture sends read-tick commands as it runs; their acknowledgements map the
+/// box's time to the host's, so the rows' host times come from exchanges, with a bound.
+#[test]
+fn a_claiming_capture_maps_box_time_by_read_tick_exchanges() {
+    let emulator = Emulator::start(&[], 5000);
+    let dir = std::env::temp_dir().join(format!("skinbox-exchanges-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let rows = dir.join("rows.csv");
+    let out = skinbox()
+        .args(["--json", "capture", "--listen", "127.0.0.1:0", "--claim"])
+        .arg(&emulator.addr)
+        .args([
+            "--duration-ms",
+            "1500",
+            "--exchange-ms",
+            "50",
+            "--sample-rate-hz",
+            "125",
+        ])
+        .arg("--rows")
+        .arg(&rows)
+        .output()
+        .unwrap();
+    let v = json(&out);
+    let sent = v["read_ticks_sent"].as_u64().unwrap();
+    assert!((15..=40).contains(&sent), "{v}");
+    let times = &v["host_times"][0];
+    assert_eq!(times["source"], "exchanges", "{v}");
+    assert_eq!(times["restarts"], 0);
+    let bound_ns = times["error_bound_ns"].as_f64().unwrap();
+    assert!(bound_ns > 0.0 && bound_ns < 2e6, "{times}");
+    // the emulator counted the commands: every read tick answered
+    let status = json(&ctl(&emulator.addr, &["status"]));
+    let accepted = status["box_counters"]["counters"]["commands_accepted"]
+        .as_u64()
+        .unwrap();
+    assert!(
+        accepted > sent,
+        "{accepted} accepted, {sent} read ticks and the claim"
+    );
+    // the last rows are mapped by the exchanges, with their bound
+    let text = std::fs::read_to_string(&rows).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let last: Vec<&str> = text.lines().last().unwrap().split(',').collect();
+    assert_eq!(last[column("host_time_source")], "exchanges");
+    let bound: f64 = last[column("host_time_bound_ns")].parse().unwrap();
+    assert!(bound > 0.0 && bound < 2e6, "{bound}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn a_host_outside_the_subnet_is_refused_and_counted() {
     let emulator = Emulator::start(&["--host-subnet", "192.0.2.0/24"], 3000);

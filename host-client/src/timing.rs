@@ -73,6 +73,11 @@ pub struct Timing {
     samples: SampleTimer,
     exchanges: HashMap<u16, ClockMap>,
     receive: HashMap<u16, ReceiveStampMap>,
+    /// Each box's boot id, from its latest status datagram.
+    boot_ids: HashMap<u16, u32>,
+    /// Read-tick acknowledgements that could not be used: no boot id seen yet, or an
+    /// exchange that cannot be true.
+    exchanges_unused: u64,
 }
 
 impl Timing {
@@ -82,6 +87,8 @@ impl Timing {
             samples: SampleTimer::new(sample_rate_hz, paths),
             exchanges: HashMap::new(),
             receive: HashMap::new(),
+            boot_ids: HashMap::new(),
+            exchanges_unused: 0,
         }
     }
 
@@ -90,11 +97,31 @@ impl Timing {
     /// against `receive` is a point above the receive-stamp envelope of its box, taken
     /// before any of its records is mapped. A payload that is no records datagram adds no
     /// point (the decoder counts it).
+    ///
+    /// A status datagram tells the box's boot id; the acknowledgement of a read-tick command
+    /// whose host time is its send time on this clock (as `skinbox capture` sends them) is
+    /// an exchange for the box's map ([`Timing::exchange`]), once its boot id is known.
     pub fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
-        let Some(receive) = receive else {
+        if skinbox_protocol::command::peek_kind(payload)
+            == Some(skinbox_protocol::command::KIND_ACK)
+        {
+            self.acknowledgement(receive, payload);
+            return;
+        }
+        let Ok(d) = Datagram::new_checked(payload) else {
             return;
         };
-        let Ok(d) = Datagram::new_checked(payload) else {
+        if d.kind() == DatagramKind::Status {
+            if let Ok(skinbox_protocol::DatagramRepr {
+                body: skinbox_protocol::datagram::DatagramBody::Status(status),
+                ..
+            }) = skinbox_protocol::DatagramRepr::parse(payload)
+            {
+                self.boot_ids.insert(d.box_id(), status.boot_id);
+            }
+            return;
+        }
+        let Some(receive) = receive else {
             return;
         };
         if d.kind() != DatagramKind::Records {
@@ -111,6 +138,36 @@ impl Timing {
                 .or_default()
                 .push(tick, receive.as_nanos() as u64);
         }
+    }
+
+    /// A read-tick acknowledgement received at `receive`: an exchange, if it is one.
+    fn acknowledgement(&mut self, receive: Option<Duration>, payload: &[u8]) {
+        use skinbox_protocol::command::{AckRepr, AckResult, Opcode};
+        let Ok(ack) = AckRepr::parse(payload) else {
+            return;
+        };
+        if ack.opcode != Opcode::ReadTick as u8 || ack.result != AckResult::Ok {
+            return;
+        }
+        let (Some(receive), Some(&boot_id)) = (receive, self.boot_ids.get(&ack.box_id)) else {
+            self.exchanges_unused += 1;
+            return;
+        };
+        let exchange = TimeExchange {
+            host_send_ns: ack.host_time,
+            box_receive_tick: ack.receive_tick,
+            box_send_tick: ack.send_tick,
+            host_receive_ns: receive.as_nanos() as u64,
+        };
+        if self.exchange(ack.box_id, boot_id, exchange).is_err() {
+            self.exchanges_unused += 1;
+        }
+    }
+
+    /// Read-tick acknowledgements not used for a map (no boot id seen yet for the box, or
+    /// an exchange that cannot be true).
+    pub fn exchanges_unused(&self) -> u64 {
+        self.exchanges_unused
     }
 
     /// An exchange with box `box_id` of boot id `boot_id` (from the box's "read tick"
@@ -292,5 +349,94 @@ pub(crate) mod tests {
                 .source,
             HostTimeSource::None
         );
+    }
+
+    fn status(box_id: u16, boot_id: u32) -> Vec<u8> {
+        use skinbox_protocol::datagram::DatagramBody;
+        use skinbox_protocol::{DatagramRepr, StatusRepr};
+        DatagramRepr {
+            box_id,
+            port_count: 1,
+            flags: 0,
+            sequence: 0,
+            base_tick: 0,
+            body: DatagramBody::Status(StatusRepr {
+                boot_id,
+                datagrams_sent: 0,
+                records_sent: 0,
+                first_port: 0,
+                ports: vec![Default::default()],
+            }),
+        }
+        .to_bytes()
+    }
+
+    fn read_tick_ack(box_id: u16, host_send_ns: u64, tick: u64) -> Vec<u8> {
+        ack(
+            box_id,
+            host_send_ns,
+            tick,
+            skinbox_protocol::command::Opcode::ReadTick,
+        )
+    }
+
+    fn ack(
+        box_id: u16,
+        host_send_ns: u64,
+        tick: u64,
+        opcode: skinbox_protocol::command::Opcode,
+    ) -> Vec<u8> {
+        use skinbox_protocol::command::{AckReply, AckRepr, AckResult};
+        AckRepr {
+            box_id,
+            port_count: 1,
+            sequence: 1,
+            host_time: host_send_ns,
+            opcode: opcode as u8,
+            result: AckResult::Ok,
+            last_accepted: 1,
+            receive_tick: tick,
+            send_tick: tick + 100,
+            reply: AckReply::None,
+        }
+        .to_bytes()
+    }
+
+    #[test]
+    fn read_tick_acknowledgements_are_exchanges_once_the_boot_id_is_known() {
+        let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
+        let at = |ns: u64| Some(Duration::from_nanos(ns));
+        // before any status datagram: no boot id, not used
+        t.datagram_received(at(2_000_000), &read_tick_ack(3, 1_000_000, 1_000));
+        assert_eq!(t.exchanges_unused(), 1);
+        assert!(t.summary().is_empty(), "no map yet");
+        t.datagram_received(at(2_500_000), &status(3, 9));
+        // host sent at 3.00 ms, the box took it at tick 20,000, answered 800 ns later, the
+        // answer arrived 20 us after it left
+        t.datagram_received(at(3_020_800), &read_tick_ack(3, 3_000_000, 20_000));
+        assert_eq!(t.exchanges_unused(), 1);
+        let s = &t.summary()[0];
+        assert_eq!((s.source, s.restarts), (HostTimeSource::Exchanges, 0));
+        // a record's sample maps within the bound of the exchange's midpoint offset (host
+        // 3,010,400 ns at box 160,400 ns: host time = box time + 2.85 ms)
+        t.datagram_received(None, &datagram(3, 1, &[20_000]));
+        let times = t.record(&record(3, 1, 20_000));
+        let mapped = times.sample_host_ns.unwrap();
+        let truth = times.sample_box_s * 1e9 + 2_850_000.0;
+        assert!((mapped - truth).abs() <= times.host_error_bound_ns.unwrap() + 1.0);
+        // a new boot id: the next exchange starts the map over
+        t.datagram_received(at(4_000_000), &status(3, 10));
+        t.datagram_received(at(5_020_800), &read_tick_ack(3, 5_000_000, 1_000));
+        assert_eq!(t.summary()[0].restarts, 1);
+        // an acknowledgement of another command is no exchange
+        let other = ack(
+            3,
+            6_000_000,
+            2_000,
+            skinbox_protocol::command::Opcode::StatusNow,
+        );
+        let before = t.exchanges_unused();
+        t.datagram_received(at(6_020_000), &other);
+        assert_eq!(t.exchanges_unused(), before);
     }
 }

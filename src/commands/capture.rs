@@ -46,6 +46,11 @@ pub struct CaptureArgs {
     /// from the capture's own socket, so the box sends its datagrams here.
     #[arg(long)]
     pub claim: Option<String>,
+    /// With --claim: send the box a read-tick command this often, in milliseconds; each
+    /// acknowledgement is an exchange that maps the box's time to the host's (the rows'
+    /// host times then come with an error bound). 0: none.
+    #[arg(long, default_value_t = 100, requires = "claim")]
+    pub exchange_ms: u64,
     /// Write every record as a CSV row to this file (`-`: stdout), with its sample time in
     /// box time and in host time (CLOCK_REALTIME, from the kernel's receive timestamps).
     #[arg(long)]
@@ -59,11 +64,17 @@ pub struct CaptureArgs {
 }
 
 /// Claims the stream of the box at `box_addr` from `socket` (a stream-to of the sender);
-/// returns the exchange, whose passed-over datagrams the capture decodes first.
+/// returns the socket, the exchange (whose passed-over datagrams the capture decodes
+/// first), the box's address and a handle of the socket to send commands from.
 fn claim(
     socket: tokio::net::UdpSocket,
     box_addr: &str,
-) -> anyhow::Result<(tokio::net::UdpSocket, skinbox_host::control::Exchange)> {
+) -> anyhow::Result<(
+    tokio::net::UdpSocket,
+    skinbox_host::control::Exchange,
+    SocketAddr,
+    std::net::UdpSocket,
+)> {
     use std::net::ToSocketAddrs;
     let addr = box_addr
         .to_socket_addrs()
@@ -78,8 +89,50 @@ fn claim(
         "--claim {box_addr}: the box refused stream-to: {}",
         exchange.ack.result.name()
     );
+    let sender = std_socket.try_clone()?;
     std_socket.set_nonblocking(true)?;
-    Ok((tokio::net::UdpSocket::from_std(std_socket)?, exchange))
+    Ok((
+        tokio::net::UdpSocket::from_std(std_socket)?,
+        exchange,
+        addr,
+        sender,
+    ))
+}
+
+/// Sends a read-tick command to the box at `to` from `socket` every `every`, its host time
+/// the send time (CLOCK_REALTIME, ns) and its sequence number the host clock in
+/// microseconds (newer each time), until `stop`. The acknowledgements arrive on the
+/// capture's socket, where the rows' timing takes them as exchanges.
+fn send_read_ticks(
+    socket: std::net::UdpSocket,
+    to: SocketAddr,
+    box_id: u16,
+    every: Duration,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<u64> {
+    std::thread::spawn(move || {
+        let mut sent = 0u64;
+        let mut last_sequence = 0u32;
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            let now_ns = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap_or_default()
+                .as_nanos() as u64;
+            let sequence = ((now_ns / 1_000) as u32).max(last_sequence.wrapping_add(1));
+            last_sequence = sequence;
+            let command = skinbox_protocol::command::CommandRepr {
+                box_id,
+                sequence,
+                host_time: now_ns,
+                request: skinbox_protocol::command::Request::ReadTick,
+            };
+            if socket.send_to(&command.to_bytes(), to).is_ok() {
+                sent += 1;
+            }
+            std::thread::sleep(every);
+        }
+        sent
+    })
 }
 
 /// Runs the capture on a single-threaded tokio runtime until the duration, the count or
@@ -101,13 +154,23 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             socket.local_addr()?,
             live::usable_recv_buffer(granted)
         );
-        let (socket, claimed) = match &args.claim {
+        let stop_read_ticks = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (socket, claimed, read_ticks) = match &args.claim {
             Some(box_addr) => {
-                let (socket, exchange) = claim(socket, box_addr)?;
+                let (socket, exchange, to, sender) = claim(socket, box_addr)?;
                 eprintln!("claimed the stream: {}", exchange.ack);
-                (socket, Some(exchange))
+                let read_ticks = (args.exchange_ms > 0).then(|| {
+                    send_read_ticks(
+                        sender,
+                        to,
+                        exchange.ack.box_id,
+                        Duration::from_millis(args.exchange_ms),
+                        stop_read_ticks.clone(),
+                    )
+                });
+                (socket, Some(exchange), read_ticks)
             }
-            None => (socket, None),
+            None => (socket, None, None),
         };
         let recv_buffer_warning = live::recv_buffer_warning(args.recv_buffer, granted);
         if let Some(w) = &recv_buffer_warning {
@@ -200,10 +263,16 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             },
         )
         .await?;
+        stop_read_ticks.store(true, std::sync::atomic::Ordering::Relaxed);
+        let read_ticks_sent = read_ticks.map(|t| t.join().unwrap_or(0));
         if let Some(w) = recorder {
             w.finish()?.flush()?;
         }
         let host_times = rows.as_ref().and_then(|w| w.timing()).map(|t| t.summary());
+        let exchanges_unused = rows
+            .as_ref()
+            .and_then(|w| w.timing())
+            .map(|t| t.exchanges_unused());
         if let Some(w) = rows {
             match w.finish() {
                 Ok(_) => {}
@@ -234,6 +303,8 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 })),
                 "report": report,
                 "host_times": host_times,
+                "read_ticks_sent": read_ticks_sent,
+                "exchanges_unused": exchanges_unused,
             }))
         } else {
             print!("{}", report.summary());
