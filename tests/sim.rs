@@ -344,5 +344,37 @@ fn time_sync_through_the_rtl_downlink_puts_every_cell_within_20_us() {
     assert!(c["packets"].as_u64().unwrap() > 800, "{c}");
     assert!(f(c, "worst_cell_p99") < 20.0, "{c}");
     assert!(f(a, "p99") > 3_000.0, "{a}");
+    // `decode --synced` gives every record the 4 ms grid point of its sample
+    let rows = dir.join("rows.csv");
+    let out = skinbox([
+        "decode".as_ref(),
+        pcap.as_os_str(),
+        "--synced".as_ref(),
+        "--cells-per-bus".as_ref(),
+        "66".as_ref(),
+        "--sample-rate-hz".as_ref(),
+        "250".as_ref(),
+        "-o".as_ref(),
+        rows.as_os_str(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&rows).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let column = header
+        .iter()
+        .position(|c| *c == "sample_box_time_s")
+        .unwrap();
+    let mut n = 0;
+    for line in text.lines().skip(1) {
+        let s: f64 = line.split(',').nth(column).unwrap().parse().unwrap();
+        let off = (s * 250.0 - (s * 250.0).round()).abs();
+        assert!(off < 1e-6, "{line}");
+        n += 1;
+    }
+    assert_eq!(n, r["packets_delivered"].as_u64().unwrap());
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -358,6 +358,8 @@ fn least_squares(points: &VecDeque<(i64, i64)>) -> Option<f64> {
 pub struct SampleTimer {
     nominal_period_ns: f64,
     paths: PathModel,
+    /// The cells sample on the box's time grid (method c): no estimate, the grid point.
+    on_box_grid: bool,
     cells: HashMap<(u16, u16), SampleClockEstimator>,
     last_on_port: HashMap<(u16, u8), u64>,
 }
@@ -368,15 +370,34 @@ impl SampleTimer {
         SampleTimer {
             nominal_period_ns: 1e9 / sample_rate_hz,
             paths,
+            on_box_grid: false,
             cells: HashMap::new(),
             last_on_port: HashMap::new(),
         }
+    }
+
+    /// The same timer for cells that sample on the box's time grid, set by its time-sync
+    /// commands (docs/time.md, method c): a packet's sample time is the grid point
+    /// `n / sample_rate_hz` of box time that its stamp less the cell's path latency (its
+    /// half round trip) falls on, allowing queueing at the root up to 7/8 of a period.
+    pub fn on_box_grid(mut self) -> SampleTimer {
+        self.on_box_grid = true;
+        self
     }
 
     /// The estimated sample time of a packet of `cell_id` on `port` of box `box_id`
     /// stamped at `stamp_ns` (box time); a port's packets in pin order.
     pub fn push(&mut self, box_id: u16, port: u8, cell_id: u16, stamp_ns: u64) -> SampleTime {
         let (period, latency) = (self.nominal_period_ns, self.paths.latency_ns(cell_id));
+        if self.on_box_grid {
+            let at = stamp_ns as f64 - latency as f64 + period / 8.0;
+            let index = (at / period).floor();
+            return SampleTime {
+                sample_time_ns: index * period,
+                index: index as i64,
+                period_learnt: false,
+            };
+        }
         // The port's first packet: whether the line was idle before it is unknown.
         let unqueued = self
             .last_on_port
@@ -394,7 +415,7 @@ impl SampleTimer {
         self.last_on_port.retain(|&(b, _), _| b != box_id);
     }
 
-    /// Cells followed.
+    /// Cells followed (none on the box's grid).
     pub fn cells(&self) -> usize {
         self.cells.len()
     }
@@ -628,5 +649,28 @@ mod tests {
             PathModel::bus_model(Positions::Unknown).latency_ns(500),
             20_000
         );
+    }
+
+    #[test]
+    fn on_the_box_grid_a_stamp_less_the_path_falls_on_its_sample() {
+        // 250 Hz, cells numbered 66 to a bus: cell 66 sits 65 hops from its root
+        let paths = PathModel::bus_model(Positions::Numbered { cells_per_bus: 66 });
+        let mut timer = SampleTimer::new(250.0, paths.clone()).on_box_grid();
+        let period = 4_000_000u64;
+        for (cell, n, queued_ns) in [
+            (1u16, 10u64, 0u64),
+            (66, 11, 0),
+            (66, 12, 3_400_000),
+            (30, 13, 50_000),
+        ] {
+            let stamp = n * period + paths.latency_ns(cell) + queued_ns;
+            let t = timer.push(1, 0, cell, stamp);
+            assert_eq!(t.sample_time_ns, (n * period) as f64, "cell {cell}");
+            assert_eq!(t.index, n as i64);
+        }
+        // queued beyond 7/8 of a period the grid point is the next one: the method's limit
+        let stamp = 20 * period + paths.latency_ns(66) + period * 7 / 8 + 1;
+        assert_eq!(timer.push(1, 0, 66, stamp).index, 21);
+        assert_eq!(timer.cells(), 0);
     }
 }

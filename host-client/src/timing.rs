@@ -81,6 +81,12 @@ pub struct Timing {
 }
 
 impl Timing {
+    /// The same timing for cells on the box's time grid ([`SampleTimer::on_box_grid`]).
+    pub fn on_box_grid(mut self) -> Timing {
+        self.samples = self.samples.on_box_grid();
+        self
+    }
+
     /// Cells sampling nominally at `sample_rate_hz` on paths of `paths`.
     pub fn new(sample_rate_hz: f64, paths: PathModel) -> Timing {
         Timing {

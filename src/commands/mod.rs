@@ -114,6 +114,11 @@ pub struct TimingArgs {
     /// A cell's processing before its packet leaves, ns (the bus model's 20 us).
     #[arg(long, default_value_t = skinbox_host::sample_clock::PROCESSING_NS)]
     pub processing_ns: u64,
+    /// The cells sample on the box's time grid (time-sync commands, docs/time.md method c):
+    /// a sample's time is the grid point its stamp less the path latency falls on, instead
+    /// of the estimate from each cell's stamps (method b).
+    #[arg(long)]
+    pub synced: bool,
 }
 
 impl TimingArgs {
@@ -128,14 +133,19 @@ impl TimingArgs {
             Some(n) => Positions::Numbered { cells_per_bus: n },
             None => Positions::Unknown,
         };
-        Ok(skinbox_host::timing::Timing::new(
+        let timing = skinbox_host::timing::Timing::new(
             sample_rate_hz,
             PathModel {
                 processing_ns: self.processing_ns,
                 hop_latency_ns: self.hop_latency_ns,
                 hops,
             },
-        ))
+        );
+        Ok(if self.synced {
+            timing.on_box_grid()
+        } else {
+            timing
+        })
     }
 }
 

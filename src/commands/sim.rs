@@ -369,7 +369,8 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
 }
 
 /// Method (c) over the delivered records: the grid point of box time the stamp minus the
-/// cell's half round trip falls on (`assign_synced`, in box time), taken to scene time.
+/// cell's half round trip falls on (the host's `SampleTimer::on_box_grid`, in box time),
+/// taken to scene time.
 /// Counted from when the box's first sync on the port has reached the bus's last cell and
 /// a sample period has passed: the simulated box starts its time base at the window, so
 /// cells sample on the scene's time until then.
@@ -380,7 +381,7 @@ fn synced_sample_time_error(
     (from_ns, duration_ms): (u64, f64),
     plan: &skinbox_cosim::scene::DownlinkPlan,
 ) -> SampleTimeError {
-    use skinbox::studies::sample_time::{assign_synced, errors, matched, Method};
+    use skinbox::studies::sample_time::{errors, matched, Method};
     use skinbox_protocol::TICK_NS;
     let window = from_ns..from_ns + (duration_ms * 1e6) as u64;
     let offset_ns = skinbox_cosim::scene::scene_ns_of_tick(0, from_ns) as f64;
@@ -409,13 +410,22 @@ fn synced_sample_time_error(
     let (packets, assigned): (Vec<_>, Vec<_>) = settled
         .iter()
         .flat_map(|bus| {
-            let box_grid = assign_synced(
-                bus,
+            // the host's own timer on the box's grid (what `decode --synced` uses)
+            use skinbox_host::sample_clock::{PathModel, Positions, SampleTimer};
+            let hops = bus.iter().map(|p| (p.cell_id, p.hops)).collect();
+            let mut timer = SampleTimer::new(
                 scene.config.scene.sample_rate_hz,
-                b.processing_ns,
-                b.hop_latency_ns,
-                b.hop_latency_ns,
-            );
+                PathModel {
+                    processing_ns: b.processing_ns,
+                    hop_latency_ns: b.hop_latency_ns,
+                    hops: Positions::Listed(hops),
+                },
+            )
+            .on_box_grid();
+            let box_grid: Vec<f64> = bus
+                .iter()
+                .map(|p| timer.push(0, 0, p.cell_id, p.stamp_ns).sample_time_ns)
+                .collect();
             bus.iter()
                 .copied()
                 .zip(box_grid.into_iter().map(move |g| g + offset_ns))
