@@ -11,56 +11,17 @@ use skinbox_cosim::control::{BoxControl, ControlConfig, DOWNLINK_OFFER_AFTER_REC
 use skinbox_cosim::downlink::{DownlinkModel, PinChange};
 use skinbox_cosim::harness::{LINK_SPEED, LINK_UP};
 use skinbox_cosim::reference::run_reference;
-use skinbox_cosim::run::{HostFrame, SentPacket, SimSpec, TICK_ZERO_CYCLE};
+use skinbox_cosim::run::{HostFrame, SimSpec, TICK_ZERO_CYCLE};
 use skinbox_cosim::sim::run_rtl;
 use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::{AckRepr, AckResult, Request, ALL_PORTS};
-use skinbox_protocol::{DataRepr, TICKS_PER_SECOND};
+use skinbox_protocol::TICKS_PER_SECOND;
 use support::*;
 
 /// Ticks per bit at 4 Mbit/s.
 const BIT_TICKS: f64 = TICKS_PER_SECOND as f64 / 4_000_000.0;
-
-/// The box of the support module's control configuration.
-fn box_config() -> BoxConfig {
-    let c = config();
-    BoxConfig {
-        ports: usize::from(c.port_count),
-        box_id: c.box_id,
-        link: c.link,
-        flush_timeout_ticks: u64::from(c.flush_timeout_ticks),
-        status_period_ticks: u64::from(c.status_period_ticks),
-        ..BoxConfig::default()
-    }
-}
-
-/// Every port at line rate: a cell packet every 200 bits from 20 us to `until_ns`.
-fn line_rate(ports: usize, until_ns: f64) -> Vec<Vec<SentPacket>> {
-    (0..ports)
-        .map(|port| {
-            let mut t = 20_000.0 + port as f64 * 1_100.0;
-            let mut out = vec![];
-            let mut n = 0u16;
-            while t < until_ns {
-                out.push(SentPacket {
-                    bytes: DataRepr::from_raw(
-                        (port as u16) << 8 | (n & 0xFF),
-                        [i32::from(n), 1, 2, 3, 4, 5, 6, 7, 8],
-                    )
-                    .unwrap()
-                    .to_bytes(),
-                    start_ns: t,
-                    bit_ns: 250.0,
-                });
-                t += 50_000.0;
-                n = n.wrapping_add(1);
-            }
-            out
-        })
-        .collect()
-}
 
 /// The bytes on each port's pin: a start bit is a fall from high; each bit is sampled in
 /// its middle, the stop bit must be high.
@@ -150,7 +111,7 @@ fn cell_commands_leave_on_the_uart_pins_as_the_reference_says_while_the_uplink_r
     let duration_ns = 440_000;
     let spec = SimSpec {
         config: config.clone(),
-        ports: line_rate(config.ports, 300_000.0),
+        ports: traffic(config.ports, 20_000.0, 300_000.0, 50_000.0),
         duration_ns,
         pcap: None,
         vcd: None,

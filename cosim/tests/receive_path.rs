@@ -18,25 +18,12 @@ use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::{UART_BAUD, UART_BITS_PER_PACKET};
 use skinbox_protocol::command::{AckRepr, Request};
 use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT};
-use skinbox_protocol::{DataRepr, DatagramRepr, TICKS_PER_SECOND, TICK_NS};
+use skinbox_protocol::{DatagramRepr, TICKS_PER_SECOND, TICK_NS};
 use std::collections::BTreeMap;
 use support::*;
 
 /// Ticks of one cell packet on its 4 Mbit/s line.
 const PACKET_TICKS: u64 = UART_BITS_PER_PACKET * TICKS_PER_SECOND / UART_BAUD;
-
-/// The box of the support module's control configuration.
-fn box_config() -> BoxConfig {
-    let c = config();
-    BoxConfig {
-        ports: usize::from(c.port_count),
-        box_id: c.box_id,
-        link: c.link,
-        flush_timeout_ticks: u64::from(c.flush_timeout_ticks),
-        status_period_ticks: u64::from(c.status_period_ticks),
-        ..BoxConfig::default()
-    }
-}
 
 /// The control model as the co-simulated box starts: its link as the harness drives it.
 fn model(config: ControlConfig) -> BoxControl {
@@ -44,34 +31,6 @@ fn model(config: ControlConfig) -> BoxControl {
     m.counters.link_up = LINK_UP;
     m.counters.link_speed = LINK_SPEED;
     m
-}
-
-/// Cell packets on every port: one every `every_ns` from `from_ns` to `until_ns`.
-fn traffic(ports: usize, from_ns: f64, until_ns: f64, every_ns: f64) -> Vec<Vec<SentPacket>> {
-    let bit_ns = 250.0;
-    (0..ports)
-        .map(|port| {
-            let mut out = vec![];
-            let mut t = from_ns + port as f64 * 1_100.0;
-            let mut n = 0u16;
-            while t < until_ns {
-                let bytes = DataRepr::from_raw(
-                    (port as u16) << 8 | (n & 0xFF),
-                    [i32::from(n), 1, 2, 3, 4, 5, 6, 7, 8],
-                )
-                .unwrap()
-                .to_bytes();
-                out.push(SentPacket {
-                    bytes,
-                    start_ns: t,
-                    bit_ns,
-                });
-                t += every_ns;
-                n = n.wrapping_add(1);
-            }
-            out
-        })
-        .collect()
 }
 
 fn spec(

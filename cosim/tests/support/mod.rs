@@ -9,13 +9,16 @@ use etherparse::{
     PacketBuilder,
 };
 use skinbox_cosim::control::{ControlConfig, Effect, Reply};
+use skinbox_cosim::run::SentPacket;
 use skinbox_frame_check::{check, encode, UdpAddresses};
+use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::{
     AckRepr, AckResult, CommandRepr, Destination, Request, MIN_STATUS_PERIOD_TICKS,
 };
 use skinbox_protocol::link::LinkConfig;
+use skinbox_protocol::DataRepr;
 use std::collections::BTreeMap;
 
 pub const BOX_MAC: [u8; 6] = [0x02, 0x53, 0x4B, 0x00, 0x00, 0x01];
@@ -424,4 +427,45 @@ pub fn random_case(
             }
         }
     }
+}
+
+/// The box of the support module's control configuration.
+pub fn box_config() -> BoxConfig {
+    let c = config();
+    BoxConfig {
+        ports: usize::from(c.port_count),
+        box_id: c.box_id,
+        link: c.link,
+        flush_timeout_ticks: u64::from(c.flush_timeout_ticks),
+        status_period_ticks: u64::from(c.status_period_ticks),
+        ..BoxConfig::default()
+    }
+}
+
+/// Cell packets on every port: one every `every_ns` from `from_ns` to `until_ns`.
+pub fn traffic(ports: usize, from_ns: f64, until_ns: f64, every_ns: f64) -> Vec<Vec<SentPacket>> {
+    let bit_ns = 250.0;
+    (0..ports)
+        .map(|port| {
+            let mut out = vec![];
+            let mut t = from_ns + port as f64 * 1_100.0;
+            let mut n = 0u16;
+            while t < until_ns {
+                let bytes = DataRepr::from_raw(
+                    (port as u16) << 8 | (n & 0xFF),
+                    [i32::from(n), 1, 2, 3, 4, 5, 6, 7, 8],
+                )
+                .unwrap()
+                .to_bytes();
+                out.push(SentPacket {
+                    bytes,
+                    start_ns: t,
+                    bit_ns,
+                });
+                t += every_ns;
+                n = n.wrapping_add(1);
+            }
+            out
+        })
+        .collect()
 }
