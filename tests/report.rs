@@ -118,6 +118,11 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
             "C5d Sample time error against bus load",
         ),
         ("c6_sample_rate", "C6 Packet rate against sample rate"),
+        (
+            "c7_mode_rate_packets",
+            "C7 One skin switched by host commands",
+        ),
+        ("c7_mode_rate_cpu", "C7 Host CPU against sample rate"),
     ];
     assert_eq!(
         written["charts"].as_array().unwrap().len(),
@@ -300,17 +305,51 @@ fn quick_report_writes_every_chart_and_the_numbers_behind_them() {
         )
     };
     assert!(share("stroking_arm", "500") < share("stroking_arm", "62.5"));
+
+    // C7: one skin switched through data and event mode at the four rates by host commands
+    // through the box; the papers' curves recomputed here (docs/design.md section 2)
+    let c7 = &tables(&summary, "C7")[1];
+    assert_eq!(c7.len(), 8);
+    for r in c7 {
+        let x = num(r, "sample rate (Hz)");
+        let packets = num(r, "packets per cell per s");
+        let papers = num(r, "papers (data: 0.9435 x; event: Fig. 11 fit)");
+        let driver = num(r, "papers' driver CPU (%) at this packet rate");
+        let total = packets * 260.0;
+        match r["mode"].as_str() {
+            "data" => {
+                assert!((packets / x - 1.0).abs() < 0.01, "{r:?}");
+                assert!((papers - 0.9435 * x).abs() < 0.006, "{r:?}");
+                assert!(
+                    (driver - 45.52 * (5.453e-5 * total + 1.0).ln()).abs() < 0.06,
+                    "{r:?}"
+                );
+            }
+            "event" => {
+                assert!(packets < 0.8 * x, "{r:?}");
+                let fit = 74.2308 * (6.154e-3 * x + 1.0f64).ln();
+                assert!((papers - fit).abs() < 0.006, "{r:?}");
+                assert!(
+                    (driver - 32.65 * (1.239e-4 * total + 1.0).ln()).abs() < 0.06,
+                    "{r:?}"
+                );
+            }
+            m => panic!("mode {m}"),
+        }
+        assert!(num(r, "host CPU (% of a core)") < driver, "{r:?}");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
 
 /// The summary with the measured wall times masked: the first line (how and in how long
 /// it was written), C2's "wall time per simulated s (s)" column and the C2 findings made
-/// from those times (speed-ups, wall times, the extrapolation), and C5's host CPU columns.
+/// from those times (speed-ups, wall times, the extrapolation), and the host CPU columns
+/// of C5 and C7 and C7's host CPU finding.
 /// A merged report keeps the times each shard measured, which differ from run to run;
 /// every other number must agree.
 fn masked(summary: &str) -> String {
     const TIMING_COLUMN: &str = "wall time per simulated s (s)";
-    const CPU_COLUMN: &str = "host CPU (ns/packet";
+    const CPU_COLUMN: &str = "host CPU";
     const TIMING_FINDINGS: [&str; 3] = [
         "reference model wall time per simulated s",
         "RTL wall time per simulated s",
@@ -319,7 +358,7 @@ fn masked(summary: &str) -> String {
     let mut out = Vec::new();
     let mut section = "";
     let mut masked_column = None;
-    let mut cpu_column = None;
+    let mut cpu_columns: Vec<usize> = Vec::new();
     let mut in_table = false;
     for line in summary.lines() {
         if let Some(heading) = line.strip_prefix("## ") {
@@ -342,9 +381,16 @@ fn masked(summary: &str) -> String {
         if !in_table {
             in_table = true;
             masked_column = cells.iter().position(|c| c == TIMING_COLUMN);
-            cpu_column = cells.iter().position(|c| c.starts_with(CPU_COLUMN));
-        } else if let Some(k) = cpu_column.filter(|&k| k < cells.len()) {
-            cells[k] = "(time)".into();
+            cpu_columns = (0..cells.len())
+                .filter(|&k| cells[k].starts_with(CPU_COLUMN))
+                .collect();
+        } else if !cpu_columns.is_empty() {
+            let n = cells.len();
+            for &k in cpu_columns.iter().filter(|&&k| k < n) {
+                cells[k] = "(time)".into();
+            }
+        } else if section == "C7" && cells.len() > 1 && cells[0].starts_with(CPU_COLUMN) {
+            cells[1] = "(time)".into();
         } else if section == "C2" && cells.len() > 1 {
             if let Some(k) = masked_column.filter(|&k| k < cells.len()) {
                 cells[k] = "(time)".into();
@@ -449,10 +495,11 @@ fn quick_report_in_three_shards_merges_into_the_unsharded_report() {
     assert_eq!(masked(&merged_summary), masked(&whole_summary));
     // the mask hides the times and nothing else: the column in the 10 rows of the quick
     // C2 table (RTL, cell models, reference, rate model at 7 sizes) and 4 findings; C5's
-    // host CPU in its 36 rows (4 scenes and modes, 3 rates, 3 methods) and 3 cost rows
+    // host CPU in its 36 rows (4 scenes and modes, 3 rates, 3 methods) and 3 cost rows;
+    // C7's two host CPU columns in its 8 segments and its CPU finding
     assert_eq!(
         masked(&whole_summary).matches("(time)").count(),
-        10 + 4 + 36 + 3
+        10 + 4 + 36 + 3 + 8 * 2 + 1
     );
 
     let names = |v: &serde_json::Value| -> Vec<String> {
@@ -470,11 +517,10 @@ fn quick_report_in_three_shards_merges_into_the_unsharded_report() {
             .collect()
     };
     assert_eq!(names(&merged), names(&whole));
-    // (the C2 charts and C5's cost chart draw measured times)
-    for name in names(&whole)
-        .iter()
-        .filter(|n| !n.starts_with("c2_") && !n.starts_with("c5b_"))
-    {
+    // (the C2 charts, C5's cost chart and C7's CPU chart draw measured times)
+    for name in names(&whole).iter().filter(|n| {
+        !n.starts_with("c2_") && !n.starts_with("c5b_") && !n.starts_with("c7_mode_rate_cpu")
+    }) {
         let read = |d: &str| std::fs::read(dir.join(d).join(name)).unwrap();
         assert!(read("merged") == read("whole"), "{name} differs");
     }
