@@ -8,7 +8,7 @@
 //! flight) and jumps over idle stretches, so a run of seconds with a few commands costs
 //! a few hundred thousand port-clocks.
 
-use skinbox_gateware::cell_downlink::{COPY_CLOCKS_PER_PORT, QUEUE_PACKETS};
+use skinbox_gateware::cell_downlink::QUEUE_PACKETS;
 use skinbox_gateware::uart_rx::{phase_increment, PHASE_BITS};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::ALL_PORTS;
@@ -303,9 +303,4 @@ impl DownlinkModel {
         self.broadcast = next_broadcast;
         self.tick = tick + 1;
     }
-}
-
-/// Clocks a copy of an `ALL_PORTS` packet into `ports` ports takes.
-pub fn broadcast_copy_clocks(ports: usize) -> u64 {
-    ports as u64 * COPY_CLOCKS_PER_PORT
 }
