@@ -1,17 +1,19 @@
-//! The box's downlink to the cells, clock by clock: a model of the gateware's
-//! `CellDownlink` (`gateware/src/cell_downlink.rs`) and its `UartTx` pins, register for
-//! register, so the reference model can say which cell commands the box takes and when
-//! every bit of them is on which transmit pin.
+//! The box's downlink to the cells: a model of the gateware's `CellDownlink`
+//! (`gateware/src/cell_downlink.rs`) to the clock, so the reference model can say which
+//! cell commands the box takes and when every bit of them is on which transmit pin.
 //!
-//! Clocks are box ticks (the tick counter and the downlink leave reset together). The
-//! model runs only while something is under way (a copy, a queued packet, a byte in
-//! flight) and jumps over idle stretches, so a run of seconds with a few commands costs
-//! a few hundred thousand port-clocks.
+//! The gateware sends on every pin in one shared bit time and frame: after a frame's last
+//! data bit a refill scan visits one port a clock and loads the next byte of its oldest
+//! packet (or nothing) for the next frame. The model follows those visits and the copies of
+//! accepted packets into the queues as events at their clocks, and writes each frame's
+//! pins from the byte it loaded; ticks are box ticks (the tick counter and the downlink
+//! leave reset together). An idle downlink costs nothing: frames without a queued packet
+//! are skipped.
 
-use skinbox_gateware::cell_downlink::QUEUE_PACKETS;
-use skinbox_gateware::uart_rx::{phase_increment, PHASE_BITS};
+use skinbox_gateware::cell_downlink::{bit_start, frame_bits, QUEUE_PACKETS, REFILL_LATENCY};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::ALL_PORTS;
+use std::collections::VecDeque;
 
 /// A change of one transmit pin: from clock `tick` on, `port`'s pin is at `level`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -35,51 +37,56 @@ pub struct PacketStart {
     pub bytes: [u8; PACKET_LEN],
 }
 
-/// One port's queue, holding register and transmitter.
-#[derive(Debug, Clone, Copy, Default)]
+/// Clocks from the offer to the first copy's commit: the offer register, then 20 copy
+/// clocks (the commit is the 20th).
+const OFFER_TO_COMMIT: u64 = 1 + PACKET_LEN as u64;
+/// Edges from a refill visit to the edge its slot is freed (the count read two clocks
+/// later, registered once more).
+const VISIT_TO_FREE: u64 = 4;
+
+/// One port's queue.
+#[derive(Debug, Clone, Default)]
 struct Port {
+    /// Packets counted in the queue (committed, last byte not yet read).
     count: u64,
-    head: bool,
-    read_index: usize,
-    fetching: bool,
-    holding_valid: bool,
-    holding: u8,
-    // the transmitter
-    phase: u32,
-    sending: bool,
-    bit_index: u8,
-    shift: u16,
+    /// The packets committed whose bytes are not all read, oldest first.
+    packets: VecDeque<[u8; PACKET_LEN]>,
+    /// Next byte of the oldest packet.
+    index: usize,
+    /// The edge at which the oldest packet's slot is freed, once its last byte was read.
+    free_at: Option<u64>,
+    /// The pin's level after the last change written.
     pin: bool,
-    /// Bytes of the oldest packet taken by the transmitter so far.
-    taken: usize,
+}
+
+/// A copy into the queues under way.
+#[derive(Debug, Clone)]
+struct Copy {
+    packet: [u8; PACKET_LEN],
+    /// The ports still to commit, in order, and the cycle of the next commit.
+    ports: VecDeque<usize>,
+    next_commit: u64,
 }
 
 /// The downlink of a box with `ports` ports.
 #[derive(Debug, Clone)]
 pub struct DownlinkModel {
-    increment: u32,
-    /// The next clock to evaluate.
+    clock_hz: u64,
+    baud: u64,
+    frame_bits: u64,
+    /// The registers are those of this cycle (every edge up to it applied).
     tick: u64,
     ports: Vec<Port>,
-    /// Two packet slots per port.
-    ram: Vec<[[u8; PACKET_LEN]; 2]>,
-    staging: [u8; PACKET_LEN],
-    /// The packet being copied, whole.
-    copy_packet: [u8; PACKET_LEN],
-    /// The offer taken in the previous clock (registered: its copy starts now).
-    offered: Option<(u8, [u8; PACKET_LEN])>,
-    copying: bool,
-    broadcast: bool,
-    copy_port: usize,
-    copy_index: usize,
-    scan: usize,
-    /// Reads in flight, newest first: (port, slot, byte index); the oldest's data arrives
-    /// in this clock (address register, then the RAM's two clocks).
-    reads: [Option<(usize, bool, usize)>; 3],
+    /// The offer taken last: busy until its copy's last commit (inclusive).
+    busy_until: Option<u64>,
+    copy: Option<Copy>,
+    /// The frame whose refill scan is under way or next, and its next port to visit.
+    frame: u64,
+    next_port: usize,
     changes: Vec<PinChange>,
+    /// The changes of the frame whose refill scan is under way.
+    frame_changes: Vec<PinChange>,
     starts: Vec<PacketStart>,
-    /// Per port, the packets committed and not yet fully taken, oldest first.
-    packets: Vec<std::collections::VecDeque<[u8; PACKET_LEN]>>,
 }
 
 impl DownlinkModel {
@@ -87,7 +94,9 @@ impl DownlinkModel {
     /// reset at tick 0: queues empty, pins high.
     pub fn new(ports: usize, clock_hz: u64, baud: u64) -> DownlinkModel {
         DownlinkModel {
-            increment: phase_increment(clock_hz, baud) as u32,
+            clock_hz,
+            baud,
+            frame_bits: frame_bits(ports),
             tick: 0,
             ports: (0..ports)
                 .map(|_| Port {
@@ -95,44 +104,151 @@ impl DownlinkModel {
                     ..Port::default()
                 })
                 .collect(),
-            ram: vec![[[0; PACKET_LEN]; 2]; ports],
-            staging: [0; PACKET_LEN],
-            copy_packet: [0; PACKET_LEN],
-            offered: None,
-            copying: false,
-            broadcast: false,
-            copy_port: 0,
-            copy_index: 0,
-            scan: 0,
-            reads: [None; 3],
+            busy_until: None,
+            copy: None,
+            frame: 0,
+            next_port: 0,
             changes: Vec::new(),
+            frame_changes: Vec::new(),
             starts: Vec::new(),
-            packets: vec![std::collections::VecDeque::new(); ports],
         }
     }
 
-    /// Nothing under way: the state only changes by the scan's position.
+    /// Tick from which bit `bit` of the shared frames is on the pins.
+    fn bit_start(&self, bit: u64) -> u64 {
+        bit_start(self.clock_hz, self.baud, bit)
+    }
+
+    /// The cycle of frame `frame`'s refill visit of port 0 (the clock after the pins took
+    /// its last data bit).
+    fn refill_start(&self, frame: u64) -> u64 {
+        self.bit_start(frame * self.frame_bits + 8)
+    }
+
+    /// Nothing queued, copied or in flight: refills load nothing.
     fn idle(&self) -> bool {
-        !self.copying
-            && self.offered.is_none()
-            && self.reads.iter().all(Option::is_none)
+        self.copy.is_none()
             && self
                 .ports
                 .iter()
-                .all(|p| p.count == 0 && !p.fetching && !p.holding_valid && !p.sending)
+                .all(|p| p.count == 0 && p.free_at.is_none())
     }
 
-    /// Evaluates clocks up to (not including) `tick`.
-    pub fn advance_to(&mut self, tick: u64) {
-        while self.tick < tick {
-            if self.idle() {
-                let n = self.ports.len() as u64;
-                self.scan = ((self.scan as u64 + (tick - self.tick)) % n) as usize;
-                self.tick = tick;
+    /// Applies the copy's commits whose count is in place by edge `edge` (a commit in
+    /// cycle `c` counts from edge `c + 1`).
+    fn commit_until(&mut self, edge: u64) {
+        while let Some(copy) = &mut self.copy {
+            if copy.next_commit + 1 > edge {
                 return;
             }
-            self.clock(None);
+            let port = copy.ports.pop_front().expect("a copy has ports left");
+            let packet = copy.packet;
+            copy.next_commit += PACKET_LEN as u64;
+            if copy.ports.is_empty() {
+                self.copy = None;
+            }
+            let p = &mut self.ports[port];
+            p.count += 1;
+            p.packets.push_back(packet);
         }
+    }
+
+    /// Applies the slot frees that happen by edge `edge`.
+    fn free_until(&mut self, edge: u64) {
+        for p in &mut self.ports {
+            if p.free_at.is_some_and(|at| at <= edge) {
+                p.free_at = None;
+                p.count -= 1;
+            }
+        }
+    }
+
+    /// The cycle of the next refill visit (port `self.next_port` of `self.frame`).
+    fn next_visit(&self) -> u64 {
+        self.refill_start(self.frame) + self.next_port as u64
+    }
+
+    /// One refill visit: the port's byte for the next frame, and that frame's pins.
+    fn visit(&mut self) {
+        let visit = self.next_visit();
+        let s = self.next_port;
+        let start_bit = (self.frame + 1) * self.frame_bits;
+        debug_assert!(visit + REFILL_LATENCY < self.bit_start(start_bit));
+        self.next_port += 1;
+        if self.next_port == self.ports.len() {
+            self.next_port = 0;
+            self.frame += 1;
+        }
+        self.visit_port(visit, s, start_bit);
+        if self.next_port == 0 {
+            // the frame's changes, in tick order and port order within a tick
+            self.frame_changes.sort_by_key(|c| (c.tick, c.port));
+            self.changes.append(&mut self.frame_changes);
+        }
+    }
+
+    /// Port `s`'s refill at cycle `visit`, for the frame starting at bit `start_bit`.
+    fn visit_port(&mut self, visit: u64, s: usize, start_bit: u64) {
+        self.commit_until(visit);
+        self.free_until(visit);
+        let (clock_hz, baud) = (self.clock_hz, self.baud);
+        let port = &mut self.ports[s];
+        if port.count == 0 {
+            return;
+        }
+        let packet = *port.packets.front().expect("a counted packet is queued");
+        let index = port.index;
+        port.index += 1;
+        if port.index == PACKET_LEN {
+            port.index = 0;
+            port.packets.pop_front();
+            port.free_at = Some(visit + VISIT_TO_FREE);
+        }
+        let byte = packet[index];
+        let levels = std::iter::once(false)
+            .chain((0..8).map(|b| byte >> b & 1 == 1))
+            .chain(std::iter::once(true));
+        for (b, level) in levels.enumerate() {
+            if level != port.pin {
+                port.pin = level;
+                self.frame_changes.push(PinChange {
+                    tick: bit_start(clock_hz, baud, start_bit + b as u64),
+                    port: s,
+                    level,
+                });
+            }
+        }
+        if index == 0 {
+            self.starts.push(PacketStart {
+                tick: bit_start(clock_hz, baud, start_bit),
+                port: s,
+                bytes: packet,
+            });
+        }
+    }
+
+    /// Evaluates clocks up to (not including) `tick`: the registers are then those of
+    /// cycle `tick`.
+    pub fn advance_to(&mut self, tick: u64) {
+        if tick <= self.tick {
+            return;
+        }
+        loop {
+            if self.idle() && self.next_port == 0 {
+                // skip the frames whose refill would find nothing
+                while self.refill_start(self.frame) < tick {
+                    self.frame += 1;
+                }
+                break;
+            }
+            if self.next_visit() >= tick {
+                break;
+            }
+            self.visit();
+        }
+        self.commit_until(tick);
+        self.free_until(tick);
+        self.tick = tick;
     }
 
     /// Offers `packet` for `port` (or `ALL_PORTS`) in clock `tick` (the command unit's
@@ -141,21 +257,34 @@ impl DownlinkModel {
     pub fn offer(&mut self, tick: u64, port: u8, packet: [u8; PACKET_LEN]) -> bool {
         self.advance_to(tick);
         let full = |p: &Port| p.count == QUEUE_PACKETS;
-        let refused = self.copying
-            || self.offered.is_some()
+        let busy = self.busy_until.is_some_and(|until| tick <= until);
+        let refused = busy
             || if port == ALL_PORTS {
                 self.ports.iter().any(full)
             } else {
                 self.ports.get(port as usize).is_none_or(full)
             };
-        if !refused {
-            self.clock(Some((port, packet)));
+        if refused {
+            return false;
         }
-        !refused
+        let targets: VecDeque<usize> = if port == ALL_PORTS {
+            (0..self.ports.len()).collect()
+        } else {
+            VecDeque::from([port as usize])
+        };
+        let first_commit = tick + OFFER_TO_COMMIT;
+        self.busy_until = Some(first_commit + (targets.len() as u64 - 1) * PACKET_LEN as u64);
+        self.copy = Some(Copy {
+            packet,
+            ports: targets,
+            next_commit: first_commit,
+        });
+        true
     }
 
-    /// Pin changes so far, in tick order within each port (a change at tick `t` is
-    /// reported once the model evaluated clock `t - 1`).
+    /// Pin changes so far, in tick order and port order within a tick: every change of a
+    /// frame whose refill scan ran (a change at tick `t` is reported by the time the model
+    /// reached `t`).
     pub fn changes(&self) -> &[PinChange] {
         &self.changes
     }
@@ -173,134 +302,13 @@ impl DownlinkModel {
 
     /// Runs until every packet taken has left its pin; returns the tick after that.
     pub fn drain(&mut self) -> u64 {
-        while !self.idle() {
-            self.clock(None);
+        while !(self.idle() && self.next_port == 0) {
+            let next = self.next_visit();
+            self.advance_to(next.max(self.tick) + 1);
         }
+        // the last frame loaded (the frame after the last refill that found a byte) ends
+        let end = self.bit_start((self.frame + 1) * self.frame_bits);
+        self.advance_to(end.max(self.tick));
         self.tick
-    }
-
-    /// One clock, with an accepted offer in it.
-    fn clock(&mut self, offer: Option<(u8, [u8; PACKET_LEN])>) {
-        let offered = std::mem::replace(&mut self.offered, offer);
-        let n = self.ports.len();
-        let tick = self.tick;
-        // the copy (registers as they were at the start of the clock)
-        let mut commit = None;
-        let (mut next_copying, mut next_copy_port, mut next_copy_index, mut next_broadcast) = (
-            self.copying,
-            self.copy_port,
-            self.copy_index,
-            self.broadcast,
-        );
-        let mut next_staging = self.staging;
-        if self.copying {
-            let p = &self.ports[self.copy_port];
-            let slot = p.head ^ (p.count == 1);
-            self.ram[self.copy_port][usize::from(slot)][self.copy_index] = self.staging[0];
-            next_staging.rotate_left(1);
-            next_copy_index = self.copy_index + 1;
-            if self.copy_index == PACKET_LEN - 1 {
-                commit = Some(self.copy_port);
-                next_copy_index = 0;
-                if self.broadcast && self.copy_port != n - 1 {
-                    next_copy_port = self.copy_port + 1;
-                } else {
-                    next_copying = false;
-                }
-            }
-        }
-        if let Some((port, packet)) = offered {
-            next_staging = packet;
-            self.copy_packet = packet;
-            next_copying = true;
-            next_copy_index = 0;
-            next_broadcast = port == ALL_PORTS;
-            next_copy_port = if port == ALL_PORTS { 0 } else { port as usize };
-        }
-        // the scan, and the read whose data arrives in this clock
-        let arriving = self.reads[2];
-        let mut issued = None;
-        for (i, p) in self.ports.iter_mut().enumerate() {
-            // the transmitter (its `ready`/take, from the registers)
-            let bit_end = p.phase >> PHASE_BITS & 1 == 1;
-            let ready = !p.sending || (bit_end && p.bit_index == 9);
-            let take = ready && p.holding_valid;
-            let mut next = *p;
-            next.phase = (p.phase & ((1 << PHASE_BITS) - 1)) + self.increment;
-            if p.sending && bit_end {
-                if p.bit_index == 9 {
-                    next.sending = false;
-                } else {
-                    next.pin = p.shift & 1 == 1;
-                    next.shift = p.shift >> 1 | 1 << 8;
-                    next.bit_index = p.bit_index + 1;
-                }
-            }
-            if take {
-                if !p.sending {
-                    next.phase = self.increment;
-                }
-                next.sending = true;
-                next.pin = false;
-                next.bit_index = 0;
-                next.shift = u16::from(p.holding) | 1 << 8;
-                next.holding_valid = false;
-                if p.taken == 0 {
-                    self.starts.push(PacketStart {
-                        tick: tick + 1,
-                        port: i,
-                        bytes: self.packets[i].front().copied().unwrap_or_default(),
-                    });
-                }
-                next.taken = p.taken + 1;
-                if next.taken == PACKET_LEN {
-                    next.taken = 0;
-                    self.packets[i].pop_front();
-                }
-            }
-            // the queue
-            if self.scan == i && p.count != 0 && !p.fetching && !p.holding_valid {
-                issued = Some((i, p.head, p.read_index));
-                next.fetching = true;
-                next.read_index = p.read_index + 1;
-                if p.read_index == PACKET_LEN - 1 {
-                    next.read_index = 0;
-                    next.head = !p.head;
-                    next.count = p.count - 1;
-                    if commit == Some(i) {
-                        next.count = p.count;
-                    }
-                }
-            }
-            if commit == Some(i) && !(issued.is_some_and(|r| r.0 == i) && p.read_index == 19) {
-                next.count = p.count + 1;
-            }
-            if commit == Some(i) {
-                self.packets[i].push_back(self.copy_packet);
-            }
-            if let Some((port, slot, index)) = arriving {
-                if port == i {
-                    next.holding = self.ram[port][usize::from(slot)][index];
-                    next.holding_valid = true;
-                    next.fetching = false;
-                }
-            }
-            if next.pin != p.pin {
-                self.changes.push(PinChange {
-                    tick: tick + 1,
-                    port: i,
-                    level: next.pin,
-                });
-            }
-            *p = next;
-        }
-        self.reads = [issued, self.reads[0], self.reads[1]];
-        self.scan = if self.scan == n - 1 { 0 } else { self.scan + 1 };
-        self.staging = next_staging;
-        self.copying = next_copying;
-        self.copy_port = next_copy_port;
-        self.copy_index = next_copy_index;
-        self.broadcast = next_broadcast;
-        self.tick = tick + 1;
     }
 }

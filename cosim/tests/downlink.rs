@@ -175,13 +175,14 @@ fn cell_commands_leave_on_the_uart_pins_as_the_reference_says_while_the_uplink_r
         let got: Vec<u8> = bytes.iter().map(|b| b.1).collect();
         assert_eq!(got, expected[p], "port {p}");
     }
-    // an accepted command's first start bit leaves within the offer, the copy of its
-    // ports, a scan round and the read
+    // an accepted command's first start bit leaves after the offer and the copy (22
+    // clocks), at the start of the frame after the next refill scan: within two frames
     let first_ok = &host_frames[0];
     let start = decoded[3][0].0;
     let earliest = receive_tick(first_ok) + DOWNLINK_OFFER_AFTER_RECEIVE_TICK;
+    let frame_ticks = skinbox_gateware::cell_downlink::frame_bits(config.ports) as f64 * BIT_TICKS;
     assert!(
-        start > earliest && start <= earliest + 21 + config.ports as u64 + 5,
+        start > earliest + 22 && start as f64 <= (earliest + 22) as f64 + 2.0 * frame_ticks + 1.0,
         "first start bit at {start}, offer at {earliest}"
     );
     // two queued packets go out back to back: 400 bits
@@ -243,22 +244,28 @@ fn a_command_flood_to_one_port_is_refused_and_counted_not_queued() {
 }
 
 #[test]
-fn the_downlink_model_is_idle_cheap_and_starts_each_packet_on_the_scan() {
-    // a packet offered on an idle 64-port downlink leaves after its copy (20 clocks) once
-    // the scan reaches its port, a read (the address register and the RAM, 3 clocks) and
-    // the holding register (1 clock)
+fn the_downlink_model_is_idle_cheap_and_starts_each_packet_in_the_next_frame() {
+    // a packet offered on an idle 64-port downlink (11-bit frames) is committed after its
+    // copy (the offer register and 20 clocks); the first refill scan that visits its port
+    // after that (one port a clock from the clock after a frame's last data bit went to
+    // the pins) loads its first byte, whose start bit opens the next frame
+    let (clock_hz, baud) = (125_000_000, 4_000_000);
+    let frame = skinbox_gateware::cell_downlink::frame_bits(64);
+    assert_eq!(frame, 11);
+    let bit = |b: u64| skinbox_gateware::cell_downlink::bit_start(clock_hz, baud, b);
     for port in [0u8, 17, 63] {
-        let mut d = DownlinkModel::new(64, 125_000_000, 4_000_000);
+        let mut d = DownlinkModel::new(64, clock_hz, baud);
         let offer = 1_000_000_007;
         assert!(d.offer(offer, port, cell_packet(1)));
         d.drain();
         let first = d.changes()[0];
         assert_eq!(first.port, usize::from(port));
         assert!(!first.level);
-        // (the offer is registered: the copy runs in the clocks offer + 2 ..= offer + 21)
-        let committed = offer + 2 + 20;
-        let scan = (committed..).find(|t| t % 64 == u64::from(port)).unwrap();
-        assert_eq!(first.tick, scan + 4 + 1, "port {port}");
+        let counted = offer + 1 + 20 + 1;
+        let f = (0..)
+            .find(|f| bit(f * frame + 8) + u64::from(port) >= counted)
+            .unwrap();
+        assert_eq!(first.tick, bit((f + 1) * frame), "port {port}");
     }
 }
 

@@ -2,8 +2,9 @@
 //! its own clock error and +-10 ns of edge jitter: nothing is lost, nothing corrupted,
 //! every stamp lies within one tick after the true (jittered) start edge; the reference
 //! model predicts the same frames. Eight ports (the default box), 40 (both banks of the
-//! packet store, the first with its write ring at its longest, 32 clocks) and 64 (the
-//! largest box) for 10 ms.
+//! packet store), 45 (the board's largest box: busy, idle and edge-of-tolerance lines
+//! through the one deframing engine) and 64 (the largest box, whose receivers hold their
+//! bytes in hold registers) for 10 ms.
 
 use skinbox_cosim::reference::run_reference;
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec};
@@ -18,8 +19,8 @@ fn eight_ports_at_line_rate_lose_nothing() {
 
 #[test]
 fn forty_ports_at_line_rate_lose_nothing() {
-    // clock errors from -3 % to +3 %: the fast cells' bytes come 297 clocks apart, the
-    // write ring takes a header's five beats in at most 160
+    // clock errors from -3 % to +3 %: the fast cells' bytes come 303 clocks apart, the
+    // engine visits each port every 40 clocks
     at_line_rate(40, 16, 0.03);
 }
 
@@ -29,20 +30,64 @@ fn sixty_four_ports_at_line_rate_for_ten_ms_lose_nothing() {
     at_line_rate(64, 200, 0.03);
 }
 
+#[test]
+fn forty_five_ports_busy_idle_and_at_the_tolerance_edges_through_the_shared_engine() {
+    // the board's largest box: 37 ports at line rate with random clock errors (+-3 %) and
+    // start phases, 6 idle, one 4 % fast and one 4 % slow (the receiver's +-4.75 % less the
+    // lines' 10 ns of jitter); the deframing engine
+    // visits each port every 45 clocks, the receivers hold their bytes in their shift
+    // registers
+    let ports = 45;
+    let mut state = 0x5EED_u64;
+    let mut random = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let lines: Vec<Option<(f64, f64)>> = (0..ports)
+        .map(|port| match port {
+            3 | 11 | 20 | 29 | 38 | 41 => None,
+            43 => Some((0.04, 10_000.0)),
+            44 => Some((-0.04, 10_100.0)),
+            _ => Some((0.06 * random() - 0.03, 10_000.0 + 250.0 * random())),
+        })
+        .collect();
+    check_lines(&lines, 40);
+}
+
 /// `per_port` packets back to back on each of `ports` lines, the lines' clock errors
 /// spread evenly over +-`spread`.
 fn at_line_rate(ports: usize, per_port: usize, spread: f64) {
+    let lines: Vec<Option<(f64, f64)>> = (0..ports)
+        .map(|port| {
+            // start phases spread over a bit
+            let error = spread * (2.0 * port as f64 / (ports - 1) as f64 - 1.0);
+            Some((error, 10_000.0 + port as f64 * 37.3))
+        })
+        .collect();
+    check_lines(&lines, per_port);
+}
+
+/// `per_port` packets back to back on each line that has a (clock error, first start
+/// in ns), none on the others: the RTL loses nothing and stamps every packet within a
+/// tick, and the reference model predicts its frames.
+fn check_lines(lines: &[Option<(f64, f64)>], per_port: usize) {
+    let ports = lines.len();
+    let busy = lines.iter().filter(|l| l.is_some()).count();
     let spec = SimSpec {
         config: BoxConfig {
             ports,
             ..BoxConfig::default()
         },
-        ports: (0..ports)
-            .map(|port| {
-                // start phases spread over a bit
-                let error = spread * (2.0 * port as f64 / (ports - 1) as f64 - 1.0);
+        ports: lines
+            .iter()
+            .enumerate()
+            .map(|(port, line)| {
+                let Some((error, first)) = *line else {
+                    return vec![];
+                };
                 let bit_ns = 250.0 / (1.0 + error);
-                let first = 10_000.0 + port as f64 * 37.3;
                 (0..per_port)
                     .map(|k| {
                         let id = (port * per_port + k + 1) as u16;
@@ -80,7 +125,7 @@ fn at_line_rate(ports: usize, per_port: usize, spread: f64) {
     );
     let report = run.report;
     eprintln!("{report:?}");
-    assert_eq!(report.packets_sent, (ports * per_port) as u64);
+    assert_eq!(report.packets_sent, (busy * per_port) as u64);
     assert_eq!(report.packets_delivered, report.packets_sent);
     assert_eq!(report.records_corrupted, 0);
     assert!(

@@ -204,9 +204,10 @@ fn status_and_records_waiting_together_take_turns() {
 
 /// The idle gap's edge, clock by clock: on each port a packet stops after 11 bytes and the
 /// next one starts after an idle line of about the gap, 4 ns longer from port to port. Where
-/// the gap is reached first, the stopped packet is truncated and the next one stored; where
-/// its header comes first, the header continues the stopped packet, which then fails.
-/// Both models must draw the line at the same clock.
+/// no byte completed within `10 + idle_gap_bits` bit times of the last one, the stopped
+/// packet is truncated and the next one stored; where the header came in time, it
+/// continues the stopped packet, which then fails. Both models must draw the line at the
+/// same clock.
 #[test]
 fn truncation_at_the_idle_gap_clock_by_clock() {
     let ports = 24;
@@ -216,8 +217,8 @@ fn truncation_at_the_idle_gap_clock_by_clock() {
         ..BoxConfig::default()
     };
     let bit_ns = 250.0;
-    // the gap (10 bit times) is counted from the middle of the last stop bit
-    let idle_at_edge = (config.idle_gap_bits as f64 - 0.5) * bit_ns;
+    // strobe to strobe: the rest of the stop bit, the idle line and 9.5 bits of the header
+    let idle_at_edge = config.idle_gap_bits as f64 * bit_ns;
     let lines: Vec<Vec<Transition>> = (0..ports)
         .map(|port| {
             let first = 5_000.0 + port as f64 * 101.0;

@@ -10,25 +10,28 @@
 //!   decides a cell command, only when neither says no: a packet is queued whole in every
 //!   target port or not at all, and nothing waits outside the queues.
 //! - An accepted packet moves to the staging register (a clock after the offer) and is
-//!   copied, a byte a clock, into
-//!   each target port's queue (two packet slots per port in one [`BlockRam`]: port, slot
-//!   and byte index form the address), port after port for `ALL_PORTS`:
-//!   [`COPY_CLOCKS_PER_PORT`] clocks each. `accepted` pulses with `accepted_port` as each
-//!   copy is committed.
-//! - A scan visits one port per clock (port `n` in the clocks `n`, `n + ports`, ... after
-//!   reset) and reads the next byte of its oldest packet into the port's one-byte holding
-//!   register, which feeds the port's [`UartTx`]; the scan comes back every `ports`
-//!   clocks, well within a byte time (312.5 clocks), so a port's packets go out back to
-//!   back, in order. A slot is free in the clock after its last byte was read.
+//!   copied, a byte a clock, into each target port's queue (two packet slots per port in
+//!   one [`BlockRam`]: port, slot and byte index form the address), port after port for
+//!   `ALL_PORTS`: [`COPY_CLOCKS_PER_PORT`] clocks each. `accepted` pulses with
+//!   `accepted_port` as each copy is committed.
+//! - All pins share one bit time and one frame: a phase accumulator (31.25 clocks a bit at
+//!   4 Mbit/s) steps a frame of [`frame_bits`] bits (start, eight data bits, stop; a second
+//!   stop bit above [`TEN_BIT_FRAME_PORTS`] ports), and every port that has a byte sends it
+//!   in that frame. A port keeps only its byte, a start flag and its pin register: the
+//!   bit shifting of every transmitter is one shared bit index.
+//! - After the frame's last data bit has gone to the pins, a refill scan visits one port a
+//!   clock: it reads the port's read position (a RAM) and the next byte of its oldest
+//!   packet (the queue RAM) into the port's byte register, or 0xFF with no start bit when
+//!   the port's queue is empty, before the next frame's start bit. A slot is free when
+//!   its last byte was read; a port's packets go out back to back, in order.
 //!
-//! Cost (yosys `synth_ecp5` of the block alone, `read_verilog -DSKINBOX_ECP5_BRAM`): 8 ports
-//! 847 LUT4, 112 CCU2C, 626 FF, 2 DP16KD; 64 ports 4,328 LUT4, 782 CCU2C, 3,426 FF, 2 DP16KD
-//! (measured with a byte-stream input in place of the capture register).
-//! The queues in registers instead would take 320 FF per port (two 20-byte packets).
+//! Latency, a packet committed on an idle port to its first start bit: up to one frame and
+//! a refill (about 2.5 to 5 us). Cost per port: 13 flip-flops (byte, start, pin, queue
+//! count, write slot).
 
 use crate::block_ram::{BlockRam, READ_LATENCY};
 use crate::hdl::*;
-use crate::uart_tx::UartTx;
+use crate::uart_rx::{phase_increment, PHASE_BITS};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::{cell_command_field, ALL_PORTS, HEADER_LEN};
 use skinbox_protocol::link::{ETHERNET_HEADER_LEN, IPV4_HEADER_LEN, UDP_HEADER_LEN};
@@ -50,6 +53,32 @@ pub const PACKET_OFFSET: usize = ETHERNET_HEADER_LEN
 /// Largest port count.
 pub const MAX_PORTS: usize = 64;
 
+/// Most ports whose refill fits the two stop and start bit times of a 10-bit frame; more
+/// ports get a second stop bit.
+pub const TEN_BIT_FRAME_PORTS: usize = 56;
+
+/// Clocks from a port's refill visit to its byte register: the read position RAM, then
+/// the queue RAM, each two clocks, and the load.
+pub const REFILL_LATENCY: u64 = 5;
+
+/// Bits of a frame on every pin: start, eight data, one stop bit (two above
+/// [`TEN_BIT_FRAME_PORTS`] ports).
+pub fn frame_bits(ports: usize) -> u64 {
+    if ports <= TEN_BIT_FRAME_PORTS {
+        10
+    } else {
+        11
+    }
+}
+
+/// Clock edges from tick 0 to the start of bit `bit` of the shared frames (counting the
+/// bits of every frame, from frame 0's start bit): `ceil((bit + 1) * 2^16 / increment)`,
+/// where the accumulator carries. A pin changes at such an edge (it is seen from that
+/// tick on).
+pub fn bit_start(clock_hz: u64, baud: u64, bit: u64) -> u64 {
+    ((bit + 1) << PHASE_BITS).div_ceil(phase_increment(clock_hz, baud)) + 1
+}
+
 /// Queue RAM address: 6 bits of port, 1 of slot, 5 of byte index.
 const ADDRESS_BITS: usize = 12;
 
@@ -58,7 +87,7 @@ const ADDRESS_BITS: usize = 12;
 pub struct CellDownlink {
     /// The box clock.
     pub clock: Signal<In, Clock>,
-    /// Synchronous reset: queues emptied, pins idle.
+    /// Synchronous reset: queues emptied, pins idle, the frame restarts.
     pub reset: Signal<In, Bit>,
     /// A byte of a received frame is written into the reply buffer (the parser's write
     /// port): `capture_address` is its frame offset, `capture_data` the byte.
@@ -84,13 +113,16 @@ pub struct CellDownlink {
     /// The port of that copy.
     pub accepted_port: Signal<Out, Bits<8>>,
     ram: BlockRam<8, ADDRESS_BITS>,
-    uarts: Vec<UartTx>,
+    /// Per port: the slot its oldest packet is in (bit 5) and the next byte's index.
+    positions: BlockRam<6, 6>,
     port_number: Vec<Constant<Bits<8>>>,
     port_bit: Vec<Constant<Bits<64>>>,
     last_port: Constant<Bits<8>>,
     packet_first: Constant<Bits<11>>,
     packet_last: Constant<Bits<11>>,
     all_ports: Constant<Bits<8>>,
+    phase_increment: Constant<Bits<17>>,
+    last_frame_bit: Constant<Bits<4>>,
     // receive and copy
     captured: DFF<Bits<160>>,
     /// The offer, registered: the copy starts a clock after it.
@@ -103,33 +135,53 @@ pub struct CellDownlink {
     copy_index: DFF<Bits<5>>,
     accepted_out: DFF<Bit>,
     accepted_port_out: DFF<Bits<8>>,
-    // per port
-    count: Vec<DFF<Bits<2>>>,
-    head: Vec<DFF<Bit>>,
-    read_index: Vec<DFF<Bits<5>>>,
-    fetching: Vec<DFF<Bit>>,
-    holding_valid: Vec<DFF<Bit>>,
-    holding: Vec<DFF<Bits<8>>>,
-    // read scan and the RAM's read pipeline
-    scan: DFF<Bits<8>>,
-    /// Reads in flight: bit 2 marks the data of the read issued three clocks ago (the
-    /// address is registered before the RAM).
-    read_valid: DFF<Bits<3>>,
-    read_address: DFF<Bits<ADDRESS_BITS>>,
     write_enable: DFF<Bit>,
     write_address: DFF<Bits<ADDRESS_BITS>>,
     write_data: DFF<Bits<8>>,
-    read_port_1: DFF<Bits<8>>,
-    read_port_2: DFF<Bits<8>>,
-    read_port_3: DFF<Bits<8>>,
+    // the shared bit time and frame: the accumulator with its carry on top, the bit on
+    // the pins
+    phase: DFF<Bits<17>>,
+    frame_bit: DFF<Bits<4>>,
+    // the refill scan: the port visited, and the pipeline behind it
+    refilling: DFF<Bit>,
+    scan: DFF<Bits<6>>,
+    visit_1: DFF<Bit>,
+    port_1: DFF<Bits<6>>,
+    nonempty_1: DFF<Bit>,
+    visit_2: DFF<Bit>,
+    port_2: DFF<Bits<6>>,
+    nonempty_2: DFF<Bit>,
+    visit_3: DFF<Bit>,
+    port_3: DFF<Bits<6>>,
+    nonempty_3: DFF<Bit>,
+    visit_4: DFF<Bit>,
+    port_4: DFF<Bits<6>>,
+    nonempty_4: DFF<Bit>,
+    position_write: DFF<Bit>,
+    position_port: DFF<Bits<6>>,
+    position_next: DFF<Bits<6>>,
+    freed: DFF<Bit>,
+    freed_port: DFF<Bits<6>>,
+    clearing: DFF<Bit>,
+    clear_address: DFF<Bits<6>>,
+    // per port
+    count: Vec<DFF<Bits<2>>>,
+    tail: Vec<DFF<Bit>>,
+    byte: Vec<DFF<Bits<8>>>,
+    start: Vec<DFF<Bit>>,
+    pin: Vec<DFF<Bit>>,
     full: Signal<Local, Bits<64>>,
-    copy_count: Signal<Local, Bits<2>>,
-    copy_head: Signal<Local, Bit>,
+    nonempty: Signal<Local, Bit>,
+    copy_tail: Signal<Local, Bit>,
     commit: Signal<Local, Bit>,
     advance: Signal<Local, Bit>,
-    issue: Signal<Local, Bit>,
-    scan_head: Signal<Local, Bit>,
-    scan_index: Signal<Local, Bits<5>>,
+    bit_end: Signal<Local, Bit>,
+    next_bit: Signal<Local, Bits<4>>,
+    data_bit: Signal<Local, Bits<3>>,
+    position: Signal<Local, Bits<6>>,
+    load_byte: Signal<Local, Bits<8>>,
+    term_byte: Signal<Local, Bits<8>>,
+    shifted: Signal<Local, Bits<8>>,
 }
 
 impl CellDownlink {
@@ -139,6 +191,15 @@ impl CellDownlink {
             (1..=MAX_PORTS).contains(&ports),
             "CellDownlink: {ports} ports (1 to {MAX_PORTS})"
         );
+        assert!(
+            baud > 0 && clock_hz >= 4 * baud,
+            "CellDownlink: clock {clock_hz} Hz must be at least 4 x baud {baud}"
+        );
+        let each = |n: usize| {
+            (0..n)
+                .map(|_| Default::default())
+                .collect::<Vec<DFF<Bit>>>()
+        };
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -153,7 +214,7 @@ impl CellDownlink {
             accepted: Default::default(),
             accepted_port: Default::default(),
             ram: Default::default(),
-            uarts: (0..ports).map(|_| UartTx::new(clock_hz, baud)).collect(),
+            positions: Default::default(),
             port_number: (0..ports)
                 .map(|p| Constant::new((p as u64).into()))
                 .collect(),
@@ -164,6 +225,8 @@ impl CellDownlink {
             packet_first: Constant::new((PACKET_OFFSET as u64).into()),
             packet_last: Constant::new(((PACKET_OFFSET + PACKET_LEN - 1) as u64).into()),
             all_ports: Constant::new(u64::from(ALL_PORTS).into()),
+            phase_increment: Constant::new(phase_increment(clock_hz, baud).into()),
+            last_frame_bit: Constant::new((frame_bits(ports) - 1).into()),
             captured: Default::default(),
             offered: Default::default(),
             offered_port: Default::default(),
@@ -174,29 +237,49 @@ impl CellDownlink {
             copy_index: Default::default(),
             accepted_out: Default::default(),
             accepted_port_out: Default::default(),
-            count: (0..ports).map(|_| Default::default()).collect(),
-            head: (0..ports).map(|_| Default::default()).collect(),
-            read_index: (0..ports).map(|_| Default::default()).collect(),
-            fetching: (0..ports).map(|_| Default::default()).collect(),
-            holding_valid: (0..ports).map(|_| Default::default()).collect(),
-            holding: (0..ports).map(|_| Default::default()).collect(),
-            scan: Default::default(),
-            read_valid: Default::default(),
-            read_address: Default::default(),
             write_enable: Default::default(),
             write_address: Default::default(),
             write_data: Default::default(),
-            read_port_1: Default::default(),
-            read_port_2: Default::default(),
-            read_port_3: Default::default(),
+            phase: Default::default(),
+            frame_bit: Default::default(),
+            refilling: Default::default(),
+            scan: Default::default(),
+            visit_1: Default::default(),
+            port_1: Default::default(),
+            nonempty_1: Default::default(),
+            visit_2: Default::default(),
+            port_2: Default::default(),
+            nonempty_2: Default::default(),
+            visit_3: Default::default(),
+            port_3: Default::default(),
+            nonempty_3: Default::default(),
+            visit_4: Default::default(),
+            port_4: Default::default(),
+            nonempty_4: Default::default(),
+            position_write: Default::default(),
+            position_port: Default::default(),
+            position_next: Default::default(),
+            freed: Default::default(),
+            freed_port: Default::default(),
+            clearing: Default::default(),
+            clear_address: Default::default(),
+            count: (0..ports).map(|_| Default::default()).collect(),
+            tail: each(ports),
+            byte: (0..ports).map(|_| Default::default()).collect(),
+            start: each(ports),
+            pin: each(ports),
             full: Default::default(),
-            copy_count: Default::default(),
-            copy_head: Default::default(),
+            nonempty: Default::default(),
+            copy_tail: Default::default(),
             commit: Default::default(),
             advance: Default::default(),
-            issue: Default::default(),
-            scan_head: Default::default(),
-            scan_index: Default::default(),
+            bit_end: Default::default(),
+            next_bit: Default::default(),
+            data_bit: Default::default(),
+            position: Default::default(),
+            load_byte: Default::default(),
+            term_byte: Default::default(),
+            shifted: Default::default(),
         }
     }
 }
@@ -217,21 +300,38 @@ impl Logic for CellDownlink {
             copy_index,
             accepted_out,
             accepted_port_out,
-            scan,
-            read_valid,
-            read_address,
             write_enable,
             write_address,
             write_data,
-            read_port_1,
-            read_port_2,
-            read_port_3
+            phase,
+            frame_bit,
+            refilling,
+            scan,
+            visit_1,
+            port_1,
+            nonempty_1,
+            visit_2,
+            port_2,
+            nonempty_2,
+            visit_3,
+            port_3,
+            nonempty_3,
+            visit_4,
+            port_4,
+            nonempty_4,
+            position_write,
+            position_port,
+            position_next,
+            freed,
+            freed_port,
+            clearing,
+            clear_address
         );
         self.ram.clock.next = self.clock.val();
-        // the writes are registered: no copy logic in front of the RAM (a slot's last byte
-        // lands a clock after its commit, long before a read can reach it)
+        self.positions.clock.next = self.clock.val();
+        // the copy's writes are registered: no copy logic in front of the RAM (a slot's
+        // last byte lands a clock after its commit, long before a refill reads it)
         self.write_enable.d.next = false;
-        self.write_address.d.next = self.write_address.q.val();
         self.write_data.d.next = self.staging.q.val().get_bits::<8>(0);
         self.ram.write_enable.next = self.write_enable.q.val();
         self.ram.write_address.next = self.write_address.q.val();
@@ -246,15 +346,6 @@ impl Logic for CellDownlink {
             self.captured.d.next =
                 (self.captured.q.val() >> 8) | (bit_cast::<160, 8>(self.capture_data.val()) << 152);
         }
-
-        // room: from registers only (the command unit decides from them)
-        self.full.next = 0.into();
-        for i in 0..self.uarts.len() {
-            if self.count[i].q.val() == 2 {
-                self.full.next = self.full.val() | self.port_bit[i].val();
-            }
-        }
-        self.full_ports.next = self.full.val();
         self.busy.next = self.copying.q.val() | self.offered.q.val();
         // (registered: the offer reaches two flip-flops, the copy starts a clock later)
         self.offered.d.next = self.offer.val();
@@ -269,14 +360,11 @@ impl Logic for CellDownlink {
                 self.copy_port.d.next = 0.into();
             }
         }
-
-        // copy the staged packet into the target port's free slot
-        self.copy_count.next = 0.into();
-        self.copy_head.next = false;
-        for i in 0..self.uarts.len() {
+        // copy the staged packet into the target port's free slot (its `tail`)
+        self.copy_tail.next = false;
+        for i in 0..self.count.len() {
             if self.copy_port.q.val() == self.port_number[i].val() {
-                self.copy_count.next = self.count[i].q.val();
-                self.copy_head.next = self.head[i].q.val();
+                self.copy_tail.next = self.tail[i].q.val();
             }
         }
         self.commit.next = false;
@@ -284,9 +372,7 @@ impl Logic for CellDownlink {
         if self.copying.q.val() {
             self.write_enable.d.next = true;
             self.write_address.d.next = (bit_cast::<ADDRESS_BITS, 8>(self.copy_port.q.val()) << 6)
-                | (bit_cast::<ADDRESS_BITS, 1>(
-                    (self.copy_head.val() ^ (self.copy_count.val() == 1)).into(),
-                ) << 5)
+                | (bit_cast::<ADDRESS_BITS, 1>(self.copy_tail.val().into()) << 5)
                 | bit_cast::<ADDRESS_BITS, 5>(self.copy_index.q.val());
             self.staging.d.next = (self.staging.q.val() >> 8)
                 | (bit_cast::<160, 8>(self.staging.q.val().get_bits::<8>(0)) << 152);
@@ -307,107 +393,168 @@ impl Logic for CellDownlink {
             }
         }
 
-        // read scan: one port per clock fetches the next byte of its oldest packet
-        self.scan.d.next = self.scan.q.val() + 1;
-        if self.scan.q.val() == self.last_port.val() {
+        // the shared bit time: the accumulator carries at each bit's end
+        self.bit_end.next = self.phase.q.val().get_bit(16);
+        self.phase.d.next =
+            bit_cast::<17, 16>(self.phase.q.val().get_bits::<16>(0)) + self.phase_increment.val();
+        self.next_bit.next = self.frame_bit.q.val() + 1;
+        if self.frame_bit.q.val() == self.last_frame_bit.val() {
+            self.next_bit.next = 0.into();
+        }
+        self.data_bit.next = self.next_bit.val().get_bits::<3>(0) - 1;
+        if self.bit_end.val() {
+            self.frame_bit.d.next = self.next_bit.val();
+        }
+        // the refill scan starts as the pins take the last data bit
+        if self.refilling.q.val() {
+            self.scan.d.next = self.scan.q.val() + 1;
+            if bit_cast::<8, 6>(self.scan.q.val()) == self.last_port.val() {
+                self.refilling.d.next = false;
+            }
+        }
+        if self.bit_end.val() & (self.next_bit.val() == 8) {
+            self.refilling.d.next = true;
             self.scan.d.next = 0.into();
         }
-        self.issue.next = false;
-        self.scan_head.next = false;
-        self.scan_index.next = 0.into();
-        self.read_valid.d.next = self.read_valid.q.val() << 1;
-        self.read_port_1.d.next = self.scan.q.val();
-        self.read_port_2.d.next = self.read_port_1.q.val();
-        self.read_port_3.d.next = self.read_port_2.q.val();
-        for i in 0..self.uarts.len() {
+        // visit: the port's queue count; its position read from RAM
+        self.nonempty.next = false;
+        self.full.next = 0.into();
+        for i in 0..self.count.len() {
+            if bit_cast::<8, 6>(self.scan.q.val()) == self.port_number[i].val() {
+                self.nonempty.next = self.count[i].q.val() != 0;
+            }
+            if self.count[i].q.val().get_bit(1) {
+                self.full.next = self.full.val() | self.port_bit[i].val();
+            }
+        }
+        self.full_ports.next = self.full.val();
+        self.positions.read_address.next = self.scan.q.val();
+        self.visit_1.d.next = self.refilling.q.val();
+        self.port_1.d.next = self.scan.q.val();
+        self.nonempty_1.d.next = self.nonempty.val();
+        self.visit_2.d.next = self.visit_1.q.val();
+        self.port_2.d.next = self.port_1.q.val();
+        self.nonempty_2.d.next = self.nonempty_1.q.val() & self.visit_1.q.val();
+        // two clocks later: the byte's address, and the next position
+        self.position.next = self.positions.read_data.val();
+        self.ram.read_address.next = (bit_cast::<ADDRESS_BITS, 6>(self.port_2.q.val()) << 6)
+            | bit_cast::<ADDRESS_BITS, 6>(self.position.val());
+        self.position_write.d.next = self.nonempty_2.q.val();
+        self.position_port.d.next = self.port_2.q.val();
+        self.position_next.d.next = self.position.val() + 1;
+        self.freed.d.next = false;
+        self.freed_port.d.next = self.port_2.q.val();
+        if self.position.val().get_bits::<5>(0) == 19 {
+            // the last byte of the slot: the other slot next, this one is free
+            self.position_next.d.next =
+                bit_cast::<6, 1>((!self.position.val().get_bit(5)).into()) << 5;
+            self.freed.d.next = self.nonempty_2.q.val();
+        }
+        self.visit_3.d.next = self.visit_2.q.val();
+        self.port_3.d.next = self.port_2.q.val();
+        self.nonempty_3.d.next = self.nonempty_2.q.val();
+        self.visit_4.d.next = self.visit_3.q.val();
+        self.port_4.d.next = self.port_3.q.val();
+        self.nonempty_4.d.next = self.nonempty_3.q.val();
+        // two clocks after the address: the byte, or 0xFF and no start bit when empty
+        self.load_byte.next = self.ram.read_data.val();
+        if !self.nonempty_4.q.val() {
+            self.load_byte.next = 0xFF.into();
+        }
+        self.positions.write_enable.next = self.position_write.q.val() | self.clearing.q.val();
+        self.positions.write_address.next = self.position_port.q.val();
+        self.positions.write_data.next = self.position_next.q.val();
+        if self.clearing.q.val() {
+            // after reset every port reads slot 0 from byte 0
+            self.positions.write_address.next = self.clear_address.q.val();
+            self.positions.write_data.next = 0.into();
+            self.clear_address.d.next = self.clear_address.q.val() + 1;
+            if self.clear_address.q.val() == 63 {
+                self.clearing.d.next = false;
+            }
+        }
+
+        for i in 0..self.count.len() {
             self.count[i].clock.next = self.clock.val();
-            self.head[i].clock.next = self.clock.val();
-            self.read_index[i].clock.next = self.clock.val();
-            self.fetching[i].clock.next = self.clock.val();
-            self.holding_valid[i].clock.next = self.clock.val();
-            self.holding[i].clock.next = self.clock.val();
+            self.tail[i].clock.next = self.clock.val();
+            self.byte[i].clock.next = self.clock.val();
+            self.start[i].clock.next = self.clock.val();
+            self.pin[i].clock.next = self.clock.val();
+            self.tail[i].d.next = self.tail[i].q.val();
+            self.byte[i].d.next = self.byte[i].q.val();
+            self.start[i].d.next = self.start[i].q.val();
+            self.pin[i].d.next = self.pin[i].q.val();
+            // the queue count: +1 on a copy's commit, -1 when the last byte is read
             self.count[i].d.next = self.count[i].q.val();
-            self.head[i].d.next = self.head[i].q.val();
-            self.read_index[i].d.next = self.read_index[i].q.val();
-            self.fetching[i].d.next = self.fetching[i].q.val();
-            self.holding_valid[i].d.next = self.holding_valid[i].q.val();
-            self.holding[i].d.next = self.holding[i].q.val();
-            self.uarts[i].clock.next = self.clock.val();
-            self.uarts[i].reset.next = self.reset.val();
-            self.uarts[i].bytes.data.next = self.holding[i].q.val();
-            self.uarts[i].bytes.valid.next = self.holding_valid[i].q.val();
-            self.uarts[i].bytes.last.next = false;
-            self.uarts[i].bytes.error.next = false;
-            self.uart_tx[i].next = self.uarts[i].tx.val();
-            if self.holding_valid[i].q.val() & self.uarts[i].bytes.ready.val() {
-                self.holding_valid[i].d.next = false;
-            }
-            if (self.scan.q.val() == self.port_number[i].val())
-                & (self.count[i].q.val() != 0)
-                & !self.fetching[i].q.val()
-                & !self.holding_valid[i].q.val()
-            {
-                self.issue.next = true;
-                self.scan_head.next = self.head[i].q.val();
-                self.scan_index.next = self.read_index[i].q.val();
-                self.fetching[i].d.next = true;
-                self.read_index[i].d.next = self.read_index[i].q.val() + 1;
-                if self.read_index[i].q.val() == 19 {
-                    // the last byte is read: the slot is free
-                    self.read_index[i].d.next = 0.into();
-                    self.head[i].d.next = !self.head[i].q.val();
-                    self.count[i].d.next = self.count[i].q.val() - 1;
-                    if self.commit.val() & (self.copy_port.q.val() == self.port_number[i].val()) {
-                        self.count[i].d.next = self.count[i].q.val();
-                    }
-                }
-            }
-            if self.commit.val()
-                & (self.copy_port.q.val() == self.port_number[i].val())
-                & !(self.issue.val()
-                    & (self.scan.q.val() == self.port_number[i].val())
-                    & (self.read_index[i].q.val() == 19))
-            {
+            if self.commit.val() & (self.copy_port.q.val() == self.port_number[i].val()) {
+                self.tail[i].d.next = !self.tail[i].q.val();
                 self.count[i].d.next = self.count[i].q.val() + 1;
-            }
-            if self.read_valid.q.val().get_bit(2)
-                & (self.read_port_3.q.val() == self.port_number[i].val())
+                if self.freed.q.val()
+                    & (bit_cast::<8, 6>(self.freed_port.q.val()) == self.port_number[i].val())
+                {
+                    self.count[i].d.next = self.count[i].q.val();
+                }
+            } else if self.freed.q.val()
+                & (bit_cast::<8, 6>(self.freed_port.q.val()) == self.port_number[i].val())
             {
-                self.holding[i].d.next = self.ram.read_data.val();
-                self.holding_valid[i].d.next = true;
-                self.fetching[i].d.next = false;
+                self.count[i].d.next = self.count[i].q.val() - 1;
+            }
+            // the refill's load
+            if self.visit_4.q.val()
+                & (bit_cast::<8, 6>(self.port_4.q.val()) == self.port_number[i].val())
+            {
+                self.byte[i].d.next = self.load_byte.val();
+                self.start[i].d.next = self.nonempty_4.q.val();
+            }
+            // the pin at each bit's start: start bit, data bit, stop bits
+            self.term_byte.next = self.byte[i].q.val();
+            self.shifted.next = self.term_byte.val() >> self.data_bit.val();
+            if self.bit_end.val() {
+                self.pin[i].d.next = true;
+                if self.next_bit.val() == 0 {
+                    self.pin[i].d.next = !self.start[i].q.val();
+                } else if self.next_bit.val() <= 8 {
+                    self.pin[i].d.next = self.shifted.val().get_bit(0);
+                }
             }
             if self.reset.val() {
                 self.count[i].d.next = 0.into();
-                self.head[i].d.next = false;
-                self.read_index[i].d.next = 0.into();
-                self.fetching[i].d.next = false;
-                self.holding_valid[i].d.next = false;
+                self.tail[i].d.next = false;
+                self.byte[i].d.next = 0xFF.into();
+                self.start[i].d.next = false;
+                self.pin[i].d.next = true;
             }
+            self.uart_tx[i].next = self.pin[i].q.val();
         }
-        // the address is registered: no scan logic in front of the RAM
-        self.read_address.d.next = (bit_cast::<ADDRESS_BITS, 8>(self.scan.q.val()) << 6)
-            | (bit_cast::<ADDRESS_BITS, 1>(self.scan_head.val().into()) << 5)
-            | bit_cast::<ADDRESS_BITS, 5>(self.scan_index.val());
-        self.ram.read_address.next = self.read_address.q.val();
-        self.read_valid.d.next =
-            (self.read_valid.q.val() << 1) | bit_cast::<3, 1>(self.issue.val().into());
         if self.reset.val() {
             self.copying.d.next = false;
             self.offered.d.next = false;
             self.write_enable.d.next = false;
-            self.scan.d.next = 0.into();
-            self.read_valid.d.next = 0.into();
             self.accepted_out.d.next = false;
+            self.phase.d.next = 0.into();
+            self.frame_bit.d.next = self.last_frame_bit.val();
+            self.refilling.d.next = false;
+            self.visit_1.d.next = false;
+            self.visit_2.d.next = false;
+            self.nonempty_2.d.next = false;
+            self.visit_3.d.next = false;
+            self.visit_4.d.next = false;
+            self.position_write.d.next = false;
+            self.freed.d.next = false;
+            self.clearing.d.next = true;
+            self.clear_address.d.next = 0.into();
         }
         self.accepted.next = self.accepted_out.q.val();
         self.accepted_port.next = self.accepted_port_out.q.val();
     }
 }
 
-// the staging register and byte indices are sized for 20-byte packets, the read pipeline
-// (`read_valid` bit 2) for the address register and the RAM's read latency
+// the staging register and byte indices are sized for 20-byte packets, the refill
+// pipeline for the RAMs' read latency
 const _: () = assert!(PACKET_LEN == 20 && READ_LATENCY == 2);
+// the refill of every port fits between the frame's last data bit and the next start bit
+const _: () = assert!(TEN_BIT_FRAME_PORTS as u64 + REFILL_LATENCY < 62);
+const _: () = assert!(MAX_PORTS as u64 + REFILL_LATENCY < 93);
 
 #[cfg(test)]
 mod tests {
@@ -547,7 +694,7 @@ mod tests {
                     for pair in packet.windows(2) {
                         let gap = (pair[1].0 - pair[0].0) as f64;
                         assert!(
-                            (gap - 10.0 * period).abs() < 1.5,
+                            (gap - frame_bits(self.pins.len()) as f64 * period).abs() < 1.5,
                             "port {p}: frames {} clocks apart",
                             gap
                         );
@@ -579,7 +726,10 @@ mod tests {
         let frames = decode_uart_line(&run.pins[3]);
         let span = (frames[39].0 - frames[0].0) as f64;
         // (up to a clock late, plus the rounding of the increment: 0.007 % slow)
-        assert!((span - 390.0 * bit_period(0.0)).abs() < 2.5, "{span}");
+        assert!(
+            (span - 39.0 * frame_bits(8) as f64 * bit_period(0.0)).abs() < 2.5,
+            "{span}"
+        );
     }
 
     #[test]

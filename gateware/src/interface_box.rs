@@ -1,8 +1,8 @@
 //! InterfaceBox: the whole box for simulation, N UART pins in, GMII out.
 //!
-//! Per port: [`UartRx`] -> [`CellDeframer`]; the [`PacketStore`] holds every port's
-//! packets in shared block RAM and merges them, one whole record at a time, into the
-//! [`RecordBatcher`]. The batcher's records datagrams and the [`StatusReporter`]'s status
+//! Per port only a bit-level [`UartRx`]; one [`CellDeframer`] engine serves every port in
+//! turn and writes their packets into the [`PacketStore`], which holds them in shared block
+//! RAM and merges them, one whole record at a time, into the [`RecordBatcher`]. The batcher's records datagrams and the [`StatusReporter`]'s status
 //! datagrams meet in the [`DatagramArbiter`], whose output the [`FrameTransmitter`] sends
 //! on GMII. The [`CounterFile`] counts every port's events. The ports stay in reset until
 //! the counters are cleared (about 4 us after reset), so no event goes uncounted.
@@ -11,7 +11,7 @@
 //! packet's first start bit low at the pin (the true falling edge lies in the tick before).
 
 use crate::box_counter_file::BoxCounterFile;
-use crate::cell_deframer::{CellDeframer, MAX_IDLE_GAP_BITS};
+use crate::cell_deframer::{scan_period, CellDeframer, MAX_IDLE_GAP_BITS};
 use crate::cell_downlink::CellDownlink;
 use crate::command_unit::{CommandUnit, CommandUnitConfig};
 use crate::counter_file::CounterFile;
@@ -27,7 +27,8 @@ use crate::reply_builder::ReplyBuilder;
 use crate::status_reporter::StatusReporter;
 use crate::stream::{ByteStreamSource, DatagramSource};
 use crate::timestamp::TimestampCounter;
-use crate::uart_rx::UartRx;
+use crate::uart_rx::{rate_supported, shift_hold_clocks, UartRx, STAMP_BITS};
+const _: () = assert!(STAMP_BITS == 7);
 use skinbox_protocol::{CellFraming, LinkConfig};
 
 /// The datagram arbiter's sources, in their order of precedence after reset: records
@@ -86,16 +87,16 @@ pub enum ConfigError {
         /// The port count asked for.
         ports: usize,
     },
-    /// The clock is below 4 x the baud rate (or the baud rate is 0).
-    #[error("invalid box parameters: clock {clock_hz} Hz must be at least 4 x the baud rate {baud} (the UART samples 3 times per bit middle)")]
-    ClockBelowBaud {
+    /// The clock is below 4 x the baud rate (or the baud rate is 0), or above 64 x.
+    #[error("invalid box parameters: clock {clock_hz} Hz must be 4 to 64 x the baud rate {baud} (the UART samples 3 times per bit middle; its bit timer counts to 64)")]
+    ClockForBaud {
         /// Box clock, Hz.
         clock_hz: u64,
         /// UART rate.
         baud: u64,
     },
-    /// The counter file cannot visit every port once per received byte.
-    #[error("invalid box parameters: {ports} ports at {byte_clocks} clocks per byte: the counters need 3 clocks per port per byte")]
+    /// The deframing engine cannot count every event of a port before it can recur.
+    #[error("invalid box parameters: {ports} ports at {byte_clocks} clocks per byte: the deframing engine must visit each port 4 times per byte")]
     PortsForCounters {
         /// The port count asked for.
         ports: usize,
@@ -158,15 +159,18 @@ impl BoxConfig {
         if !(1..=MAX_PORTS).contains(&self.ports) {
             return Err(ConfigError::Ports { ports: self.ports });
         }
-        if self.baud == 0 || self.clock_hz < 4 * self.baud {
-            return Err(ConfigError::ClockBelowBaud {
+        if !rate_supported(self.clock_hz, self.baud) {
+            return Err(ConfigError::ClockForBaud {
                 clock_hz: self.clock_hz,
                 baud: self.baud,
             });
         }
-        // The counter file needs three clocks per port between a port's event bursts.
+        // The engine counts one event per visit and a byte raises at most four: a port's
+        // byte visits (a byte on the fastest line the receiver accepts) must be four
+        // visits apart.
         let byte_clocks = 10.0 * self.clocks_per_bit() * 0.95;
-        if (3 * self.ports) as f64 > byte_clocks {
+        let period = scan_period(self.ports) as f64;
+        if 1.0 + ((byte_clocks - period) / period).floor() < 4.0 {
             return Err(ConfigError::PortsForCounters {
                 ports: self.ports,
                 byte_clocks: byte_clocks as u64,
@@ -234,7 +238,7 @@ pub struct InterfaceBox {
     pub gmii_tx_er: Signal<Out, Bit>,
     timestamp: TimestampCounter,
     uarts: Vec<UartRx>,
-    deframers: Vec<CellDeframer>,
+    deframer: CellDeframer,
     store: PacketStore,
     counters: CounterFile,
     status: StatusReporter,
@@ -284,13 +288,25 @@ impl InterfaceBox {
             gmii_tx_er: Default::default(),
             timestamp: Default::default(),
             uarts: (0..n)
-                .map(|_| UartRx::new(config.clock_hz, config.baud))
+                .map(|_| {
+                    // a byte waits in the receiver's shift register for the engine's
+                    // visit, or in a hold register when visits are further apart
+                    if scan_period(n) as u64 > shift_hold_clocks(config.clock_hz, config.baud) {
+                        UartRx::with_hold_register(config.clock_hz, config.baud)
+                    } else {
+                        UartRx::new(config.clock_hz, config.baud)
+                    }
+                })
                 .collect(),
-            deframers: (0..n)
-                .map(|_| CellDeframer::new(config.framing, config.idle_gap_bits))
-                .collect(),
+            deframer: CellDeframer::new(
+                n,
+                config.clock_hz,
+                config.baud,
+                config.framing,
+                config.idle_gap_bits,
+            ),
             store: PacketStore::new(n),
-            counters: CounterFile::new(n),
+            counters: CounterFile::new(),
             status: StatusReporter::new(n, config.boot_seed),
             batcher: RecordBatcher::new(),
             arbiter: DatagramArbiter::new(DATAGRAM_SOURCES),
@@ -346,33 +362,35 @@ impl Logic for InterfaceBox {
         self.timestamp.clock.next = self.clock.val();
         self.timestamp.reset.next = self.core_reset.q.val();
         for i in 0..self.uarts.len() {
-            // pin -> UART -> deframer -> packet store
+            // pin -> UART, held bytes -> the deframing engine
             self.uarts[i].clock.next = self.clock.val();
             self.uarts[i].reset.next = false;
-            self.deframers[i].reset.next = false;
             for g in 0..self.group_resets.len() {
                 if self.port_group[i].val().get_bit(g) {
                     self.uarts[i].reset.next = self.group_resets[g].q.val();
-                    self.deframers[i].reset.next = self.group_resets[g].q.val();
                 }
             }
             self.uarts[i].rx.next = self.uart_rx[i].val();
-            self.deframers[i].clock.next = self.clock.val();
-            self.deframers[i].byte_data.next = self.uarts[i].data.val();
-            self.deframers[i].byte_strobe.next = self.uarts[i].strobe.val();
-            self.deframers[i].byte_framing_error.next = self.uarts[i].framing_error.val();
-            self.deframers[i].byte_start.next = self.uarts[i].start.val();
-            self.deframers[i].tick.next = self.timestamp.start_stamp.val();
-            self.deframers[i].byte_bit_count.next = self.uarts[i].bit_count.val();
-            self.store.ports[i].data.next = self.deframers[i].packets.data.val();
-            self.store.ports[i].valid.next = self.deframers[i].packets.valid.val();
-            self.store.ports[i].last.next = self.deframers[i].packets.last.val();
-            self.store.ports[i].error.next = self.deframers[i].packets.error.val();
-            self.deframers[i].packets.ready.next = self.store.ports[i].ready.val();
-            // counter events, bit i = skinbox_protocol::PortCounter i
-            self.counters.events[i].next =
-                self.deframers[i].events.val() | self.store.events[i].val();
+            self.uarts[i].tick_low.next = self.timestamp.tick.val().get_bits::<7>(0);
+            self.uarts[i].visit.next = self.deframer.visit[i].val();
+            self.deframer.held[i].next = self.uarts[i].held.val();
+            self.deframer.data[i].next = self.uarts[i].data.val();
+            self.deframer.framing_error[i].next = self.uarts[i].framing_error.val();
+            self.deframer.stamp[i].next = self.uarts[i].stamp.val();
         }
+        self.deframer.clock.next = self.clock.val();
+        self.deframer.reset.next = self.core_reset.q.val();
+        self.deframer.port_reset.next = self.store_port_reset.q.val();
+        self.deframer.tick.next = self.timestamp.tick.val();
+        self.deframer.full_ports.next = self.store.full_ports.val();
+        self.store.write.next = self.deframer.write.val();
+        self.store.write_port.next = self.deframer.write_port.val();
+        self.store.write_slot.next = self.deframer.write_slot.val();
+        self.store.write_word.next = self.deframer.write_word.val();
+        self.store.write_data.next = self.deframer.write_data.val();
+        self.store.commit_ports.next = self.deframer.commit_ports.val();
+        self.counters.increment.next = self.deframer.increment.val();
+        self.counters.increment_address.next = self.deframer.increment_address.val();
         self.store.clock.next = self.clock.val();
         self.store.reset.next = self.core_reset.q.val();
         self.store.port_reset.next = self.store_port_reset.q.val();
@@ -537,12 +555,19 @@ mod tests {
         );
         assert_eq!(
             with(|c| c.clock_hz = 4 * c.baud - 1),
-            Err(ConfigError::ClockBelowBaud {
+            Err(ConfigError::ClockForBaud {
                 clock_hz: 15_999_999,
                 baud: 4_000_000
             })
         );
-        // 8 ports at 4 clocks per bit: 38 clocks in a fast byte, 24 needed; 16 ports need 48.
+        assert_eq!(
+            with(|c| c.baud = 1_000_000),
+            Err(ConfigError::ClockForBaud {
+                clock_hz: 125_000_000,
+                baud: 1_000_000
+            })
+        );
+        // at 4 clocks per bit a fast byte lasts 38 clocks: four visits of 8 ports, two of 16
         assert_eq!(
             with(|c| {
                 c.clock_hz = 4 * c.baud;
@@ -647,7 +672,7 @@ mod tests {
                     baud: 40_000_000,
                     ..Default::default()
                 },
-                "at least 4 x the baud",
+                "must be 4 to 64 x the baud rate",
             ),
             (
                 BoxConfig {

@@ -3,10 +3,11 @@
 //! One 125 MHz clock domain with a synchronous, active-high `reset` input on every block.
 //! A cell packet travels through the blocks in this order, one file each:
 //!
-//! 1. [`uart_rx::UartRx`]: samples the asynchronous UART pin, one byte at a time, with the
-//!    tick of its start edge;
-//! 2. [`cell_deframer::CellDeframer`]: finds 20-byte cell packets in the byte stream and
-//!    rejects broken ones, counting each cause;
+//! 1. [`uart_rx::UartRx`], one per pin: samples the asynchronous UART pin and holds each
+//!    byte with the low bits of its strobe tick (bit level: all a port keeps in registers);
+//! 2. [`cell_deframer::CellDeframer`]: one engine for all ports, visiting one per clock with
+//!    their state in block RAM: finds 20-byte cell packets in each port's bytes, stamps
+//!    them, rejects broken ones and counts each cause;
 //! 3. [`packet_store::PacketStore`]: holds every port's whole packets in shared block RAM
 //!    and merges the ports, one whole record at a time;
 //! 4. [`record_batcher::RecordBatcher`]: batches the records into records datagrams;
@@ -23,9 +24,8 @@
 //! [`box_counter_file::BoxCounterFile`]; ARP, echo and command replies built by
 //! [`reply_builder::ReplyBuilder`] and sent as the datagram arbiter's third source.
 //!
-//! The downlink to the cells, built and tested but not yet part of the box:
-//! [`cell_downlink::CellDownlink`] queues cell command packets per port and sends them
-//! with a [`uart_tx::UartTx`] per port.
+//! The downlink to the cells: [`cell_downlink::CellDownlink`] queues cell command packets
+//! per port and sends them on every port's pin in one shared bit time and frame.
 
 pub mod async_fifo;
 pub mod block_ram;
@@ -56,7 +56,6 @@ pub mod stream;
 pub mod stream_fifo;
 pub mod timestamp;
 pub mod uart_rx;
-pub mod uart_tx;
 pub mod verilog;
 
 #[cfg(test)]

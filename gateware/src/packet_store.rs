@@ -1,20 +1,19 @@
 //! PacketStore: the ports' packet buffers and the reader that merges them into one record
-//! stream: [`PortSlots`] (two slots per port in shared block RAM, written by a ring that
-//! visits one port per clock) and [`RecordArbiter`] (a scan that grants one port at a
-//! time and reads its packet out as a whole record, round robin). The slots tell the
-//! reader which ports hold a packet and in which slot; the reader reads the slots' RAM and
-//! frees a slot when its record is out. The tests here hold the two together to the
-//! behaviour the rest of the box relies on: every good packet out once, in order per port,
-//! whole-packet drops counted, the loss flag on the next record.
+//! stream: [`PortSlots`] (two slots per port in shared block RAM, written by the deframing
+//! engine) and [`RecordArbiter`] (a scan that grants one port at a time and reads its
+//! packet out as a whole record, round robin). The slots tell the reader which ports hold
+//! a packet and in which slot; the reader reads the slots' RAM and frees a slot when its
+//! record is out. The tests here hold the two together to the behaviour the rest of the
+//! box relies on: every committed packet out once, in order per port, round robin.
 
 use crate::hdl::*;
 use crate::port_slots::PortSlots;
 pub use crate::port_slots::{
-    group_onehot, visit_period, BANK_PORTS, GROUP_PORTS, MAX_PORTS, SLOTS, STORED_BEATS,
+    group_onehot, BANK_PORTS, GROUP_PORTS, MAX_PORTS, SLOTS, STORED_BEATS,
 };
 use crate::record_arbiter::RecordArbiter;
 pub use crate::record_arbiter::RECORD_BEATS;
-use crate::stream::{ByteStreamSink, ByteStreamSource};
+use crate::stream::ByteStreamSource;
 pub use crate::stream_fifo::FIFO_DEPTH;
 
 /// Packet buffers of N ports and their round-robin reader.
@@ -24,15 +23,24 @@ pub struct PacketStore {
     pub clock: Signal<In, Clock>,
     /// Synchronous reset of the reader.
     pub reset: Signal<In, Bit>,
-    /// Synchronous reset of the write side: empties every port and restarts the ring.
+    /// Synchronous reset of the slots: empties every port.
     pub port_reset: Signal<In, Bit>,
-    /// Packets from the deframers, one stream per port (4 tick bytes, 20 cell bytes).
-    pub ports: Vec<ByteStreamSink>,
+    /// Write a word (the deframing engine's registers).
+    pub write: Signal<In, Bit>,
+    /// Port of the word.
+    pub write_port: Signal<In, Bits<6>>,
+    /// Slot of the word.
+    pub write_slot: Signal<In, Bit>,
+    /// Word in the slot: 0-3 start tick, 4-23 cell bytes.
+    pub write_word: Signal<In, Bits<5>>,
+    /// The word: byte and loss flag (bit 8).
+    pub write_data: Signal<In, Bits<9>>,
+    /// Bit i: port i's packet is complete in its write slot (one clock).
+    pub commit_ports: Signal<In, Bits<64>>,
+    /// Bit i: both of port i's slots hold a packet.
+    pub full_ports: Signal<Out, Bits<64>>,
     /// Records, port number first.
     pub records: ByteStreamSource,
-    /// Per port, counter events, bit i = `skinbox_protocol::PortCounter` i (see
-    /// [`PortSlots::events`]).
-    pub events: Vec<Signal<Out, Bits<8>>>,
     slots: PortSlots,
     reader: RecordArbiter,
 }
@@ -48,9 +56,14 @@ impl PacketStore {
             clock: Default::default(),
             reset: Default::default(),
             port_reset: Default::default(),
-            ports: (0..ports).map(|_| Default::default()).collect(),
+            write: Default::default(),
+            write_port: Default::default(),
+            write_slot: Default::default(),
+            write_word: Default::default(),
+            write_data: Default::default(),
+            commit_ports: Default::default(),
+            full_ports: Default::default(),
             records: Default::default(),
-            events: (0..ports).map(|_| Default::default()).collect(),
             slots: PortSlots::new(ports),
             reader: RecordArbiter::new(ports),
         }
@@ -64,14 +77,13 @@ impl Logic for PacketStore {
         self.slots.port_reset.next = self.port_reset.val();
         self.reader.clock.next = self.clock.val();
         self.reader.reset.next = self.reset.val();
-        for i in 0..self.ports.len() {
-            self.slots.ports[i].data.next = self.ports[i].data.val();
-            self.slots.ports[i].valid.next = self.ports[i].valid.val();
-            self.slots.ports[i].last.next = self.ports[i].last.val();
-            self.slots.ports[i].error.next = self.ports[i].error.val();
-            self.ports[i].ready.next = self.slots.ports[i].ready.val();
-            self.events[i].next = self.slots.events[i].val();
-        }
+        self.slots.write.next = self.write.val();
+        self.slots.write_port.next = self.write_port.val();
+        self.slots.write_slot.next = self.write_slot.val();
+        self.slots.write_word.next = self.write_word.val();
+        self.slots.write_data.next = self.write_data.val();
+        self.slots.commit_ports.next = self.commit_ports.val();
+        self.full_ports.next = self.slots.full_ports.val();
         self.reader.occupied_ports.next = self.slots.occupied_ports.val();
         self.reader.read_slots.next = self.slots.read_slots.val();
         self.slots.read_address.next = self.reader.read_address.val();
@@ -94,28 +106,10 @@ mod tests {
     use crate::testbench::Bench;
     use std::collections::VecDeque;
 
-    /// A packet a deframer offers: its 24 stored bytes, cut to `bytes.len()` beats and
-    /// ended with `error` when it is rejected.
-    #[derive(Clone, Debug, PartialEq)]
-    struct Offer {
-        bytes: Vec<u8>,
-        error: bool,
-    }
-
-    fn good(port: usize, k: usize) -> Offer {
-        Offer {
-            bytes: (0..STORED_BEATS)
-                .map(|i| (port * 53 + k * 31 + i) as u8)
-                .collect(),
-            error: false,
-        }
-    }
-
-    fn rejected(port: usize, k: usize, beats: usize) -> Offer {
-        let mut o = good(port, k);
-        o.bytes.truncate(beats);
-        o.error = true;
-        o
+    fn good(port: usize, k: usize) -> Vec<u8> {
+        (0..STORED_BEATS)
+            .map(|i| (port * 53 + k * 31 + i) as u8)
+            .collect()
     }
 
     /// A record as it leaves the store: port, flags, stored bytes.
@@ -125,19 +119,12 @@ mod tests {
         records: Vec<Record>,
         /// Clock of each record's first beat.
         record_clocks: Vec<u64>,
-        drops: Vec<u32>,
     }
 
-    /// Offers each port's packets beat by beat (a new beat `gap` clocks after the previous
-    /// one moved, the stream contract: a beat stays offered until taken) while the record
-    /// sink takes beats per `ready` from clock `read_after` on.
-    fn run(
-        queues: Vec<VecDeque<Offer>>,
-        gap: u64,
-        ready: &[bool],
-        read_after: u64,
-        clocks: u64,
-    ) -> Run {
+    /// Writes each port's packets as the engine does (one word per clock, the ports in
+    /// turn, a word of a port at most every `gap` clocks; a packet only into a free slot,
+    /// committed with its last word) while the record sink takes beats per `ready`.
+    fn run(queues: Vec<VecDeque<Vec<u8>>>, gap: u64, ready: &[bool], clocks: u64) -> Run {
         let n = queues.len();
         let mut queues = queues;
         let mut bench = Bench::new(PacketStore::new(n), |b| &mut b.clock);
@@ -147,44 +134,37 @@ mod tests {
         bench.uut.reset.next = false;
         bench.uut.port_reset.next = false;
         let mut position = vec![0usize; n];
-        let mut wait = vec![0u64; n];
+        let mut slot = vec![0usize; n];
+        let mut next_write = vec![0u64; n];
         let mut beats: Vec<(u8, bool, u64)> = vec![];
-        let mut drops = vec![0u32; n];
         for clock in 0..clocks {
-            for p in 0..n {
-                let beat = queues[p].front().filter(|_| wait[p] == 0).map(|o| {
-                    (
-                        o.bytes[position[p]],
-                        position[p] + 1 == o.bytes.len(),
-                        o.error,
-                    )
-                });
-                let s = &mut bench.uut.ports[p];
-                s.valid.next = beat.is_some();
-                if let Some((d, last, error)) = beat {
-                    s.data.next = u64::from(d).into();
-                    s.last.next = last;
-                    s.error.next = error && last;
+            bench.settle();
+            let p = clock as usize % n;
+            let full = bench.uut.full_ports.val().get_bit(p);
+            bench.uut.write.next = false;
+            bench.uut.commit_ports.next = 0.into();
+            if let Some(packet) = queues[p].front() {
+                if clock >= next_write[p] && (position[p] > 0 || !full) {
+                    let w = position[p];
+                    bench.uut.write.next = true;
+                    bench.uut.write_port.next = (p as u64).into();
+                    bench.uut.write_slot.next = slot[p] == 1;
+                    bench.uut.write_word.next = (w as u64).into();
+                    bench.uut.write_data.next = u64::from(packet[w]).into();
+                    position[p] += 1;
+                    next_write[p] = clock + gap;
+                    if position[p] == STORED_BEATS {
+                        bench.uut.commit_ports.next = (1u64 << p).into();
+                        position[p] = 0;
+                        slot[p] ^= 1;
+                        queues[p].pop_front();
+                    }
                 }
             }
-            let r = clock >= read_after && ready[clock as usize % ready.len()];
+            let r = ready[clock as usize % ready.len()];
             bench.uut.records.ready.next = r;
             bench.settle();
             let u = &bench.uut;
-            for p in 0..n {
-                wait[p] = wait[p].saturating_sub(1);
-                if u.ports[p].ready.val() && u.ports[p].valid.val() {
-                    position[p] += 1;
-                    wait[p] = gap;
-                    if position[p] == queues[p][0].bytes.len() {
-                        queues[p].pop_front();
-                        position[p] = 0;
-                    }
-                }
-                let events = u.events[p].val().to_u8();
-                assert_eq!(events & !2, 0, "only the dropped-overflow event");
-                drops[p] += u32::from(events >> 1);
-            }
             assert!(!u.records.error.val());
             if r && u.records.valid.val() {
                 beats.push((u.records.data.val().to_u8(), u.records.last.val(), clock));
@@ -193,7 +173,7 @@ mod tests {
         }
         assert!(
             queues.iter().all(|q| q.is_empty()),
-            "offers left: {:?}",
+            "packets left: {:?}",
             queues.iter().map(|q| q.len()).collect::<Vec<_>>()
         );
         let mut records = vec![];
@@ -214,11 +194,10 @@ mod tests {
         Run {
             records,
             record_clocks,
-            drops,
         }
     }
 
-    fn queues(n: usize, per_port: usize) -> Vec<VecDeque<Offer>> {
+    fn queues(n: usize, per_port: usize) -> Vec<VecDeque<Vec<u8>>> {
         (0..n)
             .map(|p| (0..per_port).map(|k| good(p, k)).collect())
             .collect()
@@ -227,28 +206,15 @@ mod tests {
     #[test]
     fn every_port_busy_gets_one_grant_per_round() {
         for n in [1, 3, 8] {
-            // beats every 12 clocks: each port has a packet ready in every round
-            let out = run(
-                queues(n, 4),
-                12,
-                &[true],
-                0,
-                4 * 24 * 13 + 60 * n as u64 + 200,
-            );
+            let out = run(queues(n, 4), 12, &[true], 4 * 24 * 13 * n as u64 + 400);
             assert_eq!(out.records.len(), 4 * n, "{n} ports");
-            assert_eq!(out.drops.iter().sum::<u32>(), 0);
             let mut seen = vec![0usize; n];
             for (i, (port, flags, bytes)) in out.records.iter().enumerate() {
                 let p = *port as usize;
                 assert_eq!(flags, &0);
-                assert_eq!(
-                    bytes,
-                    &good(p, seen[p]).bytes,
-                    "port {p} packet {}",
-                    seen[p]
-                );
+                assert_eq!(bytes, &good(p, seen[p]), "port {p} packet {}", seen[p]);
                 seen[p] += 1;
-                if i > 0 {
+                if i > 0 && i < 3 * n {
                     // every port always has a packet: the grants go round in port order
                     let previous = out.records[i - 1].0 as usize;
                     assert_eq!(p, (previous + 1) % n, "record {i}: round robin");
@@ -259,10 +225,9 @@ mod tests {
 
     #[test]
     fn two_banks_carry_every_port() {
-        // 40 ports: bank 0 holds 32, bank 1 holds 8; both rings run with period 32
+        // 40 ports: bank 0 holds 32, bank 1 holds 8
         let n = 40;
-        assert_eq!(visit_period(n), 32);
-        let out = run(queues(n, 2), 0, &[true], 0, 5000);
+        let out = run(queues(n, 2), 0, &[true], 8000);
         every_port_in_order(&out.records, n, 2);
     }
 
@@ -275,7 +240,7 @@ mod tests {
                 .filter(|r| r.0 as usize == p)
                 .map(|r| (r.1, &r.2))
                 .collect();
-            let want: Vec<Vec<u8>> = (0..per_port).map(|k| good(p, k).bytes).collect();
+            let want: Vec<Vec<u8>> = (0..per_port).map(|k| good(p, k)).collect();
             assert_eq!(
                 got,
                 want.iter().map(|w| (0, w)).collect::<Vec<_>>(),
@@ -292,73 +257,18 @@ mod tests {
             &[false, false, true],
             &[true, true, false, true, false, false, false, true],
         ] {
-            let out = run(queues(n, 3), 30, ready, 0, 20_000);
+            let out = run(queues(n, 3), 30, ready, 20_000);
             every_port_in_order(&out.records, n, 3);
         }
     }
 
     #[test]
-    fn rejected_packets_vanish_and_flag_the_next() {
-        let q: VecDeque<Offer> = vec![
-            good(0, 1),
-            rejected(0, 9, 7),
-            good(0, 2),
-            rejected(0, 10, STORED_BEATS),
-            good(0, 3),
-        ]
-        .into();
-        // the reader keeps up: nothing drops
-        let out = run(vec![VecDeque::new(), q], 3, &[true], 0, 2000);
-        let got: Vec<(u8, u8, Vec<u8>)> = out.records;
-        assert_eq!(
-            got,
-            vec![
-                (1, 0, good(0, 1).bytes),
-                (1, 1, good(0, 2).bytes),
-                (1, 1, good(0, 3).bytes)
-            ]
-        );
-        assert_eq!(out.drops, vec![0, 0]);
-    }
-
-    #[test]
-    fn overflow_drops_whole_packets_counts_them_and_flags_the_next() {
-        // the reader sleeps until all five packets were offered: two fit, three drop
-        let n = 3;
-        let mut qs: Vec<VecDeque<Offer>> = vec![VecDeque::new(); n];
-        qs[2] = (0..5).map(|k| good(2, k)).collect();
-        let out = run(qs, 0, &[true], 5 * 24 * 3 + 20, 1200);
-        let got: Vec<&Vec<u8>> = out.records.iter().map(|r| &r.2).collect();
-        assert_eq!(got, vec![&good(2, 0).bytes, &good(2, 1).bytes]);
-        assert_eq!(out.drops, vec![0, 0, 3]);
-
-        // a packet after drops carries the loss flag
-        let mut qs: Vec<VecDeque<Offer>> = vec![VecDeque::new(); n];
-        qs[0] = (0..4).map(|k| good(0, k)).collect();
-        // a beat 7 clocks after the previous one moved, taken at the next visit (every 3
-        // clocks): a packet takes 24 x 9 = 216 clocks. Packet 2 starts at about 432 and
-        // finds both slots full; the reader wakes at 540 and frees a slot before packet 3
-        // starts at about 648
-        let out = run(qs, 7, &[true], 540, 1500);
-        assert_eq!(out.drops, vec![1, 0, 0]);
-        let got: Vec<(u8, u8, Vec<u8>)> = out.records;
-        assert_eq!(
-            got,
-            vec![
-                (0, 0, good(0, 0).bytes),
-                (0, 0, good(0, 1).bytes),
-                (0, 1, good(0, 3).bytes)
-            ]
-        );
-    }
-
-    #[test]
     fn a_lone_port_is_found_wherever_the_scan_is() {
         let n = 8;
-        let mut qs: Vec<VecDeque<Offer>> = vec![VecDeque::new(); n];
+        let mut qs: Vec<VecDeque<Vec<u8>>> = vec![VecDeque::new(); n];
         qs[6] = (0..3).map(|k| good(6, k)).collect();
         qs[2] = (0..1).map(|k| good(2, k)).collect();
-        let out = run(qs, 0, &[true], 0, 1500);
+        let out = run(qs, 0, &[true], 3000);
         let ports: Vec<u8> = out.records.iter().map(|r| r.0).collect();
         assert_eq!(ports, vec![2, 6, 6, 6]);
     }
@@ -366,7 +276,7 @@ mod tests {
     #[test]
     fn a_record_streams_one_beat_per_clock() {
         // one port, the reader free: the 26 beats of a record leave on 26 clocks in a row
-        let out = run(queues(1, 2), 0, &[true], 0, 400);
+        let out = run(queues(1, 2), 0, &[true], 400);
         assert_eq!(out.records.len(), 2);
         let gap = out.record_clocks[1] - out.record_clocks[0];
         assert!(

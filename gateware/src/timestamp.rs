@@ -1,16 +1,9 @@
 //! TimestampCounter: the box time, a free-running 64-bit count of 8 ns ticks.
 //!
 //! At 125 MHz it wraps after 4,677 years. Latency: the count after a rising edge is the
-//! number of edges since reset went low. Cost: one 64-bit incrementer and two 32-bit copies
-//! of earlier counts (the start stamp, shared by every deframer instead of a subtractor
-//! each).
+//! number of edges since reset went low. Cost: one 64-bit incrementer.
 
 use crate::hdl::*;
-
-/// Ticks `start_stamp` lags `tick`: the receiver's synchroniser
-/// ([`crate::uart_rx::START_LATENCY_TICKS`]) and the deframer's input register
-/// ([`crate::cell_deframer::INPUT_REGISTER_CLOCKS`]).
-pub const START_STAMP_LAG: u64 = 2;
 
 /// Free-running 64-bit tick counter.
 #[derive(LogicBlock, Default)]
@@ -21,29 +14,18 @@ pub struct TimestampCounter {
     pub reset: Signal<In, Bit>,
     /// The current tick.
     pub tick: Signal<Out, Bits<64>>,
-    /// The low 32 bits of `tick - START_STAMP_LAG`, from registers (from tick
-    /// `START_STAMP_LAG` on): when a deframer takes its registered start edge, the tick of
-    /// the first edge that sampled the start bit low.
-    pub start_stamp: Signal<Out, Bits<32>>,
     count: DFF<Bits<64>>,
-    previous_low: DFF<Bits<32>>,
-    stamp_low: DFF<Bits<32>>,
 }
 
 impl Logic for TimestampCounter {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, count, previous_low, stamp_low);
+        dff_setup!(self, clock, count);
         self.count.d.next = self.count.q.val() + 1;
-        self.previous_low.d.next = self.count.q.val().get_bits::<32>(0);
-        self.stamp_low.d.next = self.previous_low.q.val();
-        // (the copies need no reset: they are right from tick START_STAMP_LAG on, and the
-        // ports leave reset long after, once the counter file is cleared)
         if self.reset.val() {
             self.count.d.next = 0.into();
         }
         self.tick.next = self.count.q.val();
-        self.start_stamp.next = self.stamp_low.q.val();
     }
 }
 
@@ -51,12 +33,6 @@ impl Logic for TimestampCounter {
 mod tests {
     use super::*;
     use crate::testbench::Bench;
-
-    #[test]
-    fn start_stamp_lag_is_the_latency_from_pin_to_deframer() {
-        use crate::{cell_deframer::INPUT_REGISTER_CLOCKS, uart_rx::START_LATENCY_TICKS};
-        assert_eq!(START_STAMP_LAG, START_LATENCY_TICKS + INPUT_REGISTER_CLOCKS);
-    }
 
     #[test]
     fn counts_clock_edges_from_reset() {
@@ -68,10 +44,6 @@ mod tests {
         for expected in 1..=1000u64 {
             bench.cycle();
             assert_eq!(bench.uut.tick.val(), expected);
-            if expected >= START_STAMP_LAG {
-                let stamp = expected - START_STAMP_LAG;
-                assert_eq!(bench.uut.start_stamp.val(), stamp, "tick {expected}");
-            }
         }
     }
 

@@ -1,134 +1,200 @@
-//! UartRx: receives 8N1 bytes from one asynchronous UART pin.
+//! UartRx: the bit-level part of one port's receiver: 8N1 bytes from one asynchronous UART
+//! pin, each held with the low bits of its strobe tick until the shared deframer takes it.
+//!
+//! Everything at byte level or slower (deframing, stamps, slot writes, counters) is done by
+//! one engine for all ports ([`crate::cell_deframer::CellDeframer`]); a port keeps only what
+//! must run every clock:
 //!
 //! - Two-flop synchroniser, then a falling-edge detector.
-//! - Fractional baud generator: a 16-bit phase accumulator adds `2^16 * baud / clock` per
-//!   clock (2097 for 4 Mbit/s at 125 MHz, 31.25 clocks per bit: an integer divider would
-//!   be 0.8 % off before any cell clock error). Its carry marks the middle of each bit; the
-//!   accumulator is kept a clock ahead with that carry in a register, so no carry chain
-//!   feeds the receiver's decisions. It
-//!   runs on while the line is idle, and `bit_count` counts the bit middles since the last
-//!   start edge: 10 after the stop bit's, one more per idle bit time (so the deframer needs
-//!   no idle timer of its own).
-//! - At each bit middle, the majority of the last three synchronised samples is taken, so a
+//! - A down-counter of clocks to the next bit middle, reloaded at each middle from a table
+//!   of the bit index ([`bit_middles`]): the middles are those of a 16-bit fractional
+//!   accumulator (31.25 clocks per bit at 4 Mbit/s and 125 MHz, no drift over a frame),
+//!   in 6 flip-flops instead of 17.
+//! - At each bit middle, the majority of the last three synchronised samples, so a
 //!   single-sample spike inside a bit is absorbed.
 //! - Start-bit validation: if the middle of the start bit reads high, the falling edge was a
 //!   glitch (shorter than half a bit) and the receiver goes back to idle.
-//! - Stop-bit check: a low stop bit sets `framing_error` with the byte.
+//! - At the stop bit's middle (the strobe) the byte is complete: `held` rises, with the stop
+//!   bit's check (`framing_error`) and `stamp`, the low [`STAMP_BITS`] bits of the tick of
+//!   the strobe cycle. The strobe comes exactly `bit_middles(..)[9]` clocks after the first
+//!   clock edge that sampled the start bit low, so the engine knows the start tick from the
+//!   stamp alone. `held` falls when the engine visits the port (`visit`).
+//! - The byte is held in the shift register itself, which the next byte overwrites only at
+//!   its first data bit's middle, at the earliest [`shift_hold_clocks`] after the strobe
+//!   (the next start edge can be sampled in the strobe's cycle); a receiver built `with_hold_register` copies it
+//!   into a register of its own at the strobe, for engines that visit a port less often.
 //!
-//! Outputs: `data` with a one-clock `strobe` at the middle of the stop bit, `framing_error`
-//! with it, and a one-clock `start` when a start edge is detected, [`START_LATENCY_TICKS`]
-//! after the first clock edge that sampled the start bit low (the true falling edge lies
-//! within the tick before that edge): the deframer stamps its packets with that edge's tick
-//! (`TimestampCounter::start_stamp`). The receiver keeps no time itself: the deframer captures it, once per packet. Baud
-//! tolerance measured by the tests: +-4.75 % (8N1 with mid-bit sampling allows about 5 %).
+//! Baud tolerance measured by the tests: +-4.75 % (8N1 with mid-bit sampling allows about
+//! 5 %).
 
 use crate::hdl::*;
 
-/// Fraction bits of the baud phase accumulator.
+/// Fraction bits of the reference accumulator the bit middles are taken from.
 pub const PHASE_BITS: usize = 16;
 
-/// Ticks from the first edge that samples the pin low to the detection of the edge (`start`):
-/// the synchroniser's second flop.
-pub const START_LATENCY_TICKS: u64 = 1;
-
-/// Phase accumulator value right after a start edge is detected: half a bit, so the
-/// accumulator carries near each bit middle (the detection latency of two clocks and the
-/// majority window, centred one clock before the carry, cancel out; the tolerance tests
-/// check that the window is centred).
+/// Value of the reference accumulator right after a start edge: half a bit, so it carries
+/// near each bit middle.
 pub const PHASE_START: u64 = 1 << (PHASE_BITS - 1);
 
-/// Phase added per clock: `2^PHASE_BITS * baud / clock`, rounded (2097 for 4 Mbit/s at
-/// 125 MHz).
+/// Ticks from the first edge that samples the pin low to the detection of the edge: the
+/// synchroniser's second flop.
+pub const START_LATENCY_TICKS: u64 = 1;
+
+/// Width of the bit timer: at most 2^6 clocks from one bit middle to the next.
+pub const TIMER_BITS: usize = 6;
+
+/// Bits of the strobe tick a port holds.
+pub const STAMP_BITS: usize = 7;
+
+/// Phase added per clock by a `2^PHASE_BITS` accumulator: `2^PHASE_BITS * baud / clock`,
+/// rounded (2097 for 4 Mbit/s at 125 MHz). The transmitters' bit time comes from it too.
 pub fn phase_increment(clock_hz: u64, baud: u64) -> u64 {
     ((1u64 << PHASE_BITS) as f64 * baud as f64 / clock_hz as f64).round() as u64
 }
 
-/// `bit_count` after the stop bit's middle, and after a glitch's start-bit middle: idle bit
-/// times count on from here.
-pub const BIT_COUNT_AFTER_STOP: u64 = 10;
+/// Cycles from the first edge that sampled a start bit low to the cycle in which bit `b`
+/// (0 start, 1-8 data, 9 stop) is sampled: where the reference accumulator, loaded two
+/// clocks after that edge, carries.
+pub fn bit_middles(clock_hz: u64, baud: u64) -> [u64; 10] {
+    let increment = phase_increment(clock_hz, baud);
+    std::array::from_fn(|b| 1 + (((b as u64 + 1) << PHASE_BITS) - PHASE_START).div_ceil(increment))
+}
 
-/// Largest `bit_count` (it wraps to 0 after it).
-pub const BIT_COUNT_MAX: u64 = 31;
+/// Clocks after its strobe cycle through which a byte stays in the shift register: the
+/// next start edge is sampled in the strobe's cycle at the earliest, and its first data bit
+/// shifts in at that bit's middle. An engine that visits every port at least this often
+/// needs no hold register.
+pub fn shift_hold_clocks(clock_hz: u64, baud: u64) -> u64 {
+    bit_middles(clock_hz, baud)[1]
+}
 
-/// UART receiver for one pin.
+/// Whether a receiver can be built for this clock and rate: the bit timer reaches every
+/// middle (at most 2^[`TIMER_BITS`] clocks apart) and the clock is at least 4 x the rate.
+pub fn rate_supported(clock_hz: u64, baud: u64) -> bool {
+    if baud == 0 || clock_hz < 4 * baud {
+        return false;
+    }
+    let m = bit_middles(clock_hz, baud);
+    m.windows(2).all(|w| w[1] - w[0] <= 1 << TIMER_BITS)
+}
+
+/// The timer's load at a start edge and its reload after each middle: the value that makes
+/// it reach zero at the next middle.
+fn timer_loads(clock_hz: u64, baud: u64) -> (u64, u64, u64) {
+    let m = bit_middles(clock_hz, baud);
+    let gaps: Vec<u64> = m.windows(2).map(|w| w[1] - w[0] - 1).collect();
+    let base = *gaps.iter().min().expect("ten middles");
+    let mut long = 0u64;
+    for (b, g) in gaps.iter().enumerate() {
+        assert!(
+            *g <= base + 1,
+            "UartRx: bit middles more than a clock apart in length"
+        );
+        if *g > base {
+            long |= 1 << b;
+        }
+    }
+    (m[0] - 2, base, long)
+}
+
+/// Bit-level receiver of one UART pin.
 #[derive(LogicBlock)]
 pub struct UartRx {
     /// The box clock.
     pub clock: Signal<In, Clock>,
-    /// Synchronous reset.
+    /// Synchronous reset: idle, nothing held.
     pub reset: Signal<In, Bit>,
     /// The UART pin, asynchronous, idle high.
     pub rx: Signal<In, Bit>,
-    /// Received byte, valid with `strobe` (the shift register, which holds it until the
-    /// next byte's first data bit).
+    /// The low bits of the box tick (the stamp of a strobe in this cycle).
+    pub tick_low: Signal<In, Bits<STAMP_BITS>>,
+    /// The engine reads this port now: `held` falls at the next edge (unless a byte
+    /// completes in this very cycle).
+    pub visit: Signal<In, Bit>,
+    /// A byte is held for the engine.
+    pub held: Signal<Out, Bit>,
+    /// The byte held.
     pub data: Signal<Out, Bits<8>>,
-    /// High for one clock when a byte is complete.
-    pub strobe: Signal<Out, Bit>,
-    /// With `strobe`: the stop bit was low.
+    /// Its stop bit was low.
     pub framing_error: Signal<Out, Bit>,
-    /// High for one clock when a start edge is detected, [`START_LATENCY_TICKS`] after
-    /// the first edge that sampled the pin low.
-    pub start: Signal<Out, Bit>,
-    /// Bit middles since the last start edge: [`BIT_COUNT_AFTER_STOP`] after the stop bit
-    /// (or a glitch), then one more per idle bit time, wrapping after [`BIT_COUNT_MAX`].
-    pub bit_count: Signal<Out, Bits<5>>,
-    phase_increment: Constant<Bits<17>>,
-    phase_start_ahead: Constant<Bits<17>>,
-    after_stop: Constant<Bits<5>>,
+    /// The low bits of the tick of its strobe cycle.
+    pub stamp: Signal<Out, Bits<STAMP_BITS>>,
+    first_load: Constant<Bits<TIMER_BITS>>,
+    reload: Constant<Bits<TIMER_BITS>>,
+    reload_long: Constant<Bits<TIMER_BITS>>,
+    // bit b of it: the timer's reload after bit b's middle is `reload_long`
+    long_bits: Constant<Bits<16>>,
     sync_meta: DFF<Bit>,
     sync_stable: DFF<Bit>,
     sync_previous: DFF<Bit>,
     history: DFF<Bits<2>>,
     receiving: DFF<Bit>,
-    /// The accumulator one clock ahead, with that addition's carry on top: bit 16 is the
-    /// bit middle, straight from a register.
-    phase_ahead: DFF<Bits<17>>,
-    bit_index: DFF<Bits<5>>,
+    timer: DFF<Bits<TIMER_BITS>>,
+    bit_index: DFF<Bits<4>>,
     shift: DFF<Bits<8>>,
-    strobe_out: DFF<Bit>,
-    framing_error_out: DFF<Bit>,
-    start_edge: Signal<Local, Bit>,
-    phase_sum: Signal<Local, Bits<17>>,
+    held_flag: DFF<Bit>,
+    framing_error_flag: DFF<Bit>,
+    stamp_bits: DFF<Bits<STAMP_BITS>>,
+    /// With a hold register: the byte, copied at the strobe (none: the shift register).
+    hold: Vec<DFF<Bits<8>>>,
     majority: Signal<Local, Bit>,
     middle: Signal<Local, Bit>,
+    strobe: Signal<Local, Bit>,
+    long_shifted: Signal<Local, Bits<16>>,
+    long_gap: Signal<Local, Bit>,
 }
 
 impl UartRx {
-    /// A receiver for `baud` with a `clock_hz` box clock. Panics when the clock is below
-    /// four times the baud rate (the majority window would span most of a bit).
+    /// A receiver for `baud` with a `clock_hz` box clock whose byte stays in its shift
+    /// register (an engine visiting it at least every [`shift_hold_clocks`]). Panics when
+    /// the rate is not [`rate_supported`].
     pub fn new(clock_hz: u64, baud: u64) -> Self {
+        Self::build(clock_hz, baud, false)
+    }
+
+    /// As [`UartRx::new`], with a hold register: the byte stays until the next strobe.
+    pub fn with_hold_register(clock_hz: u64, baud: u64) -> Self {
+        Self::build(clock_hz, baud, true)
+    }
+
+    fn build(clock_hz: u64, baud: u64, hold: bool) -> Self {
         assert!(
-            baud > 0 && clock_hz >= 4 * baud,
-            "UartRx: clock {clock_hz} Hz must be at least 4 x baud {baud}"
+            rate_supported(clock_hz, baud),
+            "UartRx: clock {clock_hz} Hz must be 4 to {} x baud {baud}",
+            1 << TIMER_BITS
         );
-        let increment = phase_increment(clock_hz, baud);
-        let start = PHASE_START;
+        let (first, base, long) = timer_loads(clock_hz, baud);
         Self {
             clock: Default::default(),
             reset: Default::default(),
             rx: Default::default(),
+            tick_low: Default::default(),
+            visit: Default::default(),
+            held: Default::default(),
             data: Default::default(),
-            strobe: Default::default(),
             framing_error: Default::default(),
-            start: Default::default(),
-            bit_count: Default::default(),
-            phase_increment: Constant::new(increment.into()),
-            phase_start_ahead: Constant::new((start + increment).into()),
-            after_stop: Constant::new(BIT_COUNT_AFTER_STOP.into()),
+            stamp: Default::default(),
+            first_load: Constant::new(first.into()),
+            reload: Constant::new(base.into()),
+            reload_long: Constant::new((base + 1).into()),
+            long_bits: Constant::new(long.into()),
             sync_meta: Default::default(),
             sync_stable: Default::default(),
             sync_previous: Default::default(),
             history: Default::default(),
             receiving: Default::default(),
-            phase_ahead: Default::default(),
+            timer: Default::default(),
             bit_index: Default::default(),
             shift: Default::default(),
-            strobe_out: Default::default(),
-            framing_error_out: Default::default(),
-            start_edge: Default::default(),
-            phase_sum: Default::default(),
+            held_flag: Default::default(),
+            framing_error_flag: Default::default(),
+            stamp_bits: Default::default(),
+            hold: (0..usize::from(hold)).map(|_| Default::default()).collect(),
             majority: Default::default(),
             middle: Default::default(),
+            strobe: Default::default(),
+            long_shifted: Default::default(),
+            long_gap: Default::default(),
         }
     }
 }
@@ -144,11 +210,12 @@ impl Logic for UartRx {
             sync_previous,
             history,
             receiving,
-            phase_ahead,
+            timer,
             bit_index,
             shift,
-            strobe_out,
-            framing_error_out
+            held_flag,
+            framing_error_flag,
+            stamp_bits
         );
         self.sync_meta.d.next = self.rx.val();
         self.sync_stable.d.next = self.sync_meta.q.val();
@@ -158,34 +225,49 @@ impl Logic for UartRx {
         self.majority.next = (self.sync_stable.q.val() & self.history.q.val().get_bit(0))
             | (self.sync_stable.q.val() & self.history.q.val().get_bit(1))
             | (self.history.q.val().get_bit(0) & self.history.q.val().get_bit(1));
-        // the accumulator runs on when idle: its carries count idle bit times
-        self.middle.next = self.phase_ahead.q.val().get_bit(16);
-        self.phase_sum.next = bit_cast::<17, 16>(self.phase_ahead.q.val().get_bits::<16>(0))
-            + self.phase_increment.val();
-        self.phase_ahead.d.next = self.phase_sum.val();
+        self.middle.next = self.receiving.q.val() & (self.timer.q.val() == 0);
+        self.timer.d.next = self.timer.q.val() - 1;
+        self.long_shifted.next = self.long_bits.val() >> self.bit_index.q.val();
+        self.long_gap.next = self.long_shifted.val().get_bit(0);
         if self.middle.val() {
             self.bit_index.d.next = self.bit_index.q.val() + 1;
-        }
-        self.start_edge.next =
-            !self.receiving.q.val() & self.sync_previous.q.val() & !self.sync_stable.q.val();
-        if self.start_edge.val() {
-            self.receiving.d.next = true;
-            self.phase_ahead.d.next = self.phase_start_ahead.val();
-            self.bit_index.d.next = 0.into();
-        }
-        if self.middle.val() & self.receiving.q.val() {
+            self.timer.d.next = self.reload.val();
+            if self.long_gap.val() {
+                self.timer.d.next = self.reload_long.val();
+            }
             if self.bit_index.q.val() == 0 {
                 // a start bit that reads high in its middle was a glitch: idle from here
                 if self.majority.val() {
                     self.receiving.d.next = false;
-                    self.bit_index.d.next = self.after_stop.val();
                 }
             } else if self.bit_index.q.val() == 9 {
                 self.receiving.d.next = false;
-                self.framing_error_out.d.next = !self.majority.val();
             } else {
                 self.shift.d.next = (self.shift.q.val() >> 1).replace_bit(7, self.majority.val());
             }
+        }
+        if !self.receiving.q.val() & self.sync_previous.q.val() & !self.sync_stable.q.val() {
+            self.receiving.d.next = true;
+            self.timer.d.next = self.first_load.val();
+            self.bit_index.d.next = 0.into();
+        }
+        self.strobe.next = self.middle.val() & (self.bit_index.q.val() == 9);
+        // the stop bit's middle: the byte is complete (one expression each: set and cleared
+        // in branches, a flip-flop gets a reset net of its own, one per port)
+        self.held_flag.d.next =
+            (self.strobe.val() | (self.held_flag.q.val() & !self.visit.val())) & !self.reset.val();
+        if self.strobe.val() {
+            self.framing_error_flag.d.next = !self.majority.val();
+            self.stamp_bits.d.next = self.tick_low.val();
+        }
+        self.data.next = self.shift.q.val();
+        for h in 0..self.hold.len() {
+            self.hold[h].clock.next = self.clock.val();
+            self.hold[h].d.next = self.hold[h].q.val();
+            if self.strobe.val() {
+                self.hold[h].d.next = self.shift.q.val();
+            }
+            self.data.next = self.hold[h].q.val();
         }
         if self.reset.val() {
             self.receiving.d.next = false;
@@ -193,18 +275,9 @@ impl Logic for UartRx {
             self.sync_stable.d.next = true;
             self.sync_previous.d.next = true;
         }
-        // the stop bit's middle, as one expression: a chain of ifs setting and clearing the
-        // bit maps to a flip-flop with its own reset net (one per port), which crowds the
-        // placement of a 64-port box
-        self.strobe_out.d.next = self.middle.val()
-            & self.receiving.q.val()
-            & (self.bit_index.q.val() == 9)
-            & !self.reset.val();
-        self.data.next = self.shift.q.val();
-        self.strobe.next = self.strobe_out.q.val();
-        self.framing_error.next = self.framing_error_out.q.val();
-        self.start.next = self.start_edge.val();
-        self.bit_count.next = self.bit_index.q.val();
+        self.held.next = self.held_flag.q.val();
+        self.framing_error.next = self.framing_error_flag.q.val();
+        self.stamp.next = self.stamp_bits.q.val();
     }
 }
 
@@ -217,36 +290,53 @@ mod tests {
     /// What the receiver delivered: (byte, framing error, start tick).
     type Received = Vec<(u8, bool, u64)>;
 
-    fn receive(line: &UartLine) -> Received {
-        let mut bench = Bench::new(UartRx::new(CLOCK_HZ, CELL_BAUD), |b| &mut b.clock);
+    /// Plays `line` into a receiver whose engine visits it `visit_delay` clocks after each
+    /// strobe and reads what it holds then.
+    fn receive_visited(line: &UartLine, hold: bool, visit_delay: u64) -> Received {
+        let uut = if hold {
+            UartRx::with_hold_register(CLOCK_HZ, CELL_BAUD)
+        } else {
+            UartRx::new(CLOCK_HZ, CELL_BAUD)
+        };
+        let mut bench = Bench::new(uut, |b| &mut b.clock);
         bench.uut.reset.next = true;
         bench.uut.rx.next = true;
         bench.cycles(4);
         bench.uut.reset.next = false;
+        let middles = bit_middles(CLOCK_HZ, CELL_BAUD);
         let mut out = vec![];
         // from here on edge e of the line is the bench's edge number e
         let first = bench.cycles;
-        let levels = line.levels(line.end().ceil() as u64 + 100);
-        // the stamp a deframer keeps: `start` is high after edge e - 1, which is
-        // START_LATENCY_TICKS after the first edge that sampled the start bit low
-        let mut start_tick = None;
+        let levels = line.levels(line.end().ceil() as u64 + 400);
+        let mut held_since: Option<u64> = None;
         for e in 1..levels.len() as u64 {
+            // the inputs of cycle e - 1, taken by edge e
             bench.uut.rx.next = levels[e as usize];
-            if bench.uut.start.val() {
-                start_tick = Some(e.wrapping_sub(1 + START_LATENCY_TICKS) & 0xFFFF_FFFF);
-            }
-            bench.cycle();
-            assert_eq!(bench.cycles - first, e);
-            if bench.uut.strobe.val() {
-                let tick = start_tick.take().expect("a byte without a start edge");
+            bench.uut.tick_low.next = ((e - 1) & 0x7F).into();
+            let visit = held_since.is_some_and(|h| e > h + visit_delay);
+            bench.uut.visit.next = visit;
+            if visit {
+                // read in cycle e - 1: the strobe cycle from the stamp
+                let now = e - 1;
+                let age = (now - bench.uut.stamp.val().to_u64()) & 0x7F;
                 out.push((
                     bench.uut.data.val().to_u8(),
                     bench.uut.framing_error.val(),
-                    tick,
+                    now - age - middles[9],
                 ));
+                held_since = None;
+            }
+            bench.cycle();
+            assert_eq!(bench.cycles - first, e);
+            if bench.uut.held.val() && held_since.is_none() && !visit {
+                held_since = Some(e);
             }
         }
         out
+    }
+
+    fn receive(line: &UartLine) -> Received {
+        receive_visited(line, false, 0)
     }
 
     fn stream(bytes: &[u8], error_ppm: f64, start: f64) -> (UartLine, Received) {
@@ -261,6 +351,20 @@ mod tests {
     }
 
     #[test]
+    fn bit_middles_are_the_reference_accumulators_carries() {
+        let m = bit_middles(CLOCK_HZ, CELL_BAUD);
+        // 31.25 clocks per bit, half a bit to the start bit's middle, two clocks of
+        // detection before the accumulator counts
+        for (b, middle) in m.iter().enumerate() {
+            let exact = 1.0 + (b as f64 + 0.5) * 31.25;
+            assert!((*middle as f64 - exact).abs() < 1.0, "bit {b}: {middle}");
+        }
+        assert!(rate_supported(CLOCK_HZ, CELL_BAUD));
+        assert!(!rate_supported(CLOCK_HZ, 1_000_000), "125 clocks per bit");
+        assert!(!rate_supported(15_999_999, 4_000_000));
+    }
+
+    #[test]
     fn every_byte_at_exact_baud_with_its_start_tick() {
         for start in [10.0, 10.25, 10.5, 10.999] {
             let (line, rx) = stream(&all_bytes(), 0.0, start);
@@ -272,6 +376,31 @@ mod tests {
                 assert_eq!(r.2, t.ceil() as u64, "start tick of the frame at {t}");
             }
         }
+    }
+
+    #[test]
+    fn a_byte_waits_for_the_visit_in_the_shift_register_or_the_hold_register() {
+        // back to back on a line 4.5 % fast: the next byte's start edge right after the
+        // strobe; a visit within shift_hold_clocks still reads the byte
+        let bytes: Vec<u8> = (0..64u8).map(|i| i.wrapping_mul(37) ^ 0x5A).collect();
+        let mut line = UartLine::default();
+        line.bytes(&bytes, 20.0, bit_period(4.5e4));
+        let hold = shift_hold_clocks(CLOCK_HZ, CELL_BAUD);
+        for (with_hold, delay) in [(false, hold - 1), (true, hold - 1), (true, 120)] {
+            let rx = receive_visited(&line, with_hold, delay);
+            let got: Vec<u8> = rx.iter().map(|r| r.0).collect();
+            assert_eq!(got, bytes, "hold register {with_hold}, visit after {delay}");
+            for (r, t) in rx.iter().zip(&line.frame_starts) {
+                assert_eq!(r.2, t.ceil() as u64, "start tick of the frame at {t}");
+            }
+        }
+        // without the hold register, a visit later than that reads the next byte's bits
+        let rx = receive_visited(&line, false, hold + 40);
+        let got: Vec<u8> = rx.iter().map(|r| r.0).collect();
+        assert_ne!(
+            got, bytes,
+            "a late visit must see the shift register move on"
+        );
     }
 
     #[test]
@@ -313,7 +442,7 @@ mod tests {
     fn baud_tolerance_is_symmetric_and_beyond_4_percent() {
         let (fast, slow) = (tolerance(1.0), tolerance(-1.0));
         eprintln!("UartRx tolerance: +{fast} % / -{slow} %");
-        assert!(fast >= 4.0 && slow >= 4.0, "+{fast} % / -{slow} %");
+        assert!(fast >= 4.5 && slow >= 4.5, "+{fast} % / -{slow} %");
         assert!((fast - slow).abs() <= 0.5, "centred: +{fast} % / -{slow} %");
         assert!(fast < 7.0 && slow < 7.0, "8N1 cannot exceed ~5 %");
     }
@@ -324,71 +453,6 @@ mod tests {
         let (_, rx) = stream(&[0x00; 64], -8e4, 10.0);
         let flagged = rx.iter().filter(|r| r.1).count();
         assert!(flagged * 2 > rx.len(), "{flagged} of {} flagged", rx.len());
-    }
-
-    #[test]
-    fn bit_count_counts_idle_bit_times_after_the_stop_bit_and_a_glitch() {
-        let p = bit_period(0.0);
-        let mut line = UartLine::default();
-        let end = line.bytes(&[0x5A], 20.0, p);
-        // a glitch (high again before the start bit's middle) long after the byte
-        let glitch = end + 40.0 * p;
-        line.force(glitch, glitch + 5.0, false);
-        let mut bench = Bench::new(UartRx::new(CLOCK_HZ, CELL_BAUD), |b| &mut b.clock);
-        bench.uut.reset.next = true;
-        bench.uut.rx.next = true;
-        bench.cycles(4);
-        bench.uut.reset.next = false;
-        let first = bench.cycles;
-        let levels = line.levels((glitch + 20.0 * p) as u64);
-        // (edge, bit count) at every change of the count
-        let mut changes = vec![];
-        let mut count = bench.uut.bit_count.val().to_u64();
-        for (e, level) in levels.iter().enumerate().skip(1) {
-            bench.uut.rx.next = *level;
-            bench.cycle();
-            assert_eq!(bench.cycles - first, e as u64);
-            let now = bench.uut.bit_count.val().to_u64();
-            if now != count {
-                changes.push((e as f64, now));
-                count = now;
-            }
-        }
-        let stop = changes
-            .iter()
-            .position(|c| c.1 == BIT_COUNT_AFTER_STOP)
-            .expect("the stop bit's middle");
-        // 9.5 bits after the start edge, then one more per bit time, wrapping after 31
-        assert!(
-            (changes[stop].0 - (20.0 + 9.5 * p)).abs() < 3.0,
-            "{changes:?}"
-        );
-        for (k, c) in changes[stop + 1..].iter().take(30).enumerate() {
-            let k = k as u64 + 1;
-            assert_eq!(
-                c.1,
-                (BIT_COUNT_AFTER_STOP + k) % (BIT_COUNT_MAX + 1),
-                "{changes:?}"
-            );
-            let at = 20.0 + (9.5 + k as f64) * p;
-            assert!(
-                (c.0 - at).abs() < 3.0,
-                "idle bit {k} at {}: {changes:?}",
-                c.0
-            );
-        }
-        // the glitch restarts the count (0 at its edge), then sets it to the stop value at
-        // its start bit's middle, from where idle bit times count on
-        let restart = changes.iter().rposition(|c| c.1 == 0).expect("restart");
-        assert!((changes[restart].0 - glitch).abs() < 4.0, "{changes:?}");
-        assert_eq!(changes[restart + 1].1, BIT_COUNT_AFTER_STOP, "{changes:?}");
-        assert!((changes[restart + 1].0 - (glitch + 0.5 * p)).abs() < 3.0);
-        assert_eq!(
-            changes[restart + 2].1,
-            BIT_COUNT_AFTER_STOP + 1,
-            "{changes:?}"
-        );
-        assert!((changes[restart + 2].0 - (glitch + 1.5 * p)).abs() < 3.0);
     }
 
     #[test]

@@ -342,6 +342,18 @@ fn print_report(r: &SynthReport) {
             .collect();
         println!("  seeds   {} MHz; kept seed {}", each.join(", "), r.seed);
     }
+    let statically: Vec<String> = r
+        .seeds
+        .iter()
+        .filter(|s| s.placer == skinbox_synth::Placer::Static)
+        .map(|s| s.seed.to_string())
+        .collect();
+    if !statically.is_empty() {
+        println!(
+            "  placer  static for seed {} (HeAP's legaliser found no legal placement)",
+            statically.join(", ")
+        );
+    }
     println!("  bits    {}", r.bitstream.display());
     println!(
         "  time    yosys {:.0} s, nextpnr {:.0} s, ecppack {:.0} s, total {:.0} s",

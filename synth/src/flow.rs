@@ -50,7 +50,25 @@ pub struct SeedResult {
     pub seed: u64,
     /// Fmax of the box clock with that seed, MHz.
     pub fmax_mhz: f64,
+    /// The placer that placed it: HeAP, or the static placer when HeAP's legaliser found
+    /// no place for a cell.
+    #[serde(default)]
+    pub placer: Placer,
 }
+
+/// nextpnr-ecp5's placer of a placement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Placer {
+    /// The analytic placer (nextpnr's default), with the flow's legaliser bound.
+    #[default]
+    Heap,
+    /// The static placer, tried when HeAP could not legalise the design.
+    Static,
+}
+
+/// What nextpnr's HeAP legaliser prints when it finds no legal place for a cell.
+const HEAP_LEGALISER_FAILED: &str = "Unable to find legal placement";
 
 /// A step of the flow.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -248,12 +266,26 @@ fn place_seeds(
     let mut tried = Vec::new();
     for &seed in seeds {
         progress(Event::Line(&format!("seed {seed}")));
-        place_and_route(toolchain, options, &lpf_name(options.board), seed, progress)?;
+        let lpf = lpf_name(options.board);
+        let placer = match place_and_route(toolchain, options, &lpf, seed, Placer::Heap, progress) {
+            Err(SynthError::Tool { tail, .. }) if tail.contains(HEAP_LEGALISER_FAILED) => {
+                progress(Event::Line(&format!(
+                    "seed {seed}: HeAP found no legal placement; placing with the static placer"
+                )));
+                place_and_route(toolchain, options, &lpf, seed, Placer::Static, progress)?;
+                Placer::Static
+            }
+            other => {
+                other?;
+                Placer::Heap
+            }
+        };
         let pnr = NextpnrReport::parse(&read(dir, &seed_file(seed, "report.json"))?, BOX_INSTANCE)?;
         let (_, fmax) = box_clock(&pnr, target_mhz)?;
         tried.push(SeedResult {
             seed,
             fmax_mhz: fmax.achieved,
+            placer,
         });
     }
     Ok(tried)
@@ -645,13 +677,14 @@ fn seed_file(seed: u64, what: &str) -> String {
     format!("nextpnr-seed{seed}.{what}")
 }
 
-/// Places and routes the synthesised netlist with the constraints file `lpf` and `seed`,
-/// into that seed's files.
+/// Places and routes the synthesised netlist with the constraints file `lpf`, `seed` and
+/// `placer`, into that seed's files.
 fn place_and_route(
     toolchain: &Toolchain,
     options: &FlowOptions,
     lpf: &str,
     seed: u64,
+    placer: Placer,
     progress: &mut dyn FnMut(Event<'_>),
 ) -> Result<(), SynthError> {
     let board = options.board;
@@ -666,11 +699,14 @@ fn place_and_route(
         .args(["--textcfg", &seed_file(seed, "config")])
         .args(["--report", &seed_file(seed, "report.json")])
         .args(["--seed", &seed.to_string()])
-        .args([
+        .arg("--timing-allow-fail");
+    match placer {
+        Placer::Heap => nextpnr.args([
             "--placer-heap-cell-placement-timeout",
             &PLACER_CELL_TIMEOUT_DIVISOR.to_string(),
-        ])
-        .arg("--timing-allow-fail");
+        ]),
+        Placer::Static => nextpnr.args(["--placer", "static"]),
+    };
     // nextpnr goes on placing a design that cannot fit for a long time: stop it as soon as
     // its utilisation table shows a resource over capacity.
     run_logged(
@@ -735,7 +771,11 @@ mod tests {
     use super::*;
 
     fn seed(seed: u64, fmax_mhz: f64) -> SeedResult {
-        SeedResult { seed, fmax_mhz }
+        SeedResult {
+            seed,
+            fmax_mhz,
+            placer: Placer::Heap,
+        }
     }
 
     #[test]

@@ -13,8 +13,8 @@ pub mod toolchain;
 use std::path::PathBuf;
 
 pub use flow::{
-    merge, read_seed_shards, run, run_shard, Event, FlowOptions, SeedResult, SeedShard, Stage,
-    SynthReport,
+    merge, read_seed_shards, run, run_shard, Event, FlowOptions, Placer, SeedResult, SeedShard,
+    Stage, SynthReport,
 };
 pub use toolchain::Toolchain;
 

@@ -8,8 +8,8 @@ use super::receive::ReceiveSide;
 use crate::control::Effect;
 use crate::downlink::PinChange;
 use crate::harness::{LINK_SPEED, LINK_UP};
-use skinbox_gateware::cell_deframer::TICK_BEATS;
-use skinbox_gateware::counter_file::scan_period;
+use skinbox_gateware::cell_deframer::DECISION_CLOCKS;
+use skinbox_gateware::counter_file::INCREMENT_WRITE_EDGE;
 use skinbox_gateware::frame_transmitter::TAKE_TO_RAW_BODY;
 use skinbox_gateware::packet_store::{FIFO_DEPTH, RECORD_BEATS};
 use skinbox_gateware::status_reporter::{
@@ -49,12 +49,8 @@ pub(super) struct BackTiming {
     pub frame_tail: u64,
     /// Clocks from a transmitter start to its first GMII byte.
     pub start_to_first_byte: u64,
-    /// First cycle of the store's write ring (ring bit 0 visited).
-    pub visit_from: u64,
-    /// Clocks between two visits of a port by the write ring.
-    pub visit_period: u64,
-    /// Ports per bank of the store (the ring position of port p is p mod this).
-    pub bank_ports: usize,
+    /// The deframing engine's scan period (it counts one event of a port per visit).
+    pub scan_period: u64,
 }
 
 /// A frame the back end sends.
@@ -106,12 +102,14 @@ struct RecordBeat {
 #[derive(Debug, Default)]
 struct Buffer {
     slots: VecDeque<Stored>,
-    /// A packet stored whole in the previous cycle: the store counts it a clock after its
-    /// last beat, so it joins `slots` at the end of this cycle.
+    /// A packet committed in the previous cycle: the store counts it a clock after the
+    /// engine's decision, so it joins `slots` at the end of this cycle.
     committed: Option<Stored>,
+    /// Both slots were full at the visit of the header being decided.
+    full_at_check: bool,
     dropping: bool,
     loss_pending: bool,
-    /// Loss flag captured with the first beat of the packet being written.
+    /// Loss flag captured with the header of the packet being written.
     flag_of_writing: bool,
 }
 
@@ -128,10 +126,10 @@ enum Report {
     Sending,
 }
 
-/// Counter file of one port: pending event bits served one per scanner visit.
+/// Counter events of one port: pending bits, one counted per visit of the engine.
 #[derive(Debug, Default)]
 struct PortCounting {
-    /// Events (cycle on the input, bits), in cycle order.
+    /// Events (decision cycle, bits), in cycle order.
     events: Vec<(u64, u8)>,
     next_event: usize,
     /// Cycle up to which visits were processed (exclusive).
@@ -141,11 +139,22 @@ struct PortCounting {
     writes: [Vec<u64>; 8],
 }
 
+/// What the engine does with a packet in one cycle, in the order they happen in a cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Step {
+    /// It visits the header's port: the store's occupancy of this cycle is what it sees.
+    Check,
+    /// It decides the end of the packet.
+    End,
+    /// It decides the header (after an end in the same decision: a truncation).
+    Start,
+}
+
 struct FrontBeat {
     cycle: u64,
     port: usize,
     packet: usize,
-    first: bool,
+    step: Step,
 }
 
 /// The back end's state: the registers of the gateware that matter to the frames.
@@ -216,38 +225,27 @@ impl<'a> Back<'a> {
         destination: Destination,
         receive: Option<ReceiveSide>,
     ) -> Self {
-        // The store's write ring takes a port's beat only on its visits: the first beat at
-        // the first visit from its cycle on; the tick beats and the header byte follow one
-        // visit each, and the last beat waits for them (it is the header byte itself when
-        // the packet ends there) and for its own cycle.
-        let next_visit = |port: usize, from: u64| -> u64 {
-            let period = t.visit_period;
-            let position = (port % t.bank_ports) as u64;
-            let at = (from.max(t.visit_from) - t.visit_from) % period;
-            from.max(t.visit_from) + (position + period - at) % period
-        };
-        let beats_after_first = TICK_BEATS as u64 - 1;
+        // the engine's steps on each packet, in cycle order
         let mut beats: Vec<FrontBeat> = fronts
             .iter()
             .enumerate()
             .flat_map(|(port, f)| {
                 f.packets.iter().enumerate().flat_map(move |(i, p)| {
-                    let first = next_visit(port, p.first_beat);
-                    let last = next_visit(
-                        port,
-                        p.last_beat
-                            .max(first + beats_after_first * t.visit_period + 1),
-                    );
-                    [(first, true), (last, false)].map(|(cycle, first)| FrontBeat {
+                    [
+                        (p.check, Step::Check),
+                        (p.start, Step::Start),
+                        (p.end, Step::End),
+                    ]
+                    .map(|(cycle, step)| FrontBeat {
                         cycle,
                         port,
                         packet: i,
-                        first,
+                        step,
                     })
                 })
             })
             .collect();
-        beats.sort_by_key(|b| (b.cycle, b.port));
+        beats.sort_by_key(|b| (b.cycle, b.step, b.port));
         let counting = fronts
             .iter()
             .map(|f| PortCounting {
@@ -636,7 +634,7 @@ impl<'a> Back<'a> {
             });
         }
 
-        // store write side: the deframers' first and last beats taken this cycle
+        // store write side: the engine's steps on packets this cycle
         let counted_now: Vec<(usize, Stored)> = self
             .buffers
             .iter_mut()
@@ -644,28 +642,30 @@ impl<'a> Back<'a> {
             .filter_map(|(port, b)| b.committed.take().map(|s| (port, s)))
             .collect();
         while let Some(b) = self.beats.get(self.next_beat).filter(|b| b.cycle == c) {
-            let (port, packet, first) = (b.port, b.packet, b.first);
+            let (port, packet, step) = (b.port, b.packet, b.step);
             self.next_beat += 1;
             let p: &StartedPacket = &self.fronts[port].packets[packet];
             let buffer = &mut self.buffers[port];
             let used = buffer.slots.len() + usize::from(read_done == Some(port));
-            if first {
-                buffer.dropping = used == super::SLOTS;
-                buffer.flag_of_writing = buffer.loss_pending;
-            } else if !p.good {
-                buffer.loss_pending = true;
-            } else if buffer.dropping {
-                buffer.loss_pending = true;
-                self.counting[port].add(c + 1, DROPPED);
-            } else {
-                // (a port's first and last beats never share a cycle, so `used` above
-                // is not changed by this)
-                buffer.committed = Some(Stored {
-                    flags: u8::from(buffer.flag_of_writing),
-                    stamp: p.stamp as u32,
-                    bytes: p.bytes,
-                });
-                buffer.loss_pending = false;
+            match step {
+                Step::Check => buffer.full_at_check = used == super::SLOTS,
+                Step::Start => {
+                    buffer.dropping = buffer.full_at_check;
+                    buffer.flag_of_writing = buffer.loss_pending;
+                }
+                Step::End if !p.good => buffer.loss_pending = true,
+                Step::End if buffer.dropping => {
+                    buffer.loss_pending = true;
+                    self.counting[port].add(c, DROPPED);
+                }
+                Step::End => {
+                    buffer.committed = Some(Stored {
+                        flags: u8::from(buffer.flag_of_writing),
+                        stamp: p.stamp as u32,
+                        bytes: p.bytes,
+                    });
+                    buffer.loss_pending = false;
+                }
             }
         }
         for (port, stored) in counted_now {
@@ -784,8 +784,8 @@ impl<'a> Back<'a> {
             let last_read = word_read(first_word + 7);
             self.counting[port].advance(
                 port,
-                scan_period(self.t.ports),
-                self.t.tick_offset,
+                self.t.scan_period,
+                self.t.tick_offset + DECISION_CLOCKS,
                 last_read + 1,
             );
             let mut counters = PortCounters::default();
@@ -815,53 +815,55 @@ fn empty_record() -> RecordRepr {
 }
 
 impl PortCounting {
-    /// An event generated by the back end (a dropped packet), in cycle order.
+    /// An event generated by the back end (a dropped packet), in cycle order (after the
+    /// engine's events of the same decision: they are ORed together).
     fn add(&mut self, cycle: u64, bits: u8) {
-        let at = self.events[self.next_event..].partition_point(|e| e.0 <= cycle) + self.next_event;
-        self.events.insert(at, (cycle, bits));
+        let at = self.events[self.next_event..].partition_point(|e| e.0 < cycle) + self.next_event;
+        match self.events.get_mut(at) {
+            Some(e) if e.0 == cycle => e.1 |= bits,
+            _ => self.events.insert(at, (cycle, bits)),
+        }
     }
 
-    /// Serves pending bits at the scanner visits of `port` before cycle `until`; the
-    /// scanner steps through `period` positions, one per clock.
-    fn advance(&mut self, port: usize, period: usize, visit_offset: u64, until: u64) {
+    /// Counts pending bits at the engine's decisions on `port` before cycle `until`: they
+    /// come every `period` clocks, the first at `origin + port`; each ORs in the events
+    /// decided then and sends the lowest pending bit to the counter file.
+    fn advance(&mut self, port: usize, period: u64, origin: u64, until: u64) {
         let period = period as i128;
-        // first visit of this port at or after cycle c: the scanner is at (c - offset) mod P
-        let visit = |c: u64| {
-            let phase = (c as i128 - visit_offset as i128 - port as i128).rem_euclid(period);
+        // first decision on this port at or after cycle c
+        let decision = |c: u64| {
+            let phase = (c as i128 - origin as i128 - port as i128).rem_euclid(period);
             c + ((period - phase) % period) as u64
         };
         let mut c = self.done_until;
         while c < until {
             if self.pending == 0 {
-                let Some(&(e, bits)) = self.events.get(self.next_event) else {
+                let Some(&(e, _)) = self.events.get(self.next_event) else {
                     break;
                 };
-                if e + 1 >= until {
-                    break;
-                }
-                self.next_event += 1;
-                self.pending |= bits;
-                c = c.max(e + 1);
-                continue;
+                // (events are decided at decisions on this port)
+                c = c.max(e);
             }
-            let v = visit(c);
-            // events that arrive before this visit join the pending bits
-            if let Some(&(e, bits)) = self.events.get(self.next_event) {
-                if e < v {
-                    self.next_event += 1;
-                    self.pending |= bits;
-                    continue;
-                }
-            }
+            let v = decision(c);
             if v >= until {
                 break;
             }
+            if let Some(&(e, bits)) = self.events.get(self.next_event) {
+                if e <= v {
+                    debug_assert_eq!(e, v, "port {port}: an event off the engine's schedule");
+                    self.next_event += 1;
+                    self.pending |= bits;
+                }
+            }
+            if self.pending == 0 {
+                c = v + 1;
+                continue;
+            }
             let lowest = self.pending.trailing_zeros() as usize;
             self.pending &= !(1 << lowest);
-            // pending bits sampled at the visit into the group register, `sampled` a clock
-            // later, the address a clock after that, the memory's output registered, the
-            // increment registered, written the edge after that
-            self.writes[lowest].push(v + 6);
+            // the increment leaves the engine's register a clock after the decision and is
+            // written INCREMENT_WRITE_EDGE edges later
+            self.writes[lowest].push(v + 1 + INCREMENT_WRITE_EDGE);
             c = v + 1;
         }
         self.done_until = c.min(until).max(self.done_until);

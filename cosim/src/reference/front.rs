@@ -1,26 +1,31 @@
 //! The ports' front end, per port and without a clock loop: which bytes the UART receiver
-//! decodes from the pin's transitions, and which packets, beats and counter events the
-//! deframer makes of them.
+//! decodes from the pin's transitions, and which packets and counter events the deframing
+//! engine makes of them at its visits of the port (it visits each port on a fixed
+//! schedule, so a port's outcome depends on its own pin and, for drops, on the store's
+//! occupancy alone).
 //!
 //! Cycle `c` below is the clock period after edge `c` (the harness's edge numbering):
 //! registers hold what edge `c` stored, and what they compute is stored by edge `c + 1`.
 //! `level(e)` is what the synchroniser's first flop captured at edge `e`.
 
 use crate::line::Transition;
-use skinbox_gateware::cell_deframer::INPUT_REGISTER_CLOCKS;
 use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 use skinbox_protocol::status::PortCounter;
 use std::cell::Cell;
 
-/// Fixed numbers of the UART receiver and deframer.
+/// Fixed numbers of the UART receivers and the deframing engine.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct FrontTiming {
-    /// Phase accumulator increment per clock.
-    pub phase_increment: u64,
-    /// Accumulator value after a start edge.
-    pub phase_start: u64,
-    /// Idle bit times inside a packet that truncate it.
-    pub idle_gap_bits: u64,
+    /// Cycles from the first low sample of a start bit to the sample of each bit
+    /// (`skinbox_gateware::uart_rx::bit_middles`).
+    pub middles: [u64; 10],
+    /// The engine's scan period: port `p` is visited in the cycles `c` with
+    /// `(c - scan_origin - p) mod scan_period = 0`.
+    pub scan_period: u64,
+    /// Cycle in which the scan visits port 0 first.
+    pub scan_origin: u64,
+    /// Clocks after a byte's strobe at which a packet without a next byte is truncated.
+    pub truncation: u64,
     /// Header and end bytes.
     pub framing: CellFraming,
     /// Last cycle the ports are held in reset: the synchroniser reads high up to its edge.
@@ -30,22 +35,23 @@ pub(super) struct FrontTiming {
 }
 
 impl FrontTiming {
-    /// Cycles from the start detection's reference (the first low sample) to the middle
-    /// of bit `b` (0 start, 1..=8 data, 9 stop, then idle bit times: the accumulator runs
-    /// on): the accumulator, loaded two clocks after the first low sample, carries there.
-    fn middle(&self, b: u64) -> u64 {
-        let target = (b + 1) << crate::reference::PHASE_BITS;
-        2 + (target - self.phase_start).div_ceil(self.phase_increment) - 1
+    /// The first cycle at or after `c` in which the engine visits `port`.
+    fn visit(&self, port: usize, c: u64) -> u64 {
+        let phase = (c as i128 - self.scan_origin as i128 - port as i128)
+            .rem_euclid(self.scan_period as i128) as u64;
+        c + (self.scan_period - phase) % self.scan_period
     }
 }
 
-/// A packet the deframer started (header seen), good or rejected.
+/// A packet the engine started (header seen), good or rejected.
 #[derive(Debug, Clone)]
 pub(super) struct StartedPacket {
-    /// Cycle its first beat (the first tick byte) is offered to the packet store.
-    pub first_beat: u64,
-    /// Cycle of its last beat (the 20th byte, or the error beat of a rejected packet).
-    pub last_beat: u64,
+    /// Cycle of its header's visit: the store's occupancy the engine sees is this cycle's.
+    pub check: u64,
+    /// Cycle of the decision on its header (the loss flag it carries is taken then).
+    pub start: u64,
+    /// Cycle of the decision that ends it (its 20th byte, or its rejection).
+    pub end: u64,
     /// Complete with the right end byte.
     pub good: bool,
     /// Tick of the first low sample of its header's start bit.
@@ -59,7 +65,7 @@ pub(super) struct StartedPacket {
 pub(super) struct PortFront {
     /// Packets in order.
     pub packets: Vec<StartedPacket>,
-    /// Counter events: (cycle the event is on the counter file's input, counter bits).
+    /// Counter events: (decision cycle, counter bits), in order.
     pub events: Vec<(u64, u8)>,
 }
 
@@ -128,47 +134,22 @@ impl Pin<'_> {
 struct Byte {
     value: u8,
     framing_error: bool,
-    /// Cycle its strobe is high at the deframer (after its input register).
+    /// Cycle its stop bit is sampled (the receiver holds it from the next cycle on).
     strobe: u64,
-    /// Tick of the first low sample of its start bit.
-    stamp: u64,
 }
 
-/// A busy stretch of the receiver: from `busy_from` (the first cycle the deframer sees
-/// its bit count restarted), the cycle the deframer sees the idle gap after it when no
-/// reception comes first (`gap_at`), and the byte, if one came.
-struct Reception {
-    busy_from: u64,
-    gap_at: u64,
-    byte: Option<Byte>,
-}
-
-/// Everything the receiver does on this pin, in order, up to `end`.
-fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Reception> {
-    let middles: Vec<u64> = (0..10).map(|b| t.middle(b)).collect();
-    // the bit count is BIT_COUNT_AFTER_STOP from the stop bit's middle (9) or a glitch's
-    // start-bit middle (0) on and reaches the gap's end `idle_gap_bits` middles later; the
-    // deframer's register sees it a clock after that middle
-    let gap_middle = |from: u64| t.middle(from + t.idle_gap_bits) + 1;
-    let gap_after_stop = gap_middle(9);
-    let gap_after_glitch = gap_middle(0);
+/// Every byte the receiver completes on this pin, in order, up to `end`.
+fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Byte> {
+    let middles = t.middles;
     let mut out = vec![];
     let mut from = 0;
     while let Some(m) = pin.next_fall(from) {
         if m >= end {
             break;
         }
-        // as the deframer sees them: through its input register
-        let seen = INPUT_REGISTER_CLOCKS;
-        let busy_from = m + 2 + seen;
         let k0 = m + middles[0];
         if pin.majority(k0) {
             // a glitch: back to idle after the start bit's middle
-            out.push(Reception {
-                busy_from,
-                gap_at: m + gap_after_glitch + seen,
-                byte: None,
-            });
             from = k0;
             continue;
         }
@@ -177,15 +158,10 @@ fn receive(pin: &Pin, t: &FrontTiming, end: u64) -> Vec<Reception> {
             value |= u8::from(pin.majority(m + middle)) << (b - 1);
         }
         let k9 = m + middles[9];
-        out.push(Reception {
-            busy_from,
-            gap_at: m + gap_after_stop + seen,
-            byte: Some(Byte {
-                value,
-                framing_error: !pin.majority(k9),
-                strobe: k9 + 1 + seen,
-                stamp: m - t.tick_offset,
-            }),
+        out.push(Byte {
+            value,
+            framing_error: !pin.majority(k9),
+            strobe: k9,
         });
         from = k9;
     }
@@ -200,38 +176,51 @@ const GARBAGE: u8 = 1 << PortCounter::GarbageBytes as u8;
 const FRAMING_ERROR: u8 = 1 << PortCounter::FramingErrors as u8;
 const RESYNC: u8 = 1 << PortCounter::Resyncs as u8;
 
-/// The deframer on one port's pin: packets and counter events up to cycle `end`.
-pub(super) fn port_front(transitions: &[Transition], t: &FrontTiming, end: u64) -> PortFront {
+/// Clocks from a visit to the engine's decision about it.
+const DECISION: u64 = skinbox_gateware::cell_deframer::DECISION_CLOCKS;
+
+/// The deframing engine on port `port`'s pin: packets and counter events up to `end`.
+pub(super) fn port_front(
+    transitions: &[Transition],
+    port: usize,
+    t: &FrontTiming,
+    end: u64,
+) -> PortFront {
     let pin = Pin {
         transitions,
         reset_until: t.port_reset_until,
         cursor: Cell::new(0),
     };
-    let receptions = receive(&pin, t, end);
     let mut out = PortFront::default();
     let mut aligned = false;
-    // the packet being collected: its bytes so far
+    // the packet being collected and its bytes so far; the strobe of the last byte
     let mut current: Option<(StartedPacket, usize)> = None;
-    // the deframer sees the idle gap here unless a reception restarts the bit count first
-    let mut gap_at = 0u64;
-    for r in &receptions {
-        // truncation: the bit count reached the gap before this reception restarted it
+    let mut last_strobe = 0u64;
+    for byte in receive(&pin, t, end) {
+        let visit = t.visit(port, byte.strobe + 1);
+        let decision = visit + DECISION;
+        let mut events = 0u8;
         if current.is_some() {
-            let fire = gap_at;
-            if fire < r.busy_from {
+            // the first visit whose decision sees the limit passed since the last strobe
+            let due = t.visit(port, last_strobe + t.truncation - DECISION);
+            let truncated_before = due < visit;
+            let truncated_now = due == visit && byte.strobe - last_strobe >= t.truncation;
+            if truncated_before || truncated_now {
                 let (mut p, _) = current.take().expect("checked");
-                p.last_beat = fire + 1;
+                p.end = due + DECISION;
                 out.packets.push(p);
-                out.events.push((fire + 1, TRUNCATED | RESYNC));
                 aligned = false;
+                if truncated_before {
+                    out.events.push((due + DECISION, TRUNCATED | RESYNC));
+                } else {
+                    events |= TRUNCATED | RESYNC;
+                }
             }
         }
-        let Some(byte) = &r.byte else {
-            gap_at = r.gap_at;
-            continue;
-        };
-        let at = byte.strobe + 1;
-        let mut events = if byte.framing_error { FRAMING_ERROR } else { 0 };
+        last_strobe = byte.strobe;
+        if byte.framing_error {
+            events |= FRAMING_ERROR;
+        }
         match current.take() {
             None => {
                 let header = !byte.framing_error
@@ -240,16 +229,15 @@ pub(super) fn port_front(transitions: &[Transition], t: &FrontTiming, end: u64) 
                 if header {
                     let mut bytes = [0; PACKET_LEN];
                     bytes[0] = byte.value;
-                    current = Some((
-                        StartedPacket {
-                            first_beat: at,
-                            last_beat: 0,
-                            good: false,
-                            stamp: byte.stamp,
-                            bytes,
-                        },
-                        1,
-                    ));
+                    let packet = StartedPacket {
+                        check: visit,
+                        start: decision,
+                        end: 0,
+                        good: false,
+                        stamp: byte.strobe - t.middles[9] - t.tick_offset,
+                        bytes,
+                    };
+                    current = Some((packet, 1));
                 } else {
                     events |= GARBAGE;
                     if aligned {
@@ -261,12 +249,12 @@ pub(super) fn port_front(transitions: &[Transition], t: &FrontTiming, end: u64) 
             Some((mut p, n)) => {
                 p.bytes[n] = byte.value;
                 if byte.framing_error {
-                    p.last_beat = at;
+                    p.end = decision;
                     out.packets.push(p);
                     aligned = false;
                     events |= FRAMING | RESYNC;
                 } else if n == PACKET_LEN - 1 {
-                    p.last_beat = at;
+                    p.end = decision;
                     p.good = byte.value == t.framing.end_of_packet;
                     aligned = p.good;
                     events |= if p.good { GOOD } else { END_BYTE | RESYNC };
@@ -277,16 +265,15 @@ pub(super) fn port_front(transitions: &[Transition], t: &FrontTiming, end: u64) 
             }
         }
         if events != 0 {
-            out.events.push((at, events));
+            out.events.push((decision, events));
         }
-        gap_at = r.gap_at;
     }
     if let Some((mut p, _)) = current {
-        let fire = gap_at;
-        if fire + 1 < end {
-            p.last_beat = fire + 1;
+        let due = t.visit(port, last_strobe + t.truncation - DECISION);
+        if due + DECISION < end {
+            p.end = due + DECISION;
             out.packets.push(p);
-            out.events.push((fire + 1, TRUNCATED | RESYNC));
+            out.events.push((due + DECISION, TRUNCATED | RESYNC));
         }
     }
     out

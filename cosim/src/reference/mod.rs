@@ -34,6 +34,7 @@ use back::{Back, BackTiming, Sent};
 use front::{port_front, FrontTiming, PortFront};
 use receive::{ReceiveSide, ReceiveTiming};
 use skinbox_frame_check::{encode, UdpAddresses};
+use skinbox_gateware::cell_deframer::{scan_period, truncation_clocks};
 use skinbox_gateware::command_unit::COMMAND_LATENCY;
 use skinbox_gateware::counter_file::CLEAR_CLOCKS;
 use skinbox_gateware::frame_parser::DECISION_LATENCY;
@@ -42,15 +43,13 @@ use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_gateware::interface_box::RECEIVE_TICK_LAG;
 use skinbox_gateware::mac_receiver::MAC_LATENCY;
 use skinbox_gateware::status_reporter::PORTS_PER_STATUS;
-use skinbox_gateware::uart_rx::{phase_increment, PHASE_START};
+use skinbox_gateware::uart_rx::bit_middles;
 use skinbox_protocol::command::Destination;
 use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP};
 use std::time::Instant;
 
 pub(crate) use skinbox_gateware::packet_store::SLOTS;
-use skinbox_gateware::packet_store::{visit_period, BANK_PORTS};
-pub(crate) use skinbox_gateware::uart_rx::PHASE_BITS;
 
 /// The fixed numbers of front and back end for `config`.
 fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
@@ -58,9 +57,10 @@ fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
     // a clock later
     let counters_ready_from = TICK_ZERO_CYCLE + CLEAR_CLOCKS;
     let front = FrontTiming {
-        phase_increment: phase_increment(config.clock_hz, config.baud),
-        phase_start: PHASE_START,
-        idle_gap_bits: config.idle_gap_bits,
+        middles: bit_middles(config.clock_hz, config.baud),
+        scan_period: scan_period(config.ports) as u64,
+        scan_origin: TICK_ZERO_CYCLE,
+        truncation: truncation_clocks(config.clock_hz, config.baud, config.idle_gap_bits),
         framing: config.framing,
         port_reset_until: counters_ready_from + 1,
         tick_offset: TICK_ZERO_CYCLE,
@@ -78,9 +78,7 @@ fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
         body_start: BODY_START as u64,
         frame_tail: (FCS_LEN + INTER_FRAME_GAP) as u64,
         start_to_first_byte: START_TO_FIRST_BYTE,
-        visit_from: counters_ready_from + 1,
-        visit_period: visit_period(config.ports) as u64,
-        bank_ports: BANK_PORTS,
+        scan_period: scan_period(config.ports) as u64,
     };
     (front, back)
 }
@@ -105,7 +103,8 @@ pub fn prepare(
     let (front_timing, back_timing) = timings(config);
     let mut fronts: Vec<PortFront> = lines
         .iter()
-        .map(|l| port_front(l, &front_timing, end))
+        .enumerate()
+        .map(|(port, l)| port_front(l, port, &front_timing, end))
         .collect();
     fronts.resize_with(config.ports, PortFront::default);
     let link = &config.link;
