@@ -10,10 +10,12 @@
 //!   its store occupancy (both slots full) go into the register of its group of eight
 //!   ports, and its receiver drops `held`; the port's state is read from RAM;
 //! - `t + 1`: the groups' registers into one register;
-//! - `t + 2` ([`DECISION_CLOCKS`]): the decision, from registers and the RAM's output
-//!   register; at `t + 3` the new state, the slot write, the commit and one counter
-//!   increment leave registers (the state is written back at `t + 4`, before the port's
-//!   next visit: the period is at least four).
+//! - `t + 2`: the arithmetic (the byte's age from its stamp, the idle time, the start
+//!   tick) from registers and the RAM's output register, into registers;
+//! - `t + 3` ([`DECISION_CLOCKS`]): the decision, from registers only; at `t + 4` the new
+//!   state, the slot write, the commit and one counter increment leave registers (the
+//!   state is written back at `t + 5`, before the port's next visit: the period is at
+//!   least five).
 //!
 //! The rules, per port: hunting, every byte that is not a data or event header is garbage.
 //! After a header the engine collects 19 more bytes; the packet is good when the 20th byte
@@ -56,12 +58,12 @@ pub const TICK_BEATS: usize = 4;
 pub const MAX_IDLE_GAP_BITS: u64 = 21;
 
 /// Clocks from a port's visit to the clock of the engine's decision about it.
-pub const DECISION_CLOCKS: u64 = 2;
+pub const DECISION_CLOCKS: u64 = 3;
 
-/// Clocks between two visits of a port: the port count, at least four (the state is read
+/// Clocks between two visits of a port: the port count, at least five (the state is read
 /// and written back in that time).
 pub fn scan_period(ports: usize) -> usize {
-    ports.max(4)
+    ports.max(5)
 }
 
 /// Clocks from a byte's strobe (the cycle its stop bit is sampled) at which the engine
@@ -160,7 +162,7 @@ pub struct CellDeframer {
     strobe_to_start: Constant<Bits<32>>,
     ring_keep: Constant<Bits<64>>,
     bit_zero: Constant<Bits<64>>,
-    // per port: its group, one-hot, and the ring bit that is set three clocks after its
+    // per port: its group, one-hot, and the ring bit that is set four clocks after its
     // visit (its commit)
     port_group: Vec<Constant<Bits<8>>>,
     commit_mask: Vec<Constant<Bits<64>>>,
@@ -182,6 +184,16 @@ pub struct CellDeframer {
     sampled: DFF<Bits<SCAN_BITS>>,
     sampled_term: Signal<Local, Bits<SCAN_BITS>>,
     start_base: DFF<Bits<32>>,
+    // the decision's input registers (cycle t + 3)
+    a_port: DFF<Bits<6>>,
+    a_state: DFF<Bits<STATE_BITS>>,
+    a_tick: DFF<Bits<32>>,
+    a_sampled: DFF<Bits<SCAN_BITS>>,
+    a_truncate: DFF<Bit>,
+    a_header: DFF<Bit>,
+    a_end: DFF<Bit>,
+    a_strobe_low: DFF<Bits<11>>,
+    a_start_tick: DFF<Bits<32>>,
     // the decision's registers
     state_write: DFF<Bit>,
     state_port: DFF<Bits<6>>,
@@ -314,7 +326,7 @@ impl CellDeframer {
             bit_zero: Constant::new(1u64.into()),
             port_group: (0..ports).map(group_onehot).collect(),
             commit_mask: (0..ports)
-                .map(|p| Constant::new((1u64 << ((p + 3) % period)).into()))
+                .map(|p| Constant::new((1u64 << ((p + 4) % period)).into()))
                 .collect(),
             port_bit: (0..ports)
                 .map(|p| Constant::new((1u64 << p).into()))
@@ -336,6 +348,15 @@ impl CellDeframer {
             sampled: Default::default(),
             sampled_term: Default::default(),
             start_base: Default::default(),
+            a_port: Default::default(),
+            a_state: Default::default(),
+            a_tick: Default::default(),
+            a_sampled: Default::default(),
+            a_truncate: Default::default(),
+            a_header: Default::default(),
+            a_end: Default::default(),
+            a_strobe_low: Default::default(),
+            a_start_tick: Default::default(),
             state_write: Default::default(),
             state_port: Default::default(),
             state_next: Default::default(),
@@ -405,6 +426,15 @@ impl Logic for CellDeframer {
             port,
             sampled,
             start_base,
+            a_port,
+            a_state,
+            a_tick,
+            a_sampled,
+            a_truncate,
+            a_header,
+            a_end,
+            a_strobe_low,
+            a_start_tick,
             state_write,
             state_port,
             state_next,
@@ -471,21 +501,37 @@ impl Logic for CellDeframer {
         }
         self.sampled.d.next = self.sampled_term.val();
 
-        // cycle t + 2: the decision
-        self.state.next = self.state_ram.read_data.val();
-        self.held_byte.next = self.sampled.q.val().get_bits::<8>(0);
-        self.held_now.next = self.sampled.q.val().get_bit(16);
-        self.byte_error.next = self.sampled.q.val().get_bit(15);
-        self.full.next = self.sampled.q.val().get_bit(17);
+        // cycle t + 2: the arithmetic, from the registers and the RAMs' output registers,
+        // into the decision's input registers
         self.age.next = self.tick.val().get_bits::<7>(0) - self.sampled.q.val().get_bits::<7>(8);
         self.strobe_low.next =
             self.tick.val().get_bits::<11>(0) - bit_cast::<11, STAMP_BITS>(self.age.val());
-        self.idle.next = self.tick.val().get_bits::<11>(0) - self.state.val().get_bits::<11>(14);
-        if self.held_now.val() {
-            self.idle.next = self.strobe_low.val() - self.state.val().get_bits::<11>(14);
+        self.idle.next =
+            self.tick.val().get_bits::<11>(0) - self.state_ram.read_data.val().get_bits::<11>(14);
+        if self.sampled.q.val().get_bit(16) {
+            self.idle.next = self.idle.val() - bit_cast::<11, STAMP_BITS>(self.age.val());
         }
-        self.truncate.next =
-            self.state.val().get_bit(0) & (self.idle.val() >= self.truncation.val());
+        self.a_port.d.next = self.port.q.val();
+        self.a_state.d.next = self.state_ram.read_data.val();
+        self.a_tick.d.next = self.tick_ram.read_data.val();
+        self.a_sampled.d.next = self.sampled.q.val();
+        self.a_truncate.d.next =
+            self.state_ram.read_data.val().get_bit(0) & (self.idle.val() >= self.truncation.val());
+        self.a_header.d.next = !self.sampled.q.val().get_bit(15)
+            & ((self.sampled.q.val().get_bits::<8>(0) == self.data_header.val())
+                | (self.sampled.q.val().get_bits::<8>(0) == self.event_header.val()));
+        self.a_end.d.next = self.sampled.q.val().get_bits::<8>(0) == self.end_of_packet.val();
+        self.a_strobe_low.d.next = self.strobe_low.val();
+        self.a_start_tick.d.next =
+            self.start_base.q.val() - bit_cast::<32, STAMP_BITS>(self.age.val());
+
+        // cycle t + 3: the decision, from registers only
+        self.state.next = self.a_state.q.val();
+        self.held_byte.next = self.a_sampled.q.val().get_bits::<8>(0);
+        self.held_now.next = self.a_sampled.q.val().get_bit(16);
+        self.byte_error.next = self.a_sampled.q.val().get_bit(15);
+        self.full.next = self.a_sampled.q.val().get_bit(17);
+        self.truncate.next = self.a_truncate.q.val();
         self.in_packet.next = self.state.val().get_bit(0) & !self.truncate.val();
         self.aligned.next = self.state.val().get_bit(6) & !self.truncate.val();
         self.loss.next = self.state.val().get_bit(8) | self.truncate.val();
@@ -501,7 +547,7 @@ impl Logic for CellDeframer {
         self.n_dropping.next = self.state.val().get_bit(10);
         self.n_ticks_left.next = self.ticks_left.val();
         self.n_last.next = self.state.val().get_bits::<11>(14);
-        self.n_tick.next = self.tick_ram.read_data.val();
+        self.n_tick.next = self.a_tick.q.val();
         self.events.next = 0.into();
         self.word_write.next = false;
         self.word.next = bit_cast::<5, 3>(self.ticks_left.val());
@@ -511,22 +557,18 @@ impl Logic for CellDeframer {
             self.events.next = self.truncated_event.val() | self.resync_event.val();
         }
         if self.held_now.val() {
-            self.n_last.next = self.strobe_low.val();
+            self.n_last.next = self.a_strobe_low.q.val();
             if self.byte_error.val() {
                 self.events.next = self.events.val() | self.framing_error_event.val();
             }
             if !self.in_packet.val() {
-                if !self.byte_error.val()
-                    & ((self.held_byte.val() == self.data_header.val())
-                        | (self.held_byte.val() == self.event_header.val()))
-                {
+                if self.a_header.q.val() {
                     self.n_in_packet.next = true;
                     self.n_index.next = 1.into();
                     self.n_dropping.next = self.full.val();
                     self.n_flag.next = self.loss.val();
                     self.n_ticks_left.next = 4.into();
-                    self.n_tick.next =
-                        self.start_base.q.val() - bit_cast::<32, STAMP_BITS>(self.age.val());
+                    self.n_tick.next = self.a_start_tick.q.val();
                     self.word_write.next = !self.full.val();
                     self.word.next = 4.into();
                 } else {
@@ -548,7 +590,7 @@ impl Logic for CellDeframer {
                         self.events.val() | self.framing_event.val() | self.resync_event.val();
                 } else if self.index.val() == self.last_index.val() {
                     self.n_in_packet.next = false;
-                    if self.held_byte.val() == self.end_of_packet.val() {
+                    if self.a_end.q.val() {
                         self.n_aligned.next = true;
                         self.events.next = self.events.val() | self.good_event.val();
                         if self.state.val().get_bit(10) {
@@ -571,8 +613,8 @@ impl Logic for CellDeframer {
             // a start tick byte, most significant first, at a visit without a byte
             self.word_write.next = true;
             self.word.next = self.tick_words.val() - bit_cast::<5, 3>(self.ticks_left.val());
-            self.word_data.next = self.tick_ram.read_data.val().get_bits::<8>(24);
-            self.n_tick.next = self.tick_ram.read_data.val() << 8;
+            self.word_data.next = self.a_tick.q.val().get_bits::<8>(24);
+            self.n_tick.next = self.a_tick.q.val() << 8;
             self.n_ticks_left.next = self.ticks_left.val() - 1;
         }
         // one pending event counted per visit: the lowest
@@ -615,11 +657,11 @@ impl Logic for CellDeframer {
             | (bit_cast::<STATE_BITS, 8>(self.all_events.val() & !self.lowest_bit.val()) << 25);
         // the decision's registers (the ports' reset clears each visited port's state)
         self.state_write.d.next = true;
-        self.state_port.d.next = self.port.q.val();
+        self.state_port.d.next = self.a_port.q.val();
         self.state_next.d.next = self.next.val();
         self.tick_next.d.next = self.n_tick.val();
         self.write_out.d.next = self.word_write.val() & !self.port_reset.val();
-        self.write_port_out.d.next = self.port.q.val();
+        self.write_port_out.d.next = self.a_port.q.val();
         self.write_slot_out.d.next = self.state.val().get_bit(7);
         self.write_word_out.d.next = self.word.val();
         self.write_data_out.d.next = bit_cast::<9, 8>(self.word_data.val())
@@ -627,7 +669,7 @@ impl Logic for CellDeframer {
         self.commit_out.d.next = self.commit_now.val() & !self.port_reset.val();
         self.increment_out.d.next = (self.all_events.val() != 0) & !self.port_reset.val();
         self.increment_address_out.d.next =
-            (bit_cast::<9, 6>(self.port.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
+            (bit_cast::<9, 6>(self.a_port.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
         if self.port_reset.val() {
             self.state_next.d.next = 0.into();
             self.tick_next.d.next = 0.into();
