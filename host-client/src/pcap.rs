@@ -9,7 +9,8 @@
 
 use crate::bad_input::{BadInput, Reason};
 use crate::decoder::{DecodedRecord, Decoder, DecoderConfig, RecordSink};
-use crate::frame::{self, FrameReject, LinkType, UdpDatagram};
+use crate::frame::{self, LinkType, UdpDatagram};
+use crate::other_traffic::OtherTraffic;
 use crate::report::{FrameCounts, HostCost, Report};
 use pcap_file::pcap::PcapParseError;
 use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
@@ -52,13 +53,15 @@ pub struct PcapOptions {
     pub udp_port: Option<u16>,
 }
 
-/// Frames and bad input of one pass over a pcap.
+/// Frames, bad input and other traffic of one pass over a pcap.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PcapScan {
     /// Frame counts.
     pub frames: FrameCounts,
     /// Frames and pcap records rejected.
     pub bad: BadInput,
+    /// Frames that are not the box's, by kind.
+    pub other: OtherTraffic,
 }
 
 /// Block type of a pcapng section header, as the file's first four bytes.
@@ -96,13 +99,13 @@ fn take_frame(
             scan.frames.udp_payloads += 1;
             f(ts.unwrap_or_default(), udp);
         }
-        Err(FrameReject::OtherPort(_)) => scan.frames.other_port += 1,
-        Err(reject) => reject.count_in(&mut scan.bad),
+        Err(reject) => reject.count_in(&mut scan.bad, &mut scan.other),
     }
 }
 
 /// Calls `f` with the timestamp and UDP datagram of every frame of a pcap or pcapng that
-/// carries one; counts every other frame by reason. Frames of pcapng simple packet blocks
+/// carries a skinbox datagram; counts every other frame as other traffic by kind, or as
+/// bad input by reason. Frames of pcapng simple packet blocks
 /// have no timestamp: `f` gets a zero one, and they do not enter the capture span.
 pub fn for_each_udp_payload(
     bytes: &[u8],
@@ -232,11 +235,16 @@ pub fn decode_pcap_with<S: RecordSink + ?Sized>(
     let mut decoder = Decoder::new(options.decoder);
     let scan = for_each_udp_payload(bytes, options.udp_port, |timestamp, udp| {
         // A frame without a timestamp comes with zero.
-        sink.datagram_received((!timestamp.is_zero()).then_some(timestamp), udp.payload);
+        sink.datagram_received(
+            (!timestamp.is_zero()).then_some(timestamp),
+            Some(udp.source),
+            udp.payload,
+        );
         decoder.push_datagram_from(Some(udp.source), udp.payload, sink);
     })?;
     let cpu_ns = crate::thread_cpu_ns().saturating_sub(cpu);
     decoder.bad_input_mut().merge(&scan.bad);
+    decoder.other_traffic_mut().merge(&scan.other);
     let mut report = decoder.report();
     report.frames = scan.frames;
     report.host = Some(HostCost {
@@ -293,7 +301,8 @@ pub struct TimedPayload {
     pub payload: Vec<u8>,
 }
 
-/// The UDP payloads of a pcap (on `udp_port` if given), with the scan's counts.
+/// The skinbox datagrams of a pcap (UDP payloads with the magic "SK", on `udp_port` if
+/// given), with the scan's counts.
 pub fn udp_payloads(
     bytes: &[u8],
     udp_port: Option<u16>,
