@@ -101,11 +101,11 @@ fn decode_writes_one_row_per_packet() {
     let mut lines = text.lines();
     let header = lines.next().unwrap();
     assert!(
-        header.starts_with("time_s,tick,box_id,cell_id,"),
+        header.starts_with("time_s,tick,box_id,source,cell_id,"),
         "{header}"
     );
     // 9 channels, then the sample's box time, host time, bound and the host time's source
-    assert_eq!(header.split(',').count(), 7 + 9 + 4);
+    assert_eq!(header.split(',').count(), 8 + 9 + 4);
     assert!(
         header.ends_with(skinbox_host::output::TIME_COLUMNS),
         "{header}"
@@ -215,8 +215,14 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
         .all(|f| f.timestamp <= now && now - f.timestamp < std::time::Duration::from_secs(120)));
     assert!(frames.windows(2).all(|w| w[0].timestamp <= w[1].timestamp));
     assert_eq!(captured.records.len(), original.records.len());
+    // the same records, from the replaying socket's address instead of the pcap's
     for (a, b) in captured.records.iter().zip(&original.records) {
-        assert_eq!(a, b);
+        assert_eq!(a.source.map(|s| s.ip()), Some([127, 0, 0, 1].into()));
+        let a = skinbox_host::DecodedRecord {
+            source: b.source,
+            ..*a
+        };
+        assert_eq!(&a, b);
     }
     assert_eq!(captured.report.losses, original.report.losses);
 }
@@ -344,19 +350,24 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
     ))
     .unwrap();
     let dst: SocketAddr = "127.0.0.1:6000".parse().unwrap();
-    // host time = box time + offset; box 2 was reset 7 s after box 1
-    let boxes = [(1u16, 20_000_000_000u64), (2, 27_000_000_000)];
+    // host time = box time + offset; box 2 was reset 7 s after box 1, and a second box of
+    // id 1 (another address) 0.5 s after it
+    let boxes = [
+        (1u16, 20_000_000_000u64, "127.0.0.1:5000"),
+        (2, 27_000_000_000, "127.0.0.2:5000"),
+        (1, 20_500_000_000, "127.0.0.3:5000"),
+    ];
     let mut frames = Vec::new();
-    for (box_id, offset_ns) in boxes {
+    for (k, (box_id, offset_ns, address)) in boxes.into_iter().enumerate() {
         let capture = synth::generate(&SynthConfig {
             cells: 20,
             samples_per_cell: 60,
             box_id,
-            seed: u64::from(box_id),
+            seed: k as u64 + 1,
             ..SynthConfig::default()
         })
         .unwrap();
-        let src: SocketAddr = format!("127.0.0.{box_id}:5000").parse().unwrap();
+        let src: SocketAddr = address.parse().unwrap();
         for p in capture.payloads() {
             let d = DatagramRepr::parse(&p).unwrap();
             let latest = match &d.body {
@@ -399,8 +410,14 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
         "not in host time order"
     );
     for r in &rows {
+        // every row names its box: id and source address
         let box_id = r["box_id"].as_u64().unwrap() as u16;
-        let offset = boxes.iter().find(|b| b.0 == box_id).unwrap().1 as f64;
+        let source = r["source"].as_str().unwrap();
+        let offset = boxes
+            .iter()
+            .find(|b| b.0 == box_id && b.2 == source)
+            .unwrap()
+            .1 as f64;
         // each box's envelope: its offset plus the 40 us delivery
         let expected = r["sample_box_time_s"].as_f64().unwrap() * 1e9 + offset + 40_000.0;
         let got = r["sample_host_time_ns"].as_f64().unwrap();
@@ -408,6 +425,8 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
         assert_eq!(r["host_time_source"], "receive_stamps");
     }
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("box 1 from receive_stamps"), "{stderr}");
-    assert!(stderr.contains("box 2 from receive_stamps"), "{stderr}");
+    for (box_id, _, address) in boxes {
+        let line = format!("box {box_id} at {address} from receive_stamps");
+        assert!(stderr.contains(&line), "{stderr}");
+    }
 }
