@@ -82,18 +82,12 @@ fn link_type(datalink: DataLink) -> Option<LinkType> {
 /// timestamp and leaves the capture span alone.
 fn take_frame(
     scan: &mut PcapScan,
-    span: &mut (Option<Duration>, Duration),
     ts: Option<Duration>,
     data: &[u8],
     link: LinkType,
     udp_port: Option<u16>,
     f: &mut impl FnMut(Duration, UdpDatagram<'_>),
 ) {
-    scan.frames.frames += 1;
-    if let Some(ts) = ts {
-        span.0.get_or_insert(ts);
-        span.1 = span.1.max(ts);
-    }
     match frame::udp_payload(data, link, udp_port) {
         Ok(udp) => {
             scan.frames.udp_payloads += 1;
@@ -110,24 +104,71 @@ fn take_frame(
 pub fn for_each_udp_payload(
     bytes: &[u8],
     udp_port: Option<u16>,
-    f: impl FnMut(Duration, UdpDatagram<'_>),
-) -> Result<PcapScan, PcapError> {
-    if bytes.starts_with(&PCAPNG_MAGIC) {
-        for_each_pcapng(bytes, udp_port, f)
-    } else {
-        for_each_pcap(bytes, udp_port, f)
-    }
-}
-
-fn for_each_pcapng(
-    bytes: &[u8],
-    udp_port: Option<u16>,
     mut f: impl FnMut(Duration, UdpDatagram<'_>),
 ) -> Result<PcapScan, PcapError> {
+    for_each_frame(bytes, &mut |scan, ts, data, link| {
+        take_frame(scan, ts, data, link, udp_port, &mut f)
+    })
+}
+
+/// A frame of a capture file: the scan so far, its timestamp (`None`: a pcapng simple
+/// packet block), its bytes and its link type.
+type FrameFn<'a> = dyn FnMut(&mut PcapScan, Option<Duration>, &[u8], LinkType) + 'a;
+
+/// Calls `f` with every frame of a pcap or pcapng whose link type is read; counts the
+/// frames, the capture span and what cannot be read.
+fn for_each_frame(bytes: &[u8], f: &mut FrameFn<'_>) -> Result<PcapScan, PcapError> {
+    let mut span = (None, Duration::ZERO);
+    let mut g = |scan: &mut PcapScan, ts: Option<Duration>, data: &[u8], link: LinkType| {
+        scan.frames.frames += 1;
+        if let Some(ts) = ts {
+            span.0.get_or_insert(ts);
+            span.1 = span.1.max(ts);
+        }
+        f(scan, ts, data, link);
+    };
+    let mut scan = if bytes.starts_with(&PCAPNG_MAGIC) {
+        for_each_pcapng(bytes, &mut g)?
+    } else {
+        for_each_pcap(bytes, &mut g)?
+    };
+    if let Some(first) = span.0 {
+        scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
+    }
+    Ok(scan)
+}
+
+/// Every Ethernet frame of a pcap or pcapng with its timestamp (zero for a pcapng simple
+/// packet block), in file order: frames to send somewhere, not to decode. A frame of
+/// another link type, or a file that ends inside a record, is an error that says which.
+pub fn ethernet_frames(bytes: &[u8]) -> Result<Vec<(Duration, Vec<u8>)>, PcapError> {
+    let mut frames = Vec::new();
+    let mut other_link = None;
+    let scan = for_each_frame(bytes, &mut |_, ts, data, link| {
+        if link == LinkType::Ethernet {
+            frames.push((ts.unwrap_or_default(), data.to_vec()));
+        } else {
+            other_link.get_or_insert(link);
+        }
+    })?;
+    if let Some(link) = other_link {
+        return Err(PcapError::NotPcap(format!(
+            "a frame of link type {link:?}: only Ethernet frames can be sent"
+        )));
+    }
+    if scan.bad.total > 0 {
+        return Err(PcapError::NotPcap(format!(
+            "unreadable records: {}",
+            scan.bad
+        )));
+    }
+    Ok(frames)
+}
+
+fn for_each_pcapng(bytes: &[u8], f: &mut FrameFn<'_>) -> Result<PcapScan, PcapError> {
     let (mut rest, mut parser) = PcapNgParser::new(bytes)
         .map_err(|e| PcapError::NotPcap(format!("pcapng section header: {e}")))?;
     let mut scan = PcapScan::default();
-    let mut span = (None, Duration::ZERO);
     while !rest.is_empty() {
         let (next, block) = match parser.next_block(rest) {
             Ok(x) => x,
@@ -166,25 +207,17 @@ fn for_each_pcapng(
             continue;
         };
         // The parser borrows packet data from `bytes`; owned data is read all the same.
-        take_frame(&mut scan, &mut span, ts, &data, link, udp_port, &mut f);
-    }
-    if let Some(first) = span.0 {
-        scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
+        f(&mut scan, ts, &data, link);
     }
     Ok(scan)
 }
 
-fn for_each_pcap(
-    bytes: &[u8],
-    udp_port: Option<u16>,
-    mut f: impl FnMut(Duration, UdpDatagram<'_>),
-) -> Result<PcapScan, PcapError> {
+fn for_each_pcap(bytes: &[u8], f: &mut FrameFn<'_>) -> Result<PcapScan, PcapError> {
     let (mut rest, parser) =
         PcapParser::new(bytes).map_err(|e| PcapError::NotPcap(e.to_string()))?;
     let link =
         link_type(parser.header().datalink).ok_or(PcapError::LinkType(parser.header().datalink))?;
     let mut scan = PcapScan::default();
-    let mut span = (None, Duration::ZERO);
     while !rest.is_empty() {
         match parser.next_packet(rest) {
             Ok((next, packet)) => {
@@ -192,15 +225,7 @@ fn for_each_pcap(
                 let ts = packet.timestamp();
                 // `next_packet` borrows from `bytes`; owned data is read all the same.
                 let data = packet.into_data();
-                take_frame(
-                    &mut scan,
-                    &mut span,
-                    Some(ts),
-                    &data,
-                    link,
-                    udp_port,
-                    &mut f,
-                );
+                f(&mut scan, Some(ts), &data, link);
             }
             Err(PcapParseError::IncompleteBuffer(needed, have)) => {
                 scan.bad.count(Reason::PcapTruncated, || {
@@ -216,9 +241,6 @@ fn for_each_pcap(
                 break;
             }
         }
-    }
-    if let Some(first) = span.0 {
-        scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
     }
     Ok(scan)
 }
