@@ -430,3 +430,123 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
         assert!(stderr.contains(&line), "{stderr}");
     }
 }
+
+/// A capture of a lab network: the box's datagrams among ARP, TCP, LLDP, mDNS and IPv6
+/// frames (built with etherparse). `stats` and `decode` report no bad input and the other
+/// traffic by kind, in text and JSON.
+#[test]
+fn a_mixed_capture_reports_other_traffic_not_bad_input() {
+    use etherparse::PacketBuilder;
+    let capture = synth::generate(&SynthConfig {
+        cells: 10,
+        samples_per_cell: 20,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    let path = temp_path("mixed.pcap");
+    let mut w = PcapFrameWriter::new(std::fs::File::create(&path).unwrap()).unwrap();
+    let src: SocketAddr = "192.0.2.10:54091".parse().unwrap();
+    let dst: SocketAddr = "192.0.2.1:54091".parse().unwrap();
+    let mac = [2, 0, 0, 0, 0, 1];
+    let mut others: Vec<Vec<u8>> = vec![];
+    let mut f = Vec::new();
+    PacketBuilder::ethernet2(mac, [0xFF; 6])
+        .arp(
+            etherparse::ArpPacket::new(
+                etherparse::ArpHardwareId::ETHERNET,
+                etherparse::EtherType::IPV4,
+                etherparse::ArpOperation::REQUEST,
+                &mac,
+                &[192, 0, 2, 1],
+                &[0; 6],
+                &[192, 0, 2, 10],
+            )
+            .unwrap(),
+        )
+        .write(&mut f)
+        .unwrap();
+    others.push(f);
+    let mut f = Vec::new();
+    PacketBuilder::ethernet2(mac, mac)
+        .ipv4([192, 0, 2, 1], [192, 0, 2, 2], 64)
+        .tcp(40_000, 443, 7, 1000)
+        .write(&mut f, b"hello")
+        .unwrap();
+    others.push(f);
+    let mut lldp = vec![0x01, 0x80, 0xC2, 0, 0, 0x0E, 2, 0, 0, 0, 0, 9, 0x88, 0xCC];
+    lldp.resize(60, 0);
+    others.push(lldp);
+    let mut f = Vec::new();
+    PacketBuilder::ethernet2(mac, [0x01, 0, 0x5E, 0, 0, 0xFB])
+        .ipv4([192, 0, 2, 1], [224, 0, 0, 251], 255)
+        .udp(5353, 5353)
+        .write(&mut f, &[0; 12])
+        .unwrap();
+    others.push(f);
+    let mut f = Vec::new();
+    PacketBuilder::ethernet2(mac, [0x33, 0x33, 0, 0, 0, 1])
+        .ipv6([0xFE; 16], [0xFF; 16], 255)
+        .icmpv6_echo_request(1, 1)
+        .write(&mut f, &[0; 8])
+        .unwrap();
+    others.push(f);
+    let mut t = 0;
+    for p in capture.payloads() {
+        for o in &others {
+            w.write_frame(Duration::from_micros(t), o).unwrap();
+            t += 10;
+        }
+        w.write_udp(Duration::from_micros(t), src, dst, &p).unwrap();
+        t += 10;
+    }
+    w.finish().unwrap();
+    let datagrams = capture.payloads().len() as u64;
+
+    let out = skinbox()
+        .args(["stats", "--json", "--port", "54091"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["bad_input"]["total"], 0, "{}", r["bad_input"]);
+    assert_eq!(r["records"], capture.truth.len() as u64);
+    let kinds = &r["other_traffic"]["by_kind"];
+    for kind in ["ARP", "TCP", "LLDP", "UDP mDNS", "IPv6"] {
+        assert_eq!(kinds[kind], datagrams, "{kind}: {kinds}");
+    }
+    assert_eq!(r["other_traffic"]["total"], 5 * datagrams);
+
+    let out = skinbox().arg("stats").arg(&path).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("bad input: 0\n"), "{text}");
+    assert!(
+        text.contains(&format!(
+            "other traffic: {} (ARP {datagrams}",
+            5 * datagrams
+        )),
+        "{text}"
+    );
+    let out = skinbox()
+        .args(["decode", "--csv"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("bad input 0;"), "{stderr}");
+    assert!(
+        stderr.contains(&format!("other traffic {}", 5 * datagrams)),
+        "{stderr}"
+    );
+    // every row names its box
+    let rows = String::from_utf8_lossy(&out.stdout);
+    assert!(rows
+        .lines()
+        .skip(1)
+        .all(|l| l.split(',').nth(3) == Some("192.0.2.10:54091")));
+}

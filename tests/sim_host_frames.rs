@@ -362,6 +362,14 @@ fn host_frames_into_the_box_at_rtl_and_in_the_reference_model() {
                 );
                 let ack = AckRepr::parse(u.payload()).unwrap();
                 assert_eq!(ack.result.name(), result, "frame {i}");
+                // the body lengths docs/wire-format.md gives: 24, 36 (stream-to ok), 108
+                // (status-now ok)
+                let body_len = match (&ack.reply, result) {
+                    (AckReply::Destination(_), "ok") => 36,
+                    (AckReply::Counters(_), "ok") => 108,
+                    _ => 24,
+                };
+                assert_eq!(u.payload().len() - HEADER_LEN, body_len, "frame {i}");
                 let cmd = skinbox_protocol::command::Command::new_checked(q.payload()).unwrap();
                 assert_eq!(
                     (ack.sequence, ack.host_time),

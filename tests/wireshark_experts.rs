@@ -112,9 +112,12 @@ fn with(mut b: Vec<u8>, at: usize, value: u8) -> Vec<u8> {
     b
 }
 
+/// A crafted datagram and the words its expert info must hold (empty: none).
+type Case = (Vec<u8>, &'static str);
+
 /// Well-formed datagrams of every kind, then one malformed datagram per rule with the
 /// words its expert info must hold.
-fn cases() -> (Vec<Vec<u8>>, Vec<(Vec<u8>, &'static str)>) {
+fn cases() -> (Vec<Vec<u8>>, Vec<Case>) {
     let rec = HEADER_LEN; // first record
     let cell = rec + 6; // its cell packet
     let status_blocks = HEADER_LEN + 16;
@@ -142,9 +145,8 @@ fn cases() -> (Vec<Vec<u8>>, Vec<(Vec<u8>, &'static str)>) {
         counters_ack.clone(),
         ack(Opcode::CellCommand, AckResult::DownlinkFull, AckReply::None),
     ];
-    let mut bad: Vec<(Vec<u8>, &str)> = vec![];
     // datagrams
-    bad.push((status(3, 3), "at or above the port count"));
+    let mut bad: Vec<Case> = vec![(status(3, 3), "at or above the port count")];
     bad.push((with(records(4, vec![data()]), 6, 0), "port count 0 outside"));
     bad.push((
         with(records(5, vec![data()]), 7, 0x04),
