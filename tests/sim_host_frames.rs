@@ -212,8 +212,9 @@ fn sim(dir: &Path, name: &str, frames: &Path, extra: &[&str]) -> (serde_json::Va
         "2",
         "--cells",
         "132",
+        // the box of tests/sim.rs's idle scene: one verilated model for both
         "--status-period-ms",
-        "1",
+        "2",
         "--host-frames",
     ];
     let mut args: Vec<&std::ffi::OsStr> = fixed.iter().map(std::ffi::OsStr::new).collect();
