@@ -47,7 +47,7 @@ fn spec(config: BoxConfig, start_cycle: u64, cycles: u64) -> SimSpec {
 fn tick_zero_and_the_status_report_after_reset() {
     // the default box (the model other tests build): its first datagrams at RTL
     let start_cycle = 2_000u64;
-    let short = spec(BoxConfig::default(), start_cycle, 12_000);
+    let short = spec(BoxConfig::default(), start_cycle, 30_000);
     let rtl = run_rtl(&short).unwrap();
     assert_eq!(
         rtl.datagrams,
