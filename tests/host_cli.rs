@@ -101,11 +101,11 @@ fn decode_writes_one_row_per_packet() {
     let mut lines = text.lines();
     let header = lines.next().unwrap();
     assert!(
-        header.starts_with("time_s,tick,box_id,cell_id,"),
+        header.starts_with("time_s,tick,box_id,source,cell_id,"),
         "{header}"
     );
     // 9 channels, then the sample's box time, host time, bound and the host time's source
-    assert_eq!(header.split(',').count(), 7 + 9 + 4);
+    assert_eq!(header.split(',').count(), 8 + 9 + 4);
     assert!(
         header.ends_with(skinbox_host::output::TIME_COLUMNS),
         "{header}"
@@ -215,8 +215,14 @@ fn replay_into_capture_on_loopback_gives_the_same_records() {
         .all(|f| f.timestamp <= now && now - f.timestamp < std::time::Duration::from_secs(120)));
     assert!(frames.windows(2).all(|w| w[0].timestamp <= w[1].timestamp));
     assert_eq!(captured.records.len(), original.records.len());
+    // the same records, from the replaying socket's address instead of the pcap's
     for (a, b) in captured.records.iter().zip(&original.records) {
-        assert_eq!(a, b);
+        assert_eq!(a.source.map(|s| s.ip()), Some([127, 0, 0, 1].into()));
+        let a = skinbox_host::DecodedRecord {
+            source: b.source,
+            ..*a
+        };
+        assert_eq!(&a, b);
     }
     assert_eq!(captured.report.losses, original.report.losses);
 }
@@ -344,19 +350,24 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
     ))
     .unwrap();
     let dst: SocketAddr = "127.0.0.1:6000".parse().unwrap();
-    // host time = box time + offset; box 2 was reset 7 s after box 1
-    let boxes = [(1u16, 20_000_000_000u64), (2, 27_000_000_000)];
+    // host time = box time + offset; box 2 was reset 7 s after box 1, and a second box of
+    // id 1 (another address) 0.5 s after it
+    let boxes = [
+        (1u16, 20_000_000_000u64, "127.0.0.1:5000"),
+        (2, 27_000_000_000, "127.0.0.2:5000"),
+        (1, 20_500_000_000, "127.0.0.3:5000"),
+    ];
     let mut frames = Vec::new();
-    for (box_id, offset_ns) in boxes {
+    for (k, (box_id, offset_ns, address)) in boxes.into_iter().enumerate() {
         let capture = synth::generate(&SynthConfig {
             cells: 20,
             samples_per_cell: 60,
             box_id,
-            seed: u64::from(box_id),
+            seed: k as u64 + 1,
             ..SynthConfig::default()
         })
         .unwrap();
-        let src: SocketAddr = format!("127.0.0.{box_id}:5000").parse().unwrap();
+        let src: SocketAddr = address.parse().unwrap();
         for p in capture.payloads() {
             let d = DatagramRepr::parse(&p).unwrap();
             let latest = match &d.body {
@@ -399,8 +410,14 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
         "not in host time order"
     );
     for r in &rows {
+        // every row names its box: id and source address
         let box_id = r["box_id"].as_u64().unwrap() as u16;
-        let offset = boxes.iter().find(|b| b.0 == box_id).unwrap().1 as f64;
+        let source = r["source"].as_str().unwrap();
+        let offset = boxes
+            .iter()
+            .find(|b| b.0 == box_id && b.2 == source)
+            .unwrap()
+            .1 as f64;
         // each box's envelope: its offset plus the 40 us delivery
         let expected = r["sample_box_time_s"].as_f64().unwrap() * 1e9 + offset + 40_000.0;
         let got = r["sample_host_time_ns"].as_f64().unwrap();
@@ -408,6 +425,128 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
         assert_eq!(r["host_time_source"], "receive_stamps");
     }
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("box 1 from receive_stamps"), "{stderr}");
-    assert!(stderr.contains("box 2 from receive_stamps"), "{stderr}");
+    for (box_id, _, address) in boxes {
+        let line = format!("box {box_id} at {address} from receive_stamps");
+        assert!(stderr.contains(&line), "{stderr}");
+    }
+}
+
+/// A capture of a lab network: the box's datagrams among ARP, TCP, LLDP, mDNS and IPv6
+/// frames (built with etherparse). `stats` and `decode` report no bad input and the other
+/// traffic by kind, in text and JSON.
+#[test]
+fn a_mixed_capture_reports_other_traffic_not_bad_input() {
+    use etherparse::PacketBuilder;
+    let capture = synth::generate(&SynthConfig {
+        cells: 10,
+        samples_per_cell: 20,
+        ..SynthConfig::default()
+    })
+    .unwrap();
+    let path = temp_path("mixed.pcap");
+    let mut w = PcapFrameWriter::new(std::fs::File::create(&path).unwrap()).unwrap();
+    let src: SocketAddr = "192.0.2.10:54091".parse().unwrap();
+    let dst: SocketAddr = "192.0.2.1:54091".parse().unwrap();
+    let mac = [2, 0, 0, 0, 0, 1];
+    let mut others: Vec<Vec<u8>> = vec![];
+    let mut f = Vec::new();
+    PacketBuilder::ethernet2(mac, [0xFF; 6])
+        .arp(
+            etherparse::ArpPacket::new(
+                etherparse::ArpHardwareId::ETHERNET,
+                etherparse::EtherType::IPV4,
+                etherparse::ArpOperation::REQUEST,
+                &mac,
+                &[192, 0, 2, 1],
+                &[0; 6],
+                &[192, 0, 2, 10],
+            )
+            .unwrap(),
+        )
+        .write(&mut f)
+        .unwrap();
+    others.push(f);
+    let mut f = Vec::new();
+    PacketBuilder::ethernet2(mac, mac)
+        .ipv4([192, 0, 2, 1], [192, 0, 2, 2], 64)
+        .tcp(40_000, 443, 7, 1000)
+        .write(&mut f, b"hello")
+        .unwrap();
+    others.push(f);
+    let mut lldp = vec![0x01, 0x80, 0xC2, 0, 0, 0x0E, 2, 0, 0, 0, 0, 9, 0x88, 0xCC];
+    lldp.resize(60, 0);
+    others.push(lldp);
+    let mut f = Vec::new();
+    PacketBuilder::ethernet2(mac, [0x01, 0, 0x5E, 0, 0, 0xFB])
+        .ipv4([192, 0, 2, 1], [224, 0, 0, 251], 255)
+        .udp(5353, 5353)
+        .write(&mut f, &[0; 12])
+        .unwrap();
+    others.push(f);
+    let mut f = Vec::new();
+    PacketBuilder::ethernet2(mac, [0x33, 0x33, 0, 0, 0, 1])
+        .ipv6([0xFE; 16], [0xFF; 16], 255)
+        .icmpv6_echo_request(1, 1)
+        .write(&mut f, &[0; 8])
+        .unwrap();
+    others.push(f);
+    let mut t = 0;
+    for p in capture.payloads() {
+        for o in &others {
+            w.write_frame(Duration::from_micros(t), o).unwrap();
+            t += 10;
+        }
+        w.write_udp(Duration::from_micros(t), src, dst, &p).unwrap();
+        t += 10;
+    }
+    w.finish().unwrap();
+    let datagrams = capture.payloads().len() as u64;
+
+    let out = skinbox()
+        .args(["stats", "--json", "--port", "54091"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["bad_input"]["total"], 0, "{}", r["bad_input"]);
+    assert_eq!(r["records"], capture.truth.len() as u64);
+    let kinds = &r["other_traffic"]["by_kind"];
+    for kind in ["ARP", "TCP", "LLDP", "UDP mDNS", "IPv6"] {
+        assert_eq!(kinds[kind], datagrams, "{kind}: {kinds}");
+    }
+    assert_eq!(r["other_traffic"]["total"], 5 * datagrams);
+
+    let out = skinbox().arg("stats").arg(&path).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("bad input: 0\n"), "{text}");
+    assert!(
+        text.contains(&format!(
+            "other traffic: {} (ARP {datagrams}",
+            5 * datagrams
+        )),
+        "{text}"
+    );
+    let out = skinbox()
+        .args(["decode", "--csv"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("bad input 0;"), "{stderr}");
+    assert!(
+        stderr.contains(&format!("other traffic {}", 5 * datagrams)),
+        "{stderr}"
+    );
+    // every row names its box
+    let rows = String::from_utf8_lossy(&out.stdout);
+    assert!(rows
+        .lines()
+        .skip(1)
+        .all(|l| l.split(',').nth(3) == Some("192.0.2.10:54091")));
 }

@@ -49,6 +49,16 @@ impl HostFrame {
     pub fn last_edge(&self) -> u64 {
         self.edge + 8 + self.frame.len() as u64 - 1
     }
+
+    /// An Ethernet frame as a capture holds it (destination MAC to payload, no FCS) as a
+    /// MAC sends it: padded with zeros to 60 bytes, its FCS appended.
+    pub fn from_ethernet(edge: u64, ethernet: &[u8]) -> HostFrame {
+        let mut frame = ethernet.to_vec();
+        frame.resize(frame.len().max(skinbox_protocol::link::MIN_FRAME_LEN), 0);
+        let fcs = crate::control::crc32(&frame);
+        frame.extend_from_slice(&fcs.to_le_bytes());
+        HostFrame { edge, frame }
+    }
 }
 
 /// What to simulate.
@@ -215,7 +225,26 @@ pub(crate) fn analyse(
     let (mut error_sum, mut error_count) = (0.0, 0u64);
     let mut datagrams = Vec::with_capacity(frames.len());
     let mut replies = vec![];
+    // the host's frames go into the pcap beside the box's, by the cycle of their first byte
+    let mut host_frames = spec.host_frames.iter().peekable();
+    let mut write_host_frames =
+        |until: u64,
+         pcap: &mut Option<skinbox_host::pcap::PcapFrameWriter<std::fs::File>>|
+         -> Result<(), CosimError> {
+            while let Some(f) = host_frames.next_if(|f| f.edge <= until) {
+                if let Some(pcap) = pcap {
+                    let ethernet = &f.frame[..f
+                        .frame
+                        .len()
+                        .saturating_sub(skinbox_protocol::link::FCS_LEN)];
+                    pcap.write_frame(Duration::from_nanos(f.edge * TICK_NS), ethernet)
+                        .map_err(pcap_error)?;
+                }
+            }
+            Ok(())
+        };
     for frame in frames {
+        write_host_frames(frame.first_cycle, &mut pcap)?;
         if is_reply(&frame.bytes) {
             if let Some(pcap) = &mut pcap {
                 let ethernet = &frame.bytes[8..frame.bytes.len() - 4];
@@ -291,6 +320,7 @@ pub(crate) fn analyse(
         }
         datagrams.push(datagram);
     }
+    write_host_frames(u64::MAX, &mut pcap)?;
     if let Some(pcap) = pcap {
         pcap.finish().map_err(pcap_error)?;
     }

@@ -5,6 +5,7 @@ use etherparse::PacketBuilder;
 use pcap_file::pcap::{PcapPacket, PcapWriter};
 use skinbox_cosim::synth::{self, SynthConfig};
 use skinbox_host::bad_input::{FormatFault, FrameFault, Reason};
+use skinbox_host::other_traffic::OtherKind;
 use skinbox_host::pcap::{decode_pcap_bytes, PcapOptions};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{CellFraming, CellRepr, DatagramRepr};
@@ -136,19 +137,23 @@ fn bad_input_is_counted_by_reason() {
     let d = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
     let b = &d.report.bad_input;
     let by = |reason: Reason| b.get(reason);
-    assert_eq!(by(Reason::Datagram(FormatFault::BadMagic)), 1, "{b:?}");
     assert_eq!(
         by(Reason::Datagram(FormatFault::UnsupportedVersion)),
         1,
         "{b:?}"
     );
     assert_eq!(by(Reason::Datagram(FormatFault::UnknownKind)), 1, "{b:?}");
-    assert_eq!(by(Reason::Datagram(FormatFault::Truncated)), 2, "{b:?}"); // cut one, empty one
+    assert_eq!(by(Reason::Datagram(FormatFault::Truncated)), 1, "{b:?}");
     assert_eq!(by(Reason::Record(FormatFault::BadEndOfPacket)), 1, "{b:?}");
-    assert_eq!(by(Reason::Frame(FrameFault::NotUdp)), 1, "{b:?}");
     assert_eq!(by(Reason::Frame(FrameFault::Malformed)), 1, "{b:?}");
     assert_eq!(by(Reason::PcapTruncated), 1, "{b:?}");
-    assert_eq!(b.total, 9);
+    assert_eq!(b.total, 6);
+    // Without the magic "SK" (a wrong first byte, an empty payload) and over TCP, a frame
+    // is someone else's: other traffic, not bad input.
+    let other = &d.report.other_traffic;
+    assert_eq!(other.get(OtherKind::UdpNotSkinbox), 2, "{other:?}");
+    assert_eq!(other.get(OtherKind::Tcp), 1, "{other:?}");
+    assert_eq!(other.total, 3);
     // The good records all arrived, plus the bad datagram's other records.
     let bad_cell_records = capture.datagrams[0].to_bytes().len() / 26 - 1;
     assert_eq!(
@@ -180,17 +185,14 @@ fn port_filter_skips_other_traffic() {
         ..PcapOptions::default()
     };
     let d = decode_pcap_bytes(&file, &options).unwrap();
-    assert_eq!(d.report.frames.other_port, 1);
+    assert_eq!(d.report.other_traffic.get(OtherKind::UdpService("DNS")), 1);
     assert_eq!(d.report.bad_input.total, 0);
     assert_eq!(d.records.len(), capture.truth.len());
-    // Without the filter, the DNS-looking payload is a datagram with a bad magic.
+    // Without the filter, the DNS payload is still not a skinbox datagram (no magic).
     let d = decode_pcap_bytes(&file, &PcapOptions::default()).unwrap();
-    assert_eq!(
-        d.report
-            .bad_input
-            .get(Reason::Datagram(FormatFault::BadMagic)),
-        1
-    );
+    assert_eq!(d.report.bad_input.total, 0);
+    assert_eq!(d.report.other_traffic.get(OtherKind::UdpService("DNS")), 1);
+    assert_eq!(d.records.len(), capture.truth.len());
 }
 
 #[test]

@@ -88,19 +88,12 @@ impl FormatFault {
     }
 }
 
-/// Why a captured frame gave no box datagram (the kind of a `frame::FrameReject`).
+/// Why a frame that carried (or may have carried) a skinbox datagram gave none (the kind
+/// of a bad `frame::FrameReject`; frames of other traffic are not bad input).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum FrameFault {
     /// etherparse could not slice it.
     Malformed,
-    /// Not IP.
-    NotIp,
-    /// An IP fragment.
-    Fragment,
-    /// IP but not UDP.
-    NotUdp,
-    /// UDP on another port than the filter.
-    OtherPort,
     /// Wrong IPv4 header checksum.
     BadIpv4Checksum,
     /// Wrong UDP checksum.
@@ -112,10 +105,6 @@ impl FrameFault {
     pub fn name(self) -> &'static str {
         match self {
             FrameFault::Malformed => "malformed",
-            FrameFault::NotIp => "not IP",
-            FrameFault::Fragment => "IP fragment",
-            FrameFault::NotUdp => "not UDP",
-            FrameFault::OtherPort => "other UDP port",
             FrameFault::BadIpv4Checksum => "bad IPv4 header checksum",
             FrameFault::BadUdpChecksum => "bad UDP checksum",
         }
@@ -133,6 +122,11 @@ pub enum Reason {
     Status(FormatFault),
     /// One record: its port, flags or cell packet (`record: ...`).
     Record(FormatFault),
+    /// A command datagram (kind 3): its header, arguments or cell command packet
+    /// (`command: ...`).
+    Command(FormatFault),
+    /// An acknowledgement datagram (kind 4): its header, body or reply (`ack: ...`).
+    Ack(FormatFault),
     /// A datagram of a box past `decoder::MAX_BOXES` (`datagram: too many boxes`).
     TooManyBoxes,
     /// The capture file ends inside a packet (`pcap: truncated at end of file`).
@@ -153,6 +147,8 @@ impl fmt::Display for Reason {
             Reason::Datagram(k) => write!(f, "datagram: {}", k.name()),
             Reason::Status(k) => write!(f, "status: {}", k.name()),
             Reason::Record(k) => write!(f, "record: {}", k.name()),
+            Reason::Command(k) => write!(f, "command: {}", k.name()),
+            Reason::Ack(k) => write!(f, "ack: {}", k.name()),
             Reason::TooManyBoxes => f.write_str("datagram: too many boxes"),
             Reason::PcapTruncated => f.write_str("pcap: truncated at end of file"),
             Reason::PcapCorrupt => f.write_str("pcap: corrupt packet record"),
@@ -197,6 +193,8 @@ impl BadInput {
         let layer = match reason {
             Reason::Record(_) => "record",
             Reason::Status(_) => "status",
+            Reason::Command(_) => "command",
+            Reason::Ack(_) => "ack",
             _ => "datagram",
         };
         self.count(reason, || format!("{layer}: {error}"));

@@ -22,6 +22,8 @@ pub const CELL_IDS: usize = 1 << 14;
 pub struct Sample {
     /// The box the cell is on (set by the decoder; 0 from a bare converter).
     pub box_id: u16,
+    /// The source address of the box's datagrams, where known (set by the decoder).
+    pub source: Option<std::net::SocketAddr>,
     /// The cell.
     pub cell_id: u16,
     /// Box tick of the packet that produced the sample.
@@ -117,6 +119,7 @@ impl EventToData {
         s.stale &= s.known;
         Sample {
             box_id: 0,
+            source: None,
             cell_id,
             tick,
             raw: s.raw,

@@ -18,6 +18,7 @@
 
 use crate::bad_input::{BadInput, Reason};
 use crate::convert::{EventToData, Sample, CELL_IDS};
+use crate::other_traffic::{OtherKind, OtherTraffic};
 pub use crate::rate::ASSUMED_SAMPLE_RATE_HZ;
 use crate::rate::{learn_sample_rate, SampleRateEstimate};
 use crate::report::{
@@ -27,7 +28,9 @@ use crate::report::{
 };
 use crate::sequence::{SequenceEvent, SequenceTracker};
 use serde::Serialize;
-use skinbox_protocol::datagram::{Datagram, DatagramKind};
+use skinbox_protocol::cell_command::CellCommandRepr;
+use skinbox_protocol::command::{AckRepr, Command, Request, KIND_ACK, KIND_COMMAND};
+use skinbox_protocol::datagram::{has_magic, Datagram, DatagramKind, MAX_PORTS};
 use skinbox_protocol::record::FLAG_LOSS_BEFORE;
 use skinbox_protocol::status::{PortCounter, StatusRepr};
 use skinbox_protocol::{CellFraming, CellRepr, Channel, DatagramRepr, Modality};
@@ -76,6 +79,9 @@ impl Default for DecoderConfig {
 pub struct DecodedRecord {
     /// Box that sent it.
     pub box_id: u16,
+    /// Source address of its datagram, where the shell knows it: with `box_id` the box's
+    /// identity ([`BoxKey`]).
+    pub source: Option<SocketAddr>,
     /// Sequence number of the datagram that carried it.
     pub datagram_sequence: u32,
     /// UART port of the box.
@@ -107,11 +113,17 @@ pub trait RecordSink {
     }
     /// The full sample of the record's cell after it.
     fn sample(&mut self, _sample: &Sample) {}
-    /// The next datagram, `payload` (not yet checked), was received at `receive` on the
-    /// host clock (the kernel's receive timestamp, or the pcap's; `None`: unknown): for
-    /// sinks that map box time to host time ([`crate::timing`]). The shells call it before
-    /// decoding each datagram.
-    fn datagram_received(&mut self, _receive: Option<std::time::Duration>, _payload: &[u8]) {}
+    /// The next datagram, `payload` (not yet checked), from `source` (where known), was
+    /// received at `receive` on the host clock (the kernel's receive timestamp, or the
+    /// pcap's; `None`: unknown): for sinks that map box time to host time
+    /// ([`crate::timing`]). The shells call it before decoding each datagram.
+    fn datagram_received(
+        &mut self,
+        _receive: Option<std::time::Duration>,
+        _source: Option<SocketAddr>,
+        _payload: &[u8],
+    ) {
+    }
 }
 
 /// A sink that drops everything (for reports only).
@@ -140,11 +152,13 @@ pub enum DatagramOutcome {
     Duplicate,
     /// Rejected as bad input.
     Rejected,
-    /// A command acknowledgement (kind 4): counted, not a box datagram
-    /// ([`crate::control`] reads them).
+    /// A well-formed command acknowledgement (kind 4): counted by result, not a box
+    /// datagram ([`crate::control`] reads them).
     Acknowledgement,
-    /// A command to a box (kind 3, in a capture of both directions): counted.
+    /// A well-formed command to a box (kind 3, in a capture of both directions): counted.
     Command,
+    /// Not a skinbox datagram (no magic "SK"): counted as other traffic.
+    NotSkinbox,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -180,6 +194,8 @@ struct BoxState {
 #[derive(Debug, Clone)]
 struct BoxTrack {
     key: BoxKey,
+    /// Port count of its latest datagram.
+    port_count: u8,
     sequence: SequenceTracker,
     cells: Vec<CellCounters>,
     converter: Option<EventToData>,
@@ -212,6 +228,7 @@ impl BoxTrack {
     fn new(key: BoxKey) -> Self {
         BoxTrack {
             key,
+            port_count: MAX_PORTS,
             sequence: SequenceTracker::new(),
             cells: Vec::new(),
             converter: None,
@@ -393,7 +410,9 @@ pub struct Decoder {
     /// Index of the box of the previous datagram (most datagrams come from the same box).
     current: usize,
     bad: BadInput,
+    other: OtherTraffic,
     acknowledgements: u64,
+    acknowledgements_by_result: BTreeMap<&'static str, u64>,
     commands: u64,
     records: u64,
     /// Per-cell intervals between packets that began a sample, in ticks, of every box
@@ -422,7 +441,9 @@ impl Decoder {
             boxes: Vec::new(),
             current: 0,
             bad: BadInput::default(),
+            other: OtherTraffic::default(),
             acknowledgements: 0,
+            acknowledgements_by_result: BTreeMap::new(),
             commands: 0,
             records: 0,
             intervals: Vec::new(),
@@ -445,6 +466,16 @@ impl Decoder {
     /// Bad input counted so far; shells add their own (frames, pcap) here.
     pub fn bad_input_mut(&mut self) -> &mut BadInput {
         &mut self.bad
+    }
+
+    /// Other traffic counted so far; shells add the frames they passed over here.
+    pub fn other_traffic_mut(&mut self) -> &mut OtherTraffic {
+        &mut self.other
+    }
+
+    /// Other traffic counted so far.
+    pub fn other_traffic(&self) -> &OtherTraffic {
+        &self.other
     }
 
     /// Records decoded so far.
@@ -497,15 +528,13 @@ impl Decoder {
         payload: &[u8],
         sink: &mut S,
     ) -> DatagramOutcome {
-        match skinbox_protocol::command::peek_kind(payload) {
-            Some(skinbox_protocol::command::KIND_ACK) => {
-                self.acknowledgements += 1;
-                return DatagramOutcome::Acknowledgement;
-            }
-            Some(skinbox_protocol::command::KIND_COMMAND) => {
-                self.commands += 1;
-                return DatagramOutcome::Command;
-            }
+        if !has_magic(payload) {
+            self.other.count(OtherKind::UdpNotSkinbox);
+            return DatagramOutcome::NotSkinbox;
+        }
+        match payload.get(skinbox_protocol::datagram::field::KIND) {
+            Some(&KIND_ACK) => return self.take_ack(payload),
+            Some(&KIND_COMMAND) => return self.take_command(payload),
             _ => {}
         }
         let d = match Datagram::new_checked(payload) {
@@ -528,6 +557,7 @@ impl Decoder {
             });
             return DatagramOutcome::Rejected;
         };
+        self.boxes[index].port_count = d.port_count();
         match d.kind() {
             DatagramKind::Status => {
                 // A status datagram is small and rare: parse it whole.
@@ -538,13 +568,21 @@ impl Decoder {
                         body: skinbox_protocol::datagram::DatagramBody::Status(status),
                         ..
                     }) => {
+                        // A status body is one unit: a bad box counter block refuses the
+                        // datagram whole, as a bad port counter block does, before its
+                        // sequence number is taken (docs/wire-format.md).
+                        let counters = match d.box_counters() {
+                            Ok(c) => c,
+                            Err(e) => {
+                                self.bad.count_error(Reason::Status, &e);
+                                return DatagramOutcome::Rejected;
+                            }
+                        };
                         if !self.boxes[index].take_status(sequence, base_tick, &status) {
                             return DatagramOutcome::Duplicate;
                         }
-                        match d.box_counters() {
-                            Ok(Some(c)) => self.boxes[index].state.box_counters = Some(c),
-                            Ok(None) => {}
-                            Err(e) => self.bad.count_error(Reason::Status, &e),
+                        if let Some(c) = counters {
+                            self.boxes[index].state.box_counters = Some(c);
                         }
                         DatagramOutcome::Status
                     }
@@ -572,6 +610,52 @@ impl Decoder {
         }
     }
 
+    /// An acknowledgement (kind 4), parsed whole by the protocol crate: counted by result,
+    /// or refused with its reason.
+    fn take_ack(&mut self, payload: &[u8]) -> DatagramOutcome {
+        match AckRepr::parse(payload) {
+            Ok(ack) => {
+                self.acknowledgements += 1;
+                *self
+                    .acknowledgements_by_result
+                    .entry(ack.result.name())
+                    .or_insert(0) += 1;
+                DatagramOutcome::Acknowledgement
+            }
+            Err(e) => {
+                self.bad.count_error(Reason::Ack, &e);
+                DatagramOutcome::Rejected
+            }
+        }
+    }
+
+    /// A command (kind 3), parsed whole: header, arguments against the addressed box's port
+    /// count (the most a box has when the box is unknown or any box is addressed), and the
+    /// cell command packet of a cell command; or refused with its reason.
+    fn take_command(&mut self, payload: &[u8]) -> DatagramOutcome {
+        let checked = Command::new_checked(payload).and_then(|c| {
+            let port_count = self
+                .boxes
+                .iter()
+                .find(|b| b.key.box_id == c.box_id())
+                .map_or(MAX_PORTS, |b| b.port_count);
+            match c.request(port_count)? {
+                Request::CellCommand { packet, .. } => CellCommandRepr::parse(&packet).map(|_| ()),
+                _ => Ok(()),
+            }
+        });
+        match checked {
+            Ok(()) => {
+                self.commands += 1;
+                DatagramOutcome::Command
+            }
+            Err(e) => {
+                self.bad.count_error(Reason::Command, &e);
+                DatagramOutcome::Rejected
+            }
+        }
+    }
+
     fn take_records<S: RecordSink + ?Sized>(
         &mut self,
         index: usize,
@@ -585,6 +669,7 @@ impl Decoder {
         let framing = self.config.framing;
         let wants_samples = sink.wants_samples();
         let track = &mut self.boxes[index];
+        let source = track.key.source;
         if wants_samples && track.converter.is_none() {
             track.converter = Some(EventToData::new());
         }
@@ -686,6 +771,7 @@ impl Decoder {
             }
             let record = DecodedRecord {
                 box_id,
+                source,
                 datagram_sequence,
                 port,
                 flags,
@@ -698,6 +784,7 @@ impl Decoder {
                 if let Some(conv) = track.converter.as_mut() {
                     let mut sample = conv.push(tick, &cell, missing_before > 0);
                     sample.box_id = box_id;
+                    sample.source = source;
                     sink.sample(&sample);
                 }
             }
@@ -773,6 +860,7 @@ impl Decoder {
                 }
                 cells.push(CellReport {
                     box_id: b.key.box_id,
+                    source: b.key.source,
                     cell_id: id as u16,
                     port: c.port,
                     data_packets: c.data_packets,
@@ -867,6 +955,7 @@ impl Decoder {
             records_datagrams: boxes.iter().map(|b| b.records_datagrams).sum(),
             status_datagrams: box_status.status_datagrams,
             acknowledgements: self.acknowledgements,
+            acknowledgements_by_result: self.acknowledgements_by_result.clone(),
             commands: self.commands,
             records: self.records,
             data_packets: self.data_packets,
@@ -901,6 +990,7 @@ impl Decoder {
             box_status,
             boxes,
             bad_input: self.bad.clone(),
+            other_traffic: self.other.clone(),
             frames: Default::default(),
             host: None,
             cells,

@@ -2,16 +2,19 @@
 //!
 //! The box sends Ethernet II / IPv4 (no options) / UDP frames (docs/design.md section 4). Its
 //! source port and addresses are parameters, so box datagrams are found by their payload
-//! magic "SK" on any UDP port, or only on one port when a filter is given. Parsing is
+//! magic "SK" on any UDP port, or only on one port when a filter is given. Every other frame
+//! is other traffic, counted by kind ([`crate::other_traffic`]), never bad input. Parsing is
 //! etherparse's; this module only says why a frame is not a box datagram.
 //!
 //! Checksums are verified with etherparse's own computation (independent of the gateware's):
 //! the IPv4 header checksum always, the UDP checksum unless it is 0 over IPv4 (RFC 768:
-//! "not computed"; over IPv6 it is mandatory, RFC 8200). A frame with a wrong checksum gives
-//! nothing to the decoder.
+//! "not computed"; over IPv6 it is mandatory, RFC 8200), of the frames that carry a skinbox
+//! datagram only. Such a frame with a wrong checksum gives nothing to the decoder.
 
 use crate::bad_input::{BadInput, FrameFault, Reason};
-use etherparse::{NetSlice, SlicedPacket, TransportSlice};
+use crate::other_traffic::{udp_service, OtherKind, OtherTraffic};
+use etherparse::{IpNumber, LaxNetSlice, LaxSlicedPacket, NetSlice, SlicedPacket, TransportSlice};
+use skinbox_protocol::datagram::has_magic;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
 
 /// What the first bytes of a captured frame are.
@@ -36,27 +39,25 @@ pub struct UdpDatagram<'a> {
     pub payload: &'a [u8],
 }
 
-/// Why a frame does not carry a box datagram.
+/// Why a frame does not carry a box datagram: someone else's traffic, or a frame that
+/// carried one and is broken.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum FrameReject {
-    /// etherparse could not slice the frame (too short, bad IP header, ...).
+    /// Not the box's: another protocol, another UDP port, a UDP payload without the magic
+    /// "SK" ([`crate::other_traffic`]). Not bad input.
+    Other(OtherKind),
+    /// etherparse could not slice a frame that is (or may be) IP/UDP: too short, bad IP
+    /// header, ...
     Malformed(String),
-    /// Not an IP packet (ARP, other ether types).
-    NotIp,
-    /// An IP fragment: the box never fragments, so it is not ours.
-    Fragment,
-    /// IP, but not UDP.
-    NotUdp,
-    /// UDP on another port than the filter.
-    OtherPort(u16),
-    /// The IPv4 header checksum does not match the header.
+    /// The IPv4 header checksum of a skinbox datagram's frame does not match the header.
     BadIpv4Checksum {
         /// Checksum in the header.
         found: u16,
         /// Checksum of the header's bytes.
         computed: u16,
     },
-    /// The UDP checksum does not match the pseudo header, UDP header and payload.
+    /// The UDP checksum of a skinbox datagram does not match the pseudo header, UDP header
+    /// and payload.
     BadUdpChecksum {
         /// Checksum in the UDP header.
         found: u16,
@@ -66,36 +67,90 @@ pub enum FrameReject {
 }
 
 impl FrameReject {
-    /// The counting key.
-    pub fn reason(&self) -> Reason {
-        Reason::Frame(match self {
+    /// The counting key of bad input (`None` for other traffic).
+    pub fn reason(&self) -> Option<Reason> {
+        Some(Reason::Frame(match self {
+            FrameReject::Other(_) => return None,
             FrameReject::Malformed(_) => FrameFault::Malformed,
-            FrameReject::NotIp => FrameFault::NotIp,
-            FrameReject::Fragment => FrameFault::Fragment,
-            FrameReject::NotUdp => FrameFault::NotUdp,
-            FrameReject::OtherPort(_) => FrameFault::OtherPort,
             FrameReject::BadIpv4Checksum { .. } => FrameFault::BadIpv4Checksum,
             FrameReject::BadUdpChecksum { .. } => FrameFault::BadUdpChecksum,
-        })
+        }))
     }
 
-    /// Counts this rejection.
-    pub fn count_in(&self, bad: &mut BadInput) {
-        bad.count(self.reason(), || match self {
+    /// Counts this rejection: other traffic by kind, bad input by reason.
+    pub fn count_in(&self, bad: &mut BadInput, other: &mut OtherTraffic) {
+        let Some(reason) = self.reason() else {
+            if let FrameReject::Other(kind) = self {
+                other.count(*kind);
+            }
+            return;
+        };
+        bad.count(reason, || match self {
             FrameReject::Malformed(m) => format!("frame: malformed: {m}"),
-            FrameReject::OtherPort(p) => format!("frame: UDP port {p} is not the filter's"),
             FrameReject::BadIpv4Checksum { found, computed } => format!(
                 "frame: IPv4 header checksum 0x{found:04X}, the header's bytes give 0x{computed:04X}"
             ),
             FrameReject::BadUdpChecksum { found, computed } => format!(
                 "frame: UDP checksum 0x{found:04X}, the datagram as captured gives 0x{computed:04X}"
             ),
-            other => other.reason().to_string(),
+            FrameReject::Other(_) => String::new(),
         });
     }
 }
 
-/// The UDP datagram in `frame`, if it has one on `port` (either side) or on any port.
+const ETHER_ARP: u16 = 0x0806;
+const ETHER_LLDP: u16 = 0x88CC;
+const ETHER_IPV4: u16 = 0x0800;
+const ETHER_IPV6: u16 = 0x86DD;
+
+fn ether_kind(ether_type: u16) -> OtherKind {
+    match ether_type {
+        ETHER_ARP => OtherKind::Arp,
+        ETHER_LLDP => OtherKind::Lldp,
+        ETHER_IPV6 => OtherKind::Ipv6,
+        t => OtherKind::EtherType(t),
+    }
+}
+
+fn ip_kind(protocol: IpNumber) -> OtherKind {
+    match protocol {
+        IpNumber::TCP => OtherKind::Tcp,
+        IpNumber::ICMP => OtherKind::Icmp,
+        p => OtherKind::IpProtocol(p.0),
+    }
+}
+
+/// A frame etherparse cannot slice strictly: bad input when it is (or may be) IP/UDP,
+/// other traffic when its EtherType or IP protocol says it is not.
+fn classify_unsliceable(frame: &[u8], link: LinkType, error: String) -> FrameReject {
+    let lax = match link {
+        LinkType::Ethernet => LaxSlicedPacket::from_ethernet(frame).ok(),
+        LinkType::RawIp => LaxSlicedPacket::from_ip(frame).ok(),
+        LinkType::LinuxSll => None,
+    };
+    let Some(lax) = lax else {
+        return FrameReject::Malformed(error);
+    };
+    match &lax.net {
+        Some(LaxNetSlice::Arp(_)) => FrameReject::Other(OtherKind::Arp),
+        Some(LaxNetSlice::Ipv6(ip)) if ip.payload().ip_number != IpNumber::UDP => {
+            FrameReject::Other(OtherKind::Ipv6)
+        }
+        Some(LaxNetSlice::Ipv4(ip)) if ip.payload().ip_number != IpNumber::UDP => {
+            FrameReject::Other(ip_kind(ip.payload().ip_number))
+        }
+        Some(_) => FrameReject::Malformed(error),
+        None => match lax.ether_payload().map(|p| p.ether_type.0) {
+            Some(ETHER_IPV4 | ETHER_IPV6) | None => FrameReject::Malformed(error),
+            Some(t) => FrameReject::Other(ether_kind(t)),
+        },
+    }
+}
+
+/// The skinbox datagram in `frame`, if it carries one: UDP on `port` (either side; any
+/// port when `None`) whose payload begins with the magic "SK". Every other frame is
+/// [`FrameReject::Other`], whatever its checksums; a skinbox datagram's frame with a wrong
+/// IPv4 header or UDP checksum, or one etherparse cannot slice, is bad input.
 pub fn udp_payload(
     frame: &[u8],
     link: LinkType,
@@ -105,21 +160,19 @@ pub fn udp_payload(
         LinkType::Ethernet => SlicedPacket::from_ethernet(frame),
         LinkType::RawIp => SlicedPacket::from_ip(frame),
         LinkType::LinuxSll => SlicedPacket::from_linux_sll(frame),
-    }
-    .map_err(|e| FrameReject::Malformed(e.to_string()))?;
+    };
+    let sliced = match sliced {
+        Ok(s) => s,
+        Err(e) => return Err(classify_unsliceable(frame, link, e.to_string())),
+    };
+    let is_v6 = matches!(sliced.net, Some(NetSlice::Ipv6(_)));
+    // What the frame is, before any checksum: other traffic is never judged.
     let (source_ip, destination_ip) = match &sliced.net {
         Some(NetSlice::Ipv4(ip)) => {
-            let h = ip.header();
-            let computed = h.to_header().calc_header_checksum();
-            if computed != h.header_checksum() {
-                return Err(FrameReject::BadIpv4Checksum {
-                    found: h.header_checksum(),
-                    computed,
-                });
-            }
             if ip.is_payload_fragmented() {
-                return Err(FrameReject::Fragment);
+                return Err(FrameReject::Other(OtherKind::IpFragment));
             }
+            let h = ip.header();
             (
                 std::net::IpAddr::V4(h.source_addr()),
                 std::net::IpAddr::V4(h.destination_addr()),
@@ -127,7 +180,7 @@ pub fn udp_payload(
         }
         Some(NetSlice::Ipv6(ip)) => {
             if ip.is_payload_fragmented() {
-                return Err(FrameReject::Fragment);
+                return Err(FrameReject::Other(OtherKind::Ipv6));
             }
             let h = ip.header();
             (
@@ -135,12 +188,52 @@ pub fn udp_payload(
                 std::net::IpAddr::V6(h.destination_addr()),
             )
         }
-        _ => return Err(FrameReject::NotIp),
+        Some(NetSlice::Arp(_)) => return Err(FrameReject::Other(OtherKind::Arp)),
+        None => {
+            let kind = sliced
+                .payload_ether_type()
+                .map_or(OtherKind::EtherType(0), |t| ether_kind(t.0));
+            return Err(FrameReject::Other(kind));
+        }
     };
     let udp = match &sliced.transport {
         Some(TransportSlice::Udp(udp)) => udp,
-        _ => return Err(FrameReject::NotUdp),
+        _ if is_v6 => return Err(FrameReject::Other(OtherKind::Ipv6)),
+        _ => {
+            let protocol = sliced.ip_payload().map_or(IpNumber(255), |p| p.ip_number);
+            return Err(FrameReject::Other(ip_kind(protocol)));
+        }
     };
+    let (sp, dp) = (udp.source_port(), udp.destination_port());
+    let not_ours = |fallback: OtherKind| {
+        let kind = if is_v6 {
+            OtherKind::Ipv6
+        } else {
+            udp_service(dp)
+                .or_else(|| udp_service(sp))
+                .map_or(fallback, OtherKind::UdpService)
+        };
+        FrameReject::Other(kind)
+    };
+    if let Some(p) = port {
+        if sp != p && dp != p {
+            return Err(not_ours(OtherKind::UdpOtherPort));
+        }
+    }
+    if !has_magic(udp.payload()) {
+        return Err(not_ours(OtherKind::UdpNotSkinbox));
+    }
+    // A skinbox datagram: its checksums must hold.
+    if let Some(NetSlice::Ipv4(ip)) = &sliced.net {
+        let h = ip.header();
+        let computed = h.to_header().calc_header_checksum();
+        if computed != h.header_checksum() {
+            return Err(FrameReject::BadIpv4Checksum {
+                found: h.header_checksum(),
+                computed,
+            });
+        }
+    }
     let found = udp.checksum();
     let computed = match (source_ip, destination_ip) {
         // RFC 768: a zero checksum over IPv4 means the sender computed none.
@@ -157,12 +250,6 @@ pub fn udp_payload(
     };
     if let Some(computed) = computed.filter(|c| *c != found) {
         return Err(FrameReject::BadUdpChecksum { found, computed });
-    }
-    let (sp, dp) = (udp.source_port(), udp.destination_port());
-    if let Some(p) = port {
-        if sp != p && dp != p {
-            return Err(FrameReject::OtherPort(dp));
-        }
     }
     Ok(UdpDatagram {
         source: SocketAddr::new(source_ip, sp),
@@ -211,7 +298,7 @@ mod tests {
         assert_eq!((udp.source, udp.destination), (src, dst));
         assert_eq!(
             udp_payload(&frame, LinkType::Ethernet, Some(7)),
-            Err(FrameReject::OtherPort(6000))
+            Err(FrameReject::Other(OtherKind::UdpOtherPort))
         );
         assert!(udp_payload(&frame, LinkType::Ethernet, Some(5000)).is_ok());
         assert!(matches!(

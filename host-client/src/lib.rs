@@ -31,6 +31,7 @@ pub mod convert;
 pub mod decoder;
 pub mod frame;
 pub mod live;
+pub mod other_traffic;
 pub mod output;
 pub mod pcap;
 pub mod rate;

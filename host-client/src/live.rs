@@ -442,7 +442,7 @@ where
                             );
                             continue;
                         }
-                        sink.datagram_received(got.timestamp, payload);
+                        sink.datagram_received(got.timestamp, got.peer, payload);
                         decoder.push_datagram_from(got.peer, payload, sink);
                         if let Some(w) = recorder.as_deref_mut() {
                             let ts = got.timestamp.unwrap_or_else(|| {

@@ -26,6 +26,11 @@ pub enum RowKind {
     Samples,
 }
 
+/// A row's box source address: `IP:port`, or empty where unknown.
+fn source_text(source: Option<std::net::SocketAddr>) -> String {
+    source.map(|a| a.to_string()).unwrap_or_default()
+}
+
 /// A [`RecordSink`] writing rows. The first write error stops writing and is kept.
 pub struct RowWriter<W: Write> {
     out: W,
@@ -147,12 +152,12 @@ impl<W: Write> RowWriter<W> {
         match self.kind {
             RowKind::Packets => writeln!(
                 self.out,
-                "time_s,tick,box_id,datagram_sequence,port,flags,cell_id,kind,event_sequence,second_part,event_packets_missing_before,{}{times}",
+                "time_s,tick,box_id,source,datagram_sequence,port,flags,cell_id,kind,event_sequence,second_part,event_packets_missing_before,{}{times}",
                 channels.join(",")
             ),
             RowKind::Samples => writeln!(
                 self.out,
-                "time_s,tick,box_id,cell_id,updated_mask,stale_mask,known_mask,{}{times}",
+                "time_s,tick,box_id,source,cell_id,updated_mask,stale_mask,known_mask,{}{times}",
                 channels.join(",")
             ),
         }
@@ -181,10 +186,11 @@ impl<W: Write> RowWriter<W> {
                 }
                 write!(
                     self.out,
-                    "{:.9},{},{},{},{},{},{},{},{},{},{}",
+                    "{:.9},{},{},{},{},{},{},{},{},{},{},{}",
                     r.time_s(),
                     r.tick,
                     r.box_id,
+                    source_text(r.source),
                     r.datagram_sequence,
                     r.port,
                     r.flags,
@@ -212,6 +218,7 @@ impl<W: Write> RowWriter<W> {
                     "time_s": r.time_s(),
                     "tick": r.tick,
                     "box_id": r.box_id,
+                    "source": r.source.map(|a| a.to_string()),
                     "datagram_sequence": r.datagram_sequence,
                     "port": r.port,
                     "flags": r.flags,
@@ -237,10 +244,11 @@ impl<W: Write> RowWriter<W> {
                 }
                 write!(
                     self.out,
-                    "{:.9},{},{},{},{},{},{}",
+                    "{:.9},{},{},{},{},{},{},{}",
                     s.time_s(),
                     s.tick,
                     s.box_id,
+                    source_text(s.source),
                     s.cell_id,
                     s.updated.bits(),
                     s.stale.bits(),
@@ -261,6 +269,7 @@ impl<W: Write> RowWriter<W> {
                     "time_s": s.time_s(),
                     "tick": s.tick,
                     "box_id": s.box_id,
+                    "source": s.source.map(|a| a.to_string()),
                     "cell_id": s.cell_id,
                     "updated": s.updated.iter().map(|c| c.name()).collect::<Vec<_>>(),
                     "stale": s.stale.iter().map(|c| c.name()).collect::<Vec<_>>(),
@@ -293,9 +302,14 @@ impl<W: Write> RecordSink for RowWriter<W> {
         self.kind == RowKind::Samples
     }
 
-    fn datagram_received(&mut self, receive: Option<std::time::Duration>, payload: &[u8]) {
+    fn datagram_received(
+        &mut self,
+        receive: Option<std::time::Duration>,
+        source: Option<std::net::SocketAddr>,
+        payload: &[u8],
+    ) {
         if let Some(timing) = &mut self.timing {
-            timing.datagram_received(receive, payload);
+            timing.datagram_received(receive, source, payload);
         }
     }
 
@@ -358,6 +372,7 @@ mod tests {
     fn record(cell: CellRepr) -> DecodedRecord {
         DecodedRecord {
             box_id: 1,
+            source: None,
             datagram_sequence: 9,
             port: 2,
             flags: 0,
@@ -383,13 +398,13 @@ mod tests {
         assert_eq!(
             lines[1],
             format!(
-                "2.000000000,250000000,1,9,2,0,17,data,,0,0,0.0078125,-0.01171875,1.0078125,\
+                "2.000000000,250000000,1,,9,2,0,17,data,,0,0,0.0078125,-0.01171875,1.0078125,\
                  0.0009765625,0,0.001953125,{proximity},30.5,0"
             )
         );
         assert_eq!(
             lines[2],
-            "2.000000000,250000000,1,9,2,0,17,event,41,0,0,,,,0.5,,,,,"
+            "2.000000000,250000000,1,,9,2,0,17,event,41,0,0,,,,0.5,,,,,"
         );
     }
 
@@ -408,7 +423,7 @@ mod tests {
                 let host = host_ms + u64::from(box_id);
                 let tick = (host + 6_000 - reset_ms) * 125_000;
                 let payload = crate::timing::tests::datagram(box_id, box_id, &[tick]);
-                w.datagram_received(Some(Duration::from_millis(host + 1_000)), &payload);
+                w.datagram_received(Some(Duration::from_millis(host + 1_000)), None, &payload);
                 w.record(&DecodedRecord {
                     box_id,
                     tick,

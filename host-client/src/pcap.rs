@@ -9,7 +9,8 @@
 
 use crate::bad_input::{BadInput, Reason};
 use crate::decoder::{DecodedRecord, Decoder, DecoderConfig, RecordSink};
-use crate::frame::{self, FrameReject, LinkType, UdpDatagram};
+use crate::frame::{self, LinkType, UdpDatagram};
+use crate::other_traffic::OtherTraffic;
 use crate::report::{FrameCounts, HostCost, Report};
 use pcap_file::pcap::PcapParseError;
 use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
@@ -52,13 +53,15 @@ pub struct PcapOptions {
     pub udp_port: Option<u16>,
 }
 
-/// Frames and bad input of one pass over a pcap.
+/// Frames, bad input and other traffic of one pass over a pcap.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PcapScan {
     /// Frame counts.
     pub frames: FrameCounts,
     /// Frames and pcap records rejected.
     pub bad: BadInput,
+    /// Frames that are not the box's, by kind.
+    pub other: OtherTraffic,
 }
 
 /// Block type of a pcapng section header, as the file's first four bytes.
@@ -79,52 +82,93 @@ fn link_type(datalink: DataLink) -> Option<LinkType> {
 /// timestamp and leaves the capture span alone.
 fn take_frame(
     scan: &mut PcapScan,
-    span: &mut (Option<Duration>, Duration),
     ts: Option<Duration>,
     data: &[u8],
     link: LinkType,
     udp_port: Option<u16>,
     f: &mut impl FnMut(Duration, UdpDatagram<'_>),
 ) {
-    scan.frames.frames += 1;
-    if let Some(ts) = ts {
-        span.0.get_or_insert(ts);
-        span.1 = span.1.max(ts);
-    }
     match frame::udp_payload(data, link, udp_port) {
         Ok(udp) => {
             scan.frames.udp_payloads += 1;
             f(ts.unwrap_or_default(), udp);
         }
-        Err(FrameReject::OtherPort(_)) => scan.frames.other_port += 1,
-        Err(reject) => reject.count_in(&mut scan.bad),
+        Err(reject) => reject.count_in(&mut scan.bad, &mut scan.other),
     }
 }
 
 /// Calls `f` with the timestamp and UDP datagram of every frame of a pcap or pcapng that
-/// carries one; counts every other frame by reason. Frames of pcapng simple packet blocks
+/// carries a skinbox datagram; counts every other frame as other traffic by kind, or as
+/// bad input by reason. Frames of pcapng simple packet blocks
 /// have no timestamp: `f` gets a zero one, and they do not enter the capture span.
 pub fn for_each_udp_payload(
     bytes: &[u8],
     udp_port: Option<u16>,
-    f: impl FnMut(Duration, UdpDatagram<'_>),
-) -> Result<PcapScan, PcapError> {
-    if bytes.starts_with(&PCAPNG_MAGIC) {
-        for_each_pcapng(bytes, udp_port, f)
-    } else {
-        for_each_pcap(bytes, udp_port, f)
-    }
-}
-
-fn for_each_pcapng(
-    bytes: &[u8],
-    udp_port: Option<u16>,
     mut f: impl FnMut(Duration, UdpDatagram<'_>),
 ) -> Result<PcapScan, PcapError> {
+    for_each_frame(bytes, &mut |scan, ts, data, link| {
+        take_frame(scan, ts, data, link, udp_port, &mut f)
+    })
+}
+
+/// A frame of a capture file: the scan so far, its timestamp (`None`: a pcapng simple
+/// packet block), its bytes and its link type.
+type FrameFn<'a> = dyn FnMut(&mut PcapScan, Option<Duration>, &[u8], LinkType) + 'a;
+
+/// Calls `f` with every frame of a pcap or pcapng whose link type is read; counts the
+/// frames, the capture span and what cannot be read.
+fn for_each_frame(bytes: &[u8], f: &mut FrameFn<'_>) -> Result<PcapScan, PcapError> {
+    let mut span = (None, Duration::ZERO);
+    let mut g = |scan: &mut PcapScan, ts: Option<Duration>, data: &[u8], link: LinkType| {
+        scan.frames.frames += 1;
+        if let Some(ts) = ts {
+            span.0.get_or_insert(ts);
+            span.1 = span.1.max(ts);
+        }
+        f(scan, ts, data, link);
+    };
+    let mut scan = if bytes.starts_with(&PCAPNG_MAGIC) {
+        for_each_pcapng(bytes, &mut g)?
+    } else {
+        for_each_pcap(bytes, &mut g)?
+    };
+    if let Some(first) = span.0 {
+        scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
+    }
+    Ok(scan)
+}
+
+/// Every Ethernet frame of a pcap or pcapng with its timestamp (zero for a pcapng simple
+/// packet block), in file order: frames to send somewhere, not to decode. A frame of
+/// another link type, or a file that ends inside a record, is an error that says which.
+pub fn ethernet_frames(bytes: &[u8]) -> Result<Vec<(Duration, Vec<u8>)>, PcapError> {
+    let mut frames = Vec::new();
+    let mut other_link = None;
+    let scan = for_each_frame(bytes, &mut |_, ts, data, link| {
+        if link == LinkType::Ethernet {
+            frames.push((ts.unwrap_or_default(), data.to_vec()));
+        } else {
+            other_link.get_or_insert(link);
+        }
+    })?;
+    if let Some(link) = other_link {
+        return Err(PcapError::NotPcap(format!(
+            "a frame of link type {link:?}: only Ethernet frames can be sent"
+        )));
+    }
+    if scan.bad.total > 0 {
+        return Err(PcapError::NotPcap(format!(
+            "unreadable records: {}",
+            scan.bad
+        )));
+    }
+    Ok(frames)
+}
+
+fn for_each_pcapng(bytes: &[u8], f: &mut FrameFn<'_>) -> Result<PcapScan, PcapError> {
     let (mut rest, mut parser) = PcapNgParser::new(bytes)
         .map_err(|e| PcapError::NotPcap(format!("pcapng section header: {e}")))?;
     let mut scan = PcapScan::default();
-    let mut span = (None, Duration::ZERO);
     while !rest.is_empty() {
         let (next, block) = match parser.next_block(rest) {
             Ok(x) => x,
@@ -163,25 +207,17 @@ fn for_each_pcapng(
             continue;
         };
         // The parser borrows packet data from `bytes`; owned data is read all the same.
-        take_frame(&mut scan, &mut span, ts, &data, link, udp_port, &mut f);
-    }
-    if let Some(first) = span.0 {
-        scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
+        f(&mut scan, ts, &data, link);
     }
     Ok(scan)
 }
 
-fn for_each_pcap(
-    bytes: &[u8],
-    udp_port: Option<u16>,
-    mut f: impl FnMut(Duration, UdpDatagram<'_>),
-) -> Result<PcapScan, PcapError> {
+fn for_each_pcap(bytes: &[u8], f: &mut FrameFn<'_>) -> Result<PcapScan, PcapError> {
     let (mut rest, parser) =
         PcapParser::new(bytes).map_err(|e| PcapError::NotPcap(e.to_string()))?;
     let link =
         link_type(parser.header().datalink).ok_or(PcapError::LinkType(parser.header().datalink))?;
     let mut scan = PcapScan::default();
-    let mut span = (None, Duration::ZERO);
     while !rest.is_empty() {
         match parser.next_packet(rest) {
             Ok((next, packet)) => {
@@ -189,15 +225,7 @@ fn for_each_pcap(
                 let ts = packet.timestamp();
                 // `next_packet` borrows from `bytes`; owned data is read all the same.
                 let data = packet.into_data();
-                take_frame(
-                    &mut scan,
-                    &mut span,
-                    Some(ts),
-                    &data,
-                    link,
-                    udp_port,
-                    &mut f,
-                );
+                f(&mut scan, Some(ts), &data, link);
             }
             Err(PcapParseError::IncompleteBuffer(needed, have)) => {
                 scan.bad.count(Reason::PcapTruncated, || {
@@ -214,9 +242,6 @@ fn for_each_pcap(
             }
         }
     }
-    if let Some(first) = span.0 {
-        scan.frames.capture_span_s = span.1.saturating_sub(first).as_secs_f64();
-    }
     Ok(scan)
 }
 
@@ -232,11 +257,16 @@ pub fn decode_pcap_with<S: RecordSink + ?Sized>(
     let mut decoder = Decoder::new(options.decoder);
     let scan = for_each_udp_payload(bytes, options.udp_port, |timestamp, udp| {
         // A frame without a timestamp comes with zero.
-        sink.datagram_received((!timestamp.is_zero()).then_some(timestamp), udp.payload);
+        sink.datagram_received(
+            (!timestamp.is_zero()).then_some(timestamp),
+            Some(udp.source),
+            udp.payload,
+        );
         decoder.push_datagram_from(Some(udp.source), udp.payload, sink);
     })?;
     let cpu_ns = crate::thread_cpu_ns().saturating_sub(cpu);
     decoder.bad_input_mut().merge(&scan.bad);
+    decoder.other_traffic_mut().merge(&scan.other);
     let mut report = decoder.report();
     report.frames = scan.frames;
     report.host = Some(HostCost {
@@ -293,7 +323,8 @@ pub struct TimedPayload {
     pub payload: Vec<u8>,
 }
 
-/// The UDP payloads of a pcap (on `udp_port` if given), with the scan's counts.
+/// The skinbox datagrams of a pcap (UDP payloads with the magic "SK", on `udp_port` if
+/// given), with the scan's counts.
 pub fn udp_payloads(
     bytes: &[u8],
     udp_port: Option<u16>,

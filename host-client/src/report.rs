@@ -142,6 +142,8 @@ impl PacketSizeAnalysis {
 pub struct CellReport {
     /// Box the cell is on.
     pub box_id: u16,
+    /// Source address of that box's datagrams, where known.
+    pub source: Option<std::net::SocketAddr>,
     /// Cell id.
     pub cell_id: u16,
     /// Port of its last record.
@@ -301,8 +303,6 @@ pub struct FrameCounts {
     pub frames: u64,
     /// Frames whose UDP payload went to the datagram decoder.
     pub udp_payloads: u64,
-    /// UDP frames skipped by the port filter.
-    pub other_port: u64,
     /// Time span of the frames by the capture's clock, in seconds.
     pub capture_span_s: f64,
 }
@@ -336,9 +336,12 @@ pub struct Report {
     pub records_datagrams: u64,
     /// Status datagrams decoded.
     pub status_datagrams: u64,
-    /// Command acknowledgements among the datagrams (kind 4; not box datagrams).
+    /// Well-formed command acknowledgements among the datagrams (kind 4; not box
+    /// datagrams).
     pub acknowledgements: u64,
-    /// Commands to a box among the datagrams (kind 3; not box datagrams).
+    /// Those acknowledgements by result (`ok`, `replay`, ...).
+    pub acknowledgements_by_result: BTreeMap<&'static str, u64>,
+    /// Well-formed commands to a box among the datagrams (kind 3; not box datagrams).
     pub commands: u64,
     /// Records with a valid cell packet.
     pub records: u64,
@@ -390,8 +393,11 @@ pub struct Report {
     pub box_status: BoxStatusReport,
     /// Each box (box id and source address) on its own, in order of its first datagram.
     pub boxes: Vec<BoxReport>,
-    /// Rejected input by reason.
+    /// Rejected input by reason: malformed skinbox datagrams (and their frames), only.
     pub bad_input: BadInput,
+    /// Frames and datagrams that are not the box's (ARP, IPv6, TCP, other UDP, ...), by
+    /// kind: not bad input.
+    pub other_traffic: crate::other_traffic::OtherTraffic,
     /// Frames before the datagram decoder.
     pub frames: FrameCounts,
     /// The host's cost, when the shell measured it.
@@ -577,7 +583,26 @@ impl Report {
                 );
             }
         }
+        if self.commands > 0 || self.acknowledgements > 0 {
+            let results: Vec<String> = self
+                .acknowledgements_by_result
+                .iter()
+                .map(|(r, n)| format!("{r} {n}"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "commands: {}; acknowledgements: {}{}",
+                self.commands,
+                self.acknowledgements,
+                if results.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", results.join(", "))
+                }
+            );
+        }
         let _ = writeln!(s, "bad input: {}", self.bad_input);
+        let _ = writeln!(s, "other traffic: {}", self.other_traffic);
         if let Some(h) = &self.host {
             let _ = writeln!(
                 s,

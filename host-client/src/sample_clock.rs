@@ -22,6 +22,7 @@
 //! cell silent for so long that its drift moves the grid by more than half a period before
 //! its period is learnt (the sample index is then wrong by one).
 
+use crate::decoder::BoxKey;
 use std::collections::{HashMap, VecDeque};
 
 /// The bus model's processing time in a cell before its packet leaves, ns (docs/design.md
@@ -360,8 +361,8 @@ pub struct SampleTimer {
     paths: PathModel,
     /// The cells sample on the box's time grid (method c): no estimate, the grid point.
     on_box_grid: bool,
-    cells: HashMap<(u16, u16), SampleClockEstimator>,
-    last_on_port: HashMap<(u16, u8), u64>,
+    cells: HashMap<(BoxKey, u16), SampleClockEstimator>,
+    last_on_port: HashMap<(BoxKey, u8), u64>,
 }
 
 impl SampleTimer {
@@ -385,9 +386,19 @@ impl SampleTimer {
         self
     }
 
-    /// The estimated sample time of a packet of `cell_id` on `port` of box `box_id`
-    /// stamped at `stamp_ns` (box time); a port's packets in pin order.
+    /// The estimated sample time of a packet of `cell_id` on `port` of box `box_id` (its
+    /// source address unknown) stamped at `stamp_ns` (box time); a port's packets in pin
+    /// order.
     pub fn push(&mut self, box_id: u16, port: u8, cell_id: u16, stamp_ns: u64) -> SampleTime {
+        let key = BoxKey {
+            box_id,
+            source: None,
+        };
+        self.push_for(key, port, cell_id, stamp_ns)
+    }
+
+    /// [`SampleTimer::push`] for the box `key` (box id and source address).
+    pub fn push_for(&mut self, key: BoxKey, port: u8, cell_id: u16, stamp_ns: u64) -> SampleTime {
         let (period, latency) = (self.nominal_period_ns, self.paths.latency_ns(cell_id));
         if self.on_box_grid {
             let at = stamp_ns as f64 - latency as f64 + period / 8.0;
@@ -401,18 +412,19 @@ impl SampleTimer {
         // The port's first packet: whether the line was idle before it is unknown.
         let unqueued = self
             .last_on_port
-            .insert((box_id, port), stamp_ns)
+            .insert((key, port), stamp_ns)
             .is_some_and(|last| stamp_ns >= last && stamp_ns - last > BACK_TO_BACK_NS);
         self.cells
-            .entry((box_id, cell_id))
+            .entry((key, cell_id))
             .or_insert_with(|| SampleClockEstimator::new(period, latency))
             .push(stamp_ns, unqueued)
     }
 
-    /// Starts every cell and port of `box_id` over (the box was reset).
+    /// Starts every cell and port of `box_id` over (the box was reset), whatever its
+    /// source address.
     pub fn reset_box(&mut self, box_id: u16) {
-        self.cells.retain(|&(b, _), _| b != box_id);
-        self.last_on_port.retain(|&(b, _), _| b != box_id);
+        self.cells.retain(|(b, _), _| b.box_id != box_id);
+        self.last_on_port.retain(|(b, _), _| b.box_id != box_id);
     }
 
     /// Cells followed (none on the box's grid).

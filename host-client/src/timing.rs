@@ -9,10 +9,11 @@
 //! records of several boxes land on one host time line.
 
 use crate::clock_map::{ClockMap, HostTime, ReceiveStampMap, TimeExchange};
-use crate::decoder::DecodedRecord;
+use crate::decoder::{BoxKey, DecodedRecord};
 use crate::sample_clock::{PathModel, SampleTimer};
 use skinbox_protocol::datagram::{Datagram, DatagramKind};
 use std::collections::HashMap;
+use std::net::SocketAddr;
 use std::time::Duration;
 
 /// Where a record's host time came from.
@@ -55,8 +56,10 @@ pub struct RecordTimes {
 /// How one box's time is mapped to host time, for reports.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct BoxTimeSummary {
-    /// The box.
+    /// The box: its id ...
     pub box_id: u16,
+    /// ... and the source address of its datagrams, where known.
+    pub address: Option<SocketAddr>,
     /// Which map gives its host times.
     pub source: HostTimeSource,
     /// The box oscillator's drift against the host clock, ppm, where measured.
@@ -67,14 +70,15 @@ pub struct BoxTimeSummary {
     pub restarts: u64,
 }
 
-/// Sample times and host times of every record, per box.
+/// Sample times and host times of every record, per box (box id and source address: two
+/// boxes of one id from two addresses are two boxes with two maps).
 #[derive(Debug, Clone)]
 pub struct Timing {
     samples: SampleTimer,
-    exchanges: HashMap<u16, ClockMap>,
-    receive: HashMap<u16, ReceiveStampMap>,
+    exchanges: HashMap<BoxKey, ClockMap>,
+    receive: HashMap<BoxKey, ReceiveStampMap>,
     /// Each box's boot id, from its latest status datagram.
-    boot_ids: HashMap<u16, u32>,
+    boot_ids: HashMap<BoxKey, u32>,
     /// Read-tick acknowledgements that could not be used: no boot id seen yet, or an
     /// exchange that cannot be true.
     exchanges_unused: u64,
@@ -98,8 +102,8 @@ impl Timing {
         }
     }
 
-    /// The next datagram, `payload`, was received at `receive` on the host clock (`None`:
-    /// unknown). Its records were all stamped before it left: its latest record's tick
+    /// The next datagram, `payload`, from `source` (where known), was received at
+    /// `receive` on the host clock (`None`: unknown). Its records were all stamped before it left: its latest record's tick
     /// against `receive` is a point above the receive-stamp envelope of its box, taken
     /// before any of its records is mapped. A payload that is no records datagram adds no
     /// point (the decoder counts it).
@@ -107,15 +111,24 @@ impl Timing {
     /// A status datagram tells the box's boot id; the acknowledgement of a read-tick command
     /// whose host time is its send time on this clock (as `skinbox capture` sends them) is
     /// an exchange for the box's map ([`Timing::exchange`]), once its boot id is known.
-    pub fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
+    pub fn datagram_received(
+        &mut self,
+        receive: Option<Duration>,
+        source: Option<SocketAddr>,
+        payload: &[u8],
+    ) {
         if skinbox_protocol::command::peek_kind(payload)
             == Some(skinbox_protocol::command::KIND_ACK)
         {
-            self.acknowledgement(receive, payload);
+            self.acknowledgement(receive, source, payload);
             return;
         }
         let Ok(d) = Datagram::new_checked(payload) else {
             return;
+        };
+        let key = BoxKey {
+            box_id: d.box_id(),
+            source,
         };
         if d.kind() == DatagramKind::Status {
             if let Ok(skinbox_protocol::DatagramRepr {
@@ -123,7 +136,7 @@ impl Timing {
                 ..
             }) = skinbox_protocol::DatagramRepr::parse(payload)
             {
-                self.boot_ids.insert(d.box_id(), status.boot_id);
+                self.boot_ids.insert(key, status.boot_id);
             }
             return;
         }
@@ -140,14 +153,19 @@ impl Timing {
             .max();
         if let Some(tick) = latest {
             self.receive
-                .entry(d.box_id())
+                .entry(key)
                 .or_default()
                 .push(tick, receive.as_nanos() as u64);
         }
     }
 
     /// A read-tick acknowledgement received at `receive`: an exchange, if it is one.
-    fn acknowledgement(&mut self, receive: Option<Duration>, payload: &[u8]) {
+    fn acknowledgement(
+        &mut self,
+        receive: Option<Duration>,
+        source: Option<SocketAddr>,
+        payload: &[u8],
+    ) {
         use skinbox_protocol::command::{AckRepr, AckResult, Opcode};
         let Ok(ack) = AckRepr::parse(payload) else {
             return;
@@ -155,7 +173,11 @@ impl Timing {
         if ack.opcode != Opcode::ReadTick as u8 || ack.result != AckResult::Ok {
             return;
         }
-        let (Some(receive), Some(&boot_id)) = (receive, self.boot_ids.get(&ack.box_id)) else {
+        let key = BoxKey {
+            box_id: ack.box_id,
+            source,
+        };
+        let (Some(receive), Some(&boot_id)) = (receive, self.boot_ids.get(&key)) else {
             self.exchanges_unused += 1;
             return;
         };
@@ -165,7 +187,7 @@ impl Timing {
             box_send_tick: ack.send_tick,
             host_receive_ns: receive.as_nanos() as u64,
         };
-        if self.exchange(ack.box_id, boot_id, exchange).is_err() {
+        if self.exchange_for(key, boot_id, exchange).is_err() {
             self.exchanges_unused += 1;
         }
     }
@@ -184,15 +206,29 @@ impl Timing {
         boot_id: u32,
         exchange: TimeExchange,
     ) -> Result<(), crate::clock_map::ExchangeError> {
+        let key = BoxKey {
+            box_id,
+            source: None,
+        };
+        self.exchange_for(key, boot_id, exchange)
+    }
+
+    /// [`Timing::exchange`] with the box `key` (box id and source address).
+    pub fn exchange_for(
+        &mut self,
+        key: BoxKey,
+        boot_id: u32,
+        exchange: TimeExchange,
+    ) -> Result<(), crate::clock_map::ExchangeError> {
         self.exchanges
-            .entry(box_id)
+            .entry(key)
             .or_default()
             .push(boot_id, exchange)
     }
 
-    /// How each box's time is mapped, by box id.
+    /// How each box's time is mapped, by box id and source address.
     pub fn summary(&self) -> Vec<BoxTimeSummary> {
-        let mut ids: Vec<u16> = self
+        let mut ids: Vec<BoxKey> = self
             .exchanges
             .keys()
             .chain(self.receive.keys())
@@ -202,23 +238,26 @@ impl Timing {
         ids.dedup();
         ids.into_iter()
             .map(
-                |box_id| match (self.exchanges.get(&box_id), self.receive.get(&box_id)) {
+                |key| match (self.exchanges.get(&key), self.receive.get(&key)) {
                     (Some(m), _) if m.boot_id().is_some() => BoxTimeSummary {
-                        box_id,
+                        box_id: key.box_id,
+                        address: key.source,
                         source: HostTimeSource::Exchanges,
                         drift_ppm: m.drift_ppm(),
                         error_bound_ns: m.last_bound_ns(),
                         restarts: m.restarts(),
                     },
                     (_, Some(r)) => BoxTimeSummary {
-                        box_id,
+                        box_id: key.box_id,
+                        address: key.source,
                         source: HostTimeSource::ReceiveStamps,
                         drift_ppm: r.drift_ppm(),
                         error_bound_ns: None,
                         restarts: r.restarts(),
                     },
                     _ => BoxTimeSummary {
-                        box_id,
+                        box_id: key.box_id,
+                        address: key.source,
                         source: HostTimeSource::None,
                         drift_ppm: None,
                         error_bound_ns: None,
@@ -232,17 +271,21 @@ impl Timing {
     /// The times of `record` (records in datagram order).
     pub fn record(&mut self, record: &DecodedRecord) -> RecordTimes {
         let stamp_ns = record.tick * skinbox_protocol::TICK_NS;
+        let key = BoxKey {
+            box_id: record.box_id,
+            source: record.source,
+        };
         let sample = self
             .samples
-            .push(record.box_id, record.port, record.cell.cell_id(), stamp_ns);
+            .push_for(key, record.port, record.cell.cell_id(), stamp_ns);
         let sample_box_ns = sample.sample_time_ns;
         let (host, source) = match self
             .exchanges
-            .get(&record.box_id)
+            .get(&key)
             .and_then(|m| m.ns_to_host(sample_box_ns))
         {
             Some(h) => (Some(h), HostTimeSource::Exchanges),
-            None => match self.receive.get(&record.box_id).and_then(|m| {
+            None => match self.receive.get(&key).and_then(|m| {
                 // The receive map is linear: the sample's host time is the stamp's less
                 // the stamp-to-sample interval.
                 m.to_host(record.tick).map(|h| HostTime {
@@ -272,6 +315,7 @@ pub(crate) mod tests {
     fn record(box_id: u16, cell: u16, tick: u64) -> DecodedRecord {
         DecodedRecord {
             box_id,
+            source: None,
             datagram_sequence: 0,
             port: 0,
             flags: 0,
@@ -317,7 +361,11 @@ pub(crate) mod tests {
         for (box_id, box_ns) in [(1u16, 30_000_000_000u64), (2, 20_000_000_000)] {
             let ticks = [box_ns / 8, (box_ns + 60_000) / 8];
             let payload = datagram(box_id, 5, &ticks);
-            t.datagram_received(Some(Duration::from_nanos(host_ns + 100_000)), &payload);
+            t.datagram_received(
+                Some(Duration::from_nanos(host_ns + 100_000)),
+                None,
+                &payload,
+            );
             let times = t.record(&record(box_id, 5, box_ns / 8));
             // Sample 20 us (processing) before the stamp, host time 40 us late.
             let expected = (host_ns - 20_000 + 40_000) as f64;
@@ -345,7 +393,7 @@ pub(crate) mod tests {
             },
         )
         .unwrap();
-        t.datagram_received(None, &datagram(3, 1, &[10_000]));
+        t.datagram_received(None, None, &datagram(3, 1, &[10_000]));
         let times = t.record(&record(3, 1, 10_000));
         assert_eq!(times.source, HostTimeSource::Exchanges);
         assert!(times.host_error_bound_ns.unwrap() >= 50_000.0);
@@ -413,26 +461,26 @@ pub(crate) mod tests {
         let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
         let at = |ns: u64| Some(Duration::from_nanos(ns));
         // before any status datagram: no boot id, not used
-        t.datagram_received(at(2_000_000), &read_tick_ack(3, 1_000_000, 1_000));
+        t.datagram_received(at(2_000_000), None, &read_tick_ack(3, 1_000_000, 1_000));
         assert_eq!(t.exchanges_unused(), 1);
         assert!(t.summary().is_empty(), "no map yet");
-        t.datagram_received(at(2_500_000), &status(3, 9));
+        t.datagram_received(at(2_500_000), None, &status(3, 9));
         // host sent at 3.00 ms, the box took it at tick 20,000, answered 800 ns later, the
         // answer arrived 20 us after it left
-        t.datagram_received(at(3_020_800), &read_tick_ack(3, 3_000_000, 20_000));
+        t.datagram_received(at(3_020_800), None, &read_tick_ack(3, 3_000_000, 20_000));
         assert_eq!(t.exchanges_unused(), 1);
         let s = &t.summary()[0];
         assert_eq!((s.source, s.restarts), (HostTimeSource::Exchanges, 0));
         // a record's sample maps within the bound of the exchange's midpoint offset (host
         // 3,010,400 ns at box 160,400 ns: host time = box time + 2.85 ms)
-        t.datagram_received(None, &datagram(3, 1, &[20_000]));
+        t.datagram_received(None, None, &datagram(3, 1, &[20_000]));
         let times = t.record(&record(3, 1, 20_000));
         let mapped = times.sample_host_ns.unwrap();
         let truth = times.sample_box_s * 1e9 + 2_850_000.0;
         assert!((mapped - truth).abs() <= times.host_error_bound_ns.unwrap() + 1.0);
         // a new boot id: the next exchange starts the map over
-        t.datagram_received(at(4_000_000), &status(3, 10));
-        t.datagram_received(at(5_020_800), &read_tick_ack(3, 5_000_000, 1_000));
+        t.datagram_received(at(4_000_000), None, &status(3, 10));
+        t.datagram_received(at(5_020_800), None, &read_tick_ack(3, 5_000_000, 1_000));
         assert_eq!(t.summary()[0].restarts, 1);
         // an acknowledgement of another command is no exchange
         let other = ack(
@@ -442,7 +490,7 @@ pub(crate) mod tests {
             skinbox_protocol::command::Opcode::StatusNow,
         );
         let before = t.exchanges_unused();
-        t.datagram_received(at(6_020_000), &other);
+        t.datagram_received(at(6_020_000), None, &other);
         assert_eq!(t.exchanges_unused(), before);
     }
 }

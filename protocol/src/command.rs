@@ -670,8 +670,12 @@ pub struct Ack<T: AsRef<[u8]>> {
 
 impl<T: AsRef<[u8]>> Ack<T> {
     /// Wraps untrusted bytes: the header as for a command (kind 4), a port count of
-    /// 1..=64, a known result, reserved 0, and the reply length the opcode and result call
-    /// for (the reply itself is checked by [`AckRepr::parse`]).
+    /// 1..=64, a known result the box can give the opcode (`unknown_opcode` exactly for
+    /// unknown opcodes, unless refused earlier as `replay` or `other_box`;
+    /// `downlink_full` only for a cell command), a last accepted sequence number equal to
+    /// the command's for every result but `replay` and `other_box`, reserved 0, and the
+    /// reply length the opcode and result call for (the reply itself is checked by
+    /// [`AckRepr::parse`]).
     pub fn new_checked(buffer: T) -> Result<Self> {
         let b = buffer.as_ref();
         check_header(Format::Ack, b, KIND_ACK)?;
@@ -696,7 +700,37 @@ impl<T: AsRef<[u8]>> Ack<T> {
                 found: u32::from(get_u16(body, ack_field::RESERVED)),
             });
         }
-        let expected = match (Opcode::from_byte(body[ack_field::OPCODE]), result) {
+        // The result must be one the box can give the opcode: an unknown opcode is refused
+        // at step 19 (or earlier, as another box's or a replay); only a cell command
+        // finds the downlink full.
+        let opcode = Opcode::from_byte(body[ack_field::OPCODE]);
+        let possible = match (opcode, result) {
+            (None, r) => matches!(
+                r,
+                AckResult::Replay | AckResult::OtherBox | AckResult::UnknownOpcode
+            ),
+            (Some(_), AckResult::UnknownOpcode) => false,
+            (Some(op), AckResult::DownlinkFull) => op == Opcode::CellCommand,
+            (Some(_), _) => true,
+        };
+        if !possible {
+            return Err(Error::BadField {
+                format: Format::Ack,
+                field: "result",
+                found: u32::from(body[ack_field::RESULT]),
+            });
+        }
+        // Steps 19 to 22 take the command's sequence number whatever their result.
+        let takes_sequence = !matches!(result, AckResult::Replay | AckResult::OtherBox);
+        if takes_sequence && get_u32(body, ack_field::LAST_ACCEPTED) != get_u32(b, field::SEQUENCE)
+        {
+            return Err(Error::BadField {
+                format: Format::Ack,
+                field: "last_accepted",
+                found: get_u32(body, ack_field::LAST_ACCEPTED),
+            });
+        }
+        let expected = match (opcode, result) {
             (Some(Opcode::StreamTo), AckResult::Ok) => DESTINATION_LEN,
             (Some(Opcode::StatusNow), AckResult::Ok) => BOX_COUNTERS_LEN,
             _ => 0,

@@ -68,6 +68,13 @@ pub const FLAG_BOX_COUNTERS: u8 = 0x02;
 pub const MAX_STATUS_PORTS_WITH_BOX_COUNTERS: usize =
     (MAX_PAYLOAD_LEN - HEADER_LEN - STATUS_FIXED_LEN - BOX_COUNTERS_LEN) / PORT_COUNTERS_LEN;
 
+/// Whether a UDP payload is a skinbox datagram of any kind (box datagram, command or
+/// acknowledgement): it begins with the magic "SK". A payload that does not is someone
+/// else's traffic; one that does is judged by the rules of its kind.
+pub fn has_magic(bytes: &[u8]) -> bool {
+    bytes.starts_with(&MAGIC)
+}
+
 /// Published layout of the datagram header.
 pub fn layout() -> Vec<LayoutRow> {
     let one = |at: usize| at..at + 1;

@@ -252,12 +252,13 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             &mut |s, d| {
                 // Cheap getters: no report (and no rate learning) on the receive thread.
                 eprintln!(
-                    "{:7.1} s: {} datagrams, {} records, {} missing, {} bad, {:.1} % CPU",
+                    "{:7.1} s: {} datagrams, {} records, {} missing, {} bad, {} other, {:.1} % CPU",
                     s.wall_s,
                     s.datagrams,
                     d.records(),
                     d.datagrams_missing(),
                     d.bad_input_total(),
+                    d.other_traffic().total,
                     100.0 * s.cpu_s / s.wall_s.max(1e-9)
                 );
             },

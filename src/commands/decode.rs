@@ -105,12 +105,14 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         (report, times, rows)
     };
     eprintln!(
-        "{rows} rows from {} records in {} datagrams; {} datagrams missing, {} event packets missing, {} bad input",
+        "{rows} rows from {} records in {} datagrams of {} boxes; {} datagrams missing, {} event packets missing, bad input {}; other traffic {}",
         report.records,
         report.records_datagrams,
+        report.boxes.len(),
         report.losses.datagrams_missing,
         report.losses.event_packets_missing,
-        report.bad_input.total
+        report.bad_input,
+        report.other_traffic
     );
     eprintln!(
         "sample times at {rate_hz} Hz; host times: {}",

@@ -157,7 +157,8 @@ pub fn host_time_line(times: &[skinbox_host::timing::BoxTimeSummary]) -> String 
     times
         .iter()
         .map(|t| {
-            let mut s = format!("box {} from {}", t.box_id, t.source.name());
+            let at = t.address.map(|a| format!(" at {a}")).unwrap_or_default();
+            let mut s = format!("box {}{at} from {}", t.box_id, t.source.name());
             if let Some(d) = t.drift_ppm {
                 s += &format!(", drift {d:.1} ppm");
             }

@@ -62,17 +62,19 @@ pub fn run(args: ReplayArgs, json: bool) -> anyhow::Result<()> {
             "replay": summary,
             "frames": scan.frames,
             "bad_input": scan.bad,
+            "other_traffic": scan.other,
         }))
     } else {
         println!(
-            "sent {} datagrams ({} bytes) to {} in {:.3} s ({:.0}/s), {} send errors; {} frames skipped",
+            "sent {} datagrams ({} bytes) to {} in {:.3} s ({:.0}/s), {} send errors; skipped: bad input {}, other traffic {}",
             summary.datagrams,
             summary.bytes,
             args.to,
             summary.wall_s,
             summary.datagrams_per_second,
             summary.send_errors,
-            scan.bad.total + scan.frames.other_port
+            scan.bad,
+            scan.other
         );
         Ok(())
     }

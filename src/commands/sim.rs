@@ -54,6 +54,16 @@ pub struct Args {
     /// (same frames, orders of magnitude faster).
     #[arg(long, value_enum, default_value_t = FidelityArg::Rtl)]
     fidelity: FidelityArg,
+    /// Ethernet frames of a pcap or pcapng for the box's GMII receive (ARP, pings,
+    /// commands, anything), at their timestamps relative to the first one from the window's
+    /// start; padded to 60 bytes and given their FCS as a MAC sends them. The box's replies
+    /// go into the output pcap beside its datagrams and the report decodes them.
+    #[arg(long)]
+    host_frames: Option<PathBuf>,
+    /// Send the --host-frames back to back, this many us from the end of one to the start
+    /// of the next (from the window's start), instead of at their timestamps.
+    #[arg(long, requires = "host_frames")]
+    host_frames_gap_us: Option<f64>,
 }
 
 /// `--mode` values.
@@ -145,8 +155,41 @@ struct Output {
     /// The same for (c), the grid point of the box's time the cells sample on, when the
     /// scene's cells are time-synced through the box (`[time_sync]` or sync commands).
     synced_sample_time_error_us: Option<SampleTimeError>,
-    /// The scene's cell commands through the box.
-    downlink: DownlinkOutput,
+    /// The scene's cell commands through the box (none with --host-frames: the cells
+    /// were not driven with what the host's own frames may have sent down).
+    downlink: Option<DownlinkOutput>,
+    /// The frames of --host-frames and what the box answered.
+    host_frames: Option<HostFramesOutput>,
+}
+
+/// What came of the frames of `--host-frames`.
+#[derive(Serialize)]
+struct HostFramesOutput {
+    /// The file.
+    file: PathBuf,
+    /// Frames put on the box's GMII receive.
+    frames_sent: usize,
+    /// Box tick of the first frame's last byte and of the last frame's.
+    first_tick: u64,
+    /// See `first_tick`.
+    last_tick: u64,
+    /// The box's answers: every one, and by kind (etherparse's reading).
+    replies: u64,
+    /// ARP replies.
+    arp_replies: u64,
+    /// ICMP echo replies.
+    echo_replies: u64,
+    /// Acknowledgements, by result.
+    acknowledgements: std::collections::BTreeMap<&'static str, u64>,
+    /// Answers of none of these kinds (must be 0).
+    other_replies: u64,
+    /// The fate of every received frame, from the box counter block of the last status
+    /// report (`frames_received` and one fate each).
+    box_counters: std::collections::BTreeMap<&'static str, u32>,
+    /// Received frames the box counted in no fate (must be 0).
+    unaccounted_frames: u32,
+    /// Changes of the box's UART transmit pins (cell commands the frames sent down).
+    uart_tx_pin_changes: usize,
 }
 
 /// The scene's `[[commands]]` in the window, sent by the host to the box, and what the box
@@ -263,6 +306,14 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     spec.pcap = Some(pcap.clone());
     spec.vcd = args.vcd.clone();
     spec.host_frames = plan.host_frames.clone();
+    if let Some(file) = &args.host_frames {
+        anyhow::ensure!(
+            plan.host_frames.is_empty(),
+            "--host-frames: the scene sends {} cell commands of its own in the window ([[commands]]); use a scene without",
+            plan.host_frames.len()
+        );
+        spec.host_frames = host_frames(file, args.host_frames_gap_us, window_ns.1)?;
+    }
     anyhow::ensure!(
         (0.0..=50.0).contains(&args.jitter_ns),
         "--jitter-ns {} must be 0 to 50 (a fifth of a bit)",
@@ -291,7 +342,14 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         bar.set_position(done);
     })?;
     bar.finish_and_clear();
-    let downlink = check_downlink(&plan, &run.uart_tx, &spec)?;
+    let downlink = match args.host_frames {
+        None => Some(check_downlink(&plan, &run.uart_tx, &spec)?),
+        Some(_) => None,
+    };
+    let host_frames_output = args
+        .host_frames
+        .as_ref()
+        .map(|file| host_frames_output(file, &spec, &run));
     let report = run.report;
 
     // the host told the scene's true sample rate and cell count, so its "% of data mode"
@@ -360,12 +418,147 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         arrival_stamp_error_us,
         synced_sample_time_error_us,
         downlink,
+        host_frames: host_frames_output,
     };
     if json {
         return super::print_json(&out);
     }
     print_summary(&out);
     Ok(())
+}
+
+/// The frames of `file` on the box's GMII receive from the window's start (the edge the
+/// ports start to listen at): at their timestamps relative to the first, or `gap_us` apart;
+/// never closer than the 12-byte inter-frame gap. They must have left by the window's end
+/// (`window_ns` after its start), so the last status report counts them.
+fn host_frames(
+    file: &std::path::Path,
+    gap_us: Option<f64>,
+    window_ns: u64,
+) -> anyhow::Result<Vec<skinbox_cosim::run::HostFrame>> {
+    use skinbox_cosim::run::{HostFrame, PORTS_READY_CYCLE};
+    use skinbox_protocol::TICK_NS;
+    const INTER_FRAME_GAP: u64 = 12;
+    let bytes = skinbox_host::pcap::read_file(file)?;
+    let frames = skinbox_host::pcap::ethernet_frames(&bytes)
+        .with_context(|| format!("--host-frames {}", file.display()))?;
+    if let Some(gap) = gap_us {
+        anyhow::ensure!(
+            gap.is_finite() && gap >= 0.0,
+            "--host-frames-gap-us {gap} must be 0 or more"
+        );
+    }
+    let gap_cycles = gap_us.map(|g| (g * 1e3 / TICK_NS as f64).round() as u64);
+    let first_ts = frames.first().map(|f| f.0).unwrap_or_default();
+    let mut free = PORTS_READY_CYCLE;
+    let mut out = Vec::with_capacity(frames.len());
+    for (ts, ethernet) in &frames {
+        anyhow::ensure!(
+            ethernet.len() >= 14,
+            "--host-frames: a frame of {} bytes has no Ethernet header",
+            ethernet.len()
+        );
+        let wanted = match gap_cycles {
+            Some(gap) => free + gap.saturating_sub(INTER_FRAME_GAP),
+            None => {
+                PORTS_READY_CYCLE
+                    + (ts.saturating_sub(first_ts).as_nanos() / u128::from(TICK_NS)) as u64
+            }
+        };
+        let f = HostFrame::from_ethernet(wanted.max(free), ethernet);
+        free = f.last_edge() + 1 + INTER_FRAME_GAP;
+        out.push(f);
+    }
+    let end = PORTS_READY_CYCLE + window_ns / TICK_NS;
+    if let Some(last) = out.last() {
+        anyhow::ensure!(
+            last.last_edge() < end,
+            "--host-frames: the last of {} frames ends {:.1} us after the window's start, after its end; give a longer --duration-ms or a --host-frames-gap-us",
+            out.len(),
+            ((last.last_edge() - PORTS_READY_CYCLE) * TICK_NS) as f64 / 1e3
+        );
+    }
+    Ok(out)
+}
+
+/// The box's answers to the host's frames, read with etherparse, and the fates its last
+/// status report counted.
+fn host_frames_output(
+    file: &std::path::Path,
+    spec: &skinbox_cosim::run::SimSpec,
+    run: &skinbox_cosim::run::SimRun,
+) -> HostFramesOutput {
+    use etherparse::{NetSlice, SlicedPacket, TransportSlice};
+    use skinbox_cosim::run::TICK_ZERO_CYCLE;
+    use skinbox_gateware::interface_box::RECEIVE_TICK_LAG;
+    use skinbox_protocol::command::AckRepr;
+    let tick = |f: &skinbox_cosim::run::HostFrame| {
+        (f.last_edge() + RECEIVE_TICK_LAG).saturating_sub(TICK_ZERO_CYCLE)
+    };
+    let mut out = HostFramesOutput {
+        file: file.to_path_buf(),
+        frames_sent: spec.host_frames.len(),
+        first_tick: spec.host_frames.first().map_or(0, tick),
+        last_tick: spec.host_frames.last().map_or(0, tick),
+        replies: run.replies.len() as u64,
+        arp_replies: 0,
+        echo_replies: 0,
+        acknowledgements: Default::default(),
+        other_replies: 0,
+        box_counters: Default::default(),
+        unaccounted_frames: 0,
+        uart_tx_pin_changes: run.uart_tx.len(),
+    };
+    for reply in &run.replies {
+        // preamble and SFD before, the FCS after
+        let ethernet = &reply.bytes[8..reply.bytes.len().saturating_sub(4)];
+        let kind =
+            SlicedPacket::from_ethernet(ethernet)
+                .ok()
+                .and_then(|p| match (&p.net, &p.transport) {
+                    (Some(NetSlice::Arp(a)), _)
+                        if a.operation() == etherparse::ArpOperation::REPLY =>
+                    {
+                        Some("arp")
+                    }
+                    (_, Some(TransportSlice::Icmpv4(i)))
+                        if matches!(i.icmp_type(), etherparse::Icmpv4Type::EchoReply(_)) =>
+                    {
+                        Some("echo")
+                    }
+                    (_, Some(TransportSlice::Udp(u))) => {
+                        AckRepr::parse(u.payload()).ok().map(|a| a.result.name())
+                    }
+                    _ => None,
+                });
+        match kind {
+            Some("arp") => out.arp_replies += 1,
+            Some("echo") => out.echo_replies += 1,
+            Some(result) => *out.acknowledgements.entry(result).or_insert(0) += 1,
+            None => out.other_replies += 1,
+        }
+    }
+    // the box counter block of the last status datagram that carried one
+    let last_block = run.frames.iter().rev().find_map(|f| {
+        let ethernet = f.bytes.get(8..f.bytes.len().saturating_sub(4))?;
+        let udp = skinbox_host::frame::udp_payload(
+            ethernet,
+            skinbox_host::frame::LinkType::Ethernet,
+            None,
+        )
+        .ok()?;
+        skinbox_protocol::DatagramRepr::parse_box_counters(udp.payload)
+            .ok()?
+            .1
+    });
+    if let Some(c) = last_block {
+        out.box_counters = skinbox_protocol::box_counters::BoxCounter::ALL
+            .iter()
+            .map(|k| (k.name(), c.get(*k)))
+            .collect();
+        out.unaccounted_frames = c.unaccounted_frames();
+    }
+    out
 }
 
 /// Method (c) over the delivered records: the grid point of box time the stamp minus the
@@ -554,11 +747,44 @@ fn print_summary(o: &Output) {
         "        timestamps: stamp - true start edge {:.3} ticks max, {:.3} mean (8 ns ticks)",
         s.ts_error_max_ticks, s.ts_error_mean_ticks
     );
-    let d = &o.downlink;
-    if d.commands_sent > 0 {
+    if let Some(d) = o.downlink.as_ref().filter(|d| d.commands_sent > 0) {
         println!(
             "        downlink: {} cell commands from the host, {} queued, {} refused (downlink_full); {} packets on the UART transmit pins, every pin change as the cells were driven",
             d.commands_sent, d.commands_accepted, d.commands_refused, d.packets_on_pins
+        );
+    }
+    if let Some(f) = &o.host_frames {
+        let acks: Vec<String> = f
+            .acknowledgements
+            .iter()
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect();
+        let fates: Vec<String> = f
+            .box_counters
+            .iter()
+            .filter(|(_, v)| **v != 0)
+            .map(|(k, v)| format!("{k} {v}"))
+            .collect();
+        println!(
+            "        host frames: {} from {} (ticks {} to {}); {} replies: {} ARP, {} echo, acknowledgements {}{}",
+            f.frames_sent,
+            f.file.display(),
+            f.first_tick,
+            f.last_tick,
+            f.replies,
+            f.arp_replies,
+            f.echo_replies,
+            if acks.is_empty() { "none".to_string() } else { acks.join(", ") },
+            if f.other_replies > 0 { format!(", {} other", f.other_replies) } else { String::new() }
+        );
+        println!(
+            "        fates: {}{}",
+            fates.join(", "),
+            if f.unaccounted_frames > 0 {
+                format!("; {} frames unaccounted", f.unaccounted_frames)
+            } else {
+                String::new()
+            }
         );
     }
     let h = &o.host;

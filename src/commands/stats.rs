@@ -58,7 +58,9 @@ pub fn run(args: StatsArgs, json: bool) -> anyhow::Result<()> {
                 .map(|(m, r)| format!("{} {r:.2}", m.name()))
                 .collect();
             println!(
-                "cell {:5} port {:2}: {} data, {} event packets, {:.2} % of data mode, {}; {} event packets missing",
+                "box {}{} cell {:5} port {:2}: {} data, {} event packets, {:.2} % of data mode, {}; {} event packets missing",
+                c.box_id,
+                c.source.map(|a| format!(" at {a}")).unwrap_or_default(),
                 c.cell_id,
                 c.port,
                 c.data_packets,

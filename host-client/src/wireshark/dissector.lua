@@ -68,6 +68,64 @@ local function uint(buf, base, format, name)
     return buf(base + off, len):uint()
 end
 
+-- A malformation the documents list (docs/wire-format.md, "What a reader refuses").
+local function malformed(item, message)
+    item:add_proto_expert_info(E.malformed, message)
+end
+
+-- Why a box counter block is malformed, or nil.
+local function box_counters_fault(buf, base)
+    local link_up = uint(buf, base, "box_counters", "link_up")
+    if link_up > 1 then
+        return "box counters: link_up " .. link_up .. " is not 0 or 1"
+    end
+    local speed = uint(buf, base, "box_counters", "link_speed")
+    if speed > C.max_link_speed then
+        return "box counters: link_speed " .. speed .. " is above " .. C.max_link_speed
+    end
+    if uint(buf, base, "box_counters", "reserved") ~= 0 then
+        return "box counters: reserved bytes not 0"
+    end
+    return nil
+end
+
+-- Why a 20-byte cell command packet at `base` is malformed, or nil.
+local function cell_command_fault(buf, base)
+    local len = C.cell_packet_len
+    if buf(base, 1):uint() ~= C.cc_header then
+        return string.format("cell command packet: header 0x%02x is not 0x%02x",
+            buf(base, 1):uint(), C.cc_header)
+    end
+    if buf(base + len - 1, 1):uint() ~= skinbox.prefs.end_of_packet then
+        return string.format("cell command packet: end byte 0x%02x is wrong",
+            buf(base + len - 1, 1):uint())
+    end
+    if buf(base + 1, 2):uint() > C.max_cell_id then
+        return "cell command packet: cell id above 14 bits"
+    end
+    local code = buf(base + 3, 1):uint()
+    local args_end = C.cc_arguments_end[code]
+    if args_end == nil then
+        return "cell command packet: unknown command " .. code
+    end
+    local arg = buf(base + 4, 1):uint()
+    if code == C.cc_mode and arg > C.cc_max_mode then
+        return "cell command packet: mode " .. arg .. " is above " .. C.cc_max_mode
+    end
+    if code == C.cc_rate and arg > C.cc_max_rate then
+        return "cell command packet: rate code " .. arg .. " is above " .. C.cc_max_rate
+    end
+    if code == C.cc_enable and bit32.band(buf(base + 4, 2):uint(), C.cc_enable_reserved) ~= 0 then
+        return "cell command packet: enable mask bits 9-15 set"
+    end
+    for i = args_end, len - 2 do
+        if buf(base + i, 1):uint() ~= 0 then
+            return "cell command packet: byte " .. i .. " after the arguments is not 0"
+        end
+    end
+    return nil
+end
+
 -- Length of a whole datagram of `kind` with `entries` entries and `flags`, or nil for an
 -- unknown kind (a status datagram with the box counter flag carries the block after its
 -- port counters).
@@ -107,6 +165,10 @@ local function dissect_box_counters(buf, tree, base)
         uint(buf, base, "box_counters", "link_up") == 1 and "up" or "down",
         uint(buf, base, "box_counters", "frames_received"),
         uint(buf, base, "box_counters", "commands_accepted"), refused))
+    local fault = box_counters_fault(buf, base)
+    if fault ~= nil then
+        malformed(bt, fault)
+    end
 end
 
 local function dissect_destination(buf, tree, base)
@@ -142,9 +204,49 @@ local function dissect_control(buf, pinfo, root, kind)
         return len
     end
     local base = C.header_len
+    if uint(buf, 0, format, "flags") ~= 0 then
+        malformed(root, string.format("flags 0x%02x are not 0", uint(buf, 0, format, "flags")))
+    end
+    if uint(buf, 0, format, "reserved") ~= 0 then
+        malformed(root, "header reserved bytes not 0")
+    end
     local text
     if format == "command" then
         local op = uint(buf, 0, "command", "opcode")
+        local want = C.arguments_len[op]
+        if OPCODE_NAMES[op] == nil then
+            malformed(root, "unknown opcode " .. op .. " (the box answers unknown_opcode)")
+        elseif op == C.opcode_stream_to then
+            if body_len ~= 0 and body_len ~= C.destination_len then
+                malformed(root, "stream-to arguments of " .. body_len
+                    .. " bytes (0 or " .. C.destination_len .. ")")
+            elseif body_len == C.destination_len and (buf(base + P.destination.ip[1], 4):uint() == 0
+                or uint(buf, base, "destination", "port") == 0) then
+                malformed(root, "stream-to destination IP 0.0.0.0 or port 0")
+            end
+        elseif body_len ~= want then
+            malformed(root, string.format("%s arguments of %d bytes (%d)", OPCODE_NAMES[op],
+                body_len, want))
+        elseif body_len == 4 then
+            local ticks = buf(base, 4):uint()
+            if op == C.opcode_set_flush_timeout and (ticks < 1 or ticks > C.max_flush_timeout) then
+                malformed(root, "flush timeout " .. ticks .. " outside 1..2^31-1 ticks")
+            elseif op == C.opcode_set_status_period and ticks < C.min_status_period then
+                malformed(root, "status period " .. ticks .. " below " .. C.min_status_period .. " ticks")
+            end
+        elseif op == C.opcode_cell_command then
+            local port = uint(buf, base, "cell_command", "port")
+            if port ~= C.all_ports and port >= C.max_ports then
+                malformed(root, "cell command port " .. port .. " on no box")
+            end
+            if uint(buf, base, "cell_command", "reserved") ~= 0 then
+                malformed(root, "cell command reserved bytes 1-3 not 0 (the box answers bad_argument)")
+            end
+            local fault = cell_command_fault(buf, base + P.cell_command.cell_packet[1])
+            if fault ~= nil then
+                malformed(root, fault)
+            end
+        end
         text = "command " .. (OPCODE_NAMES[op] or ("opcode " .. op)) .. ", seq " .. sequence
         if op == C.opcode_stream_to and body_len == C.destination_len then
             text = text .. " to " .. dissect_destination(buf, root, base)
@@ -168,6 +270,36 @@ local function dissect_control(buf, pinfo, root, kind)
         end
         local op = uint(buf, base, "ack_body", "command_opcode")
         local result = uint(buf, base, "ack_body", "result")
+        local port_count = uint(buf, 0, "ack", "port_count")
+        if port_count < 1 or port_count > C.max_ports then
+            malformed(root, "port count " .. port_count .. " outside 1.." .. C.max_ports)
+        end
+        if uint(buf, base, "ack_body", "body_reserved") ~= 0 then
+            malformed(root, "acknowledgement body reserved bytes not 0")
+        end
+        local known = OPCODE_NAMES[op] ~= nil
+        if RESULT_NAMES[result] == nil then
+            malformed(root, "unknown result " .. result)
+        elseif (known and result == C.result_unknown_opcode)
+            or (not known and result ~= C.result_replay and result ~= C.result_other_box
+                and result ~= C.result_unknown_opcode)
+            or (result == C.result_downlink_full and op ~= C.opcode_cell_command) then
+            malformed(root, "result " .. RESULT_NAMES[result] .. " is not one the box gives opcode " .. op)
+        elseif result ~= C.result_replay and result ~= C.result_other_box
+            and uint(buf, base, "ack_body", "last_accepted") ~= sequence then
+            malformed(root, "last accepted is not the command's sequence number (result "
+                .. RESULT_NAMES[result] .. " takes it)")
+        end
+        local reply_len = 0
+        if result == C.result_ok and op == C.opcode_stream_to then
+            reply_len = C.destination_len
+        elseif result == C.result_ok and op == C.opcode_status_now then
+            reply_len = C.box_counters_len
+        end
+        if body_len ~= C.ack_fixed_len + reply_len then
+            malformed(root, string.format("body of %d bytes; opcode %d, result %d call for %d",
+                body_len, op, result, C.ack_fixed_len + reply_len))
+        end
         text = "ack " .. (OPCODE_NAMES[op] or ("opcode " .. op)) .. ", seq " .. sequence
             .. ": " .. (RESULT_NAMES[result] or ("result " .. result))
         local rest = base + C.ack_fixed_len
@@ -308,6 +440,9 @@ local function dissect_cell(buf, base, tree, verdict, state)
     add(t, buf, base, "cell", "header")
     add(t, buf, base, "cell", "cell_id")
     local summary = (kind or "unknown") .. " cell " .. cell_id
+    if cell_id > C.max_cell_id then
+        malformed(t, "cell id above 14 bits")
+    end
     if kind == nil then
         t:add_proto_expert_info(E.malformed,
             string.format("unknown cell packet header 0x%02x", header))
@@ -319,8 +454,11 @@ local function dissect_cell(buf, base, tree, verdict, state)
             if ch.signed then
                 raw = range:int()
             end
-            t:add(F.data[ch.name], range)
+            local di = t:add(F.data[ch.name], range)
             channel_tree(t, range, ch, raw)
+            if ch.signed and (raw < C.accel_min or raw > C.accel_max) then
+                malformed(di, ch.name .. " " .. raw .. " outside " .. C.accel_min .. ".." .. C.accel_max)
+            end
         end
     else
         local mask_off, mask_len = pos("event", "mask")
@@ -352,13 +490,22 @@ local function dissect_cell(buf, base, tree, verdict, state)
                 end
                 local vi = t:add(F.event[name], range)
                 vi:append_text(" (" .. ch.name .. ")")
+                if ch.signed and (raw < C.accel_min or raw > C.accel_max) then
+                    malformed(vi, ch.name .. " " .. raw .. " outside " .. C.accel_min .. ".." .. C.accel_max)
+                end
                 channel_tree(t, range, ch, raw)
                 names[#names + 1] = ch.name
                 slot = slot + 1
             end
         end
+        if #names == 0 then
+            malformed(mt, "no channel in the mask")
+        end
         while P.event["value_" .. slot] ~= nil do
-            add(t, buf, base, "event", "value_" .. slot)
+            local ui = add(t, buf, base, "event", "value_" .. slot)
+            if uint(buf, base, "event", "value_" .. slot) ~= 0 then
+                malformed(ui, "value slot after the mask's channels is not 0")
+            end
             slot = slot + 1
         end
         local sequence = uint(buf, base, "event", "sequence")
@@ -410,6 +557,10 @@ local function dissect_records(buf, tree, header, verdict, state)
         local fi = add(rt, buf, base, "record", "flags")
         local flags_range = buf(base + P.record.flags[1], P.record.flags[2])
         fi:add(F.record_flags.loss_before, flags_range)
+        local rflags = uint(buf, base, "record", "flags")
+        if bit32.band(rflags, bit32.bnot(C.record_flags_defined)) ~= 0 then
+            malformed(fi, string.format("undefined record flag bits 0x%02x", rflags))
+        end
         add(rt, buf, base, "record", "tick_offset")
         rt:add(F.record_extra.tick, buf(base + P.record.tick_offset[1], P.record.tick_offset[2]),
             tick):set_generated()
@@ -468,6 +619,10 @@ local function dissect_status(buf, tree, header, verdict, state)
         end
         pt:set_text(string.format("Port %d: %d good, %d lost", port,
             uint(buf, b, "port_counters", "packets_good"), lost))
+        if port >= header.port_count then
+            malformed(pt, string.format("counter block of port %d, at or above the port count %d",
+                port, header.port_count))
+        end
     end
     local text = "status, seq " .. header.sequence
     if header.entries > 0 then
@@ -534,7 +689,20 @@ local function dissect(buf, pinfo, tree)
         return len
     end
 
-    local key = header.box_id .. "@" .. tostring(pinfo.src)
+    if header.port_count < 1 or header.port_count > C.max_ports then
+        malformed(root, "port count " .. header.port_count .. " outside 1.." .. C.max_ports)
+    end
+    local defined = C.flags_defined_status
+    if header.kind == C.kind_records then
+        defined = C.flags_defined_records
+    end
+    if bit32.band(header.flags, bit32.bnot(defined)) ~= 0 then
+        malformed(fi, string.format("undefined flag bits 0x%02x",
+            bit32.band(header.flags, bit32.bnot(defined))))
+    end
+
+    -- a box is its box id and its source address (IP and UDP port), as in the host client
+    local key = header.box_id .. "@" .. tostring(pinfo.src) .. ":" .. pinfo.src_port
     local state = box_state(key)
     local verdict = verdicts[pinfo.number]
     if verdict == nil or not pinfo.visited then

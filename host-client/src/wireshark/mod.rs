@@ -9,9 +9,10 @@
 
 use skinbox_protocol::box_counters::{self, BoxCounter, BOX_COUNTERS_LEN};
 use skinbox_protocol::cell::{self, DATA_HEADER, END_OF_PACKET, EVENT_HEADER, PACKET_LEN};
+use skinbox_protocol::cell_command::{self, CellMode, CommandCode, SampleRate, COMMAND_HEADER};
 use skinbox_protocol::command::{
-    self, AckResult, Opcode, ACK_FIXED_LEN, CELL_COMMAND_LEN, DESTINATION_LEN, KIND_ACK,
-    KIND_COMMAND,
+    self, AckResult, Opcode, ACK_FIXED_LEN, ALL_PORTS, CELL_COMMAND_LEN, DESTINATION_LEN, KIND_ACK,
+    KIND_COMMAND, MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS,
 };
 use skinbox_protocol::datagram::{
     self, DatagramKind, FLAG_BOX_COUNTERS, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAGIC,
@@ -393,6 +394,89 @@ fn tables() -> String {
         (
             "opcode_cell_command",
             (Opcode::CellCommand as u8).to_string(),
+        ),
+        ("max_ports", datagram::MAX_PORTS.to_string()),
+        ("flags_defined_records", FLAG_FLUSH_TIMEOUT.to_string()),
+        (
+            "flags_defined_status",
+            (FLAG_FLUSH_TIMEOUT | FLAG_BOX_COUNTERS).to_string(),
+        ),
+        ("record_flags_defined", FLAG_LOSS_BEFORE.to_string()),
+        ("max_cell_id", cell::CELL_ID_BROADCAST.to_string()),
+        (
+            "accel_min",
+            skinbox_protocol::channel::ACCEL_MIN.to_string(),
+        ),
+        (
+            "accel_max",
+            skinbox_protocol::channel::ACCEL_MAX.to_string(),
+        ),
+        (
+            "max_link_speed",
+            (skinbox_protocol::box_counters::LinkSpeed::Unknown as u8).to_string(),
+        ),
+        ("opcode_status_now", (Opcode::StatusNow as u8).to_string()),
+        (
+            "opcode_set_flush_timeout",
+            (Opcode::SetFlushTimeout as u8).to_string(),
+        ),
+        (
+            "opcode_set_status_period",
+            (Opcode::SetStatusPeriod as u8).to_string(),
+        ),
+        ("min_status_period", MIN_STATUS_PERIOD_TICKS.to_string()),
+        ("max_flush_timeout", MAX_FLUSH_TIMEOUT_TICKS.to_string()),
+        ("all_ports", ALL_PORTS.to_string()),
+        ("result_ok", (AckResult::Ok as u8).to_string()),
+        ("result_replay", (AckResult::Replay as u8).to_string()),
+        ("result_other_box", (AckResult::OtherBox as u8).to_string()),
+        (
+            "result_unknown_opcode",
+            (AckResult::UnknownOpcode as u8).to_string(),
+        ),
+        (
+            "result_downlink_full",
+            (AckResult::DownlinkFull as u8).to_string(),
+        ),
+        (
+            "arguments_len",
+            format!(
+                "{{ [{}] = 4, [{}] = 4, [{}] = 0, [{}] = 0, [{}] = {CELL_COMMAND_LEN} }}",
+                Opcode::SetFlushTimeout as u8,
+                Opcode::SetStatusPeriod as u8,
+                Opcode::StatusNow as u8,
+                Opcode::ReadTick as u8,
+                Opcode::CellCommand as u8
+            ),
+        ),
+        ("cc_header", COMMAND_HEADER.to_string()),
+        (
+            "cc_arguments_end",
+            format!(
+                "{{ {} }}",
+                CommandCode::ALL
+                    .iter()
+                    .map(|c| {
+                        let end = cell_command::arguments_layout(*c)
+                            .iter()
+                            .filter(|r| r.name != "reserved")
+                            .map(|r| r.bytes.end)
+                            .max()
+                            .unwrap_or(0);
+                        format!("[{}] = {end}", *c as u8)
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ),
+        ("cc_mode", (CommandCode::Mode as u8).to_string()),
+        ("cc_rate", (CommandCode::SampleRate as u8).to_string()),
+        ("cc_enable", (CommandCode::EnableMask as u8).to_string()),
+        ("cc_max_mode", (CellMode::Event as u8).to_string()),
+        ("cc_max_rate", (SampleRate::ALL.len() - 1).to_string()),
+        (
+            "cc_enable_reserved",
+            (!ChannelMask::CHANNEL_BITS).to_string(),
         ),
         ("mask_second_part", MASK_SECOND_PART.to_string()),
         ("mask_reserved", reserved_mask.to_string()),
