@@ -406,7 +406,7 @@ pub fn serve(
         box_ticks: tick_now(Instant::now()),
         stats: emulated.stats,
         box_counters: (&emulated.control().counters).into(),
-        counters: emulated.control().counters.clone(),
+        counters: emulated.control().counters,
         send_errors,
     })
 }
