@@ -271,34 +271,53 @@ pub const SAMPLE_FIELDS: &[RowField] = &[
     ),
 ];
 
+/// The times of a row written without a [`Timing`]: no sample time (NaN, index -1), no
+/// host time.
+pub const UNTIMED: RecordTimes = RecordTimes {
+    sample_box_s: f64::NAN,
+    sample_box_ns: f64::NAN,
+    sample_index: -1,
+    sample_host_ns: None,
+    host_error_bound_ns: None,
+    source: HostTimeSource::None,
+};
+
+/// An upper bound of the records a capture of `capture_bytes` bytes holds: each takes at
+/// least [`skinbox_protocol::record::RECORD_LEN`] bytes of it.
+pub fn max_records(capture_bytes: usize) -> usize {
+    capture_bytes / skinbox_protocol::record::RECORD_LEN
+}
+
 /// A [`RecordSink`] writing one [`RecordRow`] per record (or, with samples, one
 /// [`SampleRow`] per sample) into a slice the caller allocated, in decoding order, with the
-/// times of `timing`. Rows beyond the slice are counted in [`RowWriter::beyond`], not
-/// written.
+/// times of `timing` (or [`UNTIMED`]). Rows beyond the slice are counted in
+/// [`RowWriter::beyond`], not written.
 pub struct RowWriter<'a, R> {
     rows: &'a mut [R],
     written: usize,
     beyond: u64,
-    timing: Timing,
+    timing: Option<Timing>,
     last_times: RecordTimes,
 }
 
 impl<'a, R> RowWriter<'a, R> {
-    /// A writer into `rows` from the first.
-    pub fn new(rows: &'a mut [R], timing: Timing) -> Self {
+    /// A writer into `rows` from the first, with the sample and host times of `timing`
+    /// (`None`: [`UNTIMED`], and no time estimation cost).
+    pub fn new(rows: &'a mut [R], timing: Option<Timing>) -> Self {
         RowWriter {
             rows,
             written: 0,
             beyond: 0,
             timing,
-            last_times: RecordTimes {
-                sample_box_s: 0.0,
-                sample_box_ns: 0.0,
-                sample_index: 0,
-                sample_host_ns: None,
-                host_error_bound_ns: None,
-                source: HostTimeSource::None,
-            },
+            last_times: UNTIMED,
+        }
+    }
+
+    #[inline]
+    fn times(&mut self, record: &DecodedRecord) -> RecordTimes {
+        match &mut self.timing {
+            Some(t) => t.record(record),
+            None => UNTIMED,
         }
     }
 
@@ -313,12 +332,12 @@ impl<'a, R> RowWriter<'a, R> {
     }
 
     /// The timing, for its summary.
-    pub fn timing(&self) -> &Timing {
-        &self.timing
+    pub fn timing(&self) -> Option<&Timing> {
+        self.timing.as_ref()
     }
 
     /// The timing, the slice released.
-    pub fn into_timing(self) -> Timing {
+    pub fn into_timing(self) -> Option<Timing> {
         self.timing
     }
 
@@ -337,19 +356,21 @@ impl<'a, R> RowWriter<'a, R> {
 impl RecordSink for RowWriter<'_, RecordRow> {
     #[inline]
     fn record(&mut self, record: &DecodedRecord) {
-        let times = self.timing.record(record);
+        let times = self.times(record);
         self.put(RecordRow::new(record, &times));
     }
 
     fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
-        self.timing.datagram_received(receive, payload);
+        if let Some(t) = &mut self.timing {
+            t.datagram_received(receive, payload);
+        }
     }
 }
 
 impl RecordSink for RowWriter<'_, SampleRow> {
     #[inline]
     fn record(&mut self, record: &DecodedRecord) {
-        self.last_times = self.timing.record(record);
+        self.last_times = self.times(record);
     }
 
     fn wants_samples(&self) -> bool {
@@ -363,7 +384,9 @@ impl RecordSink for RowWriter<'_, SampleRow> {
     }
 
     fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
-        self.timing.datagram_received(receive, payload);
+        if let Some(t) = &mut self.timing {
+            t.datagram_received(receive, payload);
+        }
     }
 }
 
@@ -400,7 +423,7 @@ mod tests {
     fn rows_hold_units_masks_and_sequences() {
         let timing = Timing::new(125.0, PathModel::bus_model(Positions::Unknown));
         let mut rows = [RecordRow::default(); 2];
-        let mut w = RowWriter::new(&mut rows, timing);
+        let mut w = RowWriter::new(&mut rows, Some(timing));
         let data = DataRepr::from_raw(17, [2, -3, 258, 1, 0, 2, 310, 61, 0]).unwrap();
         let event = EventRepr::new(17, 41, true, &[(Channel::Force1, 512)]).unwrap();
         for cell in [

@@ -105,6 +105,7 @@ def read(
     udp_port: Optional[int] = None,
     cells_per_bus: Optional[int] = None,
     synced: bool = False,
+    times: bool = True,
     strict: bool = True,
 ) -> Decoded:
     """Every record of a pcap or pcapng capture, and its report.
@@ -118,7 +119,11 @@ def read(
 
     ``sample_rate_hz``: the cells' rate (default: learned from the stamps);
     ``udp_port``: only datagrams from or to this port; ``cells_per_bus`` and ``synced``:
-    where the cells sit and whether they sample on the box's grid, for the sample times.
+    where the cells sit and whether they sample on the box's grid, for the sample times;
+    ``times=False``: no sample and host times (``sample_box_time_ns`` NaN,
+    ``sample_index`` -1, no host time), which saves most of the decoding time. With the
+    rate given (or no times) the file is decoded in one pass, else in two (the first
+    learns the rate), as ``skinbox decode`` does.
 
     Raises ``FileNotFoundError``/``OSError`` for a file that cannot be read,
     :class:`CaptureFileError` for one that is no pcap or pcapng, and, with ``strict``,
@@ -126,7 +131,7 @@ def read(
     hold what was decoded); without ``strict`` the report counts the rejections.
     """
     rows, report_json = _native.read_records(
-        os.fspath(path), sample_rate_hz, udp_port, cells_per_bus, synced
+        os.fspath(path), sample_rate_hz, udp_port, cells_per_bus, synced, times
     )
     import json
 
@@ -142,6 +147,7 @@ def samples(
     udp_port: Optional[int] = None,
     cells_per_bus: Optional[int] = None,
     synced: bool = False,
+    times: bool = True,
     strict: bool = True,
 ) -> Dict[Tuple[int, int], np.ndarray]:
     """The full nine-channel samples of every cell of a capture (event to data).
@@ -154,7 +160,7 @@ def samples(
     Options and errors as :func:`read`.
     """
     rows, report_json = _native.read_samples(
-        os.fspath(path), sample_rate_hz, udp_port, cells_per_bus, synced
+        os.fspath(path), sample_rate_hz, udp_port, cells_per_bus, synced, times
     )
     import json
 

@@ -44,6 +44,7 @@ def read_records(
     udp_port: Optional[int] = None,
     cells_per_bus: Optional[int] = None,
     synced: bool = False,
+    times: bool = True,
 ) -> Tuple[np.ndarray, str]:
     """Every record of a capture (RECORD_DTYPE) and the report as JSON text."""
 
@@ -53,6 +54,7 @@ def read_samples(
     udp_port: Optional[int] = None,
     cells_per_bus: Optional[int] = None,
     synced: bool = False,
+    times: bool = True,
 ) -> Tuple[np.ndarray, str]:
     """The sample after every record of a capture (SAMPLE_DTYPE) and the report as JSON."""
 

@@ -4,8 +4,9 @@ use crate::errors::{pcap_error, value_error};
 use crate::rows::{as_record_rows, as_sample_rows, RecordElement, SampleElement};
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::PySlice;
 use skinbox_host::pcap::{self, PcapOptions};
-use skinbox_host::rows::RowWriter;
+use skinbox_host::rows::{max_records, RecordRow, RowWriter, SampleRow};
 use skinbox_host::sample_clock::{PathModel, Positions, HOP_LATENCY_NS, PROCESSING_NS};
 use skinbox_host::timing::Timing;
 use skinbox_host::{DecoderConfig, RecordSink, Report};
@@ -68,46 +69,81 @@ impl DecodeOptions {
 }
 
 /// The report with the host-time summary, as JSON text.
-pub fn report_json(report: &Report, timing: &Timing) -> PyResult<String> {
+pub fn report_json(report: &Report, timing: Option<&Timing>) -> PyResult<String> {
     let mut value = serde_json::to_value(report).map_err(|e| value_error(e.to_string()))?;
-    value["host_times"] =
-        serde_json::to_value(timing.summary()).map_err(|e| value_error(e.to_string()))?;
+    value["host_times"] = serde_json::to_value(timing.map(|t| t.summary()).unwrap_or_default())
+        .map_err(|e| value_error(e.to_string()))?;
     Ok(value.to_string())
 }
 
-/// Reads the file and counts its records (the first pass, which also learns the sample
-/// rate when it is not given); the rows then fill an array of exactly that length.
-fn first_pass(
+/// Decodes the capture at `path` into a new array of rows (`rows_of` views its elements as
+/// rows), in one pass when the sample times need no learned rate (`times` off, or the
+/// rate given: the array is then allocated for the most records the file can hold, and
+/// only the rows written are touched and returned), else in two as `skinbox decode`
+/// does. Returns the rows and the report as JSON text.
+fn decode_into<'py, E, R>(
+    py: Python<'py>,
     path: &std::path::Path,
     options: &DecodeOptions,
-) -> Result<(Vec<u8>, usize, f64), pcap::PcapError> {
-    let bytes = pcap::read_file(path)?;
-    let report = pcap::decode_pcap_with(&bytes, &options.pcap(), &mut ())?;
-    Ok((bytes, report.records as usize, report.sample_rate_hz))
-}
-
-/// Decodes the rows into `rows`; every row must fit exactly.
-fn fill<S: RecordSink>(
-    bytes: &[u8],
-    options: &DecodeOptions,
-    writer: &mut S,
-) -> Result<Report, pcap::PcapError> {
-    pcap::decode_pcap_with(bytes, &options.pcap(), writer)
-}
-
-fn check_filled(written: usize, beyond: u64, expected: usize) -> PyResult<()> {
-    if written != expected || beyond != 0 {
+    times: bool,
+    rows_of: fn(&mut [E]) -> &mut [R],
+) -> PyResult<(Bound<'py, PyAny>, String)>
+where
+    E: numpy::Element + Send,
+    R: Send,
+    for<'a> RowWriter<'a, R>: RecordSink,
+{
+    options.check()?;
+    let bytes = py.detach(|| pcap::read_file(path)).map_err(pcap_error)?;
+    let (rate_hz, exact) = match (times, options.sample_rate_hz) {
+        (false, _) => (None, None),
+        (true, Some(rate)) => (Some(rate), None),
+        (true, None) => {
+            let report = py
+                .detach(|| pcap::decode_pcap_with(&bytes, &options.pcap(), &mut ()))
+                .map_err(pcap_error)?;
+            (Some(report.sample_rate_hz), Some(report.records as usize))
+        }
+    };
+    let capacity = exact.unwrap_or_else(|| max_records(bytes.len()));
+    // SAFETY: every row handed to Python is written below before the array is returned;
+    // the rows past them are cut off (a view) or not copied.
+    let array = unsafe { PyArray1::<E>::new(py, [capacity], false) };
+    // SAFETY: the array is new and not yet visible to Python: nothing else reads or
+    // writes it while the rows are written without the GIL.
+    let elements = unsafe { array.as_slice_mut() }.map_err(|e| value_error(e.to_string()))?;
+    let (report, written, beyond, timing) = py.detach(|| {
+        let mut writer = RowWriter::new(rows_of(elements), rate_hz.map(|r| options.timing(r)));
+        let report = pcap::decode_pcap_with(&bytes, &options.pcap(), &mut writer);
+        let (written, beyond) = (writer.written(), writer.beyond());
+        (report, written, beyond, writer.into_timing())
+    });
+    let report = report.map_err(pcap_error)?;
+    if beyond != 0 || exact.is_some_and(|n| n != written) {
         return Err(pyo3::exceptions::PyRuntimeError::new_err(format!(
-            "the second pass over the capture gave {} rows, the first {expected}",
+            "{} rows decoded, room for {capacity}",
             written as u64 + beyond
         )));
     }
-    Ok(())
+    let json = report_json(&report, timing.as_ref())?;
+    let array = array.into_any();
+    let rows = if written == capacity {
+        array
+    } else {
+        let view = array.get_item(PySlice::new(py, 0, written as isize, 1))?;
+        // A file of small datagrams leaves most of the room unused: keep only the rows.
+        if written < capacity / 2 {
+            view.call_method0("copy")?
+        } else {
+            view
+        }
+    };
+    Ok((rows, json))
 }
 
 /// Every record of a pcap or pcapng as a record array, and the report as JSON text.
 #[pyfunction]
-#[pyo3(signature = (path, sample_rate_hz=None, udp_port=None, cells_per_bus=None, synced=false))]
+#[pyo3(signature = (path, sample_rate_hz=None, udp_port=None, cells_per_bus=None, synced=false, times=true))]
 pub fn read_records<'py>(
     py: Python<'py>,
     path: PathBuf,
@@ -115,36 +151,21 @@ pub fn read_records<'py>(
     udp_port: Option<u16>,
     cells_per_bus: Option<u16>,
     synced: bool,
-) -> PyResult<(Bound<'py, PyArray1<RecordElement>>, String)> {
+    times: bool,
+) -> PyResult<(Bound<'py, PyAny>, String)> {
     let options = DecodeOptions {
         sample_rate_hz,
         udp_port,
         cells_per_bus,
         synced,
     };
-    options.check()?;
-    let (bytes, n, rate_hz) = py
-        .detach(|| first_pass(&path, &options))
-        .map_err(pcap_error)?;
-    let array = PyArray1::<RecordElement>::zeros(py, n, false);
-    // SAFETY: the array is new and not yet visible to Python: nothing else reads or
-    // writes it while the rows are written without the GIL.
-    let elements = unsafe { array.as_slice_mut() }.map_err(|e| value_error(e.to_string()))?;
-    let (report, written, beyond, timing) = py.detach(|| {
-        let mut writer = RowWriter::new(as_record_rows(elements), options.timing(rate_hz));
-        let report = fill(&bytes, &options, &mut writer);
-        let (written, beyond) = (writer.written(), writer.beyond());
-        (report, written, beyond, writer.into_timing())
-    });
-    let report = report.map_err(pcap_error)?;
-    check_filled(written, beyond, n)?;
-    Ok((array, report_json(&report, &timing)?))
+    decode_into::<RecordElement, RecordRow>(py, &path, &options, times, as_record_rows)
 }
 
 /// The full sample after every record of a pcap or pcapng (event to data) as a sample
 /// array, and the report as JSON text.
 #[pyfunction]
-#[pyo3(signature = (path, sample_rate_hz=None, udp_port=None, cells_per_bus=None, synced=false))]
+#[pyo3(signature = (path, sample_rate_hz=None, udp_port=None, cells_per_bus=None, synced=false, times=true))]
 pub fn read_samples<'py>(
     py: Python<'py>,
     path: PathBuf,
@@ -152,27 +173,13 @@ pub fn read_samples<'py>(
     udp_port: Option<u16>,
     cells_per_bus: Option<u16>,
     synced: bool,
-) -> PyResult<(Bound<'py, PyArray1<SampleElement>>, String)> {
+    times: bool,
+) -> PyResult<(Bound<'py, PyAny>, String)> {
     let options = DecodeOptions {
         sample_rate_hz,
         udp_port,
         cells_per_bus,
         synced,
     };
-    options.check()?;
-    let (bytes, n, rate_hz) = py
-        .detach(|| first_pass(&path, &options))
-        .map_err(pcap_error)?;
-    let array = PyArray1::<SampleElement>::zeros(py, n, false);
-    // SAFETY: as in `read_records`.
-    let elements = unsafe { array.as_slice_mut() }.map_err(|e| value_error(e.to_string()))?;
-    let (report, written, beyond, timing) = py.detach(|| {
-        let mut writer = RowWriter::new(as_sample_rows(elements), options.timing(rate_hz));
-        let report = fill(&bytes, &options, &mut writer);
-        let (written, beyond) = (writer.written(), writer.beyond());
-        (report, written, beyond, writer.into_timing())
-    });
-    let report = report.map_err(pcap_error)?;
-    check_filled(written, beyond, n)?;
-    Ok((array, report_json(&report, &timing)?))
+    decode_into::<SampleElement, SampleRow>(py, &path, &options, times, as_sample_rows)
 }

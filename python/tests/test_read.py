@@ -126,3 +126,25 @@ def test_options_are_checked(captures):
         skinbox.read(captures["data"][0], sample_rate_hz=-1.0)
     with pytest.raises(ValueError, match="cells_per_bus"):
         skinbox.read(captures["data"][0], cells_per_bus=0)
+
+
+def test_rate_given_is_one_pass_and_equals_decode_with_that_rate(captures, skinbox_bin):
+    path, _ = captures["mixed"]
+    records, _ = skinbox.read(path, sample_rate_hz=125.0)
+    want = decode_jsonl(skinbox_bin, path, "--sample-rate-hz", "125")
+    assert len(records) == len(want)
+    for row, w in zip(records, want):
+        assert_row_equals(row, w)
+
+
+def test_without_times_the_records_are_the_same(captures):
+    path, _ = captures["two_boxes"]
+    timed, _ = skinbox.read(path)
+    untimed, report = skinbox.read(path, times=False)
+    assert report["host_times"] == []
+    assert np.isnan(untimed["sample_box_time_ns"]).all()
+    assert (untimed["sample_index"] == -1).all()
+    assert (untimed["host_time_source"] == skinbox.HOST_TIME_NONE).all()
+    for field in ("tick", "box_id", "cell_id", "kind", "mask", "event_sequence", "port"):
+        assert np.array_equal(timed[field], untimed[field]), field
+    assert np.array_equal(timed["values"], untimed["values"], equal_nan=True)
