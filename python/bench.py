@@ -21,24 +21,33 @@ import numpy as np
 import skinbox
 
 
-def pcap_into_numpy(path: Path, rounds: int) -> dict:
-    """The fastest of `rounds` reads of the whole pcap into one record array."""
-    best = float("inf")
+def pcap_into_numpy(path: Path, rounds: int, **options) -> dict:
+    """The fastest of `rounds` reads of the whole pcap into one record array: wall time
+    and this process's CPU time."""
+    best_wall = best_cpu = float("inf")
     n = 0
     for _ in range(rounds):
-        start = time.perf_counter()
-        records, _ = skinbox.read(path)
-        best = min(best, time.perf_counter() - start)
+        wall, cpu = time.perf_counter(), time.process_time()
+        records, _ = skinbox.read(path, **options)
+        best_wall = min(best_wall, time.perf_counter() - wall)
+        best_cpu = min(best_cpu, time.process_time() - cpu)
         n = len(records)
         del records
-    return {"records": n, "best_s": best, "records_per_s": n / best, "ns_per_record": best / n * 1e9}
+    return {
+        "options": options,
+        "records": n,
+        "records_per_s": n / best_wall,
+        "ns_per_record": best_wall / n * 1e9,
+        "cpu_ns_per_record": best_cpu / n * 1e9,
+    }
 
 
-def live_into_numpy(skinbox_bin: str, path: Path, rate: float, records_in_file: int) -> dict:
-    """`skinbox replay` sends the pcap's datagrams at `rate` records/s to a Capture on
-    loopback; the Python side takes every batch and sums a column of it."""
+def live_into_numpy(path: Path, rate: float, records_in_file: int, times: bool) -> dict:
+    """The pcap's datagrams go at `rate` records/s, in bursts of 32 as `skinbox bench live`
+    sends them, to a Capture on loopback; the Python side takes every batch and sums a
+    column of it."""
     datagrams_per_s = rate / 55.0
-    capture = skinbox.Capture(listen="127.0.0.1:0", batch_ms=50)
+    capture = skinbox.Capture(listen="127.0.0.1:0", batch_ms=50, times=times)
     got = 0
     checksum = 0
 
@@ -51,12 +60,7 @@ def live_into_numpy(skinbox_bin: str, path: Path, rate: float, records_in_file: 
     consumer = threading.Thread(target=consume)
     consumer.start()
     start = time.perf_counter()
-    sent = subprocess.run(
-        [skinbox_bin, "replay", str(path), "--to", capture.address, "--rate", str(datagrams_per_s), "--json"],
-        check=True,
-        capture_output=True,
-        text=True,
-    )
+    sent = skinbox._native.replay_capture(path, capture.address, datagrams_per_s)
     wall = time.perf_counter() - start
     deadline = time.monotonic() + 5
     while got < records_in_file and time.monotonic() < deadline:
@@ -66,8 +70,9 @@ def live_into_numpy(skinbox_bin: str, path: Path, rate: float, records_in_file: 
     report = capture.report
     cpu_s = report["capture"]["cpu_s"]
     return {
+        "times": times,
         "target_records_per_s": rate,
-        "sent": json.loads(sent.stdout),
+        "sent": json.loads(sent),
         "replay_wall_s": wall,
         "records_received": got,
         "records_in_file": records_in_file,
@@ -88,28 +93,38 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "bench.pcap"
         packets = skinbox.write_bench_capture(path, args.packets)
-        pcap = pcap_into_numpy(path, args.rounds)
+        pcaps = [
+            pcap_into_numpy(path, args.rounds),
+            pcap_into_numpy(path, args.rounds, sample_rate_hz=125.0),
+            pcap_into_numpy(path, args.rounds, times=False),
+        ]
         rust_decode = json.loads(
             subprocess.run(
                 [args.skinbox, "bench", "decode", "--packets", str(args.packets), "--json"],
                 check=True, capture_output=True, text=True,
             ).stdout
         )
-        live = live_into_numpy(args.skinbox, path, args.rate, packets)
+        lives = [
+            live_into_numpy(path, args.rate, packets, times=True),
+            live_into_numpy(path, args.rate, packets, times=False),
+        ]
         rust_live = json.loads(
             subprocess.run(
-                [args.skinbox, "bench", "live", "--rates", str(args.rate), "--batches", "64", "--json"],
+                [args.skinbox, "bench", "live", "--rates", str(args.rate), "--batches", "64", "--coalesce-us", "0", "--json"],
                 check=True, capture_output=True, text=True,
             ).stdout
         )
     step = rust_live["steps"][0]
-    print(json.dumps({"pcap_into_numpy": pcap, "bench_decode": rust_decode, "live_into_numpy": live, "bench_live": rust_live}, indent=1), file=sys.stderr)
-    print(f"pcap -> numpy (skinbox.read, whole file):   {pcap['records_per_s'] / 1e6:6.2f} M records/s, {pcap['ns_per_record']:5.1f} ns/record ({pcap['records']} records)")
+    print(json.dumps({"pcap_into_numpy": pcaps, "bench_decode": rust_decode, "live_into_numpy": lives, "bench_live": rust_live}, indent=1), file=sys.stderr)
+    for pcap, name in zip(pcaps, ["two passes, times", "rate given: one pass, times", "times=False: one pass"]):
+        print(f"pcap -> numpy, skinbox.read ({name}): {pcap['records_per_s'] / 1e6:6.2f} M records/s, "
+              f"{pcap['ns_per_record']:6.1f} ns/record wall, {pcap['cpu_ns_per_record']:6.1f} ns CPU ({pcap['records']} records)")
     print(f"skinbox bench decode (decoder only, Rust):  {rust_decode['packets_per_second'] / 1e6:6.2f} M records/s, {rust_decode['ns_per_packet']:5.1f} ns/record")
-    print(f"live -> numpy at {args.rate / 1e6:.1f} M records/s (Capture):  {live['records_received']} of {live['records_in_file']} records, "
-          f"{live['datagrams_missing']} datagrams missing, receiver {live['receiver_cpu_ns_per_record']:.1f} ns CPU/record")
+    for live in lives:
+        print(f"live -> numpy at {args.rate / 1e6:.1f} M records/s (Capture, times={live['times']}):  {live['records_received']} of {live['records_in_file']} records, "
+              f"{live['datagrams_missing']} datagrams missing, sent at {live['records_in_file'] / live['sent']['wall_s'] / 1e6:.2f} M records/s, receiver {live['receiver_cpu_ns_per_record']:.1f} ns CPU/record")
     print(f"skinbox bench live at {step['target_records_per_second'] / 1e6:.1f} M records/s (Rust):  {step['records_received']} records, "
-          f"{step['datagrams_missing']} datagrams missing, lossless {step['lossless']}, receiver {step['receiver_cpu_ns_per_record']:.1f} ns CPU/record")
+          f"{step['datagrams_missing']} datagrams missing, sent at {step['sent_records_per_second'] / 1e6:.2f} M records/s, lossless {step['lossless']}, receiver {step['receiver_cpu_ns_per_record']:.1f} ns CPU/record")
 
 
 if __name__ == "__main__":

@@ -171,6 +171,7 @@ class Capture:
         pcap: Optional[_Path] = None,
         cells_per_bus: Optional[int] = None,
         synced: bool = False,
+        times: bool = True,
     ) -> None: ...
     @property
     def address(self) -> str: ...
@@ -181,3 +182,9 @@ class Capture:
     def close(self) -> None: ...
     def __enter__(self) -> "Capture": ...
     def __exit__(self, *args: Any) -> bool: ...
+
+def replay_capture(
+    path: _Path, to: str, datagrams_per_second: float, burst: int = 32
+) -> str:
+    """Sends a pcap's UDP payloads to ``to`` in bursts at a rate (as ``skinbox bench live``);
+    returns what the sender did as JSON text."""

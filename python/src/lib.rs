@@ -64,6 +64,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(files::read_samples, m)?)?;
     m.add_function(wrap_pyfunction!(synth::write_synthetic_capture, m)?)?;
     m.add_function(wrap_pyfunction!(synth::write_bench_capture, m)?)?;
+    m.add_function(wrap_pyfunction!(synth::replay_capture, m)?)?;
     m.add_class::<control::BoxHandle>()?;
     m.add_class::<emulate::Emulator>()?;
     m.add_class::<live::Capture>()?;

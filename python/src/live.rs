@@ -38,7 +38,7 @@ enum Message {
 struct Batcher {
     rows: Vec<RecordElement>,
     batch_records: usize,
-    timing: Timing,
+    timing: Option<Timing>,
     to: Sender<Message>,
     records: u64,
 }
@@ -61,7 +61,10 @@ impl RecordSink for BatchSink {
     #[inline]
     fn record(&mut self, record: &DecodedRecord) {
         let mut b = self.0.borrow_mut();
-        let times = b.timing.record(record);
+        let times = match &mut b.timing {
+            Some(t) => t.record(record),
+            None => skinbox_host::rows::UNTIMED,
+        };
         b.rows.push(RecordElement(RecordRow::new(record, &times)));
         b.records += 1;
         if b.rows.len() >= b.batch_records {
@@ -70,10 +73,9 @@ impl RecordSink for BatchSink {
     }
 
     fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
-        self.0
-            .borrow_mut()
-            .timing
-            .datagram_received(receive, payload);
+        if let Some(t) = &mut self.0.borrow_mut().timing {
+            t.datagram_received(receive, payload);
+        }
     }
 }
 
@@ -89,6 +91,7 @@ struct Settings {
     count: Option<u64>,
     pcap: Option<std::path::PathBuf>,
     options: DecodeOptions,
+    times: bool,
 }
 
 fn running_json(stats: &CaptureStats, decoder: &Decoder) -> String {
@@ -167,7 +170,7 @@ fn capture_thread(
         let batcher = Rc::new(RefCell::new(Batcher {
             rows: Vec::with_capacity(settings.batch_records),
             batch_records: settings.batch_records,
-            timing: settings.options.timing(rate_hz),
+            timing: settings.times.then(|| settings.options.timing(rate_hz)),
             to: to.clone(),
             records: 0,
         }));
@@ -249,9 +252,9 @@ fn capture_thread(
             })),
             "rows": b.records,
             "report": report,
-            "host_times": b.timing.summary(),
+            "host_times": b.timing.as_ref().map(|t| t.summary()).unwrap_or_default(),
             "read_ticks_sent": read_ticks_sent,
-            "exchanges_unused": b.timing.exchanges_unused(),
+            "exchanges_unused": b.timing.as_ref().map_or(0, |t| t.exchanges_unused()),
         });
         Ok(json.to_string())
     });
@@ -308,9 +311,11 @@ impl Capture {
     /// (a box's command address), asks that box to stream here first and maps its time by
     /// read-tick exchanges every `exchange_ms`. A batch is handed over when it holds
     /// `batch_records` records or `batch_ms` passed; the capture stops on `close()`, after
-    /// `duration_ms` or after `count` datagrams.
+    /// `duration_ms` or after `count` datagrams. `times=False` leaves the sample and host
+    /// times out of the rows (as `read(times=False)`), which costs most of the receiving
+    /// thread's time.
     #[new]
-    #[pyo3(signature = (listen="0.0.0.0:54091", claim=None, batch_records=65536, batch_ms=100, sample_rate_hz=None, recv_buffer=live::DEFAULT_RECV_BUFFER_BYTES, exchange_ms=100, duration_ms=None, count=None, pcap=None, cells_per_bus=None, synced=false))]
+    #[pyo3(signature = (listen="0.0.0.0:54091", claim=None, batch_records=65536, batch_ms=100, sample_rate_hz=None, recv_buffer=live::DEFAULT_RECV_BUFFER_BYTES, exchange_ms=100, duration_ms=None, count=None, pcap=None, cells_per_bus=None, synced=false, times=true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -326,6 +331,7 @@ impl Capture {
         pcap: Option<std::path::PathBuf>,
         cells_per_bus: Option<u16>,
         synced: bool,
+        times: bool,
     ) -> PyResult<Self> {
         let listen: SocketAddr = listen
             .parse()
@@ -351,6 +357,7 @@ impl Capture {
             count,
             pcap,
             options,
+            times,
         };
         let (started_tx, started_rx) = channel();
         let (to, messages) = channel();

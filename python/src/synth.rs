@@ -204,3 +204,43 @@ pub fn write_bench_capture(
     })
     .map_err(value_error)
 }
+
+/// Sends the UDP payloads of the pcap at `path` to `to` from 127.0.0.1 at
+/// `datagrams_per_second` on average, `burst` back to back (as `skinbox bench live`
+/// paces them), without the GIL; returns what the sender did as JSON text.
+#[pyfunction]
+#[pyo3(signature = (path, to, datagrams_per_second, burst=32))]
+pub fn replay_capture(
+    py: Python<'_>,
+    path: std::path::PathBuf,
+    to: &str,
+    datagrams_per_second: f64,
+    burst: usize,
+) -> PyResult<String> {
+    use skinbox_host::replay::{replay, Pacing};
+    let to: SocketAddr = to
+        .parse()
+        .map_err(|e| value_error(format!("to {to}: {e}")))?;
+    py.detach(|| {
+        let bytes = skinbox_host::pcap::read_file(&path).map_err(|e| e.to_string())?;
+        let (payloads, _) =
+            skinbox_host::pcap::udp_payloads(&bytes, None).map_err(|e| e.to_string())?;
+        let socket = std::net::UdpSocket::bind(SocketAddr::from(([127, 0, 0, 1], 0)))
+            .map_err(|e| e.to_string())?;
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let summary = replay(
+            &socket,
+            to,
+            payloads
+                .iter()
+                .map(|p| (Duration::ZERO, p.payload.as_slice())),
+            Pacing::Bursts {
+                datagrams_per_second,
+                burst: burst.max(1),
+            },
+            &stop,
+        );
+        serde_json::to_string(&summary).map_err(|e| e.to_string())
+    })
+    .map_err(value_error)
+}

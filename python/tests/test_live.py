@@ -23,10 +23,15 @@ def box():
         yield emulated
 
 
-def test_a_claimed_capture_gets_every_record_the_box_sent():
+@pytest.mark.parametrize("times", [True, False])
+def test_a_claimed_capture_gets_every_record_the_box_sent(times):
     with skinbox.emulate("stroking_upper_arm", duration_ms=300.0) as emulated:
         capture = skinbox.Capture(
-            listen="127.0.0.1:0", claim=emulated.address, batch_ms=20, exchange_ms=50
+            listen="127.0.0.1:0",
+            claim=emulated.address,
+            batch_ms=20,
+            exchange_ms=50,
+            times=times,
         )
         batches = []
         deadline = time.monotonic() + 30
@@ -52,6 +57,10 @@ def test_a_claimed_capture_gets_every_record_the_box_sent():
     assert report["report"]["records"] == len(records)
     assert report["report"]["losses"]["datagrams_missing"] == 0
     assert report["report"]["bad_input"]["total"] == 0
+    if not times:
+        assert (records["host_time_source"] == skinbox.HOST_TIME_NONE).all()
+        assert np.isnan(records["sample_box_time_ns"]).all()
+        return
     # the read-tick exchanges map box time to host time, with a bound
     assert report["host_times"][0]["source"] == "exchanges"
     mapped = records["host_time_source"] == skinbox.HOST_TIME_EXCHANGES
