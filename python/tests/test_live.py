@@ -34,19 +34,24 @@ def test_a_claimed_capture_gets_every_record_the_box_sent(times):
             times=times,
         )
         batches = []
-        deadline = time.monotonic() + 30
+        consumer = threading.Thread(target=lambda: batches.extend(capture))
+        consumer.start()
         # the cells send for 300 ms of scene time; then the box sends status reports only
-        for batch in capture:
-            batches.append(batch)
-            sent = emulated.stats()
-            got = sum(len(b) for b in batches)
-            if sent["records_sent"] > 0 and got == sent["records_sent"]:
-                time.sleep(0.1)  # the box sends nothing after its scene
-                if emulated.stats()["records_sent"] == got:
-                    break
-            assert time.monotonic() < deadline, (got, sent)
+        deadline = time.monotonic() + 60
+        sent, last = -1, 0
+        while sent != last or sent == 0:
+            assert time.monotonic() < deadline, sent
+            last = sent
+            time.sleep(0.3)
+            sent = emulated.stats()["records_sent"]
         summary = emulated.stop()
+    # every record the box sent arrives
+    deadline = time.monotonic() + 20
+    while sum(len(b) for b in batches) < summary["records_sent"]:
+        assert time.monotonic() < deadline, (sum(len(b) for b in batches), summary)
+        time.sleep(0.05)
     capture.close()
+    consumer.join()
     rest = list(capture)
     assert all(b.dtype == skinbox.RECORD_DTYPE for b in batches + rest)
     records = np.concatenate(batches + rest)
