@@ -456,4 +456,29 @@ mod tests {
         assert_eq!(e.host_time_source, HOST_TIME_NONE);
         assert!(e.host_time_bound_ns.is_nan());
     }
+
+    #[test]
+    fn untimed_rows_have_no_times_and_the_bound_holds_every_record() {
+        let mut rows = [SampleRow::default(); 1];
+        let mut w = RowWriter::new(&mut rows, None);
+        let data = DataRepr::from_raw(5, [0; 9]).unwrap();
+        let record = DecodedRecord {
+            box_id: 1,
+            datagram_sequence: 0,
+            port: 0,
+            flags: 0,
+            tick: 8,
+            cell: CellRepr::Data(data),
+            event_packets_missing_before: 0,
+        };
+        w.record(&record);
+        w.sample(&crate::EventToData::new().push(8, &record.cell, false));
+        assert_eq!(w.written(), 1);
+        assert!(rows[0].sample_box_time_ns.is_nan());
+        assert_eq!((rows[0].sample_index, rows[0].host_time_ns), (-1, 0));
+        assert_eq!(rows[0].host_time_source, HOST_TIME_NONE);
+        // a datagram of one record in its frame: 24 + 26 bytes of payload and more
+        assert_eq!(max_records(24 + 26), 1);
+        assert_eq!(max_records(25), 0);
+    }
 }
