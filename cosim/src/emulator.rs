@@ -28,6 +28,8 @@ pub const SENDER_MAC: [u8; 6] = [0x02, 0x00, 0x00, 0x00, 0x00, 0x01];
 pub struct EmulatorStats {
     /// Records datagrams sent to the claimed destination.
     pub records_datagrams_sent: u64,
+    /// Records (cell packets) in them.
+    pub records_sent: u64,
     /// Status datagrams sent to the claimed destination.
     pub status_datagrams_sent: u64,
     /// Datagrams the box made before any stream-to claimed the stream: sent nowhere.
@@ -100,8 +102,9 @@ impl<'a> EmulatedBox<'a> {
                     s.datagram
                         .to_bytes_with_box_counters(&self.control.counters)
                 }
-                DatagramBody::Records(_) => {
+                DatagramBody::Records(records) => {
                     self.stats.records_datagrams_sent += 1;
+                    self.stats.records_sent += records.len() as u64;
                     s.datagram.to_bytes()
                 }
             };
@@ -213,4 +216,197 @@ pub fn command_frame(link: &LinkConfig, sender: &Destination, payload: &[u8]) ->
     let fcs = crc32(&e);
     e.extend_from_slice(&fcs.to_le_bytes());
     e
+}
+
+/// What an emulated box on a socket plays and how it starts (the settings of `skinbox
+/// emulate`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EmulatorSettings {
+    /// A built-in scene's name or a scene file (`None`: stroking_upper_arm).
+    pub scene: Option<String>,
+    /// Scene time at which the box starts to listen, ms (after the warm-up by default).
+    pub from_ms: f64,
+    /// Scene time the cells send, ms; after it the box goes on with status reports only.
+    pub duration_ms: f64,
+    /// Number of buses, one box port each (overrides the scene).
+    pub buses: Option<usize>,
+    /// Number of cells (overrides the scene).
+    pub cells: Option<usize>,
+    /// Flush timeout after reset, us.
+    pub flush_timeout_us: f64,
+    /// Status period after reset, ms.
+    pub status_period_ms: f64,
+    /// The host subnet commands are taken from: address and prefix length.
+    pub host_subnet: ([u8; 4], u8),
+    /// Box id.
+    pub box_id: u16,
+}
+
+impl Default for EmulatorSettings {
+    fn default() -> Self {
+        EmulatorSettings {
+            scene: None,
+            from_ms: 1000.0,
+            duration_ms: 10_000.0,
+            buses: None,
+            cells: None,
+            flush_timeout_us: 100.0,
+            status_period_ms: 100.0,
+            host_subnet: ([127, 0, 0, 0], 8),
+            box_id: 1,
+        }
+    }
+}
+
+/// A scene played through the reference model, ready for [`serve`].
+pub struct PreparedEmulator {
+    prepared: PreparedReference,
+    /// The box's configuration (its address is the listening address).
+    pub config: BoxConfig,
+    /// The scene's name.
+    pub scene: String,
+    /// The box's ports (the scene's buses).
+    pub ports: usize,
+}
+
+/// Loads and generates the scene of `settings` and prepares the box listening on `listen`.
+pub fn prepare(
+    settings: &EmulatorSettings,
+    listen: SocketAddrV4,
+) -> Result<PreparedEmulator, crate::error::CosimError> {
+    use crate::error::CosimError;
+    let mut scene = skinbox_cells::scene::Scene::find(settings.scene.as_deref())?;
+    if let Some(b) = settings.buses {
+        scene.config.scene.buses = b;
+    }
+    if let Some(c) = settings.cells {
+        scene.config.scene.cells = c;
+    }
+    scene.check()?;
+    let generated =
+        crate::scene::generate(&scene, (settings.from_ms + settings.duration_ms) * 1e-3)?;
+    let ports = generated.buses.len();
+    if !(1..=64).contains(&ports) {
+        return Err(CosimError::Ports(ports));
+    }
+    let (host_subnet, host_subnet_prefix_len) = settings.host_subnet;
+    let config = BoxConfig {
+        ports,
+        flush_timeout_ticks: (settings.flush_timeout_us * 125.0).round() as u64,
+        status_period_ticks: (settings.status_period_ms * 125_000.0).round() as u64,
+        box_id: settings.box_id,
+        link: LinkConfig {
+            box_ip: listen.ip().octets(),
+            box_port: listen.port(),
+            host_subnet,
+            host_subnet_prefix_len,
+            ..LinkConfig::DEFAULT
+        },
+        ..BoxConfig::default()
+    };
+    config.validate()?;
+    let spec = crate::scene::spec(
+        &generated,
+        config.clone(),
+        (settings.from_ms * 1e6) as u64,
+        (settings.duration_ms * 1e6) as u64,
+    );
+    let (lines, _) = crate::run::lines(&spec);
+    let prepared = crate::reference::prepare(&config, &lines, crate::run::cycles(&spec))?;
+    Ok(PreparedEmulator {
+        prepared,
+        config,
+        scene: scene.name().to_string(),
+        ports,
+    })
+}
+
+/// What [`serve`] did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ServeSummary {
+    /// Wall-clock time served, s.
+    pub wall_s: f64,
+    /// Box ticks reached.
+    pub box_ticks: u64,
+    /// What the box did.
+    #[serde(flatten)]
+    pub stats: EmulatorStats,
+    /// The box's counters at the end.
+    pub box_counters: skinbox_host::report::BoxCountersReport,
+    /// The same as the box keeps them.
+    #[serde(skip)]
+    pub counters: skinbox_protocol::box_counters::BoxCounters,
+    /// Datagrams the socket could not send.
+    pub send_errors: u64,
+}
+
+/// Runs the box of `prepared` on `socket` in real time (`speed`: scene time per wall-clock
+/// time) until `stop` is set or `deadline`: it sends its datagrams once a stream-to claims
+/// them and answers every command. `progress` sees the box's counts after each step.
+pub fn serve(
+    prepared: &PreparedEmulator,
+    socket: &std::net::UdpSocket,
+    speed: f64,
+    stop: &std::sync::atomic::AtomicBool,
+    deadline: Option<std::time::Instant>,
+    progress: &mut dyn FnMut(&EmulatorStats),
+) -> std::io::Result<ServeSummary> {
+    use std::net::SocketAddr;
+    use std::time::{Duration, Instant};
+    let mut emulated = EmulatedBox::new(&prepared.prepared, &prepared.config);
+    let started = Instant::now();
+    let tick_now = |at: Instant| -> u64 {
+        (at.duration_since(started).as_secs_f64()
+            * speed
+            * skinbox_protocol::TICKS_PER_SECOND as f64) as u64
+    };
+    let mut send_errors = 0u64;
+    let send = |socket: &std::net::UdpSocket, o: &Outgoing| {
+        u64::from(socket.send_to(&o.payload, o.to).is_err())
+    };
+    socket.set_read_timeout(Some(Duration::from_micros(500)))?;
+    let mut buf = vec![0u8; 65536];
+    loop {
+        let now = Instant::now();
+        if deadline.is_some_and(|d| now >= d) || stop.load(std::sync::atomic::Ordering::Relaxed) {
+            break;
+        }
+        for o in emulated.advance(tick_now(now)) {
+            send_errors += send(socket, &o);
+        }
+        match socket.recv_from(&mut buf) {
+            Ok((n, SocketAddr::V4(from))) => {
+                let tick = tick_now(Instant::now());
+                for o in emulated.advance(tick) {
+                    send_errors += send(socket, &o);
+                }
+                if let Some(ack) =
+                    emulated.command(from, &buf[..n], tick, || tick_now(Instant::now()))
+                {
+                    send_errors += send(socket, &ack);
+                }
+            }
+            // IPv6 senders cannot reach an IPv4 box
+            Ok((_, SocketAddr::V6(_))) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::Interrupted
+                ) => {}
+            // an ICMP port unreachable of an earlier send shows up here on Linux
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => send_errors += 1,
+            Err(e) => return Err(e),
+        }
+        progress(&emulated.stats);
+    }
+    Ok(ServeSummary {
+        wall_s: started.elapsed().as_secs_f64(),
+        box_ticks: tick_now(Instant::now()),
+        stats: emulated.stats,
+        box_counters: (&emulated.control().counters).into(),
+        counters: emulated.control().counters,
+        send_errors,
+    })
 }

@@ -43,6 +43,9 @@ pub enum CosimError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// A scene has more or fewer buses than a box has ports.
+    #[error("the scene has {0} buses; the box has 1 to 64 ports")]
+    Ports(usize),
     /// The shared library could not be loaded.
     #[error("loading {path}: {message}")]
     Load { path: PathBuf, message: String },

@@ -205,6 +205,88 @@ impl<'s> BoxClient<'s> {
     }
 }
 
+/// A box address (`host:port`) as its first IPv4 socket address.
+pub fn resolve_ipv4(box_addr: &str) -> io::Result<SocketAddr> {
+    use std::net::ToSocketAddrs;
+    box_addr
+        .to_socket_addrs()?
+        .find(SocketAddr::is_ipv4)
+        .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "no IPv4 address"))
+}
+
+/// The request of `set PARAMETER VALUE`: `flush-timeout-us` or `status-period-ms`, a
+/// positive value; else why not.
+pub fn set_request(parameter: &str, value: f64) -> Result<Request, String> {
+    if !(value.is_finite() && value > 0.0) {
+        return Err(format!("set {parameter}: {value} must be positive"));
+    }
+    match parameter {
+        "flush-timeout-us" => Ok(Request::SetFlushTimeout {
+            ticks: (value * 125.0).round().min(f64::from(u32::MAX)) as u32,
+        }),
+        "status-period-ms" => Ok(Request::SetStatusPeriod {
+            ticks: (value * 125_000.0).round().min(f64::from(u32::MAX)) as u32,
+        }),
+        other => Err(format!(
+            "set {other}: the parameters are flush-timeout-us and status-period-ms"
+        )),
+    }
+}
+
+/// Why the box refused the command of `exchange`, or `None` when it accepted it.
+pub fn refusal(exchange: &Exchange) -> Option<String> {
+    match exchange.ack.result {
+        AckResult::Ok => None,
+        AckResult::DownlinkFull => Some(format!(
+            "the box's downlink had no room (downlink_full): a target port already queues two \
+             packets, or the previous cell command was still being queued; nothing was sent \
+             down (sequence {}); send it again once the queue has drained (50 us a packet)",
+            exchange.ack.sequence
+        )),
+        result => Some(format!(
+            "the box refused the command: {} (last accepted sequence {})",
+            result.name(),
+            exchange.ack.last_accepted
+        )),
+    }
+}
+
+/// An exchange as `skinbox ctl --json` prints it: the command, its result, the four
+/// times, and what the acknowledgement carries (destination or box counters).
+pub fn exchange_json(e: &Exchange) -> serde_json::Value {
+    use skinbox_protocol::command::{AckReply, Opcode};
+    let op = Opcode::from_byte(e.ack.opcode).map_or("unknown", Opcode::name);
+    let mut v = serde_json::json!({
+        "command": op,
+        "sequence": e.ack.sequence,
+        "result": e.ack.result.name(),
+        "last_accepted": e.ack.last_accepted,
+        "attempts": e.attempts,
+        "rtt_us": e.rtt_ns as f64 / 1000.0,
+        "host_send_ns": e.host_send_ns,
+        "box_receive_tick": e.ack.receive_tick,
+        "box_send_tick": e.ack.send_tick,
+        "host_receive_ns": e.host_receive_ns,
+        "box_id": e.ack.box_id,
+        "port_count": e.ack.port_count,
+    });
+    match &e.ack.reply {
+        AckReply::None => {}
+        AckReply::Destination(d) => {
+            v["streaming_to"] = serde_json::json!({
+                "ip": std::net::Ipv4Addr::from(d.ip).to_string(),
+                "port": d.port,
+                "mac": d.mac.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(":"),
+            })
+        }
+        AckReply::Counters(c) => {
+            v["box_counters"] =
+                serde_json::to_value(crate::report::BoxCountersReport::from(c)).unwrap_or_default()
+        }
+    }
+    v
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

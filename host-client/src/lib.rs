@@ -37,6 +37,7 @@ pub mod pcap;
 pub mod rate;
 pub mod replay;
 pub mod report;
+pub mod rows;
 pub mod sample_clock;
 pub mod sequence;
 pub mod timing;

@@ -472,6 +472,127 @@ where
     Ok(stats)
 }
 
+/// A socket that claimed a box's stream ([`claim`]).
+#[derive(Debug)]
+pub struct Claimed {
+    /// The capture's socket, now receiving the box's stream.
+    pub socket: UdpSocket,
+    /// The stream-to exchange; the capture decodes its passed-over datagrams first.
+    pub exchange: crate::control::Exchange,
+    /// The box's command address.
+    pub box_addr: SocketAddr,
+    /// A handle of the same socket to send commands from.
+    pub sender: std::net::UdpSocket,
+}
+
+/// Why a claim failed; each names the box address as given.
+#[derive(Debug, thiserror::Error)]
+pub enum ClaimError {
+    /// The address does not resolve to an IPv4 address.
+    #[error("{box_addr}: {error}")]
+    Address {
+        /// The address as given.
+        box_addr: String,
+        /// Why not.
+        error: io::Error,
+    },
+    /// The socket failed.
+    #[error("{box_addr}: socket: {error}")]
+    Io {
+        /// The address as given.
+        box_addr: String,
+        /// The error.
+        error: io::Error,
+    },
+    /// The box did not acknowledge.
+    #[error("{box_addr}: {error}")]
+    Control {
+        /// The address as given.
+        box_addr: String,
+        /// The error.
+        error: crate::control::ControlError,
+    },
+    /// The box refused the stream-to command.
+    #[error("{box_addr}: the box refused stream-to: {result}")]
+    Refused {
+        /// The address as given.
+        box_addr: String,
+        /// The acknowledgement's result.
+        result: &'static str,
+    },
+}
+
+/// Claims the stream of the box at `box_addr` from `socket` (a stream-to of the sender),
+/// so the box sends its datagrams to this socket.
+pub fn claim(socket: UdpSocket, box_addr: &str) -> Result<Claimed, ClaimError> {
+    let io_error = |error| ClaimError::Io {
+        box_addr: box_addr.to_string(),
+        error,
+    };
+    let addr = crate::control::resolve_ipv4(box_addr).map_err(|error| ClaimError::Address {
+        box_addr: box_addr.to_string(),
+        error,
+    })?;
+    let std_socket = socket.into_std().map_err(io_error)?;
+    let exchange = crate::control::BoxClient::new(&std_socket, addr)
+        .send(skinbox_protocol::command::Request::StreamTo { to: None })
+        .map_err(|error| ClaimError::Control {
+            box_addr: box_addr.to_string(),
+            error,
+        })?;
+    if exchange.ack.result != skinbox_protocol::AckResult::Ok {
+        return Err(ClaimError::Refused {
+            box_addr: box_addr.to_string(),
+            result: exchange.ack.result.name(),
+        });
+    }
+    let sender = std_socket.try_clone().map_err(io_error)?;
+    std_socket.set_nonblocking(true).map_err(io_error)?;
+    Ok(Claimed {
+        socket: UdpSocket::from_std(std_socket).map_err(io_error)?,
+        exchange,
+        box_addr: addr,
+        sender,
+    })
+}
+
+/// Sends a read-tick command to the box at `to` from `socket` every `every`, its host time
+/// the send time (CLOCK_REALTIME, ns) and its sequence number the host clock in
+/// microseconds (newer each time), until `stop`; returns the commands sent. The
+/// acknowledgements arrive on the capture's socket, where a [`crate::timing::Timing`]
+/// takes them as exchanges.
+pub fn send_read_ticks(
+    socket: std::net::UdpSocket,
+    to: SocketAddr,
+    box_id: u16,
+    every: Duration,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<u64> {
+    std::thread::spawn(move || {
+        let mut sent = 0u64;
+        let mut last_sequence = 0u32;
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            let now_ns = SystemTime::now()
+                .duration_since(SystemTime::UNIX_EPOCH)
+                .unwrap_or_default()
+                .as_nanos() as u64;
+            let sequence = ((now_ns / 1_000) as u32).max(last_sequence.wrapping_add(1));
+            last_sequence = sequence;
+            let command = skinbox_protocol::command::CommandRepr {
+                box_id,
+                sequence,
+                host_time: now_ns,
+                request: skinbox_protocol::command::Request::ReadTick,
+            };
+            if socket.send_to(&command.to_bytes(), to).is_ok() {
+                sent += 1;
+            }
+            std::thread::sleep(every);
+        }
+        sent
+    })
+}
+
 /// Why a capture stopped with an error.
 #[derive(Debug, thiserror::Error)]
 pub enum CaptureError {

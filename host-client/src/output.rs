@@ -107,6 +107,7 @@ impl<W: Write> RowWriter<W> {
         }
         if let (Some(t), Some(map)) = (self.last_times, row.as_object_mut()) {
             map.insert("sample_box_time_s".into(), t.sample_box_s.into());
+            map.insert("sample_index".into(), t.sample_index.into());
             map.insert(
                 "sample_host_time_ns".into(),
                 t.sample_host_ns.map(|v| v.round()).into(),

@@ -45,6 +45,11 @@ impl HostTimeSource {
 pub struct RecordTimes {
     /// Estimated box time of the sample, s.
     pub sample_box_s: f64,
+    /// The same in ns, as estimated (`sample_box_s` is it times 1e-9).
+    pub sample_box_ns: f64,
+    /// The cell's sample index on its sample clock (0: the sample of the first packet of
+    /// the cell since its clock began).
+    pub sample_index: i64,
     /// The sample's host time, ns on the host clock, if mapped.
     pub sample_host_ns: Option<f64>,
     /// The mapping's error bound, ns, where it has one.
@@ -299,6 +304,8 @@ impl Timing {
         };
         RecordTimes {
             sample_box_s: sample_box_ns * 1e-9,
+            sample_box_ns,
+            sample_index: sample.index,
             sample_host_ns: host.map(|h| h.host_ns),
             host_error_bound_ns: host.and_then(|h| h.error_bound_ns),
             source,

@@ -63,78 +63,6 @@ pub struct CaptureArgs {
     pub timing: super::TimingArgs,
 }
 
-/// Claims the stream of the box at `box_addr` from `socket` (a stream-to of the sender);
-/// returns the socket, the exchange (whose passed-over datagrams the capture decodes
-/// first), the box's address and a handle of the socket to send commands from.
-fn claim(
-    socket: tokio::net::UdpSocket,
-    box_addr: &str,
-) -> anyhow::Result<(
-    tokio::net::UdpSocket,
-    skinbox_host::control::Exchange,
-    SocketAddr,
-    std::net::UdpSocket,
-)> {
-    use std::net::ToSocketAddrs;
-    let addr = box_addr
-        .to_socket_addrs()
-        .map_err(|e| anyhow::anyhow!("--claim {box_addr}: {e}"))?
-        .find(SocketAddr::is_ipv4)
-        .ok_or_else(|| anyhow::anyhow!("--claim {box_addr}: no IPv4 address"))?;
-    let std_socket = socket.into_std()?;
-    let exchange = skinbox_host::control::BoxClient::new(&std_socket, addr)
-        .send(skinbox_protocol::command::Request::StreamTo { to: None })?;
-    anyhow::ensure!(
-        exchange.ack.result == skinbox_protocol::AckResult::Ok,
-        "--claim {box_addr}: the box refused stream-to: {}",
-        exchange.ack.result.name()
-    );
-    let sender = std_socket.try_clone()?;
-    std_socket.set_nonblocking(true)?;
-    Ok((
-        tokio::net::UdpSocket::from_std(std_socket)?,
-        exchange,
-        addr,
-        sender,
-    ))
-}
-
-/// Sends a read-tick command to the box at `to` from `socket` every `every`, its host time
-/// the send time (CLOCK_REALTIME, ns) and its sequence number the host clock in
-/// microseconds (newer each time), until `stop`. The acknowledgements arrive on the
-/// capture's socket, where the rows' timing takes them as exchanges.
-fn send_read_ticks(
-    socket: std::net::UdpSocket,
-    to: SocketAddr,
-    box_id: u16,
-    every: Duration,
-    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
-) -> std::thread::JoinHandle<u64> {
-    std::thread::spawn(move || {
-        let mut sent = 0u64;
-        let mut last_sequence = 0u32;
-        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-            let now_ns = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .unwrap_or_default()
-                .as_nanos() as u64;
-            let sequence = ((now_ns / 1_000) as u32).max(last_sequence.wrapping_add(1));
-            last_sequence = sequence;
-            let command = skinbox_protocol::command::CommandRepr {
-                box_id,
-                sequence,
-                host_time: now_ns,
-                request: skinbox_protocol::command::Request::ReadTick,
-            };
-            if socket.send_to(&command.to_bytes(), to).is_ok() {
-                sent += 1;
-            }
-            std::thread::sleep(every);
-        }
-        sent
-    })
-}
-
 /// Runs the capture on a single-threaded tokio runtime until the duration, the count or
 /// Ctrl-C; prints a summary line every second on stderr and the report at the end.
 pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
@@ -157,10 +85,15 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         let stop_read_ticks = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let (socket, claimed, read_ticks) = match &args.claim {
             Some(box_addr) => {
-                let (socket, exchange, to, sender) = claim(socket, box_addr)?;
+                let live::Claimed {
+                    socket,
+                    exchange,
+                    box_addr: to,
+                    sender,
+                } = live::claim(socket, box_addr).map_err(|e| anyhow::anyhow!("--claim {e}"))?;
                 eprintln!("claimed the stream: {}", exchange.ack);
                 let read_ticks = (args.exchange_ms > 0).then(|| {
-                    send_read_ticks(
+                    live::send_read_ticks(
                         sender,
                         to,
                         exchange.ack.box_id,

@@ -1,11 +1,11 @@
 //! `skinbox ctl`: command a box (or `skinbox emulate`) and print its acknowledgement.
 
 use anyhow::Context;
-use skinbox_host::control::{BoxClient, Exchange};
+use skinbox_host::control::BoxClient;
 use skinbox_protocol::cell_command::{
     CellCommand, CellCommandRepr, CellMode, ModalityThresholds, SampleRate, ALL_CELLS,
 };
-use skinbox_protocol::command::{AckReply, AckResult, Destination, Opcode, Request, ALL_PORTS};
+use skinbox_protocol::command::{AckResult, Destination, Request, ALL_PORTS};
 use skinbox_protocol::{Channel, ChannelMask, TICKS_PER_SECOND};
 use std::net::{SocketAddr, SocketAddrV4, ToSocketAddrs, UdpSocket};
 use std::time::Duration;
@@ -210,21 +210,7 @@ fn request_of(command: &CtlCommand) -> anyhow::Result<Request> {
             }),
         },
         CtlCommand::Set { parameter, value } => {
-            anyhow::ensure!(
-                value.is_finite() && *value > 0.0,
-                "set {parameter}: {value} must be positive"
-            );
-            match parameter.as_str() {
-                "flush-timeout-us" => Request::SetFlushTimeout {
-                    ticks: (value * 125.0).round().min(f64::from(u32::MAX)) as u32,
-                },
-                "status-period-ms" => Request::SetStatusPeriod {
-                    ticks: (value * 125_000.0).round().min(f64::from(u32::MAX)) as u32,
-                },
-                other => anyhow::bail!(
-                    "set {other}: the parameters are flush-timeout-us and status-period-ms"
-                ),
-            }
+            skinbox_host::control::set_request(parameter, *value).map_err(anyhow::Error::msg)?
         }
         CtlCommand::CellCommand { port, packet } => {
             let hex = packet.trim();
@@ -253,40 +239,6 @@ fn request_of(command: &CtlCommand) -> anyhow::Result<Request> {
             packet: cell_command_of(*cell, command)?.to_bytes(),
         },
     })
-}
-
-fn exchange_json(e: &Exchange) -> serde_json::Value {
-    let op = Opcode::from_byte(e.ack.opcode).map_or("unknown", Opcode::name);
-    let mut v = serde_json::json!({
-        "command": op,
-        "sequence": e.ack.sequence,
-        "result": e.ack.result.name(),
-        "last_accepted": e.ack.last_accepted,
-        "attempts": e.attempts,
-        "rtt_us": e.rtt_ns as f64 / 1000.0,
-        "host_send_ns": e.host_send_ns,
-        "box_receive_tick": e.ack.receive_tick,
-        "box_send_tick": e.ack.send_tick,
-        "host_receive_ns": e.host_receive_ns,
-        "box_id": e.ack.box_id,
-        "port_count": e.ack.port_count,
-    });
-    match &e.ack.reply {
-        AckReply::None => {}
-        AckReply::Destination(d) => {
-            v["streaming_to"] = serde_json::json!({
-                "ip": std::net::Ipv4Addr::from(d.ip).to_string(),
-                "port": d.port,
-                "mac": d.mac.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(":"),
-            })
-        }
-        AckReply::Counters(c) => {
-            v["box_counters"] =
-                serde_json::to_value(skinbox_host::report::BoxCountersReport::from(c))
-                    .unwrap_or_default()
-        }
-    }
-    v
 }
 
 /// Runs one `ctl` command; fails when the box refuses it or does not answer.
@@ -319,7 +271,10 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         _ => None,
     };
     if json {
-        let mut values: Vec<_> = exchanges.iter().map(exchange_json).collect();
+        let mut values: Vec<_> = exchanges
+            .iter()
+            .map(skinbox_host::control::exchange_json)
+            .collect();
         if let (Some((port, packet)), [one]) = (cell_packet, values.as_mut_slice()) {
             one["cell_packet"] = packet
                 .iter()
@@ -374,20 +329,8 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             }
         }
     }
-    if let Some(e) = refused.filter(|e| e.ack.result == AckResult::DownlinkFull) {
-        anyhow::bail!(
-            "the box's downlink had no room (downlink_full): a target port already queues two \
-             packets, or the previous cell command was still being queued; nothing was sent \
-             down (sequence {}); send it again once the queue has drained (50 us a packet)",
-            e.ack.sequence
-        );
-    }
-    if let Some(e) = refused {
-        anyhow::bail!(
-            "the box refused the command: {} (last accepted sequence {})",
-            e.ack.result.name(),
-            e.ack.last_accepted
-        );
+    if let Some(reason) = refused.and_then(skinbox_host::control::refusal) {
+        anyhow::bail!(reason);
     }
     Ok(())
 }

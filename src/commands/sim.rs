@@ -77,33 +77,7 @@ enum ModeArg {
 
 /// The scene `name_or_path`: a file, or a built-in scene's name.
 pub(crate) fn load_scene(name_or_path: Option<&str>) -> anyhow::Result<Scene> {
-    let dir = skinbox_cells::scenes_dir();
-    let name = name_or_path.unwrap_or("stroking_upper_arm");
-    let path = PathBuf::from(name);
-    if path.is_file() {
-        return Ok(Scene::load(&path)?);
-    }
-    let builtin = dir.join(format!("{name}.toml"));
-    if !name.contains(['/', '.']) && builtin.is_file() {
-        return Ok(Scene::load(&builtin)?);
-    }
-    let mut names: Vec<String> = std::fs::read_dir(&dir)
-        .map(|entries| {
-            entries
-                .filter_map(|e| e.ok())
-                .filter_map(|e| {
-                    let p = e.path();
-                    (p.extension()? == "toml")
-                        .then(|| p.file_stem()?.to_str().map(str::to_string))?
-                })
-                .collect()
-        })
-        .unwrap_or_default();
-    names.sort();
-    anyhow::bail!(
-        "no scene file {name} and no built-in scene of that name (built in: {})",
-        names.join(", ")
-    )
+    Ok(Scene::find(name_or_path)?)
 }
 
 /// `--fidelity` values.

@@ -173,6 +173,42 @@ fn region(table: &'static str, r: [f64; 2], out: &mut Vec<Problem>) {
 }
 
 impl Scene {
+    /// The scene `name_or_path`: a scene file, or a built-in scene's name (in
+    /// [`crate::scenes_dir`]); `None`: stroking_upper_arm.
+    pub fn find(name_or_path: Option<&str>) -> Result<Scene, SceneError> {
+        let dir = crate::scenes_dir();
+        let name = name_or_path.unwrap_or("stroking_upper_arm");
+        let path = Path::new(name);
+        if path.is_file() {
+            return Scene::load(path);
+        }
+        let builtin = dir.join(format!("{name}.toml"));
+        if !name.contains(['/', '.']) && builtin.is_file() {
+            return Scene::load(&builtin);
+        }
+        let mut names: Vec<String> = std::fs::read_dir(&dir)
+            .map(|entries| {
+                entries
+                    .filter_map(|e| e.ok())
+                    .filter_map(|e| {
+                        let p = e.path();
+                        (p.extension()? == "toml")
+                            .then(|| p.file_stem()?.to_str().map(str::to_string))?
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        names.sort();
+        Err(SceneError {
+            file: name.to_string(),
+            line: None,
+            message: format!(
+                "no scene file and no built-in scene of that name (built in: {})",
+                names.join(", ")
+            ),
+        })
+    }
+
     /// Reads and checks a scene file.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         let file = path.display().to_string();
