@@ -360,9 +360,14 @@ impl RecordSink for RowWriter<'_, RecordRow> {
         self.put(RecordRow::new(record, &times));
     }
 
-    fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
+    fn datagram_received(
+        &mut self,
+        receive: Option<Duration>,
+        source: Option<std::net::SocketAddr>,
+        payload: &[u8],
+    ) {
         if let Some(t) = &mut self.timing {
-            t.datagram_received(receive, payload);
+            t.datagram_received(receive, source, payload);
         }
     }
 }
@@ -383,9 +388,14 @@ impl RecordSink for RowWriter<'_, SampleRow> {
         self.put(SampleRow::new(sample, &times));
     }
 
-    fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
+    fn datagram_received(
+        &mut self,
+        receive: Option<Duration>,
+        source: Option<std::net::SocketAddr>,
+        payload: &[u8],
+    ) {
         if let Some(t) = &mut self.timing {
-            t.datagram_received(receive, payload);
+            t.datagram_received(receive, source, payload);
         }
     }
 }
@@ -433,6 +443,7 @@ mod tests {
         ] {
             w.record(&DecodedRecord {
                 box_id: 3,
+                source: None,
                 datagram_sequence: 9,
                 port: 2,
                 flags: 0,
@@ -464,6 +475,7 @@ mod tests {
         let data = DataRepr::from_raw(5, [0; 9]).unwrap();
         let record = DecodedRecord {
             box_id: 1,
+            source: None,
             datagram_sequence: 0,
             port: 0,
             flags: 0,

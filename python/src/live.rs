@@ -72,9 +72,14 @@ impl RecordSink for BatchSink {
         }
     }
 
-    fn datagram_received(&mut self, receive: Option<Duration>, payload: &[u8]) {
+    fn datagram_received(
+        &mut self,
+        receive: Option<Duration>,
+        source: Option<SocketAddr>,
+        payload: &[u8],
+    ) {
         if let Some(t) = &mut self.0.borrow_mut().timing {
-            t.datagram_received(receive, payload);
+            t.datagram_received(receive, source, payload);
         }
     }
 }
@@ -183,7 +188,7 @@ fn capture_thread(
         let passed_over = claimed.as_ref().map_or(0, |e| e.passed_over.len() as u64);
         if let Some(e) = &claimed {
             for (from, payload) in &e.passed_over {
-                sink.datagram_received(None, payload);
+                sink.datagram_received(None, Some(*from), payload);
                 decoder.push_datagram_from(Some(*from), payload, &mut sink);
             }
         }
