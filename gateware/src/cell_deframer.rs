@@ -42,7 +42,7 @@
 //! (`BoxConfig::validate`).
 //!
 //! Cost per port: the visit bit of the one-hot scan and a share of the group registers; the
-//! state lives in two RAMs (33 bits and the 32-bit start tick per port).
+//! state lives in two RAMs (34 bits and the 32-bit start tick per port).
 
 use crate::block_ram::BlockRam;
 use crate::hdl::*;
@@ -73,7 +73,7 @@ pub fn truncation_clocks(clock_hz: u64, baud: u64, idle_gap_bits: u64) -> u64 {
 }
 
 /// Bits of the per-port state word.
-const STATE_BITS: usize = 33;
+const STATE_BITS: usize = 34;
 // fields of the state word
 const IN_PACKET: usize = 0;
 const INDEX: usize = 1; // 5 bits: bytes of the packet so far
@@ -83,8 +83,8 @@ const LOSS: usize = 8;
 const FLAG: usize = 9;
 const DROPPING: usize = 10;
 const TICKS_LEFT: usize = 11; // 3 bits
-const LAST_STROBE: usize = 14; // 11 bits
-const PENDING: usize = 25; // 8 bits
+const DEADLINE: usize = 14; // 12 bits: the last strobe's tick + the truncation time
+const PENDING: usize = 26; // 8 bits
 const _: () = assert!(PENDING + 8 == STATE_BITS);
 // (the kernel below writes these positions as literals: rust-hdl puts names into Verilog)
 const _: () = assert!(
@@ -96,8 +96,8 @@ const _: () = assert!(
         && FLAG == 9
         && DROPPING == 10
         && TICKS_LEFT == 11
-        && LAST_STROBE == 14
-        && PENDING == 25
+        && DEADLINE == 14
+        && PENDING == 26
         && SCAN_STAMP == 8
         && SCAN_FRAMING_ERROR == 15
         && SCAN_HELD == 16
@@ -158,7 +158,7 @@ pub struct CellDeframer {
     last_index: Constant<Bits<5>>,
     tick_words: Constant<Bits<5>>,
     last_scan: Constant<Bits<6>>,
-    truncation: Constant<Bits<11>>,
+    truncation: Constant<Bits<12>>,
     strobe_to_start: Constant<Bits<32>>,
     ring_keep: Constant<Bits<64>>,
     bit_zero: Constant<Bits<64>>,
@@ -192,7 +192,9 @@ pub struct CellDeframer {
     a_truncate: DFF<Bit>,
     a_header: DFF<Bit>,
     a_end: DFF<Bit>,
-    a_strobe_low: DFF<Bits<11>>,
+    a_deadline: DFF<Bits<12>>,
+    sampled_age: DFF<Bits<STAMP_BITS>>,
+    limit_base: DFF<Bits<12>>,
     a_start_tick: DFF<Bits<32>>,
     // the decision's registers
     state_write: DFF<Bit>,
@@ -215,8 +217,8 @@ pub struct CellDeframer {
     byte_error: Signal<Local, Bit>,
     full: Signal<Local, Bit>,
     age: Signal<Local, Bits<STAMP_BITS>>,
-    strobe_low: Signal<Local, Bits<11>>,
-    idle: Signal<Local, Bits<11>>,
+    deadline: Signal<Local, Bits<12>>,
+    idle: Signal<Local, Bits<12>>,
     truncate: Signal<Local, Bit>,
     in_packet: Signal<Local, Bit>,
     aligned: Signal<Local, Bit>,
@@ -235,7 +237,7 @@ pub struct CellDeframer {
     n_flag: Signal<Local, Bit>,
     n_dropping: Signal<Local, Bit>,
     n_ticks_left: Signal<Local, Bits<3>>,
-    n_last: Signal<Local, Bits<11>>,
+    n_last: Signal<Local, Bits<12>>,
     n_tick: Signal<Local, Bits<32>>,
     word_write: Signal<Local, Bit>,
     word: Signal<Local, Bits<5>>,
@@ -355,7 +357,9 @@ impl CellDeframer {
             a_truncate: Default::default(),
             a_header: Default::default(),
             a_end: Default::default(),
-            a_strobe_low: Default::default(),
+            a_deadline: Default::default(),
+            sampled_age: Default::default(),
+            limit_base: Default::default(),
             a_start_tick: Default::default(),
             state_write: Default::default(),
             state_port: Default::default(),
@@ -376,7 +380,7 @@ impl CellDeframer {
             byte_error: Default::default(),
             full: Default::default(),
             age: Default::default(),
-            strobe_low: Default::default(),
+            deadline: Default::default(),
             idle: Default::default(),
             truncate: Default::default(),
             in_packet: Default::default(),
@@ -433,7 +437,9 @@ impl Logic for CellDeframer {
             a_truncate,
             a_header,
             a_end,
-            a_strobe_low,
+            a_deadline,
+            sampled_age,
+            limit_base,
             a_start_tick,
             state_write,
             state_port,
@@ -500,30 +506,36 @@ impl Logic for CellDeframer {
             self.sampled_term.next = self.sampled_term.val() | self.group_word[g].q.val();
         }
         self.sampled.d.next = self.sampled_term.val();
+        // the byte's age in the next cycle, from its stamp
+        self.age.next =
+            (self.tick.val().get_bits::<7>(0) + 1) - self.sampled_term.val().get_bits::<7>(8);
+        self.sampled_age.d.next = self.age.val();
+        // tick + truncation time in the next cycle's tick
+        self.limit_base.d.next = self.tick.val().get_bits::<12>(0) + 1 + self.truncation.val();
 
         // cycle t + 2: the arithmetic, from the registers and the RAMs' output registers,
         // into the decision's input registers
-        self.age.next = self.tick.val().get_bits::<7>(0) - self.sampled.q.val().get_bits::<7>(8);
-        self.strobe_low.next =
-            self.tick.val().get_bits::<11>(0) - bit_cast::<11, STAMP_BITS>(self.age.val());
+        // idle: now - deadline, signed; with a byte held, its strobe (now - age) decides
         self.idle.next =
-            self.tick.val().get_bits::<11>(0) - self.state_ram.read_data.val().get_bits::<11>(14);
-        if self.sampled.q.val().get_bit(16) {
-            self.idle.next = self.idle.val() - bit_cast::<11, STAMP_BITS>(self.age.val());
-        }
+            self.tick.val().get_bits::<12>(0) - self.state_ram.read_data.val().get_bits::<12>(14);
+        self.deadline.next =
+            self.limit_base.q.val() - bit_cast::<12, STAMP_BITS>(self.sampled_age.q.val());
         self.a_port.d.next = self.port.q.val();
         self.a_state.d.next = self.state_ram.read_data.val();
         self.a_tick.d.next = self.tick_ram.read_data.val();
         self.a_sampled.d.next = self.sampled.q.val();
-        self.a_truncate.d.next =
-            self.state_ram.read_data.val().get_bit(0) & (self.idle.val() >= self.truncation.val());
+        self.a_truncate.d.next = self.state_ram.read_data.val().get_bit(0)
+            & !self.idle.val().get_bit(11)
+            & (!self.sampled.q.val().get_bit(16)
+                | (self.idle.val().get_bits::<11>(0)
+                    >= bit_cast::<11, STAMP_BITS>(self.sampled_age.q.val())));
         self.a_header.d.next = !self.sampled.q.val().get_bit(15)
             & ((self.sampled.q.val().get_bits::<8>(0) == self.data_header.val())
                 | (self.sampled.q.val().get_bits::<8>(0) == self.event_header.val()));
         self.a_end.d.next = self.sampled.q.val().get_bits::<8>(0) == self.end_of_packet.val();
-        self.a_strobe_low.d.next = self.strobe_low.val();
+        self.a_deadline.d.next = self.deadline.val();
         self.a_start_tick.d.next =
-            self.start_base.q.val() - bit_cast::<32, STAMP_BITS>(self.age.val());
+            self.start_base.q.val() - bit_cast::<32, STAMP_BITS>(self.sampled_age.q.val());
 
         // cycle t + 3: the decision, from registers only
         self.state.next = self.a_state.q.val();
@@ -546,7 +558,7 @@ impl Logic for CellDeframer {
         self.n_flag.next = self.state.val().get_bit(9);
         self.n_dropping.next = self.state.val().get_bit(10);
         self.n_ticks_left.next = self.ticks_left.val();
-        self.n_last.next = self.state.val().get_bits::<11>(14);
+        self.n_last.next = self.state.val().get_bits::<12>(14);
         self.n_tick.next = self.a_tick.q.val();
         self.events.next = 0.into();
         self.word_write.next = false;
@@ -557,7 +569,7 @@ impl Logic for CellDeframer {
             self.events.next = self.truncated_event.val() | self.resync_event.val();
         }
         if self.held_now.val() {
-            self.n_last.next = self.a_strobe_low.q.val();
+            self.n_last.next = self.a_deadline.q.val();
             if self.byte_error.val() {
                 self.events.next = self.events.val() | self.framing_error_event.val();
             }
@@ -618,7 +630,7 @@ impl Logic for CellDeframer {
             self.n_ticks_left.next = self.ticks_left.val() - 1;
         }
         // one pending event counted per visit: the lowest
-        self.all_events.next = self.state.val().get_bits::<8>(25) | self.events.val();
+        self.all_events.next = self.state.val().get_bits::<8>(26) | self.events.val();
         self.lowest.next = 0.into();
         self.lowest_bit.next = 0.into();
         if self.all_events.val().get_bit(0) {
@@ -653,8 +665,8 @@ impl Logic for CellDeframer {
             | (bit_cast::<STATE_BITS, 1>(self.n_flag.val().into()) << 9)
             | (bit_cast::<STATE_BITS, 1>(self.n_dropping.val().into()) << 10)
             | (bit_cast::<STATE_BITS, 3>(self.n_ticks_left.val()) << 11)
-            | (bit_cast::<STATE_BITS, 11>(self.n_last.val()) << 14)
-            | (bit_cast::<STATE_BITS, 8>(self.all_events.val() & !self.lowest_bit.val()) << 25);
+            | (bit_cast::<STATE_BITS, 12>(self.n_last.val()) << 14)
+            | (bit_cast::<STATE_BITS, 8>(self.all_events.val() & !self.lowest_bit.val()) << 26);
         // the decision's registers (the ports' reset clears each visited port's state)
         self.state_write.d.next = true;
         self.state_port.d.next = self.a_port.q.val();

@@ -1675,6 +1675,11 @@ mod tests {
                 held.opcode = request.opcode() as u8;
                 held.result = result;
                 held.command = Some(command);
+                // the command unit's rule: every result but a replay and another box's takes
+                // the command's sequence number
+                if !matches!(result, AckResult::Replay | AckResult::OtherBox) {
+                    held.last_accepted = command.sequence;
+                }
                 let frame = command_frame(&command, held.peer_port);
                 let kind = ReplyKind::Ack(reply);
                 let r = run(kind, &frame, &held, seed, fastest);
