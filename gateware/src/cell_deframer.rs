@@ -253,11 +253,6 @@ pub struct CellDeframer {
     resync_event: Constant<Bits<8>>,
 }
 
-/// `n` default values (the per-port and per-group parts of the engine).
-fn each<T: Default>(n: usize) -> Vec<T> {
-    (0..n).map(|_| T::default()).collect()
-}
-
 /// The event bit of `counter` in a port's 8-bit counter events (bit i = `PortCounter` i).
 pub fn counter_bit(counter: PortCounter) -> Constant<Bits<8>> {
     Constant::new((1u64 << counter as u64).into())

@@ -195,11 +195,6 @@ impl CellDownlink {
             baud > 0 && clock_hz >= 4 * baud,
             "CellDownlink: clock {clock_hz} Hz must be at least 4 x baud {baud}"
         );
-        let each = |n: usize| {
-            (0..n)
-                .map(|_| Default::default())
-                .collect::<Vec<DFF<Bit>>>()
-        };
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -210,7 +205,7 @@ impl CellDownlink {
             offer_port: Default::default(),
             busy: Default::default(),
             full_ports: Default::default(),
-            uart_tx: (0..ports).map(|_| Default::default()).collect(),
+            uart_tx: each(ports),
             accepted: Default::default(),
             accepted_port: Default::default(),
             ram: Default::default(),
@@ -263,9 +258,9 @@ impl CellDownlink {
             freed_port: Default::default(),
             clearing: Default::default(),
             clear_address: Default::default(),
-            count: (0..ports).map(|_| Default::default()).collect(),
+            count: each(ports),
             tail: each(ports),
-            byte: (0..ports).map(|_| Default::default()).collect(),
+            byte: each(ports),
             start: each(ports),
             pin: each(ports),
             full: Default::default(),

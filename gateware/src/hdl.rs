@@ -4,3 +4,8 @@
 
 pub use rust_hdl_core::prelude::*;
 pub use rust_hdl_widgets::prelude::{dff_setup, DFF};
+
+/// `n` default values: the per-port and per-group parts of a block.
+pub fn each<T: Default>(n: usize) -> Vec<T> {
+    (0..n).map(|_| T::default()).collect()
+}

@@ -42,11 +42,6 @@ pub fn slot_address(port: usize, slot: usize, word: usize) -> usize {
     (port % BANK_PORTS) << 6 | slot << 5 | word
 }
 
-/// `n` default values (the per-port and per-bank parts of a block).
-fn each<T: Default>(n: usize) -> Vec<T> {
-    (0..n).map(|_| T::default()).collect()
-}
-
 /// Packet buffers of N ports.
 #[derive(LogicBlock)]
 pub struct PortSlots {
