@@ -328,11 +328,12 @@ fn commands_reconfigure_the_uplink_under_line_rate_traffic() {
 /// Reply latency when the transmitter is idle: from the edge that samples a command's
 /// last byte to its acknowledgement's first byte on GMII, per acknowledgement kind. The
 /// blocks' latencies add up to it: the MAC and the parser decide, the command unit
-/// carries the command out, the builder writes the reply, the arbiter grants it in the
-/// clock it is offered, the transmitter starts.
+/// carries the command out, the builder writes the reply, the arbiter offers it a clock
+/// later, the transmitter takes it and starts.
 #[test]
 fn reply_latency_is_the_sum_of_the_blocks_latencies() {
     use skinbox_gateware::command_unit::COMMAND_LATENCY;
+    use skinbox_gateware::datagram_arbiter::OFFER_LATENCY;
     use skinbox_gateware::frame_parser::DECISION_LATENCY;
     use skinbox_gateware::frame_transmitter::TAKE_TO_FIRST_BYTE;
     use skinbox_gateware::mac_receiver::MAC_LATENCY;
@@ -372,6 +373,7 @@ fn reply_latency_is_the_sum_of_the_blocks_latencies() {
             + DECISION_LATENCY
             + COMMAND_LATENCY
             + build_clocks(ReplyKind::Ack(kind))
+            + OFFER_LATENCY
             + TAKE_TO_FIRST_BYTE;
         eprintln!(
             "acknowledgement ({kind:?}): {latency} clocks = {:.3} us from the command's last byte",

@@ -5,15 +5,23 @@
 //! source it granted last (so no source waits more than one datagram of each other
 //! source), and passes the granted source's body through until its `last` beat; no other
 //! descriptor is offered before that beat moved, so two datagrams never interleave.
-//! Selection is combinational from the sources' `valid` and registers (the last grant, the
+//! The choice is made from the sources' `valid` and registers (the last grant, the
 //! sources after it, "a body is open") through no adder or carry chain (a prefix OR picks
-//! the lowest candidate): a source granted in a clock is taken in that clock.
+//! the lowest candidate) and is registered: the descriptor offered in a clock is that of
+//! the source chosen from the sources waiting in the clock before ([`OFFER_LATENCY`]), so
+//! the sink's descriptor registers and the sources' `ready` hang off one register, not off
+//! the choice. The choice is made again every clock until the offer is taken (sources keep
+//! `valid` until taken, so the offer never drops; it moves to a source of higher precedence
+//! that starts waiting meanwhile).
 
 use crate::hdl::*;
 use crate::stream::{DatagramSink, DatagramSource};
 
 /// Most sources an arbiter takes.
 pub const MAX_SOURCES: usize = 8;
+
+/// Clocks from a source's `valid` to the arbiter offering its descriptor.
+pub const OFFER_LATENCY: u64 = 1;
 
 /// Round-robin, packet-atomic merge of datagram sources.
 #[derive(LogicBlock)]
@@ -32,6 +40,9 @@ pub struct DatagramArbiter {
     after_last_grant: DFF<Bits<MAX_SOURCES>>,
     // a descriptor was taken and its body's last beat has not moved
     body_open: DFF<Bit>,
+    // the source offered, one-hot (chosen in the clock before), and the sources after it
+    offered: DFF<Bits<MAX_SOURCES>>,
+    after_offered: DFF<Bits<MAX_SOURCES>>,
     // source i's bit
     source_bit: Vec<Constant<Bits<MAX_SOURCES>>>,
     waiting: Signal<Local, Bits<MAX_SOURCES>>,
@@ -62,6 +73,8 @@ impl DatagramArbiter {
             last_grant: Default::default(),
             after_last_grant: Default::default(),
             body_open: Default::default(),
+            offered: Default::default(),
+            after_offered: Default::default(),
             source_bit: (0..sources)
                 .map(|i| Constant::new((1u64 << i).into()))
                 .collect(),
@@ -80,7 +93,15 @@ impl DatagramArbiter {
 impl Logic for DatagramArbiter {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, last_grant, after_last_grant, body_open);
+        dff_setup!(
+            self,
+            clock,
+            last_grant,
+            after_last_grant,
+            body_open,
+            offered,
+            after_offered
+        );
         self.waiting.next = 0.into();
         for i in 0..self.sources.len() {
             if self.sources[i].valid.val() & !self.body_open.q.val() {
@@ -109,7 +130,7 @@ impl Logic for DatagramArbiter {
             self.candidate_below.next =
                 self.candidate_below.val() | self.candidates.val().get_bit(i);
         }
-        self.datagrams.valid.next = self.waiting.val() != 0;
+        self.datagrams.valid.next = self.offered.q.val() != 0;
         self.datagrams.kind.next = 0.into();
         self.datagrams.flags.next = 0.into();
         self.datagrams.entry_count.next = 0.into();
@@ -121,8 +142,9 @@ impl Logic for DatagramArbiter {
         self.datagrams.body.last.next = false;
         self.datagrams.body.error.next = false;
         for i in 0..self.sources.len() {
-            self.sources[i].ready.next = self.datagrams.ready.val() & self.grant.val().get_bit(i);
-            if self.grant.val().get_bit(i) {
+            self.sources[i].ready.next =
+                self.datagrams.ready.val() & self.offered.q.val().get_bit(i);
+            if self.offered.q.val().get_bit(i) {
                 self.datagrams.kind.next = self.sources[i].kind.val();
                 self.datagrams.flags.next = self.sources[i].flags.val();
                 self.datagrams.entry_count.next = self.sources[i].entry_count.val();
@@ -141,10 +163,13 @@ impl Logic for DatagramArbiter {
                 self.datagrams.body.error.next = self.sources[i].body.error.val();
             }
         }
-        self.taken.next = self.datagrams.ready.val() & (self.waiting.val() != 0);
+        self.taken.next = self.datagrams.ready.val() & (self.offered.q.val() != 0);
+        self.offered.d.next = self.grant.val();
+        self.after_offered.d.next = self.after_grant.val();
         if self.taken.val() {
-            self.last_grant.d.next = self.grant.val();
-            self.after_last_grant.d.next = self.after_grant.val();
+            self.offered.d.next = 0.into();
+            self.last_grant.d.next = self.offered.q.val();
+            self.after_last_grant.d.next = self.after_offered.q.val();
             self.body_open.d.next = true;
         }
         if self.body_open.q.val()
@@ -158,6 +183,7 @@ impl Logic for DatagramArbiter {
             self.last_grant.d.next = 0.into();
             self.after_last_grant.d.next = 0.into();
             self.body_open.d.next = false;
+            self.offered.d.next = 0.into();
         }
     }
 }
@@ -372,5 +398,36 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_waiting_source_is_offered_a_clock_later_from_registers() {
+        let mut bench = Bench::new(DatagramArbiter::new(3), |b| &mut b.clock);
+        bench.uut.reset.next = true;
+        bench.cycle();
+        bench.uut.reset.next = false;
+        bench.uut.datagrams.ready.next = true;
+        bench.uut.datagrams.body.ready.next = false;
+        bench.uut.sources[2].valid.next = true;
+        bench.uut.sources[2].kind.next = 7.into();
+        bench.settle();
+        // the clock the source starts waiting: nothing offered, nothing taken
+        assert!(!bench.uut.datagrams.valid.val());
+        assert!(!bench.uut.sources[2].ready.val());
+        for clock in 1..=OFFER_LATENCY {
+            bench.cycle();
+            bench.settle();
+            let offered = bench.uut.datagrams.valid.val();
+            assert_eq!(offered, clock == OFFER_LATENCY, "clock {clock}");
+        }
+        assert_eq!(bench.uut.datagrams.kind.val().to_u8(), 7);
+        assert!(
+            bench.uut.sources[2].ready.val(),
+            "taken in the clock offered"
+        );
+        // taken: no offer in the next clock, though the source still says valid
+        bench.cycle();
+        bench.settle();
+        assert!(!bench.uut.datagrams.valid.val());
     }
 }

@@ -10,6 +10,7 @@ use crate::downlink::PinChange;
 use crate::harness::{LINK_SPEED, LINK_UP};
 use skinbox_gateware::cell_deframer::DECISION_CLOCKS;
 use skinbox_gateware::counter_file::INCREMENT_WRITE_EDGE;
+use skinbox_gateware::datagram_arbiter::OFFER_LATENCY;
 use skinbox_gateware::frame_transmitter::TAKE_TO_RAW_BODY;
 use skinbox_gateware::packet_store::{FIFO_DEPTH, RECORD_BEATS};
 use skinbox_gateware::status_reporter::{
@@ -23,6 +24,9 @@ use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::{DatagramRepr, PortCounters, RecordRepr, StatusRepr};
 use std::collections::VecDeque;
+
+// `offer` is the arbiter's one offer register
+const _: () = assert!(OFFER_LATENCY == 1);
 
 /// Fixed numbers of the back end.
 #[derive(Debug, Clone)]
@@ -189,8 +193,10 @@ pub(super) struct Back<'a> {
     /// (its buffer is free from then on).
     records_body_until: u64,
     // datagram arbiter: the source granted last (records 0, status 1, replies 2); the
-    // first waiting source after it goes next, else the lowest waiting
+    // first waiting source after it goes next, else the lowest waiting; the source it
+    // offers, chosen in the clock before (`OFFER_LATENCY`)
     last_grant: Option<usize>,
+    offer: Option<usize>,
     /// Cycles from which each records datagram counts as sent, and the records sum.
     started_records: Vec<(u64, u64)>,
     records_sent: u64,
@@ -280,6 +286,7 @@ impl<'a> Back<'a> {
             pending: None,
             records_body_until: 0,
             last_grant: None,
+            offer: None,
             started_records: vec![],
             records_sent: 0,
             idle_from: 0,
@@ -368,7 +375,8 @@ impl<'a> Back<'a> {
             && self.offset_left == 0
             && self.beat == 0
             && !self.close_now(c)
-            && !(idle && (self.pending.is_some() || self.report == Report::Request))
+            && !(idle && self.offer.is_some())
+            && self.offer == self.choose(c)
             && match self.report {
                 Report::Wait => !(self.due && c >= self.t.counters_ready_from),
                 Report::Start => false,
@@ -377,10 +385,22 @@ impl<'a> Back<'a> {
                 Report::Sending => c < self.status_body_until,
             }
             && self.beats.get(self.next_beat).is_none_or(|b| b.cycle > c)
-            && self
-                .receive
-                .as_ref()
-                .is_none_or(|r| r.next_event(c) > c && !(idle && r.reply_waits(c)))
+            && self.receive.as_ref().is_none_or(|r| r.next_event(c) > c)
+    }
+
+    /// The source the datagram arbiter chooses from the sources waiting in cycle `c` (on
+    /// the registers as they are): the first after the source granted last, else the
+    /// lowest.
+    fn choose(&self, c: u64) -> Option<usize> {
+        let waiting = [
+            self.pending.is_some(),
+            self.report == Report::Request,
+            self.receive.as_ref().is_some_and(|r| r.reply_waits(c)),
+        ];
+        let after_last = |i: usize| self.last_grant.is_some_and(|last| i > last);
+        (0..waiting.len())
+            .find(|&i| waiting[i] && after_last(i))
+            .or_else(|| (0..waiting.len()).find(|&i| waiting[i]))
     }
 
     /// The earliest cycle after `c` at which something may change.
@@ -557,20 +577,15 @@ impl<'a> Back<'a> {
         let next_deadline_passed = (tick as u32).wrapping_sub(self.deadline) as i32 >= 0;
         self.deadline = next_deadline;
 
-        // arbiter and transmitter: of the waiting datagrams the first after the source
-        // granted last, else the lowest (decided on the registers as they are: a datagram
-        // closing now waits a clock)
-        let waiting = [
-            self.pending.is_some(),
-            self.report == Report::Request,
-            self.receive.as_ref().is_some_and(|r| r.reply_waits(c)),
-        ];
-        let after_last = |i: usize| self.last_grant.is_some_and(|last| i > last);
-        let grant = (0..waiting.len())
-            .find(|&i| waiting[i] && after_last(i))
-            .or_else(|| (0..waiting.len()).find(|&i| waiting[i]))
-            .filter(|_| idle);
-
+        // arbiter and transmitter: the idle transmitter takes the offered datagram; the
+        // arbiter chooses the next offer from the sources waiting now (a datagram closing
+        // now waits a clock to be chosen, and a clock more to be offered)
+        let grant = self.offer.filter(|_| idle);
+        let next_offer = if grant.is_some() {
+            None
+        } else {
+            self.choose(c)
+        };
         self.step_report(c, tick, grant == Some(1));
 
         match grant {
@@ -617,6 +632,7 @@ impl<'a> Back<'a> {
         if grant.is_some() {
             self.last_grant = grant;
         }
+        self.offer = next_offer;
         if closing {
             let records = std::mem::take(&mut self.fill);
             let flags = if records.len() == MAX_RECORDS {
