@@ -142,6 +142,15 @@ pub struct CellDownlink {
     // the pins
     phase: DFF<Bits<17>>,
     frame_bit: DFF<Bits<4>>,
+    // decoded from `frame_bit` a clock after it changes (a bit lasts at least 4 clocks:
+    // the clock is at least 4 x baud), so the
+    // pins' next values hang off registers: the next bit, start bit or data bit, which
+    // data bit, the last data bit
+    next_bit_held: DFF<Bits<4>>,
+    next_is_start: DFF<Bit>,
+    next_is_data: DFF<Bit>,
+    next_data_bit: DFF<Bits<3>>,
+    next_is_last_data: DFF<Bit>,
     // the refill scan: the port visited, and the pipeline behind it
     refilling: DFF<Bit>,
     scan: DFF<Bits<6>>,
@@ -237,6 +246,11 @@ impl CellDownlink {
             write_data: Default::default(),
             phase: Default::default(),
             frame_bit: Default::default(),
+            next_bit_held: Default::default(),
+            next_is_start: Default::default(),
+            next_is_data: Default::default(),
+            next_data_bit: Default::default(),
+            next_is_last_data: Default::default(),
             refilling: Default::default(),
             scan: Default::default(),
             visit_1: Default::default(),
@@ -300,6 +314,11 @@ impl Logic for CellDownlink {
             write_data,
             phase,
             frame_bit,
+            next_bit_held,
+            next_is_start,
+            next_is_data,
+            next_data_bit,
+            next_is_last_data,
             refilling,
             scan,
             visit_1,
@@ -397,8 +416,13 @@ impl Logic for CellDownlink {
             self.next_bit.next = 0.into();
         }
         self.data_bit.next = self.next_bit.val().get_bits::<3>(0) - 1;
+        self.next_bit_held.d.next = self.next_bit.val();
+        self.next_is_start.d.next = self.next_bit.val() == 0;
+        self.next_is_data.d.next = (self.next_bit.val() != 0) & (self.next_bit.val() <= 8);
+        self.next_data_bit.d.next = self.data_bit.val();
+        self.next_is_last_data.d.next = self.next_bit.val() == 8;
         if self.bit_end.val() {
-            self.frame_bit.d.next = self.next_bit.val();
+            self.frame_bit.d.next = self.next_bit_held.q.val();
         }
         // the refill scan starts as the pins take the last data bit
         if self.refilling.q.val() {
@@ -407,7 +431,7 @@ impl Logic for CellDownlink {
                 self.refilling.d.next = false;
             }
         }
-        if self.bit_end.val() & (self.next_bit.val() == 8) {
+        if self.bit_end.val() & self.next_is_last_data.q.val() {
             self.refilling.d.next = true;
             self.scan.d.next = 0.into();
         }
@@ -503,12 +527,12 @@ impl Logic for CellDownlink {
             }
             // the pin at each bit's start: start bit, data bit, stop bits
             self.term_byte.next = self.byte[i].q.val();
-            self.shifted.next = self.term_byte.val() >> self.data_bit.val();
+            self.shifted.next = self.term_byte.val() >> self.next_data_bit.q.val();
             if self.bit_end.val() {
                 self.pin[i].d.next = true;
-                if self.next_bit.val() == 0 {
+                if self.next_is_start.q.val() {
                     self.pin[i].d.next = !self.start[i].q.val();
-                } else if self.next_bit.val() <= 8 {
+                } else if self.next_is_data.q.val() {
                     self.pin[i].d.next = self.shifted.val().get_bit(0);
                 }
             }
