@@ -11,6 +11,9 @@
 
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod cdr;
+pub mod mcap_out;
 pub mod msg;
 pub mod msgdef;
+pub mod sink;

@@ -289,7 +289,7 @@ pub struct BoxStatus {
     pub ports: Vec<PortCounters>,
     /// Records datagrams the host received from the box.
     pub datagrams_received: u64,
-    /// Records datagrams missing (sequence gaps).
+    /// Datagrams missing (gaps in the sequence numbers records and status datagrams share).
     pub datagrams_missing: u64,
     /// Records received.
     pub records_received: u64,
