@@ -61,7 +61,7 @@ pub struct CaptureArgs {
     /// Where the cells sit on their chains, for the sample times.
     #[command(flatten)]
     pub timing: super::TimingArgs,
-    /// ROS 2 messages: an MCAP recording (not with --rows).
+    /// ROS 2 messages: an MCAP recording, the Foxglove live view (not with --rows).
     #[command(flatten)]
     pub ros: super::ros::RosArgs,
 }
@@ -171,12 +171,17 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         };
         anyhow::ensure!(
             rows.is_none() || !args.ros.any(),
-            "--rows and the ROS 2 outputs (--mcap) are one or the other"
+            "--rows and the ROS 2 outputs (--mcap, --foxglove) are one or the other"
         );
         let mut ros = if args.ros.any() {
             let mut outputs: Vec<Box<dyn skinbox_ros::sink::Output + Send>> = Vec::new();
             if let Some(path) = &args.ros.mcap {
                 outputs.push(Box::new(skinbox_ros::mcap_out::McapOutput::create(path)?));
+            }
+            if let Some(addr) = args.ros.foxglove {
+                let server = skinbox_ros::foxglove::FoxgloveServer::start(addr)?;
+                eprintln!("foxglove live view on ws://{}", server.local_addr());
+                outputs.push(Box::new(server));
             }
             Some(skinbox_ros::sink::RosSink::new(
                 args.timing.timing(rate_hz)?,

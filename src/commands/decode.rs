@@ -81,6 +81,10 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         None => pcap::decode_pcap_with(&bytes, &options, &mut ())?.sample_rate_hz,
     };
     let timing = args.timing.timing(rate_hz)?;
+    anyhow::ensure!(
+        args.ros.foxglove.is_none(),
+        "--foxglove serves a live capture: use it with skinbox capture or emulate"
+    );
     if let Some(path) = &args.ros.mcap {
         return record_mcap(&bytes, &options, timing, &args, path, rate_hz, json);
     }

@@ -15,6 +15,10 @@ pub struct RosArgs {
     /// .mcap (docs/ros2.md).
     #[arg(long, value_name = "OUT")]
     pub mcap: Option<PathBuf>,
+    /// Serve the topics live to Foxglove on this address (WebSocket,
+    /// ws://ADDR, e.g. 127.0.0.1:8765; port 0 picks one, printed on stderr).
+    #[arg(long, value_name = "ADDR")]
+    pub foxglove: Option<std::net::SocketAddr>,
     /// The channel /skinbox/activity sums per port (max and mean): accel_x ... force_1 ...
     /// temperature_2.
     #[arg(long, default_value = "force_1", value_parser = parse_channel)]
@@ -37,7 +41,7 @@ fn parse_channel(s: &str) -> Result<Channel, String> {
 impl RosArgs {
     /// Whether any ROS 2 output is asked for.
     pub fn any(&self) -> bool {
-        self.mcap.is_some()
+        self.mcap.is_some() || self.foxglove.is_some()
     }
 
     /// The sink's settings.
