@@ -124,6 +124,16 @@ pub trait RecordSink {
         _payload: &[u8],
     ) {
     }
+    /// The decoder is done with the datagram `payload` from `source` (after its records):
+    /// what became of it. For sinks that group records by datagram (one message per
+    /// datagram) or read status datagrams.
+    fn datagram_decoded(
+        &mut self,
+        _source: Option<SocketAddr>,
+        _payload: &[u8],
+        _outcome: DatagramOutcome,
+    ) {
+    }
 }
 
 /// A sink that drops everything (for reports only).
@@ -523,6 +533,17 @@ impl Decoder {
     /// Takes one UDP payload that should be a box datagram, from `source` (the box is
     /// told by its box id and this address).
     pub fn push_datagram_from<S: RecordSink + ?Sized>(
+        &mut self,
+        source: Option<SocketAddr>,
+        payload: &[u8],
+        sink: &mut S,
+    ) -> DatagramOutcome {
+        let outcome = self.take_datagram(source, payload, sink);
+        sink.datagram_decoded(source, payload, outcome);
+        outcome
+    }
+
+    fn take_datagram<S: RecordSink + ?Sized>(
         &mut self,
         source: Option<SocketAddr>,
         payload: &[u8],

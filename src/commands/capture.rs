@@ -61,6 +61,9 @@ pub struct CaptureArgs {
     /// Where the cells sit on their chains, for the sample times.
     #[command(flatten)]
     pub timing: super::TimingArgs,
+    /// ROS 2 messages: an MCAP recording, the Foxglove live view (not with --rows).
+    #[command(flatten)]
+    pub ros: super::ros::RosArgs,
 }
 
 /// Runs the capture on a single-threaded tokio runtime until the duration, the count or
@@ -166,9 +169,32 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 }
             }
         };
-        let sink: &mut dyn skinbox_host::RecordSink = match &mut rows {
-            Some(w) => w,
-            None => &mut (),
+        anyhow::ensure!(
+            rows.is_none() || !args.ros.any(),
+            "--rows and the ROS 2 outputs (--mcap, --foxglove) are one or the other"
+        );
+        let mut ros = if args.ros.any() {
+            let mut outputs: Vec<Box<dyn skinbox_ros::sink::Output + Send>> = Vec::new();
+            if let Some(path) = &args.ros.mcap {
+                outputs.push(Box::new(skinbox_ros::mcap_out::McapOutput::create(path)?));
+            }
+            if let Some(addr) = args.ros.foxglove {
+                let server = skinbox_ros::foxglove::FoxgloveServer::start(addr)?;
+                eprintln!("foxglove live view on ws://{}", server.local_addr());
+                outputs.push(Box::new(server));
+            }
+            Some(skinbox_ros::sink::RosSink::new(
+                args.timing.timing(rate_hz)?,
+                args.ros.settings()?,
+                outputs,
+            ))
+        } else {
+            None
+        };
+        let sink: &mut dyn skinbox_host::RecordSink = match (&mut rows, &mut ros) {
+            (Some(w), _) => w,
+            (None, Some(r)) => r,
+            (None, None) => &mut (),
         };
         let stats = live::run_capture(
             &socket,
@@ -202,7 +228,15 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         if let Some(w) = recorder {
             w.finish()?.flush()?;
         }
-        let host_times = rows.as_ref().and_then(|w| w.timing()).map(|t| t.summary());
+        let host_times = rows
+            .as_ref()
+            .and_then(|w| w.timing())
+            .or(ros.as_ref().map(|r| r.timing()))
+            .map(|t| t.summary());
+        let published = match ros {
+            Some(r) => Some(r.finish()?),
+            None => None,
+        };
         let exchanges_unused = rows
             .as_ref()
             .and_then(|w| w.timing())
@@ -239,11 +273,18 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 "host_times": host_times,
                 "read_ticks_sent": read_ticks_sent,
                 "exchanges_unused": exchanges_unused,
+                "ros": published,
             }))
         } else {
             print!("{}", report.summary());
             if let Some(times) = &host_times {
                 println!("host times: {}", super::host_time_line(times));
+            }
+            if let Some(p) = &published {
+                println!(
+                    "ROS 2: {} samples in {} messages on /skinbox/samples, {} on /skinbox/status, {} on /skinbox/activity",
+                    p.samples, p.samples_messages, p.status_messages, p.activity_messages
+                );
             }
             Ok(())
         }

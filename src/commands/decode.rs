@@ -43,6 +43,9 @@ pub struct DecodeArgs {
     /// Where the cells sit on their chains, for the sample times.
     #[command(flatten)]
     pub timing: super::TimingArgs,
+    /// ROS 2 messages: with --mcap, a recording instead of rows.
+    #[command(flatten)]
+    pub ros: super::ros::RosArgs,
 }
 
 /// Decodes the file; rows on stdout (or --output), a one-line summary on stderr.
@@ -78,6 +81,13 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         None => pcap::decode_pcap_with(&bytes, &options, &mut ())?.sample_rate_hz,
     };
     let timing = args.timing.timing(rate_hz)?;
+    anyhow::ensure!(
+        args.ros.foxglove.is_none(),
+        "--foxglove serves a live capture: use it with skinbox capture or emulate"
+    );
+    if let Some(path) = &args.ros.mcap {
+        return record_mcap(&bytes, &options, timing, &args, path, rate_hz, json);
+    }
     let (report, times, rows) = if args.by_host_time {
         let mut writer = RowWriter::new(Vec::new(), format, kind).with_timing(timing);
         let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
@@ -117,6 +127,42 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
     eprintln!(
         "sample times at {rate_hz} Hz; host times: {}",
         super::host_time_line(&times)
+    );
+    Ok(())
+}
+
+/// `--mcap`: the skinbox_msgs topics to an MCAP recording; a summary on stderr (or JSON).
+fn record_mcap(
+    bytes: &[u8],
+    options: &PcapOptions,
+    timing: skinbox_host::timing::Timing,
+    args: &DecodeArgs,
+    path: &std::path::Path,
+    rate_hz: f64,
+    json: bool,
+) -> anyhow::Result<()> {
+    let out = skinbox_ros::mcap_out::McapOutput::create(path)?;
+    let mut sink =
+        skinbox_ros::sink::RosSink::new(timing, args.ros.settings()?, vec![Box::new(out)]);
+    let report = pcap::decode_pcap_with(bytes, options, &mut sink)?;
+    let published = sink.finish()?;
+    if json {
+        return super::print_json(&serde_json::json!({
+            "mcap": path,
+            "published": published,
+            "sample_rate_hz": rate_hz,
+            "report": report,
+        }));
+    }
+    eprintln!(
+        "{}: {} samples in {} messages on /skinbox/samples, {} on /skinbox/status, {} on /skinbox/activity; {} datagrams missing, bad input {}",
+        path.display(),
+        published.samples,
+        published.samples_messages,
+        published.status_messages,
+        published.activity_messages,
+        report.losses.datagrams_missing,
+        report.bad_input
     );
     Ok(())
 }

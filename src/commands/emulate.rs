@@ -44,6 +44,10 @@ pub struct Args {
     /// Stop after this much wall-clock time, ms (default: at Ctrl-C); then print a summary.
     #[arg(long)]
     run_ms: Option<u64>,
+    /// Watch the skin live: a capture in this process claims the box's stream and serves
+    /// the ROS 2 topics to Foxglove on this address (ws://ADDR; docs/ros2.md).
+    #[arg(long, value_name = "ADDR")]
+    foxglove: Option<std::net::SocketAddr>,
 }
 
 /// `ADDRESS/PREFIX` as address and prefix length.
@@ -105,6 +109,30 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         socket.local_addr()?,
         args.host_subnet
     );
+    if let Some(fx) = args.foxglove {
+        // `skinbox capture --claim` on loopback, in a thread: the same code path as a box
+        let mut argv = vec![
+            "skinbox".to_string(),
+            "capture".into(),
+            "--listen".into(),
+            "127.0.0.1:0".into(),
+            "--claim".into(),
+            socket.local_addr()?.to_string(),
+            "--foxglove".into(),
+            fx.to_string(),
+        ];
+        if let Some(ms) = args.run_ms {
+            argv.extend(["--duration-ms".into(), ms.to_string()]);
+        }
+        let cli = <super::Cli as clap::Parser>::try_parse_from(argv)?;
+        std::thread::spawn(move || {
+            if let super::Command::Capture(c) = cli.command {
+                if let Err(e) = super::capture::run(c, false) {
+                    eprintln!("live view: {e:#}");
+                }
+            }
+        });
+    }
     let deadline = args
         .run_ms
         .map(|ms| Instant::now() + Duration::from_millis(ms));

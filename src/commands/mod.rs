@@ -9,6 +9,7 @@ mod emulate;
 mod examples;
 mod replay;
 mod report;
+mod ros;
 mod sim;
 mod stats;
 mod synth;

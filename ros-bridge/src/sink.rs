@@ -1,0 +1,428 @@
+//! Decoded datagrams to `skinbox_msgs` messages: a [`RecordSink`] that gathers each records
+//! datagram's records into one [`CellSampleBatch`], turns each status datagram into a
+//! [`BoxStatus`] (with the losses the host saw and the box-to-host time mapping) and sums
+//! each box's ports into a [`SkinActivity`] every period; each message goes out as CDR to
+//! every [`Output`] (an MCAP recording, the Foxglove live view, DDS).
+
+use crate::cdr::CdrWriter;
+use crate::msg::*;
+use skinbox_host::decoder::{BoxKey, DatagramOutcome};
+use skinbox_host::rows::RecordRow;
+use skinbox_host::timing::{HostTimeSource, Timing};
+use skinbox_host::{DecodedRecord, RecordSink};
+use skinbox_protocol::datagram::{Datagram, DatagramBody};
+use skinbox_protocol::record::FLAG_LOSS_BEFORE;
+use skinbox_protocol::{Channel, DatagramRepr};
+use std::collections::{BTreeMap, BTreeSet};
+use std::net::SocketAddr;
+use std::time::Duration;
+
+/// The topics, with their message types and QoS (docs/ros2.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Topic {
+    /// `/skinbox/samples`: one [`CellSampleBatch`] per records datagram.
+    Samples,
+    /// `/skinbox/status`: one [`BoxStatus`] per status datagram.
+    Status,
+    /// `/skinbox/activity`: one [`SkinActivity`] per box and period.
+    Activity,
+}
+
+impl Topic {
+    /// Every topic.
+    pub const ALL: [Topic; 3] = [Topic::Samples, Topic::Status, Topic::Activity];
+
+    /// The ROS 2 topic name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Topic::Samples => "/skinbox/samples",
+            Topic::Status => "/skinbox/status",
+            Topic::Activity => "/skinbox/activity",
+        }
+    }
+
+    /// The message's `package/Name`.
+    pub fn message(self) -> &'static str {
+        match self {
+            Topic::Samples => CellSampleBatch::NAME,
+            Topic::Status => BoxStatus::NAME,
+            Topic::Activity => SkinActivity::NAME,
+        }
+    }
+
+    /// The ROS 2 type name, `package/msg/Name`.
+    pub fn type_name(self) -> String {
+        self.message().replacen('/', "/msg/", 1)
+    }
+
+    /// The `ros2msg` schema text (the `.msg` files).
+    pub fn schema(self) -> String {
+        // The definitions are compiled in and checked by the one-definition test.
+        crate::msgdef::schema_text(self.message()).unwrap_or_default()
+    }
+
+    /// History depth of the topic's QoS (reliable, volatile, keep last).
+    pub fn depth(self) -> u32 {
+        match self {
+            Topic::Samples => 1000,
+            Topic::Status | Topic::Activity => 100,
+        }
+    }
+
+    /// An index 0..3.
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// Where messages go: an MCAP recording, the Foxglove server, a DDS publisher.
+pub trait Output {
+    /// One message on `topic`, CDR with its encapsulation header, logged at `log_time_ns`
+    /// (host time, ns since the epoch).
+    fn publish(&mut self, topic: Topic, log_time_ns: u64, cdr: &[u8]) -> std::io::Result<()>;
+
+    /// No more messages: finish what is written.
+    fn close(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Settings of a [`RosSink`].
+#[derive(Debug, Clone, Copy)]
+pub struct SinkSettings {
+    /// Period of the [`SkinActivity`] messages.
+    pub activity_period: Duration,
+    /// The channel [`PortActivity`] sums.
+    pub activity_channel: Channel,
+}
+
+impl Default for SinkSettings {
+    fn default() -> Self {
+        SinkSettings {
+            activity_period: Duration::from_millis(100),
+            activity_channel: Channel::Force1,
+        }
+    }
+}
+
+#[derive(Debug, Default, Clone)]
+struct PortSums {
+    packets: u64,
+    events: u64,
+    cells: BTreeSet<u16>,
+    sum: f64,
+    n: u64,
+    max: f64,
+}
+
+#[derive(Debug, Default)]
+struct BoxTrack {
+    last_sequence: Option<u32>,
+    datagrams_received: u64,
+    datagrams_missing: u64,
+    records_received: u64,
+    event_packets_missing: u64,
+    flagged: u64,
+    period_start_ns: Option<u64>,
+    period_datagrams_missing: u64,
+    period_event_packets_missing: u64,
+    ports: BTreeMap<u8, PortSums>,
+}
+
+/// Messages sent, per topic.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct Published {
+    /// [`CellSampleBatch`] messages.
+    pub samples_messages: u64,
+    /// Cell samples in them.
+    pub samples: u64,
+    /// [`BoxStatus`] messages.
+    pub status_messages: u64,
+    /// [`SkinActivity`] messages.
+    pub activity_messages: u64,
+}
+
+/// The sink: records in, messages out. The first output error stops the outputs and is
+/// kept ([`RosSink::finish`]).
+pub struct RosSink {
+    timing: Timing,
+    settings: SinkSettings,
+    outputs: Vec<Box<dyn Output + Send>>,
+    w: CdrWriter,
+    batch: CellSampleBatch,
+    receive_ns: Option<u64>,
+    boxes: BTreeMap<BoxKey, BoxTrack>,
+    published: Published,
+    error: Option<std::io::Error>,
+}
+
+fn now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
+impl RosSink {
+    /// A sink timing records with `timing` and sending to `outputs`.
+    pub fn new(
+        timing: Timing,
+        settings: SinkSettings,
+        outputs: Vec<Box<dyn Output + Send>>,
+    ) -> Self {
+        RosSink {
+            timing,
+            settings,
+            outputs,
+            w: CdrWriter::new(),
+            batch: CellSampleBatch::default(),
+            receive_ns: None,
+            boxes: BTreeMap::new(),
+            published: Published::default(),
+            error: None,
+        }
+    }
+
+    /// The timing, for its summary.
+    pub fn timing(&self) -> &Timing {
+        &self.timing
+    }
+
+    /// Messages sent so far.
+    pub fn published(&self) -> Published {
+        self.published
+    }
+
+    fn send<M: RosMessage>(&mut self, topic: Topic, log_time_ns: u64, m: &M) {
+        if self.error.is_some() {
+            return;
+        }
+        m.encode(&mut self.w);
+        for o in &mut self.outputs {
+            if let Err(e) = o.publish(topic, log_time_ns, self.w.bytes()) {
+                self.error = Some(e);
+                return;
+            }
+        }
+    }
+
+    /// The log time of a message about a datagram: its receive time, else the host time of
+    /// its first sample, else its box time.
+    fn log_time(&self) -> u64 {
+        self.receive_ns.unwrap_or_else(|| {
+            self.batch.samples.first().map_or(0, |s| {
+                if s.host_time_ns > 0 {
+                    s.host_time_ns as u64
+                } else {
+                    s.box_time_ns
+                }
+            })
+        })
+    }
+
+    fn take_batch(&mut self, key: BoxKey, sequence: u32) {
+        let log_time = self.log_time();
+        self.batch.stamp = Time::from_ns(log_time);
+        self.batch.box_id = key.box_id;
+        self.batch.box_address = key.source.map(|a| a.to_string()).unwrap_or_default();
+        self.batch.datagram_sequence = sequence;
+        let batch = std::mem::take(&mut self.batch);
+        self.published.samples_messages += 1;
+        self.published.samples += batch.samples.len() as u64;
+        self.send(Topic::Samples, log_time, &batch);
+        self.batch = batch;
+        self.batch.samples.clear();
+    }
+
+    fn status(&mut self, key: BoxKey, payload: &[u8]) {
+        let Ok((repr, counters)) = DatagramRepr::parse_box_counters(payload) else {
+            return;
+        };
+        let DatagramBody::Status(s) = &repr.body else {
+            return;
+        };
+        let log_time = self.receive_ns.unwrap_or_else(now_ns);
+        let track = self.boxes.entry(key).or_default();
+        let time = self
+            .timing
+            .summary()
+            .into_iter()
+            .find(|t| t.box_id == key.box_id && t.address == key.source);
+        let m = BoxStatus {
+            stamp: Time::from_ns(log_time),
+            box_id: key.box_id,
+            box_address: key.source.map(|a| a.to_string()).unwrap_or_default(),
+            boot_id: s.boot_id,
+            link_up: counters.is_some_and(|c| c.link_up),
+            link_speed: counters.map_or(
+                skinbox_protocol::box_counters::LinkSpeed::Unknown as u8,
+                |c| c.link_speed as u8,
+            ),
+            datagrams_sent: s.datagrams_sent,
+            records_sent: s.records_sent,
+            ports: s
+                .ports
+                .iter()
+                .enumerate()
+                .map(|(i, c)| PortCounters {
+                    port: s.first_port.wrapping_add(i as u8),
+                    counters: *c,
+                })
+                .collect(),
+            datagrams_received: track.datagrams_received,
+            datagrams_missing: track.datagrams_missing,
+            records_received: track.records_received,
+            event_packets_missing: track.event_packets_missing,
+            records_flagged_loss_before: track.flagged,
+            host_time_source: skinbox_host::rows::host_time_source_code(
+                time.as_ref().map_or(HostTimeSource::None, |t| t.source),
+            ),
+            drift_ppm: time.as_ref().and_then(|t| t.drift_ppm).unwrap_or(f64::NAN),
+            time_error_bound_ns: time
+                .as_ref()
+                .and_then(|t| t.error_bound_ns)
+                .unwrap_or(f64::NAN),
+            time_map_restarts: time.as_ref().map_or(0, |t| t.restarts),
+        };
+        self.published.status_messages += 1;
+        self.send(Topic::Status, log_time, &m);
+    }
+
+    fn activity(&mut self, key: BoxKey, at_ns: u64) {
+        let period_ns = self.settings.activity_period.as_nanos() as u64;
+        let track = self.boxes.entry(key).or_default();
+        let start = *track.period_start_ns.get_or_insert(at_ns);
+        if at_ns < start + period_ns.max(1) {
+            return;
+        }
+        let period_s = (at_ns - start) as f64 * 1e-9;
+        let channel = self.settings.activity_channel;
+        let ports = track
+            .ports
+            .iter_mut()
+            .map(|(port, p)| {
+                let taken = std::mem::take(p);
+                PortActivity {
+                    port: *port,
+                    packets_per_s: taken.packets as f64 / period_s,
+                    events_per_s: taken.events as f64 / period_s,
+                    cells_active: taken.cells.len().min(usize::from(u16::MAX)) as u16,
+                    channel_max: if taken.n > 0 { taken.max } else { f64::NAN },
+                    channel_mean: if taken.n > 0 {
+                        taken.sum / taken.n as f64
+                    } else {
+                        f64::NAN
+                    },
+                }
+            })
+            .collect();
+        let m = SkinActivity {
+            stamp: Time::from_ns(at_ns),
+            box_id: key.box_id,
+            period_s,
+            channel: channel.index() as u8,
+            channel_name: channel.name().to_string(),
+            ports,
+            datagrams_missing: std::mem::take(&mut track.period_datagrams_missing),
+            event_packets_missing: std::mem::take(&mut track.period_event_packets_missing),
+        };
+        track.period_start_ns = Some(at_ns);
+        self.published.activity_messages += 1;
+        self.send(Topic::Activity, at_ns, &m);
+    }
+
+    /// Ends: closes every output; the first error, or the messages sent.
+    pub fn finish(mut self) -> std::io::Result<Published> {
+        if let Some(e) = self.error.take() {
+            return Err(e);
+        }
+        for o in &mut self.outputs {
+            o.close()?;
+        }
+        Ok(self.published)
+    }
+}
+
+impl RecordSink for RosSink {
+    #[inline]
+    fn record(&mut self, record: &DecodedRecord) {
+        let times = self.timing.record(record);
+        let row = RecordRow::new(record, &times);
+        let key = BoxKey {
+            box_id: record.box_id,
+            source: record.source,
+        };
+        let track = self.boxes.entry(key).or_default();
+        track.records_received += 1;
+        track.event_packets_missing += u64::from(record.event_packets_missing_before);
+        track.period_event_packets_missing += u64::from(record.event_packets_missing_before);
+        track.flagged += u64::from(record.flags & FLAG_LOSS_BEFORE != 0);
+        let p = track.ports.entry(record.port).or_default();
+        p.packets += 1;
+        p.events += u64::from(if row.kind == skinbox_host::rows::KIND_EVENT {
+            row.mask.count_ones()
+        } else {
+            0
+        });
+        p.cells.insert(row.cell_id);
+        let v = row.values[self.settings.activity_channel.index()];
+        if !v.is_nan() {
+            p.max = if p.n == 0 { v } else { p.max.max(v) };
+            p.sum += v;
+            p.n += 1;
+        }
+        self.batch.samples.push(CellSample::from(&row));
+    }
+
+    fn datagram_received(
+        &mut self,
+        receive: Option<Duration>,
+        source: Option<SocketAddr>,
+        payload: &[u8],
+    ) {
+        self.receive_ns = receive.map(|d| d.as_nanos() as u64);
+        self.batch.samples.clear();
+        self.timing.datagram_received(receive, source, payload);
+    }
+
+    fn datagram_decoded(
+        &mut self,
+        source: Option<SocketAddr>,
+        payload: &[u8],
+        outcome: DatagramOutcome,
+    ) {
+        let Ok(d) = Datagram::new_checked(payload) else {
+            return;
+        };
+        let key = BoxKey {
+            box_id: d.box_id(),
+            source,
+        };
+        if !matches!(
+            outcome,
+            DatagramOutcome::Records { .. } | DatagramOutcome::Status
+        ) {
+            return;
+        }
+        // Records and status datagrams share the box's sequence numbers.
+        let track = self.boxes.entry(key).or_default();
+        let sequence = d.sequence();
+        if let Some(last) = track.last_sequence {
+            let gap = sequence.wrapping_sub(last).wrapping_sub(1);
+            if gap < 1 << 31 {
+                track.datagrams_missing += u64::from(gap);
+                track.period_datagrams_missing += u64::from(gap);
+            }
+        }
+        track.last_sequence = Some(sequence);
+        if let DatagramOutcome::Records { .. } = outcome {
+            track.datagrams_received += 1;
+            if !self.batch.samples.is_empty() {
+                self.take_batch(key, sequence);
+            }
+        } else {
+            self.status(key, payload);
+        }
+        let at = self.receive_ns.unwrap_or_else(now_ns);
+        self.activity(key, at);
+    }
+}
