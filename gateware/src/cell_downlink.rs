@@ -151,6 +151,12 @@ pub struct CellDownlink {
     next_is_data: DFF<Bit>,
     next_data_bit: DFF<Bits<3>>,
     next_is_last_data: DFF<Bit>,
+    // the bit's end and what the pins take then, a clock ahead (from the accumulator's sum
+    // as it is written): a start bit, a data bit or a stop bit
+    phase_sum: Signal<Local, Bits<17>>,
+    pins_take_start: DFF<Bit>,
+    pins_take_data: DFF<Bit>,
+    pins_take_stop: DFF<Bit>,
     // the refill scan: the port visited, and the pipeline behind it
     refilling: DFF<Bit>,
     scan: DFF<Bits<6>>,
@@ -251,6 +257,10 @@ impl CellDownlink {
             next_is_data: Default::default(),
             next_data_bit: Default::default(),
             next_is_last_data: Default::default(),
+            phase_sum: Default::default(),
+            pins_take_start: Default::default(),
+            pins_take_data: Default::default(),
+            pins_take_stop: Default::default(),
             refilling: Default::default(),
             scan: Default::default(),
             visit_1: Default::default(),
@@ -319,6 +329,9 @@ impl Logic for CellDownlink {
             next_is_data,
             next_data_bit,
             next_is_last_data,
+            pins_take_start,
+            pins_take_data,
+            pins_take_stop,
             refilling,
             scan,
             visit_1,
@@ -409,8 +422,15 @@ impl Logic for CellDownlink {
 
         // the shared bit time: the accumulator carries at each bit's end
         self.bit_end.next = self.phase.q.val().get_bit(16);
-        self.phase.d.next =
+        self.phase_sum.next =
             bit_cast::<17, 16>(self.phase.q.val().get_bits::<16>(0)) + self.phase_increment.val();
+        self.phase.d.next = self.phase_sum.val();
+        // (the decodes are those of the bit now: they change two clocks after a bit's end)
+        self.pins_take_start.d.next = self.phase_sum.val().get_bit(16) & self.next_is_start.q.val();
+        self.pins_take_data.d.next = self.phase_sum.val().get_bit(16) & self.next_is_data.q.val();
+        self.pins_take_stop.d.next = self.phase_sum.val().get_bit(16)
+            & !self.next_is_start.q.val()
+            & !self.next_is_data.q.val();
         self.next_bit.next = self.frame_bit.q.val() + 1;
         if self.frame_bit.q.val() == self.last_frame_bit.val() {
             self.next_bit.next = 0.into();
@@ -528,13 +548,14 @@ impl Logic for CellDownlink {
             // the pin at each bit's start: start bit, data bit, stop bits
             self.term_byte.next = self.byte[i].q.val();
             self.shifted.next = self.term_byte.val() >> self.next_data_bit.q.val();
-            if self.bit_end.val() {
+            if self.pins_take_start.q.val() {
+                self.pin[i].d.next = !self.start[i].q.val();
+            }
+            if self.pins_take_data.q.val() {
+                self.pin[i].d.next = self.shifted.val().get_bit(0);
+            }
+            if self.pins_take_stop.q.val() {
                 self.pin[i].d.next = true;
-                if self.next_is_start.q.val() {
-                    self.pin[i].d.next = !self.start[i].q.val();
-                } else if self.next_is_data.q.val() {
-                    self.pin[i].d.next = self.shifted.val().get_bit(0);
-                }
             }
             if self.reset.val() {
                 self.count[i].d.next = 0.into();
@@ -551,6 +572,9 @@ impl Logic for CellDownlink {
             self.write_enable.d.next = false;
             self.accepted_out.d.next = false;
             self.phase.d.next = 0.into();
+            self.pins_take_start.d.next = false;
+            self.pins_take_data.d.next = false;
+            self.pins_take_stop.d.next = false;
             self.frame_bit.d.next = self.last_frame_bit.val();
             self.refilling.d.next = false;
             self.visit_1.d.next = false;
