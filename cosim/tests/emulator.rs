@@ -477,3 +477,211 @@ fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
         assert_eq!(served.stats.acks_sent, 29);
     });
 }
+
+/// The commands among the receive-path test's random frames (the same generator and seed:
+/// other boxes, replays, three hosts and foreign ones, bad arguments, unknown opcodes,
+/// malformed payloads), sent over loopback at their frames' times (40 us apart), each
+/// host from its own address (192.0.2.1 to 3 as 127.0.0.1 to 3; the foreign subnet's
+/// senders as 127.0.1.x outside the emulator's 127.0.0.0/24): every command is answered
+/// or not as the test's book and the RTL say, with the result they give, and every
+/// acknowledgement is the control model's at its receive tick, field for field.
+#[test]
+fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers() {
+    use skinbox_cosim::control::{BoxControl, ControlConfig, Reply};
+    use skinbox_cosim::emulator::{prepare as prepare_emulator, serve, EmulatorSettings};
+    use skinbox_protocol::box_counters::BoxCounter;
+    use skinbox_protocol::command::Destination;
+    use std::collections::{BTreeMap, HashMap, VecDeque};
+    use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    // the generator's commands: (sender, UDP payload, expected result if answered)
+    let mut rng = support::Rng(0x005E_C04D);
+    let (mut next_sequence, mut accepted) = (BTreeMap::new(), vec![]);
+    // (frame index, sender, payload, expected result): the frames are 40 us apart
+    type Booked = (u64, [u8; 4], Vec<u8>, Option<AckResult>);
+    let mut commands: Vec<Booked> = vec![];
+    for index in 0..240 {
+        let case = support::random_case(&mut rng, &mut next_sequence, &mut accepted);
+        let command_fate = matches!(
+            case.fate,
+            BoxCounter::CommandsAccepted
+                | BoxCounter::RefusedForeignSubnet
+                | BoxCounter::RefusedMalformed
+                | BoxCounter::RefusedOtherBox
+                | BoxCounter::RefusedReplay
+                | BoxCounter::RefusedUnknownOpcode
+                | BoxCounter::RefusedBadArgument
+                | BoxCounter::RefusedDownlinkFull
+        );
+        if !command_fate {
+            continue;
+        }
+        let ethernet = &case.frame[..case.frame.len() - 4];
+        let packet = etherparse::SlicedPacket::from_ethernet(ethernet).unwrap();
+        let Some(etherparse::NetSlice::Ipv4(ip)) = packet.net else {
+            panic!("a command frame without IPv4")
+        };
+        let Some(etherparse::TransportSlice::Udp(udp)) = packet.transport else {
+            panic!("a command frame without UDP")
+        };
+        commands.push((
+            index,
+            ip.header().source(),
+            udp.payload().to_vec(),
+            case.ack.map(|a| a.0),
+        ));
+    }
+    let fates: std::collections::BTreeSet<Option<u8>> =
+        commands.iter().map(|c| c.3.map(|r| r as u8)).collect();
+    assert!(fates.len() >= 5, "kinds of answers: {fates:?}");
+
+    let box_socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let SocketAddr::V4(listen) = box_socket.local_addr().unwrap() else {
+        panic!("IPv4")
+    };
+    let settings = EmulatorSettings {
+        scene: Some("idle".into()),
+        buses: Some(8),
+        cells: Some(16),
+        from_ms: 0.0,
+        duration_ms: 200.0,
+        host_subnet: ([127, 0, 0, 0], 24),
+        ..EmulatorSettings::default()
+    };
+    let prepared = prepare_emulator(&settings, listen).unwrap();
+    let mut model = BoxControl::new(ControlConfig::of(&prepared.config));
+    model.counters.link_speed = skinbox_protocol::box_counters::LinkSpeed::Unknown;
+    let local = |ip: [u8; 4]| -> Ipv4Addr {
+        match ip {
+            [192, 0, 2, h] => Ipv4Addr::new(127, 0, 0, h),
+            [_, _, c, _] => Ipv4Addr::new(127, 0, 1, c),
+        }
+    };
+    let mut sockets: HashMap<Ipv4Addr, UdpSocket> = HashMap::new();
+    for (_, ip, _, _) in &commands {
+        let ip = local(*ip);
+        sockets
+            .entry(ip)
+            .or_insert_with(|| UdpSocket::bind((ip, 0)).unwrap());
+    }
+    let stop = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        let server = scope.spawn(|| {
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+            serve(
+                &prepared,
+                &box_socket,
+                1.0,
+                &stop,
+                Some(deadline),
+                &mut |_| {},
+            )
+            .unwrap()
+        });
+        // the kernel's stamps on (see above), then each command at its frame's time
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        let to = SocketAddr::V4(listen);
+        let start = std::time::Instant::now() + std::time::Duration::from_millis(1);
+        let mut sent = vec![];
+        for (index, ip, payload, _) in &commands {
+            let at = start + std::time::Duration::from_micros(40 * index);
+            while std::time::Instant::now() < at {
+                std::hint::spin_loop();
+            }
+            let before_ns = epoch_ns();
+            sockets[&local(*ip)].send_to(payload, to).unwrap();
+            sent.push((before_ns, epoch_ns()));
+        }
+        // every answer has left 100 ms on: the box stops, then each host's
+        // acknowledgements are read, in the order the box sent them
+        std::thread::sleep(std::time::Duration::from_millis(100));
+        stop.store(true, Ordering::Relaxed);
+        let served = server.join().unwrap();
+        let mut acks: HashMap<Ipv4Addr, VecDeque<AckRepr>> = HashMap::new();
+        for (ip, socket) in &sockets {
+            socket
+                .set_read_timeout(Some(std::time::Duration::from_millis(50)))
+                .unwrap();
+            let mut buf = [0u8; 2048];
+            let queue = acks.entry(*ip).or_default();
+            while let Ok(n) = socket.recv(&mut buf) {
+                // a stream-to among the commands sends the box's datagrams here too
+                if skinbox_protocol::command::peek_kind(&buf[..n])
+                    == Some(skinbox_protocol::command::KIND_ACK)
+                {
+                    queue.push_back(AckRepr::parse(&buf[..n]).unwrap());
+                }
+            }
+        }
+        let mut decided = vec![];
+        let (mut cell_commands, mut cell_commands_as_booked) = (0, 0);
+        for (i, (_, ip, payload, expected)) in commands.iter().enumerate() {
+            let host = local(*ip);
+            let got = match expected {
+                Some(_) => acks.get_mut(&host).and_then(VecDeque::pop_front),
+                None => None,
+            };
+            // whether it is answered, and the result, as the book (the RTL) says; a cell
+            // command's result depends on the spacing the downlink saw, which a loaded
+            // sender may not keep: the control model's at its arrival (below) decides it
+            let cell_command = got
+                .is_some_and(|a| a.opcode == skinbox_protocol::command::Opcode::CellCommand as u8);
+            assert_eq!(got.is_some(), expected.is_some(), "command {i} from {host}");
+            if cell_command {
+                cell_commands += 1;
+                cell_commands_as_booked += usize::from(got.map(|a| a.result) == *expected);
+            } else {
+                assert_eq!(
+                    got.map(|a| a.result),
+                    *expected,
+                    "command {i} from {host}: the book's (the RTL's) answer"
+                );
+            }
+            let sender = Destination {
+                mac: SENDER_MAC,
+                ip: host.octets(),
+                port: sockets[&host].local_addr().unwrap().port(),
+            };
+            let frame =
+                skinbox_cosim::emulator::command_frame(&model.config().link, &sender, payload);
+            let tick = got.map_or(0, |a| a.receive_tick);
+            let reply = model.receive(&frame, tick).reply;
+            match (got, reply) {
+                (Some(got), Some(Reply::Ack { ack, .. })) => {
+                    assert_eq!(
+                        got,
+                        AckRepr {
+                            send_tick: got.send_tick,
+                            ..ack
+                        },
+                        "command {i}: the control model's acknowledgement"
+                    );
+                    decided.push((sent[i], got.receive_tick));
+                }
+                (None, None) => {}
+                (got, reply) => panic!("command {i}: emulator {got:?}, model {reply:?}"),
+            }
+        }
+        assert!(
+            acks.values().all(VecDeque::is_empty),
+            "no acknowledgement beyond the book's"
+        );
+        // decided at arrival: within each datagram's send, relative to the first answered
+        let ((b0, a0), t0) = decided[0];
+        for (i, &((before, after), tick)) in decided.iter().enumerate() {
+            let apart = (tick as i128 - t0 as i128) * 8;
+            assert!(
+                (before - a0 - 16..=after - b0 + 16).contains(&apart),
+                "answered command {i}: decided {apart} ns after the first"
+            );
+        }
+        eprintln!(
+            "{} commands, {} answered, kinds of answers {fates:?}; {cell_commands_as_booked} of {cell_commands} cell commands as booked at 40 us a frame",
+            commands.len(),
+            decided.len()
+        );
+        assert_eq!(served.stats.commands_received, commands.len() as u64);
+        assert_eq!(served.stats.acks_sent, decided.len() as u64);
+    });
+}
