@@ -360,14 +360,31 @@ pub fn serve(
 ) -> std::io::Result<ServeSummary> {
     use std::net::SocketAddr;
     use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
-    let mut emulated = EmulatedBox::new(&prepared.prepared, &prepared.config);
     // Without kernel stamps each command is decided when it is read.
     let stamped = skinbox_host::live::enable_receive_timestamps(socket).is_ok();
-    let started = Instant::now();
-    // the same instant on the clock of the kernel's receive stamps
-    let started_realtime = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap_or_default();
+    let mut emulated = EmulatedBox::new(&prepared.prepared, &prepared.config);
+    // the start on both clocks: the loop's (monotonic) and the kernel's receive stamps'
+    // (the wall clock), read close together (a read between two wall clock reads at most
+    // 5 us apart, taken at their middle)
+    let wall = || {
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap_or_default()
+    };
+    let (started, started_realtime) = {
+        let mut best = None;
+        for _ in 0..20 {
+            let (before, at, after) = (wall(), Instant::now(), wall());
+            let spread = after.saturating_sub(before);
+            if best.is_none_or(|(s, _, _)| spread < s) {
+                best = Some((spread, at, before + spread / 2));
+            }
+            if spread < Duration::from_micros(5) {
+                break;
+            }
+        }
+        best.map_or_else(|| (Instant::now(), wall()), |(_, at, w)| (at, w))
+    };
     let ticks = |elapsed: Duration| -> u64 {
         (elapsed.as_secs_f64() * speed * skinbox_protocol::TICKS_PER_SECOND as f64) as u64
     };
@@ -397,12 +414,15 @@ pub fn serve(
                 draining = true;
                 let read = tick_now(Instant::now());
                 // the arrival on the box's time line; a stamp from before the start or
-                // after the read (the wall clock stepped) is taken as the read
+                // more than a millisecond after the read (the wall clock stepped) is
+                // taken as the read
+                let late = ticks(Duration::from_millis(1));
                 let arrival = stamp
                     .filter(|_| stamped)
                     .and_then(|s| s.checked_sub(started_realtime))
-                    .map_or(read, ticks)
-                    .min(read)
+                    .map(ticks)
+                    .filter(|&t| t <= read + late)
+                    .unwrap_or(read)
                     .max(last_command);
                 last_command = arrival;
                 for o in emulated.advance(arrival) {

@@ -220,6 +220,27 @@ fn epoch_ns() -> i128 {
         .as_nanos() as i128
 }
 
+/// Waits until the kernel stamps datagrams on arrival: it turns its receive stamps on in a
+/// deferred work item once a socket asks for them, and before that a datagram is stamped
+/// when read. A probe sent to itself is stamped inside its `send_to` once they are on.
+fn wait_for_arrival_stamps() {
+    let probe = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    skinbox_host::live::enable_receive_timestamps(&probe).unwrap();
+    let me = probe.local_addr().unwrap();
+    let mut buf = [0u8; 8];
+    for _ in 0..500 {
+        let before = epoch_ns();
+        probe.send_to(b"probe", me).unwrap();
+        let after = epoch_ns();
+        let (_, _, stamp) = skinbox_host::live::recv_stamped(&probe, &mut buf, false).unwrap();
+        if stamp.is_some_and(|s| (before..=after).contains(&(s.as_nanos() as i128))) {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    panic!("the kernel did not stamp datagrams on arrival within 5 s");
+}
+
 /// Sends `requests` to `to` from `socket`, each at its offset (us) after the first,
 /// spinning for the instant; sequence numbers from `first_sequence`.
 fn send_paced(
@@ -366,16 +387,15 @@ fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
             .unwrap()
         });
         let to = std::net::SocketAddr::V4(listen);
-        // The kernel turns its arrival stamps on in a deferred work item once a socket
-        // asks for them (before, a datagram is stamped when read): a read-tick exchange,
-        // then a pause, before the commands whose spacing counts.
+        // a read-tick exchange, and the kernel's arrival stamps on, before the commands
+        // whose spacing counts
         let sent = send_paced(&host, to, 1, &[(0.0, Request::ReadTick)]);
         let acks = acks_of(&host, &sent);
         assert_eq!(
             model_results(&mut model, from, &sent, &acks),
             [AckResult::Ok]
         );
-        std::thread::sleep(std::time::Duration::from_millis(50));
+        wait_for_arrival_stamps();
 
         // the downlink test's schedule, its offsets from the first command
         let schedule = support::downlink_schedule();
@@ -579,9 +599,34 @@ fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers()
             )
             .unwrap()
         });
-        // the kernel's stamps on (see above), then each command at its frame's time
-        std::thread::sleep(std::time::Duration::from_millis(50));
         let to = SocketAddr::V4(listen);
+        // the emulator serving (a command for another box, from a host of its own,
+        // answered and changing no host's state), the kernel's arrival stamps on, then
+        // each command at its frame's time
+        let other = UdpSocket::bind("127.0.0.9:0").unwrap();
+        let payload = CommandRepr {
+            box_id: 7,
+            sequence: 1,
+            host_time: 0,
+            request: Request::ReadTick,
+        }
+        .to_bytes();
+        other.send_to(&payload, to).unwrap();
+        other
+            .set_read_timeout(Some(std::time::Duration::from_secs(2)))
+            .unwrap();
+        let mut buf = [0u8; 2048];
+        let n = other.recv(&mut buf).unwrap();
+        let ack = AckRepr::parse(&buf[..n]).unwrap();
+        assert_eq!(ack.result, AckResult::OtherBox);
+        let sender = Destination {
+            mac: SENDER_MAC,
+            ip: [127, 0, 0, 9],
+            port: other.local_addr().unwrap().port(),
+        };
+        let frame = skinbox_cosim::emulator::command_frame(&model.config().link, &sender, &payload);
+        model.receive(&frame, ack.receive_tick);
+        wait_for_arrival_stamps();
         let start = std::time::Instant::now() + std::time::Duration::from_millis(1);
         let mut sent = vec![];
         for (index, ip, payload, _) in &commands {
@@ -681,7 +726,7 @@ fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers()
             commands.len(),
             decided.len()
         );
-        assert_eq!(served.stats.commands_received, commands.len() as u64);
-        assert_eq!(served.stats.acks_sent, decided.len() as u64);
+        assert_eq!(served.stats.commands_received, commands.len() as u64 + 1);
+        assert_eq!(served.stats.acks_sent, decided.len() as u64 + 1);
     });
 }
