@@ -713,13 +713,28 @@ mod tests {
         let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
         enable_receive_timestamps(&receiver).unwrap();
         let to = receiver.local_addr().unwrap();
+        let mut buf = [0u8; 16];
+        // the kernel turns its arrival stamps on in a deferred work item once a socket
+        // asks (before, a datagram is stamped when read): wait for a probe stamped inside
+        // its send
+        let on = (0..500).any(|_| {
+            let before = epoch_ns();
+            sender.send_to(b"probe", to).unwrap();
+            let after = epoch_ns();
+            let (_, _, stamp) = recv_stamped(&receiver, &mut buf, false).unwrap();
+            let inside = stamp.is_some_and(|s| (before..=after).contains(&s.as_nanos()));
+            if !inside {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            inside
+        });
+        assert!(on, "no arrival stamps within 5 s");
         let mut brackets = vec![];
         for i in 0..5u8 {
             let before = epoch_ns();
             sender.send_to(&[i; 30], to).unwrap();
             brackets.push((before, epoch_ns()));
         }
-        let mut buf = [0u8; 16];
         for (i, (before, after)) in brackets.into_iter().enumerate() {
             let (n, from, stamp) = recv_stamped(&receiver, &mut buf, true).unwrap();
             assert_eq!(
