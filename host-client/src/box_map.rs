@@ -29,6 +29,9 @@ impl<V> BoxMap<V> {
     /// The entry index of `key`, if it has one.
     #[inline]
     fn find(&self, key: &BoxKey) -> Option<usize> {
+        if self.entries.is_empty() {
+            return None;
+        }
         let current = self.current.get();
         if self.entries.get(current).is_some_and(|(k, _)| k == key) {
             return Some(current);

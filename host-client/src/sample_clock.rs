@@ -180,7 +180,7 @@ impl LineSums {
         let num = n
             .wrapping_mul(self.kr)
             .wrapping_sub(self.k.wrapping_mul(self.r));
-        let slope = num as f64 / den as f64;
+        let slope = to_f64(num) / to_f64(den);
         (den > 0 && slope.is_finite()).then_some(slope)
     }
 
@@ -191,7 +191,7 @@ impl LineSums {
         let n = i128::from(self.n.max(1));
         let dk = self.k.wrapping_sub(n.wrapping_mul(i128::from(k0)));
         let dr = self.r.wrapping_sub(n.wrapping_mul(i128::from(r0)));
-        (r0 as f64 - period * k0 as f64) + (dr as f64 - period * dk as f64) / n as f64
+        (r0 as f64 - period * k0 as f64) + (to_f64(dr) - period * to_f64(dk)) / n as f64
     }
 }
 
@@ -383,12 +383,7 @@ impl SampleClockEstimator {
             if let Some(ls) = ls.filter(|&p| plausible(p)) {
                 // Then the line through the lowest point of each half: packets that did
                 // not queue lie exactly on the true line.
-                let lowest = |from: usize, to: usize| {
-                    self.window
-                        .range(from..to)
-                        .map(|&(k, r)| (k, r as f64 - ls * k as f64))
-                        .min_by(|a, b| a.1.total_cmp(&b.1))
-                };
+                let lowest = |from: usize, to: usize| lowest_under(&self.window, from, to, ls);
                 let half = self.window.len() / 2;
                 let envelope = match (lowest(0, half), lowest(half, self.window.len())) {
                     (Some((ka, ra)), Some((kb, rb))) if kb - ka >= MIN_SPAN / 2 => {
@@ -443,6 +438,45 @@ impl SampleClockEstimator {
                     / self.unqueued.len().max(1) as f64
             }
         }
+    }
+}
+
+/// The first of `points[from..to]` lowest below the line of slope `slope` through the
+/// origin: its sample index and `r - slope * k` (`None` for no points). The points' offsets
+/// are finite and never -0, so `<` orders them as `f64::total_cmp` does.
+fn lowest_under(
+    points: &VecDeque<(i64, i64)>,
+    from: usize,
+    to: usize,
+    slope: f64,
+) -> Option<(i64, f64)> {
+    let (front, back) = points.as_slices();
+    let split = front.len();
+    let (mut best_k, mut best) = (None, f64::INFINITY);
+    let parts = [
+        front
+            .get(from.min(split)..to.min(split))
+            .unwrap_or_default(),
+        back.get(from.saturating_sub(split)..to.saturating_sub(split))
+            .unwrap_or_default(),
+    ];
+    for part in parts {
+        for &(k, r) in part {
+            let v = r as f64 - slope * k as f64;
+            if v < best {
+                (best_k, best) = (Some(k), v);
+            }
+        }
+    }
+    best_k.map(|k| (k, best))
+}
+
+/// `x` as the nearest `f64`, as `x as f64`, through the faster conversion of an `i64`
+/// where it fits (the same integer rounds to the same `f64` either way).
+fn to_f64(x: i128) -> f64 {
+    match i64::try_from(x) {
+        Ok(v) => v as f64,
+        Err(_) => x as f64,
     }
 }
 
