@@ -96,10 +96,21 @@ pub fn source_fields(source: Option<std::net::SocketAddr>) -> (u32, u16) {
     }
 }
 
+/// `v.round()`, without the library call where `v` is an integer already: every `f64` of
+/// magnitude 2^52 or more is one, as host times in ns since 1970 are.
+#[inline]
+fn round(v: f64) -> f64 {
+    if v.abs() >= 4_503_599_627_370_496.0 {
+        v
+    } else {
+        v.round()
+    }
+}
+
 fn host_time(times: &RecordTimes) -> (i64, f64, u8) {
     (
-        times.sample_host_ns.map_or(0, |v| v.round() as i64),
-        times.host_error_bound_ns.map_or(f64::NAN, f64::round),
+        times.sample_host_ns.map_or(0, |v| round(v) as i64),
+        times.host_error_bound_ns.map_or(f64::NAN, round),
         host_time_source_code(times.source),
     )
 }
@@ -460,6 +471,25 @@ mod tests {
             }
             assert!(end <= row_size && row_size - end < 8, "{end} of {row_size}");
         }
+    }
+
+    #[test]
+    fn round_is_f64_round() {
+        for v in [
+            0.5,
+            -0.5,
+            1.5,
+            2.5,
+            -2.5,
+            4_503_599_627_370_495.5,
+            4_503_599_627_370_496.0,
+            1.795e18,
+            -1.795e18,
+            f64::INFINITY,
+        ] {
+            assert_eq!(round(v), v.round(), "{v}");
+        }
+        assert!(round(f64::NAN).is_nan());
     }
 
     #[test]

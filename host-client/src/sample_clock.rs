@@ -273,8 +273,8 @@ impl SampleClockEstimator {
                 } else {
                     0.125
                 };
-                let k = ((rel - self.offset_ns + margin * self.period_ns) / self.period_ns).floor();
-                (k as i64).max(last_index)
+                floor_i64((rel - self.offset_ns + margin * self.period_ns) / self.period_ns)
+                    .max(last_index)
             }
         };
         let rel = (stamp_ns - self.anchor_ns) as i64;
@@ -469,6 +469,16 @@ fn lowest_under(
         }
     }
     best_k.map(|k| (k, best))
+}
+
+/// `x.floor() as i64` (saturating, NaN to 0) without the library call of `floor`.
+fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    if (t as f64) > x {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
 }
 
 /// `x` as the nearest `f64`, as `x as f64`, through the faster conversion of an `i64`
@@ -905,6 +915,30 @@ mod tests {
         stamps.extend(reset);
         let worst = incremental_against_batch(4e6, c.latency_ns, &stamps);
         assert!(worst < 1.0, "data mode: {worst} ns");
+    }
+
+    #[test]
+    fn floor_i64_is_floor_as_i64() {
+        for x in [
+            0.0,
+            -0.0,
+            2.5,
+            -2.5,
+            -2.0,
+            3.0,
+            0.999_999,
+            -1e-300,
+            4.5e15 + 0.5,
+            9.3e18,
+            -9.3e18,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ] {
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+        }
     }
 
     #[test]
