@@ -343,6 +343,13 @@ pub struct ServeSummary {
 /// Runs the box of `prepared` on `socket` in real time (`speed`: scene time per wall-clock
 /// time) until `stop` is set or `deadline`: it sends its datagrams once a stream-to claims
 /// them and answers every command. `progress` sees the box's counts after each step.
+///
+/// Each command is decided at its arrival: the kernel's receive timestamp of its datagram
+/// (SO_TIMESTAMPNS) on the box's time line, as the box decides at the tick the frame's last
+/// byte arrived, so downlink queues fill and drain at the spacing the commands came with,
+/// not at the pace this loop reads them. The datagrams waiting are all taken, in arrival
+/// order, before the uplink runs on to the present. docs/control.md ("The emulator") says
+/// where this can still differ from the box.
 pub fn serve(
     prepared: &PreparedEmulator,
     socket: &std::net::UdpSocket,
@@ -352,49 +359,93 @@ pub fn serve(
     progress: &mut dyn FnMut(&EmulatorStats),
 ) -> std::io::Result<ServeSummary> {
     use std::net::SocketAddr;
-    use std::time::{Duration, Instant};
+    use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+    // Without kernel stamps each command is decided when it is read.
+    let stamped = skinbox_host::live::enable_receive_timestamps(socket).is_ok();
     let mut emulated = EmulatedBox::new(&prepared.prepared, &prepared.config);
-    let started = Instant::now();
-    let tick_now = |at: Instant| -> u64 {
-        (at.duration_since(started).as_secs_f64()
-            * speed
-            * skinbox_protocol::TICKS_PER_SECOND as f64) as u64
+    // the start on both clocks: the loop's (monotonic) and the kernel's receive stamps'
+    // (the wall clock), read close together (a read between two wall clock reads at most
+    // 5 us apart, taken at their middle)
+    let wall = || {
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap_or_default()
     };
+    let (started, started_realtime) = {
+        let mut best = None;
+        for _ in 0..20 {
+            let (before, at, after) = (wall(), Instant::now(), wall());
+            let spread = after.saturating_sub(before);
+            if best.is_none_or(|(s, _, _)| spread < s) {
+                best = Some((spread, at, before + spread / 2));
+            }
+            if spread < Duration::from_micros(5) {
+                break;
+            }
+        }
+        best.map_or_else(|| (Instant::now(), wall()), |(_, at, w)| (at, w))
+    };
+    let ticks = |elapsed: Duration| -> u64 {
+        (elapsed.as_secs_f64() * speed * skinbox_protocol::TICKS_PER_SECOND as f64) as u64
+    };
+    let tick_now = |at: Instant| -> u64 { ticks(at.duration_since(started)) };
     let mut send_errors = 0u64;
     let send = |socket: &std::net::UdpSocket, o: &Outgoing| {
         u64::from(socket.send_to(&o.payload, o.to).is_err())
     };
     socket.set_read_timeout(Some(Duration::from_micros(500)))?;
     let mut buf = vec![0u8; 65536];
+    // the last command's tick: the box's decisions never go back in time
+    let mut last_command = 0u64;
+    // a datagram was just taken: take every other one waiting before the uplink runs on
+    let mut draining = false;
     loop {
         let now = Instant::now();
         if deadline.is_some_and(|d| now >= d) || stop.load(std::sync::atomic::Ordering::Relaxed) {
             break;
         }
-        for o in emulated.advance(tick_now(now)) {
-            send_errors += send(socket, &o);
+        if !draining {
+            for o in emulated.advance(tick_now(now)) {
+                send_errors += send(socket, &o);
+            }
         }
-        match socket.recv_from(&mut buf) {
-            Ok((n, SocketAddr::V4(from))) => {
-                let tick = tick_now(Instant::now());
-                for o in emulated.advance(tick) {
+        match skinbox_host::live::recv_stamped(socket, &mut buf, draining) {
+            Ok((n, Some(SocketAddr::V4(from)), stamp)) => {
+                draining = true;
+                let read = tick_now(Instant::now());
+                // the arrival on the box's time line; a stamp from before the start or
+                // more than a millisecond after the read (the wall clock stepped) is
+                // taken as the read
+                let late = ticks(Duration::from_millis(1));
+                let arrival = stamp
+                    .filter(|_| stamped)
+                    .and_then(|s| s.checked_sub(started_realtime))
+                    .map(ticks)
+                    .filter(|&t| t <= read + late)
+                    .unwrap_or(read)
+                    .max(last_command);
+                last_command = arrival;
+                for o in emulated.advance(arrival) {
                     send_errors += send(socket, &o);
                 }
-                if let Some(ack) =
-                    emulated.command(from, &buf[..n], tick, || tick_now(Instant::now()))
-                {
+                if let Some(ack) = emulated.command(from, &buf[..n], arrival, || {
+                    tick_now(Instant::now()).max(arrival)
+                }) {
                     send_errors += send(socket, &ack);
                 }
             }
             // IPv6 senders cannot reach an IPv4 box
-            Ok((_, SocketAddr::V6(_))) => {}
+            Ok(_) => draining = true,
             Err(e)
                 if matches!(
                     e.kind(),
                     std::io::ErrorKind::WouldBlock
                         | std::io::ErrorKind::TimedOut
                         | std::io::ErrorKind::Interrupted
-                ) => {}
+                ) =>
+            {
+                draining = false
+            }
             // an ICMP port unreachable of an earlier send shows up here on Linux
             Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => send_errors += 1,
             Err(e) => return Err(e),

@@ -25,6 +25,7 @@
 
 pub mod bad_input;
 pub mod bench;
+mod box_map;
 pub mod clock_map;
 pub mod control;
 pub mod convert;

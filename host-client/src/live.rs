@@ -122,6 +122,63 @@ fn enable_timestamps(socket: &Socket) {
 #[cfg(not(target_os = "linux"))]
 fn enable_timestamps(_socket: &Socket) {}
 
+/// Asks the kernel to stamp every datagram `socket` receives (SO_TIMESTAMPNS: CLOCK_REALTIME
+/// when the datagram entered the host's stack), for [`recv_stamped`]; an error where the
+/// system has no such option.
+pub fn enable_receive_timestamps(socket: &std::net::UdpSocket) -> io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let on: libc::c_int = 1;
+        // SAFETY: setsockopt reads one c_int through a valid pointer of the given length.
+        let rc = unsafe {
+            libc::setsockopt(
+                socket.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_TIMESTAMPNS,
+                (&on as *const libc::c_int).cast(),
+                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+            )
+        };
+        if rc == 0 {
+            Ok(())
+        } else {
+            Err(io::Error::last_os_error())
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = socket;
+        Err(io::Error::new(
+            io::ErrorKind::Unsupported,
+            "no kernel receive timestamps on this system",
+        ))
+    }
+}
+
+/// One datagram from a blocking `socket` into `buf` (waiting as the socket's read timeout
+/// says, or not at all with `dont_wait`): its length (cut to `buf`), sender and kernel
+/// receive timestamp (since the Unix epoch; `None` unless [`enable_receive_timestamps`]
+/// was granted). Errors as `recv_from`: `WouldBlock` or `TimedOut` when none came.
+pub fn recv_stamped(
+    socket: &std::net::UdpSocket,
+    buf: &mut [u8],
+    dont_wait: bool,
+) -> io::Result<(usize, Option<SocketAddr>, Option<Duration>)> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        linux::recv_one(socket.as_raw_fd(), buf, dont_wait)
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        socket.set_nonblocking(dont_wait)?;
+        let got = socket.recv_from(buf);
+        socket.set_nonblocking(false)?;
+        got.map(|(n, peer)| (n.min(buf.len()), Some(peer), None))
+    }
+}
+
 /// When a capture stops by itself, how often it reports progress, and how it receives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CaptureLimits {
@@ -330,6 +387,41 @@ mod linux {
             }
             Ok(n)
         }
+    }
+
+    /// One `recvmsg` into `buf`, with the sender and the SO_TIMESTAMPNS control message.
+    pub(super) fn recv_one(
+        fd: RawFd,
+        buf: &mut [u8],
+        dont_wait: bool,
+    ) -> io::Result<(usize, Option<SocketAddr>, Option<Duration>)> {
+        let mut iov = libc::iovec {
+            iov_base: buf.as_mut_ptr().cast(),
+            iov_len: buf.len(),
+        };
+        // SAFETY: all-zero bytes are valid values of these plain C structs.
+        let mut name: libc::sockaddr_storage = unsafe { std::mem::zeroed() };
+        let mut control: Control = [0; 8];
+        // SAFETY: as above.
+        let mut h: libc::msghdr = unsafe { std::mem::zeroed() };
+        h.msg_name = (&mut name as *mut libc::sockaddr_storage).cast();
+        h.msg_namelen = std::mem::size_of::<libc::sockaddr_storage>() as libc::socklen_t;
+        h.msg_iov = &mut iov;
+        h.msg_iovlen = 1;
+        h.msg_control = control.as_mut_ptr().cast();
+        h.msg_controllen = std::mem::size_of::<Control>() as _;
+        let flags = if dont_wait { libc::MSG_DONTWAIT } else { 0 };
+        // SAFETY: the header points at live buffers of the lengths it names; the kernel
+        // writes at most that much.
+        let n = unsafe { libc::recvmsg(fd, &mut h, flags) };
+        if n < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        Ok((
+            (n as usize).min(buf.len()),
+            peer(&name, h.msg_namelen),
+            timestamp(&h),
+        ))
     }
 
     fn peer(name: &libc::sockaddr_storage, len: libc::socklen_t) -> Option<SocketAddr> {
@@ -607,6 +699,59 @@ pub enum CaptureError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn stamped_datagrams_carry_the_kernel_arrival_time_inside_the_send() {
+        let epoch_ns = || {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_nanos()
+        };
+        let receiver = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let sender = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        enable_receive_timestamps(&receiver).unwrap();
+        let to = receiver.local_addr().unwrap();
+        let mut buf = [0u8; 16];
+        // the kernel turns its arrival stamps on in a deferred work item once a socket
+        // asks (before, a datagram is stamped when read): wait for a probe stamped inside
+        // its send
+        let on = (0..500).any(|_| {
+            let before = epoch_ns();
+            sender.send_to(b"probe", to).unwrap();
+            let after = epoch_ns();
+            let (_, _, stamp) = recv_stamped(&receiver, &mut buf, false).unwrap();
+            let inside = stamp.is_some_and(|s| (before..=after).contains(&s.as_nanos()));
+            if !inside {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            inside
+        });
+        assert!(on, "no arrival stamps within 5 s");
+        let mut brackets = vec![];
+        for i in 0..5u8 {
+            let before = epoch_ns();
+            sender.send_to(&[i; 30], to).unwrap();
+            brackets.push((before, epoch_ns()));
+        }
+        for (i, (before, after)) in brackets.into_iter().enumerate() {
+            let (n, from, stamp) = recv_stamped(&receiver, &mut buf, true).unwrap();
+            assert_eq!(
+                (n, from),
+                (16, Some(sender.local_addr().unwrap())),
+                "cut to buf"
+            );
+            assert_eq!(buf, [i as u8; 16]);
+            let stamp = stamp.expect("a kernel timestamp").as_nanos();
+            assert!(
+                (before..=after).contains(&stamp),
+                "{i}: {before} {stamp} {after}"
+            );
+        }
+        let e = recv_stamped(&receiver, &mut buf, true).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::WouldBlock);
+    }
 
     #[test]
     fn warns_only_when_granted_less_than_asked() {

@@ -57,6 +57,9 @@ pub struct RecordRow {
     pub datagram_sequence: u32,
     /// The cell's event sequence number (-1 for a data packet).
     pub event_sequence: i32,
+    /// IPv4 source address of the box's datagram, as an integer (`u32::from(Ipv4Addr)`);
+    /// 0 where unknown or not IPv4 (see [`source_fields`]).
+    pub source_ip: u32,
     /// Box that sent it.
     pub box_id: u16,
     /// The cell.
@@ -65,6 +68,8 @@ pub struct RecordRow {
     pub mask: u16,
     /// Event packets of this cell missing just before this one.
     pub event_packets_missing_before: u16,
+    /// UDP source port of the box's datagram (0 where unknown).
+    pub source_port: u16,
     /// UART port of the box.
     pub port: u8,
     /// [`KIND_DATA`] or [`KIND_EVENT`].
@@ -77,10 +82,35 @@ pub struct RecordRow {
     pub host_time_source: u8,
 }
 
+/// A datagram's source address as the rows' `source_ip` and `source_port`: the IPv4
+/// address as an integer (an IPv4-mapped IPv6 address as its IPv4 one) and the port; both 0
+/// where the source is unknown, and the address 0 for other IPv6 sources (the box speaks
+/// IPv4).
+pub fn source_fields(source: Option<std::net::SocketAddr>) -> (u32, u16) {
+    match source {
+        None => (0, 0),
+        Some(std::net::SocketAddr::V4(a)) => (u32::from(*a.ip()), a.port()),
+        Some(std::net::SocketAddr::V6(a)) => {
+            (a.ip().to_ipv4_mapped().map_or(0, u32::from), a.port())
+        }
+    }
+}
+
+/// `v.round()`, without the library call where `v` is an integer already: every `f64` of
+/// magnitude 2^52 or more is one, as host times in ns since 1970 are.
+#[inline]
+fn round(v: f64) -> f64 {
+    if v.abs() >= 4_503_599_627_370_496.0 {
+        v
+    } else {
+        v.round()
+    }
+}
+
 fn host_time(times: &RecordTimes) -> (i64, f64, u8) {
     (
-        times.sample_host_ns.map_or(0, |v| v.round() as i64),
-        times.host_error_bound_ns.map_or(f64::NAN, f64::round),
+        times.sample_host_ns.map_or(0, |v| round(v) as i64),
+        times.host_error_bound_ns.map_or(f64::NAN, round),
         host_time_source_code(times.source),
     )
 }
@@ -110,6 +140,7 @@ impl RecordRow {
             }
         };
         let (host_time_ns, host_time_bound_ns, host_time_source) = host_time(times);
+        let (source_ip, source_port) = source_fields(record.source);
         RecordRow {
             tick: record.tick,
             box_time_ns: record.tick.wrapping_mul(skinbox_protocol::TICK_NS),
@@ -120,10 +151,12 @@ impl RecordRow {
             values,
             datagram_sequence: record.datagram_sequence,
             event_sequence,
+            source_ip,
             box_id: record.box_id,
             cell_id: record.cell.cell_id(),
             mask,
             event_packets_missing_before: record.event_packets_missing_before,
+            source_port,
             port: record.port,
             kind,
             flags: record.flags,
@@ -151,6 +184,8 @@ pub struct SampleRow {
     pub sample_index: i64,
     /// The nine channels in physical units (0 where never received: see `known`).
     pub values: [f64; Channel::COUNT],
+    /// IPv4 source address of the box, as in [`RecordRow::source_ip`].
+    pub source_ip: u32,
     /// Box the cell is on.
     pub box_id: u16,
     /// The cell.
@@ -161,6 +196,8 @@ pub struct SampleRow {
     pub stale: u16,
     /// Channels received at least once.
     pub known: u16,
+    /// UDP source port of the box (0 where unknown).
+    pub source_port: u16,
     /// [`HOST_TIME_NONE`], [`HOST_TIME_RECEIVE_STAMPS`] or [`HOST_TIME_EXCHANGES`].
     pub host_time_source: u8,
 }
@@ -174,6 +211,7 @@ impl SampleRow {
             values[c.index()] = sample.value(c);
         }
         let (host_time_ns, host_time_bound_ns, host_time_source) = host_time(times);
+        let (source_ip, source_port) = source_fields(sample.source);
         SampleRow {
             tick: sample.tick,
             box_time_ns: sample.tick.wrapping_mul(skinbox_protocol::TICK_NS),
@@ -182,11 +220,13 @@ impl SampleRow {
             host_time_bound_ns,
             sample_index: times.sample_index,
             values,
+            source_ip,
             box_id: sample.box_id,
             cell_id: sample.cell_id,
             updated: sample.updated.bits(),
             stale: sample.stale.bits(),
             known: sample.known.bits(),
+            source_port,
             host_time_source,
         }
     }
@@ -223,6 +263,7 @@ pub const RECORD_FIELDS: &[RowField] = &[
         "<i4",
         offset_of!(RecordRow, event_sequence),
     ),
+    ("source_ip", "<u4", offset_of!(RecordRow, source_ip)),
     ("box_id", "<u2", offset_of!(RecordRow, box_id)),
     ("cell_id", "<u2", offset_of!(RecordRow, cell_id)),
     ("mask", "<u2", offset_of!(RecordRow, mask)),
@@ -231,6 +272,7 @@ pub const RECORD_FIELDS: &[RowField] = &[
         "<u2",
         offset_of!(RecordRow, event_packets_missing_before),
     ),
+    ("source_port", "<u2", offset_of!(RecordRow, source_port)),
     ("port", "u1", offset_of!(RecordRow, port)),
     ("kind", "u1", offset_of!(RecordRow, kind)),
     ("flags", "u1", offset_of!(RecordRow, flags)),
@@ -259,11 +301,13 @@ pub const SAMPLE_FIELDS: &[RowField] = &[
     ),
     ("sample_index", "<i8", offset_of!(SampleRow, sample_index)),
     ("values", "(9,)<f8", offset_of!(SampleRow, values)),
+    ("source_ip", "<u4", offset_of!(SampleRow, source_ip)),
     ("box_id", "<u2", offset_of!(SampleRow, box_id)),
     ("cell_id", "<u2", offset_of!(SampleRow, cell_id)),
     ("updated", "<u2", offset_of!(SampleRow, updated)),
     ("stale", "<u2", offset_of!(SampleRow, stale)),
     ("known", "<u2", offset_of!(SampleRow, known)),
+    ("source_port", "<u2", offset_of!(SampleRow, source_port)),
     (
         "host_time_source",
         "u1",
@@ -427,6 +471,52 @@ mod tests {
             }
             assert!(end <= row_size && row_size - end < 8, "{end} of {row_size}");
         }
+    }
+
+    #[test]
+    fn round_is_f64_round() {
+        for v in [
+            0.5,
+            -0.5,
+            1.5,
+            2.5,
+            -2.5,
+            4_503_599_627_370_495.5,
+            4_503_599_627_370_496.0,
+            1.795e18,
+            -1.795e18,
+            f64::INFINITY,
+        ] {
+            assert_eq!(round(v), v.round(), "{v}");
+        }
+        assert!(round(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn rows_name_the_source_address_of_their_box() {
+        use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr};
+        let v4 = SocketAddr::from(([192, 0, 2, 10], 54_091));
+        assert_eq!(source_fields(Some(v4)), (0xC000_020A, 54_091));
+        let mapped = SocketAddr::from((Ipv4Addr::new(10, 1, 2, 3).to_ipv6_mapped(), 7));
+        assert_eq!(source_fields(Some(mapped)), (0x0A01_0203, 7));
+        let v6 = SocketAddr::from((Ipv6Addr::LOCALHOST, 9));
+        assert_eq!(source_fields(Some(v6)), (0, 9));
+        assert_eq!(source_fields(None), (0, 0));
+        let record = DecodedRecord {
+            box_id: 4,
+            source: Some(v4),
+            datagram_sequence: 1,
+            port: 2,
+            flags: 0,
+            tick: 100,
+            cell: CellRepr::Data(DataRepr::from_raw(9, [0; 9]).unwrap()),
+            event_packets_missing_before: 0,
+        };
+        let row = RecordRow::new(&record, &UNTIMED);
+        assert_eq!(
+            (row.box_id, Ipv4Addr::from(row.source_ip), row.source_port),
+            (4, Ipv4Addr::new(192, 0, 2, 10), 54_091)
+        );
     }
 
     #[test]

@@ -22,8 +22,10 @@
 //! cell silent for so long that its drift moves the grid by more than half a period before
 //! its period is learnt (the sample index is then wrong by one).
 
+use crate::box_map::BoxMap;
 use crate::decoder::BoxKey;
 use std::collections::{HashMap, VecDeque};
+use std::hash::{BuildHasherDefault, Hasher};
 
 /// The bus model's processing time in a cell before its packet leaves, ns (docs/design.md
 /// section 7).
@@ -127,9 +129,70 @@ pub struct SampleClockEstimator {
     /// (sample index, stamp - anchor) of unqueued packets, kept however old: dense recently,
     /// thinned further back.
     unqueued: VecDeque<(i64, i64)>,
+    /// Running sums over `window` and `unqueued`: their least-squares lines and the
+    /// anchors' mean offset in O(1) at each packet.
+    window_sums: LineSums,
+    unqueued_sums: LineSums,
+    /// Recompute every fit from its points instead ([`SampleClockEstimator::batch`]).
+    batch: bool,
     last: Option<(i64, u64)>,
     since_fit: u32,
     period_learnt: bool,
+}
+
+/// Sums of points `(k, r)` for their least-squares line, exact in integers: a point is
+/// added and removed in O(1), and the line is the same whatever the order.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct LineSums {
+    n: i64,
+    k: i128,
+    r: i128,
+    kk: i128,
+    kr: i128,
+}
+
+impl LineSums {
+    fn add(&mut self, (k, r): (i64, i64)) {
+        let (k, r) = (i128::from(k), i128::from(r));
+        self.n += 1;
+        self.k = self.k.wrapping_add(k);
+        self.r = self.r.wrapping_add(r);
+        self.kk = self.kk.wrapping_add(k.wrapping_mul(k));
+        self.kr = self.kr.wrapping_add(k.wrapping_mul(r));
+    }
+
+    fn remove(&mut self, (k, r): (i64, i64)) {
+        let (k, r) = (i128::from(k), i128::from(r));
+        self.n -= 1;
+        self.k = self.k.wrapping_sub(k);
+        self.r = self.r.wrapping_sub(r);
+        self.kk = self.kk.wrapping_sub(k.wrapping_mul(k));
+        self.kr = self.kr.wrapping_sub(k.wrapping_mul(r));
+    }
+
+    /// Slope of `r` over `k` by least squares: `(n Σkr - Σk Σr) / (n Σk² - (Σk)²)`, both
+    /// exact, divided once; `None` for fewer than two distinct `k`.
+    fn slope(&self) -> Option<f64> {
+        let n = i128::from(self.n);
+        let den = n
+            .wrapping_mul(self.kk)
+            .wrapping_sub(self.k.wrapping_mul(self.k));
+        let num = n
+            .wrapping_mul(self.kr)
+            .wrapping_sub(self.k.wrapping_mul(self.r));
+        let slope = to_f64(num) / to_f64(den);
+        (den > 0 && slope.is_finite()).then_some(slope)
+    }
+
+    /// Mean of `r - period * k` over the points, taken about the point `(k0, r0)` (one of
+    /// them, or near them): the sums less `n` times it are small and exact, so the mean is
+    /// as precise as a sum of the points' own offsets.
+    fn mean_offset(&self, period: f64, (k0, r0): (i64, i64)) -> f64 {
+        let n = i128::from(self.n.max(1));
+        let dk = self.k.wrapping_sub(n.wrapping_mul(i128::from(k0)));
+        let dr = self.r.wrapping_sub(n.wrapping_mul(i128::from(r0)));
+        (r0 as f64 - period * k0 as f64) + (to_f64(dr) - period * to_f64(dk)) / n as f64
+    }
 }
 
 /// A packet's estimated sample time.
@@ -155,10 +218,21 @@ impl SampleClockEstimator {
             anchor_ns: 0,
             window: VecDeque::with_capacity(WINDOW),
             unqueued: VecDeque::with_capacity(ANCHORS),
+            window_sums: LineSums::default(),
+            unqueued_sums: LineSums::default(),
+            batch: false,
             last: None,
             since_fit: 0,
             period_learnt: false,
         }
+    }
+
+    /// The same estimator recomputing every least-squares fit and mean from all its points
+    /// (O([`WINDOW`]) per packet) instead of from running sums: the reference the
+    /// incremental fits are checked against.
+    pub fn batch(mut self) -> SampleClockEstimator {
+        self.batch = true;
+        self
     }
 
     /// The period in use, ns.
@@ -168,8 +242,10 @@ impl SampleClockEstimator {
 
     /// Starts over (a box reset: the stamps restart).
     pub fn reset(&mut self) {
+        let batch = self.batch;
         *self =
             SampleClockEstimator::new(self.nominal_period_ns, self.path_latency_ns.round() as u64);
+        self.batch = batch;
     }
 
     /// Takes the stamp of the cell's next packet (box time of its first start bit, ns, in
@@ -197,8 +273,8 @@ impl SampleClockEstimator {
                 } else {
                     0.125
                 };
-                let k = ((rel - self.offset_ns + margin * self.period_ns) / self.period_ns).floor();
-                (k as i64).max(last_index)
+                floor_i64((rel - self.offset_ns + margin * self.period_ns) / self.period_ns)
+                    .max(last_index)
             }
         };
         let rel = (stamp_ns - self.anchor_ns) as i64;
@@ -218,30 +294,49 @@ impl SampleClockEstimator {
                 return self.push(stamp_ns, unqueued);
             }
         }
-        if self.window.len() == WINDOW {
-            self.window.pop_front();
+        // Once the period is learnt and an unqueued packet is kept, every fit goes through
+        // the unqueued packets until a reset (neither changes back): past the first
+        // 2 * REFIT_EVERY stamps, the window, which only its length is then read of, is
+        // left as it is.
+        let anchored = self.period_learnt
+            && !self.unqueued.is_empty()
+            && self.window.len() >= 2 * REFIT_EVERY as usize;
+        if !anchored {
+            if self.window.len() == WINDOW {
+                if let Some(old) = self.window.pop_front() {
+                    self.window_sums.remove(old);
+                }
+            }
+            self.window.push_back((index, rel));
+            self.window_sums.add((index, rel));
         }
-        self.window.push_back((index, rel));
         self.last = Some((index, stamp_ns));
         self.since_fit += 1;
         if unqueued {
             if self.unqueued.len() == ANCHORS {
                 // Thin the older half to every other one: the kept ones span ever more
                 // samples (the period's precision grows with it), the newest stay dense.
-                let mut i = 0;
-                self.unqueued.retain(|_| {
+                let (mut i, sums) = (0, &mut self.unqueued_sums);
+                self.unqueued.retain(|&point| {
                     i += 1;
-                    i > ANCHORS / 2 || i % 2 == 1
+                    let keep = i > ANCHORS / 2 || i % 2 == 1;
+                    if !keep {
+                        sums.remove(point);
+                    }
+                    keep
                 });
             }
             self.unqueued.push_back((index, rel));
+            self.unqueued_sums.add((index, rel));
             // A cell's drift wanders (temperature): the line holds only over a while.
             while self
                 .unqueued
                 .front()
                 .is_some_and(|&(_, r)| (rel - r) as f64 > MAX_ANCHOR_AGE_NS)
             {
-                self.unqueued.pop_front();
+                if let Some(old) = self.unqueued.pop_front() {
+                    self.unqueued_sums.remove(old);
+                }
             }
         }
         if self.since_fit >= REFIT_EVERY
@@ -280,15 +375,15 @@ impl SampleClockEstimator {
             return;
         }
         if span(&self.window) >= MIN_SPAN {
-            if let Some(ls) = least_squares(&self.window).filter(|&p| plausible(p)) {
+            let ls = if self.batch {
+                least_squares(&self.window)
+            } else {
+                self.window_sums.slope()
+            };
+            if let Some(ls) = ls.filter(|&p| plausible(p)) {
                 // Then the line through the lowest point of each half: packets that did
                 // not queue lie exactly on the true line.
-                let lowest = |from: usize, to: usize| {
-                    self.window
-                        .range(from..to)
-                        .map(|&(k, r)| (k, r as f64 - ls * k as f64))
-                        .min_by(|a, b| a.1.total_cmp(&b.1))
-                };
+                let lowest = |from: usize, to: usize| lowest_under(&self.window, from, to, ls);
                 let half = self.window.len() / 2;
                 let envelope = match (lowest(0, half), lowest(half, self.window.len())) {
                     (Some((ka, ra)), Some((kb, rb))) if kb - ka >= MIN_SPAN / 2 => {
@@ -315,8 +410,13 @@ impl SampleClockEstimator {
     fn fit_anchors(&mut self) {
         if let (Some(a), Some(b)) = (self.unqueued.front(), self.unqueued.back()) {
             if b.0 - a.0 >= MIN_ANCHOR_SPAN {
-                if let Some(p) = least_squares(&self.unqueued)
-                    .filter(|&p| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR)
+                let slope = if self.batch {
+                    least_squares(&self.unqueued)
+                } else {
+                    self.unqueued_sums.slope()
+                };
+                if let Some(p) =
+                    slope.filter(|&p| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR)
                 {
                     self.period_ns = p;
                     self.period_learnt = true;
@@ -328,15 +428,70 @@ impl SampleClockEstimator {
 
     /// The unqueued packets lie on the line, up to the tick: the mean of their offsets.
     fn anchored_offset(&self) -> f64 {
-        self.unqueued
-            .iter()
-            .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
-            .sum::<f64>()
-            / self.unqueued.len().max(1) as f64
+        match self.unqueued.back() {
+            Some(&newest) if !self.batch => self.unqueued_sums.mean_offset(self.period_ns, newest),
+            _ => {
+                self.unqueued
+                    .iter()
+                    .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
+                    .sum::<f64>()
+                    / self.unqueued.len().max(1) as f64
+            }
+        }
     }
 }
 
-/// Slope of stamps over sample indices by least squares, ns per sample.
+/// The first of `points[from..to]` lowest below the line of slope `slope` through the
+/// origin: its sample index and `r - slope * k` (`None` for no points). The points' offsets
+/// are finite and never -0, so `<` orders them as `f64::total_cmp` does.
+fn lowest_under(
+    points: &VecDeque<(i64, i64)>,
+    from: usize,
+    to: usize,
+    slope: f64,
+) -> Option<(i64, f64)> {
+    let (front, back) = points.as_slices();
+    let split = front.len();
+    let (mut best_k, mut best) = (None, f64::INFINITY);
+    let parts = [
+        front
+            .get(from.min(split)..to.min(split))
+            .unwrap_or_default(),
+        back.get(from.saturating_sub(split)..to.saturating_sub(split))
+            .unwrap_or_default(),
+    ];
+    for part in parts {
+        for &(k, r) in part {
+            let v = r as f64 - slope * k as f64;
+            if v < best {
+                (best_k, best) = (Some(k), v);
+            }
+        }
+    }
+    best_k.map(|k| (k, best))
+}
+
+/// `x.floor() as i64` (saturating, NaN to 0) without the library call of `floor`.
+fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    if (t as f64) > x {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
+/// `x` as the nearest `f64`, as `x as f64`, through the faster conversion of an `i64`
+/// where it fits (the same integer rounds to the same `f64` either way).
+fn to_f64(x: i128) -> f64 {
+    match i64::try_from(x) {
+        Ok(v) => v as f64,
+        Err(_) => x as f64,
+    }
+}
+
+/// Slope of stamps over sample indices by least squares, ns per sample, from every point
+/// (the batch reference of [`LineSums::slope`]).
 fn least_squares(points: &VecDeque<(i64, i64)>) -> Option<f64> {
     let &(k0, r0) = points.front()?;
     let n = points.len() as f64;
@@ -361,8 +516,44 @@ pub struct SampleTimer {
     paths: PathModel,
     /// The cells sample on the box's time grid (method c): no estimate, the grid point.
     on_box_grid: bool,
-    cells: HashMap<(BoxKey, u16), SampleClockEstimator>,
-    last_on_port: HashMap<(BoxKey, u8), u64>,
+    /// The estimators recompute their fits from every point ([`SampleClockEstimator::batch`]).
+    batch: bool,
+    /// Each box's ports and cells.
+    boxes: BoxMap<BoxClocks>,
+}
+
+/// The cells and ports of one box.
+#[derive(Debug, Clone)]
+struct BoxClocks {
+    /// Stamp of the last packet on each port.
+    last_on_port: Box<[Option<u64>; 256]>,
+    cells: HashMap<u16, SampleClockEstimator, BuildHasherDefault<CellIdHasher>>,
+}
+
+/// The hasher of cell ids (at most 65,536 keys a box): a multiplication, and its high bits
+/// folded onto the low ones, which the table indexes by.
+#[derive(Debug, Clone, Copy, Default)]
+struct CellIdHasher(u64);
+
+impl Hasher for CellIdHasher {
+    fn finish(&self) -> u64 {
+        self.0 ^ (self.0 >> 32)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    fn write_u16(&mut self, id: u16) {
+        self.write_u64(u64::from(id));
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        // Fibonacci hashing: the high bits, which the table uses, depend on every bit.
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
 }
 
 impl SampleTimer {
@@ -372,8 +563,8 @@ impl SampleTimer {
             nominal_period_ns: 1e9 / sample_rate_hz,
             paths,
             on_box_grid: false,
-            cells: HashMap::new(),
-            last_on_port: HashMap::new(),
+            batch: false,
+            boxes: BoxMap::default(),
         }
     }
 
@@ -383,6 +574,13 @@ impl SampleTimer {
     /// half round trip) falls on, allowing queueing at the root up to 7/8 of a period.
     pub fn on_box_grid(mut self) -> SampleTimer {
         self.on_box_grid = true;
+        self
+    }
+
+    /// The same timer with every cell's fits recomputed from all their points
+    /// ([`SampleClockEstimator::batch`]): the reference for the incremental fits.
+    pub fn batch(mut self) -> SampleTimer {
+        self.batch = true;
         self
     }
 
@@ -409,27 +607,41 @@ impl SampleTimer {
                 period_learnt: false,
             };
         }
+        let batch = self.batch;
+        let clocks = self.boxes.get_or_insert_with(key, || BoxClocks {
+            last_on_port: Box::new([None; 256]),
+            cells: HashMap::default(),
+        });
         // The port's first packet: whether the line was idle before it is unknown.
-        let unqueued = self
-            .last_on_port
-            .insert((key, port), stamp_ns)
+        let unqueued = clocks.last_on_port[usize::from(port)]
+            .replace(stamp_ns)
             .is_some_and(|last| stamp_ns >= last && stamp_ns - last > BACK_TO_BACK_NS);
-        self.cells
-            .entry((key, cell_id))
-            .or_insert_with(|| SampleClockEstimator::new(period, latency))
+        clocks
+            .cells
+            .entry(cell_id)
+            .or_insert_with(|| {
+                let estimator = SampleClockEstimator::new(period, latency);
+                if batch {
+                    estimator.batch()
+                } else {
+                    estimator
+                }
+            })
             .push(stamp_ns, unqueued)
     }
 
     /// Starts every cell and port of `box_id` over (the box was reset), whatever its
     /// source address.
     pub fn reset_box(&mut self, box_id: u16) {
-        self.cells.retain(|(b, _), _| b.box_id != box_id);
-        self.last_on_port.retain(|(b, _), _| b.box_id != box_id);
+        for (_, b) in self.boxes.iter_mut().filter(|(k, _)| k.box_id == box_id) {
+            b.cells.clear();
+            *b.last_on_port = [None; 256];
+        }
     }
 
     /// Cells followed (none on the box's grid).
     pub fn cells(&self) -> usize {
-        self.cells.len()
+        self.boxes.iter().map(|(_, b)| b.cells.len()).sum()
     }
 }
 
@@ -646,6 +858,120 @@ mod tests {
         assert_eq!(timer.cells(), 3);
         timer.reset_box(7);
         assert_eq!(timer.cells(), 0);
+    }
+
+    /// Pushes `stamps` (stamp, unqueued) through an incremental and a batch estimator and
+    /// returns the largest difference of their sample times, ns; the sample indices and
+    /// whether the period was learnt must be equal at every packet.
+    fn incremental_against_batch(nominal_ns: f64, latency: u64, stamps: &[(u64, bool)]) -> f64 {
+        let mut fast = SampleClockEstimator::new(nominal_ns, latency);
+        let mut batch = SampleClockEstimator::new(nominal_ns, latency).batch();
+        let mut worst = 0.0f64;
+        for (i, &(stamp, unqueued)) in stamps.iter().enumerate() {
+            let (f, b) = (fast.push(stamp, unqueued), batch.push(stamp, unqueued));
+            assert_eq!(
+                (f.index, f.period_learnt),
+                (b.index, b.period_learnt),
+                "packet {i}"
+            );
+            worst = worst.max((f.sample_time_ns - b.sample_time_ns).abs());
+        }
+        worst
+    }
+
+    #[test]
+    fn the_incremental_fits_give_the_batch_fits_sample_times_to_a_nanosecond() {
+        let mut noise = Noise(7);
+        // data mode, one in four unqueued; event mode with gaps, none flagged unqueued
+        // (the window's envelope)
+        let c = cell(80.0, 250.0, 12);
+        let mut stamps: Vec<(u64, bool)> = (0..20_000u64)
+            .map(|k| {
+                let idle = noise.next() < 0.25;
+                let q = if idle { 0.0 } else { noise.next() * 600e3 };
+                (c.stamp_ns(k, q), idle)
+            })
+            .collect();
+        let mut k = 0u64;
+        let e = cell(-60.0, 500.0, 3);
+        while stamps.len() < 40_000 {
+            for _ in 0..1 + (noise.next() * 40.0) as u64 {
+                stamps.push((e.stamp_ns(k, noise.next() * 90e3), false));
+                k += 1;
+            }
+            k += (noise.next() * 600.0) as u64;
+        }
+        let worst = incremental_against_batch(2e6, e.latency_ns, &stamps[20_000..]);
+        assert!(worst < 1.0, "event mode: {worst} ns");
+        stamps.truncate(20_000);
+        // hours in: the stamps' magnitude grows, the sums stay exact
+        let late: Vec<(u64, bool)> = stamps
+            .iter()
+            .map(|&(s, u)| (s + 5 * 3_600_000_000_000, u))
+            .collect();
+        // then a box reset: the stamps start over
+        let reset: Vec<(u64, bool)> = stamps[..3_000].to_vec();
+        stamps.extend(late);
+        stamps.extend(reset);
+        let worst = incremental_against_batch(4e6, c.latency_ns, &stamps);
+        assert!(worst < 1.0, "data mode: {worst} ns");
+    }
+
+    #[test]
+    fn floor_i64_is_floor_as_i64() {
+        for x in [
+            0.0,
+            -0.0,
+            2.5,
+            -2.5,
+            -2.0,
+            3.0,
+            0.999_999,
+            -1e-300,
+            4.5e15 + 0.5,
+            9.3e18,
+            -9.3e18,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ] {
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+        }
+    }
+
+    #[test]
+    fn line_sums_remove_what_they_added() {
+        let mut sums = LineSums::default();
+        let points = [
+            (3, 12_000_000),
+            (4, 16_000_008),
+            (9, 36_000_016),
+            (10, 40_000_040),
+        ];
+        for p in points {
+            sums.add(p);
+        }
+        let all = sums;
+        sums.add((1 << 40, i64::MAX / 4));
+        sums.remove((1 << 40, i64::MAX / 4));
+        assert_eq!(sums, all);
+        // the slope by hand: n = 4, Σk = 26, Σk² = 206, Σr = 104,000,064,
+        // Σkr = 3*12e6 + 4*16,000,008 + 9*36,000,016 + 10*40,000,040 = 824,000,576
+        let expected = (4.0 * 824_000_576.0 - 26.0 * 104_000_064.0) / (4.0 * 206.0 - 676.0);
+        assert_eq!(sums.slope(), Some(expected));
+        let period = 4_000_001.0;
+        let mean = points
+            .iter()
+            .map(|&(k, r)| r as f64 - period * k as f64)
+            .sum::<f64>()
+            / 4.0;
+        assert!((sums.mean_offset(period, (10, 40_000_040)) - mean).abs() < 1e-6);
+        let mut one = LineSums::default();
+        one.add((5, 5));
+        one.add((5, 9));
+        assert_eq!(one.slope(), None, "one sample index: no slope");
     }
 
     #[test]

@@ -8,6 +8,7 @@
 //! other pcaps (a co-simulation's are simulated time). Each box has its own map, so the
 //! records of several boxes land on one host time line.
 
+use crate::box_map::BoxMap;
 use crate::clock_map::{ClockMap, HostTime, ReceiveStampMap, TimeExchange};
 use crate::decoder::{BoxKey, DecodedRecord};
 use crate::sample_clock::{PathModel, SampleTimer};
@@ -80,8 +81,8 @@ pub struct BoxTimeSummary {
 #[derive(Debug, Clone)]
 pub struct Timing {
     samples: SampleTimer,
-    exchanges: HashMap<BoxKey, ClockMap>,
-    receive: HashMap<BoxKey, ReceiveStampMap>,
+    exchanges: BoxMap<ClockMap>,
+    receive: BoxMap<ReceiveStampMap>,
     /// Each box's boot id, from its latest status datagram.
     boot_ids: HashMap<BoxKey, u32>,
     /// Read-tick acknowledgements that could not be used: no boot id seen yet, or an
@@ -96,12 +97,19 @@ impl Timing {
         self
     }
 
+    /// The same timing with every sample clock fit recomputed from all its points
+    /// ([`SampleTimer::batch`]): the reference for the incremental fits, O(window) a record.
+    pub fn batch(mut self) -> Timing {
+        self.samples = self.samples.batch();
+        self
+    }
+
     /// Cells sampling nominally at `sample_rate_hz` on paths of `paths`.
     pub fn new(sample_rate_hz: f64, paths: PathModel) -> Timing {
         Timing {
             samples: SampleTimer::new(sample_rate_hz, paths),
-            exchanges: HashMap::new(),
-            receive: HashMap::new(),
+            exchanges: BoxMap::default(),
+            receive: BoxMap::default(),
             boot_ids: HashMap::new(),
             exchanges_unused: 0,
         }
@@ -158,8 +166,7 @@ impl Timing {
             .max();
         if let Some(tick) = latest {
             self.receive
-                .entry(key)
-                .or_default()
+                .get_or_insert_with(key, ReceiveStampMap::default)
                 .push(tick, receive.as_nanos() as u64);
         }
     }
@@ -226,8 +233,7 @@ impl Timing {
         exchange: TimeExchange,
     ) -> Result<(), crate::clock_map::ExchangeError> {
         self.exchanges
-            .entry(key)
-            .or_default()
+            .get_or_insert_with(key, ClockMap::default)
             .push(boot_id, exchange)
     }
 

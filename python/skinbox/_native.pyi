@@ -10,12 +10,13 @@ _Path = Union[str, "PathLike[str]"]
 RECORD_DTYPE: np.dtype
 """One record (cell packet): tick, box_time_ns, sample_box_time_ns, host_time_ns,
 host_time_bound_ns, sample_index, values (9 channels, units), datagram_sequence,
-event_sequence, box_id, cell_id, mask, event_packets_missing_before, port, kind, flags,
-second_part, host_time_source."""
+event_sequence, source_ip (the box's IPv4 source address as an integer, 0 where unknown),
+box_id, cell_id, mask, event_packets_missing_before, source_port (0 where unknown), port,
+kind, flags, second_part, host_time_source."""
 SAMPLE_DTYPE: np.dtype
 """One full sample: tick, box_time_ns, sample_box_time_ns, host_time_ns,
-host_time_bound_ns, sample_index, values (9 channels, units), box_id, cell_id, updated,
-stale, known, host_time_source."""
+host_time_bound_ns, sample_index, values (9 channels, units), source_ip, box_id, cell_id,
+updated, stale, known, source_port, host_time_source."""
 CHANNELS: List[str]
 """The nine channel names, in the order of ``values``."""
 CHANNEL_UNITS: List[str]

@@ -3,6 +3,7 @@ record, and the report, on synthetic captures of the box's reference model."""
 
 from __future__ import annotations
 
+import ipaddress
 import math
 import struct
 
@@ -26,6 +27,13 @@ def assert_row_equals(row: np.void, want: dict) -> None:
     for field in ("box_id", "datagram_sequence", "port", "flags", "cell_id"):
         assert row[field] == want[field], field
     assert row["event_packets_missing_before"] == want["event_packets_missing_before"]
+    # the box's source address, "IP:port" in the JSON lines
+    if want["source"] is None:
+        assert (row["source_ip"], row["source_port"]) == (0, 0)
+    else:
+        ip, port = want["source"].rsplit(":", 1)
+        assert str(ipaddress.IPv4Address(int(row["source_ip"]))) == ip
+        assert row["source_port"] == int(port)
     assert row["kind"] == {"data": skinbox.KIND_DATA, "event": skinbox.KIND_EVENT}[want["kind"]]
     assert row["event_sequence"] == (
         -1 if want["event_sequence"] is None else want["event_sequence"]
@@ -66,6 +74,7 @@ def test_every_field_equals_decode_jsonl(name, captures, skinbox_bin):
     assert np.array_equal(records["cell_id"], truth["cell_id"])
     assert np.array_equal(records["box_id"], truth["box_id"])
     assert np.array_equal(records["mask"], truth["mask"])
+    assert (records["source_port"] != 0).all(), "every datagram of a pcap has its source"
 
 
 @pytest.mark.parametrize("name", ["mixed", "two_boxes", "gaps", "pcapng"])

@@ -58,7 +58,14 @@ def test_samples_carry_the_record_times(captures):
     cells = skinbox.samples(path)
     for (box_id, cell_id), rows in cells.items():
         mine = records[(records["box_id"] == box_id) & (records["cell_id"] == cell_id)]
-        for field in ("tick", "sample_box_time_ns", "host_time_ns", "sample_index"):
+        for field in (
+            "tick",
+            "sample_box_time_ns",
+            "host_time_ns",
+            "sample_index",
+            "source_ip",
+            "source_port",
+        ):
             assert np.array_equal(rows[field], mine[field]), field
 
 

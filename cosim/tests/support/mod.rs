@@ -469,3 +469,38 @@ pub fn traffic(ports: usize, from_ns: f64, until_ns: f64, every_ns: f64) -> Vec<
         })
         .collect()
 }
+
+/// A cell command packet, `n` telling them apart.
+pub fn cell_packet(n: u8) -> [u8; skinbox_protocol::cell::PACKET_LEN] {
+    let mut p = [0u8; skinbox_protocol::cell::PACKET_LEN];
+    for (i, b) in p.iter_mut().enumerate() {
+        *b = n.wrapping_mul(37).wrapping_add(i as u8 * 11);
+    }
+    p[0] = skinbox_protocol::cell_command::COMMAND_HEADER;
+    p
+}
+
+/// The cell commands of the downlink test (the RTL's acknowledgements are these results,
+/// cosim/tests/downlink.rs; the emulator's test replays them on loopback): (box tick of
+/// the frame's first edge, port, packet, the result the rules give: two slots a port, a
+/// packet queued in every target port or in none). 12 us apart: an acknowledgement waits
+/// for the uplink's datagram on the wire, and holds the reply buffer until it has left.
+/// (Offers while a packet is still being copied, 20 clocks a port, are refused too: at 8
+/// ports the copy ends before the buffer is free again; the block's and the model's tests
+/// show it.)
+pub fn downlink_schedule() -> Vec<(u64, u8, u8, skinbox_protocol::command::AckResult)> {
+    use skinbox_protocol::command::{AckResult, ALL_PORTS};
+    let us = 125u64;
+    vec![
+        (50 * us, 3, 1, AckResult::Ok),
+        (62 * us, 3, 2, AckResult::Ok),
+        // port 3 holds two: the broadcast goes nowhere, the next for port 3 neither
+        (74 * us, ALL_PORTS, 3, AckResult::DownlinkFull),
+        (86 * us, 3, 4, AckResult::DownlinkFull),
+        // port 3 has drained (two packets take 100 us)
+        (200 * us, ALL_PORTS, 5, AckResult::Ok),
+        (215 * us, 1, 6, AckResult::Ok),
+        (230 * us, ALL_PORTS, 7, AckResult::DownlinkFull),
+        (245 * us, 0, 8, AckResult::Ok),
+    ]
+}
