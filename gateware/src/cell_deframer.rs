@@ -195,6 +195,8 @@ pub struct CellDeframer {
     a_deadline: DFF<Bits<12>>,
     sampled_age: DFF<Bits<STAMP_BITS>>,
     limit_base: DFF<Bits<12>>,
+    // the tick's low bits, registered here a clock ahead (the shared tick's wires are long)
+    tick_low: DFF<Bits<12>>,
     a_start_tick: DFF<Bits<32>>,
     // the decision's registers
     state_write: DFF<Bit>,
@@ -355,6 +357,7 @@ impl CellDeframer {
             a_deadline: Default::default(),
             sampled_age: Default::default(),
             limit_base: Default::default(),
+            tick_low: Default::default(),
             a_start_tick: Default::default(),
             state_write: Default::default(),
             state_port: Default::default(),
@@ -435,6 +438,7 @@ impl Logic for CellDeframer {
             a_deadline,
             sampled_age,
             limit_base,
+            tick_low,
             a_start_tick,
             state_write,
             state_port,
@@ -507,12 +511,12 @@ impl Logic for CellDeframer {
         self.sampled_age.d.next = self.age.val();
         // tick + truncation time in the next cycle's tick
         self.limit_base.d.next = self.tick.val().get_bits::<12>(0) + 1 + self.truncation.val();
+        self.tick_low.d.next = self.tick.val().get_bits::<12>(0) + 1;
 
         // cycle t + 2: the arithmetic, from the registers and the RAMs' output registers,
         // into the decision's input registers
         // idle: now - deadline, signed; with a byte held, its strobe (now - age) decides
-        self.idle.next =
-            self.tick.val().get_bits::<12>(0) - self.state_ram.read_data.val().get_bits::<12>(14);
+        self.idle.next = self.tick_low.q.val() - self.state_ram.read_data.val().get_bits::<12>(14);
         self.deadline.next =
             self.limit_base.q.val() - bit_cast::<12, STAMP_BITS>(self.sampled_age.q.val());
         self.a_port.d.next = self.port.q.val();
