@@ -68,6 +68,8 @@ pub struct DdsPublished {
     pub messages: [u64; 3],
     /// Writes that failed.
     pub write_errors: u64,
+    /// The first failed write's error.
+    pub first_write_error: Option<String>,
     /// Time from a samples message's log time (its datagram's receive time) to the
     /// return of its write, ns: median.
     pub latency_p50_ns: Option<u64>,
@@ -183,7 +185,12 @@ impl Output for DdsOutput {
             Ok(()) => self.published.messages[topic.index()] += 1,
             // A write refused (the history full of unacknowledged messages, a subscriber
             // gone) is counted, not fatal: the capture goes on.
-            Err(_) => self.published.write_errors += 1,
+            Err(e) => {
+                self.published.write_errors += 1;
+                if self.published.first_write_error.is_none() {
+                    self.published.first_write_error = Some(e.to_string());
+                }
+            }
         }
         if topic == Topic::Samples && self.latencies_ns.len() < LATENCIES_KEPT {
             let now = SystemTime::now()

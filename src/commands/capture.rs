@@ -323,6 +323,9 @@ impl skinbox_ros::sink::Output for DdsReport {
             us(p.latency_max_ns),
             us(p.write_p99_ns)
         );
+        if let Some(e) = &p.first_write_error {
+            eprintln!("ROS 2 over DDS: the first failed write: {e}");
+        }
         self.0.close()
     }
 }
