@@ -36,11 +36,28 @@ impl CdrWriter {
         self.buf.reserve(additional);
     }
 
-    #[inline]
+    #[inline(always)]
     fn align(&mut self, n: usize) {
         let pos = self.buf.len() - CDR_LE_HEADER.len();
         let pad = (n - pos % n) % n;
-        self.buf.resize(self.buf.len() + pad, 0);
+        self.buf.extend_from_slice(&[0; 8][..pad]);
+    }
+
+    /// Writes a run of primitives of at most `N` bytes (with their padding) through a
+    /// [`CdrBlock`]: on the stack, aligned as they land in the payload, then appended at
+    /// once, much faster than field by field.
+    ///
+    /// `f` writing more than `N` bytes panics: `N` is the most the caller's fixed-size
+    /// message takes.
+    #[inline(always)]
+    pub fn block<const N: usize>(&mut self, f: impl FnOnce(&mut CdrBlock<N>)) {
+        let mut b = CdrBlock {
+            bytes: [0; N],
+            pos: 0,
+            base: self.buf.len() - CDR_LE_HEADER.len(),
+        };
+        f(&mut b);
+        self.buf.extend_from_slice(&b.bytes[..b.pos]);
     }
 
     /// A `uint8`.
@@ -121,6 +138,81 @@ impl CdrWriter {
     }
 }
 
+/// A run of primitives being written by [`CdrWriter::block`].
+#[derive(Debug)]
+pub struct CdrBlock<const N: usize> {
+    bytes: [u8; N],
+    pos: usize,
+    /// Offset of `bytes[0]` from the end of the encapsulation header.
+    base: usize,
+}
+
+impl<const N: usize> CdrBlock<N> {
+    #[inline(always)]
+    fn put<const M: usize>(&mut self, v: [u8; M]) {
+        // Padding is left zero: the block starts zeroed.
+        self.pos += (M - (self.base + self.pos) % M) % M;
+        self.bytes[self.pos..self.pos + M].copy_from_slice(&v);
+        self.pos += M;
+    }
+
+    /// A `uint8`.
+    #[inline(always)]
+    pub fn u8(&mut self, v: u8) {
+        self.put([v]);
+    }
+
+    /// A `bool`.
+    #[inline(always)]
+    pub fn bool(&mut self, v: bool) {
+        self.put([u8::from(v)]);
+    }
+
+    /// A `uint16`.
+    #[inline(always)]
+    pub fn u16(&mut self, v: u16) {
+        self.put(v.to_le_bytes());
+    }
+
+    /// A `uint32`.
+    #[inline(always)]
+    pub fn u32(&mut self, v: u32) {
+        self.put(v.to_le_bytes());
+    }
+
+    /// An `int32`.
+    #[inline(always)]
+    pub fn i32(&mut self, v: i32) {
+        self.put(v.to_le_bytes());
+    }
+
+    /// A `uint64`.
+    #[inline(always)]
+    pub fn u64(&mut self, v: u64) {
+        self.put(v.to_le_bytes());
+    }
+
+    /// An `int64`.
+    #[inline(always)]
+    pub fn i64(&mut self, v: i64) {
+        self.put(v.to_le_bytes());
+    }
+
+    /// A `float64`.
+    #[inline(always)]
+    pub fn f64(&mut self, v: f64) {
+        self.put(v.to_le_bytes());
+    }
+
+    /// A fixed-size `float64[K]` (no length).
+    #[inline(always)]
+    pub fn f64_array(&mut self, v: &[f64]) {
+        for x in v {
+            self.put(x.to_le_bytes());
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -143,5 +235,38 @@ mod tests {
                 3, 0, 0, 0, b'a', b'b', 0
             ][..]
         );
+    }
+
+    #[test]
+    fn a_block_writes_what_the_fields_write() {
+        for lead in 0..8 {
+            let mut a = CdrWriter::new();
+            let mut b = CdrWriter::new();
+            for w in [&mut a, &mut b] {
+                w.start();
+                (0..lead).for_each(|i| w.u8(i));
+            }
+            a.u16(2);
+            a.u8(3);
+            a.f64_array(&[0.5, -1.0]);
+            a.i32(-4);
+            a.bool(true);
+            a.u64(5);
+            a.u32(6);
+            a.i64(-7);
+            a.f64(8.0);
+            b.block::<96>(|b| {
+                b.u16(2);
+                b.u8(3);
+                b.f64_array(&[0.5, -1.0]);
+                b.i32(-4);
+                b.bool(true);
+                b.u64(5);
+                b.u32(6);
+                b.i64(-7);
+                b.f64(8.0);
+            });
+            assert_eq!(a.bytes(), b.bytes(), "{lead} bytes before");
+        }
     }
 }

@@ -13,6 +13,7 @@
 
 pub mod bench;
 pub mod cdr;
+pub mod dds;
 pub mod foxglove;
 pub mod mcap_out;
 pub mod msg;

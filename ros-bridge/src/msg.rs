@@ -142,22 +142,24 @@ impl RosMessage for CellSample {
 
     #[inline]
     fn encode_fields(&self, w: &mut CdrWriter) {
-        w.u16(self.box_id);
-        w.u8(self.port);
-        w.u16(self.cell_id);
-        w.u8(self.kind);
-        w.u16(self.event_mask);
-        w.f64_array(&self.values);
-        w.i32(self.event_sequence);
-        w.bool(self.second_part);
-        w.u16(self.event_packets_missing_before);
-        w.u8(self.flags);
-        w.u32(self.datagram_sequence);
-        w.u64(self.box_time_ns);
-        w.f64(self.sample_box_time_ns);
-        w.i64(self.host_time_ns);
-        w.f64(self.host_time_bound_ns);
-        w.u8(self.host_time_source);
+        w.block::<CELL_SAMPLE_MAX_BYTES>(|w| {
+            w.u16(self.box_id);
+            w.u8(self.port);
+            w.u16(self.cell_id);
+            w.u8(self.kind);
+            w.u16(self.event_mask);
+            w.f64_array(&self.values);
+            w.i32(self.event_sequence);
+            w.bool(self.second_part);
+            w.u16(self.event_packets_missing_before);
+            w.u8(self.flags);
+            w.u32(self.datagram_sequence);
+            w.u64(self.box_time_ns);
+            w.f64(self.sample_box_time_ns);
+            w.i64(self.host_time_ns);
+            w.f64(self.host_time_bound_ns);
+            w.u8(self.host_time_source);
+        });
     }
 
     fn fields(&self) -> Vec<(String, Value)> {
@@ -203,8 +205,9 @@ pub struct CellSampleBatch {
     pub samples: Vec<CellSample>,
 }
 
-/// Bytes of one [`CellSample`] in CDR at most (with its alignment).
-pub const CELL_SAMPLE_MAX_BYTES: usize = 8 + 72 + 56;
+/// Bytes of one [`CellSample`] in CDR at most, with its padding (131 to 138 bytes by
+/// where it starts, rounded up to 8).
+pub const CELL_SAMPLE_MAX_BYTES: usize = 144;
 
 impl RosMessage for CellSampleBatch {
     const NAME: &'static str = "skinbox_msgs/CellSampleBatch";

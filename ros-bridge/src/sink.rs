@@ -13,7 +13,6 @@ use skinbox_host::{DecodedRecord, RecordSink};
 use skinbox_protocol::datagram::{Datagram, DatagramBody};
 use skinbox_protocol::record::FLAG_LOSS_BEFORE;
 use skinbox_protocol::{Channel, DatagramRepr};
-use std::collections::{BTreeMap, BTreeSet};
 use std::net::SocketAddr;
 use std::time::Duration;
 
@@ -105,11 +104,46 @@ impl Default for SinkSettings {
     }
 }
 
+/// The cells seen in a period: one bit per cell id, and their count.
+#[derive(Debug, Clone)]
+struct CellSet {
+    bits: Box<[u64; 1024]>,
+    len: usize,
+}
+
+impl Default for CellSet {
+    fn default() -> Self {
+        CellSet {
+            bits: Box::new([0; 1024]),
+            len: 0,
+        }
+    }
+}
+
+impl CellSet {
+    #[inline]
+    fn insert(&mut self, cell: u16) {
+        let (word, bit) = (usize::from(cell >> 6), 1u64 << (cell & 63));
+        let w = &mut self.bits[word];
+        self.len += usize::from(*w & bit == 0);
+        *w |= bit;
+    }
+
+    fn clear(&mut self) {
+        if self.len > 0 {
+            self.bits.fill(0);
+            self.len = 0;
+        }
+    }
+}
+
 #[derive(Debug, Default, Clone)]
 struct PortSums {
+    /// The port sent once (it is reported from then on).
+    seen: bool,
     packets: u64,
     events: u64,
-    cells: BTreeSet<u16>,
+    cells: CellSet,
     sum: f64,
     n: u64,
     max: f64,
@@ -126,7 +160,19 @@ struct BoxTrack {
     period_start_ns: Option<u64>,
     period_datagrams_missing: u64,
     period_event_packets_missing: u64,
-    ports: BTreeMap<u8, PortSums>,
+    /// Indexed by port (grown to the highest port seen).
+    ports: Vec<PortSums>,
+}
+
+impl BoxTrack {
+    #[inline]
+    fn port(&mut self, port: u8) -> &mut PortSums {
+        let i = usize::from(port);
+        if i >= self.ports.len() {
+            self.ports.resize_with(i + 1, PortSums::default);
+        }
+        &mut self.ports[i]
+    }
 }
 
 /// Messages sent, per topic.
@@ -151,9 +197,33 @@ pub struct RosSink {
     w: CdrWriter,
     batch: CellSampleBatch,
     receive_ns: Option<u64>,
-    boxes: BTreeMap<BoxKey, BoxTrack>,
+    /// Each box's track, found by the last box first (a datagram's records are one box's).
+    boxes: Vec<(BoxKey, BoxTrack)>,
+    last_box: usize,
     published: Published,
     error: Option<std::io::Error>,
+}
+
+/// The track of box `key` in `boxes`, made on its first use; `last` is the box found
+/// before, tried first.
+#[inline]
+fn track_of<'a>(
+    boxes: &'a mut Vec<(BoxKey, BoxTrack)>,
+    last: &mut usize,
+    key: BoxKey,
+) -> &'a mut BoxTrack {
+    let i = match boxes.get(*last) {
+        Some((k, _)) if *k == key => *last,
+        _ => match boxes.iter().position(|(k, _)| *k == key) {
+            Some(i) => i,
+            None => {
+                boxes.push((key, BoxTrack::default()));
+                boxes.len() - 1
+            }
+        },
+    };
+    *last = i;
+    &mut boxes[i].1
 }
 
 fn now_ns() -> u64 {
@@ -176,7 +246,8 @@ impl RosSink {
             w: CdrWriter::new(),
             batch: CellSampleBatch::default(),
             receive_ns: None,
-            boxes: BTreeMap::new(),
+            boxes: Vec::new(),
+            last_box: 0,
             published: Published::default(),
             error: None,
         }
@@ -241,7 +312,7 @@ impl RosSink {
             return;
         };
         let log_time = self.receive_ns.unwrap_or_else(now_ns);
-        let track = self.boxes.entry(key).or_default();
+        let track = track_of(&mut self.boxes, &mut self.last_box, key);
         let time = self
             .timing
             .summary()
@@ -289,7 +360,7 @@ impl RosSink {
 
     fn activity(&mut self, key: BoxKey, at_ns: u64) {
         let period_ns = self.settings.activity_period.as_nanos() as u64;
-        let track = self.boxes.entry(key).or_default();
+        let track = track_of(&mut self.boxes, &mut self.last_box, key);
         let start = *track.period_start_ns.get_or_insert(at_ns);
         if at_ns < start + period_ns.max(1) {
             return;
@@ -299,20 +370,28 @@ impl RosSink {
         let ports = track
             .ports
             .iter_mut()
+            .enumerate()
+            .filter(|(_, p)| p.seen)
             .map(|(port, p)| {
-                let taken = std::mem::take(p);
-                PortActivity {
-                    port: *port,
-                    packets_per_s: taken.packets as f64 / period_s,
-                    events_per_s: taken.events as f64 / period_s,
-                    cells_active: taken.cells.len().min(usize::from(u16::MAX)) as u16,
-                    channel_max: if taken.n > 0 { taken.max } else { f64::NAN },
-                    channel_mean: if taken.n > 0 {
-                        taken.sum / taken.n as f64
+                let a = PortActivity {
+                    port: port as u8,
+                    packets_per_s: p.packets as f64 / period_s,
+                    events_per_s: p.events as f64 / period_s,
+                    cells_active: p.cells.len.min(usize::from(u16::MAX)) as u16,
+                    channel_max: if p.n > 0 { p.max } else { f64::NAN },
+                    channel_mean: if p.n > 0 {
+                        p.sum / p.n as f64
                     } else {
                         f64::NAN
                     },
-                }
+                };
+                p.packets = 0;
+                p.events = 0;
+                p.cells.clear();
+                p.sum = 0.0;
+                p.n = 0;
+                p.max = 0.0;
+                a
             })
             .collect();
         let m = SkinActivity {
@@ -351,12 +430,13 @@ impl RecordSink for RosSink {
             box_id: record.box_id,
             source: record.source,
         };
-        let track = self.boxes.entry(key).or_default();
+        let track = track_of(&mut self.boxes, &mut self.last_box, key);
         track.records_received += 1;
         track.event_packets_missing += u64::from(record.event_packets_missing_before);
         track.period_event_packets_missing += u64::from(record.event_packets_missing_before);
         track.flagged += u64::from(record.flags & FLAG_LOSS_BEFORE != 0);
-        let p = track.ports.entry(record.port).or_default();
+        let p = track.port(record.port);
+        p.seen = true;
         p.packets += 1;
         p.events += u64::from(if row.kind == skinbox_host::rows::KIND_EVENT {
             row.mask.count_ones()
@@ -404,7 +484,7 @@ impl RecordSink for RosSink {
             return;
         }
         // Records and status datagrams share the box's sequence numbers.
-        let track = self.boxes.entry(key).or_default();
+        let track = track_of(&mut self.boxes, &mut self.last_box, key);
         let sequence = d.sequence();
         if let Some(last) = track.last_sequence {
             let gap = sequence.wrapping_sub(last).wrapping_sub(1);

@@ -171,7 +171,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         };
         anyhow::ensure!(
             rows.is_none() || !args.ros.any(),
-            "--rows and the ROS 2 outputs (--mcap, --foxglove) are one or the other"
+            "--rows and the ROS 2 outputs (--mcap, --foxglove, --ros2) are one or the other"
         );
         let mut ros = if args.ros.any() {
             let mut outputs: Vec<Box<dyn skinbox_ros::sink::Output + Send>> = Vec::new();
@@ -182,6 +182,11 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 let server = skinbox_ros::foxglove::FoxgloveServer::start(addr)?;
                 eprintln!("foxglove live view on ws://{}", server.local_addr());
                 outputs.push(Box::new(server));
+            }
+            if args.ros.ros2 {
+                let dds = skinbox_ros::dds::DdsOutput::create(skinbox_ros::dds::ros_domain_id()?)?;
+                eprintln!("ROS 2 topics over DDS in domain {}", dds.domain());
+                outputs.push(Box::new(DdsReport(dds)));
             }
             Some(skinbox_ros::sink::RosSink::new(
                 args.timing.timing(rate_hz)?,
@@ -289,4 +294,38 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             Ok(())
         }
     })
+}
+
+/// The DDS output of `--ros2`, which says on stderr what it sent when the capture ends.
+struct DdsReport(skinbox_ros::dds::DdsOutput);
+
+impl skinbox_ros::sink::Output for DdsReport {
+    fn publish(
+        &mut self,
+        topic: skinbox_ros::sink::Topic,
+        log_time_ns: u64,
+        cdr: &[u8],
+    ) -> std::io::Result<()> {
+        self.0.publish(topic, log_time_ns, cdr)
+    }
+
+    fn close(&mut self) -> std::io::Result<()> {
+        let p = self.0.published();
+        let us = |ns: Option<u64>| ns.map_or(f64::NAN, |n| n as f64 / 1e3);
+        eprintln!(
+            "ROS 2 over DDS: {} samples messages, {} status, {} activity written, {} writes failed; receive to publish p50 {:.0} us, p99 {:.0} us, max {:.0} us; write call p99 {:.0} us",
+            p.messages[0],
+            p.messages[1],
+            p.messages[2],
+            p.write_errors,
+            us(p.latency_p50_ns),
+            us(p.latency_p99_ns),
+            us(p.latency_max_ns),
+            us(p.write_p99_ns)
+        );
+        if let Some(e) = &p.first_write_error {
+            eprintln!("ROS 2 over DDS: the first failed write: {e}");
+        }
+        self.0.close()
+    }
 }

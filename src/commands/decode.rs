@@ -85,6 +85,10 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         args.ros.foxglove.is_none(),
         "--foxglove serves a live capture: use it with skinbox capture or emulate"
     );
+    anyhow::ensure!(
+        !args.ros.ros2,
+        "--ros2 publishes a live capture: use it with skinbox capture or emulate"
+    );
     if let Some(path) = &args.ros.mcap {
         return record_mcap(&bytes, &options, timing, &args, path, rate_hz, json);
     }

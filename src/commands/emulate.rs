@@ -48,6 +48,10 @@ pub struct Args {
     /// the ROS 2 topics to Foxglove on this address (ws://ADDR; docs/ros2.md).
     #[arg(long, value_name = "ADDR")]
     foxglove: Option<std::net::SocketAddr>,
+    /// Publish the ROS 2 topics over DDS (a capture in this process claims the box's
+    /// stream, as with --foxglove; domain ROS_DOMAIN_ID; docs/ros2.md).
+    #[arg(long)]
+    ros2: bool,
 }
 
 /// `ADDRESS/PREFIX` as address and prefix length.
@@ -109,7 +113,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         socket.local_addr()?,
         args.host_subnet
     );
-    if let Some(fx) = args.foxglove {
+    if args.foxglove.is_some() || args.ros2 {
         // `skinbox capture --claim` on loopback, in a thread: the same code path as a box
         let mut argv = vec![
             "skinbox".to_string(),
@@ -118,9 +122,13 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             "127.0.0.1:0".into(),
             "--claim".into(),
             socket.local_addr()?.to_string(),
-            "--foxglove".into(),
-            fx.to_string(),
         ];
+        if let Some(fx) = args.foxglove {
+            argv.extend(["--foxglove".into(), fx.to_string()]);
+        }
+        if args.ros2 {
+            argv.push("--ros2".into());
+        }
         if let Some(ms) = args.run_ms {
             argv.extend(["--duration-ms".into(), ms.to_string()]);
         }

@@ -19,6 +19,11 @@ pub struct RosArgs {
     /// ws://ADDR, e.g. 127.0.0.1:8765; port 0 picks one, printed on stderr).
     #[arg(long, value_name = "ADDR")]
     pub foxglove: Option<std::net::SocketAddr>,
+    /// Publish the topics live over DDS as ROS 2 nodes see them (rt/skinbox/samples ...,
+    /// reliable, volatile, keep last), in the domain of ROS_DOMAIN_ID (0 when unset); no
+    /// ROS installation needed.
+    #[arg(long)]
+    pub ros2: bool,
     /// The channel /skinbox/activity sums per port (max and mean): accel_x ... force_1 ...
     /// temperature_2.
     #[arg(long, default_value = "force_1", value_parser = parse_channel)]
@@ -41,7 +46,7 @@ fn parse_channel(s: &str) -> Result<Channel, String> {
 impl RosArgs {
     /// Whether any ROS 2 output is asked for.
     pub fn any(&self) -> bool {
-        self.mcap.is_some() || self.foxglove.is_some()
+        self.mcap.is_some() || self.foxglove.is_some() || self.ros2
     }
 
     /// The sink's settings.
