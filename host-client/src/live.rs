@@ -79,21 +79,31 @@ pub fn bind_udp(addr: SocketAddr, recv_buffer_bytes: usize) -> io::Result<(UdpSo
     Ok((socket, granted))
 }
 
+/// Sets the integer socket option `name` at level `SOL_SOCKET` on `fd`.
 #[cfg(target_os = "linux")]
-fn force_recv_buffer(socket: &Socket, bytes: usize) -> bool {
-    use std::os::fd::AsRawFd;
-    let value = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
+fn set_socket_int(fd: std::os::fd::RawFd, name: libc::c_int, value: libc::c_int) -> io::Result<()> {
     // SAFETY: setsockopt reads one c_int through a valid pointer of the given length.
     let rc = unsafe {
         libc::setsockopt(
-            socket.as_raw_fd(),
+            fd,
             libc::SOL_SOCKET,
-            libc::SO_RCVBUFFORCE,
+            name,
             (&value as *const libc::c_int).cast(),
             std::mem::size_of::<libc::c_int>() as libc::socklen_t,
         )
     };
-    rc == 0
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(io::Error::last_os_error())
+    }
+}
+
+#[cfg(target_os = "linux")]
+fn force_recv_buffer(socket: &Socket, bytes: usize) -> bool {
+    use std::os::fd::AsRawFd;
+    let value = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
+    set_socket_int(socket.as_raw_fd(), libc::SO_RCVBUFFORCE, value).is_ok()
 }
 
 #[cfg(not(target_os = "linux"))]
@@ -101,22 +111,12 @@ fn force_recv_buffer(_socket: &Socket, _bytes: usize) -> bool {
     false
 }
 
-/// Asks for the kernel's receive timestamp of every datagram (SO_TIMESTAMPNS).
+/// Asks for the kernel's receive timestamp of every datagram (SO_TIMESTAMPNS). Without
+/// timestamps the capture stamps datagrams when it takes them.
 #[cfg(target_os = "linux")]
 fn enable_timestamps(socket: &Socket) {
     use std::os::fd::AsRawFd;
-    let on: libc::c_int = 1;
-    // SAFETY: setsockopt reads one c_int through a valid pointer of the given length.
-    // Without timestamps the capture stamps datagrams when it takes them.
-    unsafe {
-        libc::setsockopt(
-            socket.as_raw_fd(),
-            libc::SOL_SOCKET,
-            libc::SO_TIMESTAMPNS,
-            (&on as *const libc::c_int).cast(),
-            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
-        );
-    }
+    let _ = set_socket_int(socket.as_raw_fd(), libc::SO_TIMESTAMPNS, 1);
 }
 
 #[cfg(not(target_os = "linux"))]
@@ -129,22 +129,7 @@ pub fn enable_receive_timestamps(socket: &std::net::UdpSocket) -> io::Result<()>
     #[cfg(target_os = "linux")]
     {
         use std::os::fd::AsRawFd;
-        let on: libc::c_int = 1;
-        // SAFETY: setsockopt reads one c_int through a valid pointer of the given length.
-        let rc = unsafe {
-            libc::setsockopt(
-                socket.as_raw_fd(),
-                libc::SOL_SOCKET,
-                libc::SO_TIMESTAMPNS,
-                (&on as *const libc::c_int).cast(),
-                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
-            )
-        };
-        if rc == 0 {
-            Ok(())
-        } else {
-            Err(io::Error::last_os_error())
-        }
+        set_socket_int(socket.as_raw_fd(), libc::SO_TIMESTAMPNS, 1)
     }
     #[cfg(not(target_os = "linux"))]
     {
