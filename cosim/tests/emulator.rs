@@ -241,6 +241,17 @@ fn wait_for_arrival_stamps() {
     panic!("the kernel did not stamp datagrams on arrival within 5 s");
 }
 
+/// The emulator serving `socket` at real speed until `stop` or for at most 20 s.
+fn serve_for_20_s(
+    prepared: &skinbox_cosim::emulator::PreparedEmulator,
+    socket: &std::net::UdpSocket,
+    stop: &std::sync::atomic::AtomicBool,
+) -> skinbox_cosim::emulator::ServeSummary {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    skinbox_cosim::emulator::serve(prepared, socket, 1.0, stop, Some(deadline), &mut |_| {})
+        .unwrap()
+}
+
 /// Sends `requests` to `to` from `socket`, each at its offset (us) after the first,
 /// spinning for the instant; sequence numbers from `first_sequence`.
 fn send_paced(
@@ -348,7 +359,7 @@ fn model_results(
 /// `downlink_full`, as the RTL refuses them).
 #[test]
 fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
-    use skinbox_cosim::emulator::{prepare as prepare_emulator, serve, EmulatorSettings};
+    use skinbox_cosim::emulator::{prepare as prepare_emulator, EmulatorSettings};
     use std::sync::atomic::{AtomicBool, Ordering};
     let box_socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let listen = match box_socket.local_addr().unwrap() {
@@ -374,18 +385,7 @@ fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
     };
     let stop = AtomicBool::new(false);
     std::thread::scope(|scope| {
-        let server = scope.spawn(|| {
-            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
-            serve(
-                &prepared,
-                &box_socket,
-                1.0,
-                &stop,
-                Some(deadline),
-                &mut |_| {},
-            )
-            .unwrap()
-        });
+        let server = scope.spawn(|| serve_for_20_s(&prepared, &box_socket, &stop));
         let to = std::net::SocketAddr::V4(listen);
         // a read-tick exchange, and the kernel's arrival stamps on, before the commands
         // whose spacing counts
@@ -508,7 +508,7 @@ fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
 #[test]
 fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers() {
     use skinbox_cosim::control::{BoxControl, ControlConfig, Reply};
-    use skinbox_cosim::emulator::{prepare as prepare_emulator, serve, EmulatorSettings};
+    use skinbox_cosim::emulator::{prepare as prepare_emulator, EmulatorSettings};
     use skinbox_protocol::box_counters::BoxCounter;
     use skinbox_protocol::command::Destination;
     use std::collections::{BTreeMap, HashMap, VecDeque};
@@ -587,18 +587,7 @@ fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers()
     }
     let stop = AtomicBool::new(false);
     std::thread::scope(|scope| {
-        let server = scope.spawn(|| {
-            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
-            serve(
-                &prepared,
-                &box_socket,
-                1.0,
-                &stop,
-                Some(deadline),
-                &mut |_| {},
-            )
-            .unwrap()
-        });
+        let server = scope.spawn(|| serve_for_20_s(&prepared, &box_socket, &stop));
         let to = SocketAddr::V4(listen);
         // the emulator serving (a command for another box, from a host of its own,
         // answered and changing no host's state), the kernel's arrival stamps on, then
