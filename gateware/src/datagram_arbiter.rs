@@ -40,9 +40,8 @@ pub struct DatagramArbiter {
     after_last_grant: DFF<Bits<MAX_SOURCES>>,
     // a descriptor was taken and its body's last beat has not moved
     body_open: DFF<Bit>,
-    // the source offered, one-hot (chosen in the clock before), and the sources after it
+    // the source offered, one-hot (chosen in the clock before)
     offered: DFF<Bits<MAX_SOURCES>>,
-    after_offered: DFF<Bits<MAX_SOURCES>>,
     // source i's bit
     source_bit: Vec<Constant<Bits<MAX_SOURCES>>>,
     waiting: Signal<Local, Bits<MAX_SOURCES>>,
@@ -52,9 +51,9 @@ pub struct DatagramArbiter {
     // the granted source, one-hot, the lowest candidate: a candidate below is seen
     grant: Signal<Local, Bits<MAX_SOURCES>>,
     candidate_below: Signal<Local, Bit>,
-    // the sources after the grant (for the next round)
-    after_grant: Signal<Local, Bits<MAX_SOURCES>>,
-    granted_below: Signal<Local, Bit>,
+    // the sources after the offered one (for the next round), and "offered is below"
+    after_offer: Signal<Local, Bits<MAX_SOURCES>>,
+    offered_below: Signal<Local, Bit>,
     taken: Signal<Local, Bit>,
 }
 
@@ -74,7 +73,6 @@ impl DatagramArbiter {
             after_last_grant: Default::default(),
             body_open: Default::default(),
             offered: Default::default(),
-            after_offered: Default::default(),
             source_bit: (0..sources)
                 .map(|i| Constant::new((1u64 << i).into()))
                 .collect(),
@@ -83,8 +81,8 @@ impl DatagramArbiter {
             candidates: Default::default(),
             grant: Default::default(),
             candidate_below: Default::default(),
-            after_grant: Default::default(),
-            granted_below: Default::default(),
+            after_offer: Default::default(),
+            offered_below: Default::default(),
             taken: Default::default(),
         }
     }
@@ -99,8 +97,7 @@ impl Logic for DatagramArbiter {
             last_grant,
             after_last_grant,
             body_open,
-            offered,
-            after_offered
+            offered
         );
         self.waiting.next = 0.into();
         for i in 0..self.sources.len() {
@@ -114,18 +111,20 @@ impl Logic for DatagramArbiter {
         if self.after_last.val() != 0 {
             self.candidates.next = self.after_last.val();
         }
-        // the lowest candidate, and the sources after it
+        // the lowest candidate; the sources after the offered one
         self.grant.next = 0.into();
         self.candidate_below.next = false;
-        self.after_grant.next = 0.into();
-        self.granted_below.next = false;
+        self.after_offer.next = 0.into();
+        self.offered_below.next = false;
         for i in 0..self.sources.len() {
-            if self.granted_below.val() {
-                self.after_grant.next = self.after_grant.val() | self.source_bit[i].val();
+            if self.offered_below.val() {
+                self.after_offer.next = self.after_offer.val() | self.source_bit[i].val();
+            }
+            if self.offered.q.val().get_bit(i) {
+                self.offered_below.next = true;
             }
             if self.candidates.val().get_bit(i) & !self.candidate_below.val() {
                 self.grant.next = self.source_bit[i].val();
-                self.granted_below.next = true;
             }
             self.candidate_below.next =
                 self.candidate_below.val() | self.candidates.val().get_bit(i);
@@ -165,11 +164,10 @@ impl Logic for DatagramArbiter {
         }
         self.taken.next = self.datagrams.ready.val() & (self.offered.q.val() != 0);
         self.offered.d.next = self.grant.val();
-        self.after_offered.d.next = self.after_grant.val();
         if self.taken.val() {
             self.offered.d.next = 0.into();
             self.last_grant.d.next = self.offered.q.val();
-            self.after_last_grant.d.next = self.after_offered.q.val();
+            self.after_last_grant.d.next = self.after_offer.val();
             self.body_open.d.next = true;
         }
         if self.body_open.q.val()
