@@ -143,10 +143,8 @@ pub struct CellDownlink {
     phase: DFF<Bits<17>>,
     frame_bit: DFF<Bits<4>>,
     // decoded from `frame_bit` a clock after it changes (a bit lasts at least 4 clocks:
-    // the clock is at least 4 x baud), so the
-    // pins' next values hang off registers: the next bit, start bit or data bit, which
-    // data bit, the last data bit
-    next_bit_held: DFF<Bits<4>>,
+    // the clock is at least 4 x baud), so the pins' next values hang off registers: start
+    // bit or data bit, which data bit, the last data bit
     next_is_start: DFF<Bit>,
     next_is_data: DFF<Bit>,
     next_data_bit: DFF<Bits<3>>,
@@ -252,7 +250,6 @@ impl CellDownlink {
             write_data: Default::default(),
             phase: Default::default(),
             frame_bit: Default::default(),
-            next_bit_held: Default::default(),
             next_is_start: Default::default(),
             next_is_data: Default::default(),
             next_data_bit: Default::default(),
@@ -324,7 +321,6 @@ impl Logic for CellDownlink {
             write_data,
             phase,
             frame_bit,
-            next_bit_held,
             next_is_start,
             next_is_data,
             next_data_bit,
@@ -436,13 +432,12 @@ impl Logic for CellDownlink {
             self.next_bit.next = 0.into();
         }
         self.data_bit.next = self.next_bit.val().get_bits::<3>(0) - 1;
-        self.next_bit_held.d.next = self.next_bit.val();
         self.next_is_start.d.next = self.next_bit.val() == 0;
         self.next_is_data.d.next = (self.next_bit.val() != 0) & (self.next_bit.val() <= 8);
         self.next_data_bit.d.next = self.data_bit.val();
         self.next_is_last_data.d.next = self.next_bit.val() == 8;
         if self.bit_end.val() {
-            self.frame_bit.d.next = self.next_bit_held.q.val();
+            self.frame_bit.d.next = self.next_bit.val();
         }
         // the refill scan starts as the pins take the last data bit
         if self.refilling.q.val() {
