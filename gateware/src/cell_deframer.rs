@@ -9,9 +9,10 @@
 //! - cycle `t`: the visited port's receiver outputs (held, byte, framing error, stamp) and
 //!   its store occupancy (both slots full) go into the register of its group of eight
 //!   ports, and its receiver drops `held`; the port's state is read from RAM;
-//! - `t + 1`: the groups' registers into one register;
-//! - `t + 2`: the arithmetic (the byte's age from its stamp, the idle time, the start
-//!   tick) from registers and the RAM's output register, into registers;
+//! - `t + 1`: the groups' registers into one register, with the byte's age from its stamp
+//!   and the tick its idle time runs to (its strobe, or now without a byte);
+//! - `t + 2`: the arithmetic (the idle time, the deadline, the start tick) from registers
+//!   and the RAM's output register, into registers;
 //! - `t + 3` ([`DECISION_CLOCKS`]): the decision, from registers only; at `t + 4` the new
 //!   state, the slot write, the commit and one counter increment leave registers (the
 //!   state is written back at `t + 5`, before the port's next visit: the period is at
@@ -195,8 +196,9 @@ pub struct CellDeframer {
     a_deadline: DFF<Bits<12>>,
     sampled_age: DFF<Bits<STAMP_BITS>>,
     limit_base: DFF<Bits<12>>,
-    // the tick's low bits, registered here a clock ahead (the shared tick's wires are long)
-    tick_low: DFF<Bits<12>>,
+    // the tick the idle time runs to, registered a clock ahead (the shared tick's wires are
+    // long): now, or with a byte held, the byte's strobe tick (now less its age)
+    idle_end: DFF<Bits<12>>,
     a_start_tick: DFF<Bits<32>>,
     // the decision's registers
     state_write: DFF<Bit>,
@@ -357,7 +359,7 @@ impl CellDeframer {
             a_deadline: Default::default(),
             sampled_age: Default::default(),
             limit_base: Default::default(),
-            tick_low: Default::default(),
+            idle_end: Default::default(),
             a_start_tick: Default::default(),
             state_write: Default::default(),
             state_port: Default::default(),
@@ -438,7 +440,7 @@ impl Logic for CellDeframer {
             a_deadline,
             sampled_age,
             limit_base,
-            tick_low,
+            idle_end,
             a_start_tick,
             state_write,
             state_port,
@@ -511,23 +513,25 @@ impl Logic for CellDeframer {
         self.sampled_age.d.next = self.age.val();
         // tick + truncation time in the next cycle's tick
         self.limit_base.d.next = self.tick.val().get_bits::<12>(0) + 1 + self.truncation.val();
-        self.tick_low.d.next = self.tick.val().get_bits::<12>(0) + 1;
+        self.idle_end.d.next = self.tick.val().get_bits::<12>(0) + 1;
+        if self.sampled_term.val().get_bit(16) {
+            self.idle_end.d.next =
+                self.tick.val().get_bits::<12>(0) + 1 - bit_cast::<12, STAMP_BITS>(self.age.val());
+        }
 
         // cycle t + 2: the arithmetic, from the registers and the RAMs' output registers,
         // into the decision's input registers
-        // idle: now - deadline, signed; with a byte held, its strobe (now - age) decides
-        self.idle.next = self.tick_low.q.val() - self.state_ram.read_data.val().get_bits::<12>(14);
+        // idle: now (with a byte held, its strobe) - deadline, signed: one carry chain from
+        // the RAM's output register
+        self.idle.next = self.idle_end.q.val() - self.state_ram.read_data.val().get_bits::<12>(14);
         self.deadline.next =
             self.limit_base.q.val() - bit_cast::<12, STAMP_BITS>(self.sampled_age.q.val());
         self.a_port.d.next = self.port.q.val();
         self.a_state.d.next = self.state_ram.read_data.val();
         self.a_tick.d.next = self.tick_ram.read_data.val();
         self.a_sampled.d.next = self.sampled.q.val();
-        self.a_truncate.d.next = self.state_ram.read_data.val().get_bit(0)
-            & !self.idle.val().get_bit(11)
-            & (!self.sampled.q.val().get_bit(16)
-                | (self.idle.val().get_bits::<11>(0)
-                    >= bit_cast::<11, STAMP_BITS>(self.sampled_age.q.val())));
+        self.a_truncate.d.next =
+            self.state_ram.read_data.val().get_bit(0) & !self.idle.val().get_bit(11);
         self.a_header.d.next = !self.sampled.q.val().get_bit(15)
             & ((self.sampled.q.val().get_bits::<8>(0) == self.data_header.val())
                 | (self.sampled.q.val().get_bits::<8>(0) == self.event_header.val()));

@@ -3,7 +3,8 @@
 //!
 //! - The packet is captured as the frame parser writes a received frame into the reply
 //!   buffer: the bytes written at frame offsets [`PACKET_OFFSET`].. (where a cell command
-//!   carries its packet) go into a 160-bit register, whatever the frame is.
+//!   carries its packet) go into a 160-bit register a clock after they are written,
+//!   whatever the frame is.
 //! - `busy` (the previous packet is still being copied into the queues) and `full_ports`
 //!   (bit `p`: port `p` holds [`QUEUE_PACKETS`] packets) come straight from registers. The
 //!   command unit `offer`s the captured packet for a port (or `ALL_PORTS`) in the clock it
@@ -124,6 +125,10 @@ pub struct CellDownlink {
     phase_increment: Constant<Bits<17>>,
     last_frame_bit: Constant<Bits<4>>,
     // receive and copy
+    /// A byte at the packet's offsets was written, registered: the packet register shifts
+    /// it in a clock later (the offset's decode does not reach the 160 flip-flops).
+    capture_hit: DFF<Bit>,
+    capture_byte: DFF<Bits<8>>,
     captured: DFF<Bits<160>>,
     /// The offer, registered: the copy starts a clock after it.
     offered: DFF<Bit>,
@@ -235,6 +240,8 @@ impl CellDownlink {
             all_ports: Constant::new(u64::from(ALL_PORTS).into()),
             phase_increment: Constant::new(phase_increment(clock_hz, baud).into()),
             last_frame_bit: Constant::new((frame_bits(ports) - 1).into()),
+            capture_hit: Default::default(),
+            capture_byte: Default::default(),
             captured: Default::default(),
             offered: Default::default(),
             offered_port: Default::default(),
@@ -306,6 +313,8 @@ impl Logic for CellDownlink {
         dff_setup!(
             self,
             clock,
+            capture_hit,
+            capture_byte,
             captured,
             offered,
             offered_port,
@@ -362,12 +371,13 @@ impl Logic for CellDownlink {
         self.accepted_out.d.next = false;
 
         // capture: the bytes at the packet's frame offsets, the first ending in bits 7..0
-        if self.capture.val()
+        self.capture_hit.d.next = self.capture.val()
             & (self.capture_address.val() >= self.packet_first.val())
-            & (self.capture_address.val() <= self.packet_last.val())
-        {
-            self.captured.d.next =
-                (self.captured.q.val() >> 8) | (bit_cast::<160, 8>(self.capture_data.val()) << 152);
+            & (self.capture_address.val() <= self.packet_last.val());
+        self.capture_byte.d.next = self.capture_data.val();
+        if self.capture_hit.q.val() {
+            self.captured.d.next = (self.captured.q.val() >> 8)
+                | (bit_cast::<160, 8>(self.capture_byte.q.val()) << 152);
         }
         self.busy.next = self.copying.q.val() | self.offered.q.val();
         // (registered: the offer reaches two flip-flops, the copy starts a clock later)
