@@ -199,6 +199,11 @@ pub struct CellDeframer {
     // the tick the idle time runs to, registered a clock ahead (the shared tick's wires are
     // long): now, or with a byte held, the byte's strobe tick (now less its age)
     idle_end: DFF<Bits<12>>,
+    // the next cycle's tick + 1, and its bits 11..7 less one, registered a clock ahead
+    tick_ahead: DFF<Bits<12>>,
+    tick_ahead_high_less: DFF<Bits<5>>,
+    strobe_borrow: Signal<Local, Bit>,
+    tick_plus_two: Signal<Local, Bits<12>>,
     a_start_tick: DFF<Bits<32>>,
     // the decision's registers
     state_write: DFF<Bit>,
@@ -360,6 +365,10 @@ impl CellDeframer {
             sampled_age: Default::default(),
             limit_base: Default::default(),
             idle_end: Default::default(),
+            tick_ahead: Default::default(),
+            tick_ahead_high_less: Default::default(),
+            strobe_borrow: Default::default(),
+            tick_plus_two: Default::default(),
             a_start_tick: Default::default(),
             state_write: Default::default(),
             state_port: Default::default(),
@@ -441,6 +450,8 @@ impl Logic for CellDeframer {
             sampled_age,
             limit_base,
             idle_end,
+            tick_ahead,
+            tick_ahead_high_less,
             a_start_tick,
             state_write,
             state_port,
@@ -513,10 +524,23 @@ impl Logic for CellDeframer {
         self.sampled_age.d.next = self.age.val();
         // tick + truncation time in the next cycle's tick
         self.limit_base.d.next = self.tick.val().get_bits::<12>(0) + 1 + self.truncation.val();
-        self.idle_end.d.next = self.tick.val().get_bits::<12>(0) + 1;
+        // the strobe tick: the stamp as the low bits under now's high bits, or under the
+        // ones before when the stamp is above now's low bits (a compare and a choice of
+        // registers: no subtraction after the groups' OR)
+        self.tick_plus_two.next = self.tick.val().get_bits::<12>(0) + 2;
+        self.tick_ahead.d.next = self.tick_plus_two.val();
+        self.tick_ahead_high_less.d.next = self.tick_plus_two.val().get_bits::<5>(7) - 1;
+        self.strobe_borrow.next =
+            self.sampled_term.val().get_bits::<7>(8) > self.tick_ahead.q.val().get_bits::<7>(0);
+        self.idle_end.d.next = self.tick_ahead.q.val();
         if self.sampled_term.val().get_bit(16) {
-            self.idle_end.d.next =
-                self.tick.val().get_bits::<12>(0) + 1 - bit_cast::<12, STAMP_BITS>(self.age.val());
+            self.idle_end.d.next = (bit_cast::<12, 5>(self.tick_ahead.q.val().get_bits::<5>(7))
+                << 7)
+                | bit_cast::<12, 7>(self.sampled_term.val().get_bits::<7>(8));
+            if self.strobe_borrow.val() {
+                self.idle_end.d.next = (bit_cast::<12, 5>(self.tick_ahead_high_less.q.val()) << 7)
+                    | bit_cast::<12, 7>(self.sampled_term.val().get_bits::<7>(8));
+            }
         }
 
         // cycle t + 2: the arithmetic, from the registers and the RAMs' output registers,

@@ -18,16 +18,22 @@
 //! - All pins share one bit time and one frame: a phase accumulator (31.25 clocks a bit at
 //!   4 Mbit/s) steps a frame of [`frame_bits`] bits (start, eight data bits, stop; a second
 //!   stop bit above [`TEN_BIT_FRAME_PORTS`] ports), and every port that has a byte sends it
-//!   in that frame. A port keeps only its byte, a start flag and its pin register: the
-//!   bit shifting of every transmitter is one shared bit index.
+//!   in that frame. A port keeps only its pin and the value the pin takes at the next start
+//!   or data bit (`next_pin`): every pin changes at the same clock edges.
 //! - After the frame's last data bit has gone to the pins, a refill scan visits one port a
 //!   clock: it reads the port's read position (a RAM) and the next byte of its oldest
-//!   packet (the queue RAM) into the port's byte register, or 0xFF with no start bit when
-//!   the port's queue is empty, before the next frame's start bit. A slot is free when
-//!   its last byte was read; a port's packets go out back to back, in order.
+//!   packet (the queue RAM) into the port's word of the frame bytes (block RAM banks of
+//!   [`BANK_PORTS`] ports), or 0xFF when the port's queue is empty, and sets `next_pin` to
+//!   the port's start bit (low with a byte, high without), before the next frame's start
+//!   bit. A slot is free when its last byte was read; a port's packets go out back to back,
+//!   in order.
+//! - During each bit that a data bit follows, the pin scan reads a word of every bank a
+//!   clock and puts each port's next data bit into its `next_pin`
+//!   ([`pin_scan_clocks`] after the bit's end): the bit shifting of every transmitter is
+//!   one shared bit index and a RAM read.
 //!
 //! Latency, a packet committed on an idle port to its first start bit: up to one frame and
-//! a refill (about 2.5 to 5 us). Cost per port: 13 flip-flops (byte, start, pin, queue
+//! a refill (about 2.5 to 5 us). Cost per port: 5 flip-flops (pin, next pin value, queue
 //! count, write slot).
 
 use crate::block_ram::{BlockRam, READ_LATENCY};
@@ -82,6 +88,17 @@ pub fn bit_start(clock_hz: u64, baud: u64, bit: u64) -> u64 {
 
 /// Queue RAM address: 6 bits of port, 1 of slot, 5 of byte index.
 const ADDRESS_BITS: usize = 12;
+
+/// Ports whose frame bytes share one block RAM bank of the pin scan (port `p` at word
+/// `p % BANK_PORTS` of bank `p / BANK_PORTS`).
+pub const BANK_PORTS: usize = 16;
+
+/// Clocks of the pin scan after a bit's end before its last port's next data bit is in
+/// place: the frame decode (2), the scan of a bank's words, the RAM (2), the value and
+/// its write (2).
+pub fn pin_scan_clocks(ports: usize) -> u64 {
+    2 + ports.min(BANK_PORTS) as u64 + READ_LATENCY + 2
+}
 
 /// The downlink of `ports` UART pins.
 #[derive(LogicBlock)]
@@ -160,6 +177,30 @@ pub struct CellDownlink {
     pins_take_start: DFF<Bit>,
     pins_take_data: DFF<Bit>,
     pins_take_stop: DFF<Bit>,
+    /// Each port's byte of the frame on the pins, written by the refill (0xFF for a port
+    /// without a packet), read by the pin scan.
+    bytes: Vec<BlockRam<8, 4>>,
+    bank_number: Vec<Constant<Bits<2>>>,
+    bank_bit: Vec<Constant<Bits<4>>>,
+    first_word: Constant<Bits<16>>,
+    last_word: Constant<Bits<4>>,
+    /// Per port: its word of the pin scan (one bit) and its bank (one bit).
+    port_word_bit: Vec<Constant<Bits<16>>>,
+    port_bank_bit: Vec<Constant<Bits<4>>>,
+    // the pin scan: during a bit followed by a data bit, the next data bit of every port,
+    // a word of every bank a clock, into the ports' `next_pin`
+    after_bit_end_1: DFF<Bit>,
+    after_bit_end_2: DFF<Bit>,
+    pin_scanning: DFF<Bit>,
+    pin_word: DFF<Bits<4>>,
+    pin_visit_1: DFF<Bit>,
+    pin_word_1: DFF<Bits<4>>,
+    pin_visit_2: DFF<Bit>,
+    pin_word_2: DFF<Bits<4>>,
+    pin_take: DFF<Bit>,
+    pin_onehot: DFF<Bits<16>>,
+    /// Bit `b`: the value read from bank `b`.
+    pin_value: DFF<Bits<4>>,
     // the refill scan: the port visited, and the pipeline behind it
     refilling: DFF<Bit>,
     scan: DFF<Bits<6>>,
@@ -185,8 +226,8 @@ pub struct CellDownlink {
     // per port
     count: Vec<DFF<Bits<2>>>,
     tail: Vec<DFF<Bit>>,
-    byte: Vec<DFF<Bits<8>>>,
-    start: Vec<DFF<Bit>>,
+    /// The value the pin takes at the next start or data bit.
+    next_pin: Vec<DFF<Bit>>,
     pin: Vec<DFF<Bit>>,
     full: Signal<Local, Bits<64>>,
     nonempty: Signal<Local, Bit>,
@@ -198,8 +239,8 @@ pub struct CellDownlink {
     data_bit: Signal<Local, Bits<3>>,
     position: Signal<Local, Bits<6>>,
     load_byte: Signal<Local, Bits<8>>,
-    term_byte: Signal<Local, Bits<8>>,
-    shifted: Signal<Local, Bits<8>>,
+    bank_byte: Signal<Local, Bits<8>>,
+    bank_values: Signal<Local, Bits<4>>,
 }
 
 impl CellDownlink {
@@ -265,6 +306,32 @@ impl CellDownlink {
             pins_take_start: Default::default(),
             pins_take_data: Default::default(),
             pins_take_stop: Default::default(),
+            bytes: each(ports.div_ceil(BANK_PORTS)),
+            bank_number: (0..ports.div_ceil(BANK_PORTS))
+                .map(|b| Constant::new((b as u64).into()))
+                .collect(),
+            bank_bit: (0..ports.div_ceil(BANK_PORTS))
+                .map(|b| Constant::new((1u64 << b).into()))
+                .collect(),
+            first_word: Constant::new(1.into()),
+            last_word: Constant::new((ports.min(BANK_PORTS) as u64 - 1).into()),
+            port_word_bit: (0..ports)
+                .map(|p| Constant::new((1u64 << (p % BANK_PORTS)).into()))
+                .collect(),
+            port_bank_bit: (0..ports)
+                .map(|p| Constant::new((1u64 << (p / BANK_PORTS)).into()))
+                .collect(),
+            after_bit_end_1: Default::default(),
+            after_bit_end_2: Default::default(),
+            pin_scanning: Default::default(),
+            pin_word: Default::default(),
+            pin_visit_1: Default::default(),
+            pin_word_1: Default::default(),
+            pin_visit_2: Default::default(),
+            pin_word_2: Default::default(),
+            pin_take: Default::default(),
+            pin_onehot: Default::default(),
+            pin_value: Default::default(),
             refilling: Default::default(),
             scan: Default::default(),
             visit_1: Default::default(),
@@ -288,8 +355,7 @@ impl CellDownlink {
             clear_address: Default::default(),
             count: each(ports),
             tail: each(ports),
-            byte: each(ports),
-            start: each(ports),
+            next_pin: each(ports),
             pin: each(ports),
             full: Default::default(),
             nonempty: Default::default(),
@@ -301,8 +367,8 @@ impl CellDownlink {
             data_bit: Default::default(),
             position: Default::default(),
             load_byte: Default::default(),
-            term_byte: Default::default(),
-            shifted: Default::default(),
+            bank_byte: Default::default(),
+            bank_values: Default::default(),
         }
     }
 }
@@ -337,6 +403,17 @@ impl Logic for CellDownlink {
             pins_take_start,
             pins_take_data,
             pins_take_stop,
+            after_bit_end_1,
+            after_bit_end_2,
+            pin_scanning,
+            pin_word,
+            pin_visit_1,
+            pin_word_1,
+            pin_visit_2,
+            pin_word_2,
+            pin_take,
+            pin_onehot,
+            pin_value,
             refilling,
             scan,
             visit_1,
@@ -361,6 +438,9 @@ impl Logic for CellDownlink {
         );
         self.ram.clock.next = self.clock.val();
         self.positions.clock.next = self.clock.val();
+        for b in 0..self.bytes.len() {
+            self.bytes[b].clock.next = self.clock.val();
+        }
         // the copy's writes are registered: no copy logic in front of the RAM (a slot's
         // last byte lands a clock after its commit, long before a refill reads it)
         self.write_enable.d.next = false;
@@ -449,6 +529,36 @@ impl Logic for CellDownlink {
         if self.bit_end.val() {
             self.frame_bit.d.next = self.next_bit.val();
         }
+        // the pin scan: two clocks after a bit's end the decodes say what the next bit is;
+        // before a data bit, every bank's words are read (port by port of each bank) and
+        // each port's next data bit is in its `next_pin` long before the bit's end
+        self.after_bit_end_1.d.next = self.bit_end.val();
+        self.after_bit_end_2.d.next = self.after_bit_end_1.q.val();
+        if self.pin_scanning.q.val() {
+            self.pin_word.d.next = self.pin_word.q.val() + 1;
+            if self.pin_word.q.val() == self.last_word.val() {
+                self.pin_scanning.d.next = false;
+            }
+        }
+        if self.after_bit_end_2.q.val() & self.next_is_data.q.val() {
+            self.pin_scanning.d.next = true;
+            self.pin_word.d.next = 0.into();
+        }
+        self.pin_visit_1.d.next = self.pin_scanning.q.val();
+        self.pin_word_1.d.next = self.pin_word.q.val();
+        self.pin_visit_2.d.next = self.pin_visit_1.q.val();
+        self.pin_word_2.d.next = self.pin_word_1.q.val();
+        self.pin_take.d.next = self.pin_visit_2.q.val();
+        self.pin_onehot.d.next = self.first_word.val() << self.pin_word_2.q.val();
+        self.bank_values.next = 0.into();
+        for b in 0..self.bytes.len() {
+            self.bytes[b].read_address.next = self.pin_word.q.val();
+            self.bank_byte.next = self.bytes[b].read_data.val() >> self.next_data_bit.q.val();
+            if self.bank_byte.val().get_bit(0) {
+                self.bank_values.next = self.bank_values.val() | self.bank_bit[b].val();
+            }
+        }
+        self.pin_value.d.next = self.bank_values.val();
         // the refill scan starts as the pins take the last data bit
         if self.refilling.q.val() {
             self.scan.d.next = self.scan.q.val() + 1;
@@ -505,6 +615,18 @@ impl Logic for CellDownlink {
         if !self.nonempty_4.q.val() {
             self.load_byte.next = 0xFF.into();
         }
+        for b in 0..self.bytes.len() {
+            self.bytes[b].write_enable.next = self.visit_4.q.val()
+                & (self.port_4.q.val().get_bits::<2>(4) == self.bank_number[b].val());
+            self.bytes[b].write_address.next = self.port_4.q.val().get_bits::<4>(0);
+            self.bytes[b].write_data.next = self.load_byte.val();
+            if self.clearing.q.val() {
+                // after reset every port's byte is 0xFF: no data bit before the first refill
+                self.bytes[b].write_enable.next = true;
+                self.bytes[b].write_address.next = self.clear_address.q.val().get_bits::<4>(0);
+                self.bytes[b].write_data.next = 0xFF.into();
+            }
+        }
         self.positions.write_enable.next = self.position_write.q.val() | self.clearing.q.val();
         self.positions.write_address.next = self.position_port.q.val();
         self.positions.write_data.next = self.position_next.q.val();
@@ -521,12 +643,10 @@ impl Logic for CellDownlink {
         for i in 0..self.count.len() {
             self.count[i].clock.next = self.clock.val();
             self.tail[i].clock.next = self.clock.val();
-            self.byte[i].clock.next = self.clock.val();
-            self.start[i].clock.next = self.clock.val();
+            self.next_pin[i].clock.next = self.clock.val();
             self.pin[i].clock.next = self.clock.val();
             self.tail[i].d.next = self.tail[i].q.val();
-            self.byte[i].d.next = self.byte[i].q.val();
-            self.start[i].d.next = self.start[i].q.val();
+            self.next_pin[i].d.next = self.next_pin[i].q.val();
             self.pin[i].d.next = self.pin[i].q.val();
             // the queue count: +1 on a copy's commit, -1 when the last byte is read
             self.count[i].d.next = self.count[i].q.val();
@@ -543,21 +663,22 @@ impl Logic for CellDownlink {
             {
                 self.count[i].d.next = self.count[i].q.val() - 1;
             }
-            // the refill's load
+            // the next start bit, at the refill's load (high: no packet, no start bit); the
+            // next data bit, from the pin scan
             if self.visit_4.q.val()
                 & (bit_cast::<8, 6>(self.port_4.q.val()) == self.port_number[i].val())
             {
-                self.byte[i].d.next = self.load_byte.val();
-                self.start[i].d.next = self.nonempty_4.q.val();
+                self.next_pin[i].d.next = !self.nonempty_4.q.val();
+            }
+            if self.pin_take.q.val()
+                & ((self.pin_onehot.q.val() & self.port_word_bit[i].val()) != 0)
+            {
+                self.next_pin[i].d.next =
+                    (self.pin_value.q.val() & self.port_bank_bit[i].val()) != 0;
             }
             // the pin at each bit's start: start bit, data bit, stop bits
-            self.term_byte.next = self.byte[i].q.val();
-            self.shifted.next = self.term_byte.val() >> self.next_data_bit.q.val();
-            if self.pins_take_start.q.val() {
-                self.pin[i].d.next = !self.start[i].q.val();
-            }
-            if self.pins_take_data.q.val() {
-                self.pin[i].d.next = self.shifted.val().get_bit(0);
+            if self.pins_take_start.q.val() | self.pins_take_data.q.val() {
+                self.pin[i].d.next = self.next_pin[i].q.val();
             }
             if self.pins_take_stop.q.val() {
                 self.pin[i].d.next = true;
@@ -565,8 +686,7 @@ impl Logic for CellDownlink {
             if self.reset.val() {
                 self.count[i].d.next = 0.into();
                 self.tail[i].d.next = false;
-                self.byte[i].d.next = 0xFF.into();
-                self.start[i].d.next = false;
+                self.next_pin[i].d.next = true;
                 self.pin[i].d.next = true;
             }
             self.uart_tx[i].next = self.pin[i].q.val();
@@ -582,6 +702,10 @@ impl Logic for CellDownlink {
             self.pins_take_stop.d.next = false;
             self.frame_bit.d.next = self.last_frame_bit.val();
             self.refilling.d.next = false;
+            self.pin_scanning.d.next = false;
+            self.pin_visit_1.d.next = false;
+            self.pin_visit_2.d.next = false;
+            self.pin_take.d.next = false;
             self.visit_1.d.next = false;
             self.visit_2.d.next = false;
             self.nonempty_2.d.next = false;

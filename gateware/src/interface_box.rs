@@ -12,7 +12,7 @@
 
 use crate::box_counter_file::BoxCounterFile;
 use crate::cell_deframer::{scan_period, CellDeframer, MAX_IDLE_GAP_BITS};
-use crate::cell_downlink::CellDownlink;
+use crate::cell_downlink::{frame_bits, pin_scan_clocks, CellDownlink, REFILL_LATENCY};
 use crate::command_unit::{CommandUnit, CommandUnitConfig};
 use crate::counter_file::CounterFile;
 use crate::datagram_arbiter::DatagramArbiter;
@@ -103,6 +103,19 @@ pub enum ConfigError {
         /// Clocks in the shortest byte (5 % fast).
         byte_clocks: u64,
     },
+    /// The downlink's refill or pin scan does not fit a bit time: too few clocks per bit
+    /// for the port count.
+    #[error("invalid box parameters: {ports} ports at {clocks_per_bit} clocks per bit: the downlink's pin scan needs {scan_clocks} clocks of a bit and its refill {refill_clocks} clocks of the stop bits and the last data bit")]
+    PortsForDownlink {
+        /// The port count asked for.
+        ports: usize,
+        /// Clocks in the shortest bit.
+        clocks_per_bit: u64,
+        /// Clocks the pin scan takes after a bit's end.
+        scan_clocks: u64,
+        /// Clocks the refill takes after the last data bit's start.
+        refill_clocks: u64,
+    },
     /// `flush_timeout_ticks` outside 1 to 2^31 - 1.
     #[error("invalid box parameters: flush timeout {ticks} ticks: must be 1 to 2^31 - 1")]
     FlushTimeout {
@@ -174,6 +187,19 @@ impl BoxConfig {
             return Err(ConfigError::PortsForCounters {
                 ports: self.ports,
                 byte_clocks: byte_clocks as u64,
+            });
+        }
+        // The downlink: every port's next data bit is in place before the bit's end, and
+        // every port is refilled between its last data bit and its next start bit.
+        let bit_clocks = self.clock_hz / self.baud;
+        let scan_clocks = pin_scan_clocks(self.ports);
+        let refill_clocks = self.ports as u64 + REFILL_LATENCY;
+        if scan_clocks > bit_clocks || refill_clocks >= (frame_bits(self.ports) - 8) * bit_clocks {
+            return Err(ConfigError::PortsForDownlink {
+                ports: self.ports,
+                clocks_per_bit: bit_clocks,
+                scan_clocks,
+                refill_clocks,
             });
         }
         if !(1..1 << 31).contains(&self.flush_timeout_ticks) {
@@ -537,7 +563,7 @@ mod tests {
         for ok in [
             with(|c| c.ports = 1),
             with(|c| c.ports = 64),
-            with(|c| c.clock_hz = 4 * c.baud),
+            with(|c| c.clock_hz = 14 * c.baud),
             with(|c| c.flush_timeout_ticks = 1),
             with(|c| c.flush_timeout_ticks = (1 << 31) - 1),
             with(|c| c.status_period_ticks = 1),
@@ -552,6 +578,16 @@ mod tests {
         assert_eq!(
             with(|c| c.ports = 65),
             Err(ConfigError::Ports { ports: 65 })
+        );
+        // 8 ports: the pin scan takes 14 clocks of a bit
+        assert_eq!(
+            with(|c| c.clock_hz = 14 * c.baud - 1),
+            Err(ConfigError::PortsForDownlink {
+                ports: 8,
+                clocks_per_bit: 13,
+                scan_clocks: 14,
+                refill_clocks: 13
+            })
         );
         assert_eq!(
             with(|c| c.clock_hz = 4 * c.baud - 1),
