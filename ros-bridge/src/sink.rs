@@ -112,26 +112,21 @@ impl Default for SinkSettings {
     }
 }
 
-/// The cells seen in a period: one bit per cell id, and their count.
-#[derive(Debug, Clone)]
+/// The cells seen in a period: one bit per cell id (grown to the highest id seen, so a
+/// port's set stays a few cache lines, not 8 kB for every possible id), and their count.
+#[derive(Debug, Default, Clone)]
 struct CellSet {
-    bits: Box<[u64; 1024]>,
+    bits: Vec<u64>,
     len: usize,
-}
-
-impl Default for CellSet {
-    fn default() -> Self {
-        CellSet {
-            bits: Box::new([0; 1024]),
-            len: 0,
-        }
-    }
 }
 
 impl CellSet {
     #[inline]
     fn insert(&mut self, cell: u16) {
         let (word, bit) = (usize::from(cell >> 6), 1u64 << (cell & 63));
+        if word >= self.bits.len() {
+            self.bits.resize(word + 1, 0);
+        }
         let w = &mut self.bits[word];
         self.len += usize::from(*w & bit == 0);
         *w |= bit;
@@ -544,5 +539,24 @@ impl RecordSink for RosSink {
         }
         let at = self.receive_ns.unwrap_or_else(now_ns);
         self.activity(key, at);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::CellSet;
+
+    #[test]
+    fn a_cell_set_counts_each_cell_once_and_clears() {
+        let mut set = CellSet::default();
+        for cell in [5, 700, 5, 16383, 0, 700, 64, 63] {
+            set.insert(cell);
+        }
+        assert_eq!(set.len, 6);
+        set.clear();
+        assert_eq!(set.len, 0);
+        set.insert(700);
+        set.insert(1);
+        assert_eq!(set.len, 2);
     }
 }
