@@ -95,10 +95,11 @@ def _free_udp_port() -> int:
 # The subscriber's Cyclone DDS configuration without multicast for data (discovery still
 # multicast): the writer then sends to the reader's unicast address, which on the same
 # host the kernel delivers through loopback; with multicast data every datagram also
-# leaves through the network interface. A receive buffer of 4 MB (net.core.rmem_max here)
-# rides out the moments the subscriber's receive thread waits for a core.
+# leaves through the network interface. A receive buffer of up to 4 MB (as much as
+# net.core.rmem_max allows; 4 MB here) rides out the moments the subscriber's receive
+# thread waits for a core.
 UNICAST_DATA = ("<General><AllowMulticast>spdp</AllowMulticast></General>"
-                '<Internal><SocketReceiveBufferSize min="4MB"/></Internal>')
+                '<Internal><SocketReceiveBufferSize max="4MB"/></Internal>')
 
 
 def measure(skinbox_bin: str, folder: Path, seconds: float = 5.0, buses: int = 8,
