@@ -10,9 +10,11 @@ use skinbox_host::RecordSink;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-/// What one run of [`bench_mcap`] measured.
+/// What one run of [`bench_mcap`] measured, for one chunk size.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct McapBench {
+    /// The recording's chunk size, bytes.
+    pub chunk_bytes: u64,
     /// Cell samples written per round.
     pub samples: u64,
     /// Messages written per round.
@@ -61,27 +63,49 @@ fn timing() -> Timing {
     Timing::new(125.0, PathModel::bus_model(Positions::Unknown))
 }
 
-/// Decodes `payloads` (received 10 us apart) into an MCAP file at `path`, `rounds` times.
-pub fn bench_mcap(payloads: &[Vec<u8>], path: &Path, rounds: u32) -> std::io::Result<McapBench> {
-    let mut best = f64::INFINITY;
-    let mut wall = 0.0;
-    let mut published = Default::default();
+/// One round: `payloads` (received 10 us apart) decoded into an MCAP file at `path` with
+/// chunks of `chunk_bytes`; its CPU and wall time, s, and what was published.
+fn mcap_round(
+    payloads: &[Vec<u8>],
+    path: &Path,
+    chunk_bytes: u64,
+) -> std::io::Result<(f64, f64, crate::sink::Published)> {
+    let started = Instant::now();
+    let cpu = skinbox_host::thread_cpu_ns();
+    let out = McapOutput::create_with_chunks(path, chunk_bytes)?;
+    let mut sink = RosSink::new(timing(), SinkSettings::default(), vec![Box::new(out)]);
+    let mut decoder = Decoder::new(DecoderConfig::default());
+    let t0 = Duration::from_secs(1_700_000_000);
+    for (i, p) in payloads.iter().enumerate() {
+        sink.datagram_received(Some(t0 + Duration::from_micros(10 * i as u64)), None, p);
+        decoder.push_datagram(p, &mut sink);
+    }
+    let published = sink.finish()?;
+    let s = skinbox_host::thread_cpu_ns().saturating_sub(cpu) as f64 * 1e-9;
+    Ok((s, started.elapsed().as_secs_f64(), published))
+}
+
+/// Decodes `payloads` (received 10 us apart) into an MCAP file at `path`, `rounds` times
+/// for each of `chunk_sizes` (bytes; the sizes taking turns within a round, so the
+/// machine's changing load falls on each alike), then times decoding and timing alone.
+/// One result per chunk size, in their order.
+pub fn bench_mcap(
+    payloads: &[Vec<u8>],
+    path: &Path,
+    rounds: u32,
+    chunk_sizes: &[u64],
+) -> std::io::Result<Vec<McapBench>> {
+    let mut best = vec![(f64::INFINITY, 0.0); chunk_sizes.len()];
+    let mut published = crate::sink::Published::default();
+    let mut file_bytes = vec![0; chunk_sizes.len()];
     for _ in 0..rounds.max(1) {
-        let started = Instant::now();
-        let cpu = skinbox_host::thread_cpu_ns();
-        let out = McapOutput::create(path)?;
-        let mut sink = RosSink::new(timing(), SinkSettings::default(), vec![Box::new(out)]);
-        let mut decoder = Decoder::new(DecoderConfig::default());
-        let t0 = Duration::from_secs(1_700_000_000);
-        for (i, p) in payloads.iter().enumerate() {
-            sink.datagram_received(Some(t0 + Duration::from_micros(10 * i as u64)), None, p);
-            decoder.push_datagram(p, &mut sink);
-        }
-        published = sink.finish()?;
-        let s = skinbox_host::thread_cpu_ns().saturating_sub(cpu) as f64 * 1e-9;
-        if s < best {
-            best = s;
-            wall = started.elapsed().as_secs_f64();
+        for (i, chunk) in chunk_sizes.iter().enumerate() {
+            let (cpu, wall, p) = mcap_round(payloads, path, *chunk)?;
+            published = p;
+            file_bytes[i] = std::fs::metadata(path).map_or(0, |m| m.len());
+            if cpu < best[i].0 {
+                best[i] = (cpu, wall);
+            }
         }
     }
     let mut host = f64::INFINITY;
@@ -97,17 +121,23 @@ pub fn bench_mcap(payloads: &[Vec<u8>], path: &Path, rounds: u32) -> std::io::Re
         std::hint::black_box(sink.1);
         host = host.min(skinbox_host::thread_cpu_ns().saturating_sub(cpu) as f64 * 1e-9);
     }
-    let p: crate::sink::Published = published;
-    Ok(McapBench {
-        samples: p.samples,
-        messages: p.samples_messages + p.status_messages + p.activity_messages,
-        file_bytes: std::fs::metadata(path).map_or(0, |m| m.len()),
-        rounds: rounds.max(1),
-        best_cpu_s: best,
-        wall_s: wall,
-        samples_per_second: p.samples as f64 / best,
-        goal_samples_per_second: 5e6,
-        decode_and_timing_cpu_s: host,
-        ros_samples_per_second: p.samples as f64 / (best - host).max(1e-9),
-    })
+    let p = published;
+    Ok(chunk_sizes
+        .iter()
+        .zip(best)
+        .zip(file_bytes)
+        .map(|((chunk, (best, wall)), file_bytes)| McapBench {
+            chunk_bytes: *chunk,
+            samples: p.samples,
+            messages: p.samples_messages + p.status_messages + p.activity_messages,
+            file_bytes,
+            rounds: rounds.max(1),
+            best_cpu_s: best,
+            wall_s: wall,
+            samples_per_second: p.samples as f64 / best,
+            goal_samples_per_second: 5e6,
+            decode_and_timing_cpu_s: host,
+            ros_samples_per_second: p.samples as f64 / (best - host).max(1e-9),
+        })
+        .collect())
 }

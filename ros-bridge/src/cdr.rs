@@ -30,6 +30,25 @@ impl CdrWriter {
         &self.buf
     }
 
+    /// Bytes written so far, the header included.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.buf.len()
+    }
+
+    /// Whether nothing is written (not even the header).
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.buf.is_empty()
+    }
+
+    /// Back to the first `len` bytes (a mark taken with [`CdrWriter::len`]), to write
+    /// another ending after the same start.
+    #[inline]
+    pub fn truncate(&mut self, len: usize) {
+        self.buf.truncate(len);
+    }
+
     /// Room for `additional` more bytes.
     #[inline]
     pub fn reserve(&mut self, additional: usize) {

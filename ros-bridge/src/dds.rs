@@ -2,13 +2,16 @@
 //! installation: the topics of [`Topic`] as ROS 2 names them on the wire (`rt/skinbox/samples`,
 //! type `skinbox_msgs::msg::dds_::CellSampleBatch_` ...), the CDR payloads the sink
 //! writes, sent as they are. QoS as rclcpp's default publisher: reliable, volatile, keep
-//! last ([`Topic::depth`]); a slow or absent subscriber never blocks the capture (keep
-//! last drops the oldest). The domain is `ROS_DOMAIN_ID` (0 when unset).
+//! last ([`Topic::depth`]), or best effort for the samples ([`DdsSettings`]); a slow or
+//! absent subscriber never blocks the capture (a write that finds the reliable window full
+//! fails at once and is counted). A datagram's samples go in messages that fit one RTPS
+//! datagram unfragmented ([`MAX_UNFRAGMENTED_MESSAGE_BYTES`]). The domain is
+//! `ROS_DOMAIN_ID` (0 when unset).
 
 use crate::cdr::CDR_LE_HEADER;
 use crate::sink::{Output, Topic};
 use rustdds::no_key::{DataWriter, SerializerAdapter};
-use rustdds::policy::{Durability, History, Reliability};
+use rustdds::policy::{Durability, History, Reliability, ResourceLimits};
 use rustdds::{DomainParticipant, QosPolicyBuilder, RepresentationIdentifier, TopicKind};
 use std::io;
 use std::time::{SystemTime, UNIX_EPOCH};
@@ -41,6 +44,27 @@ pub fn dds_topic_name(topic: Topic) -> String {
 pub fn dds_type_name(topic: Topic) -> String {
     let (package, name) = topic.message().split_once('/').unwrap_or(("", ""));
     format!("{package}::msg::dds_::{name}_")
+}
+
+/// The largest message rustdds (0.15.1) sends unfragmented from a reliable writer: its
+/// datagram budget without a known path MTU (1,452 bytes: a 1,500-byte MTU less the IPv4,
+/// UDP and RTPS headers) less a HEARTBEAT submessage (32) and the DATA submessage's own
+/// bytes (48). Larger ones go as DATA_FRAGs of 256 bytes, each tracked and repaired on its
+/// own, which at 10,000 messages a second fills the reliable window.
+pub const MAX_UNFRAGMENTED_MESSAGE_BYTES: usize = 1452 - 32 - 48;
+
+/// Samples messages a reliable writer keeps unacknowledged (or unsent) before a write
+/// fails: about 1.7 s of messages at 130,000 samples/s (19,000 messages/s of 7 samples on
+/// average, a datagram in two parts), at most 45 MB.
+pub const SAMPLES_WINDOW: usize = 32_768;
+
+/// Settings of a [`DdsOutput`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct DdsSettings {
+    /// The samples topic best effort (not reliable): no acknowledgements, no repairs, no
+    /// window that can fill; a datagram lost on the way is lost. Status and activity stay
+    /// reliable.
+    pub samples_best_effort: bool,
 }
 
 /// A CDR payload after its encapsulation header (little-endian plain CDR).
@@ -98,7 +122,7 @@ pub struct DdsOutput {
 
 impl DdsOutput {
     /// Joins `domain` and offers the three topics.
-    pub fn create(domain: u16) -> io::Result<DdsOutput> {
+    pub fn create(domain: u16, settings: DdsSettings) -> io::Result<DdsOutput> {
         let err = |what: &str, e: &dyn std::fmt::Debug| {
             io::Error::other(format!("DDS (domain {domain}): {what}: {e:?}"))
         };
@@ -106,15 +130,30 @@ impl DdsOutput {
             DomainParticipant::new(domain).map_err(|e| err("joining the domain", &e))?;
         let mut writers = Vec::new();
         for topic in Topic::ALL {
-            let qos = QosPolicyBuilder::new()
-                .reliability(Reliability::Reliable {
+            let reliability = if topic == Topic::Samples && settings.samples_best_effort {
+                Reliability::BestEffort
+            } else {
+                // Never wait: a full window fails the write at once.
+                Reliability::Reliable {
                     max_blocking_time: rustdds::Duration::ZERO,
-                })
+                }
+            };
+            let mut qos = QosPolicyBuilder::new()
+                .reliability(reliability)
                 .durability(Durability::Volatile)
                 .history(History::KeepLast {
                     depth: topic.depth() as i32,
-                })
-                .build();
+                });
+            if topic == Topic::Samples {
+                // rustdds's reliable window (and unsent backlog) is max_samples (8,192
+                // unset): room for more than a second of messages at 130,000 samples/s.
+                qos = qos.resource_limits(ResourceLimits {
+                    max_samples: SAMPLES_WINDOW as i32,
+                    max_instances: 1,
+                    max_samples_per_instance: SAMPLES_WINDOW as i32,
+                });
+            }
+            let qos = qos.build();
             let t = participant
                 .create_topic(
                     dds_topic_name(topic),
@@ -169,6 +208,10 @@ impl DdsOutput {
 }
 
 impl Output for DdsOutput {
+    fn max_samples_message_bytes(&self) -> Option<usize> {
+        Some(MAX_UNFRAGMENTED_MESSAGE_BYTES)
+    }
+
     fn publish(&mut self, topic: Topic, log_time_ns: u64, cdr: &[u8]) -> io::Result<()> {
         let Some(body) = cdr.strip_prefix(&CDR_LE_HEADER[..]) else {
             return Err(io::Error::other("a payload without its CDR header"));
@@ -200,7 +243,23 @@ impl Output for DdsOutput {
         }
         Ok(())
     }
+
+    /// Waits (at most [`CLOSE_WAIT`]) until the reliable topics' matched readers have
+    /// acknowledged every message, so the last ones written are not lost as the
+    /// participant goes.
+    fn close(&mut self) -> io::Result<()> {
+        let deadline = std::time::Instant::now() + CLOSE_WAIT;
+        for w in &self.writers {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            // Best effort and no readers count as acknowledged; a failure is no error.
+            let _ = w.wait_for_acknowledgments(left);
+        }
+        Ok(())
+    }
 }
+
+/// The longest [`DdsOutput`]'s close waits for acknowledgements.
+pub const CLOSE_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
 
 #[cfg(test)]
 mod tests {

@@ -24,6 +24,10 @@ pub fn offered_qos_profiles(topic: Topic) -> String {
     )
 }
 
+/// Chunk size of a recording: big enough that a chunk's record and its message index are
+/// a small share, small enough for a reader to seek to a time without reading much.
+pub const DEFAULT_CHUNK_BYTES: u64 = 768 * 1024;
+
 fn mcap_error(e: mcap::McapError) -> io::Error {
     io::Error::other(e.to_string())
 }
@@ -51,8 +55,14 @@ pub struct McapOutput {
 
 impl McapOutput {
     /// Creates the recording at `path`: a bag directory, or one file where `path` ends in
-    /// `.mcap`. An existing bag directory is refused, as rosbag2 does.
+    /// `.mcap`. An existing bag directory is refused, as rosbag2 does. Chunks of
+    /// [`DEFAULT_CHUNK_BYTES`], not compressed.
     pub fn create(path: &Path) -> io::Result<McapOutput> {
+        McapOutput::create_with_chunks(path, DEFAULT_CHUNK_BYTES)
+    }
+
+    /// As [`McapOutput::create`], with chunks of `chunk_bytes` (uncompressed) at most.
+    pub fn create_with_chunks(path: &Path, chunk_bytes: u64) -> io::Result<McapOutput> {
         let named = |e: io::Error| io::Error::new(e.kind(), format!("{}: {e}", path.display()));
         let (file, bag_dir) = if path.extension().is_some_and(|e| e == "mcap") {
             (path.to_path_buf(), None)
@@ -87,7 +97,7 @@ impl McapOutput {
                 env!("CARGO_PKG_VERSION")
             ))
             .compression(None)
-            .chunk_size(Some(768 * 1024))
+            .chunk_size(Some(chunk_bytes.max(1)))
             .calculate_chunk_crcs(false)
             .create(out)
             .map_err(mcap_error)?;

@@ -209,19 +209,40 @@ pub struct CellSampleBatch {
 /// where it starts, rounded up to 8).
 pub const CELL_SAMPLE_MAX_BYTES: usize = 144;
 
-impl RosMessage for CellSampleBatch {
-    const NAME: &'static str = "skinbox_msgs/CellSampleBatch";
-
-    fn encode_fields(&self, w: &mut CdrWriter) {
+impl CellSampleBatch {
+    /// The fields before `samples` into `w`, started anew (the encapsulation header
+    /// first): with [`CellSampleBatch::encode_samples`], a message with a part of the
+    /// samples, written once for every part.
+    pub fn encode_header(&self, w: &mut CdrWriter) {
+        w.start();
         self.stamp.encode_fields(w);
         w.u16(self.box_id);
         w.string(&self.box_address);
         w.u32(self.datagram_sequence);
-        w.sequence_len(self.samples.len());
-        w.reserve(self.samples.len() * CELL_SAMPLE_MAX_BYTES);
-        for s in &self.samples {
+    }
+
+    /// `samples` (all of the batch's or a run of them) after
+    /// [`CellSampleBatch::encode_header`]: the message is this batch with those samples.
+    pub fn encode_samples(&self, w: &mut CdrWriter, samples: &[CellSample]) {
+        w.sequence_len(samples.len());
+        w.reserve(samples.len() * CELL_SAMPLE_MAX_BYTES);
+        for s in samples {
             s.encode_fields(w);
         }
+    }
+}
+
+impl RosMessage for CellSampleBatch {
+    const NAME: &'static str = "skinbox_msgs/CellSampleBatch";
+
+    fn encode(&self, w: &mut CdrWriter) {
+        self.encode_header(w);
+        self.encode_samples(w, &self.samples);
+    }
+
+    fn encode_fields(&self, w: &mut CdrWriter) {
+        self.encode_header(w);
+        self.encode_samples(w, &self.samples);
     }
 
     fn fields(&self) -> Vec<(String, Value)> {

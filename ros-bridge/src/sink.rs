@@ -80,6 +80,14 @@ pub trait Output {
     /// (host time, ns since the epoch).
     fn publish(&mut self, topic: Topic, log_time_ns: u64, cdr: &[u8]) -> std::io::Result<()>;
 
+    /// The largest samples message this output takes, bytes of CDR with its header: a
+    /// datagram's samples that need more go out as several [`CellSampleBatch`] messages
+    /// (the same stamp, box and datagram sequence, the samples in order, each message as
+    /// many as fit). `None`: one message per datagram, whatever its size.
+    fn max_samples_message_bytes(&self) -> Option<usize> {
+        None
+    }
+
     /// No more messages: finish what is written.
     fn close(&mut self) -> std::io::Result<()> {
         Ok(())
@@ -104,26 +112,21 @@ impl Default for SinkSettings {
     }
 }
 
-/// The cells seen in a period: one bit per cell id, and their count.
-#[derive(Debug, Clone)]
+/// The cells seen in a period: one bit per cell id (grown to the highest id seen, so a
+/// port's set stays a few cache lines, not 8 kB for every possible id), and their count.
+#[derive(Debug, Default, Clone)]
 struct CellSet {
-    bits: Box<[u64; 1024]>,
+    bits: Vec<u64>,
     len: usize,
-}
-
-impl Default for CellSet {
-    fn default() -> Self {
-        CellSet {
-            bits: Box::new([0; 1024]),
-            len: 0,
-        }
-    }
 }
 
 impl CellSet {
     #[inline]
     fn insert(&mut self, cell: u16) {
         let (word, bit) = (usize::from(cell >> 6), 1u64 << (cell & 63));
+        if word >= self.bits.len() {
+            self.bits.resize(word + 1, 0);
+        }
         let w = &mut self.bits[word];
         self.len += usize::from(*w & bit == 0);
         *w |= bit;
@@ -178,7 +181,8 @@ impl BoxTrack {
 /// Messages sent, per topic.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct Published {
-    /// [`CellSampleBatch`] messages.
+    /// [`CellSampleBatch`] messages, one per records datagram (an output with a size
+    /// limit sends some in parts: [`Output::max_samples_message_bytes`]).
     pub samples_messages: u64,
     /// Cell samples in them.
     pub samples: u64,
@@ -296,12 +300,43 @@ impl RosSink {
         self.batch.box_id = key.box_id;
         self.batch.box_address = key.source.map(|a| a.to_string()).unwrap_or_default();
         self.batch.datagram_sequence = sequence;
-        let batch = std::mem::take(&mut self.batch);
         self.published.samples_messages += 1;
-        self.published.samples += batch.samples.len() as u64;
-        self.send(Topic::Samples, log_time, &batch);
-        self.batch = batch;
+        self.published.samples += self.batch.samples.len() as u64;
+        if self.error.is_none() {
+            if let Err(e) = self.send_batch(log_time) {
+                self.error = Some(e);
+            }
+        }
         self.batch.samples.clear();
+    }
+
+    /// The batch to every output: whole to those without a size limit (encoded once), in
+    /// parts of as many samples as fit to the others.
+    fn send_batch(&mut self, log_time: u64) -> std::io::Result<()> {
+        let batch = &self.batch;
+        let w = &mut self.w;
+        let mut whole = false;
+        for o in &mut self.outputs {
+            let Some(limit) = o.max_samples_message_bytes() else {
+                if !whole {
+                    batch.encode(w);
+                    whole = true;
+                }
+                o.publish(Topic::Samples, log_time, w.bytes())?;
+                continue;
+            };
+            whole = false;
+            batch.encode_header(w);
+            let header = w.len();
+            // The sequence length (4 bytes, aligned) and the samples at their largest.
+            let fit = (limit.saturating_sub(header + 8) / CELL_SAMPLE_MAX_BYTES).max(1);
+            for part in batch.samples.chunks(fit) {
+                w.truncate(header);
+                batch.encode_samples(w, part);
+                o.publish(Topic::Samples, log_time, w.bytes())?;
+            }
+        }
+        Ok(())
     }
 
     fn status(&mut self, key: BoxKey, payload: &[u8]) {
@@ -504,5 +539,24 @@ impl RecordSink for RosSink {
         }
         let at = self.receive_ns.unwrap_or_else(now_ns);
         self.activity(key, at);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::CellSet;
+
+    #[test]
+    fn a_cell_set_counts_each_cell_once_and_clears() {
+        let mut set = CellSet::default();
+        for cell in [5, 700, 5, 16383, 0, 700, 64, 63] {
+            set.insert(cell);
+        }
+        assert_eq!(set.len, 6);
+        set.clear();
+        assert_eq!(set.len, 0);
+        set.insert(700);
+        set.insert(1);
+        assert_eq!(set.len, 2);
     }
 }

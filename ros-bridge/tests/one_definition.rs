@@ -223,3 +223,44 @@ fn a_changed_msg_file_is_caught() {
     let bad = msgdef::parse("skinbox_msgs", "uint8 ok\nnonsense\n");
     assert!(bad.unwrap_err().contains("line 2"));
 }
+
+/// A message with a part of a batch's samples (as DDS sends a large datagram's) is the
+/// batch with only those samples, byte for byte, and reads back through the `.msg` file;
+/// nine samples fit the largest message rustdds sends unfragmented.
+#[test]
+fn a_batch_in_parts_is_batches_of_its_samples() {
+    let batch = CellSampleBatch {
+        stamp: Time {
+            sec: 1_700_000_000,
+            nanosec: 5,
+        },
+        box_id: 2,
+        box_address: "192.168.100.200:54091".into(),
+        datagram_sequence: 77,
+        samples: (0..23).map(sample).collect(),
+    };
+    let mut w = CdrWriter::new();
+    for size in 1..=batch.samples.len() {
+        for part in batch.samples.chunks(size) {
+            batch.encode_header(&mut w);
+            let header = w.len();
+            w.truncate(header);
+            batch.encode_samples(&mut w, part);
+            let alone = CellSampleBatch {
+                samples: part.to_vec(),
+                ..batch.clone()
+            };
+            let mut v = CdrWriter::new();
+            alone.encode(&mut v);
+            assert_eq!(w.bytes(), v.bytes(), "{size} samples a part");
+            check(&alone);
+        }
+    }
+    batch.encode_header(&mut w);
+    batch.encode_samples(&mut w, &batch.samples[..9]);
+    assert!(
+        w.len() <= skinbox_ros::dds::MAX_UNFRAGMENTED_MESSAGE_BYTES,
+        "{} bytes",
+        w.len()
+    );
+}

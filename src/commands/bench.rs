@@ -12,7 +12,7 @@ pub enum BenchCommand {
     Live(LiveBenchArgs),
     /// Decode an in-memory capture into an MCAP recording of the ROS 2 topics; prints
     /// samples_per_second.
-    Mcap(DecodeBenchArgs),
+    Mcap(McapBenchArgs),
     /// Verilator co-simulation: the harness against the bare model loop and the reference
     /// model.
     Sim(SimBenchArgs),
@@ -41,6 +41,20 @@ pub struct DecodeBenchArgs {
     /// Rounds; the fastest counts.
     #[arg(long, default_value_t = 3)]
     pub rounds: u32,
+}
+
+/// Arguments of `skinbox bench mcap`.
+#[derive(Debug, Args)]
+pub struct McapBenchArgs {
+    /// At least this many cell packets.
+    #[arg(long, default_value_t = 1_000_000)]
+    pub packets: usize,
+    /// Rounds; the fastest counts.
+    #[arg(long, default_value_t = 3)]
+    pub rounds: u32,
+    /// Chunk sizes of the recording to compare, KiB (taking turns within each round).
+    #[arg(long, value_delimiter = ',', default_values_t = [skinbox_ros::mcap_out::DEFAULT_CHUNK_BYTES / 1024])]
+    pub chunk_kib: Vec<u64>,
 }
 
 /// Arguments of `skinbox bench live`.
@@ -119,30 +133,38 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
             Ok(())
         }
         BenchCommand::Mcap(a) => {
+            anyhow::ensure!(
+                !a.chunk_kib.is_empty() && a.chunk_kib.iter().all(|k| *k > 0),
+                "--chunk-kib: one or more sizes, each at least 1"
+            );
             let capture = skinbox_cosim::synth::bench_payloads(a.packets, 7)?;
             let path =
                 std::env::temp_dir().join(format!("skinbox-bench-{}.mcap", std::process::id()));
-            let r = skinbox_ros::bench::bench_mcap(&capture.payloads, &path, a.rounds);
+            let chunks: Vec<u64> = a.chunk_kib.iter().map(|k| k * 1024).collect();
+            let r = skinbox_ros::bench::bench_mcap(&capture.payloads, &path, a.rounds, &chunks);
             let _ = std::fs::remove_file(&path);
             let r = r?;
             if json {
                 return super::print_json(&r);
             }
-            println!(
-                "MCAP: {} samples in {} messages ({:.1} MB) decoded, timed and written in {:.3} s of CPU ({:.3} s wall): {:.2} M samples/s on one core (goal {:.0} M)",
-                r.samples,
-                r.messages,
-                r.file_bytes as f64 / 1e6,
-                r.best_cpu_s,
-                r.wall_s,
-                r.samples_per_second / 1e6,
-                r.goal_samples_per_second / 1e6
-            );
-            println!(
-                "of which decoding and timing alone {:.3} s; the messages and the file the rest: {:.2} M samples/s on one core",
-                r.decode_and_timing_cpu_s,
-                r.ros_samples_per_second / 1e6
-            );
+            for r in &r {
+                println!(
+                    "MCAP, chunks of {} KiB: {} samples in {} messages ({:.1} MB) decoded, timed and written in {:.3} s of CPU ({:.3} s wall): {:.2} M samples/s on one core (goal {:.0} M)",
+                    r.chunk_bytes / 1024,
+                    r.samples,
+                    r.messages,
+                    r.file_bytes as f64 / 1e6,
+                    r.best_cpu_s,
+                    r.wall_s,
+                    r.samples_per_second / 1e6,
+                    r.goal_samples_per_second / 1e6
+                );
+                println!(
+                    "  of which decoding and timing alone {:.3} s; the messages and the file the rest: {:.2} M samples/s on one core",
+                    r.decode_and_timing_cpu_s,
+                    r.ros_samples_per_second / 1e6
+                );
+            }
             Ok(())
         }
         BenchCommand::Decode(a) => {

@@ -184,7 +184,12 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 outputs.push(Box::new(server));
             }
             if args.ros.ros2 {
-                let dds = skinbox_ros::dds::DdsOutput::create(skinbox_ros::dds::ros_domain_id()?)?;
+                let dds = skinbox_ros::dds::DdsOutput::create(
+                    skinbox_ros::dds::ros_domain_id()?,
+                    skinbox_ros::dds::DdsSettings {
+                        samples_best_effort: args.ros.ros2_best_effort,
+                    },
+                )?;
                 eprintln!("ROS 2 topics over DDS in domain {}", dds.domain());
                 outputs.push(Box::new(DdsReport(dds)));
             }
@@ -307,6 +312,10 @@ impl skinbox_ros::sink::Output for DdsReport {
         cdr: &[u8],
     ) -> std::io::Result<()> {
         self.0.publish(topic, log_time_ns, cdr)
+    }
+
+    fn max_samples_message_bytes(&self) -> Option<usize> {
+        self.0.max_samples_message_bytes()
     }
 
     fn close(&mut self) -> std::io::Result<()> {

@@ -52,6 +52,9 @@ pub struct Args {
     /// stream, as with --foxglove; domain ROS_DOMAIN_ID; docs/ros2.md).
     #[arg(long)]
     ros2: bool,
+    /// With --ros2: the samples topic best effort (docs/ros2.md).
+    #[arg(long, requires = "ros2")]
+    ros2_best_effort: bool,
 }
 
 /// `ADDRESS/PREFIX` as address and prefix length.
@@ -128,6 +131,9 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         }
         if args.ros2 {
             argv.push("--ros2".into());
+            if args.ros2_best_effort {
+                argv.push("--ros2-best-effort".into());
+            }
         }
         if let Some(ms) = args.run_ms {
             argv.extend(["--duration-ms".into(), ms.to_string()]);

@@ -24,6 +24,10 @@ pub struct RosArgs {
     /// ROS installation needed.
     #[arg(long)]
     pub ros2: bool,
+    /// With --ros2: the samples topic best effort instead of reliable (status and
+    /// activity stay reliable).
+    #[arg(long, requires = "ros2")]
+    pub ros2_best_effort: bool,
     /// The channel /skinbox/activity sums per port (max and mean): accel_x ... force_1 ...
     /// temperature_2.
     #[arg(long, default_value = "force_1", value_parser = parse_channel)]
