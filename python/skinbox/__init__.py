@@ -54,6 +54,8 @@ __all__ = [
     "Decoded",
     "CellKey",
     "read",
+    "Reader",
+    "read_chunks",
     "samples",
     "Capture",
     "Box",
@@ -158,6 +160,78 @@ def read(
     report = json.loads(report_json)
     _strict(os.fspath(path), rows, report, strict)
     return Decoded(rows, report)
+
+
+class Reader:
+    """The records of a pcap or pcapng in batches written into one reused buffer.
+
+    Iterate it for record arrays (:data:`RECORD_DTYPE`, the rows of :func:`read` in the
+    same order, at most ``rows`` a batch). Each batch is a view of the reader's buffer and
+    the next batch overwrites it: copy what you keep (``batch.copy()``). Rewriting rows
+    that were touched before spares the cost of fresh memory, about half of :func:`read`'s
+    time without times. After the last batch :attr:`report` holds the report of
+    :func:`read`. Options and errors as :func:`read`; with ``strict`` the
+    :class:`BadInputError` comes after the last batch (its ``rows`` empty).
+    """
+
+    def __init__(
+        self,
+        path: PathLike,
+        rows: int = 65536,
+        *,
+        sample_rate_hz: Optional[float] = None,
+        udp_port: Optional[int] = None,
+        cells_per_bus: Optional[int] = None,
+        synced: bool = False,
+        times: bool = True,
+        strict: bool = True,
+    ) -> None:
+        self._path = os.fspath(path)
+        self._strict = strict
+        self._native = _native.Reader(
+            self._path, rows, sample_rate_hz, udp_port, cells_per_bus, synced, times
+        )
+        self.report: Optional[dict] = None
+        """The report once every batch was taken, else None."""
+
+    def __iter__(self) -> "Reader":
+        return self
+
+    def __next__(self) -> np.ndarray:
+        batch = next(self._native, None)
+        if batch is not None:
+            return batch
+        if self.report is None:
+            import json
+
+            self.report = json.loads(self._native.report_json)
+            empty = np.empty(0, dtype=RECORD_DTYPE)
+            _strict(self._path, empty, self.report, self._strict)
+        raise StopIteration
+
+
+def read_chunks(
+    path: PathLike,
+    rows: int = 65536,
+    *,
+    sample_rate_hz: Optional[float] = None,
+    udp_port: Optional[int] = None,
+    cells_per_bus: Optional[int] = None,
+    synced: bool = False,
+    times: bool = True,
+    strict: bool = True,
+) -> Reader:
+    """A :class:`Reader` of ``path``: ``for batch in skinbox.read_chunks(path): ...``."""
+    return Reader(
+        path,
+        rows,
+        sample_rate_hz=sample_rate_hz,
+        udp_port=udp_port,
+        cells_per_bus=cells_per_bus,
+        synced=synced,
+        times=times,
+        strict=strict,
+    )
 
 
 def samples(

@@ -36,7 +36,7 @@ impl DecodeOptions {
         Ok(())
     }
 
-    fn pcap(&self) -> PcapOptions {
+    pub(crate) fn pcap(&self) -> PcapOptions {
         PcapOptions {
             decoder: DecoderConfig {
                 sample_rate_hz: self.sample_rate_hz,
