@@ -59,6 +59,28 @@ def read_samples(
 ) -> Tuple[np.ndarray, str]:
     """The sample after every record of a capture (SAMPLE_DTYPE) and the report as JSON."""
 
+class Reader:
+    """A capture decoded in batches into one reused buffer: iterate it for views of the
+    buffer (RECORD_DTYPE), each overwritten by the next."""
+
+    def __init__(
+        self,
+        path: _Path,
+        rows: int = 65536,
+        sample_rate_hz: Optional[float] = None,
+        udp_port: Optional[int] = None,
+        cells_per_bus: Optional[int] = None,
+        synced: bool = False,
+        times: bool = True,
+    ) -> None: ...
+    @property
+    def rows(self) -> int: ...
+    @property
+    def report_json(self) -> Optional[str]:
+        """The report as JSON text once every batch was taken, else None."""
+    def __iter__(self) -> Iterator[np.ndarray]: ...
+    def __next__(self) -> np.ndarray: ...
+
 def write_synthetic_capture(
     path: _Path,
     cells: int = 64,

@@ -179,7 +179,9 @@ impl Reader {
             synced,
         };
         options.check()?;
-        let bytes = py.detach(|| pcap::read_file(&path)).map_err(pcap_error)?;
+        let bytes = py
+            .detach(|| crate::mapped::map_file(&path))
+            .map_err(pcap_error)?;
         let rate_hz = match (times, sample_rate_hz) {
             (false, _) => None,
             (true, Some(rate)) => Some(rate),

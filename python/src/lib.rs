@@ -9,6 +9,7 @@ mod emulate;
 mod errors;
 mod files;
 mod live;
+mod mapped;
 mod rows;
 mod synth;
 
