@@ -100,6 +100,7 @@ def live_into_numpy(path: Path, rate: float, records_in_file: int, times: bool) 
         "datagrams_missing": report["report"]["losses"]["datagrams_missing"],
         "lossless": got == records_in_file,
         "receiver_cpu_ns_per_record": cpu_s * 1e9 / max(got, 1),
+        "timing_cpu_ns_per_record": report.get("timing_cpu_s", 0.0) * 1e9 / max(got, 1),
         "received_records_per_s": got / wall,
     }
 
@@ -151,7 +152,7 @@ def main() -> None:
     step = rust_live["steps"][0]
     for live in lives:
         print(f"live -> numpy at {args.rate / 1e6:.1f} M records/s (Capture, times={live['times']}):  {live['records_received']} of {live['records_in_file']} records, "
-              f"{live['datagrams_missing']} datagrams missing, sent at {live['records_in_file'] / live['sent']['wall_s'] / 1e6:.2f} M records/s, receiver {live['receiver_cpu_ns_per_record']:.1f} ns CPU/record")
+              f"{live['datagrams_missing']} datagrams missing, sent at {live['records_in_file'] / live['sent']['wall_s'] / 1e6:.2f} M records/s, receiver {live['receiver_cpu_ns_per_record']:.1f} ns CPU/record, timing thread {live['timing_cpu_ns_per_record']:.1f} ns CPU/record")
     print(f"skinbox bench live at {step['target_records_per_second'] / 1e6:.1f} M records/s (Rust):  {step['records_received']} records, "
           f"{step['datagrams_missing']} datagrams missing, sent at {step['sent_records_per_second'] / 1e6:.2f} M records/s, lossless {step['lossless']}, receiver {step['receiver_cpu_ns_per_record']:.1f} ns CPU/record")
 

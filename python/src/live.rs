@@ -134,6 +134,7 @@ fn time_rows(timing: &mut Timing, source: &mut Option<SocketAddr>, batch: &mut U
 /// times' summary to the final report.
 fn timing_thread(mut timing: Option<Timing>, from: Receiver<Stage>, to: Sender<Message>) {
     let mut source = None;
+    let cpu = skinbox_host::thread_cpu_ns();
     for stage in from {
         let message = match stage {
             Stage::Batch(mut batch) => {
@@ -158,6 +159,9 @@ fn timing_thread(mut timing: Option<Timing>, from: Receiver<Stage>, to: Sender<M
                         "exchanges_unused".into(),
                         timing.as_ref().map_or(0, |t| t.exchanges_unused()).into(),
                     );
+                    // the timing thread's CPU time (the receiving thread's is `capture`'s)
+                    let cpu_s = skinbox_host::thread_cpu_ns().saturating_sub(cpu) as f64 * 1e-9;
+                    map.insert("timing_cpu_s".into(), cpu_s.into());
                 }
                 Message::Done(Ok(report.to_string()))
             }
