@@ -55,6 +55,10 @@ struct Untimed {
     payloads: Vec<u8>,
 }
 
+/// The datagram lists of a timed batch, emptied, for the receiving thread to reuse (memory
+/// written before costs less than new memory).
+type Spare = (Vec<Received>, Vec<u8>);
+
 /// What the receiving thread tells the timing thread: as [`Message`], rows untimed.
 enum Stage {
     Batch(Untimed),
@@ -69,6 +73,7 @@ struct Batcher {
     /// The timing thread times the rows: keep the datagrams for it.
     timed: bool,
     to: Sender<Stage>,
+    spare: Receiver<Spare>,
     records: u64,
 }
 
@@ -77,15 +82,28 @@ impl Batcher {
         if self.batch.rows.is_empty() && self.batch.datagrams.is_empty() {
             return;
         }
+        let (datagrams, payloads) = self.spare.try_recv().unwrap_or_default();
         let batch = std::mem::replace(
             &mut self.batch,
             Untimed {
                 rows: Vec::with_capacity(self.batch_records),
-                ..Untimed::default()
+                datagrams,
+                payloads,
             },
         );
         // A consumer that went away stops wanting rows: nothing to do about it here.
         let _ = self.to.send(Stage::Batch(batch));
+    }
+}
+
+/// `v.round()`, as `skinbox_host::rows` rounds the host times: without the library call
+/// where `v` is an integer already (every `f64` of magnitude 2^52 or more).
+#[inline]
+fn round(v: f64) -> f64 {
+    if v.abs() >= 4_503_599_627_370_496.0 {
+        v
+    } else {
+        v.round()
     }
 }
 
@@ -103,9 +121,10 @@ fn time_rows(timing: &mut Timing, source: &mut Option<SocketAddr>, batch: &mut U
             *source = d.source;
         }
         let row = &mut element.0;
-        // The row's cell id came from a cell packet: it fits.
-        let Ok(cell) = DataRepr::from_raw(row.cell_id, [0; 9]) else {
-            continue;
+        // (the timing reads only the cell id of the packet)
+        let cell = DataRepr {
+            cell_id: row.cell_id,
+            ..DataRepr::default()
         };
         let times = timing.record(&DecodedRecord {
             box_id: row.box_id,
@@ -119,9 +138,8 @@ fn time_rows(timing: &mut Timing, source: &mut Option<SocketAddr>, batch: &mut U
         });
         row.sample_box_time_ns = times.sample_box_ns;
         row.sample_index = times.sample_index;
-        // (f64::round as skinbox_host::rows rounds, the same values)
-        row.host_time_ns = times.sample_host_ns.map_or(0, |v| v.round() as i64);
-        row.host_time_bound_ns = times.host_error_bound_ns.map_or(f64::NAN, f64::round);
+        row.host_time_ns = times.sample_host_ns.map_or(0, |v| round(v) as i64);
+        row.host_time_bound_ns = times.host_error_bound_ns.map_or(f64::NAN, round);
         row.host_time_source = host_time_source_code(times.source);
     }
     for d in datagrams {
@@ -132,7 +150,12 @@ fn time_rows(timing: &mut Timing, source: &mut Option<SocketAddr>, batch: &mut U
 
 /// The timing thread: times each batch (with `timing`) and hands it on; adds the host
 /// times' summary to the final report.
-fn timing_thread(mut timing: Option<Timing>, from: Receiver<Stage>, to: Sender<Message>) {
+fn timing_thread(
+    mut timing: Option<Timing>,
+    from: Receiver<Stage>,
+    to: Sender<Message>,
+    spare: Sender<Spare>,
+) {
     let mut source = None;
     let cpu = skinbox_host::thread_cpu_ns();
     for stage in from {
@@ -141,6 +164,10 @@ fn timing_thread(mut timing: Option<Timing>, from: Receiver<Stage>, to: Sender<M
                 if let Some(t) = &mut timing {
                     time_rows(t, &mut source, &mut batch);
                 }
+                // the datagrams' memory back to the receiving thread, to fill again
+                batch.datagrams.clear();
+                batch.payloads.clear();
+                let _ = spare.send((batch.datagrams, batch.payloads));
                 if batch.rows.is_empty() {
                     continue;
                 }
@@ -260,9 +287,10 @@ fn capture_thread(
         .unwrap_or(skinbox_host::decoder::ASSUMED_SAMPLE_RATE_HZ);
     let timing = settings.times.then(|| settings.options.timing(rate_hz));
     let (stage_to, stage_from) = channel();
+    let (spare_to, spare) = channel();
     let timer = match std::thread::Builder::new()
         .name("skinbox-timing".into())
-        .spawn(move || timing_thread(timing, stage_from, to))
+        .spawn(move || timing_thread(timing, stage_from, to, spare_to))
     {
         Ok(t) => t,
         Err(e) => {
@@ -318,6 +346,7 @@ fn capture_thread(
             batch_records: settings.batch_records,
             timed: settings.times,
             to: to.clone(),
+            spare,
             records: 0,
         }));
         let mut sink = BatchSink(batcher.clone());
