@@ -171,7 +171,8 @@ class Reader:
     that were touched before spares the cost of fresh memory, about half of :func:`read`'s
     time without times. After the last batch :attr:`report` holds the report of
     :func:`read`. Options and errors as :func:`read`; with ``strict`` the
-    :class:`BadInputError` comes after the last batch (its ``rows`` empty).
+    :class:`BadInputError` comes after the last batch (its ``rows`` empty). Take the
+    batches in one thread: ``next`` while another thread takes one raises ``RuntimeError``.
     """
 
     def __init__(

@@ -288,9 +288,17 @@ impl Reader {
 }
 
 impl Reader {
+    /// The state, or an error while another thread takes a batch: waiting for the lock
+    /// with the GIL held would deadlock with that thread, which takes the GIL back after
+    /// waiting for its batch without it.
     fn lock(&self) -> PyResult<std::sync::MutexGuard<'_, State>> {
-        self.state
-            .lock()
-            .map_err(|_| CaptureFileError::new_err("the reader's state is poisoned"))
+        self.state.try_lock().map_err(|e| match e {
+            std::sync::TryLockError::WouldBlock => pyo3::exceptions::PyRuntimeError::new_err(
+                "the reader is taking a batch in another thread",
+            ),
+            std::sync::TryLockError::Poisoned(_) => {
+                CaptureFileError::new_err("the reader's state is poisoned")
+            }
+        })
     }
 }

@@ -136,3 +136,34 @@ def test_a_reader_left_early_is_dropped_cleanly(captures):
     del reader
     records, _ = skinbox.read(path)
     assert_same_records(joined(skinbox.Reader(path, 10)), records)
+
+
+def test_a_reader_taken_from_two_threads_raises_instead_of_waiting(captures):
+    """One thread waits for its batch without the GIL; another thread's `next` raises
+    at once rather than wait for the reader with the GIL held."""
+    import threading
+
+    path, _ = captures["mixed"]
+    records, _ = skinbox.read(path)
+    reader = skinbox.Reader(path, 1)
+    got, errors = [], []
+
+    def take():
+        while True:
+            try:
+                batch = next(reader)
+            except StopIteration:
+                return
+            except RuntimeError as e:
+                errors.append(str(e))
+                continue
+            got.append(batch.copy())
+
+    threads = [threading.Thread(target=take) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert not any(t.is_alive() for t in threads), "no deadlock"
+    assert all("another thread" in e for e in errors)
+    assert len(got) == len(records)
