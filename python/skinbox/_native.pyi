@@ -59,6 +59,28 @@ def read_samples(
 ) -> Tuple[np.ndarray, str]:
     """The sample after every record of a capture (SAMPLE_DTYPE) and the report as JSON."""
 
+class Reader:
+    """A capture decoded in batches into one reused buffer: iterate it for views of the
+    buffer (RECORD_DTYPE), each overwritten by the next."""
+
+    def __init__(
+        self,
+        path: _Path,
+        rows: int = 65536,
+        sample_rate_hz: Optional[float] = None,
+        udp_port: Optional[int] = None,
+        cells_per_bus: Optional[int] = None,
+        synced: bool = False,
+        times: bool = True,
+    ) -> None: ...
+    @property
+    def rows(self) -> int: ...
+    @property
+    def report_json(self) -> Optional[str]:
+        """The report as JSON text once every batch was taken, else None."""
+    def __iter__(self) -> Iterator[np.ndarray]: ...
+    def __next__(self) -> np.ndarray: ...
+
 def write_synthetic_capture(
     path: _Path,
     cells: int = 64,
@@ -73,10 +95,13 @@ def write_synthetic_capture(
     walk_scale: int = 1,
     flush_timeout_ticks: int = 12500,
     drop_every: int = 0,
+    shared_box_id: bool = False,
 ) -> Dict[str, np.ndarray]:
-    """A pcap of the box's reference model batching synthetic cells; returns the truth of
-    every record written (box_id, datagram_sequence, tick, port, cell_id, kind, mask,
-    event_sequence, raw (n, 9))."""
+    """A pcap of the box's reference model batching synthetic cells (``boxes`` boxes from
+    10.0.0.2, 10.0.0.3, ...; ids from ``box_id`` up, or all ``box_id`` with
+    ``shared_box_id``); returns the truth of every record written (box_id, source_ip,
+    source_port, datagram_sequence, tick, port, cell_id, kind, mask, event_sequence,
+    raw (n, 9))."""
 
 def write_bench_capture(path: _Path, packets: int = 1000000, seed: int = 1) -> int:
     """The capture of ``skinbox bench decode`` as a pcap; returns its cell packets."""

@@ -36,7 +36,7 @@ impl DecodeOptions {
         Ok(())
     }
 
-    fn pcap(&self) -> PcapOptions {
+    pub(crate) fn pcap(&self) -> PcapOptions {
         PcapOptions {
             decoder: DecoderConfig {
                 sample_rate_hz: self.sample_rate_hz,
@@ -94,7 +94,9 @@ where
     for<'a> RowWriter<'a, R>: RecordSink,
 {
     options.check()?;
-    let bytes = py.detach(|| pcap::read_file(path)).map_err(pcap_error)?;
+    let bytes = py
+        .detach(|| crate::mapped::map_file(path))
+        .map_err(pcap_error)?;
     let (rate_hz, exact) = match (times, options.sample_rate_hz) {
         (false, _) => (None, None),
         (true, Some(rate)) => (Some(rate), None),

@@ -3,11 +3,13 @@
 //! emulated box. The Python package `skinbox` (python/skinbox) wraps it; docs/python.md
 //! describes the API.
 
+mod chunks;
 mod control;
 mod emulate;
 mod errors;
 mod files;
 mod live;
+mod mapped;
 mod rows;
 mod synth;
 
@@ -65,6 +67,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(synth::write_synthetic_capture, m)?)?;
     m.add_function(wrap_pyfunction!(synth::write_bench_capture, m)?)?;
     m.add_function(wrap_pyfunction!(synth::replay_capture, m)?)?;
+    m.add_class::<chunks::Reader>()?;
     m.add_class::<control::BoxHandle>()?;
     m.add_class::<emulate::Emulator>()?;
     m.add_class::<live::Capture>()?;

@@ -1,9 +1,13 @@
 //! `Capture`: a live capture in its own thread, its records handed over in batches.
 //!
 //! The receiving thread runs the CLI's capture loop (`skinbox_host::live::run_capture`)
-//! with a sink that writes each record's row into the current batch's buffer; a full batch
-//! (or one older than the batch interval) goes over a channel and becomes a numpy array
-//! without a copy. The Python side waits for batches without the GIL.
+//! with a sink that writes each record's row, without times, into the current batch's
+//! buffer and keeps each datagram the timing reads; a full batch (or one older than the
+//! batch interval) goes over a channel to the timing thread, which fills in the rows'
+//! sample and host times (the sample clocks are most of the cost of a record: in their own
+//! thread they leave the receiving one the decoder's share) and hands the batch on; it
+//! becomes a numpy array without a copy. The Python side waits for batches without the
+//! GIL.
 
 use crate::errors::{value_error, CaptureError};
 use crate::files::DecodeOptions;
@@ -34,23 +38,165 @@ enum Message {
     Done(Result<String, String>),
 }
 
-/// Rows of the current batch; full batches go to the consumer.
-struct Batcher {
+/// A datagram the timing reads, in its place among the rows: it came before row `at_row`.
+struct Received {
+    at_row: usize,
+    receive: Option<Duration>,
+    source: Option<SocketAddr>,
+    /// Its bytes in the batch's `payloads`.
+    payload: std::ops::Range<usize>,
+}
+
+/// A batch on its way to the timing thread: rows without times and the datagrams.
+#[derive(Default)]
+struct Untimed {
     rows: Vec<RecordElement>,
+    datagrams: Vec<Received>,
+    payloads: Vec<u8>,
+}
+
+/// The datagram lists of a timed batch, emptied, for the receiving thread to reuse (memory
+/// written before costs less than new memory).
+type Spare = (Vec<Received>, Vec<u8>);
+
+/// What the receiving thread tells the timing thread: as [`Message`], rows untimed.
+enum Stage {
+    Batch(Untimed),
+    Progress(String),
+    Done(Result<String, String>),
+}
+
+/// Rows of the current batch; full batches go to the timing thread.
+struct Batcher {
+    batch: Untimed,
     batch_records: usize,
-    timing: Option<Timing>,
-    to: Sender<Message>,
+    /// The timing thread times the rows: keep the datagrams for it.
+    timed: bool,
+    to: Sender<Stage>,
+    spare: Receiver<Spare>,
     records: u64,
 }
 
 impl Batcher {
     fn flush(&mut self) {
-        if self.rows.is_empty() {
+        if self.batch.rows.is_empty() && self.batch.datagrams.is_empty() {
             return;
         }
-        let rows = std::mem::replace(&mut self.rows, Vec::with_capacity(self.batch_records));
+        let (datagrams, payloads) = self.spare.try_recv().unwrap_or_default();
+        let batch = std::mem::replace(
+            &mut self.batch,
+            Untimed {
+                rows: Vec::with_capacity(self.batch_records),
+                datagrams,
+                payloads,
+            },
+        );
         // A consumer that went away stops wanting rows: nothing to do about it here.
-        let _ = self.to.send(Message::Batch(rows));
+        let _ = self.to.send(Stage::Batch(batch));
+    }
+}
+
+/// `v.round()`, as `skinbox_host::rows` rounds the host times: without the library call
+/// where `v` is an integer already (every `f64` of magnitude 2^52 or more).
+#[inline]
+fn round(v: f64) -> f64 {
+    if v.abs() >= 4_503_599_627_370_496.0 {
+        v
+    } else {
+        v.round()
+    }
+}
+
+/// Fills in the times of a batch's rows, taking its datagrams in their places, as the
+/// receiving thread would have; `timing.record` reads a record's box (id and the source
+/// of its datagram: `source`, the last one taken, which may be in an earlier batch), port,
+/// cell and tick, which the row holds.
+fn time_rows(timing: &mut Timing, source: &mut Option<SocketAddr>, batch: &mut Untimed) {
+    use skinbox_host::rows::host_time_source_code;
+    use skinbox_protocol::{CellRepr, DataRepr};
+    let mut datagrams = batch.datagrams.iter().peekable();
+    for (i, element) in batch.rows.iter_mut().enumerate() {
+        while let Some(d) = datagrams.next_if(|d| d.at_row <= i) {
+            timing.datagram_received(d.receive, d.source, &batch.payloads[d.payload.clone()]);
+            *source = d.source;
+        }
+        let row = &mut element.0;
+        // (the timing reads only the cell id of the packet)
+        let cell = DataRepr {
+            cell_id: row.cell_id,
+            ..DataRepr::default()
+        };
+        let times = timing.record(&DecodedRecord {
+            box_id: row.box_id,
+            source: *source,
+            datagram_sequence: row.datagram_sequence,
+            port: row.port,
+            flags: row.flags,
+            tick: row.tick,
+            cell: CellRepr::Data(cell),
+            event_packets_missing_before: row.event_packets_missing_before,
+        });
+        row.sample_box_time_ns = times.sample_box_ns;
+        row.sample_index = times.sample_index;
+        row.host_time_ns = times.sample_host_ns.map_or(0, |v| round(v) as i64);
+        row.host_time_bound_ns = times.host_error_bound_ns.map_or(f64::NAN, round);
+        row.host_time_source = host_time_source_code(times.source);
+    }
+    for d in datagrams {
+        timing.datagram_received(d.receive, d.source, &batch.payloads[d.payload.clone()]);
+        *source = d.source;
+    }
+}
+
+/// The timing thread: times each batch (with `timing`) and hands it on; adds the host
+/// times' summary to the final report.
+fn timing_thread(
+    mut timing: Option<Timing>,
+    from: Receiver<Stage>,
+    to: Sender<Message>,
+    spare: Sender<Spare>,
+) {
+    let mut source = None;
+    let cpu = skinbox_host::thread_cpu_ns();
+    for stage in from {
+        let message = match stage {
+            Stage::Batch(mut batch) => {
+                if let Some(t) = &mut timing {
+                    time_rows(t, &mut source, &mut batch);
+                }
+                // the datagrams' memory back to the receiving thread, to fill again
+                batch.datagrams.clear();
+                batch.payloads.clear();
+                let _ = spare.send((batch.datagrams, batch.payloads));
+                if batch.rows.is_empty() {
+                    continue;
+                }
+                Message::Batch(batch.rows)
+            }
+            Stage::Progress(json) => Message::Progress(json),
+            Stage::Done(Ok(json)) => {
+                let mut report: serde_json::Value = serde_json::from_str(&json).unwrap_or_default();
+                if let Some(map) = report.as_object_mut() {
+                    let summary = timing.as_ref().map(|t| t.summary()).unwrap_or_default();
+                    map.insert(
+                        "host_times".into(),
+                        serde_json::to_value(summary).unwrap_or_default(),
+                    );
+                    map.insert(
+                        "exchanges_unused".into(),
+                        timing.as_ref().map_or(0, |t| t.exchanges_unused()).into(),
+                    );
+                    // the timing thread's CPU time (the receiving thread's is `capture`'s)
+                    let cpu_s = skinbox_host::thread_cpu_ns().saturating_sub(cpu) as f64 * 1e-9;
+                    map.insert("timing_cpu_s".into(), cpu_s.into());
+                }
+                Message::Done(Ok(report.to_string()))
+            }
+            Stage::Done(Err(e)) => Message::Done(Err(e)),
+        };
+        if to.send(message).is_err() {
+            return;
+        }
     }
 }
 
@@ -61,13 +207,10 @@ impl RecordSink for BatchSink {
     #[inline]
     fn record(&mut self, record: &DecodedRecord) {
         let mut b = self.0.borrow_mut();
-        let times = match &mut b.timing {
-            Some(t) => t.record(record),
-            None => skinbox_host::rows::UNTIMED,
-        };
-        b.rows.push(RecordElement(RecordRow::new(record, &times)));
+        let row = RecordRow::new(record, &skinbox_host::rows::UNTIMED);
+        b.batch.rows.push(RecordElement(row));
         b.records += 1;
-        if b.rows.len() >= b.batch_records {
+        if b.batch.rows.len() >= b.batch_records {
             b.flush();
         }
     }
@@ -78,8 +221,17 @@ impl RecordSink for BatchSink {
         source: Option<SocketAddr>,
         payload: &[u8],
     ) {
-        if let Some(t) = &mut self.0.borrow_mut().timing {
-            t.datagram_received(receive, source, payload);
+        let mut b = self.0.borrow_mut();
+        if b.timed {
+            let b = &mut b.batch;
+            let start = b.payloads.len();
+            b.payloads.extend_from_slice(payload);
+            b.datagrams.push(Received {
+                at_row: b.rows.len(),
+                receive,
+                source,
+                payload: start..b.payloads.len(),
+            });
         }
     }
 }
@@ -129,6 +281,24 @@ fn capture_thread(
             return;
         }
     };
+    let rate_hz = settings
+        .options
+        .sample_rate_hz
+        .unwrap_or(skinbox_host::decoder::ASSUMED_SAMPLE_RATE_HZ);
+    let timing = settings.times.then(|| settings.options.timing(rate_hz));
+    let (stage_to, stage_from) = channel();
+    let (spare_to, spare) = channel();
+    let timer = match std::thread::Builder::new()
+        .name("skinbox-timing".into())
+        .spawn(move || timing_thread(timing, stage_from, to, spare_to))
+    {
+        Ok(t) => t,
+        Err(e) => {
+            let _ = started.send(Err(format!("the timing thread: {e}")));
+            return;
+        }
+    };
+    let to = stage_to;
     let done = to.clone();
     let result = runtime.block_on(async move {
         let (socket, granted) = live::bind_udp(settings.listen, settings.recv_buffer)
@@ -168,15 +338,15 @@ fn capture_thread(
             ),
             None => None,
         };
-        let rate_hz = settings
-            .options
-            .sample_rate_hz
-            .unwrap_or(skinbox_host::decoder::ASSUMED_SAMPLE_RATE_HZ);
         let batcher = Rc::new(RefCell::new(Batcher {
-            rows: Vec::with_capacity(settings.batch_records),
+            batch: Untimed {
+                rows: Vec::with_capacity(settings.batch_records),
+                ..Untimed::default()
+            },
             batch_records: settings.batch_records,
-            timing: settings.times.then(|| settings.options.timing(rate_hz)),
+            timed: settings.times,
             to: to.clone(),
+            spare,
             records: 0,
         }));
         let mut sink = BatchSink(batcher.clone());
@@ -219,7 +389,7 @@ fn capture_thread(
             shutdown,
             &mut |s, d| {
                 progress_batcher.borrow_mut().flush();
-                let _ = progress_to.send(Message::Progress(running_json(s, d)));
+                let _ = progress_to.send(Stage::Progress(running_json(s, d)));
             },
         )
         .await
@@ -257,13 +427,14 @@ fn capture_thread(
             })),
             "rows": b.records,
             "report": report,
-            "host_times": b.timing.as_ref().map(|t| t.summary()).unwrap_or_default(),
             "read_ticks_sent": read_ticks_sent,
-            "exchanges_unused": b.timing.as_ref().map_or(0, |t| t.exchanges_unused()),
         });
         Ok(json.to_string())
     });
-    let _ = done.send(Message::Done(result));
+    // (the timing thread adds the host times' summary)
+    let _ = done.send(Stage::Done(result));
+    drop(done);
+    let _ = timer.join();
 }
 
 /// A live capture: an iterator of record arrays (the dtype of `read`).

@@ -29,14 +29,15 @@ fn receive_time(d: &DatagramRepr) -> Duration {
     Duration::from_secs(HOST_EPOCH_S) + Duration::from_nanos(latest * TICK_NS + DELIVERY_NS)
 }
 
-/// Writes a pcap of `boxes` synthetic boxes (box ids `box_id`, `box_id + 1`, ..., each
-/// from its own address 10.0.0.2, 10.0.0.3, ... and seed, datagrams interleaved) and
-/// returns the truth of every record written, in order, as columns: box_id, datagram
+/// Writes a pcap of `boxes` synthetic boxes (box ids `box_id`, `box_id + 1`, ..., or all
+/// `box_id` with `shared_box_id`; each from its own address 10.0.0.2, 10.0.0.3, ... and
+/// seed, datagrams interleaved) and returns the truth of every record written, in order, as
+/// columns: box_id, source_ip (the IPv4 address as an integer), source_port, datagram
 /// sequence, tick, port, cell_id, kind (0 data, 1 event), mask, event_sequence (-1 for
 /// data) and raw (the nine raw channel values, 0 where absent). Every `drop_every`-th
 /// records datagram of each box (0: none) is left out, with its records.
 #[pyfunction]
-#[pyo3(signature = (path, cells=64, ports=8, sample_rate_hz=125.0, samples_per_cell=50, event_every=2, seed=1, box_id=1, boxes=1, first_sequence=0, walk_scale=1, flush_timeout_ticks=12_500, drop_every=0))]
+#[pyo3(signature = (path, cells=64, ports=8, sample_rate_hz=125.0, samples_per_cell=50, event_every=2, seed=1, box_id=1, boxes=1, first_sequence=0, walk_scale=1, flush_timeout_ticks=12_500, drop_every=0, shared_box_id=false))]
 #[allow(clippy::too_many_arguments)]
 pub fn write_synthetic_capture<'py>(
     py: Python<'py>,
@@ -53,6 +54,7 @@ pub fn write_synthetic_capture<'py>(
     walk_scale: i32,
     flush_timeout_ticks: u64,
     drop_every: u64,
+    shared_box_id: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     if boxes == 0 || boxes > 200 {
         return Err(value_error("boxes: 1 to 200"));
@@ -66,7 +68,13 @@ pub fn write_synthetic_capture<'py>(
             samples_per_cell,
             event_every,
             seed: seed + u64::from(k),
-            box_id: box_id + k,
+            box_id: if shared_box_id {
+                box_id
+            } else {
+                box_id
+                    .checked_add(k)
+                    .ok_or_else(|| value_error("box_id + boxes - 1 must fit 16 bits"))?
+            },
             first_sequence,
             walk_scale,
             flush_timeout_ticks,
@@ -84,6 +92,8 @@ pub fn write_synthetic_capture<'py>(
     let mut writer = PcapFrameWriter::new(std::io::BufWriter::new(file))
         .map_err(|e| value_error(e.to_string()))?;
     let mut truth_box = Vec::new();
+    let mut truth_ip = Vec::new();
+    let mut truth_source_port = Vec::new();
     let mut truth_sequence = Vec::new();
     let mut truth_tick = Vec::new();
     let mut truth_port = Vec::new();
@@ -127,6 +137,9 @@ pub fn write_synthetic_capture<'py>(
                         }
                     };
                     truth_box.push(*id);
+                    let (ip, source_port) = skinbox_host::rows::source_fields(Some(*source));
+                    truth_ip.push(ip);
+                    truth_source_port.push(source_port);
                     truth_sequence.push(d.sequence);
                     truth_tick.push(r.tick(d.base_tick));
                     truth_port.push(r.port);
@@ -152,6 +165,8 @@ pub fn write_synthetic_capture<'py>(
         .map_err(|e| value_error(e.to_string()))?;
     let truth = PyDict::new(py);
     truth.set_item("box_id", PyArray1::from_vec(py, truth_box))?;
+    truth.set_item("source_ip", PyArray1::from_vec(py, truth_ip))?;
+    truth.set_item("source_port", PyArray1::from_vec(py, truth_source_port))?;
     truth.set_item("datagram_sequence", PyArray1::from_vec(py, truth_sequence))?;
     truth.set_item("tick", PyArray1::from_vec(py, truth_tick))?;
     truth.set_item("port", PyArray1::from_vec(py, truth_port))?;

@@ -95,6 +95,7 @@ CAPTURES = {
     "event": dict(event_every=1, walk_scale=4),
     "mixed": dict(event_every=2, walk_scale=2),
     "two_boxes": dict(event_every=2, boxes=2),
+    "shared_id": dict(event_every=2, boxes=2, shared_box_id=True),
     "gaps": dict(event_every=2, drop_every=4),
 }
 

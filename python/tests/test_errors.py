@@ -73,3 +73,16 @@ def test_a_bad_record_rejects_only_itself(captures, tmp_path):
     whole, _ = skinbox.read(captures["data"][0])
     assert len(records) == len(whole) - 1
     assert report["bad_input"]["by_reason"] == {"record: port out of range": 1}
+
+
+def test_an_empty_file_or_a_folder_raises_with_the_reason(tmp_path):
+    empty = tmp_path / "empty.pcap"
+    empty.write_bytes(b"")
+    with pytest.raises(skinbox.CaptureFileError, match="not a pcap or pcapng"):
+        skinbox.read(empty)
+    with pytest.raises(skinbox.CaptureFileError, match="not a pcap or pcapng"):
+        list(skinbox.Reader(empty, times=False))
+    with pytest.raises(OSError, match="Is a directory"):
+        skinbox.read(tmp_path)
+    with pytest.raises(OSError, match="Is a directory"):
+        skinbox.Reader(tmp_path)

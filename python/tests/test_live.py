@@ -143,3 +143,48 @@ def test_no_box_raises_after_the_retries():
 def test_an_unknown_scene_raises():
     with pytest.raises(skinbox.EmulatorError, match="no scene file"):
         skinbox.emulate("no_such_scene")
+
+
+@pytest.mark.parametrize("times", [True, False])
+def test_live_rows_equal_read_of_the_recorded_datagrams(times, tmp_path):
+    """A capture's rows, times filled in by its timing thread, are `read`'s rows of the pcap
+    it recorded (the same datagrams with the same receive stamps), every field."""
+    from test_chunks import assert_same_records
+
+    source = tmp_path / "sent.pcap"
+    truth = skinbox.write_synthetic_capture(
+        source, cells=48, samples_per_cell=40, seed=7, event_every=2, boxes=2
+    )
+    recorded = tmp_path / "recorded.pcap"
+    capture = skinbox.Capture(
+        listen="127.0.0.1:0",
+        batch_records=500,
+        batch_ms=20,
+        sample_rate_hz=125.0,
+        pcap=recorded,
+        times=times,
+    )
+    batches = []
+    consumer = threading.Thread(target=lambda: batches.extend(capture))
+    consumer.start()
+    skinbox._native.replay_capture(source, capture.address, 20_000.0)
+    deadline = time.monotonic() + 20
+    while sum(len(b) for b in batches) < len(truth["tick"]):
+        assert time.monotonic() < deadline, sum(len(b) for b in batches)
+        time.sleep(0.05)
+    capture.close()
+    consumer.join()
+    batches += list(capture)
+    live = np.empty(sum(len(b) for b in batches), dtype=skinbox.RECORD_DTYPE)
+    at = 0
+    for b in batches:
+        live[at : at + len(b)] = b
+        at += len(b)
+    assert np.array_equal(live["tick"], truth["tick"])
+    want, _ = skinbox.read(recorded, sample_rate_hz=125.0, times=times)
+    # the live rows' source ports are the sender's (127.0.0.1:ephemeral), as recorded
+    assert_same_records(live, want)
+    if times:
+        assert (live["host_time_source"] == skinbox.HOST_TIME_RECEIVE_STAMPS).all()
+        assert np.isfinite(live["sample_box_time_ns"]).all()
+        assert capture.report["host_times"], "the summary of the host times"

@@ -60,7 +60,9 @@ def assert_row_equals(row: np.void, want: dict) -> None:
         assert row["host_time_bound_ns"] == want["host_time_bound_ns"]
 
 
-@pytest.mark.parametrize("name", ["data", "event", "mixed", "two_boxes", "gaps", "pcapng"])
+@pytest.mark.parametrize(
+    "name", ["data", "event", "mixed", "two_boxes", "shared_id", "gaps", "pcapng"]
+)
 def test_every_field_equals_decode_jsonl(name, captures, skinbox_bin):
     path, truth = captures[name]
     records, report = skinbox.read(path)
@@ -73,6 +75,8 @@ def test_every_field_equals_decode_jsonl(name, captures, skinbox_bin):
     assert np.array_equal(records["tick"], truth["tick"])
     assert np.array_equal(records["cell_id"], truth["cell_id"])
     assert np.array_equal(records["box_id"], truth["box_id"])
+    assert np.array_equal(records["source_ip"], truth["source_ip"])
+    assert np.array_equal(records["source_port"], truth["source_port"])
     assert np.array_equal(records["mask"], truth["mask"])
     assert (records["source_port"] != 0).all(), "every datagram of a pcap has its source"
 
