@@ -154,8 +154,6 @@ pub struct CellDownlink {
     copying: DFF<Bit>,
     broadcast: DFF<Bit>,
     copy_port: DFF<Bits<8>>,
-    /// Bit `p` set: `copy_port` is `p` (the ports' decodes are one bit each).
-    copy_onehot: DFF<Bits<64>>,
     copy_index: DFF<Bits<5>>,
     accepted_out: DFF<Bit>,
     accepted_port_out: DFF<Bits<8>>,
@@ -222,10 +220,7 @@ pub struct CellDownlink {
     position_port: DFF<Bits<6>>,
     position_next: DFF<Bits<6>>,
     freed: DFF<Bit>,
-    freed_onehot: DFF<Bits<64>>,
-    /// Bit `p` set: `port_4` is `p`.
-    refill_onehot: DFF<Bits<64>>,
-    first_port_bit: Constant<Bits<64>>,
+    freed_port: DFF<Bits<6>>,
     clearing: DFF<Bit>,
     clear_address: DFF<Bits<6>>,
     // per port
@@ -295,7 +290,6 @@ impl CellDownlink {
             copying: Default::default(),
             broadcast: Default::default(),
             copy_port: Default::default(),
-            copy_onehot: Default::default(),
             copy_index: Default::default(),
             accepted_out: Default::default(),
             accepted_port_out: Default::default(),
@@ -356,9 +350,7 @@ impl CellDownlink {
             position_port: Default::default(),
             position_next: Default::default(),
             freed: Default::default(),
-            freed_onehot: Default::default(),
-            refill_onehot: Default::default(),
-            first_port_bit: Constant::new(1.into()),
+            freed_port: Default::default(),
             clearing: Default::default(),
             clear_address: Default::default(),
             count: each(ports),
@@ -396,7 +388,6 @@ impl Logic for CellDownlink {
             copying,
             broadcast,
             copy_port,
-            copy_onehot,
             copy_index,
             accepted_out,
             accepted_port_out,
@@ -441,8 +432,7 @@ impl Logic for CellDownlink {
             position_port,
             position_next,
             freed,
-            freed_onehot,
-            refill_onehot,
+            freed_port,
             clearing,
             clear_address
         );
@@ -479,16 +469,14 @@ impl Logic for CellDownlink {
             self.copy_index.d.next = 0.into();
             self.broadcast.d.next = self.offered_port.q.val() == self.all_ports.val();
             self.copy_port.d.next = self.offered_port.q.val();
-            self.copy_onehot.d.next = self.first_port_bit.val() << self.offered_port.q.val();
             if self.offered_port.q.val() == self.all_ports.val() {
                 self.copy_port.d.next = 0.into();
-                self.copy_onehot.d.next = self.first_port_bit.val();
             }
         }
         // copy the staged packet into the target port's free slot (its `tail`)
         self.copy_tail.next = false;
         for i in 0..self.count.len() {
-            if (self.copy_onehot.q.val() & self.port_bit[i].val()) != 0 {
+            if self.copy_port.q.val() == self.port_number[i].val() {
                 self.copy_tail.next = self.tail[i].q.val();
             }
         }
@@ -513,7 +501,6 @@ impl Logic for CellDownlink {
             self.copy_index.d.next = 0.into();
             if self.broadcast.q.val() & (self.copy_port.q.val() != self.last_port.val()) {
                 self.copy_port.d.next = self.copy_port.q.val() + 1;
-                self.copy_onehot.d.next = self.copy_onehot.q.val() << 1;
             } else {
                 self.copying.d.next = false;
             }
@@ -610,8 +597,7 @@ impl Logic for CellDownlink {
         self.position_port.d.next = self.port_2.q.val();
         self.position_next.d.next = self.position.val() + 1;
         self.freed.d.next = false;
-        self.freed_onehot.d.next = self.first_port_bit.val() << self.port_2.q.val();
-        self.refill_onehot.d.next = self.first_port_bit.val() << self.port_3.q.val();
+        self.freed_port.d.next = self.port_2.q.val();
         if self.position.val().get_bits::<5>(0) == 19 {
             // the last byte of the slot: the other slot next, this one is free
             self.position_next.d.next =
@@ -664,21 +650,24 @@ impl Logic for CellDownlink {
             self.pin[i].d.next = self.pin[i].q.val();
             // the queue count: +1 on a copy's commit, -1 when the last byte is read
             self.count[i].d.next = self.count[i].q.val();
-            if self.commit.val() & ((self.copy_onehot.q.val() & self.port_bit[i].val()) != 0) {
+            if self.commit.val() & (self.copy_port.q.val() == self.port_number[i].val()) {
                 self.tail[i].d.next = !self.tail[i].q.val();
                 self.count[i].d.next = self.count[i].q.val() + 1;
-                if self.freed.q.val() & ((self.freed_onehot.q.val() & self.port_bit[i].val()) != 0)
+                if self.freed.q.val()
+                    & (bit_cast::<8, 6>(self.freed_port.q.val()) == self.port_number[i].val())
                 {
                     self.count[i].d.next = self.count[i].q.val();
                 }
             } else if self.freed.q.val()
-                & ((self.freed_onehot.q.val() & self.port_bit[i].val()) != 0)
+                & (bit_cast::<8, 6>(self.freed_port.q.val()) == self.port_number[i].val())
             {
                 self.count[i].d.next = self.count[i].q.val() - 1;
             }
             // the next start bit, at the refill's load (high: no packet, no start bit); the
             // next data bit, from the pin scan
-            if self.visit_4.q.val() & ((self.refill_onehot.q.val() & self.port_bit[i].val()) != 0) {
+            if self.visit_4.q.val()
+                & (bit_cast::<8, 6>(self.port_4.q.val()) == self.port_number[i].val())
+            {
                 self.next_pin[i].d.next = !self.nonempty_4.q.val();
             }
             if self.pin_take.q.val()
