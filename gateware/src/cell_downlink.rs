@@ -100,6 +100,17 @@ pub fn pin_scan_clocks(ports: usize) -> u64 {
     2 + ports.min(BANK_PORTS) as u64 + READ_LATENCY + 2
 }
 
+/// Per port `p`, the scan ring's bit `p + delay`.
+fn ring_bits(ports: usize, delay: usize) -> Vec<Constant<Bits<68>>> {
+    (0..ports)
+        .map(|p| {
+            let mut bit = Bits::<68>::default();
+            bit = bit.replace_bit(p + delay, true);
+            Constant::new(bit)
+        })
+        .collect()
+}
+
 /// The downlink of `ports` UART pins.
 #[derive(LogicBlock)]
 pub struct CellDownlink {
@@ -204,6 +215,15 @@ pub struct CellDownlink {
     // the refill scan: the port visited, and the pipeline behind it
     refilling: DFF<Bit>,
     scan: DFF<Bits<6>>,
+    /// One bit moving up a place a clock from the refill scan's start: bit `p` at port
+    /// `p`'s visit, bit `p + 3` when its slot may be freed, bit `p + 4` at its load (the
+    /// ports' selects are one bit each, no compare a port).
+    scan_ring: DFF<Bits<68>>,
+    scan_ring_start: Constant<Bits<68>>,
+    /// Per port: its bit of the ring at its visit, its slot's freeing and its load.
+    visit_bit: Vec<Constant<Bits<68>>>,
+    freed_bit: Vec<Constant<Bits<68>>>,
+    load_bit: Vec<Constant<Bits<68>>>,
     visit_1: DFF<Bit>,
     port_1: DFF<Bits<6>>,
     nonempty_1: DFF<Bit>,
@@ -220,7 +240,6 @@ pub struct CellDownlink {
     position_port: DFF<Bits<6>>,
     position_next: DFF<Bits<6>>,
     freed: DFF<Bit>,
-    freed_port: DFF<Bits<6>>,
     clearing: DFF<Bit>,
     clear_address: DFF<Bits<6>>,
     // per port
@@ -334,6 +353,11 @@ impl CellDownlink {
             pin_value: Default::default(),
             refilling: Default::default(),
             scan: Default::default(),
+            scan_ring: Default::default(),
+            scan_ring_start: Constant::new(1.into()),
+            visit_bit: ring_bits(ports, 0),
+            freed_bit: ring_bits(ports, 3),
+            load_bit: ring_bits(ports, 4),
             visit_1: Default::default(),
             port_1: Default::default(),
             nonempty_1: Default::default(),
@@ -350,7 +374,6 @@ impl CellDownlink {
             position_port: Default::default(),
             position_next: Default::default(),
             freed: Default::default(),
-            freed_port: Default::default(),
             clearing: Default::default(),
             clear_address: Default::default(),
             count: each(ports),
@@ -416,6 +439,7 @@ impl Logic for CellDownlink {
             pin_value,
             refilling,
             scan,
+            scan_ring,
             visit_1,
             port_1,
             nonempty_1,
@@ -432,7 +456,6 @@ impl Logic for CellDownlink {
             position_port,
             position_next,
             freed,
-            freed_port,
             clearing,
             clear_address
         );
@@ -566,16 +589,20 @@ impl Logic for CellDownlink {
                 self.refilling.d.next = false;
             }
         }
+        self.scan_ring.d.next = self.scan_ring.q.val() << 1;
         if self.bit_end.val() & self.next_is_last_data.q.val() {
             self.refilling.d.next = true;
             self.scan.d.next = 0.into();
+            self.scan_ring.d.next = self.scan_ring_start.val();
         }
         // visit: the port's queue count; its position read from RAM
         self.nonempty.next = false;
         self.full.next = 0.into();
         for i in 0..self.count.len() {
-            if bit_cast::<8, 6>(self.scan.q.val()) == self.port_number[i].val() {
-                self.nonempty.next = self.count[i].q.val() != 0;
+            if ((self.scan_ring.q.val() & self.visit_bit[i].val()) != 0)
+                & (self.count[i].q.val() != 0)
+            {
+                self.nonempty.next = true;
             }
             if self.count[i].q.val().get_bit(1) {
                 self.full.next = self.full.val() | self.port_bit[i].val();
@@ -597,7 +624,6 @@ impl Logic for CellDownlink {
         self.position_port.d.next = self.port_2.q.val();
         self.position_next.d.next = self.position.val() + 1;
         self.freed.d.next = false;
-        self.freed_port.d.next = self.port_2.q.val();
         if self.position.val().get_bits::<5>(0) == 19 {
             // the last byte of the slot: the other slot next, this one is free
             self.position_next.d.next =
@@ -653,21 +679,16 @@ impl Logic for CellDownlink {
             if self.commit.val() & (self.copy_port.q.val() == self.port_number[i].val()) {
                 self.tail[i].d.next = !self.tail[i].q.val();
                 self.count[i].d.next = self.count[i].q.val() + 1;
-                if self.freed.q.val()
-                    & (bit_cast::<8, 6>(self.freed_port.q.val()) == self.port_number[i].val())
-                {
+                if self.freed.q.val() & ((self.scan_ring.q.val() & self.freed_bit[i].val()) != 0) {
                     self.count[i].d.next = self.count[i].q.val();
                 }
-            } else if self.freed.q.val()
-                & (bit_cast::<8, 6>(self.freed_port.q.val()) == self.port_number[i].val())
+            } else if self.freed.q.val() & ((self.scan_ring.q.val() & self.freed_bit[i].val()) != 0)
             {
                 self.count[i].d.next = self.count[i].q.val() - 1;
             }
             // the next start bit, at the refill's load (high: no packet, no start bit); the
             // next data bit, from the pin scan
-            if self.visit_4.q.val()
-                & (bit_cast::<8, 6>(self.port_4.q.val()) == self.port_number[i].val())
-            {
+            if self.visit_4.q.val() & ((self.scan_ring.q.val() & self.load_bit[i].val()) != 0) {
                 self.next_pin[i].d.next = !self.nonempty_4.q.val();
             }
             if self.pin_take.q.val()
