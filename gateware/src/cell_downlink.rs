@@ -34,7 +34,7 @@
 //!
 //! Latency, a packet committed on an idle port to its first start bit: up to one frame and
 //! a refill (about 2.5 to 5 us). Cost per port: 5 flip-flops (pin, next pin value, queue
-//! count, write slot).
+//! count, write slot) and a bit of the refill scan's ring.
 
 use crate::block_ram::{BlockRam, READ_LATENCY};
 use crate::hdl::*;
