@@ -607,6 +607,12 @@ impl Capture {
                     if let Some(rows) = self.take(message)? {
                         return Ok(Some(PyArray1::from_vec(py, rows)));
                     }
+                    // progress reports can come faster than the wait's timeout: Ctrl-C is
+                    // looked for after each of them too
+                    if let Err(e) = py.check_signals() {
+                        self.close(py)?;
+                        return Err(e);
+                    }
                 }
                 Err(RecvTimeoutError::Timeout) => {
                     if let Err(e) = py.check_signals() {

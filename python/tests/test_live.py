@@ -85,11 +85,17 @@ def test_close_stops_a_capture_that_waits():
 
 
 def test_ctrl_c_stops_the_capture():
-    capture = skinbox.Capture(listen="127.0.0.1:0")
-    threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()
-    with pytest.raises(KeyboardInterrupt):
-        for _ in capture:
-            pass
+    # Python's Ctrl-C handler, which a process started with SIGINT ignored (a background
+    # job of a shell without job control) does not get
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        capture = skinbox.Capture(listen="127.0.0.1:0")
+        threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()
+        with pytest.raises(KeyboardInterrupt):
+            for _ in capture:
+                pass
+    finally:
+        signal.signal(signal.SIGINT, previous)
     # the capture stopped with its report
     assert capture.report["running"] is False
 
