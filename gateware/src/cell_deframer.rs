@@ -46,14 +46,11 @@
 //! state lives in two RAMs (34 bits and the 32-bit start tick per port).
 
 use crate::block_ram::BlockRam;
+use crate::geometry::{group_onehot, GROUP_PORTS, MAX_PORTS, TICK_BEATS};
 use crate::hdl::*;
-use crate::port_slots::{group_onehot, GROUP_PORTS, MAX_PORTS};
 use crate::uart_rx::{bit_middles, STAMP_BITS};
 use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 use skinbox_protocol::PortCounter;
-
-/// Stored words of a packet before its cell bytes: the 32-bit start tick.
-pub const TICK_BEATS: usize = 4;
 
 /// Longest idle gap, in bit times (the limit's 11-bit arithmetic).
 pub const MAX_IDLE_GAP_BITS: u64 = 21;

@@ -23,7 +23,7 @@
 //! - After the frame's last data bit has gone to the pins, a refill scan visits one port a
 //!   clock: it reads the port's read position (a RAM) and the next byte of its oldest
 //!   packet (the queue RAM) into the port's word of the frame bytes (block RAM banks of
-//!   [`BANK_PORTS`] ports), or 0xFF when the port's queue is empty, and sets `next_pin` to
+//!   [`DOWNLINK_BANK_PORTS`] ports), or 0xFF when the port's queue is empty, and sets `next_pin` to
 //!   the port's start bit (low with a byte, high without), before the next frame's start
 //!   bit. A slot is free when its last byte was read; a port's packets go out back to back,
 //!   in order.
@@ -37,6 +37,7 @@
 //! count, write slot) and a bit of the refill scan's ring.
 
 use crate::block_ram::{BlockRam, READ_LATENCY};
+use crate::geometry::{DOWNLINK_BANK_PORTS, MAX_PORTS};
 use crate::hdl::*;
 use crate::uart_rx::{phase_increment, PHASE_BITS};
 use skinbox_protocol::cell::PACKET_LEN;
@@ -56,9 +57,6 @@ pub const PACKET_OFFSET: usize = ETHERNET_HEADER_LEN
     + UDP_HEADER_LEN
     + HEADER_LEN
     + cell_command_field::PACKET.start;
-
-/// Largest port count.
-pub const MAX_PORTS: usize = 64;
 
 /// Most ports whose refill fits the two stop and start bit times of a 10-bit frame; more
 /// ports get a second stop bit.
@@ -89,15 +87,11 @@ pub fn bit_start(clock_hz: u64, baud: u64, bit: u64) -> u64 {
 /// Queue RAM address: 6 bits of port, 1 of slot, 5 of byte index.
 const ADDRESS_BITS: usize = 12;
 
-/// Ports whose frame bytes share one block RAM bank of the pin scan (port `p` at word
-/// `p % BANK_PORTS` of bank `p / BANK_PORTS`).
-pub const BANK_PORTS: usize = 16;
-
 /// Clocks of the pin scan after a bit's end before its last port's next data bit is in
 /// place: the frame decode (2), the scan of a bank's words, the RAM (2), the value and
 /// its write (2).
 pub fn pin_scan_clocks(ports: usize) -> u64 {
-    2 + ports.min(BANK_PORTS) as u64 + READ_LATENCY + 2
+    2 + ports.min(DOWNLINK_BANK_PORTS) as u64 + READ_LATENCY + 2
 }
 
 /// Per port `p`, the scan ring's bit `p + delay`.
@@ -325,20 +319,20 @@ impl CellDownlink {
             pins_take_start: Default::default(),
             pins_take_data: Default::default(),
             pins_take_stop: Default::default(),
-            bytes: each(ports.div_ceil(BANK_PORTS)),
-            bank_number: (0..ports.div_ceil(BANK_PORTS))
+            bytes: each(ports.div_ceil(DOWNLINK_BANK_PORTS)),
+            bank_number: (0..ports.div_ceil(DOWNLINK_BANK_PORTS))
                 .map(|b| Constant::new((b as u64).into()))
                 .collect(),
-            bank_bit: (0..ports.div_ceil(BANK_PORTS))
+            bank_bit: (0..ports.div_ceil(DOWNLINK_BANK_PORTS))
                 .map(|b| Constant::new((1u64 << b).into()))
                 .collect(),
             first_word: Constant::new(1.into()),
-            last_word: Constant::new((ports.min(BANK_PORTS) as u64 - 1).into()),
+            last_word: Constant::new((ports.min(DOWNLINK_BANK_PORTS) as u64 - 1).into()),
             port_word_bit: (0..ports)
-                .map(|p| Constant::new((1u64 << (p % BANK_PORTS)).into()))
+                .map(|p| Constant::new((1u64 << (p % DOWNLINK_BANK_PORTS)).into()))
                 .collect(),
             port_bank_bit: (0..ports)
-                .map(|p| Constant::new((1u64 << (p / BANK_PORTS)).into()))
+                .map(|p| Constant::new((1u64 << (p / DOWNLINK_BANK_PORTS)).into()))
                 .collect(),
             after_bit_end_1: Default::default(),
             after_bit_end_2: Default::default(),

@@ -40,6 +40,7 @@ pub mod crc32;
 pub mod datagram_arbiter;
 pub mod frame_parser;
 pub mod frame_transmitter;
+pub mod geometry;
 pub mod hdl;
 pub mod interface_box;
 pub mod mac_receiver;

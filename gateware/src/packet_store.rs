@@ -6,11 +6,9 @@
 //! record is out. The tests here hold the two together to the behaviour the rest of the
 //! box relies on: every committed packet out once, in order per port, round robin.
 
+use crate::geometry::MAX_PORTS;
 use crate::hdl::*;
 use crate::port_slots::PortSlots;
-pub use crate::port_slots::{
-    group_onehot, BANK_PORTS, GROUP_PORTS, MAX_PORTS, SLOTS, STORED_BEATS,
-};
 use crate::record_arbiter::RecordArbiter;
 pub use crate::record_arbiter::RECORD_BEATS;
 use crate::stream::ByteStreamSource;
@@ -103,6 +101,7 @@ impl Logic for PacketStore {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::STORED_BEATS;
     use crate::testbench::Bench;
     use std::collections::VecDeque;
 

@@ -13,33 +13,12 @@
 //! `free_port`. Cost per port: three flip-flops and their logic, no RAM of its own.
 
 use crate::block_ram::BlockRam;
-use crate::cell_deframer::TICK_BEATS;
+use crate::geometry::{MAX_PORTS, SLOT_BANK_ADDRESS_BITS, SLOT_BANK_PORTS};
 use crate::hdl::*;
-use skinbox_protocol::cell::PACKET_LEN;
-
-/// Most ports (the port number field of a record is a byte; two banks).
-pub const MAX_PORTS: usize = 64;
-/// Ports per bank: one block RAM each.
-pub const BANK_PORTS: usize = 32;
-/// Ports per group: the engine's scan and the counter registers gather eight ports' terms
-/// in a register first, the groups a clock later (two short OR trees, not one across the
-/// chip).
-pub const GROUP_PORTS: usize = 8;
-/// Packets a port holds.
-pub const SLOTS: usize = 2;
-/// Stored words of a packet: tick and cell bytes.
-pub const STORED_BEATS: usize = TICK_BEATS + PACKET_LEN;
-/// Address bits of a bank: 5 port, 1 slot, 5 word.
-pub const BANK_ADDRESS_BITS: usize = 11;
-
-/// Port `port`'s group, one-hot (a bit of a `Bits<8>`: at most eight groups).
-pub fn group_onehot(port: usize) -> Constant<Bits<8>> {
-    Constant::new((1u64 << (port / GROUP_PORTS)).into())
-}
 
 /// The RAM address of word `word` of slot `slot` of port `port` in its bank.
 pub fn slot_address(port: usize, slot: usize, word: usize) -> usize {
-    (port % BANK_PORTS) << 6 | slot << 5 | word
+    (port % SLOT_BANK_PORTS) << 6 | slot << 5 | word
 }
 
 /// Packet buffers of N ports.
@@ -68,14 +47,14 @@ pub struct PortSlots {
     /// Bit i: the slot port i's next packet to read is in.
     pub read_slots: Signal<Out, Bits<64>>,
     /// Word to read in every bank (port within the bank, slot, word).
-    pub read_address: Signal<In, Bits<BANK_ADDRESS_BITS>>,
+    pub read_address: Signal<In, Bits<SLOT_BANK_ADDRESS_BITS>>,
     /// The word at `read_address` of each bank, two clocks later.
     pub bank_data: Vec<Signal<Out, Bits<9>>>,
     /// Free the slot read last of port `free_port`.
     pub free_slot: Signal<In, Bit>,
     /// The port whose slot is freed.
     pub free_port: Signal<In, Bits<6>>,
-    memories: Vec<BlockRam<9, BANK_ADDRESS_BITS>>,
+    memories: Vec<BlockRam<9, SLOT_BANK_ADDRESS_BITS>>,
     bank_high: Vec<Constant<Bit>>,
     port_number: Vec<Constant<Bits<6>>>,
     port_bit: Vec<Constant<Bits<64>>>,
@@ -83,7 +62,7 @@ pub struct PortSlots {
     read_slot: Vec<DFF<Bit>>,
     free: Vec<Signal<Local, Bit>>,
     commit: Vec<Signal<Local, Bit>>,
-    write_address: Signal<Local, Bits<BANK_ADDRESS_BITS>>,
+    write_address: Signal<Local, Bits<SLOT_BANK_ADDRESS_BITS>>,
 }
 
 impl PortSlots {
@@ -106,11 +85,11 @@ impl PortSlots {
             full_ports: Default::default(),
             read_slots: Default::default(),
             read_address: Default::default(),
-            bank_data: each(ports.div_ceil(BANK_PORTS)),
+            bank_data: each(ports.div_ceil(SLOT_BANK_PORTS)),
             free_slot: Default::default(),
             free_port: Default::default(),
-            memories: each(ports.div_ceil(BANK_PORTS)),
-            bank_high: (0..ports.div_ceil(BANK_PORTS))
+            memories: each(ports.div_ceil(SLOT_BANK_PORTS)),
+            bank_high: (0..ports.div_ceil(SLOT_BANK_PORTS))
                 .map(|b| Constant::new(b == 1))
                 .collect(),
             port_number: (0..ports)
@@ -167,9 +146,9 @@ impl Logic for PortSlots {
             }
         }
         self.write_address.next =
-            (bit_cast::<BANK_ADDRESS_BITS, 5>(self.write_port.val().get_bits::<5>(0)) << 6)
-                | (bit_cast::<BANK_ADDRESS_BITS, 1>(self.write_slot.val().into()) << 5)
-                | bit_cast::<BANK_ADDRESS_BITS, 5>(self.write_word.val());
+            (bit_cast::<SLOT_BANK_ADDRESS_BITS, 5>(self.write_port.val().get_bits::<5>(0)) << 6)
+                | (bit_cast::<SLOT_BANK_ADDRESS_BITS, 1>(self.write_slot.val().into()) << 5)
+                | bit_cast::<SLOT_BANK_ADDRESS_BITS, 5>(self.write_word.val());
         for b in 0..self.memories.len() {
             self.memories[b].clock.next = self.clock.val();
             self.memories[b].read_address.next = self.read_address.val();
@@ -186,6 +165,7 @@ impl Logic for PortSlots {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::STORED_BEATS;
     use crate::testbench::Bench;
 
     fn packet(k: u8) -> Vec<u8> {
@@ -228,7 +208,7 @@ mod tests {
             .map(|w| {
                 b.uut.read_address.next = (slot_address(port, slot, w) as u64).into();
                 b.cycles(2);
-                b.uut.bank_data[port / BANK_PORTS].val().to_u16()
+                b.uut.bank_data[port / SLOT_BANK_PORTS].val().to_u16()
             })
             .collect()
     }

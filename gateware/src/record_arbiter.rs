@@ -17,8 +17,8 @@
 //! [`PortSlots`]: crate::port_slots::PortSlots
 
 use crate::block_ram::READ_LATENCY;
+use crate::geometry::{MAX_PORTS, SLOT_BANK_ADDRESS_BITS, STORED_BEATS};
 use crate::hdl::*;
-use crate::port_slots::{BANK_ADDRESS_BITS, MAX_PORTS, STORED_BEATS};
 use crate::stream::ByteStreamSource;
 use crate::stream_fifo::{StreamFifo, FIFO_DEPTH};
 use skinbox_protocol::record::{field, RECORD_LEN};
@@ -41,7 +41,7 @@ pub struct RecordArbiter {
     /// Bit i: the slot of port i's next packet.
     pub read_slots: Signal<In, Bits<64>>,
     /// Word to read (port within its bank, slot, word).
-    pub read_address: Signal<Out, Bits<BANK_ADDRESS_BITS>>,
+    pub read_address: Signal<Out, Bits<SLOT_BANK_ADDRESS_BITS>>,
     /// Each bank's word, two clocks after the address.
     pub bank_data: Vec<Signal<In, Bits<9>>>,
     /// Free the slot just read of port `free_port`.
@@ -209,9 +209,9 @@ impl Logic for RecordArbiter {
             }
         }
         // (the port's bank bit drops out: each bank has its own RAM)
-        self.read_address.next = (bit_cast::<BANK_ADDRESS_BITS, 6>(self.port.q.val()) << 6)
-            | (bit_cast::<BANK_ADDRESS_BITS, 1>(self.slot.q.val().into()) << 5)
-            | bit_cast::<BANK_ADDRESS_BITS, 5>(self.word.q.val());
+        self.read_address.next = (bit_cast::<SLOT_BANK_ADDRESS_BITS, 6>(self.port.q.val()) << 6)
+            | (bit_cast::<SLOT_BANK_ADDRESS_BITS, 1>(self.slot.q.val().into()) << 5)
+            | bit_cast::<SLOT_BANK_ADDRESS_BITS, 5>(self.word.q.val());
         self.read_1.d.next = self.issue.val();
         self.read_1_port.d.next = self.issue_index.q.val() == 0;
         self.read_1_flags.d.next = self.issue_index.q.val() == 1;

@@ -25,6 +25,7 @@ pub use crate::config::{
 };
 use crate::rng::Rng;
 use crate::signal::SignalModel;
+pub use crate::time_sync::ClockWander;
 use crate::time_sync::{SyncedClock, TimeSync};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::cell_command::{
@@ -1087,25 +1088,6 @@ pub struct GenerateOptions {
     /// sends them: per bus, (scene time the first start bit leaves the box, ns; the bytes).
     /// `None`: each `[[commands]]` entry leaves at its own time.
     pub downlink: Option<Vec<BusDownlink>>,
-}
-
-/// A sample clock whose drift wanders: `drift + amplitude * sin(2 pi t / period + angle)`,
-/// each cell with its own angle (drawn from the scene seed).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ClockWander {
-    /// Amplitude of the wander, ppm.
-    pub amplitude_ppm: f64,
-    /// Period of the wander, s.
-    pub period_s: f64,
-}
-
-impl ClockWander {
-    /// The drift at time `t_s` of a cell whose steady drift is `drift_ppm`, ppm.
-    pub fn drift_ppm(&self, drift_ppm: f64, angle: f64, t_s: f64) -> f64 {
-        drift_ppm
-            + self.amplitude_ppm
-                * (std::f64::consts::TAU * t_s / self.period_s.max(1e-9) + angle).sin()
-    }
 }
 
 impl Default for GenerateOptions {

@@ -18,7 +18,6 @@
 
 use crate::config::BusConfig;
 use crate::rng::Rng;
-use crate::scene::ClockWander;
 
 /// The time-sync command as the cells obey it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -239,6 +238,25 @@ impl SyncedClock {
             }
             return t;
         }
+    }
+}
+
+/// A sample clock whose drift wanders: `drift + amplitude * sin(2 pi t / period + angle)`,
+/// each cell with its own angle (drawn from the scene seed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockWander {
+    /// Amplitude of the wander, ppm.
+    pub amplitude_ppm: f64,
+    /// Period of the wander, s.
+    pub period_s: f64,
+}
+
+impl ClockWander {
+    /// The drift at time `t_s` of a cell whose steady drift is `drift_ppm`, ppm.
+    pub fn drift_ppm(&self, drift_ppm: f64, angle: f64, t_s: f64) -> f64 {
+        drift_ppm
+            + self.amplitude_ppm
+                * (std::f64::consts::TAU * t_s / self.period_s.max(1e-9) + angle).sin()
     }
 }
 

@@ -49,7 +49,7 @@ use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP};
 use std::time::Instant;
 
-pub(crate) use skinbox_gateware::packet_store::SLOTS;
+pub(crate) use skinbox_gateware::geometry::SLOTS;
 
 /// The fixed numbers of front and back end for `config`.
 fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
