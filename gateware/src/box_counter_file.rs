@@ -3,11 +3,10 @@
 //!
 //! Every received frame raises `count` for one clock with its fate in `counter` (a
 //! `BoxCounter` index other than `FramesReceived`); the file adds one to
-//! `FramesReceived` and to that counter, each a read-modify-write in the counting RAM:
-//! `FramesReceived` is read in the clock of `count`, the fate's counter a clock later,
-//! and each is written, incremented, three clocks after its read. Two more RAMs take the
-//! same writes and serve the reporter's and the reply builder's read ports, so reading
-//! never delays counting.
+//! `FramesReceived` and to that counter, each an increment of a [`CountingRam`] of 32
+//! counters with two read ports (the reporter's and the reply builder's):
+//! `FramesReceived` is offered in the clock of `count`, the fate's counter a clock later,
+//! and each is written [`INCREMENT_WRITE_EDGE`] edges after it is offered.
 //!
 //! Limit: the last write of a count comes four clocks after `count`, so counts must be at
 //! least [`COUNT_SPACING`] clocks apart (a received frame takes at least 72 clocks, so
@@ -15,26 +14,30 @@
 //! (`FramesReceived`) adds one to it, not two. After reset the file first clears
 //! its RAMs ([`CLEAR_CLOCKS`] clocks) with `ready` low; counts in that time are lost.
 
-use crate::block_ram::BlockRam;
+use crate::counting_ram::{clear_clocks, CountingRam, INCREMENT_WRITE_EDGE};
 use crate::hdl::*;
 use skinbox_protocol::box_counters::BoxCounter;
 
 /// Counters in the file (`BoxCounter::ALL`).
 pub const COUNTERS: usize = BoxCounter::ALL.len();
 /// Clocks the file spends clearing its memories after reset (`ready` low).
-pub const CLEAR_CLOCKS: u64 = 32;
+pub const CLEAR_CLOCKS: u64 = clear_clocks(ADDRESS_BITS);
+/// Address bits of the file (`BoxCounter` indices).
+pub const ADDRESS_BITS: usize = 5;
 /// Clocks from a `count` (high in clock c) to the first clock whose read address sees
 /// `FramesReceived` counted: read in clock c, written at the edge ending clock c + 3.
-pub const FRAMES_RECEIVED_VISIBLE_AFTER: u64 = 4;
+pub const FRAMES_RECEIVED_VISIBLE_AFTER: u64 = INCREMENT_WRITE_EDGE;
 /// As [`FRAMES_RECEIVED_VISIBLE_AFTER`], for the fate's counter (read a clock later).
-pub const FATE_VISIBLE_AFTER: u64 = 5;
+pub const FATE_VISIBLE_AFTER: u64 = INCREMENT_WRITE_EDGE + 1;
+
+const _: () = assert!(COUNTERS <= 1 << ADDRESS_BITS);
 
 /// Fewest clocks between two counts (the read-modify-writes of one count must be over
 /// before the next reads).
 pub const COUNT_SPACING: u64 = 5;
 
 /// The box counters, counted by fate, with two read ports.
-#[derive(LogicBlock, Default)]
+#[derive(LogicBlock)]
 pub struct BoxCounterFile {
     /// The box clock.
     pub clock: Signal<In, Clock>,
@@ -54,100 +57,53 @@ pub struct BoxCounterFile {
     pub reply_data: Signal<Out, Bits<32>>,
     /// Counting: the clearing after reset is over.
     pub ready: Signal<Out, Bit>,
-    clearing: DFF<Bit>,
-    clear_address: DFF<Bits<5>>,
-    // the fate's read is one clock after the count
+    // the fate's increment is offered a clock after the count
     fate_read: DFF<Bit>,
     fate_address: DFF<Bits<5>>,
-    // reads in flight: (valid, address) for the two clocks of the RAM's latency
-    read_1: DFF<Bit>,
-    read_1_address: DFF<Bits<5>>,
-    read_2: DFF<Bit>,
-    read_2_address: DFF<Bits<5>>,
-    // the incremented word, written a clock after the addition
-    increment_pending: DFF<Bit>,
-    increment_address: DFF<Bits<5>>,
-    increment_value: DFF<Bits<32>>,
-    counting_memory: BlockRam<32, 5>,
-    reporter_memory: BlockRam<32, 5>,
-    reply_memory: BlockRam<32, 5>,
-    write_enable: Signal<Local, Bit>,
-    write_address: Signal<Local, Bits<5>>,
-    write_data: Signal<Local, Bits<32>>,
+    counters: CountingRam<ADDRESS_BITS>,
+}
+
+impl Default for BoxCounterFile {
+    fn default() -> Self {
+        Self {
+            clock: Default::default(),
+            reset: Default::default(),
+            count: Default::default(),
+            counter: Default::default(),
+            reporter_address: Default::default(),
+            reporter_data: Default::default(),
+            reply_address: Default::default(),
+            reply_data: Default::default(),
+            ready: Default::default(),
+            fate_read: Default::default(),
+            fate_address: Default::default(),
+            counters: CountingRam::new(2),
+        }
+    }
 }
 
 impl Logic for BoxCounterFile {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(
-            self,
-            clock,
-            clearing,
-            clear_address,
-            fate_read,
-            fate_address,
-            read_1,
-            read_1_address,
-            read_2,
-            read_2_address,
-            increment_pending,
-            increment_address,
-            increment_value
-        );
-        self.counting_memory.clock.next = self.clock.val();
-        self.reporter_memory.clock.next = self.clock.val();
-        self.reply_memory.clock.next = self.clock.val();
-
-        // FramesReceived is read in the clock of the count, the fate's counter a clock later.
-        self.fate_read.d.next = self.count.val() & !self.clearing.q.val();
+        dff_setup!(self, clock, fate_read, fate_address);
+        self.counters.clock.next = self.clock.val();
+        self.counters.reset.next = self.reset.val();
+        // FramesReceived is offered in the clock of the count, the fate's counter a clock
+        // later.
+        self.fate_read.d.next = self.count.val() & self.counters.ready.val();
         self.fate_address.d.next = self.counter.val();
-        self.counting_memory.read_address.next = 0.into();
-        self.read_1.d.next = self.count.val() & !self.clearing.q.val();
+        self.counters.increment.next = self.count.val() | self.fate_read.q.val();
+        self.counters.increment_address.next = 0.into();
         if self.fate_read.q.val() {
-            self.counting_memory.read_address.next = self.fate_address.q.val();
-            self.read_1.d.next = true;
+            self.counters.increment_address.next = self.fate_address.q.val();
         }
-        self.read_1_address.d.next = self.counting_memory.read_address.val();
-        self.read_2.d.next = self.read_1.q.val();
-        self.read_2_address.d.next = self.read_1_address.q.val();
-        self.increment_pending.d.next = self.read_2.q.val();
-        self.increment_address.d.next = self.read_2_address.q.val();
-        self.increment_value.d.next = self.counting_memory.read_data.val() + 1;
-
-        self.write_enable.next = self.increment_pending.q.val();
-        self.write_address.next = self.increment_address.q.val();
-        self.write_data.next = self.increment_value.q.val();
-        if self.clearing.q.val() {
-            self.write_enable.next = true;
-            self.write_address.next = self.clear_address.q.val();
-            self.write_data.next = 0.into();
-            self.clear_address.d.next = self.clear_address.q.val() + 1;
-            if self.clear_address.q.val() == 31 {
-                self.clearing.d.next = false;
-            }
-        }
-        self.counting_memory.write_enable.next = self.write_enable.val();
-        self.counting_memory.write_address.next = self.write_address.val();
-        self.counting_memory.write_data.next = self.write_data.val();
-        self.reporter_memory.write_enable.next = self.write_enable.val();
-        self.reporter_memory.write_address.next = self.write_address.val();
-        self.reporter_memory.write_data.next = self.write_data.val();
-        self.reply_memory.write_enable.next = self.write_enable.val();
-        self.reply_memory.write_address.next = self.write_address.val();
-        self.reply_memory.write_data.next = self.write_data.val();
-        self.reporter_memory.read_address.next = self.reporter_address.val();
-        self.reporter_data.next = self.reporter_memory.read_data.val();
-        self.reply_memory.read_address.next = self.reply_address.val();
-        self.reply_data.next = self.reply_memory.read_data.val();
-        self.ready.next = !self.clearing.q.val();
-
+        self.counters.read_address[0].next = self.reporter_address.val();
+        self.reporter_data.next = self.counters.read_data[0].val();
+        self.counters.read_address[1].next = self.reply_address.val();
+        self.reply_data.next = self.counters.read_data[1].val();
+        self.ready.next = self.counters.ready.val();
         if self.reset.val() {
-            self.clearing.d.next = true;
-            self.clear_address.d.next = 0.into();
             self.fate_read.d.next = false;
-            self.read_1.d.next = false;
-            self.read_2.d.next = false;
-            self.increment_pending.d.next = false;
         }
     }
 }

@@ -14,7 +14,7 @@ use crate::box_counter_file::BoxCounterFile;
 use crate::cell_deframer::{scan_period, CellDeframer, MAX_IDLE_GAP_BITS};
 use crate::cell_downlink::{frame_bits, pin_scan_clocks, CellDownlink, REFILL_LATENCY};
 use crate::command_unit::{CommandUnit, CommandUnitConfig};
-use crate::counter_file::CounterFile;
+use crate::counter_file::{counter_file, CounterFile};
 use crate::datagram_arbiter::DatagramArbiter;
 use crate::frame_parser::{FrameParser, ACTION_ARP, ACTION_COMMAND, ACTION_ECHO, ACTION_NONE};
 use crate::frame_transmitter::FrameTransmitter;
@@ -333,7 +333,7 @@ impl InterfaceBox {
                 config.idle_gap_bits,
             ),
             store: PacketStore::new(n),
-            counters: CounterFile::new(),
+            counters: counter_file(),
             status: StatusReporter::new(n, config.boot_seed),
             batcher: RecordBatcher::new(),
             arbiter: DatagramArbiter::new(DATAGRAM_SOURCES),
@@ -423,7 +423,7 @@ impl Logic for InterfaceBox {
         self.store.port_reset.next = self.store_port_reset.q.val();
         self.counters.clock.next = self.clock.val();
         self.counters.reset.next = self.core_reset.q.val();
-        self.counters.read_address.next = self.status.counter_address.val();
+        self.counters.read_address[0].next = self.status.counter_address.val();
 
         // store -> batcher: the store's output FIFO holds every beat in flight, so the
         // batcher's ready reaches its FIFO registers only
@@ -439,7 +439,7 @@ impl Logic for InterfaceBox {
         self.status.datagrams_sent.next = self.batcher.datagrams_sent.val();
         self.status.records_sent.next = self.batcher.records_sent.val();
         self.status.counters_ready.next = self.counters.ready.val();
-        self.status.counter_data.next = self.counters.read_data.val();
+        self.status.counter_data.next = self.counters.read_data[0].val();
         self.status.link_up.next = self.link_up.val();
         self.status.link_speed.next = self.link_speed.val();
         self.status.status_period_ticks.next = self.commands.status_period_ticks.val();

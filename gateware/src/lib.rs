@@ -36,6 +36,7 @@ pub mod cell_deframer;
 pub mod cell_downlink;
 pub mod command_unit;
 pub mod counter_file;
+pub mod counting_ram;
 pub mod crc32;
 pub mod datagram_arbiter;
 pub mod frame_parser;
