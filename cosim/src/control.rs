@@ -2,6 +2,10 @@
 //! it receives. The receive path of the gateware follows it byte for byte, and `skinbox
 //! emulate` runs it behind a real UDP socket.
 //!
+//! Every header is read and written through `skinbox_protocol::wire` (Ethernet II, ARP,
+//! IPv4, ICMP echo, UDP); [`BoxControl::receive_udp`] takes a datagram that arrived on a
+//! socket, where there is no frame, as its IPv4 and UDP representations.
+//!
 //! [`BoxControl::receive`] takes one frame as the MAC sees it after the start-of-frame
 //! delimiter (destination MAC to FCS) and the box tick of its last byte, and says its fate
 //! (exactly one [`BoxCounter`] besides `frames_received`), the reply (an ARP reply, an ICMP
@@ -44,21 +48,21 @@ use skinbox_protocol::command::{
     AckReply, AckRepr, AckResult, Command, Destination, Request, ANY_BOX,
 };
 use skinbox_protocol::link::{
-    LinkConfig, ETHERNET_HEADER_LEN, FCS_LEN, IPV4_HEADER_LEN, IPV4_TTL, MIN_FRAME_LEN,
-    PREAMBLE_LEN, UDP_HEADER_LEN,
+    box_ipv4_header, LinkConfig, ETHERNET_HEADER_LEN, FCS_LEN, IPV4_HEADER_LEN, MIN_FRAME_LEN,
+    PREAMBLE_LEN,
 };
 pub use skinbox_protocol::link::{
     ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP,
+};
+use skinbox_protocol::wire::ethernet::{EthernetFrame, BROADCAST};
+use skinbox_protocol::wire::ipv4::Ipv4Packet;
+use skinbox_protocol::wire::{
+    ArpOperation, ArpRepr, EchoMessage, EthernetRepr, IcmpEchoRepr, Ipv4Repr, UdpRepr,
 };
 use skinbox_protocol::Error;
 
 pub use skinbox_protocol::command::HOST_SLOTS;
 pub use skinbox_protocol::link::{MAX_RECEIVE_LEN, MIN_RECEIVE_LEN};
-/// Length of an ARP message for Ethernet and IPv4 (RFC 826).
-pub const ARP_LEN: usize = 28;
-/// Length of the ICMP echo header (type, code, checksum, identifier, sequence).
-pub const ICMP_ECHO_HEADER_LEN: usize = 8;
-const BROADCAST: [u8; 6] = [0xFF; 6];
 
 /// The build-time parameters the control model needs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -213,10 +217,53 @@ impl BoxControl {
         receive_tick: u64,
         reply_slot_free: bool,
     ) -> Outcome {
+        self.decide(receive_tick, reply_slot_free, |box_| {
+            box_.classify(frame, receive_tick)
+        })
+    }
+
+    /// Takes a UDP datagram that reached the box's address through a socket rather than a
+    /// wire (the emulator): the IPv4 header `ip` and datagram `udp` it arrived with, from
+    /// `source_mac`, at `receive_tick`, decided as the frame carrying them would be (with a
+    /// free reply buffer): counted in `frames_received`; `bad_length` if it would not fit
+    /// one frame; `not_for_us` to another address or over another protocol; then the UDP
+    /// rules (port, command). There is no frame to check: no FCS, no checksums.
+    pub fn receive_udp(
+        &mut self,
+        source_mac: [u8; 6],
+        ip: &Ipv4Repr,
+        udp: &UdpRepr,
+        receive_tick: u64,
+    ) -> Outcome {
+        self.decide(receive_tick, true, |box_| {
+            let fate = |fate: BoxCounter| Outcome {
+                fate,
+                reply: None,
+                effect: None,
+            };
+            let frame_len = ETHERNET_HEADER_LEN + IPV4_HEADER_LEN + udp.buffer_len() + FCS_LEN;
+            if frame_len > MAX_RECEIVE_LEN {
+                return fate(BoxCounter::BadLength);
+            }
+            if ip.destination != box_.config.link.box_ip || ip.protocol != IP_PROTOCOL_UDP {
+                return fate(BoxCounter::NotForUs);
+            }
+            box_.udp(source_mac, ip.source, udp, receive_tick)
+        })
+    }
+
+    /// Counts a frame received at `receive_tick`, decides it with `classify` and counts its
+    /// fate.
+    fn decide(
+        &mut self,
+        receive_tick: u64,
+        reply_slot_free: bool,
+        classify: impl FnOnce(&mut BoxControl) -> Outcome,
+    ) -> Outcome {
         self.reply_slot_free = reply_slot_free;
         self.receive_tick = receive_tick;
         self.counters.bump(BoxCounter::FramesReceived);
-        let outcome = self.classify(frame, receive_tick);
+        let outcome = classify(self);
         self.counters.bump(outcome.fate);
         // status-now answers with the counters, this command counted
         match outcome.reply {
@@ -245,15 +292,13 @@ impl BoxControl {
             return fate(BoxCounter::BadFcs);
         }
         let link = self.config.link;
-        let destination_mac = &body[0..6];
-        let broadcast = destination_mac == BROADCAST;
-        if destination_mac != link.box_mac && !broadcast {
+        let ethernet = EthernetFrame::new_unchecked(body);
+        let broadcast = ethernet.destination() == BROADCAST;
+        if ethernet.destination() != link.box_mac && !broadcast {
             return fate(BoxCounter::NotForUs);
         }
-        let ethertype = u16::from_be_bytes([body[12], body[13]]);
-        let payload = &body[ETHERNET_HEADER_LEN..];
-        match ethertype {
-            ETHERTYPE_ARP => match arp_reply(&link, payload) {
+        match ethernet.ethertype() {
+            ETHERTYPE_ARP => match arp_reply(&link, ethernet.payload()) {
                 Some(_) if !self.reply_slot_free => fate(BoxCounter::ReplyBusy),
                 Some(reply) => Outcome {
                     fate: BoxCounter::ArpAnswered,
@@ -262,84 +307,88 @@ impl BoxControl {
                 },
                 None => fate(BoxCounter::NotForUs),
             },
-            ETHERTYPE_IPV4 if !broadcast => self.ipv4(body, receive_tick),
+            ETHERTYPE_IPV4 if !broadcast => {
+                self.ipv4(ethernet.source(), ethernet.payload(), receive_tick)
+            }
             _ => fate(BoxCounter::NotForUs),
         }
     }
 
-    fn ipv4(&mut self, body: &[u8], receive_tick: u64) -> Outcome {
+    /// An IPv4 packet (and the frame's padding after it) from `source_mac` to the box's MAC.
+    fn ipv4(&mut self, source_mac: [u8; 6], bytes: &[u8], receive_tick: u64) -> Outcome {
         let fate = |fate: BoxCounter| Outcome {
             fate,
             reply: None,
             effect: None,
         };
         let link = self.config.link;
-        let ip = &body[ETHERNET_HEADER_LEN..];
-        let version = ip[0] >> 4;
-        let ihl = usize::from(ip[0] & 0x0F);
-        if version != 4 || ihl < 5 {
+        // a frame of at least 64 bytes holds a 20-byte header
+        let ip = Ipv4Packet::new_unchecked(bytes);
+        if ip.version() != 4 || ip.ihl() < 5 {
             return fate(BoxCounter::Ipv4BadHeader);
         }
-        if ihl > 5 {
+        if ip.ihl() > 5 {
             return fate(BoxCounter::Ipv4Options);
         }
-        let header = &ip[..IPV4_HEADER_LEN];
-        let total = usize::from(u16::from_be_bytes([ip[2], ip[3]]));
-        if internet_checksum(&[header]) != 0 || !(IPV4_HEADER_LEN..=ip.len()).contains(&total) {
+        let Some(message) = ip.payload().filter(|_| ip.verify_checksum()) else {
             return fate(BoxCounter::Ipv4BadHeader);
-        }
-        let more_fragments = ip[6] & 0x20 != 0;
-        let offset = u16::from_be_bytes([ip[6], ip[7]]) & 0x1FFF;
-        if more_fragments || offset != 0 {
+        };
+        if ip.more_fragments() || ip.fragment_offset() != 0 {
             return fate(BoxCounter::Ipv4Fragment);
         }
-        if ip[16..20] != link.box_ip {
+        if ip.destination() != link.box_ip {
             return fate(BoxCounter::NotForUs);
         }
-        let source_ip: [u8; 4] = ip[12..16].try_into().expect("4 bytes");
-        let source_mac: [u8; 6] = body[6..12].try_into().expect("6 bytes");
-        let message = &ip[IPV4_HEADER_LEN..total];
-        match ip[9] {
+        let source_ip = ip.source();
+        match ip.protocol() {
             IP_PROTOCOL_ICMP => {
-                if message.len() < ICMP_ECHO_HEADER_LEN || internet_checksum(&[message]) != 0 {
-                    return fate(BoxCounter::BadTransport);
-                }
-                if message[0] != 8 || message[1] != 0 {
-                    return fate(BoxCounter::NotForUs);
-                }
+                let echo = match IcmpEchoRepr::parse(message) {
+                    Err(Error::Truncated { .. } | Error::BadChecksum { .. }) => {
+                        return fate(BoxCounter::BadTransport)
+                    }
+                    Ok(echo) if echo.message == EchoMessage::Request => echo,
+                    _ => return fate(BoxCounter::NotForUs),
+                };
                 if !self.reply_slot_free {
                     return fate(BoxCounter::ReplyBusy);
                 }
                 Outcome {
                     fate: BoxCounter::PingsAnswered,
-                    reply: Some(Reply::Echo(echo_reply(
-                        &link, source_mac, source_ip, message,
-                    ))),
+                    reply: Some(Reply::Echo(echo_reply(&link, source_mac, source_ip, &echo))),
                     effect: None,
                 }
             }
             IP_PROTOCOL_UDP => {
-                if message.len() < UDP_HEADER_LEN
-                    || usize::from(u16::from_be_bytes([message[4], message[5]])) != message.len()
-                {
+                let Ok(udp) = UdpRepr::parse(message, source_ip, link.box_ip) else {
                     return fate(BoxCounter::BadTransport);
-                }
-                let checksum = u16::from_be_bytes([message[6], message[7]]);
-                if checksum != 0 && udp_checksum(source_ip, link.box_ip, message, true) != 0 {
-                    return fate(BoxCounter::BadTransport);
-                }
-                if u16::from_be_bytes([message[2], message[3]]) != link.box_port {
-                    return fate(BoxCounter::UnknownUdpPort);
-                }
-                let sender = Destination {
-                    mac: source_mac,
-                    ip: source_ip,
-                    port: u16::from_be_bytes([message[0], message[1]]),
                 };
-                self.command(sender, &message[UDP_HEADER_LEN..], receive_tick)
+                self.udp(source_mac, source_ip, &udp, receive_tick)
             }
             _ => fate(BoxCounter::NotForUs),
         }
+    }
+
+    /// A checked UDP datagram from `source_mac` and `source_ip` to the box.
+    fn udp(
+        &mut self,
+        source_mac: [u8; 6],
+        source_ip: [u8; 4],
+        udp: &UdpRepr,
+        receive_tick: u64,
+    ) -> Outcome {
+        if udp.destination_port != self.config.link.box_port {
+            return Outcome {
+                fate: BoxCounter::UnknownUdpPort,
+                reply: None,
+                effect: None,
+            };
+        }
+        let sender = Destination {
+            mac: source_mac,
+            ip: source_ip,
+            port: udp.source_port,
+        };
+        self.command(sender, udp.payload, receive_tick)
     }
 
     fn command(&mut self, sender: Destination, payload: &[u8], receive_tick: u64) -> Outcome {
@@ -524,129 +573,92 @@ pub fn crc32(bytes: &[u8]) -> u32 {
     !register
 }
 
-/// The one's complement of the one's complement sum of `parts` (RFC 1071): 0 over a
-/// message whose checksum field is right, the checksum to write over one whose field is 0.
-/// An odd part is padded with a zero byte (only the last part may be odd).
-pub fn internet_checksum(parts: &[&[u8]]) -> u16 {
-    let mut sum: u32 = 0;
-    for part in parts {
-        for pair in part.chunks(2) {
-            let word = u16::from_be_bytes([pair[0], pair.get(1).copied().unwrap_or(0)]);
-            sum += u32::from(word);
-        }
-    }
-    while sum > 0xFFFF {
-        sum = (sum & 0xFFFF) + (sum >> 16);
-    }
-    !(sum as u16)
-}
-
-/// The UDP checksum over the IPv4 pseudo header and `udp` (header and payload): with
-/// `verify`, 0 when the field is right; else the value to write (the field zeroed, and a
-/// result of 0 sent as 0xFFFF, RFC 768).
-fn udp_checksum(source: [u8; 4], destination: [u8; 4], udp: &[u8], verify: bool) -> u16 {
-    let len = (udp.len() as u16).to_be_bytes();
-    let pseudo = [
-        source[0],
-        source[1],
-        source[2],
-        source[3],
-        destination[0],
-        destination[1],
-        destination[2],
-        destination[3],
-        0,
-        IP_PROTOCOL_UDP,
-        len[0],
-        len[1],
-    ];
-    let sum = internet_checksum(&[&pseudo, udp]);
-    if verify || sum != 0 {
-        sum
-    } else {
-        0xFFFF
-    }
-}
-
-/// Preamble and SFD, `ethernet` padded with zeros to 60 bytes, and its FCS.
-fn wire_frame(mut ethernet: Vec<u8>) -> Vec<u8> {
-    ethernet.resize(ethernet.len().max(MIN_FRAME_LEN), 0);
-    let fcs = crc32(&ethernet);
-    let mut frame = Vec::with_capacity(PREAMBLE_LEN + ethernet.len() + FCS_LEN);
+/// Preamble and SFD, the Ethernet frame of `ethernet` with the `payload_len` bytes
+/// `emit_payload` writes, padded with zeros to 60 bytes, and its FCS.
+fn wire_frame(
+    ethernet: EthernetRepr,
+    payload_len: usize,
+    emit_payload: impl FnOnce(&mut [u8]),
+) -> Vec<u8> {
+    let mut e = vec![0u8; (ETHERNET_HEADER_LEN + payload_len).max(MIN_FRAME_LEN)];
+    ethernet.emit(&mut e);
+    emit_payload(&mut e[ETHERNET_HEADER_LEN..ETHERNET_HEADER_LEN + payload_len]);
+    let fcs = crc32(&e);
+    let mut frame = Vec::with_capacity(PREAMBLE_LEN + e.len() + FCS_LEN);
     frame.extend_from_slice(&[0x55; 7]);
     frame.push(0xD5);
-    frame.extend_from_slice(&ethernet);
+    frame.extend_from_slice(&e);
     frame.extend_from_slice(&fcs.to_le_bytes());
     frame
 }
 
-fn ethernet_header(destination: [u8; 6], source: [u8; 6], ethertype: u16) -> Vec<u8> {
-    let mut h = Vec::with_capacity(MAX_RECEIVE_LEN);
-    h.extend_from_slice(&destination);
-    h.extend_from_slice(&source);
-    h.extend_from_slice(&ethertype.to_be_bytes());
-    h
-}
-
-/// The box's IPv4 header: no options, identification 0, don't fragment, TTL 64.
-fn ipv4_header(
+/// The wire frame of an IPv4 packet from the box (its header [`box_ipv4_header`]) to
+/// `mac` and `ip`, with the `message_len` bytes `emit_message` writes.
+fn ipv4_frame(
+    link: &LinkConfig,
+    mac: [u8; 6],
+    ip: [u8; 4],
     protocol: u8,
-    source: [u8; 4],
-    destination: [u8; 4],
-    payload_len: usize,
-) -> [u8; 20] {
-    let total = ((IPV4_HEADER_LEN + payload_len) as u16).to_be_bytes();
-    let mut h = [
-        0x45, 0, total[0], total[1], 0, 0, 0x40, 0, IPV4_TTL, protocol, 0, 0, 0, 0, 0, 0, 0, 0, 0,
-        0,
-    ];
-    h[12..16].copy_from_slice(&source);
-    h[16..20].copy_from_slice(&destination);
-    let sum = internet_checksum(&[&h]);
-    h[10..12].copy_from_slice(&sum.to_be_bytes());
-    h
+    message_len: usize,
+    emit_message: impl FnOnce(&mut [u8]),
+) -> Vec<u8> {
+    let ethernet = EthernetRepr {
+        destination: mac,
+        source: link.box_mac,
+        ethertype: ETHERTYPE_IPV4,
+    };
+    let header: Ipv4Repr = box_ipv4_header(protocol, link.box_ip, ip, message_len);
+    wire_frame(ethernet, header.buffer_len(), |b| {
+        header.emit(b);
+        emit_message(&mut b[IPV4_HEADER_LEN..]);
+    })
 }
 
 /// A UDP frame from the box's addresses and port to `to`, as the box's framer builds it.
 pub fn udp_frame(link: &LinkConfig, to: &Destination, payload: &[u8]) -> Vec<u8> {
-    let mut udp = Vec::with_capacity(UDP_HEADER_LEN + payload.len());
-    udp.extend_from_slice(&link.box_port.to_be_bytes());
-    udp.extend_from_slice(&to.port.to_be_bytes());
-    udp.extend_from_slice(&((UDP_HEADER_LEN + payload.len()) as u16).to_be_bytes());
-    udp.extend_from_slice(&[0, 0]);
-    udp.extend_from_slice(payload);
-    let sum = udp_checksum(link.box_ip, to.ip, &udp, false);
-    udp[6..8].copy_from_slice(&sum.to_be_bytes());
-    let mut e = ethernet_header(to.mac, link.box_mac, ETHERTYPE_IPV4);
-    e.extend_from_slice(&ipv4_header(IP_PROTOCOL_UDP, link.box_ip, to.ip, udp.len()));
-    e.extend_from_slice(&udp);
-    wire_frame(e)
+    let udp = UdpRepr {
+        source_port: link.box_port,
+        destination_port: to.port,
+        payload,
+    };
+    ipv4_frame(
+        link,
+        to.mac,
+        to.ip,
+        IP_PROTOCOL_UDP,
+        udp.buffer_len(),
+        |b| udp.emit(b, link.box_ip, to.ip),
+    )
 }
 
 /// The reply to an ARP request for the box's IP (RFC 826), none for any other ARP message.
-fn arp_reply(link: &LinkConfig, arp: &[u8]) -> Option<Vec<u8>> {
-    let request_header = [0, 1, 8, 0, 6, 4, 0, 1];
-    if arp[..8] != request_header || arp[24..28] != link.box_ip {
+fn arp_reply(link: &LinkConfig, bytes: &[u8]) -> Option<Vec<u8>> {
+    let request = ArpRepr::parse(bytes).ok()?;
+    if request.operation != ArpOperation::Request || request.target_ip != link.box_ip {
         return None;
     }
-    let sender_mac: [u8; 6] = arp[8..14].try_into().expect("6 bytes");
-    let mut e = ethernet_header(sender_mac, link.box_mac, ETHERTYPE_ARP);
-    e.extend_from_slice(&[0, 1, 8, 0, 6, 4, 0, 2]);
-    e.extend_from_slice(&link.box_mac);
-    e.extend_from_slice(&link.box_ip);
-    e.extend_from_slice(&arp[8..18]); // the requester's MAC and IP
-    Some(wire_frame(e))
+    let reply = ArpRepr {
+        operation: ArpOperation::Reply,
+        sender_mac: link.box_mac,
+        sender_ip: link.box_ip,
+        target_mac: request.sender_mac,
+        target_ip: request.sender_ip,
+    };
+    let ethernet = EthernetRepr {
+        destination: request.sender_mac,
+        source: link.box_mac,
+        ethertype: ETHERTYPE_ARP,
+    };
+    Some(wire_frame(ethernet, reply.buffer_len(), |b| reply.emit(b)))
 }
 
-/// The echo reply to a checked echo request `message` (type 0, everything else copied).
-fn echo_reply(link: &LinkConfig, mac: [u8; 6], ip: [u8; 4], message: &[u8]) -> Vec<u8> {
-    let mut icmp = message.to_vec();
-    icmp[0] = 0;
-    icmp[2..4].fill(0);
-    let sum = internet_checksum(&[&icmp]);
-    icmp[2..4].copy_from_slice(&sum.to_be_bytes());
-    let mut e = ethernet_header(mac, link.box_mac, ETHERTYPE_IPV4);
-    e.extend_from_slice(&ipv4_header(IP_PROTOCOL_ICMP, link.box_ip, ip, icmp.len()));
-    e.extend_from_slice(&icmp);
-    wire_frame(e)
+/// The echo reply to a checked echo `request`: identifier, sequence and data returned.
+fn echo_reply(link: &LinkConfig, mac: [u8; 6], ip: [u8; 4], request: &IcmpEchoRepr) -> Vec<u8> {
+    let reply = IcmpEchoRepr {
+        message: EchoMessage::Reply,
+        ..*request
+    };
+    ipv4_frame(link, mac, ip, IP_PROTOCOL_ICMP, reply.buffer_len(), |b| {
+        reply.emit(b)
+    })
 }

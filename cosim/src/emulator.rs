@@ -3,24 +3,26 @@
 //! ([`crate::control::BoxControl`]) played together, free of I/O. `skinbox emulate` puts a
 //! real UDP socket and a clock around it.
 //!
-//! A command payload from a UDP sender is wrapped into the Ethernet frame it would be on the
-//! box's wire (the sender's IPv4 address and port, [`SENDER_MAC`]) and goes through the
-//! control model exactly as a received frame would; its effects change the reference
-//! model from that tick on: stream-to names where the datagrams go, set-flush-timeout and
+//! A command payload from a UDP sender goes to the control model as what arrived on the
+//! socket: an IPv4 header from the sender's address to the box's and a UDP datagram from
+//! its port to the box's ([`deliver`]), which the model decides as the frame carrying them
+//! would be; its effects change the reference model from that tick on: stream-to names where the datagrams go, set-flush-timeout and
 //! set-status-period change the uplink's timing, status-now starts a report. Until a
 //! stream-to claims the stream, the datagrams are counted but sent nowhere (the build-time
 //! destination of a real box is a documentation address).
 
-use crate::control::{crc32, BoxControl, ControlConfig, Effect, Reply};
+use crate::control::{BoxControl, ControlConfig, Effect, Outcome, Reply};
 use crate::reference::{PreparedReference, SlicedReference};
 use crate::run::TICK_ZERO_CYCLE;
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::command::Destination;
 use skinbox_protocol::datagram::DatagramBody;
-use skinbox_protocol::link::{LinkConfig, IPV4_TTL};
+use skinbox_protocol::link::{LinkConfig, IPV4_TTL, IP_PROTOCOL_UDP};
+use skinbox_protocol::wire::{Ipv4Repr, UdpRepr};
 use std::net::SocketAddrV4;
 
-/// The MAC address the emulator gives every UDP sender (there is no Ethernet on a socket).
+/// The MAC address the emulator gives every UDP sender: a socket shows none, and the
+/// control model keeps one for each sender (stream-to's destination names it).
 pub const SENDER_MAC: [u8; 6] = [0x02, 0x00, 0x00, 0x00, 0x00, 0x01];
 
 /// What the emulated box did so far.
@@ -127,13 +129,7 @@ impl<'a> EmulatedBox<'a> {
         send_tick: impl FnOnce() -> u64,
     ) -> Option<Outgoing> {
         self.stats.commands_received += 1;
-        let sender = Destination {
-            mac: SENDER_MAC,
-            ip: from.ip().octets(),
-            port: from.port(),
-        };
-        let frame = command_frame(&self.control.config().link, &sender, payload);
-        let outcome = self.control.receive(&frame, tick);
+        let outcome = deliver(&mut self.control, from, payload, tick);
         // the pins of an emulated box go nowhere
         self.control.downlink.take_changes();
         match outcome.effect {
@@ -157,65 +153,28 @@ impl<'a> EmulatedBox<'a> {
     }
 }
 
-/// The frame (destination MAC to FCS) a UDP payload from `sender` to the box makes on the
-/// box's wire: Ethernet II, IPv4 without options (identification 0, don't fragment, TTL
-/// 64), UDP with its checksum.
-pub fn command_frame(link: &LinkConfig, sender: &Destination, payload: &[u8]) -> Vec<u8> {
-    use crate::control::{internet_checksum, ETHERTYPE_IPV4, IP_PROTOCOL_UDP};
-    let udp_len = (8 + payload.len()) as u16;
-    let mut udp = Vec::with_capacity(usize::from(udp_len));
-    udp.extend_from_slice(&sender.port.to_be_bytes());
-    udp.extend_from_slice(&link.box_port.to_be_bytes());
-    udp.extend_from_slice(&udp_len.to_be_bytes());
-    udp.extend_from_slice(&[0, 0]);
-    udp.extend_from_slice(payload);
-    let l = udp_len.to_be_bytes();
-    let mut pseudo = Vec::with_capacity(12);
-    pseudo.extend_from_slice(&sender.ip);
-    pseudo.extend_from_slice(&link.box_ip);
-    pseudo.extend_from_slice(&[0, IP_PROTOCOL_UDP, l[0], l[1]]);
-    let sum = match internet_checksum(&[&pseudo, &udp]) {
-        0 => 0xFFFF,
-        s => s,
+/// Hands `control` a UDP payload that arrived on the box's socket from `from` at box tick
+/// `tick`: the IPv4 header (from `from`'s address to the box's, UDP; the socket shows no
+/// other field, so they are those of a plain unfragmented packet: TTL 64, don't fragment)
+/// and the UDP datagram (from `from`'s port to the box's), from [`SENDER_MAC`].
+pub fn deliver(control: &mut BoxControl, from: SocketAddrV4, payload: &[u8], tick: u64) -> Outcome {
+    let link = control.config().link;
+    let udp = UdpRepr {
+        source_port: from.port(),
+        destination_port: link.box_port,
+        payload,
     };
-    udp[6..8].copy_from_slice(&sum.to_be_bytes());
-    let total = (20 + udp.len() as u16).to_be_bytes();
-    let mut ip = [
-        0x45,
-        0,
-        total[0],
-        total[1],
-        0,
-        0,
-        0x40,
-        0,
-        IPV4_TTL,
-        IP_PROTOCOL_UDP,
-        0,
-        0,
-        0,
-        0,
-        0,
-        0,
-        0,
-        0,
-        0,
-        0,
-    ];
-    ip[12..16].copy_from_slice(&sender.ip);
-    ip[16..20].copy_from_slice(&link.box_ip);
-    let sum = internet_checksum(&[&ip]);
-    ip[10..12].copy_from_slice(&sum.to_be_bytes());
-    let mut e = Vec::with_capacity(14 + 20 + udp.len() + 4);
-    e.extend_from_slice(&link.box_mac);
-    e.extend_from_slice(&sender.mac);
-    e.extend_from_slice(&ETHERTYPE_IPV4.to_be_bytes());
-    e.extend_from_slice(&ip);
-    e.extend_from_slice(&udp);
-    e.resize(e.len().max(60), 0);
-    let fcs = crc32(&e);
-    e.extend_from_slice(&fcs.to_le_bytes());
-    e
+    let ip = Ipv4Repr {
+        source: from.ip().octets(),
+        destination: link.box_ip,
+        protocol: IP_PROTOCOL_UDP,
+        payload_len: udp.buffer_len(),
+        dscp_ecn: 0,
+        identification: 0,
+        dont_fragment: true,
+        ttl: IPV4_TTL,
+    };
+    control.receive_udp(SENDER_MAC, &ip, &udp, tick)
 }
 
 /// What an emulated box on a socket plays and how it starts (the settings of `skinbox
@@ -460,4 +419,89 @@ pub fn serve(
         counters: emulated.control().counters,
         send_errors,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::udp_frame;
+    use skinbox_protocol::command::{CommandRepr, Request};
+    use skinbox_protocol::link::PREAMBLE_LEN;
+
+    /// What [`deliver`] hands the control model is decided exactly as the frame that
+    /// would carry the datagram on the box's wire: same fate, reply, effect and counters.
+    #[test]
+    fn a_delivered_datagram_is_decided_as_its_frame_would_be() {
+        let config = ControlConfig {
+            link: LinkConfig::DEFAULT,
+            box_id: 1,
+            port_count: 4,
+            flush_timeout_ticks: 12_500,
+            status_period_ticks: 12_500_000,
+            clock_hz: skinbox_gateware::CLOCK_HZ,
+            cell_baud: skinbox_gateware::CELL_BAUD,
+        };
+        let (mut delivered, mut framed) = (BoxControl::new(config), BoxControl::new(config));
+        let link = config.link;
+        let to_box = Destination {
+            mac: link.box_mac,
+            ip: link.box_ip,
+            port: link.box_port,
+        };
+        let command = |box_id, sequence, request| {
+            CommandRepr {
+                box_id,
+                sequence,
+                host_time: 7,
+                request,
+            }
+            .to_bytes()
+        };
+        let host: SocketAddrV4 = "192.0.2.1:40000".parse().unwrap();
+        let foreign: SocketAddrV4 = "198.51.100.7:40000".parse().unwrap();
+        let cases = [
+            (host, command(1, 1, Request::ReadTick)),
+            (host, command(1, 2, Request::StreamTo { to: None })),
+            (host, command(1, 2, Request::ReadTick)), // a replay
+            (host, command(9, 3, Request::ReadTick)), // another box
+            (
+                host,
+                command(1, 4, Request::SetFlushTimeout { ticks: 2_000 }),
+            ),
+            (host, command(1, 5, Request::StatusNow)),
+            (host, vec![0x53, 0x4B, 1]), // malformed
+            (host, vec![0; 1473]),       // more than one frame holds
+            (foreign, command(1, 1, Request::ReadTick)),
+        ];
+        let mut fates = vec![];
+        for (tick, (from, payload)) in (1_000u64..).step_by(1_000).zip(&cases) {
+            let sender = LinkConfig {
+                box_mac: SENDER_MAC,
+                box_ip: from.ip().octets(),
+                box_port: from.port(),
+                ..link
+            };
+            let frame = udp_frame(&sender, &to_box, payload);
+            let expected = framed.receive(&frame[PREAMBLE_LEN..], tick);
+            let got = deliver(&mut delivered, *from, payload, tick);
+            assert_eq!(got, expected, "{from}, {} bytes", payload.len());
+            assert_eq!(delivered.counters, framed.counters);
+            fates.push(got.fate);
+        }
+        use skinbox_protocol::box_counters::BoxCounter::*;
+        assert_eq!(
+            fates,
+            [
+                CommandsAccepted,
+                CommandsAccepted,
+                RefusedReplay,
+                RefusedOtherBox,
+                CommandsAccepted,
+                CommandsAccepted,
+                RefusedMalformed,
+                BadLength,
+                RefusedForeignSubnet,
+            ]
+        );
+    }
 }

@@ -56,15 +56,23 @@ pub use skinbox_frame_check::{check, FrameError};
 /// acknowledgement kind. Looks at the type fields only; the frame is not checked.
 pub fn is_reply(frame: &[u8]) -> bool {
     use skinbox_protocol::command::{peek_kind, KIND_ACK};
-    const ETHERTYPE: usize = 8 + 12;
-    const IP_PROTOCOL: usize = 8 + 14 + 9;
-    const UDP_PAYLOAD: usize = 8 + 14 + 20 + 8;
-    match frame.get(ETHERTYPE..ETHERTYPE + 2) {
-        Some([0x08, 0x06]) => true,
-        Some([0x08, 0x00]) => match frame.get(IP_PROTOCOL) {
-            Some(1) => true,
-            Some(17) => frame
-                .get(UDP_PAYLOAD..)
+    use skinbox_protocol::link::{
+        ETHERTYPE_ARP, ETHERTYPE_IPV4, IPV4_HEADER_LEN, IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP,
+        PREAMBLE_LEN, UDP_HEADER_LEN,
+    };
+    use skinbox_protocol::wire::ethernet::EthernetFrame;
+    use skinbox_protocol::wire::ipv4::Ipv4Packet;
+    let Some(Ok(ethernet)) = frame.get(PREAMBLE_LEN..).map(EthernetFrame::new_checked) else {
+        return false;
+    };
+    match ethernet.ethertype() {
+        ETHERTYPE_ARP => true,
+        ETHERTYPE_IPV4 => match Ipv4Packet::new_checked(ethernet.payload()).map(|ip| ip.protocol())
+        {
+            Ok(IP_PROTOCOL_ICMP) => true,
+            Ok(IP_PROTOCOL_UDP) => ethernet
+                .payload()
+                .get(IPV4_HEADER_LEN + UDP_HEADER_LEN..)
                 .and_then(peek_kind)
                 .is_some_and(|k| k == KIND_ACK),
             _ => false,

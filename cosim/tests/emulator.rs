@@ -333,18 +333,10 @@ fn model_results(
     acks: &[AckRepr],
 ) -> Vec<AckResult> {
     use skinbox_cosim::control::Reply;
-    use skinbox_protocol::command::Destination;
-    let sender = Destination {
-        mac: SENDER_MAC,
-        ip: from.ip().octets(),
-        port: from.port(),
-    };
-    let link = model.config().link;
     sent.iter()
         .zip(acks)
         .map(|(s, a)| {
-            let frame = skinbox_cosim::emulator::command_frame(&link, &sender, &s.payload);
-            match model.receive(&frame, a.receive_tick).reply {
+            match skinbox_cosim::emulator::deliver(model, from, &s.payload, a.receive_tick).reply {
                 Some(Reply::Ack { ack, .. }) => ack.result,
                 r => panic!("the model answered {r:?}"),
             }
@@ -510,7 +502,6 @@ fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers()
     use skinbox_cosim::control::{BoxControl, ControlConfig, Reply};
     use skinbox_cosim::emulator::{prepare as prepare_emulator, EmulatorSettings};
     use skinbox_protocol::box_counters::BoxCounter;
-    use skinbox_protocol::command::Destination;
     use std::collections::{BTreeMap, HashMap, VecDeque};
     use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
     use std::sync::atomic::{AtomicBool, Ordering};
@@ -608,13 +599,9 @@ fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers()
         let n = other.recv(&mut buf).unwrap();
         let ack = AckRepr::parse(&buf[..n]).unwrap();
         assert_eq!(ack.result, AckResult::OtherBox);
-        let sender = Destination {
-            mac: SENDER_MAC,
-            ip: [127, 0, 0, 9],
-            port: other.local_addr().unwrap().port(),
-        };
-        let frame = skinbox_cosim::emulator::command_frame(&model.config().link, &sender, &payload);
-        model.receive(&frame, ack.receive_tick);
+        let other_address =
+            SocketAddrV4::new([127, 0, 0, 9].into(), other.local_addr().unwrap().port());
+        skinbox_cosim::emulator::deliver(&mut model, other_address, &payload, ack.receive_tick);
         wait_for_arrival_stamps();
         let start = std::time::Instant::now() + std::time::Duration::from_millis(1);
         let mut sent = vec![];
@@ -672,15 +659,9 @@ fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers()
                     "command {i} from {host}: the book's (the RTL's) answer"
                 );
             }
-            let sender = Destination {
-                mac: SENDER_MAC,
-                ip: host.octets(),
-                port: sockets[&host].local_addr().unwrap().port(),
-            };
-            let frame =
-                skinbox_cosim::emulator::command_frame(&model.config().link, &sender, payload);
+            let sender = SocketAddrV4::new(host, sockets[&host].local_addr().unwrap().port());
             let tick = got.map_or(0, |a| a.receive_tick);
-            let reply = model.receive(&frame, tick).reply;
+            let reply = skinbox_cosim::emulator::deliver(&mut model, sender, payload, tick).reply;
             match (got, reply) {
                 (Some(got), Some(Reply::Ack { ack, .. })) => {
                     assert_eq!(

@@ -34,6 +34,8 @@ pub enum FormatFault {
     BadField,
     UnknownOpcode,
     BadArgument,
+    BadChecksum,
+    Unsupported,
 }
 
 impl FormatFault {
@@ -59,6 +61,8 @@ impl FormatFault {
             Error::BadField { .. } => FormatFault::BadField,
             Error::UnknownOpcode { .. } => FormatFault::UnknownOpcode,
             Error::BadArgument { .. } => FormatFault::BadArgument,
+            Error::BadChecksum { .. } => FormatFault::BadChecksum,
+            Error::Unsupported { .. } => FormatFault::Unsupported,
         }
     }
 
@@ -84,6 +88,8 @@ impl FormatFault {
             FormatFault::BadField => "undefined field value",
             FormatFault::UnknownOpcode => "unknown opcode",
             FormatFault::BadArgument => "bad command argument",
+            FormatFault::BadChecksum => "bad checksum",
+            FormatFault::Unsupported => "not supported",
         }
     }
 }

@@ -15,6 +15,7 @@ use crate::bad_input::{BadInput, FrameFault, Reason};
 use crate::other_traffic::{udp_service, OtherKind, OtherTraffic};
 use etherparse::{IpNumber, LaxNetSlice, LaxSlicedPacket, NetSlice, SlicedPacket, TransportSlice};
 use skinbox_protocol::datagram::has_magic;
+use skinbox_protocol::wire::ethernet::{ETHERTYPE_ARP as ETHER_ARP, ETHERTYPE_IPV4 as ETHER_IPV4};
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
 
 /// What the first bytes of a captured frame are.
@@ -98,9 +99,7 @@ impl FrameReject {
     }
 }
 
-const ETHER_ARP: u16 = 0x0806;
 const ETHER_LLDP: u16 = 0x88CC;
-const ETHER_IPV4: u16 = 0x0800;
 const ETHER_IPV6: u16 = 0x86DD;
 
 fn ether_kind(ether_type: u16) -> OtherKind {

@@ -25,6 +25,16 @@ pub enum Format {
     Ack,
     /// The box-wide counter block.
     BoxCounters,
+    /// An Ethernet II frame header.
+    Ethernet,
+    /// An ARP packet (IPv4 over Ethernet).
+    Arp,
+    /// An IPv4 packet.
+    Ipv4,
+    /// An ICMP echo message.
+    Icmp,
+    /// A UDP datagram.
+    Udp,
 }
 
 impl fmt::Display for Format {
@@ -41,6 +51,11 @@ impl fmt::Display for Format {
             Format::Command => "command",
             Format::Ack => "acknowledgement",
             Format::BoxCounters => "box counters",
+            Format::Ethernet => "Ethernet frame",
+            Format::Arp => "ARP packet",
+            Format::Ipv4 => "IPv4 packet",
+            Format::Icmp => "ICMP message",
+            Format::Udp => "UDP datagram",
         })
     }
 }
@@ -139,6 +154,21 @@ pub enum Error {
         format: Format,
         field: &'static str,
         found: u32,
+    },
+    /// A checksum field that disagrees with the bytes it covers.
+    #[error("{format}: checksum 0x{found:04X}, the bytes give 0x{computed:04X}")]
+    BadChecksum {
+        format: Format,
+        found: u16,
+        computed: u16,
+    },
+    /// A well-formed field value the box does not accept (IPv4 options, fragments).
+    #[error("{format}: {field} is {found} (0x{found:X}): {reason}")]
+    Unsupported {
+        format: Format,
+        field: &'static str,
+        found: u32,
+        reason: &'static str,
     },
     /// A command opcode the box does not know.
     #[error("command: unknown opcode {found}")]

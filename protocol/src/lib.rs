@@ -9,7 +9,9 @@
 //! - [`cell_command`]: the box's 20-byte command packet down a bus to the cells (header 0xA5);
 //! - [`datagram`]: the box's UDP payload: a 24-byte header, then 26-byte [`record`]s or a
 //!   [`status`] body with per-port counters, and optionally the [`box_counters`] block;
-//! - [`command`]: commands to the box (kind 3) and its acknowledgements (kind 4).
+//! - [`command`]: commands to the box (kind 3) and its acknowledgements (kind 4);
+//! - [`wire`]: the Ethernet II, ARP, IPv4, ICMP echo and UDP headers around them, and the
+//!   Internet checksum.
 //!
 //! Each format follows one contract, after smoltcp's `wire` module:
 //! - `Packet<T: AsRef<[u8]>>` is a zero-copy view; field offsets live once in a private
@@ -34,6 +36,7 @@ pub mod event;
 pub mod link;
 pub mod record;
 pub mod status;
+pub mod wire;
 
 pub use box_counters::{BoxCounter, BoxCounters};
 pub use cell::{CellFraming, CellRepr};

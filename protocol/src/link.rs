@@ -2,6 +2,11 @@
 //!
 //! The defaults address documentation networks (RFC 5737) and a dynamic UDP port; a real
 //! installation sets its own through the box parameters.
+//!
+//! The headers themselves are declared in [`crate::wire`]; the lengths and field ranges
+//! below are its, under the names the gateware uses.
+
+use crate::wire::{ethernet, ipv4, udp};
 
 /// Ethernet, IPv4 and UDP addresses of the box and its host.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -62,19 +67,19 @@ pub const LINK_BITS_PER_S: u64 = 1_000_000_000;
 /// Largest IPv4 packet on the link (the Ethernet MTU).
 pub const MTU: usize = 1500;
 /// Ethernet II header length.
-pub const ETHERNET_HEADER_LEN: usize = 14;
+pub const ETHERNET_HEADER_LEN: usize = ethernet::HEADER_LEN;
 /// IPv4 header length (no options).
-pub const IPV4_HEADER_LEN: usize = 20;
+pub const IPV4_HEADER_LEN: usize = ipv4::HEADER_LEN;
 /// UDP header length.
-pub const UDP_HEADER_LEN: usize = 8;
+pub const UDP_HEADER_LEN: usize = udp::HEADER_LEN;
 /// IPv4 total length field, from the start of the IPv4 header (RFC 791).
-pub const IPV4_TOTAL_LEN: crate::Field = 2..4;
+pub const IPV4_TOTAL_LEN: crate::Field = ipv4::field::TOTAL_LEN;
 /// IPv4 header checksum field, from the start of the IPv4 header (RFC 791).
-pub const IPV4_CHECKSUM: crate::Field = 10..12;
+pub const IPV4_CHECKSUM: crate::Field = ipv4::field::CHECKSUM;
 /// UDP length field, from the start of the UDP header (RFC 768).
-pub const UDP_LEN: crate::Field = 4..6;
+pub const UDP_LEN: crate::Field = udp::field::LENGTH;
 /// UDP checksum field, from the start of the UDP header (RFC 768).
-pub const UDP_CHECKSUM: crate::Field = 6..8;
+pub const UDP_CHECKSUM: crate::Field = udp::field::CHECKSUM;
 /// Preamble and start-of-frame delimiter on the wire.
 pub const PREAMBLE_LEN: usize = 8;
 /// Frame check sequence length.
@@ -89,19 +94,30 @@ pub const MAX_RECEIVE_LEN: usize = ETHERNET_HEADER_LEN + MTU + FCS_LEN;
 pub const INTER_FRAME_GAP: usize = 12;
 /// IPv4 time to live of the box's packets.
 pub const IPV4_TTL: u8 = 64;
-/// EtherType of ARP.
-pub const ETHERTYPE_ARP: u16 = 0x0806;
-/// EtherType of IPv4.
-pub const ETHERTYPE_IPV4: u16 = 0x0800;
-/// IP protocol number of ICMP.
-pub const IP_PROTOCOL_ICMP: u8 = 1;
-/// IP protocol number of UDP.
-pub const IP_PROTOCOL_UDP: u8 = 17;
-/// ICMP type of an echo request (code 0).
-pub const ICMP_ECHO_REQUEST: u8 = 8;
-/// The first 8 bytes of an ARP request for IPv4 over Ethernet (RFC 826): hardware type 1,
-/// protocol type 0x0800, address lengths 6 and 4, operation 1 (request).
-pub const ARP_REQUEST_HEADER: [u8; 8] = [0, 1, 8, 0, 6, 4, 0, 1];
+pub use crate::wire::arp::REQUEST_HEADER as ARP_REQUEST_HEADER;
+pub use crate::wire::ethernet::{ETHERTYPE_ARP, ETHERTYPE_IPV4};
+pub use crate::wire::icmp::TYPE_ECHO_REQUEST as ICMP_ECHO_REQUEST;
+pub use crate::wire::ipv4::{PROTOCOL_ICMP as IP_PROTOCOL_ICMP, PROTOCOL_UDP as IP_PROTOCOL_UDP};
+
+/// The IPv4 header of a packet the box sends: DSCP/ECN 0, identification 0, don't
+/// fragment, TTL [`IPV4_TTL`].
+pub const fn box_ipv4_header(
+    protocol: u8,
+    source: [u8; 4],
+    destination: [u8; 4],
+    payload_len: usize,
+) -> crate::wire::Ipv4Repr {
+    crate::wire::Ipv4Repr {
+        source,
+        destination,
+        protocol,
+        payload_len,
+        dscp_ecn: 0,
+        identification: 0,
+        dont_fragment: true,
+        ttl: IPV4_TTL,
+    }
+}
 
 #[cfg(test)]
 mod tests {

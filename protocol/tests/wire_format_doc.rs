@@ -1,5 +1,6 @@
 //! docs/wire-format.md and the code describe the same bytes.
 
+use skinbox_protocol::wire::{arp, ethernet, icmp, ipv4, udp};
 use skinbox_protocol::{
     box_counters, cell, cell_command, command, data, datagram, event, record, status, LayoutRow,
 };
@@ -54,6 +55,11 @@ fn every_documented_table_matches_the_code() {
         ("ack", command::ack_layout()),
         ("ack_body", command::ack_body_layout()),
         ("cell_command_packet", cell_command::layout()),
+        ("ethernet", ethernet::layout()),
+        ("arp", arp::layout()),
+        ("ipv4", ipv4::layout()),
+        ("icmp_echo", icmp::layout()),
+        ("udp", udp::layout()),
     ];
     for (name, rows) in formats {
         assert_eq!(doc_table(&doc, name), code_table(rows), "table {name}");
@@ -81,6 +87,11 @@ fn layouts_are_contiguous_and_fill_their_format() {
         (command::destination_layout(), command::DESTINATION_LEN),
         (command::cell_command_layout(), command::CELL_COMMAND_LEN),
         (cell_command::layout(), cell::PACKET_LEN),
+        (ethernet::layout(), ethernet::HEADER_LEN),
+        (arp::layout(), arp::PACKET_LEN),
+        (ipv4::layout(), ipv4::HEADER_LEN),
+        (icmp::layout(), icmp::HEADER_LEN),
+        (udp::layout(), udp::HEADER_LEN),
     ];
     for (rows, len) in formats {
         let mut at = 0;

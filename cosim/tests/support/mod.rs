@@ -17,7 +17,10 @@ use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::{
     AckRepr, AckResult, CommandRepr, Destination, Request, MIN_STATUS_PERIOD_TICKS,
 };
-use skinbox_protocol::link::LinkConfig;
+use skinbox_protocol::link::{
+    LinkConfig, ETHERNET_HEADER_LEN, IPV4_CHECKSUM, IPV4_HEADER_LEN, UDP_CHECKSUM,
+};
+use skinbox_protocol::wire::ipv4::Ipv4Packet;
 use skinbox_protocol::DataRepr;
 use std::collections::BTreeMap;
 
@@ -255,7 +258,7 @@ pub fn random_case(
         10 => {
             // a wrong IPv4 header checksum
             let mut f = command(host, fresh(host, rng), Request::ReadTick);
-            f[14 + 10] ^= 0x40;
+            f[ETHERNET_HEADER_LEN + IPV4_CHECKSUM.start] ^= 0x40;
             plain(refcs(f), BoxCounter::Ipv4BadHeader)
         }
         11 => plain(
@@ -271,7 +274,7 @@ pub fn random_case(
         12 => {
             // a wrong UDP checksum (never 0: the field after the flip is not 0 by chance)
             let mut f = command(host, 1, Request::ReadTick);
-            let at = 14 + 20 + 6;
+            let at = ETHERNET_HEADER_LEN + IPV4_HEADER_LEN + UDP_CHECKSUM.start;
             f[at] ^= 0x01;
             if f[at] == 0 && f[at + 1] == 0 {
                 f[at + 1] = 1;
@@ -323,7 +326,9 @@ pub fn random_case(
         ),
         15 if !accepted.is_empty() => {
             let f = accepted[rng.below(accepted.len() as u64) as usize].clone();
-            let ip = f[14 + 12..14 + 16].try_into().unwrap();
+            let ip = Ipv4Packet::new_checked(&f[ETHERNET_HEADER_LEN..])
+                .unwrap()
+                .source();
             Case {
                 frame: f,
                 fate: BoxCounter::RefusedReplay,
