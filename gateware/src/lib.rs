@@ -39,6 +39,8 @@ pub mod counter_file;
 pub mod counting_ram;
 pub mod crc32;
 pub mod datagram_arbiter;
+pub mod deframer_decision;
+pub mod deframer_scan;
 pub mod downlink_frame_timer;
 pub mod downlink_packet_copy;
 pub mod downlink_pin_scan;
