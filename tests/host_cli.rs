@@ -1,7 +1,7 @@
 //! The host subcommands as a user runs them: stats, decode, and replay into capture on
 //! loopback, checked against the library's decoding of the same pcap.
 
-use skinbox_cosim::synth::{self, SynthConfig};
+use skinbox_cosim::synthetic::{self, SyntheticConfig};
 use skinbox_host::pcap::{decode_pcap_file, PcapFrameWriter, PcapOptions};
 use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
@@ -21,11 +21,11 @@ fn temp_path(name: &str) -> PathBuf {
 
 /// A pcap of a synthetic scene; returns its path and the number of records.
 fn scene_pcap(name: &str) -> (PathBuf, usize) {
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 50,
         samples_per_cell: 40,
         status_period_ticks: 2_500_000,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let path = temp_path(name);
@@ -359,12 +359,12 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
     ];
     let mut frames = Vec::new();
     for (k, (box_id, offset_ns, address)) in boxes.into_iter().enumerate() {
-        let capture = synth::generate(&SynthConfig {
+        let capture = synthetic::generate(&SyntheticConfig {
             cells: 20,
             samples_per_cell: 60,
             box_id,
             seed: k as u64 + 1,
-            ..SynthConfig::default()
+            ..SyntheticConfig::default()
         })
         .unwrap();
         let src: SocketAddr = address.parse().unwrap();
@@ -437,10 +437,10 @@ fn decode_merges_two_boxes_on_one_host_time_line() {
 #[test]
 fn a_mixed_capture_reports_other_traffic_not_bad_input() {
     use etherparse::PacketBuilder;
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 10,
         samples_per_cell: 20,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let path = temp_path("mixed.pcap");

@@ -5,7 +5,7 @@
 //! tshark comes from Debian (scripts/test installs it); the ADwin heuristic stays on.
 
 use serde_json::Value;
-use skinbox_cosim::synth::{self, SynthConfig};
+use skinbox_cosim::synthetic::{self, SyntheticConfig};
 use skinbox_host::pcap::PcapFrameWriter;
 use skinbox_protocol::{Channel, DatagramRepr};
 use std::collections::BTreeMap;
@@ -271,11 +271,11 @@ fn reference_box_pcap_dissects_like_the_host_decodes() {
 fn synthetic_data_and_event_capture_on_another_port_is_found_by_the_heuristic() {
     let dir = temp_dir("synthetic");
     let plugin = plugin(&dir);
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 40,
         samples_per_cell: 30,
         status_period_ticks: 2_500_000,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let pcap = dir.join("synthetic.pcap");
@@ -577,13 +577,13 @@ fn malformed_datagrams_are_flagged_not_misread() {
 fn expert_infos_mark_exactly_the_injected_gaps() {
     let dir = temp_dir("gaps");
     let plugin = plugin(&dir);
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 40,
         samples_per_cell: 200,
         event_every: 1,
         status_period_ticks: 2_500_000,
         first_sequence: u32::MAX - 20,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     // around the wrap of the numbering (at datagram 21), and from the middle on, where
@@ -695,16 +695,16 @@ fn expert_infos_mark_exactly_the_injected_gaps() {
 fn expert_infos_mark_a_box_reset_a_late_and_a_duplicate_datagram() {
     let dir = temp_dir("reset");
     let plugin = plugin(&dir);
-    let before = synth::generate(&SynthConfig {
+    let before = synthetic::generate(&SyntheticConfig {
         cells: 20,
         samples_per_cell: 20,
         status_period_ticks: 2_500_000,
         first_sequence: 100_000,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     // the box restarts: a new boot id, the numbering from 0, ticks from near 0
-    let after = synth::generate(&SynthConfig {
+    let after = synthetic::generate(&SyntheticConfig {
         cells: 20,
         samples_per_cell: 150,
         status_period_ticks: 2_500_000,
@@ -712,13 +712,13 @@ fn expert_infos_mark_a_box_reset_a_late_and_a_duplicate_datagram() {
         boot_id: 0x5eed_0002,
         start_tick: 1000,
         seed: 2,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     // then its clock alone restarts: numbering goes on, base ticks fall 1.2 s back (a box
     // whose status reports were lost); its boot id stays the same
     let last = after.datagrams.last().unwrap().sequence;
-    let again = synth::generate(&SynthConfig {
+    let again = synthetic::generate(&SyntheticConfig {
         cells: 20,
         samples_per_cell: 5,
         status_period_ticks: 0,
@@ -726,7 +726,7 @@ fn expert_infos_mark_a_box_reset_a_late_and_a_duplicate_datagram() {
         boot_id: 0x5eed_0002,
         start_tick: 1000,
         seed: 3,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     // the box reports at reset; this one's reporter is late (an edit of the box's capture):

@@ -28,7 +28,7 @@ pub mod reference;
 pub mod run;
 pub mod scene;
 pub mod sim;
-pub mod synth;
+pub mod synthetic;
 pub mod traffic;
 
 pub use dut::{Dut, GmiiByte, UartTxEdge};

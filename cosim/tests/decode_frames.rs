@@ -3,7 +3,7 @@
 
 use etherparse::PacketBuilder;
 use pcap_file::pcap::{PcapPacket, PcapWriter};
-use skinbox_cosim::synth::{self, SynthConfig};
+use skinbox_cosim::synthetic::{self, SyntheticConfig};
 use skinbox_host::bad_input::{FormatFault, FrameFault, Reason};
 use skinbox_host::other_traffic::OtherKind;
 use skinbox_host::pcap::{decode_pcap_bytes, PcapOptions};
@@ -47,10 +47,10 @@ fn pcap_of(frames: &[Vec<u8>]) -> Vec<u8> {
 
 #[test]
 fn every_record_decodes_to_what_was_emitted() {
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 40,
         samples_per_cell: 30,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let mut frames: Vec<Vec<u8>> = capture
@@ -97,11 +97,11 @@ fn every_record_decodes_to_what_was_emitted() {
 
 #[test]
 fn bad_input_is_counted_by_reason() {
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 8,
         samples_per_cell: 10,
         status_period_ticks: 0,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let good = capture.payloads();
@@ -166,11 +166,11 @@ fn bad_input_is_counted_by_reason() {
 
 #[test]
 fn port_filter_skips_other_traffic() {
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 4,
         samples_per_cell: 5,
         status_period_ticks: 0,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let mut frames: Vec<Vec<u8>> = capture
@@ -197,11 +197,11 @@ fn port_filter_skips_other_traffic() {
 
 #[test]
 fn status_datagrams_give_counter_deltas() {
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 16,
         samples_per_cell: 40,
         status_period_ticks: 2_500_000,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let statuses: Vec<_> = capture
@@ -279,11 +279,11 @@ fn datagram_repr_roundtrip_through_frames() {
 
 #[test]
 fn corrupted_payload_with_stale_checksum_is_refused_and_counted() {
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 40,
         samples_per_cell: 10,
         status_period_ticks: 0,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let payloads = capture.payloads();
@@ -338,10 +338,10 @@ fn corrupted_payload_with_stale_checksum_is_refused_and_counted() {
 fn linux_cooked_captures_decode_like_ethernet() {
     // `tcpdump -i any` on older systems: Linux cooked capture v1 (link type 113), a
     // 16-byte header in place of the Ethernet header.
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 10,
         samples_per_cell: 10,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let ethernet: Vec<Vec<u8>> = capture

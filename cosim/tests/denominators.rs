@@ -2,7 +2,7 @@
 //! cell count (the skin's, or the cells seen), checked on synthetic captures whose truth
 //! is known.
 
-use skinbox_cosim::synth::{self, SynthCapture, SynthConfig};
+use skinbox_cosim::synthetic::{self, SynthCapture, SyntheticConfig};
 use skinbox_host::rate::ASSUMED_SAMPLE_RATE_HZ;
 use skinbox_host::report::{
     CELLS_GIVEN, CELLS_SEEN, SAMPLE_RATE_ASSUMED, SAMPLE_RATE_GIVEN, SAMPLE_RATE_LEARNED,
@@ -37,14 +37,14 @@ fn the_sample_rate_is_learned_in_data_and_event_mode_and_with_gaps() {
     for rate in [62.5, 125.0, 250.0, 500.0, 1000.0] {
         for event_every in [0, 1, 2] {
             for skip_every in [0, 3] {
-                let capture = synth::generate(&SynthConfig {
+                let capture = synthetic::generate(&SyntheticConfig {
                     cells: 32,
                     ports: 8,
                     sample_rate_hz: rate,
                     samples_per_cell: 60,
                     event_every,
                     seed: rate as u64 + u64::from(event_every),
-                    ..SynthConfig::default()
+                    ..SyntheticConfig::default()
                 })
                 .unwrap();
                 let r = decode(&capture, learned(DecoderConfig::default()), skip_every);
@@ -70,9 +70,9 @@ fn the_sample_rate_is_learned_in_data_and_event_mode_and_with_gaps() {
 
 #[test]
 fn a_given_sample_rate_wins_and_the_stamps_are_still_shown() {
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         sample_rate_hz: 250.0,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     // 125 Hz given for a 250 Hz capture: used as given, the stamps say 250.
@@ -95,9 +95,9 @@ fn a_given_sample_rate_wins_and_the_stamps_are_still_shown() {
 #[test]
 fn the_default_learns_the_rate_or_says_it_assumed_one() {
     assert_eq!(DecoderConfig::default().sample_rate_hz, None);
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         sample_rate_hz: 250.0,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let r = decode(&capture, DecoderConfig::default(), 0);
@@ -105,10 +105,10 @@ fn the_default_learns_the_rate_or_says_it_assumed_one() {
     assert_eq!(r.sample_rate_source, SAMPLE_RATE_LEARNED);
 
     // One packet per cell: no interval to learn from.
-    let one = synth::generate(&SynthConfig {
+    let one = synthetic::generate(&SyntheticConfig {
         sample_rate_hz: 250.0,
         samples_per_cell: 1,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let r = decode(&one, DecoderConfig::default(), 0);
@@ -123,12 +123,12 @@ fn the_default_learns_the_rate_or_says_it_assumed_one() {
 fn per_cell_ratios_divide_by_the_skins_cells_when_given() {
     // 40 cells in data mode, but the skin has 50: 80 % of data mode.
     let samples = 30u32;
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 40,
         sample_rate_hz: 125.0,
         samples_per_cell: samples,
         event_every: 0,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let first = capture.truth.iter().map(|t| t.tick).min().unwrap();
@@ -166,7 +166,7 @@ fn per_cell_ratios_divide_by_the_skins_cells_when_given() {
 #[test]
 fn packet_size_analysis_matches_the_truth() {
     let rate = 250.0;
-    let config = SynthConfig {
+    let config = SyntheticConfig {
         cells: 48,
         ports: 6,
         sample_rate_hz: rate,
@@ -174,9 +174,9 @@ fn packet_size_analysis_matches_the_truth() {
         event_every: 1,
         seed: 7,
         walk_scale: 3,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     };
-    let capture = synth::generate(&config).unwrap();
+    let capture = synthetic::generate(&config).unwrap();
     // Truth: group each cell's event packets into samples by mask bit 15.
     let mut open: std::collections::BTreeMap<u16, u32> = Default::default();
     let mut n = [0u64; 10];

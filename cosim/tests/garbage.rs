@@ -2,7 +2,7 @@
 //! flipped, truncated or extended (the fuzz target's check, as a property test).
 
 use proptest::prelude::*;
-use skinbox_cosim::synth::{self, SynthConfig};
+use skinbox_cosim::synthetic::{self, SyntheticConfig};
 use skinbox_host::pcap::{decode_pcap_bytes, PcapOptions};
 use skinbox_host::{DecodedRecord, Decoder, DecoderConfig, RecordSink, Sample};
 
@@ -19,11 +19,11 @@ impl RecordSink for Samples {
 }
 
 fn valid_payloads() -> Vec<Vec<u8>> {
-    synth::generate(&SynthConfig {
+    synthetic::generate(&SyntheticConfig {
         cells: 12,
         samples_per_cell: 12,
         status_period_ticks: 2_500_000,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap()
     .payloads()

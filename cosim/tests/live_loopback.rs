@@ -1,7 +1,7 @@
 //! The live path on loopback: a pcap is replayed to a capture on 127.0.0.1:0 and every
 //! record received is compared with the pcap's, one by one.
 
-use skinbox_cosim::synth::{self, SynthConfig};
+use skinbox_cosim::synthetic::{self, SyntheticConfig};
 use skinbox_host::bench::loopback_run;
 use skinbox_host::pcap::{self, PcapFrameWriter, PcapOptions};
 use skinbox_host::replay::Pacing;
@@ -10,11 +10,11 @@ use std::time::Duration;
 
 #[test]
 fn replayed_pcap_arrives_record_by_record() {
-    let capture = synth::generate(&SynthConfig {
+    let capture = synthetic::generate(&SyntheticConfig {
         cells: 120,
         samples_per_cell: 40,
         status_period_ticks: 2_500_000,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     // Write the capture as a pcap, the way the co-simulation or `capture --pcap` does.
@@ -79,12 +79,12 @@ fn one_socket_follows_several_boxes() {
     let boxes: Vec<Vec<Vec<u8>>> = [1u16, 2]
         .iter()
         .map(|&box_id| {
-            synth::generate(&SynthConfig {
+            synthetic::generate(&SyntheticConfig {
                 cells: 30,
                 samples_per_cell: 20,
                 box_id,
                 seed: u64::from(box_id),
-                ..SynthConfig::default()
+                ..SyntheticConfig::default()
             })
             .unwrap()
             .payloads()

@@ -1,20 +1,20 @@
 //! Loss detection: drop, duplicate and reorder datagrams, reset the box; exact counts.
 
-use skinbox_cosim::synth::{self, SynthCapture, SynthConfig};
+use skinbox_cosim::synthetic::{self, SynthCapture, SyntheticConfig};
 use skinbox_host::{DecodedRecord, Decoder, DecoderConfig, Report};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{CellFraming, CellRepr};
 use std::collections::HashMap;
 
 fn capture(boot_id: u32, first_sequence: u32) -> SynthCapture {
-    synth::generate(&SynthConfig {
+    synthetic::generate(&SyntheticConfig {
         cells: 60,
         samples_per_cell: 60,
         event_every: 3,
         status_period_ticks: 0,
         boot_id,
         first_sequence,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap()
 }
@@ -166,19 +166,19 @@ fn sequence_numbers_wrap_without_loss() {
 
 #[test]
 fn box_reset_is_counted_from_the_boot_id() {
-    let mut config = SynthConfig {
+    let mut config = SyntheticConfig {
         cells: 20,
         samples_per_cell: 30,
         status_period_ticks: 2_500_000,
         boot_id: 0xaaaa_0001,
         first_sequence: 0,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     };
-    let before = synth::generate(&config).unwrap();
+    let before = synthetic::generate(&config).unwrap();
     // The box restarts: a new boot id, sequence numbers and counters from zero.
     config.boot_id = 0xbbbb_0002;
     config.seed = 2;
-    let after = synth::generate(&config).unwrap();
+    let after = synthetic::generate(&config).unwrap();
     // The new boot's first status comes first (the box reports at reset).
     let mut payloads = before.payloads();
     let mut next = after.payloads();
@@ -286,11 +286,11 @@ fn event_gaps_make_the_converter_mark_channels_stale() {
 
 #[test]
 fn duplicate_status_datagrams_are_skipped() {
-    let c = synth::generate(&SynthConfig {
+    let c = synthetic::generate(&SyntheticConfig {
         cells: 10,
         samples_per_cell: 30,
         status_period_ticks: 2_500_000,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap();
     let mut payloads = c.payloads();
@@ -315,18 +315,18 @@ fn duplicate_status_datagrams_are_skipped() {
 
 #[test]
 fn box_reset_before_its_status_arrives_loses_nothing() {
-    let mut config = SynthConfig {
+    let mut config = SyntheticConfig {
         cells: 20,
         samples_per_cell: 30,
         status_period_ticks: 2_500_000,
         boot_id: 0xaaaa_0001,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     };
-    let before = synth::generate(&config).unwrap();
+    let before = synthetic::generate(&config).unwrap();
     config.boot_id = 0xbbbb_0002;
     config.seed = 2;
     config.start_tick = 1_000; // the box's clock starts again too
-    let after = synth::generate(&config).unwrap();
+    let after = synthetic::generate(&config).unwrap();
     // The box reports at reset; this one's reporter is late (an edit of the box's
     // capture): its first report goes after its first three records datagrams, the four
     // numbered in that order. So the new boot's first records datagrams reuse numbers 0..

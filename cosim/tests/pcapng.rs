@@ -10,7 +10,7 @@ use pcap_file::pcapng::blocks::interface_description::InterfaceDescriptionBlock;
 use pcap_file::pcapng::blocks::simple_packet::SimplePacketBlock;
 use pcap_file::pcapng::{PcapNgBlock, PcapNgWriter};
 use pcap_file::DataLink;
-use skinbox_cosim::synth::{self, SynthConfig};
+use skinbox_cosim::synthetic::{self, SyntheticConfig};
 use skinbox_host::pcap::{decode_pcap_bytes, udp_payloads, PcapFrameWriter, PcapOptions};
 use std::borrow::Cow;
 use std::net::SocketAddr;
@@ -38,12 +38,12 @@ fn run(tool: &str, args: &[&Path]) {
 }
 
 fn payloads(box_id: u16, seed: u64) -> Vec<Vec<u8>> {
-    synth::generate(&SynthConfig {
+    synthetic::generate(&SyntheticConfig {
         cells: 30,
         samples_per_cell: 40,
         box_id,
         seed,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     })
     .unwrap()
     .payloads()

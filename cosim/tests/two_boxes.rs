@@ -2,7 +2,7 @@
 //! restart together at a simultaneous reset. Each box is followed on its own (box id and
 //! source address), so each reports exactly its own losses and nothing of the other's.
 
-use skinbox_cosim::synth::{self, SynthConfig};
+use skinbox_cosim::synthetic::{self, SyntheticConfig};
 use skinbox_host::{DecodedRecord, Decoder, DecoderConfig};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::DatagramRepr;
@@ -18,7 +18,7 @@ struct BoxRun {
 }
 
 fn box_run(box_id: u16, source: &str, first_sequence: u32, seed: u64) -> BoxRun {
-    let mut config = SynthConfig {
+    let mut config = SyntheticConfig {
         cells: 24,
         samples_per_cell: 150,
         event_every: 2,
@@ -27,16 +27,16 @@ fn box_run(box_id: u16, source: &str, first_sequence: u32, seed: u64) -> BoxRun 
         boot_id: 0x1000 + u32::from(box_id),
         first_sequence,
         seed,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     };
-    let mut payloads = synth::generate(&config).unwrap().payloads();
+    let mut payloads = synthetic::generate(&config).unwrap().payloads();
     let reset_at = payloads.len();
     // The reset: a new boot id, numbering and clock from zero.
     config.boot_id += 0x100;
     config.first_sequence = 0;
     config.start_tick = 1_000;
     config.seed += 100;
-    payloads.extend(synth::generate(&config).unwrap().payloads());
+    payloads.extend(synthetic::generate(&config).unwrap().payloads());
     BoxRun {
         source: source.parse().unwrap(),
         box_id,

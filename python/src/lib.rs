@@ -11,7 +11,7 @@ mod files;
 mod live;
 mod mapped;
 mod rows;
-mod synth;
+mod synthetic;
 
 use pyo3::prelude::*;
 use pyo3::types::PyList;
@@ -64,9 +64,9 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("CaptureError", py.get_type::<errors::CaptureError>())?;
     m.add_function(wrap_pyfunction!(files::read_records, m)?)?;
     m.add_function(wrap_pyfunction!(files::read_samples, m)?)?;
-    m.add_function(wrap_pyfunction!(synth::write_synthetic_capture, m)?)?;
-    m.add_function(wrap_pyfunction!(synth::write_bench_capture, m)?)?;
-    m.add_function(wrap_pyfunction!(synth::replay_capture, m)?)?;
+    m.add_function(wrap_pyfunction!(synthetic::write_synthetic_capture, m)?)?;
+    m.add_function(wrap_pyfunction!(synthetic::write_bench_capture, m)?)?;
+    m.add_function(wrap_pyfunction!(synthetic::replay_capture, m)?)?;
     m.add_class::<chunks::Reader>()?;
     m.add_class::<control::BoxHandle>()?;
     m.add_class::<emulate::Emulator>()?;

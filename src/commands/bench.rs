@@ -137,7 +137,7 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 !a.chunk_kib.is_empty() && a.chunk_kib.iter().all(|k| *k > 0),
                 "--chunk-kib: one or more sizes, each at least 1"
             );
-            let capture = skinbox_cosim::synth::bench_payloads(a.packets, 7)?;
+            let capture = skinbox_cosim::synthetic::bench_payloads(a.packets, 7)?;
             let path =
                 std::env::temp_dir().join(format!("skinbox-bench-{}.mcap", std::process::id()));
             let chunks: Vec<u64> = a.chunk_kib.iter().map(|k| k * 1024).collect();
@@ -168,7 +168,7 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
             Ok(())
         }
         BenchCommand::Decode(a) => {
-            let capture = skinbox_cosim::synth::bench_payloads(a.packets, 7)?;
+            let capture = skinbox_cosim::synthetic::bench_payloads(a.packets, 7)?;
             let r = skinbox_host::bench::bench_decode(&capture, a.rounds);
             if json {
                 return super::print_json(&r);
@@ -209,7 +209,7 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 recv_buffers: a.recv_buffers,
                 buffer_rate: a.buffer_rate,
             };
-            let capture = skinbox_cosim::synth::bench_payloads(config.packets_needed(), 11)?;
+            let capture = skinbox_cosim::synthetic::bench_payloads(config.packets_needed(), 11)?;
             let r = skinbox_host::bench::bench_live(&config, &capture)?;
             if json {
                 return super::print_json(&r);

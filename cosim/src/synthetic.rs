@@ -9,8 +9,8 @@
 //! packets of one to nine channels; scenes that match the papers live in the cell models.
 //!
 //! Two things a box cannot be asked for are explicit edits of the box's capture: sequence
-//! numbers from [`SynthConfig::first_sequence`] (a box that has been running a while) and
-//! no status datagrams at all ([`SynthConfig::status_period_ticks`] 0).
+//! numbers from [`SyntheticConfig::first_sequence`] (a box that has been running a while) and
+//! no status datagrams at all ([`SyntheticConfig::status_period_ticks`] 0).
 
 use crate::error::CosimError;
 use crate::line::Jitter;
@@ -26,7 +26,7 @@ use skinbox_protocol::{
 
 /// What to generate.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SynthConfig {
+pub struct SyntheticConfig {
     /// Number of cells, ids 1..=cells.
     pub cells: u16,
     /// Ports of the box; cell `i` is on port `i % ports`.
@@ -57,9 +57,9 @@ pub struct SynthConfig {
     pub walk_scale: i32,
 }
 
-impl Default for SynthConfig {
+impl Default for SyntheticConfig {
     fn default() -> Self {
-        SynthConfig {
+        SyntheticConfig {
             cells: 64,
             ports: 8,
             sample_rate_hz: 125.0,
@@ -167,7 +167,7 @@ fn step(rng: &mut Rng, channel: Channel, v: i32, scale: i32) -> i32 {
 /// Generates a capture: the cells' packets through the reference model of a box with
 /// `config.ports` ports. Fails when the box cannot be built with that configuration or
 /// does not deliver every packet with its true start tick.
-pub fn generate(config: &SynthConfig) -> Result<SynthCapture, CosimError> {
+pub fn generate(config: &SyntheticConfig) -> Result<SynthCapture, CosimError> {
     let mut rng = Rng::new(config.seed);
     let ports = config.ports.max(1);
     let mut cells: Vec<CellSim> = (1..=config.cells)
@@ -319,14 +319,14 @@ pub fn generate(config: &SynthConfig) -> Result<SynthCapture, CosimError> {
 /// 32 ports at 125 Hz, half in data mode and half in event mode, through a box with a 1 ms
 /// flush timeout, so that nearly every datagram is full (55 records).
 pub fn bench_payloads(min_packets: usize, seed: u64) -> Result<BenchPayloads, CosimError> {
-    let mut config = SynthConfig {
+    let mut config = SyntheticConfig {
         cells: 2_000,
         ports: 32,
         samples_per_cell: 400,
         event_every: 2,
         seed,
         flush_timeout_ticks: 125_000,
-        ..SynthConfig::default()
+        ..SyntheticConfig::default()
     };
     loop {
         let capture = generate(&config)?;
@@ -351,11 +351,11 @@ mod tests {
 
     #[test]
     fn the_truth_is_every_packet_sent_in_the_box_datagrams() {
-        let config = SynthConfig {
+        let config = SyntheticConfig {
             cells: 16,
             samples_per_cell: 20,
             first_sequence: u32::MAX - 3,
-            ..SynthConfig::default()
+            ..SyntheticConfig::default()
         };
         let c = generate(&config).unwrap();
         // every packet the cells sent, once: the counts kept while sending
@@ -386,7 +386,7 @@ mod tests {
         // ticks from the first sample on, in sending order per port
         assert!(c.truth.iter().all(|t| t.tick >= config.start_tick));
         // with no status period asked for, only records datagrams, still numbered densely
-        let quiet = generate(&SynthConfig {
+        let quiet = generate(&SyntheticConfig {
             status_period_ticks: 0,
             ..config
         })

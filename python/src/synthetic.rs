@@ -1,11 +1,11 @@
 //! Synthetic captures with their truth, for tests and benchmarks: the box's reference
-//! model batching cells' packets into datagrams (`skinbox_cosim::synth`), written to a pcap.
+//! model batching cells' packets into datagrams (`skinbox_cosim::synthetic`), written to a pcap.
 
 use crate::errors::value_error;
 use numpy::PyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use skinbox_cosim::synth::{self, SynthConfig};
+use skinbox_cosim::synthetic::{self, SyntheticConfig};
 use skinbox_host::pcap::PcapFrameWriter;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{CellFraming, CellRepr, Channel, DatagramRepr, TICK_NS};
@@ -61,7 +61,7 @@ pub fn write_synthetic_capture<'py>(
     }
     let mut captures = Vec::new();
     for k in 0..boxes {
-        let config = SynthConfig {
+        let config = SyntheticConfig {
             cells,
             ports,
             sample_rate_hz,
@@ -78,10 +78,10 @@ pub fn write_synthetic_capture<'py>(
             first_sequence,
             walk_scale,
             flush_timeout_ticks,
-            ..SynthConfig::default()
+            ..SyntheticConfig::default()
         };
         let capture = py
-            .detach(|| synth::generate(&config))
+            .detach(|| synthetic::generate(&config))
             .map_err(|e| value_error(e.to_string()))?;
         let source = SocketAddr::from(([10, 0, 0, 2 + k as u8], 54091));
         captures.push((config.box_id, source, capture));
@@ -196,7 +196,7 @@ pub fn write_bench_capture(
     seed: u64,
 ) -> PyResult<u64> {
     py.detach(|| {
-        let capture = synth::bench_payloads(packets, seed).map_err(|e| e.to_string())?;
+        let capture = synthetic::bench_payloads(packets, seed).map_err(|e| e.to_string())?;
         let file = std::fs::File::create(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let mut writer =
             PcapFrameWriter::new(std::io::BufWriter::new(file)).map_err(|e| e.to_string())?;
