@@ -116,18 +116,20 @@ impl PathModel {
 
 /// One cell's sample clock, learnt from the stamps of its packets.
 ///
-/// Its state is in two parts: [`CellClock`], what every packet reads and writes (one cache
-/// line), and [`CellPoints`], the points the lines are fitted through and their sums, which
-/// a packet touches only when it adds a point or the line is refitted ([`SampleTimer`]
-/// keeps each part of all its cells in an array of its own).
+/// Its state is in three parts: [`CellClock`], what every packet reads and writes (one
+/// cache line); the unqueued packets' points, which a packet touches when it is one or the
+/// line is refitted (640 bytes); and the window of recent points, touched only until the
+/// line goes through unqueued packets (4 kB). [`SampleTimer`] keeps each part of all its
+/// cells in an array of its own.
 #[derive(Debug, Clone)]
 pub struct SampleClockEstimator {
     clock: CellClock,
-    points: Box<CellPoints>,
+    unqueued: Box<Anchors>,
+    window: Box<Window>,
 }
 
 /// The part of a cell's sample clock that every packet reads and writes: the line in use,
-/// the last packet, and how many points each set of [`CellPoints`] holds.
+/// the last packet, and how many points its [`Anchors`] and [`Window`] hold.
 #[derive(Debug, Clone, Copy)]
 #[repr(align(64))]
 struct CellClock {
@@ -140,7 +142,7 @@ struct CellClock {
     /// Sample index and stamp of the last packet, if `has_last`.
     last_index: i64,
     last_stamp_ns: u64,
-    /// Points in [`CellPoints::window`] and [`CellPoints::unqueued`].
+    /// Points in the window and the unqueued packets' points.
     window_len: u16,
     unqueued_len: u8,
     /// Packets since the last full fit (at most [`REFIT_EVERY`]).
@@ -156,51 +158,27 @@ const _: () = assert!(std::mem::size_of::<CellClock>() == 64);
 const _: () = assert!(WINDOW <= u16::MAX as usize && ANCHORS <= u8::MAX as usize);
 const _: () = assert!(REFIT_EVERY <= u8::MAX as u32);
 
-/// The points a cell's lines are fitted through, with their running sums: touched when a
-/// packet adds a point or the line is refitted.
-#[derive(Debug, Clone)]
-#[repr(C)]
-struct CellPoints {
-    /// Running sums over `unqueued` and `window`: their least-squares lines and the
-    /// anchors' mean offset in O(1) at each packet.
-    unqueued_sums: LineSums,
-    /// (sample index, stamp - anchor) of unqueued packets, kept however old: dense recently,
-    /// thinned further back.
-    unqueued: Ring<ANCHORS>,
-    window_sums: LineSums,
-    /// (sample index, stamp - anchor) of the recent packets.
-    window: Ring<WINDOW>,
-}
-
-impl CellPoints {
-    fn new() -> CellPoints {
-        CellPoints {
-            unqueued_sums: LineSums::default(),
-            unqueued: Ring::new(),
-            window_sums: LineSums::default(),
-            window: Ring::new(),
-        }
-    }
-
-    /// Empties both sets of points (their storage is kept).
-    fn clear(&mut self) {
-        self.unqueued_sums = LineSums::default();
-        self.unqueued.clear();
-        self.window_sums = LineSums::default();
-        self.window.clear();
-    }
-}
+/// (sample index, stamp - anchor) of a cell's unqueued packets, kept however old: dense
+/// recently, thinned further back.
+type Anchors = Ring<ANCHORS>;
+/// (sample index, stamp - anchor) of a cell's recent packets.
+type Window = Ring<WINDOW>;
 
 /// A point `(k, r)`: a packet's sample index and its stamp less the anchor, ns.
 type Point = (i64, i64);
 
-/// At most `N` points `(k, r)` in a fixed array used as a ring buffer, oldest first.
+/// At most `N` points `(k, r)` in a fixed array used as a ring buffer, oldest first, and
+/// their running sums (their least-squares line and mean offset in O(1) at each packet).
+/// The counts and sums come first: a packet that adds a point touches the first two cache
+/// lines and the points' own.
 #[derive(Debug, Clone)]
+#[repr(C, align(64))]
 struct Ring<const N: usize> {
     /// The oldest point's position in `points`.
     head: u16,
     len: u16,
-    points: [(i64, i64); N],
+    sums: LineSums,
+    points: [Point; N],
 }
 
 impl<const N: usize> Ring<N> {
@@ -208,6 +186,7 @@ impl<const N: usize> Ring<N> {
         Ring {
             head: 0,
             len: 0,
+            sums: LineSums::default(),
             points: [(0, 0); N],
         }
     }
@@ -216,9 +195,11 @@ impl<const N: usize> Ring<N> {
         usize::from(self.len)
     }
 
+    /// Forgets every point.
     fn clear(&mut self) {
         self.head = 0;
         self.len = 0;
+        self.sums = LineSums::default();
     }
 
     /// Position in `points` of the `i`th oldest point (`i` below `N`).
@@ -240,23 +221,26 @@ impl<const N: usize> Ring<N> {
     }
 
     /// Adds `point` as the newest; the ring must not be full.
-    fn push_back(&mut self, point: (i64, i64)) {
+    fn push_back(&mut self, point: Point) {
         debug_assert!(self.len() < N);
         let at = self.slot(self.len());
         self.points[at] = point;
         self.len += 1;
+        self.sums.add(point);
     }
 
-    fn pop_front(&mut self) -> Option<(i64, i64)> {
-        let point = self.front()?;
-        self.head = self.slot(1) as u16;
-        self.len -= 1;
-        Some(point)
+    /// Removes the oldest point.
+    fn pop_front(&mut self) {
+        if let Some(point) = self.front() {
+            self.head = self.slot(1) as u16;
+            self.len -= 1;
+            self.sums.remove(point);
+        }
     }
 
     /// Keeps the points `keep` is true of, in their order; `keep` sees each once, oldest
     /// first.
-    fn retain(&mut self, mut keep: impl FnMut(&(i64, i64)) -> bool) {
+    fn retain(&mut self, mut keep: impl FnMut(&Point) -> bool) {
         let mut kept = 0;
         for i in 0..self.len() {
             let point = self.points[self.slot(i)];
@@ -264,6 +248,8 @@ impl<const N: usize> Ring<N> {
                 let to = self.slot(kept);
                 self.points[to] = point;
                 kept += 1;
+            } else {
+                self.sums.remove(point);
             }
         }
         self.len = kept as u16;
@@ -358,7 +344,8 @@ impl SampleClockEstimator {
     pub fn new(nominal_period_ns: f64, path_latency_ns: u64) -> SampleClockEstimator {
         SampleClockEstimator {
             clock: CellClock::new(nominal_period_ns, path_latency_ns),
-            points: Box::new(CellPoints::new()),
+            unqueued: Box::new(Ring::new()),
+            window: Box::new(Ring::new()),
         }
     }
 
@@ -377,7 +364,7 @@ impl SampleClockEstimator {
 
     /// Starts over (a box reset: the stamps restart).
     pub fn reset(&mut self) {
-        self.clock.reset(&mut self.points);
+        self.clock.reset(&mut self.unqueued, &mut self.window);
     }
 
     /// Takes the stamp of the cell's next packet (box time of its first start bit, ns, in
@@ -386,7 +373,8 @@ impl SampleClockEstimator {
     /// path latency exactly. A stamp before the previous one (the box was reset) starts the
     /// estimator over.
     pub fn push(&mut self, stamp_ns: u64, unqueued: bool) -> SampleTime {
-        self.clock.push(&mut self.points, stamp_ns, unqueued)
+        self.clock
+            .push(&mut self.unqueued, &mut self.window, stamp_ns, unqueued)
     }
 }
 
@@ -409,19 +397,27 @@ impl CellClock {
         }
     }
 
-    /// Starts over, as new but for the batch setting; `points` are the cell's.
-    fn reset(&mut self, points: &mut CellPoints) {
+    /// Starts over, as new but for the batch setting; `anchors` and `window` are the
+    /// cell's points.
+    fn reset(&mut self, anchors: &mut Anchors, window: &mut Window) {
         *self = CellClock {
             batch: self.batch,
             ..CellClock::new(self.nominal_period_ns, self.path_latency_ns.round() as u64)
         };
-        points.clear();
+        anchors.clear();
+        window.clear();
     }
 
-    /// [`SampleClockEstimator::push`]; `p` are the cell's points.
-    fn push(&mut self, p: &mut CellPoints, stamp_ns: u64, unqueued: bool) -> SampleTime {
+    /// [`SampleClockEstimator::push`]; `anchors` and `window` are the cell's points.
+    fn push(
+        &mut self,
+        anchors: &mut Anchors,
+        window: &mut Window,
+        stamp_ns: u64,
+        unqueued: bool,
+    ) -> SampleTime {
         if self.has_last && stamp_ns < self.last_stamp_ns {
-            self.reset(p);
+            self.reset(anchors, window);
         }
         let index = if self.has_last {
             let rel = (stamp_ns - self.anchor_ns) as f64;
@@ -453,8 +449,8 @@ impl CellClock {
                 self.period_ns / 8.0
             };
             if residual < -limit || (unqueued && residual > limit) {
-                self.reset(p);
-                return self.push(p, stamp_ns, unqueued);
+                self.reset(anchors, window);
+                return self.push(anchors, window, stamp_ns, unqueued);
             }
         }
         // Once the period is learnt and an unqueued packet is kept, every fit goes through
@@ -465,53 +461,42 @@ impl CellClock {
             && self.unqueued_len > 0
             && usize::from(self.window_len) >= 2 * REFIT_EVERY as usize;
         if !anchored {
-            if p.window.len() == WINDOW {
-                if let Some(old) = p.window.pop_front() {
-                    p.window_sums.remove(old);
-                }
+            if window.len() == WINDOW {
+                window.pop_front();
             }
-            p.window.push_back((index, rel));
-            p.window_sums.add((index, rel));
-            self.window_len = p.window.len() as u16;
+            window.push_back((index, rel));
+            self.window_len = window.len() as u16;
         }
         self.has_last = true;
         (self.last_index, self.last_stamp_ns) = (index, stamp_ns);
         self.since_fit += 1;
         if unqueued {
-            if p.unqueued.len() == ANCHORS {
+            if anchors.len() == ANCHORS {
                 // Thin the older half to every other one: the kept ones span ever more
                 // samples (the period's precision grows with it), the newest stay dense.
-                let (mut i, sums) = (0, &mut p.unqueued_sums);
-                p.unqueued.retain(|&point| {
+                let mut i = 0;
+                anchors.retain(|_| {
                     i += 1;
-                    let keep = i > ANCHORS / 2 || i % 2 == 1;
-                    if !keep {
-                        sums.remove(point);
-                    }
-                    keep
+                    i > ANCHORS / 2 || i % 2 == 1
                 });
             }
-            p.unqueued.push_back((index, rel));
-            p.unqueued_sums.add((index, rel));
+            anchors.push_back((index, rel));
             // A cell's drift wanders (temperature): the line holds only over a while.
-            while p
-                .unqueued
+            while anchors
                 .front()
                 .is_some_and(|(_, r)| (rel - r) as f64 > MAX_ANCHOR_AGE_NS)
             {
-                if let Some(old) = p.unqueued.pop_front() {
-                    p.unqueued_sums.remove(old);
-                }
+                anchors.pop_front();
             }
-            self.unqueued_len = p.unqueued.len() as u8;
+            self.unqueued_len = anchors.len() as u8;
         }
         if u32::from(self.since_fit) >= REFIT_EVERY
             || usize::from(self.window_len) < 2 * REFIT_EVERY as usize
             || (unqueued && self.unqueued_len <= 2)
         {
-            self.fit(p);
+            self.fit(anchors, window);
         } else if unqueued {
-            self.fit_anchors(p);
+            self.fit_anchors(anchors);
         } else if self.unqueued_len == 0 {
             let residual = rel as f64 - self.period_ns * index as f64;
             self.offset_ns = self.offset_ns.min(residual);
@@ -526,7 +511,7 @@ impl CellClock {
 
     /// Refits period and offset: through the unqueued packets where they span enough
     /// samples, else over the window.
-    fn fit(&mut self, p: &CellPoints) {
+    fn fit(&mut self, anchors: &Anchors, window: &Window) {
         self.since_fit = 0;
         fn span<const N: usize>(q: &Ring<N>) -> i64 {
             match (q.front(), q.back()) {
@@ -536,23 +521,23 @@ impl CellClock {
         }
         let plausible =
             |period: f64| (period / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR;
-        if span(&p.unqueued) >= MIN_ANCHOR_SPAN || (self.period_learnt && p.unqueued.len() > 0) {
+        if span(anchors) >= MIN_ANCHOR_SPAN || (self.period_learnt && anchors.len() > 0) {
             // (Too few unqueued packets for a period: the one learnt before holds.)
-            self.fit_anchors(p);
+            self.fit_anchors(anchors);
             return;
         }
-        if span(&p.window) >= MIN_SPAN {
+        if span(window) >= MIN_SPAN {
             let ls = if self.batch {
-                least_squares(&p.window)
+                least_squares(window)
             } else {
-                p.window_sums.slope()
+                window.sums.slope()
             };
             if let Some(ls) = ls.filter(|&period| plausible(period)) {
                 // Then the line through the lowest point of each half: packets that did
                 // not queue lie exactly on the true line.
-                let lowest = |from: usize, to: usize| lowest_under(&p.window, from, to, ls);
-                let half = p.window.len() / 2;
-                let envelope = match (lowest(0, half), lowest(half, p.window.len())) {
+                let lowest = |from: usize, to: usize| lowest_under(window, from, to, ls);
+                let half = window.len() / 2;
+                let envelope = match (lowest(0, half), lowest(half, window.len())) {
                     (Some((ka, ra)), Some((kb, rb))) if kb - ka >= MIN_SPAN / 2 => {
                         ls + (rb - ra) / (kb - ka) as f64
                     }
@@ -562,25 +547,25 @@ impl CellClock {
                 self.period_learnt = true;
             }
         }
-        self.offset_ns = if p.unqueued.len() == 0 {
-            p.window
+        self.offset_ns = if anchors.len() == 0 {
+            window
                 .iter()
                 .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
                 .fold(f64::INFINITY, f64::min)
         } else {
-            self.anchored_offset(p)
+            self.anchored_offset(anchors)
         };
     }
 
     /// Period and offset through the unqueued packets alone (cheap: at most [`ANCHORS`]),
     /// the period only where they span enough samples.
-    fn fit_anchors(&mut self, p: &CellPoints) {
-        if let (Some(a), Some(b)) = (p.unqueued.front(), p.unqueued.back()) {
+    fn fit_anchors(&mut self, anchors: &Anchors) {
+        if let (Some(a), Some(b)) = (anchors.front(), anchors.back()) {
             if b.0 - a.0 >= MIN_ANCHOR_SPAN {
                 let slope = if self.batch {
-                    least_squares(&p.unqueued)
+                    least_squares(anchors)
                 } else {
-                    p.unqueued_sums.slope()
+                    anchors.sums.slope()
                 };
                 if let Some(period) =
                     slope.filter(|&s| (s / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR)
@@ -590,19 +575,19 @@ impl CellClock {
                 }
             }
         }
-        self.offset_ns = self.anchored_offset(p);
+        self.offset_ns = self.anchored_offset(anchors);
     }
 
     /// The unqueued packets lie on the line, up to the tick: the mean of their offsets.
-    fn anchored_offset(&self, p: &CellPoints) -> f64 {
-        match p.unqueued.back() {
-            Some(newest) if !self.batch => p.unqueued_sums.mean_offset(self.period_ns, newest),
+    fn anchored_offset(&self, anchors: &Anchors) -> f64 {
+        match anchors.back() {
+            Some(newest) if !self.batch => anchors.sums.mean_offset(self.period_ns, newest),
             _ => {
-                p.unqueued
+                anchors
                     .iter()
                     .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
                     .sum::<f64>()
-                    / p.unqueued.len().max(1) as f64
+                    / anchors.len().max(1) as f64
             }
         }
     }
@@ -689,9 +674,9 @@ pub struct SampleTimer {
     boxes: BoxMap<BoxClocks>,
 }
 
-/// The cells and ports of one box. A cell's clock is in two arrays, by the slot the cell
-/// got when first seen: `clocks`, what every packet touches (a cache line a cell), and
-/// `points`, what only adding a point or a refit does (4.8 kB a cell).
+/// The cells and ports of one box. A cell's clock is in three arrays, by the slot the cell
+/// got when first seen: what every packet touches (a cache line a cell), the unqueued
+/// packets' points and the window's (see [`SampleClockEstimator`]).
 #[derive(Debug, Clone)]
 struct BoxClocks {
     /// Stamp of the last packet on each port.
@@ -699,7 +684,8 @@ struct BoxClocks {
     /// Each cell's slot by cell id ([`NO_SLOT`]: none yet), up to the highest id seen.
     slots: Vec<u32>,
     clocks: Vec<CellClock>,
-    points: Vec<CellPoints>,
+    anchors: Vec<Anchors>,
+    windows: Vec<Window>,
 }
 
 /// The slot of a cell not seen yet.
@@ -711,7 +697,8 @@ impl BoxClocks {
             last_on_port: Box::new([None; 256]),
             slots: Vec::new(),
             clocks: Vec::new(),
-            points: Vec::new(),
+            anchors: Vec::new(),
+            windows: Vec::new(),
         }
     }
 
@@ -720,7 +707,8 @@ impl BoxClocks {
         *self.last_on_port = [None; 256];
         self.slots.clear();
         self.clocks.clear();
-        self.points.clear();
+        self.anchors.clear();
+        self.windows.clear();
     }
 }
 
@@ -793,11 +781,17 @@ impl SampleTimer {
                 let mut clock = CellClock::new(period, self.paths.latency_ns(cell_id));
                 clock.batch = self.batch;
                 clocks.clocks.push(clock);
-                clocks.points.push(CellPoints::new());
+                clocks.anchors.push(Ring::new());
+                clocks.windows.push(Ring::new());
                 slot
             }
         };
-        clocks.clocks[slot].push(&mut clocks.points[slot], stamp_ns, unqueued)
+        clocks.clocks[slot].push(
+            &mut clocks.anchors[slot],
+            &mut clocks.windows[slot],
+            stamp_ns,
+            unqueued,
+        )
     }
 
     /// Starts every cell and port of `box_id` over (the box was reset), whatever its
