@@ -24,8 +24,7 @@
 
 use crate::box_map::BoxMap;
 use crate::decoder::BoxKey;
-use std::collections::{HashMap, VecDeque};
-use std::hash::{BuildHasherDefault, Hasher};
+use std::collections::HashMap;
 
 /// The bus model's processing time in a cell before its packet leaves, ns (docs/design.md
 /// section 7).
@@ -116,28 +115,161 @@ impl PathModel {
 }
 
 /// One cell's sample clock, learnt from the stamps of its packets.
+///
+/// Its state is in three parts: [`CellClock`], what every packet reads and writes (one
+/// cache line); the unqueued packets' points, which a packet touches when it is one or the
+/// line is refitted (640 bytes); and the window of recent points, touched only until the
+/// line goes through unqueued packets (4 kB). [`SampleTimer`] keeps each part of all its
+/// cells in an array of its own.
 #[derive(Debug, Clone)]
 pub struct SampleClockEstimator {
+    clock: CellClock,
+    unqueued: Box<Anchors>,
+    window: Box<Window>,
+}
+
+/// The part of a cell's sample clock that every packet reads and writes: the line in use,
+/// the last packet, and how many points its [`Anchors`] and [`Window`] hold.
+#[derive(Debug, Clone, Copy)]
+#[repr(align(64))]
+struct CellClock {
     path_latency_ns: f64,
     nominal_period_ns: f64,
     period_ns: f64,
     /// Time of sample index 0 plus the path latency, ns after `anchor_ns`.
     offset_ns: f64,
     anchor_ns: u64,
-    /// (sample index, stamp - anchor) of the recent packets.
-    window: VecDeque<(i64, i64)>,
-    /// (sample index, stamp - anchor) of unqueued packets, kept however old: dense recently,
-    /// thinned further back.
-    unqueued: VecDeque<(i64, i64)>,
-    /// Running sums over `window` and `unqueued`: their least-squares lines and the
-    /// anchors' mean offset in O(1) at each packet.
-    window_sums: LineSums,
-    unqueued_sums: LineSums,
+    /// Sample index and stamp of the last packet, if `has_last`.
+    last_index: i64,
+    last_stamp_ns: u64,
+    /// Points in the window and the unqueued packets' points.
+    window_len: u16,
+    unqueued_len: u8,
+    /// Packets since the last full fit (at most [`REFIT_EVERY`]).
+    since_fit: u8,
+    has_last: bool,
+    period_learnt: bool,
     /// Recompute every fit from its points instead ([`SampleClockEstimator::batch`]).
     batch: bool,
-    last: Option<(i64, u64)>,
-    since_fit: u32,
-    period_learnt: bool,
+}
+
+// Every packet touches one cache line of its cell.
+const _: () = assert!(std::mem::size_of::<CellClock>() == 64);
+const _: () = assert!(WINDOW <= u16::MAX as usize && ANCHORS <= u8::MAX as usize);
+const _: () = assert!(REFIT_EVERY <= u8::MAX as u32);
+
+/// (sample index, stamp - anchor) of a cell's unqueued packets, kept however old: dense
+/// recently, thinned further back.
+type Anchors = Ring<ANCHORS>;
+/// (sample index, stamp - anchor) of a cell's recent packets.
+type Window = Ring<WINDOW>;
+
+/// A point `(k, r)`: a packet's sample index and its stamp less the anchor, ns.
+type Point = (i64, i64);
+
+/// At most `N` points `(k, r)` in a fixed array used as a ring buffer, oldest first, and
+/// their running sums (their least-squares line and mean offset in O(1) at each packet).
+/// The counts and sums come first: a packet that adds a point touches the first two cache
+/// lines and the points' own.
+#[derive(Debug, Clone)]
+#[repr(C, align(64))]
+struct Ring<const N: usize> {
+    /// The oldest point's position in `points`.
+    head: u16,
+    len: u16,
+    sums: LineSums,
+    points: [Point; N],
+}
+
+impl<const N: usize> Ring<N> {
+    fn new() -> Ring<N> {
+        Ring {
+            head: 0,
+            len: 0,
+            sums: LineSums::default(),
+            points: [(0, 0); N],
+        }
+    }
+
+    fn len(&self) -> usize {
+        usize::from(self.len)
+    }
+
+    /// Forgets every point.
+    fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+        self.sums = LineSums::default();
+    }
+
+    /// Position in `points` of the `i`th oldest point (`i` below `N`).
+    fn slot(&self, i: usize) -> usize {
+        let at = usize::from(self.head) + i;
+        if at >= N {
+            at - N
+        } else {
+            at
+        }
+    }
+
+    fn front(&self) -> Option<(i64, i64)> {
+        (self.len > 0).then(|| self.points[usize::from(self.head)])
+    }
+
+    fn back(&self) -> Option<(i64, i64)> {
+        (self.len > 0).then(|| self.points[self.slot(self.len() - 1)])
+    }
+
+    /// Adds `point` as the newest; the ring must not be full.
+    fn push_back(&mut self, point: Point) {
+        debug_assert!(self.len() < N);
+        let at = self.slot(self.len());
+        self.points[at] = point;
+        self.len += 1;
+        self.sums.add(point);
+    }
+
+    /// Removes the oldest point.
+    fn pop_front(&mut self) {
+        if let Some(point) = self.front() {
+            self.head = self.slot(1) as u16;
+            self.len -= 1;
+            self.sums.remove(point);
+        }
+    }
+
+    /// Keeps the points `keep` is true of, in their order; `keep` sees each once, oldest
+    /// first.
+    fn retain(&mut self, mut keep: impl FnMut(&Point) -> bool) {
+        let mut kept = 0;
+        for i in 0..self.len() {
+            let point = self.points[self.slot(i)];
+            if keep(&point) {
+                let to = self.slot(kept);
+                self.points[to] = point;
+                kept += 1;
+            } else {
+                self.sums.remove(point);
+            }
+        }
+        self.len = kept as u16;
+    }
+
+    /// The points oldest first, in two runs of the array.
+    fn as_slices(&self) -> (&[Point], &[Point]) {
+        let head = usize::from(self.head);
+        let first = (N - head).min(self.len());
+        (
+            &self.points[head..head + first],
+            &self.points[..self.len() - first],
+        )
+    }
+
+    /// The points oldest first.
+    fn iter(&self) -> impl Iterator<Item = &(i64, i64)> {
+        let (a, b) = self.as_slices();
+        a.iter().chain(b)
+    }
 }
 
 /// Sums of points `(k, r)` for their least-squares line, exact in integers: a point is
@@ -211,19 +343,9 @@ impl SampleClockEstimator {
     /// need `path_latency_ns` from the sample to the pin with no queue.
     pub fn new(nominal_period_ns: f64, path_latency_ns: u64) -> SampleClockEstimator {
         SampleClockEstimator {
-            path_latency_ns: path_latency_ns as f64,
-            nominal_period_ns,
-            period_ns: nominal_period_ns,
-            offset_ns: 0.0,
-            anchor_ns: 0,
-            window: VecDeque::with_capacity(WINDOW),
-            unqueued: VecDeque::with_capacity(ANCHORS),
-            window_sums: LineSums::default(),
-            unqueued_sums: LineSums::default(),
-            batch: false,
-            last: None,
-            since_fit: 0,
-            period_learnt: false,
+            clock: CellClock::new(nominal_period_ns, path_latency_ns),
+            unqueued: Box::new(Ring::new()),
+            window: Box::new(Ring::new()),
         }
     }
 
@@ -231,21 +353,18 @@ impl SampleClockEstimator {
     /// (O([`WINDOW`]) per packet) instead of from running sums: the reference the
     /// incremental fits are checked against.
     pub fn batch(mut self) -> SampleClockEstimator {
-        self.batch = true;
+        self.clock.batch = true;
         self
     }
 
     /// The period in use, ns.
     pub fn period_ns(&self) -> f64 {
-        self.period_ns
+        self.clock.period_ns
     }
 
     /// Starts over (a box reset: the stamps restart).
     pub fn reset(&mut self) {
-        let batch = self.batch;
-        *self =
-            SampleClockEstimator::new(self.nominal_period_ns, self.path_latency_ns.round() as u64);
-        self.batch = batch;
+        self.clock.reset(&mut self.unqueued, &mut self.window);
     }
 
     /// Takes the stamp of the cell's next packet (box time of its first start bit, ns, in
@@ -254,34 +373,74 @@ impl SampleClockEstimator {
     /// path latency exactly. A stamp before the previous one (the box was reset) starts the
     /// estimator over.
     pub fn push(&mut self, stamp_ns: u64, unqueued: bool) -> SampleTime {
-        if self.last.is_some_and(|(_, s)| stamp_ns < s) {
-            self.reset();
+        self.clock
+            .push(&mut self.unqueued, &mut self.window, stamp_ns, unqueued)
+    }
+}
+
+impl CellClock {
+    fn new(nominal_period_ns: f64, path_latency_ns: u64) -> CellClock {
+        CellClock {
+            path_latency_ns: path_latency_ns as f64,
+            nominal_period_ns,
+            period_ns: nominal_period_ns,
+            offset_ns: 0.0,
+            anchor_ns: 0,
+            last_index: 0,
+            last_stamp_ns: 0,
+            window_len: 0,
+            unqueued_len: 0,
+            since_fit: 0,
+            has_last: false,
+            period_learnt: false,
+            batch: false,
         }
-        let index = match self.last {
-            None => {
-                self.anchor_ns = stamp_ns;
-                self.offset_ns = 0.0;
-                0
-            }
-            Some((last_index, _)) => {
-                let rel = (stamp_ns - self.anchor_ns) as f64;
-                // Queueing only delays: once the offset sits on the lower envelope, the
-                // index whose grid point lies at most 7/8 of a period before the stamp (up
-                // to 1/8 after, for the fit's own error); before that, the nearest.
-                let margin = if self.window.len() < 2 * REFIT_EVERY as usize {
-                    0.5
-                } else {
-                    0.125
-                };
-                floor_i64((rel - self.offset_ns + margin * self.period_ns) / self.period_ns)
-                    .max(last_index)
-            }
+    }
+
+    /// Starts over, as new but for the batch setting; `anchors` and `window` are the
+    /// cell's points.
+    fn reset(&mut self, anchors: &mut Anchors, window: &mut Window) {
+        *self = CellClock {
+            batch: self.batch,
+            ..CellClock::new(self.nominal_period_ns, self.path_latency_ns.round() as u64)
+        };
+        anchors.clear();
+        window.clear();
+    }
+
+    /// [`SampleClockEstimator::push`]; `anchors` and `window` are the cell's points.
+    fn push(
+        &mut self,
+        anchors: &mut Anchors,
+        window: &mut Window,
+        stamp_ns: u64,
+        unqueued: bool,
+    ) -> SampleTime {
+        if self.has_last && stamp_ns < self.last_stamp_ns {
+            self.reset(anchors, window);
+        }
+        let index = if self.has_last {
+            let rel = (stamp_ns - self.anchor_ns) as f64;
+            // Queueing only delays: once the offset sits on the lower envelope, the
+            // index whose grid point lies at most 7/8 of a period before the stamp (up
+            // to 1/8 after, for the fit's own error); before that, the nearest.
+            let margin = if usize::from(self.window_len) < 2 * REFIT_EVERY as usize {
+                0.5
+            } else {
+                0.125
+            };
+            floor_i64((rel - self.offset_ns + margin * self.period_ns) / self.period_ns)
+                .max(self.last_index)
+        } else {
+            self.anchor_ns = stamp_ns;
+            self.offset_ns = 0.0;
+            0
         };
         let rel = (stamp_ns - self.anchor_ns) as i64;
         // Unqueued packets lie on the line, none below it: when one is off, or any packet
         // below, the line is wrong (a sample index slipped, e.g. in the start-up burst's
         // long queues), and the estimator starts over from this packet.
-        if !self.unqueued.is_empty() {
+        if self.unqueued_len > 0 {
             let residual = rel as f64 - self.offset_ns - self.period_ns * index as f64;
             // Before the period is learnt the nominal one drifts off: only a gross miss.
             let limit = if self.period_learnt {
@@ -290,63 +449,55 @@ impl SampleClockEstimator {
                 self.period_ns / 8.0
             };
             if residual < -limit || (unqueued && residual > limit) {
-                self.reset();
-                return self.push(stamp_ns, unqueued);
+                self.reset(anchors, window);
+                return self.push(anchors, window, stamp_ns, unqueued);
             }
         }
         // Once the period is learnt and an unqueued packet is kept, every fit goes through
         // the unqueued packets until a reset (neither changes back): past the first
         // 2 * REFIT_EVERY stamps, the window, which only its length is then read of, is
-        // left as it is.
+        // left as it is (and its points not touched).
         let anchored = self.period_learnt
-            && !self.unqueued.is_empty()
-            && self.window.len() >= 2 * REFIT_EVERY as usize;
+            && self.unqueued_len > 0
+            && usize::from(self.window_len) >= 2 * REFIT_EVERY as usize;
         if !anchored {
-            if self.window.len() == WINDOW {
-                if let Some(old) = self.window.pop_front() {
-                    self.window_sums.remove(old);
-                }
+            if window.len() == WINDOW {
+                window.pop_front();
             }
-            self.window.push_back((index, rel));
-            self.window_sums.add((index, rel));
+            window.push_back((index, rel));
+            self.window_len = window.len() as u16;
         }
-        self.last = Some((index, stamp_ns));
+        self.has_last = true;
+        (self.last_index, self.last_stamp_ns) = (index, stamp_ns);
         self.since_fit += 1;
         if unqueued {
-            if self.unqueued.len() == ANCHORS {
+            if anchors.len() == ANCHORS {
                 // Thin the older half to every other one: the kept ones span ever more
                 // samples (the period's precision grows with it), the newest stay dense.
-                let (mut i, sums) = (0, &mut self.unqueued_sums);
-                self.unqueued.retain(|&point| {
+                let mut i = 0;
+                anchors.retain(|_| {
                     i += 1;
-                    let keep = i > ANCHORS / 2 || i % 2 == 1;
-                    if !keep {
-                        sums.remove(point);
-                    }
-                    keep
+                    i > ANCHORS / 2 || i % 2 == 1
                 });
             }
-            self.unqueued.push_back((index, rel));
-            self.unqueued_sums.add((index, rel));
+            anchors.push_back((index, rel));
             // A cell's drift wanders (temperature): the line holds only over a while.
-            while self
-                .unqueued
+            while anchors
                 .front()
-                .is_some_and(|&(_, r)| (rel - r) as f64 > MAX_ANCHOR_AGE_NS)
+                .is_some_and(|(_, r)| (rel - r) as f64 > MAX_ANCHOR_AGE_NS)
             {
-                if let Some(old) = self.unqueued.pop_front() {
-                    self.unqueued_sums.remove(old);
-                }
+                anchors.pop_front();
             }
+            self.unqueued_len = anchors.len() as u8;
         }
-        if self.since_fit >= REFIT_EVERY
-            || self.window.len() < 2 * REFIT_EVERY as usize
-            || (unqueued && self.unqueued.len() <= 2)
+        if u32::from(self.since_fit) >= REFIT_EVERY
+            || usize::from(self.window_len) < 2 * REFIT_EVERY as usize
+            || (unqueued && self.unqueued_len <= 2)
         {
-            self.fit();
+            self.fit(anchors, window);
         } else if unqueued {
-            self.fit_anchors();
-        } else if self.unqueued.is_empty() {
+            self.fit_anchors(anchors);
+        } else if self.unqueued_len == 0 {
             let residual = rel as f64 - self.period_ns * index as f64;
             self.offset_ns = self.offset_ns.min(residual);
         }
@@ -360,32 +511,33 @@ impl SampleClockEstimator {
 
     /// Refits period and offset: through the unqueued packets where they span enough
     /// samples, else over the window.
-    fn fit(&mut self) {
+    fn fit(&mut self, anchors: &Anchors, window: &Window) {
         self.since_fit = 0;
-        let span = |q: &VecDeque<(i64, i64)>| match (q.front(), q.back()) {
-            (Some(a), Some(b)) => b.0 - a.0,
-            _ => 0,
-        };
-        let plausible = |p: f64| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR;
-        if span(&self.unqueued) >= MIN_ANCHOR_SPAN
-            || (self.period_learnt && !self.unqueued.is_empty())
-        {
+        fn span<const N: usize>(q: &Ring<N>) -> i64 {
+            match (q.front(), q.back()) {
+                (Some(a), Some(b)) => b.0 - a.0,
+                _ => 0,
+            }
+        }
+        let plausible =
+            |period: f64| (period / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR;
+        if span(anchors) >= MIN_ANCHOR_SPAN || (self.period_learnt && anchors.len() > 0) {
             // (Too few unqueued packets for a period: the one learnt before holds.)
-            self.fit_anchors();
+            self.fit_anchors(anchors);
             return;
         }
-        if span(&self.window) >= MIN_SPAN {
+        if span(window) >= MIN_SPAN {
             let ls = if self.batch {
-                least_squares(&self.window)
+                least_squares(window)
             } else {
-                self.window_sums.slope()
+                window.sums.slope()
             };
-            if let Some(ls) = ls.filter(|&p| plausible(p)) {
+            if let Some(ls) = ls.filter(|&period| plausible(period)) {
                 // Then the line through the lowest point of each half: packets that did
                 // not queue lie exactly on the true line.
-                let lowest = |from: usize, to: usize| lowest_under(&self.window, from, to, ls);
-                let half = self.window.len() / 2;
-                let envelope = match (lowest(0, half), lowest(half, self.window.len())) {
+                let lowest = |from: usize, to: usize| lowest_under(window, from, to, ls);
+                let half = window.len() / 2;
+                let envelope = match (lowest(0, half), lowest(half, window.len())) {
                     (Some((ka, ra)), Some((kb, rb))) if kb - ka >= MIN_SPAN / 2 => {
                         ls + (rb - ra) / (kb - ka) as f64
                     }
@@ -395,57 +547,57 @@ impl SampleClockEstimator {
                 self.period_learnt = true;
             }
         }
-        self.offset_ns = if self.unqueued.is_empty() {
-            self.window
+        self.offset_ns = if anchors.len() == 0 {
+            window
                 .iter()
                 .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
                 .fold(f64::INFINITY, f64::min)
         } else {
-            self.anchored_offset()
+            self.anchored_offset(anchors)
         };
     }
 
     /// Period and offset through the unqueued packets alone (cheap: at most [`ANCHORS`]),
     /// the period only where they span enough samples.
-    fn fit_anchors(&mut self) {
-        if let (Some(a), Some(b)) = (self.unqueued.front(), self.unqueued.back()) {
+    fn fit_anchors(&mut self, anchors: &Anchors) {
+        if let (Some(a), Some(b)) = (anchors.front(), anchors.back()) {
             if b.0 - a.0 >= MIN_ANCHOR_SPAN {
                 let slope = if self.batch {
-                    least_squares(&self.unqueued)
+                    least_squares(anchors)
                 } else {
-                    self.unqueued_sums.slope()
+                    anchors.sums.slope()
                 };
-                if let Some(p) =
-                    slope.filter(|&p| (p / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR)
+                if let Some(period) =
+                    slope.filter(|&s| (s / self.nominal_period_ns - 1.0).abs() < MAX_PERIOD_ERROR)
                 {
-                    self.period_ns = p;
+                    self.period_ns = period;
                     self.period_learnt = true;
                 }
             }
         }
-        self.offset_ns = self.anchored_offset();
+        self.offset_ns = self.anchored_offset(anchors);
     }
 
     /// The unqueued packets lie on the line, up to the tick: the mean of their offsets.
-    fn anchored_offset(&self) -> f64 {
-        match self.unqueued.back() {
-            Some(&newest) if !self.batch => self.unqueued_sums.mean_offset(self.period_ns, newest),
+    fn anchored_offset(&self, anchors: &Anchors) -> f64 {
+        match anchors.back() {
+            Some(newest) if !self.batch => anchors.sums.mean_offset(self.period_ns, newest),
             _ => {
-                self.unqueued
+                anchors
                     .iter()
                     .map(|&(k, r)| r as f64 - self.period_ns * k as f64)
                     .sum::<f64>()
-                    / self.unqueued.len().max(1) as f64
+                    / anchors.len().max(1) as f64
             }
         }
     }
 }
 
-/// The first of `points[from..to]` lowest below the line of slope `slope` through the
-/// origin: its sample index and `r - slope * k` (`None` for no points). The points' offsets
-/// are finite and never -0, so `<` orders them as `f64::total_cmp` does.
-fn lowest_under(
-    points: &VecDeque<(i64, i64)>,
+/// The first of `points[from..to]` (oldest first) lowest below the line of slope `slope`
+/// through the origin: its sample index and `r - slope * k` (`None` for no points). The
+/// points' offsets are finite and never -0, so `<` orders them as `f64::total_cmp` does.
+fn lowest_under<const N: usize>(
+    points: &Ring<N>,
     from: usize,
     to: usize,
     slope: f64,
@@ -492,8 +644,8 @@ fn to_f64(x: i128) -> f64 {
 
 /// Slope of stamps over sample indices by least squares, ns per sample, from every point
 /// (the batch reference of [`LineSums::slope`]).
-fn least_squares(points: &VecDeque<(i64, i64)>) -> Option<f64> {
-    let &(k0, r0) = points.front()?;
+fn least_squares<const N: usize>(points: &Ring<N>) -> Option<f64> {
+    let (k0, r0) = points.front()?;
     let n = points.len() as f64;
     let (mk, mr) = points.iter().fold((0.0, 0.0), |(a, b), &(k, r)| {
         (a + (k - k0) as f64 / n, b + (r - r0) as f64 / n)
@@ -506,10 +658,10 @@ fn least_squares(points: &VecDeque<(i64, i64)>) -> Option<f64> {
     slope.is_finite().then_some(slope)
 }
 
-/// Sample times of every cell of every box: one [`SampleClockEstimator`] per (box, cell),
-/// and per (box, port) the last stamp, to tell the packets that found the root's line idle
-/// (more than [`BACK_TO_BACK_NS`] after the previous one on the port; records of one port
-/// come in pin order).
+/// Sample times of every cell of every box: one sample clock per (box, cell), as
+/// [`SampleClockEstimator`], and per (box, port) the last stamp, to tell the packets that
+/// found the root's line idle (more than [`BACK_TO_BACK_NS`] after the previous one on the
+/// port; records of one port come in pin order).
 #[derive(Debug, Clone)]
 pub struct SampleTimer {
     nominal_period_ns: f64,
@@ -522,37 +674,41 @@ pub struct SampleTimer {
     boxes: BoxMap<BoxClocks>,
 }
 
-/// The cells and ports of one box.
+/// The cells and ports of one box. A cell's clock is in three arrays, by the slot the cell
+/// got when first seen: what every packet touches (a cache line a cell), the unqueued
+/// packets' points and the window's (see [`SampleClockEstimator`]).
 #[derive(Debug, Clone)]
 struct BoxClocks {
     /// Stamp of the last packet on each port.
     last_on_port: Box<[Option<u64>; 256]>,
-    cells: HashMap<u16, SampleClockEstimator, BuildHasherDefault<CellIdHasher>>,
+    /// Each cell's slot by cell id ([`NO_SLOT`]: none yet), up to the highest id seen.
+    slots: Vec<u32>,
+    clocks: Vec<CellClock>,
+    anchors: Vec<Anchors>,
+    windows: Vec<Window>,
 }
 
-/// The hasher of cell ids (at most 65,536 keys a box): a multiplication, and its high bits
-/// folded onto the low ones, which the table indexes by.
-#[derive(Debug, Clone, Copy, Default)]
-struct CellIdHasher(u64);
+/// The slot of a cell not seen yet.
+const NO_SLOT: u32 = u32::MAX;
 
-impl Hasher for CellIdHasher {
-    fn finish(&self) -> u64 {
-        self.0 ^ (self.0 >> 32)
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
+impl BoxClocks {
+    fn new() -> BoxClocks {
+        BoxClocks {
+            last_on_port: Box::new([None; 256]),
+            slots: Vec::new(),
+            clocks: Vec::new(),
+            anchors: Vec::new(),
+            windows: Vec::new(),
         }
     }
 
-    fn write_u16(&mut self, id: u16) {
-        self.write_u64(u64::from(id));
-    }
-
-    fn write_u64(&mut self, v: u64) {
-        // Fibonacci hashing: the high bits, which the table uses, depend on every bit.
-        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    /// Forgets every cell and port.
+    fn clear(&mut self) {
+        *self.last_on_port = [None; 256];
+        self.slots.clear();
+        self.clocks.clear();
+        self.anchors.clear();
+        self.windows.clear();
     }
 }
 
@@ -597,8 +753,9 @@ impl SampleTimer {
 
     /// [`SampleTimer::push`] for the box `key` (box id and source address).
     pub fn push_for(&mut self, key: BoxKey, port: u8, cell_id: u16, stamp_ns: u64) -> SampleTime {
-        let (period, latency) = (self.nominal_period_ns, self.paths.latency_ns(cell_id));
+        let period = self.nominal_period_ns;
         if self.on_box_grid {
+            let latency = self.paths.latency_ns(cell_id);
             let at = stamp_ns as f64 - latency as f64 + period / 8.0;
             let index = (at / period).floor();
             return SampleTime {
@@ -607,41 +764,47 @@ impl SampleTimer {
                 period_learnt: false,
             };
         }
-        let batch = self.batch;
-        let clocks = self.boxes.get_or_insert_with(key, || BoxClocks {
-            last_on_port: Box::new([None; 256]),
-            cells: HashMap::default(),
-        });
+        let clocks = self.boxes.get_or_insert_with(key, BoxClocks::new);
         // The port's first packet: whether the line was idle before it is unknown.
         let unqueued = clocks.last_on_port[usize::from(port)]
             .replace(stamp_ns)
             .is_some_and(|last| stamp_ns >= last && stamp_ns - last > BACK_TO_BACK_NS);
-        clocks
-            .cells
-            .entry(cell_id)
-            .or_insert_with(|| {
-                let estimator = SampleClockEstimator::new(period, latency);
-                if batch {
-                    estimator.batch()
-                } else {
-                    estimator
+        let id = usize::from(cell_id);
+        let slot = match clocks.slots.get(id) {
+            Some(&slot) if slot != NO_SLOT => slot as usize,
+            _ => {
+                if clocks.slots.len() <= id {
+                    clocks.slots.resize(id + 1, NO_SLOT);
                 }
-            })
-            .push(stamp_ns, unqueued)
+                let slot = clocks.clocks.len();
+                clocks.slots[id] = slot as u32;
+                let mut clock = CellClock::new(period, self.paths.latency_ns(cell_id));
+                clock.batch = self.batch;
+                clocks.clocks.push(clock);
+                clocks.anchors.push(Ring::new());
+                clocks.windows.push(Ring::new());
+                slot
+            }
+        };
+        clocks.clocks[slot].push(
+            &mut clocks.anchors[slot],
+            &mut clocks.windows[slot],
+            stamp_ns,
+            unqueued,
+        )
     }
 
     /// Starts every cell and port of `box_id` over (the box was reset), whatever its
     /// source address.
     pub fn reset_box(&mut self, box_id: u16) {
         for (_, b) in self.boxes.iter_mut().filter(|(k, _)| k.box_id == box_id) {
-            b.cells.clear();
-            *b.last_on_port = [None; 256];
+            b.clear();
         }
     }
 
     /// Cells followed (none on the box's grid).
     pub fn cells(&self) -> usize {
-        self.boxes.iter().map(|(_, b)| b.cells.len()).sum()
+        self.boxes.iter().map(|(_, b)| b.clocks.len()).sum()
     }
 }
 
@@ -858,6 +1021,49 @@ mod tests {
         assert_eq!(timer.cells(), 3);
         timer.reset_box(7);
         assert_eq!(timer.cells(), 0);
+    }
+
+    #[test]
+    fn the_timer_gives_each_cell_what_an_estimator_of_its_own_gives() {
+        // Cells with ids far apart and in no order, on four ports, interleaved: the timer
+        // must keep every cell's clock apart, and tell the unqueued packets per port.
+        let ids: [u16; 6] = [900, 3, 65_535, 41, 0, 7];
+        let mut noise = Noise(11);
+        let cells: Vec<Cell> = ids
+            .iter()
+            .enumerate()
+            .map(|(i, _)| cell(-90.0 + 35.0 * i as f64, 250.0, 0))
+            .collect();
+        let paths = PathModel::bus_model(Positions::Unknown);
+        let mut timer = SampleTimer::new(250.0, paths.clone());
+        let mut own: Vec<SampleClockEstimator> = ids
+            .iter()
+            .map(|&id| SampleClockEstimator::new(4e6, paths.latency_ns(id)))
+            .collect();
+        let mut last_on_port = [None::<u64>; 4];
+        for k in 0..3_000u64 {
+            let mut packets = Vec::new();
+            for (i, c) in cells.iter().enumerate() {
+                if noise.next() < 0.9 {
+                    let q = if noise.next() < 0.3 {
+                        0.0
+                    } else {
+                        noise.next() * 300e3
+                    };
+                    packets.push((i, c.stamp_ns(k, q)));
+                }
+            }
+            packets.sort_by_key(|&(i, stamp)| (stamp, i));
+            for (i, stamp) in packets {
+                let port = i % 4;
+                let unqueued = last_on_port[port]
+                    .replace(stamp)
+                    .is_some_and(|last| stamp - last > BACK_TO_BACK_NS);
+                let t = timer.push(2, port as u8, ids[i], stamp);
+                assert_eq!(t, own[i].push(stamp, unqueued), "cell {} at {k}", ids[i]);
+            }
+        }
+        assert_eq!(timer.cells(), ids.len());
     }
 
     /// Pushes `stamps` (stamp, unqueued) through an incremental and a batch estimator and

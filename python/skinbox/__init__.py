@@ -211,28 +211,8 @@ class Reader:
         raise StopIteration
 
 
-def read_chunks(
-    path: PathLike,
-    rows: int = 65536,
-    *,
-    sample_rate_hz: Optional[float] = None,
-    udp_port: Optional[int] = None,
-    cells_per_bus: Optional[int] = None,
-    synced: bool = False,
-    times: bool = True,
-    strict: bool = True,
-) -> Reader:
-    """A :class:`Reader` of ``path``: ``for batch in skinbox.read_chunks(path): ...``."""
-    return Reader(
-        path,
-        rows,
-        sample_rate_hz=sample_rate_hz,
-        udp_port=udp_port,
-        cells_per_bus=cells_per_bus,
-        synced=synced,
-        times=times,
-        strict=strict,
-    )
+read_chunks = Reader
+"""Another name of :class:`Reader`: ``for batch in skinbox.read_chunks(path): ...``."""
 
 
 def samples(

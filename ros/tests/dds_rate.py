@@ -29,18 +29,14 @@ from pathlib import Path
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import int32, sequence, uint8, uint16, uint32
+from cyclonedds.idl.types import sequence, uint8, uint16, uint32
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
+from test_dds import Time_
+
 REPO = Path(__file__).resolve().parents[2]
-
-
-@dataclass
-class Stamp_(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: int32
-    nanosec: uint32
 
 
 @dataclass
@@ -48,7 +44,7 @@ class CountedBatch_(IdlStruct, typename="skinbox_msgs::msg::dds_::CellSampleBatc
     """`CellSampleBatch` with its samples declared as bytes: the sequence's length is the
     number of samples, and Python does not decode each (0.4 ms a message with the full
     type, which would bound the rate measured here)."""
-    stamp: Stamp_
+    stamp: Time_
     box_id: uint16
     box_address: str
     datagram_sequence: uint32
