@@ -18,7 +18,7 @@ use super::{array, one, set_u16};
 use crate::{check_len, get_u16, Error, Format, LayoutRow, Result};
 
 /// Byte ranges and positions of the header's fields.
-pub(crate) mod field {
+pub mod field {
     use crate::Field;
     pub const VERSION_IHL: usize = 0;
     pub const DSCP_ECN: usize = 1;
