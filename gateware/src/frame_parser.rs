@@ -275,14 +275,14 @@ pub struct FrameParser {
     at_destination: DFF<Bit>,
     at_source: DFF<Bit>,
     at_ethertype: DFF<Bit>,
-    at_14: DFF<Bit>,
+    at_network_start: DFF<Bit>,
     at_header_bytes: DFF<Bit>,
     at_total: DFF<Bit>,
-    at_18: DFF<Bit>,
-    at_19: DFF<Bit>,
-    at_33: DFF<Bit>,
+    at_total_length_end: DFF<Bit>,
+    at_arguments_expected: DFF<Bit>,
+    at_ip_header_last: DFF<Bit>,
     at_arp_sender_mac: DFF<Bit>,
-    at_23: DFF<Bit>,
+    at_ip_protocol: DFF<Bit>,
     at_ip_source: DFF<Bit>,
     at_arp_sender_ip: DFF<Bit>,
     at_ip_destination: DFF<Bit>,
@@ -293,11 +293,11 @@ pub struct FrameParser {
     at_host_time: DFF<Bit>,
     at_argument_length: DFF<Bit>,
     at_reserved: DFF<Bit>,
-    at_65: DFF<Bit>,
+    at_command_header_last: DFF<Bit>,
     at_ip_header: DFF<Bit>,
     at_pseudo_header: DFF<Bit>,
-    at_from_34: DFF<Bit>,
-    at_from_38: DFF<Bit>,
+    at_from_transport: DFF<Bit>,
+    at_from_icmp_rest: DFF<Bit>,
     beat_word: DFF<Bits<16>>,
     transport_word: DFF<Bits<16>>,
     index_in: Signal<Local, Bits<11>>,
@@ -571,14 +571,14 @@ impl FrameParser {
             at_destination: Default::default(),
             at_source: Default::default(),
             at_ethertype: Default::default(),
-            at_14: Default::default(),
+            at_network_start: Default::default(),
             at_header_bytes: Default::default(),
             at_total: Default::default(),
-            at_18: Default::default(),
-            at_19: Default::default(),
-            at_33: Default::default(),
+            at_total_length_end: Default::default(),
+            at_arguments_expected: Default::default(),
+            at_ip_header_last: Default::default(),
             at_arp_sender_mac: Default::default(),
-            at_23: Default::default(),
+            at_ip_protocol: Default::default(),
             at_ip_source: Default::default(),
             at_arp_sender_ip: Default::default(),
             at_ip_destination: Default::default(),
@@ -589,11 +589,11 @@ impl FrameParser {
             at_host_time: Default::default(),
             at_argument_length: Default::default(),
             at_reserved: Default::default(),
-            at_65: Default::default(),
+            at_command_header_last: Default::default(),
             at_ip_header: Default::default(),
             at_pseudo_header: Default::default(),
-            at_from_34: Default::default(),
-            at_from_38: Default::default(),
+            at_from_transport: Default::default(),
+            at_from_icmp_rest: Default::default(),
             beat_word: Default::default(),
             transport_word: Default::default(),
             index_in: Default::default(),
@@ -750,14 +750,14 @@ impl Logic for FrameParser {
             at_destination,
             at_source,
             at_ethertype,
-            at_14,
+            at_network_start,
             at_header_bytes,
             at_total,
-            at_18,
-            at_19,
-            at_33,
+            at_total_length_end,
+            at_arguments_expected,
+            at_ip_header_last,
             at_arp_sender_mac,
-            at_23,
+            at_ip_protocol,
             at_ip_source,
             at_arp_sender_ip,
             at_ip_destination,
@@ -768,11 +768,11 @@ impl Logic for FrameParser {
             at_host_time,
             at_argument_length,
             at_reserved,
-            at_65,
+            at_command_header_last,
             at_ip_header,
             at_pseudo_header,
-            at_from_34,
-            at_from_38,
+            at_from_transport,
+            at_from_icmp_rest,
             beat_word,
             transport_word,
             destination_mac,
@@ -918,7 +918,7 @@ impl Logic for FrameParser {
                 | (self.at_ethertype.q.val()
                     & (self.index_in.val() != self.ipv4_at.val())
                     & self.in_frame.q.val());
-            self.at_14.d.next = self.index_in.val() == self.ipv4_at.val();
+            self.at_network_start.d.next = self.index_in.val() == self.ipv4_at.val();
             self.at_header_bytes.d.next = (self.index_in.val() == self.ipv4_at.val())
                 | (self.at_header_bytes.q.val()
                     & (self.index_in.val() != self.header_bytes_end.val())
@@ -927,14 +927,15 @@ impl Logic for FrameParser {
                 | (self.at_total.q.val()
                     & (self.index_in.val() != self.ip_total_len_end.val())
                     & self.in_frame.q.val());
-            self.at_18.d.next = self.index_in.val() == self.ip_total_len_end.val();
-            self.at_19.d.next = self.index_in.val() == self.arguments_expected_at.val();
-            self.at_33.d.next = self.index_in.val() == self.ip_header_last.val();
+            self.at_total_length_end.d.next = self.index_in.val() == self.ip_total_len_end.val();
+            self.at_arguments_expected.d.next =
+                self.index_in.val() == self.arguments_expected_at.val();
+            self.at_ip_header_last.d.next = self.index_in.val() == self.ip_header_last.val();
             self.at_arp_sender_mac.d.next = (self.index_in.val() == self.arp_sender_mac_at.val())
                 | (self.at_arp_sender_mac.q.val()
                     & (self.index_in.val() != self.arp_sender_ip_at.val())
                     & self.in_frame.q.val());
-            self.at_23.d.next = self.index_in.val() == self.ip_protocol_at.val();
+            self.at_ip_protocol.d.next = self.index_in.val() == self.ip_protocol_at.val();
             self.at_ip_source.d.next = (self.index_in.val() == self.ip_source_at.val())
                 | (self.at_ip_source.q.val()
                     & (self.index_in.val() != self.ip_destination_at.val())
@@ -975,7 +976,8 @@ impl Logic for FrameParser {
                 | (self.at_reserved.q.val()
                     & (self.index_in.val() != self.arguments_at.val())
                     & self.in_frame.q.val());
-            self.at_65.d.next = self.index_in.val() == self.command_header_last.val();
+            self.at_command_header_last.d.next =
+                self.index_in.val() == self.command_header_last.val();
             self.at_ip_header.d.next = (self.index_in.val() == self.ipv4_at.val())
                 | (self.at_ip_header.q.val()
                     & (self.index_in.val() != self.transport_at.val())
@@ -984,10 +986,10 @@ impl Logic for FrameParser {
                 | (self.at_pseudo_header.q.val()
                     & (self.index_in.val() != self.transport_at.val())
                     & self.in_frame.q.val());
-            self.at_from_34.d.next = (self.index_in.val() == self.transport_at.val())
-                | (self.at_from_34.q.val() & self.in_frame.q.val());
-            self.at_from_38.d.next = (self.index_in.val() == self.icmp_rest_at.val())
-                | (self.at_from_38.q.val() & self.in_frame.q.val());
+            self.at_from_transport.d.next = (self.index_in.val() == self.transport_at.val())
+                | (self.at_from_transport.q.val() & self.in_frame.q.val());
+            self.at_from_icmp_rest.d.next = (self.index_in.val() == self.icmp_rest_at.val())
+                | (self.at_from_icmp_rest.q.val() & self.in_frame.q.val());
         }
         // the byte as a 16-bit word: even frame positions are high bytes
         self.word_in.next = bit_cast::<16, 8>(self.frame.data.val()) << 8;
@@ -1052,7 +1054,7 @@ impl Logic for FrameParser {
                 self.ethertype.d.next =
                     (self.ethertype.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
             }
-            if self.at_14.q.val() {
+            if self.at_network_start.q.val() {
                 self.is_arp.d.next = self.ethertype.q.val() == self.ethertype_arp.val();
             }
             if self.at_header_bytes.q.val() {
@@ -1063,7 +1065,7 @@ impl Logic for FrameParser {
                 self.total_length.d.next =
                     (self.total_length.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
             }
-            if self.at_23.q.val() {
+            if self.at_ip_protocol.q.val() {
                 self.protocol.d.next = self.beat_data.q.val();
                 self.is_udp.d.next = self.beat_data.q.val() == self.protocol_udp.val();
             }
@@ -1105,7 +1107,7 @@ impl Logic for FrameParser {
             }
             // arguments: one slot per byte from 66, inside the IPv4 packet only
             self.argument_slot.d.next = self.argument_slot.q.val() >> 1;
-            if self.at_65.q.val() {
+            if self.at_command_header_last.q.val() {
                 self.argument_slot.d.next = 0x800.into();
             }
             if self.argument_slot.q.val().get_bit(11) {
@@ -1151,15 +1153,15 @@ impl Logic for FrameParser {
                 self.ip_left.d.next = self.ip_left.q.val() - 1;
                 self.in_ip.d.next = self.ip_left.q.val() != 1;
             }
-            if self.at_18.q.val() {
+            if self.at_total_length_end.q.val() {
                 self.payload_length.d.next = self.total_length.q.val() - self.ip_header_len.val();
             }
-            if self.at_19.q.val() {
+            if self.at_arguments_expected.q.val() {
                 // a command's arguments: the payload after the UDP and command headers
                 self.arguments_expected.d.next =
                     self.payload_length.q.val() - self.udp_and_command_header_len.val();
             }
-            if self.at_33.q.val() {
+            if self.at_ip_header_last.q.val() {
                 // the IPv4 payload's bytes from 34 on
                 self.ip_left.d.next = self.payload_length.q.val();
                 self.in_ip.d.next = self.payload_length.q.val() != 0;
@@ -1170,12 +1172,12 @@ impl Logic for FrameParser {
                 self.header_carry.d.next = self.header_next.val().get_bit(16);
             }
             if (self.is_udp.q.val() & self.at_pseudo_header.q.val())
-                | (self.in_ip.q.val() & (self.at_from_34.q.val()))
+                | (self.in_ip.q.val() & (self.at_from_transport.q.val()))
             {
                 self.transport_sum.d.next = self.transport_next.val().get_bits::<16>(0);
                 self.transport_carry.d.next = self.transport_next.val().get_bit(16);
             }
-            if self.at_23.q.val() {
+            if self.at_ip_protocol.q.val() {
                 // UDP: the pseudo header's protocol word
                 self.transport_sum.d.next = 0.into();
                 if self.beat_data.q.val() == self.protocol_udp.val() {
@@ -1183,7 +1185,7 @@ impl Logic for FrameParser {
                 }
                 self.transport_carry.d.next = false;
             }
-            if self.in_ip.q.val() & (self.at_from_38.q.val()) {
+            if self.in_ip.q.val() & (self.at_from_icmp_rest.q.val()) {
                 self.rest_sum.d.next = self.rest_next.val().get_bits::<16>(0);
                 self.rest_carry.d.next = self.rest_next.val().get_bit(16);
             }
