@@ -32,13 +32,16 @@
 //! command: the command's own when it was taken, else the one it holds (0 for a host
 //! not in the table, which only a command for another box can leave there).
 
+use crate::frame_parser::HELD_ARGUMENT_BYTES;
 use crate::hdl::*;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::command::{
-    AckResult, Opcode, ALL_PORTS, ANY_BOX, CELL_COMMAND_LEN, DESTINATION_LEN, HOST_SLOTS,
-    MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS,
+    cell_command_field, destination_field, ticks_field, AckResult, Opcode, ALL_PORTS, ANY_BOX,
+    CELL_COMMAND_LEN, DESTINATION_LEN, HOST_SLOTS, MAX_FLUSH_TIMEOUT_TICKS,
+    MIN_STATUS_PERIOD_TICKS, TICKS_LEN,
 };
 use skinbox_protocol::link::LinkConfig;
+use skinbox_protocol::Field;
 
 /// Clocks from `command` to `done`.
 pub const COMMAND_LATENCY: u64 = 4;
@@ -63,6 +66,16 @@ pub struct CommandUnitConfig {
 
 fn constant<const N: usize>(value: u64) -> Constant<Bits<N>> {
     Constant::new(value.into())
+}
+
+/// The lowest bit in `command_arguments` of the argument bytes `field` (the first
+/// argument byte is the top byte).
+fn argument_bit(field: Field) -> Constant<Bits<7>> {
+    assert!(
+        field.end <= HELD_ARGUMENT_BYTES,
+        "argument bytes {field:?} not held"
+    );
+    constant((8 * (HELD_ARGUMENT_BYTES - field.end)) as u64)
 }
 
 fn many<T: Default>(n: usize) -> Vec<T> {
@@ -157,6 +170,13 @@ pub struct CommandUnit {
     result_unknown_opcode: Constant<Bits<8>>,
     result_bad_argument: Constant<Bits<8>>,
     result_downlink_full: Constant<Bits<8>>,
+    // argument positions in `command_arguments`
+    destination_mac_bit: Constant<Bits<7>>,
+    destination_ip_bit: Constant<Bits<7>>,
+    destination_port_bit: Constant<Bits<7>>,
+    ticks_bit: Constant<Bits<7>>,
+    cell_port_bit: Constant<Bits<7>>,
+    cell_reserved_bit: Constant<Bits<7>>,
     default_mac: Constant<Bits<48>>,
     default_ip: Constant<Bits<32>>,
     default_port: Constant<Bits<16>>,
@@ -271,7 +291,7 @@ impl CommandUnit {
             max_flush_timeout: constant(MAX_FLUSH_TIMEOUT_TICKS.into()),
             min_status_period: constant(MIN_STATUS_PERIOD_TICKS.into()),
             destination_length: constant(DESTINATION_LEN as u64),
-            value_length: constant(4),
+            value_length: constant(TICKS_LEN as u64),
             cell_command_length: constant(CELL_COMMAND_LEN as u64),
             opcode_stream_to: constant(Opcode::StreamTo as u64),
             opcode_set_flush_timeout: constant(Opcode::SetFlushTimeout as u64),
@@ -291,6 +311,12 @@ impl CommandUnit {
             result_unknown_opcode: constant(AckResult::UnknownOpcode as u64),
             result_bad_argument: constant(AckResult::BadArgument as u64),
             result_downlink_full: constant(AckResult::DownlinkFull as u64),
+            destination_mac_bit: argument_bit(destination_field::MAC),
+            destination_ip_bit: argument_bit(destination_field::IP),
+            destination_port_bit: argument_bit(destination_field::PORT),
+            ticks_bit: argument_bit(ticks_field::TICKS),
+            cell_port_bit: argument_bit(cell_command_field::PORT..cell_command_field::PORT + 1),
+            cell_reserved_bit: argument_bit(cell_command_field::RESERVED),
             default_mac: constant(mac_number(link.host_mac)),
             default_ip: constant(u32::from_be_bytes(link.host_ip).into()),
             default_port: constant(link.host_port.into()),
@@ -444,18 +470,40 @@ impl Logic for CommandUnit {
         self.length_cell_command.d.next =
             self.command_argument_length.val() == self.cell_command_length.val();
         // stream-to: MAC in bytes 0..6, IP 6..10, port 10..12
-        self.destination_ok.d.next = (self.command_arguments.val().get_bits::<32>(16) != 0)
-            & (self.command_arguments.val().get_bits::<16>(0) != 0);
+        self.destination_ok.d.next = (self
+            .command_arguments
+            .val()
+            .get_bits::<32>(self.destination_ip_bit.val().index())
+            != 0)
+            & (self
+                .command_arguments
+                .val()
+                .get_bits::<16>(self.destination_port_bit.val().index())
+                != 0);
         // set-flush-timeout and set-status-period: a u32 in bytes 0..4
-        self.value.next = self.command_arguments.val().get_bits::<32>(64);
+        self.value.next = self
+            .command_arguments
+            .val()
+            .get_bits::<32>(self.ticks_bit.val().index());
         self.flush_timeout_ok.d.next =
             (self.value.val() != 0) & (self.value.val() <= self.max_flush_timeout.val());
         self.status_period_ok.d.next = self.value.val() >= self.min_status_period.val();
         // cell command: the port in byte 0, three reserved bytes
-        self.cell_port_ok.d.next = (self.command_arguments.val().get_bits::<8>(88)
+        self.cell_port_ok.d.next = (self
+            .command_arguments
+            .val()
+            .get_bits::<8>(self.cell_port_bit.val().index())
             == self.all_ports.val())
-            | (self.command_arguments.val().get_bits::<8>(88) < self.port_count.val());
-        self.reserved_zero.d.next = self.command_arguments.val().get_bits::<24>(64) == 0;
+            | (self
+                .command_arguments
+                .val()
+                .get_bits::<8>(self.cell_port_bit.val().index())
+                < self.port_count.val());
+        self.reserved_zero.d.next = self
+            .command_arguments
+            .val()
+            .get_bits::<24>(self.cell_reserved_bit.val().index())
+            == 0;
 
         // Stage 2: the matched slot's sequence number, the oldest slot, the arguments'
         // verdict.
@@ -533,7 +581,10 @@ impl Logic for CommandUnit {
         }
         self.cell_command_taken.next =
             self.taken.val() & self.arguments_ok.q.val() & self.is_cell_command.q.val();
-        self.downlink_port.next = self.command_arguments.val().get_bits::<8>(88);
+        self.downlink_port.next = self
+            .command_arguments
+            .val()
+            .get_bits::<8>(self.cell_port_bit.val().index());
         self.full_shifted.next =
             self.downlink_full_ports.val() >> bit_cast::<64, 8>(self.downlink_port.val());
         self.downlink_room.next = !self.downlink_busy.val() & !self.full_shifted.val().get_bit(0);
@@ -587,12 +638,18 @@ impl Logic for CommandUnit {
                     self.destination_ip_out.d.next = self.peer_ip.val();
                     self.destination_port_out.d.next = self.peer_port.val();
                 } else {
-                    self.destination_mac_out.d.next =
-                        self.command_arguments.val().get_bits::<48>(48);
-                    self.destination_ip_out.d.next =
-                        self.command_arguments.val().get_bits::<32>(16);
-                    self.destination_port_out.d.next =
-                        self.command_arguments.val().get_bits::<16>(0);
+                    self.destination_mac_out.d.next = self
+                        .command_arguments
+                        .val()
+                        .get_bits::<48>(self.destination_mac_bit.val().index());
+                    self.destination_ip_out.d.next = self
+                        .command_arguments
+                        .val()
+                        .get_bits::<32>(self.destination_ip_bit.val().index());
+                    self.destination_port_out.d.next = self
+                        .command_arguments
+                        .val()
+                        .get_bits::<16>(self.destination_port_bit.val().index());
                 }
             }
             if self.is_set_flush_timeout.q.val() {

@@ -37,12 +37,15 @@
 use crate::hdl::*;
 use crate::stream::ByteStreamSink;
 use skinbox_protocol::box_counters::BoxCounter;
-use skinbox_protocol::command::{HEADER_LEN, KIND_COMMAND};
+use skinbox_protocol::command::{self, HEADER_LEN, KIND_COMMAND};
 use skinbox_protocol::datagram::{MAGIC, VERSION};
 use skinbox_protocol::link::{
-    LinkConfig, ARP_REQUEST_HEADER, ETHERNET_HEADER_LEN, ETHERTYPE_ARP, ETHERTYPE_IPV4,
-    ICMP_ECHO_REQUEST, IPV4_HEADER_LEN, IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP, UDP_HEADER_LEN,
+    LinkConfig, ARGUMENTS_AT, ARP_AT, ARP_REQUEST_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, ICMP_AT,
+    ICMP_ECHO_REQUEST, IPV4_AT, IPV4_HEADER_LEN, IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP, MIN_FRAME_LEN,
+    PAYLOAD_AT, UDP_AT, UDP_HEADER_LEN,
 };
+use skinbox_protocol::wire::{arp, ethernet, icmp, ipv4, udp};
+use skinbox_protocol::Field;
 
 /// Action: nothing to answer.
 pub const ACTION_NONE: u8 = 0;
@@ -58,14 +61,61 @@ pub const DECISION_LATENCY: u64 = 6;
 /// Bytes of command arguments held in `command_arguments`.
 pub const HELD_ARGUMENT_BYTES: usize = 12;
 
-// The byte positions below are those of an Ethernet II frame carrying IPv4 without options,
-// then ICMP or UDP, then a command.
-const _: () = assert!(ETHERNET_HEADER_LEN == 14);
-const _: () = assert!(IPV4_HEADER_LEN == 20);
-const _: () = assert!(UDP_HEADER_LEN == 8);
-const _: () = assert!(HEADER_LEN == 24);
-// the ARP body (28 bytes) ends at byte 42, inside the 60 bytes every frame has
-const _: () = assert!(ETHERNET_HEADER_LEN + 28 <= skinbox_protocol::link::MIN_FRAME_LEN);
+// Frame positions of the captured fields: an Ethernet II frame carrying ARP, or IPv4
+// without options, then ICMP or UDP, then a command.
+const fn shifted(field: Field, by: usize) -> Field {
+    field.start + by..field.end + by
+}
+const IP_TOTAL_LEN: Field = shifted(ipv4::field::TOTAL_LEN, IPV4_AT);
+const IP_PROTOCOL: usize = IPV4_AT + ipv4::field::PROTOCOL;
+const IP_CHECKSUM: Field = shifted(ipv4::field::CHECKSUM, IPV4_AT);
+const IP_SOURCE: Field = shifted(ipv4::field::SOURCE, IPV4_AT);
+const IP_DESTINATION: Field = shifted(ipv4::field::DESTINATION, IPV4_AT);
+const ARP_SENDER_MAC: Field = shifted(arp::field::SENDER_MAC, ARP_AT);
+const ARP_SENDER_IP: Field = shifted(arp::field::SENDER_IP, ARP_AT);
+const ARP_TARGET_IP: Field = shifted(arp::field::TARGET_IP, ARP_AT);
+/// Captured in `header`: the ARP request header, or IPv4 version/IHL to the fragment field.
+const HEADER_BYTES: Field = ARP_AT..ARP_AT + ARP_REQUEST_HEADER.len();
+/// Captured in `transport`: the ICMP or UDP header.
+const TRANSPORT: Field = UDP_AT..PAYLOAD_AT;
+/// Captured in `command_head`: the command header to its flags.
+const COMMAND_HEAD: Field = PAYLOAD_AT..PAYLOAD_AT + command::field::SEQUENCE.start;
+const COMMAND_SEQUENCE: Field = shifted(command::field::SEQUENCE, PAYLOAD_AT);
+const COMMAND_HOST_TIME: Field = shifted(command::field::HOST_TIME, PAYLOAD_AT);
+const COMMAND_LENGTH: Field = shifted(command::field::LENGTH, PAYLOAD_AT);
+const COMMAND_RESERVED: Field = shifted(command::field::RESERVED, PAYLOAD_AT);
+/// The ICMP message from its identifier: what the echo reply's checksum sums.
+const ICMP_REST_AT: usize = ICMP_AT + icmp::field::IDENTIFIER.start;
+// one decode ends a capture and starts the next where the fields are adjacent
+const _: () = assert!(ethernet::field::ETHERTYPE.end == IPV4_AT && IPV4_AT == ARP_AT);
+const _: () = assert!(ICMP_AT == UDP_AT && TRANSPORT.end == ICMP_AT + icmp::HEADER_LEN);
+const _: () = assert!(HEADER_BYTES.end == IPV4_AT + ipv4::field::TTL);
+const _: () = assert!(ARP_SENDER_MAC.end == ARP_SENDER_IP.start);
+const _: () = assert!(IP_SOURCE.end == IP_DESTINATION.start && IP_DESTINATION.end == UDP_AT);
+const _: () = assert!(COMMAND_SEQUENCE.end == COMMAND_HOST_TIME.start);
+const _: () = assert!(COMMAND_HOST_TIME.end == COMMAND_LENGTH.start);
+const _: () = assert!(COMMAND_LENGTH.end == COMMAND_RESERVED.start);
+const _: () = assert!(COMMAND_RESERVED.end == ARGUMENTS_AT);
+// the ARP body ends inside the 60 bytes every frame has
+const _: () = assert!(ARP_AT + arp::PACKET_LEN <= MIN_FRAME_LEN);
+
+/// A frame position as a kernel constant (compared with the 11-bit beat index).
+fn position(at: usize) -> Constant<Bits<11>> {
+    assert!(at < 1 << 11);
+    Constant::new((at as u64).into())
+}
+
+/// The lowest bit of the frame bytes `field` in a shift register that captured `capture`
+/// (the last captured byte is the low byte).
+fn capture_bit(capture: Field, field: Field) -> Constant<Bits<6>> {
+    assert!(capture.start <= field.start && field.end <= capture.end && capture.len() <= 8);
+    Constant::new(((8 * (capture.end - field.end)) as u64).into())
+}
+
+/// A length as a kernel constant (compared with 16-bit lengths).
+fn length(len: usize) -> Constant<Bits<16>> {
+    Constant::new((len as u64).into())
+}
 
 fn be(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0, |v, &b| v << 8 | u64::from(b))
@@ -143,6 +193,53 @@ pub struct FrameParser {
     icmp_echo_request: Constant<Bits<16>>,
     arp_request_header: Constant<Bits<64>>,
     command_start: Constant<Bits<32>>,
+    // frame positions
+    source_mac_at: Constant<Bits<11>>,
+    ethertype_at: Constant<Bits<11>>,
+    ipv4_at: Constant<Bits<11>>,
+    header_bytes_end: Constant<Bits<11>>,
+    ip_total_len_at: Constant<Bits<11>>,
+    ip_total_len_end: Constant<Bits<11>>,
+    arguments_expected_at: Constant<Bits<11>>,
+    ip_protocol_at: Constant<Bits<11>>,
+    ip_checksum_at: Constant<Bits<11>>,
+    ip_checksum_low_at: Constant<Bits<11>>,
+    ip_source_at: Constant<Bits<11>>,
+    ip_destination_at: Constant<Bits<11>>,
+    ip_header_last: Constant<Bits<11>>,
+    arp_sender_mac_at: Constant<Bits<11>>,
+    arp_sender_ip_at: Constant<Bits<11>>,
+    arp_sender_ip_end: Constant<Bits<11>>,
+    arp_target_ip_at: Constant<Bits<11>>,
+    arp_target_ip_end: Constant<Bits<11>>,
+    transport_at: Constant<Bits<11>>,
+    icmp_rest_at: Constant<Bits<11>>,
+    command_at: Constant<Bits<11>>,
+    sequence_at: Constant<Bits<11>>,
+    host_time_at: Constant<Bits<11>>,
+    argument_length_at: Constant<Bits<11>>,
+    reserved_at: Constant<Bits<11>>,
+    command_header_last: Constant<Bits<11>>,
+    arguments_at: Constant<Bits<11>>,
+    // field positions in the captures
+    version_bit: Constant<Bits<6>>,
+    ihl_bit: Constant<Bits<6>>,
+    fragment_offset_bit: Constant<Bits<6>>,
+    more_fragments_bit: Constant<Bits<6>>,
+    icmp_type_code_bit: Constant<Bits<6>>,
+    udp_source_port_bit: Constant<Bits<6>>,
+    udp_destination_port_bit: Constant<Bits<6>>,
+    udp_length_bit: Constant<Bits<6>>,
+    udp_checksum_bit: Constant<Bits<6>>,
+    command_start_bit: Constant<Bits<6>>,
+    command_box_id_bit: Constant<Bits<6>>,
+    command_opcode_bit: Constant<Bits<6>>,
+    command_flags_bit: Constant<Bits<6>>,
+    // lengths
+    ip_header_len: Constant<Bits<16>>,
+    udp_and_command_header_len: Constant<Bits<16>>,
+    ip_and_transport_header_len: Constant<Bits<16>>,
+    ip_to_arguments_len: Constant<Bits<16>>,
     action_none: Constant<Bits<2>>,
     action_arp: Constant<Bits<2>>,
     action_echo: Constant<Bits<2>>,
@@ -178,14 +275,14 @@ pub struct FrameParser {
     at_destination: DFF<Bit>,
     at_source: DFF<Bit>,
     at_ethertype: DFF<Bit>,
-    at_14: DFF<Bit>,
+    at_network_start: DFF<Bit>,
     at_header_bytes: DFF<Bit>,
     at_total: DFF<Bit>,
-    at_18: DFF<Bit>,
-    at_19: DFF<Bit>,
-    at_33: DFF<Bit>,
+    at_total_length_end: DFF<Bit>,
+    at_arguments_expected: DFF<Bit>,
+    at_ip_header_last: DFF<Bit>,
     at_arp_sender_mac: DFF<Bit>,
-    at_23: DFF<Bit>,
+    at_ip_protocol: DFF<Bit>,
     at_ip_source: DFF<Bit>,
     at_arp_sender_ip: DFF<Bit>,
     at_ip_destination: DFF<Bit>,
@@ -196,11 +293,11 @@ pub struct FrameParser {
     at_host_time: DFF<Bit>,
     at_argument_length: DFF<Bit>,
     at_reserved: DFF<Bit>,
-    at_65: DFF<Bit>,
+    at_command_header_last: DFF<Bit>,
     at_ip_header: DFF<Bit>,
     at_pseudo_header: DFF<Bit>,
-    at_from_34: DFF<Bit>,
-    at_from_38: DFF<Bit>,
+    at_from_transport: DFF<Bit>,
+    at_from_icmp_rest: DFF<Bit>,
     beat_word: DFF<Bits<16>>,
     transport_word: DFF<Bits<16>>,
     index_in: Signal<Local, Bits<11>>,
@@ -347,6 +444,15 @@ impl FrameParser {
         let subnet = u32::from_be_bytes(link.host_subnet) & mask;
         let command_start = [MAGIC[0], MAGIC[1], VERSION, KIND_COMMAND];
         let c2 = |v: u8| Constant::new(u64::from(v).into());
+        let udp_field = |f: Field| shifted(f, UDP_AT);
+        let command_field = |f: Field| shifted(f, PAYLOAD_AT);
+        let command_byte = |at: usize| command_field(at..at + 1);
+        let version_ihl = IPV4_AT + ipv4::field::VERSION_IHL;
+        let ihl_bit = capture_bit(HEADER_BYTES, version_ihl..version_ihl + 1)
+            .val()
+            .to_u64();
+        let flags = shifted(ipv4::field::FLAGS_FRAGMENT_OFFSET, IPV4_AT);
+        let fragment_bit = capture_bit(HEADER_BYTES, flags).val().to_u64();
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -385,6 +491,55 @@ impl FrameParser {
             icmp_echo_request: Constant::new(be(&[ICMP_ECHO_REQUEST, 0]).into()),
             arp_request_header: Constant::new(be(&ARP_REQUEST_HEADER).into()),
             command_start: Constant::new(be(&command_start).into()),
+            source_mac_at: position(ethernet::field::SOURCE.start),
+            ethertype_at: position(ethernet::field::ETHERTYPE.start),
+            ipv4_at: position(IPV4_AT),
+            header_bytes_end: position(HEADER_BYTES.end),
+            ip_total_len_at: position(IP_TOTAL_LEN.start),
+            ip_total_len_end: position(IP_TOTAL_LEN.end),
+            arguments_expected_at: position(IP_TOTAL_LEN.end + 1),
+            ip_protocol_at: position(IP_PROTOCOL),
+            ip_checksum_at: position(IP_CHECKSUM.start),
+            ip_checksum_low_at: position(IP_CHECKSUM.start + 1),
+            ip_source_at: position(IP_SOURCE.start),
+            ip_destination_at: position(IP_DESTINATION.start),
+            ip_header_last: position(UDP_AT - 1),
+            arp_sender_mac_at: position(ARP_SENDER_MAC.start),
+            arp_sender_ip_at: position(ARP_SENDER_IP.start),
+            arp_sender_ip_end: position(ARP_SENDER_IP.end),
+            arp_target_ip_at: position(ARP_TARGET_IP.start),
+            arp_target_ip_end: position(ARP_TARGET_IP.end),
+            transport_at: position(TRANSPORT.start),
+            icmp_rest_at: position(ICMP_REST_AT),
+            command_at: position(COMMAND_HEAD.start),
+            sequence_at: position(COMMAND_SEQUENCE.start),
+            host_time_at: position(COMMAND_HOST_TIME.start),
+            argument_length_at: position(COMMAND_LENGTH.start),
+            reserved_at: position(COMMAND_RESERVED.start),
+            command_header_last: position(ARGUMENTS_AT - 1),
+            arguments_at: position(ARGUMENTS_AT),
+            version_bit: Constant::new((ihl_bit + 4).into()),
+            ihl_bit: Constant::new(ihl_bit.into()),
+            fragment_offset_bit: Constant::new(fragment_bit.into()),
+            more_fragments_bit: Constant::new(
+                (fragment_bit + u64::from(ipv4::FLAG_MORE_FRAGMENTS.trailing_zeros())).into(),
+            ),
+            icmp_type_code_bit: capture_bit(TRANSPORT, ICMP_AT..ICMP_AT + 2),
+            udp_source_port_bit: capture_bit(TRANSPORT, udp_field(udp::field::SOURCE_PORT)),
+            udp_destination_port_bit: capture_bit(
+                TRANSPORT,
+                udp_field(udp::field::DESTINATION_PORT),
+            ),
+            udp_length_bit: capture_bit(TRANSPORT, udp_field(udp::field::LENGTH)),
+            udp_checksum_bit: capture_bit(TRANSPORT, udp_field(udp::field::CHECKSUM)),
+            command_start_bit: capture_bit(COMMAND_HEAD, command_field(0..4)),
+            command_box_id_bit: capture_bit(COMMAND_HEAD, command_field(command::field::BOX_ID)),
+            command_opcode_bit: capture_bit(COMMAND_HEAD, command_byte(command::field::OPCODE)),
+            command_flags_bit: capture_bit(COMMAND_HEAD, command_byte(command::field::FLAGS)),
+            ip_header_len: length(IPV4_HEADER_LEN),
+            udp_and_command_header_len: length(UDP_HEADER_LEN + HEADER_LEN),
+            ip_and_transport_header_len: length(PAYLOAD_AT - IPV4_AT),
+            ip_to_arguments_len: length(ARGUMENTS_AT - IPV4_AT),
             action_none: c2(ACTION_NONE),
             action_arp: c2(ACTION_ARP),
             action_echo: c2(ACTION_ECHO),
@@ -416,14 +571,14 @@ impl FrameParser {
             at_destination: Default::default(),
             at_source: Default::default(),
             at_ethertype: Default::default(),
-            at_14: Default::default(),
+            at_network_start: Default::default(),
             at_header_bytes: Default::default(),
             at_total: Default::default(),
-            at_18: Default::default(),
-            at_19: Default::default(),
-            at_33: Default::default(),
+            at_total_length_end: Default::default(),
+            at_arguments_expected: Default::default(),
+            at_ip_header_last: Default::default(),
             at_arp_sender_mac: Default::default(),
-            at_23: Default::default(),
+            at_ip_protocol: Default::default(),
             at_ip_source: Default::default(),
             at_arp_sender_ip: Default::default(),
             at_ip_destination: Default::default(),
@@ -434,11 +589,11 @@ impl FrameParser {
             at_host_time: Default::default(),
             at_argument_length: Default::default(),
             at_reserved: Default::default(),
-            at_65: Default::default(),
+            at_command_header_last: Default::default(),
             at_ip_header: Default::default(),
             at_pseudo_header: Default::default(),
-            at_from_34: Default::default(),
-            at_from_38: Default::default(),
+            at_from_transport: Default::default(),
+            at_from_icmp_rest: Default::default(),
             beat_word: Default::default(),
             transport_word: Default::default(),
             index_in: Default::default(),
@@ -595,14 +750,14 @@ impl Logic for FrameParser {
             at_destination,
             at_source,
             at_ethertype,
-            at_14,
+            at_network_start,
             at_header_bytes,
             at_total,
-            at_18,
-            at_19,
-            at_33,
+            at_total_length_end,
+            at_arguments_expected,
+            at_ip_header_last,
             at_arp_sender_mac,
-            at_23,
+            at_ip_protocol,
             at_ip_source,
             at_arp_sender_ip,
             at_ip_destination,
@@ -613,11 +768,11 @@ impl Logic for FrameParser {
             at_host_time,
             at_argument_length,
             at_reserved,
-            at_65,
+            at_command_header_last,
             at_ip_header,
             at_pseudo_header,
-            at_from_34,
-            at_from_38,
+            at_from_transport,
+            at_from_icmp_rest,
             beat_word,
             transport_word,
             destination_mac,
@@ -753,68 +908,88 @@ impl Logic for FrameParser {
         // starts at its first byte and ends at the byte after it or at a frame's start)
         if self.frame.valid.val() {
             self.at_first.d.next = self.index_in.val() == 0;
-            self.at_destination.d.next =
-                !self.in_frame.q.val() | (self.at_destination.q.val() & (self.index_in.val() != 6));
-            self.at_source.d.next = (self.index_in.val() == 6)
-                | (self.at_source.q.val() & (self.index_in.val() != 12) & self.in_frame.q.val());
-            self.at_ethertype.d.next = (self.index_in.val() == 12)
-                | (self.at_ethertype.q.val() & (self.index_in.val() != 14) & self.in_frame.q.val());
-            self.at_14.d.next = self.index_in.val() == 14;
-            self.at_header_bytes.d.next = (self.index_in.val() == 14)
+            self.at_destination.d.next = !self.in_frame.q.val()
+                | (self.at_destination.q.val() & (self.index_in.val() != self.source_mac_at.val()));
+            self.at_source.d.next = (self.index_in.val() == self.source_mac_at.val())
+                | (self.at_source.q.val()
+                    & (self.index_in.val() != self.ethertype_at.val())
+                    & self.in_frame.q.val());
+            self.at_ethertype.d.next = (self.index_in.val() == self.ethertype_at.val())
+                | (self.at_ethertype.q.val()
+                    & (self.index_in.val() != self.ipv4_at.val())
+                    & self.in_frame.q.val());
+            self.at_network_start.d.next = self.index_in.val() == self.ipv4_at.val();
+            self.at_header_bytes.d.next = (self.index_in.val() == self.ipv4_at.val())
                 | (self.at_header_bytes.q.val()
-                    & (self.index_in.val() != 22)
+                    & (self.index_in.val() != self.header_bytes_end.val())
                     & self.in_frame.q.val());
-            self.at_total.d.next = (self.index_in.val() == 16)
-                | (self.at_total.q.val() & (self.index_in.val() != 18) & self.in_frame.q.val());
-            self.at_18.d.next = self.index_in.val() == 18;
-            self.at_19.d.next = self.index_in.val() == 19;
-            self.at_33.d.next = self.index_in.val() == 33;
-            self.at_arp_sender_mac.d.next = (self.index_in.val() == 22)
+            self.at_total.d.next = (self.index_in.val() == self.ip_total_len_at.val())
+                | (self.at_total.q.val()
+                    & (self.index_in.val() != self.ip_total_len_end.val())
+                    & self.in_frame.q.val());
+            self.at_total_length_end.d.next = self.index_in.val() == self.ip_total_len_end.val();
+            self.at_arguments_expected.d.next =
+                self.index_in.val() == self.arguments_expected_at.val();
+            self.at_ip_header_last.d.next = self.index_in.val() == self.ip_header_last.val();
+            self.at_arp_sender_mac.d.next = (self.index_in.val() == self.arp_sender_mac_at.val())
                 | (self.at_arp_sender_mac.q.val()
-                    & (self.index_in.val() != 28)
+                    & (self.index_in.val() != self.arp_sender_ip_at.val())
                     & self.in_frame.q.val());
-            self.at_23.d.next = self.index_in.val() == 23;
-            self.at_ip_source.d.next = (self.index_in.val() == 26)
-                | (self.at_ip_source.q.val() & (self.index_in.val() != 30) & self.in_frame.q.val());
-            self.at_arp_sender_ip.d.next = (self.index_in.val() == 28)
+            self.at_ip_protocol.d.next = self.index_in.val() == self.ip_protocol_at.val();
+            self.at_ip_source.d.next = (self.index_in.val() == self.ip_source_at.val())
+                | (self.at_ip_source.q.val()
+                    & (self.index_in.val() != self.ip_destination_at.val())
+                    & self.in_frame.q.val());
+            self.at_arp_sender_ip.d.next = (self.index_in.val() == self.arp_sender_ip_at.val())
                 | (self.at_arp_sender_ip.q.val()
-                    & (self.index_in.val() != 32)
+                    & (self.index_in.val() != self.arp_sender_ip_end.val())
                     & self.in_frame.q.val());
-            self.at_ip_destination.d.next = (self.index_in.val() == 30)
+            self.at_ip_destination.d.next = (self.index_in.val() == self.ip_destination_at.val())
                 | (self.at_ip_destination.q.val()
-                    & (self.index_in.val() != 34)
+                    & (self.index_in.val() != self.transport_at.val())
                     & self.in_frame.q.val());
-            self.at_arp_target_ip.d.next = (self.index_in.val() == 38)
+            self.at_arp_target_ip.d.next = (self.index_in.val() == self.arp_target_ip_at.val())
                 | (self.at_arp_target_ip.q.val()
-                    & (self.index_in.val() != 42)
+                    & (self.index_in.val() != self.arp_target_ip_end.val())
                     & self.in_frame.q.val());
-            self.at_transport.d.next = (self.index_in.val() == 34)
-                | (self.at_transport.q.val() & (self.index_in.val() != 42) & self.in_frame.q.val());
-            self.at_command_head.d.next = (self.index_in.val() == 42)
+            self.at_transport.d.next = (self.index_in.val() == self.transport_at.val())
+                | (self.at_transport.q.val()
+                    & (self.index_in.val() != self.command_at.val())
+                    & self.in_frame.q.val());
+            self.at_command_head.d.next = (self.index_in.val() == self.command_at.val())
                 | (self.at_command_head.q.val()
-                    & (self.index_in.val() != 50)
+                    & (self.index_in.val() != self.sequence_at.val())
                     & self.in_frame.q.val());
-            self.at_sequence.d.next = (self.index_in.val() == 50)
-                | (self.at_sequence.q.val() & (self.index_in.val() != 54) & self.in_frame.q.val());
-            self.at_host_time.d.next = (self.index_in.val() == 54)
-                | (self.at_host_time.q.val() & (self.index_in.val() != 62) & self.in_frame.q.val());
-            self.at_argument_length.d.next = (self.index_in.val() == 62)
+            self.at_sequence.d.next = (self.index_in.val() == self.sequence_at.val())
+                | (self.at_sequence.q.val()
+                    & (self.index_in.val() != self.host_time_at.val())
+                    & self.in_frame.q.val());
+            self.at_host_time.d.next = (self.index_in.val() == self.host_time_at.val())
+                | (self.at_host_time.q.val()
+                    & (self.index_in.val() != self.argument_length_at.val())
+                    & self.in_frame.q.val());
+            self.at_argument_length.d.next = (self.index_in.val() == self.argument_length_at.val())
                 | (self.at_argument_length.q.val()
-                    & (self.index_in.val() != 64)
+                    & (self.index_in.val() != self.reserved_at.val())
                     & self.in_frame.q.val());
-            self.at_reserved.d.next = (self.index_in.val() == 64)
-                | (self.at_reserved.q.val() & (self.index_in.val() != 66) & self.in_frame.q.val());
-            self.at_65.d.next = self.index_in.val() == 65;
-            self.at_ip_header.d.next = (self.index_in.val() == 14)
-                | (self.at_ip_header.q.val() & (self.index_in.val() != 34) & self.in_frame.q.val());
-            self.at_pseudo_header.d.next = (self.index_in.val() == 24)
+            self.at_reserved.d.next = (self.index_in.val() == self.reserved_at.val())
+                | (self.at_reserved.q.val()
+                    & (self.index_in.val() != self.arguments_at.val())
+                    & self.in_frame.q.val());
+            self.at_command_header_last.d.next =
+                self.index_in.val() == self.command_header_last.val();
+            self.at_ip_header.d.next = (self.index_in.val() == self.ipv4_at.val())
+                | (self.at_ip_header.q.val()
+                    & (self.index_in.val() != self.transport_at.val())
+                    & self.in_frame.q.val());
+            self.at_pseudo_header.d.next = (self.index_in.val() == self.ip_checksum_at.val())
                 | (self.at_pseudo_header.q.val()
-                    & (self.index_in.val() != 34)
+                    & (self.index_in.val() != self.transport_at.val())
                     & self.in_frame.q.val());
-            self.at_from_34.d.next =
-                (self.index_in.val() == 34) | (self.at_from_34.q.val() & self.in_frame.q.val());
-            self.at_from_38.d.next =
-                (self.index_in.val() == 38) | (self.at_from_38.q.val() & self.in_frame.q.val());
+            self.at_from_transport.d.next = (self.index_in.val() == self.transport_at.val())
+                | (self.at_from_transport.q.val() & self.in_frame.q.val());
+            self.at_from_icmp_rest.d.next = (self.index_in.val() == self.icmp_rest_at.val())
+                | (self.at_from_icmp_rest.q.val() & self.in_frame.q.val());
         }
         // the byte as a 16-bit word: even frame positions are high bytes
         self.word_in.next = bit_cast::<16, 8>(self.frame.data.val()) << 8;
@@ -825,10 +1000,10 @@ impl Logic for FrameParser {
         // UDP pseudo header: the UDP length (the IPv4 payload length) in the clock of byte
         // 24, nothing in that of byte 25 (the IPv4 checksum), then the addresses
         self.transport_word.d.next = self.word_in.val();
-        if self.index_in.val() == 24 {
+        if self.index_in.val() == self.ip_checksum_at.val() {
             self.transport_word.d.next = self.payload_length.q.val();
         }
-        if self.index_in.val() == 25 {
+        if self.index_in.val() == self.ip_checksum_low_at.val() {
             self.transport_word.d.next = 0.into();
         }
         if self.frame.valid.val() {
@@ -879,7 +1054,7 @@ impl Logic for FrameParser {
                 self.ethertype.d.next =
                     (self.ethertype.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
             }
-            if self.at_14.q.val() {
+            if self.at_network_start.q.val() {
                 self.is_arp.d.next = self.ethertype.q.val() == self.ethertype_arp.val();
             }
             if self.at_header_bytes.q.val() {
@@ -890,7 +1065,7 @@ impl Logic for FrameParser {
                 self.total_length.d.next =
                     (self.total_length.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
             }
-            if self.at_23.q.val() {
+            if self.at_ip_protocol.q.val() {
                 self.protocol.d.next = self.beat_data.q.val();
                 self.is_udp.d.next = self.beat_data.q.val() == self.protocol_udp.val();
             }
@@ -932,7 +1107,7 @@ impl Logic for FrameParser {
             }
             // arguments: one slot per byte from 66, inside the IPv4 packet only
             self.argument_slot.d.next = self.argument_slot.q.val() >> 1;
-            if self.at_65.q.val() {
+            if self.at_command_header_last.q.val() {
                 self.argument_slot.d.next = 0x800.into();
             }
             if self.argument_slot.q.val().get_bit(11) {
@@ -978,14 +1153,15 @@ impl Logic for FrameParser {
                 self.ip_left.d.next = self.ip_left.q.val() - 1;
                 self.in_ip.d.next = self.ip_left.q.val() != 1;
             }
-            if self.at_18.q.val() {
-                self.payload_length.d.next = self.total_length.q.val() - 20;
+            if self.at_total_length_end.q.val() {
+                self.payload_length.d.next = self.total_length.q.val() - self.ip_header_len.val();
             }
-            if self.at_19.q.val() {
+            if self.at_arguments_expected.q.val() {
                 // a command's arguments: the payload after the UDP and command headers
-                self.arguments_expected.d.next = self.payload_length.q.val() - 32;
+                self.arguments_expected.d.next =
+                    self.payload_length.q.val() - self.udp_and_command_header_len.val();
             }
-            if self.at_33.q.val() {
+            if self.at_ip_header_last.q.val() {
                 // the IPv4 payload's bytes from 34 on
                 self.ip_left.d.next = self.payload_length.q.val();
                 self.in_ip.d.next = self.payload_length.q.val() != 0;
@@ -996,12 +1172,12 @@ impl Logic for FrameParser {
                 self.header_carry.d.next = self.header_next.val().get_bit(16);
             }
             if (self.is_udp.q.val() & self.at_pseudo_header.q.val())
-                | (self.in_ip.q.val() & (self.at_from_34.q.val()))
+                | (self.in_ip.q.val() & (self.at_from_transport.q.val()))
             {
                 self.transport_sum.d.next = self.transport_next.val().get_bits::<16>(0);
                 self.transport_carry.d.next = self.transport_next.val().get_bit(16);
             }
-            if self.at_23.q.val() {
+            if self.at_ip_protocol.q.val() {
                 // UDP: the pseudo header's protocol word
                 self.transport_sum.d.next = 0.into();
                 if self.beat_data.q.val() == self.protocol_udp.val() {
@@ -1009,7 +1185,7 @@ impl Logic for FrameParser {
                 }
                 self.transport_carry.d.next = false;
             }
-            if self.in_ip.q.val() & (self.at_from_38.q.val()) {
+            if self.in_ip.q.val() & (self.at_from_icmp_rest.q.val()) {
                 self.rest_sum.d.next = self.rest_next.val().get_bits::<16>(0);
                 self.rest_carry.d.next = self.rest_next.val().get_bit(16);
             }
@@ -1054,37 +1230,89 @@ impl Logic for FrameParser {
         self.s1_ipv4.d.next = self.ethertype.q.val() == self.ethertype_ipv4.val();
         self.s1_arp_request.d.next = self.header.q.val() == self.arp_request_header.val();
         self.s1_target_box.d.next = self.target_ip.q.val() == self.box_ip.val();
-        self.s1_version_4.d.next = self.header.q.val().get_bits::<4>(60) == 4;
-        self.s1_ihl_below_5.d.next = self.header.q.val().get_bits::<4>(56) < 5;
-        self.s1_ihl_above_5.d.next = self.header.q.val().get_bits::<4>(56) > 5;
+        self.s1_version_4.d.next = self
+            .header
+            .q
+            .val()
+            .get_bits::<4>(self.version_bit.val().index())
+            == 4;
+        self.s1_ihl_below_5.d.next = self
+            .header
+            .q
+            .val()
+            .get_bits::<4>(self.ihl_bit.val().index())
+            < 5;
+        self.s1_ihl_above_5.d.next = self
+            .header
+            .q
+            .val()
+            .get_bits::<4>(self.ihl_bit.val().index())
+            > 5;
         // a folded sum of 0xFFFF: sum + carry == 0xFFFF
         self.s1_header_sum_ok.d.next = ((self.header_sum.q.val() == 0xFFFF)
             & !self.header_carry.q.val())
             | ((self.header_sum.q.val() == 0xFFFE) & self.header_carry.q.val());
-        self.s1_total_from_20.d.next = self.total_length.q.val() >= 20;
-        self.s1_total_from_28.d.next = self.total_length.q.val() >= 28;
-        self.s1_total_from_52.d.next = self.total_length.q.val() >= 52;
+        self.s1_total_from_20.d.next = self.total_length.q.val() >= self.ip_header_len.val();
+        self.s1_total_from_28.d.next =
+            self.total_length.q.val() >= self.ip_and_transport_header_len.val();
+        self.s1_total_from_52.d.next = self.total_length.q.val() >= self.ip_to_arguments_len.val();
         self.s1_fits.d.next = self.end_fits.q.val();
         // flags and fragment offset: MF (bit 13) or an offset
-        self.s1_fragment.d.next =
-            self.header.q.val().get_bit(13) | (self.header.q.val().get_bits::<13>(0) != 0);
+        self.s1_fragment.d.next = self
+            .header
+            .q
+            .val()
+            .get_bit(self.more_fragments_bit.val().index())
+            | (self
+                .header
+                .q
+                .val()
+                .get_bits::<13>(self.fragment_offset_bit.val().index())
+                != 0);
         self.s1_icmp.d.next = self.protocol.q.val() == self.protocol_icmp.val();
         self.s1_udp.d.next = self.is_udp.q.val();
-        self.s1_echo_request.d.next =
-            self.transport.q.val().get_bits::<16>(48) == self.icmp_echo_request.val();
+        self.s1_echo_request.d.next = self
+            .transport
+            .q
+            .val()
+            .get_bits::<16>(self.icmp_type_code_bit.val().index())
+            == self.icmp_echo_request.val();
         self.s1_transport_sum_ok.d.next = ((self.transport_sum.q.val() == 0xFFFF)
             & !self.transport_carry.q.val())
             | ((self.transport_sum.q.val() == 0xFFFE) & self.transport_carry.q.val());
-        self.s1_udp_length_ok.d.next =
-            self.transport.q.val().get_bits::<16>(16) == self.payload_length.q.val();
-        self.s1_udp_no_checksum.d.next = self.transport.q.val().get_bits::<16>(0) == 0;
-        self.s1_port_box.d.next = self.transport.q.val().get_bits::<16>(32) == self.box_port.val();
+        self.s1_udp_length_ok.d.next = self
+            .transport
+            .q
+            .val()
+            .get_bits::<16>(self.udp_length_bit.val().index())
+            == self.payload_length.q.val();
+        self.s1_udp_no_checksum.d.next = self
+            .transport
+            .q
+            .val()
+            .get_bits::<16>(self.udp_checksum_bit.val().index())
+            == 0;
+        self.s1_port_box.d.next = self
+            .transport
+            .q
+            .val()
+            .get_bits::<16>(self.udp_destination_port_bit.val().index())
+            == self.box_port.val();
         self.s1_in_subnet.d.next =
             (self.source_ip.q.val() & self.host_mask.val()) == self.host_subnet.val();
-        self.s1_command_start.d.next =
-            self.command_head.q.val().get_bits::<32>(32) == self.command_start.val();
-        self.s1_command_zeros.d.next =
-            (self.command_head.q.val().get_bits::<8>(0) == 0) & (self.reserved.q.val() == 0);
+        self.s1_command_start.d.next = self
+            .command_head
+            .q
+            .val()
+            .get_bits::<32>(self.command_start_bit.val().index())
+            == self.command_start.val();
+        self.s1_command_zeros.d.next = (self
+            .command_head
+            .q
+            .val()
+            .get_bits::<8>(self.command_flags_bit.val().index())
+            == 0)
+            & (self.reserved.q.val() == 0);
         self.s1_argument_length_ok.d.next =
             self.argument_length.q.val() == self.arguments_expected.q.val();
         self.rest_folded.d.next =
@@ -1200,12 +1428,24 @@ impl Logic for FrameParser {
         if self.p4.q.val() & self.end_stored.q.val() {
             self.held_peer_mac.d.next = self.source_mac.q.val();
             self.held_peer_ip.d.next = self.source_ip.q.val();
-            self.held_peer_port.d.next = self.transport.q.val().get_bits::<16>(48);
+            self.held_peer_port.d.next = self
+                .transport
+                .q
+                .val()
+                .get_bits::<16>(self.udp_source_port_bit.val().index());
             self.held_receive_tick.d.next = self.last_tick.q.val();
             self.held_total_length.d.next = self.total_length.q.val();
             self.held_rest_sum.d.next = self.rest_folded.q.val();
-            self.held_box_id.d.next = self.command_head.q.val().get_bits::<16>(16);
-            self.held_opcode.d.next = self.command_head.q.val().get_bits::<8>(8);
+            self.held_box_id.d.next = self
+                .command_head
+                .q
+                .val()
+                .get_bits::<16>(self.command_box_id_bit.val().index());
+            self.held_opcode.d.next = self
+                .command_head
+                .q
+                .val()
+                .get_bits::<8>(self.command_opcode_bit.val().index());
             self.held_sequence.d.next = self.sequence_number.q.val();
             self.held_host_time.d.next = self.host_time.q.val();
             self.held_argument_length.d.next = self.argument_length.q.val();

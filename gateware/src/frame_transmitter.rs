@@ -40,6 +40,7 @@ use crate::hdl::*;
 use crate::stream::{DatagramSink, RAW_FRAME_KIND};
 use skinbox_protocol::datagram::{self, field, HEADER_LEN};
 use skinbox_protocol::link::*;
+use skinbox_protocol::wire::{ethernet, ipv4, udp, EthernetRepr, UdpRepr};
 
 /// Clocks from the clock a descriptor is taken (`valid & ready` at its edge) to the clock
 /// the frame's first preamble byte is on `gmii_txd`: the transmitter registers `sending`,
@@ -53,34 +54,35 @@ pub const TAKE_TO_FIRST_BYTE: u64 = 3;
 pub const TAKE_TO_RAW_BODY: u64 = TAKE_TO_FIRST_BYTE - 2 + PREAMBLE_LEN as u64;
 
 /// Frame byte where the datagram body starts (preamble, Ethernet, IPv4, UDP, box header).
-pub const BODY_START: usize =
-    PREAMBLE_LEN + ETHERNET_HEADER_LEN + IPV4_HEADER_LEN + UDP_HEADER_LEN + HEADER_LEN;
+pub const BODY_START: usize = PAYLOAD_AT_ON_WIRE + HEADER_LEN;
 
 // A datagram with an empty body still makes a minimum-size frame: no padding is ever needed.
 const _: () = assert!(BODY_START >= PREAMBLE_LEN + MIN_FRAME_LEN);
 
-const IP_AT: usize = PREAMBLE_LEN + ETHERNET_HEADER_LEN;
-const IP_TOTAL_LEN_AT: usize = IP_AT + IPV4_TOTAL_LEN.start;
-const IP_CHECKSUM_AT: usize = IP_AT + IPV4_CHECKSUM.start;
-const UDP_AT: usize = IP_AT + IPV4_HEADER_LEN;
-const UDP_LEN_AT: usize = UDP_AT + UDP_LEN.start;
-const UDP_CHECKSUM_AT: usize = UDP_AT + UDP_CHECKSUM.start;
-const BOX_HEADER_AT: usize = UDP_AT + UDP_HEADER_LEN;
-const KIND_AT: usize = BOX_HEADER_AT + field::KIND;
+// Positions on the wire: the frame positions of `link` after the preamble and SFD.
+const IPV4_AT_ON_WIRE: usize = PREAMBLE_LEN + IPV4_AT;
+const UDP_AT_ON_WIRE: usize = PREAMBLE_LEN + UDP_AT;
+const PAYLOAD_AT_ON_WIRE: usize = PREAMBLE_LEN + PAYLOAD_AT;
+const IP_TOTAL_LEN_AT: usize = IPV4_AT_ON_WIRE + IPV4_TOTAL_LEN.start;
+const IP_CHECKSUM_AT: usize = IPV4_AT_ON_WIRE + IPV4_CHECKSUM.start;
+const UDP_LEN_AT: usize = UDP_AT_ON_WIRE + UDP_LEN.start;
+const UDP_CHECKSUM_AT: usize = UDP_AT_ON_WIRE + UDP_CHECKSUM.start;
+const KIND_AT: usize = PAYLOAD_AT_ON_WIRE + field::KIND;
 /// First of the header bytes sent from the `fields` shift registers: flags, sequence, base
 /// tick, entry count.
-const FIELDS_AT: usize = BOX_HEADER_AT + field::FLAGS;
+const FIELDS_AT: usize = PAYLOAD_AT_ON_WIRE + field::FLAGS;
 const FIELDS_LEN: usize = field::ENTRY_COUNT.end - field::FLAGS;
 
-// The destination's bytes (RFC 894 / RFC 791 / RFC 768): the destination MAC, the IPv4
-// destination address and the UDP destination port, sent from the `destination` shift
-// registers.
-const DESTINATION_MAC_AT: usize = PREAMBLE_LEN;
-const DESTINATION_IP_AT: usize = IP_AT + 16;
-const DESTINATION_PORT_AT: usize = UDP_AT + 2;
-const DESTINATION_MAC_LEN: usize = 6;
-const DESTINATION_IP_LEN: usize = 4;
-const DESTINATION_PORT_LEN: usize = 2;
+// The destination's bytes: the destination MAC, the IPv4 destination address and the UDP
+// destination port, sent from the `destination` shift registers.
+const DESTINATION_MAC_AT: usize = PREAMBLE_LEN + ethernet::field::DESTINATION.start;
+const DESTINATION_IP_AT: usize = IPV4_AT_ON_WIRE + ipv4::field::DESTINATION.start;
+const DESTINATION_PORT_AT: usize = UDP_AT_ON_WIRE + udp::field::DESTINATION_PORT.start;
+const DESTINATION_MAC_LEN: usize =
+    ethernet::field::DESTINATION.end - ethernet::field::DESTINATION.start;
+const DESTINATION_IP_LEN: usize = ipv4::field::DESTINATION.end - ipv4::field::DESTINATION.start;
+const DESTINATION_PORT_LEN: usize =
+    udp::field::DESTINATION_PORT.end - udp::field::DESTINATION_PORT.start;
 
 /// A frame position (or length) as a kernel constant; panics if it does not fit.
 fn position<const N: usize>(at: usize) -> Constant<Bits<N>> {
@@ -93,16 +95,28 @@ fn position<const N: usize>(at: usize) -> Constant<Bits<N>> {
 fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
     let mut t = vec![0x55; 7];
     t.push(0xD5);
-    t.extend([0; 6]); // destination MAC
-    t.extend(link.box_mac);
-    t.extend([0x08, 0x00]);
-    // IPv4: version 4, IHL 5, no DSCP, total length, id 0, DF, TTL, UDP, checksum
-    t.extend([0x45, 0x00, 0, 0, 0, 0, 0x40, 0x00, IPV4_TTL, 17, 0, 0]);
-    t.extend(link.box_ip);
-    t.extend([0; 4]); // destination IP
-    t.extend(link.box_port.to_be_bytes());
-    t.extend([0, 0]); // destination port
-    t.extend([0, 0, 0, 0]); // UDP length and checksum
+    // Ethernet, IPv4 and UDP headers as the protocol writes them, destination 0
+    let mut headers = [0; PAYLOAD_AT];
+    let ethernet = EthernetRepr {
+        destination: [0; 6],
+        source: link.box_mac,
+        ethertype: ETHERTYPE_IPV4,
+    };
+    ethernet.emit(&mut headers);
+    let ip = &mut headers[IPV4_AT..UDP_AT];
+    box_ipv4_header(IP_PROTOCOL_UDP, link.box_ip, [0; 4], 0).emit(ip);
+    ip[IPV4_TOTAL_LEN].fill(0);
+    ip[IPV4_CHECKSUM].fill(0);
+    let udp = UdpRepr {
+        source_port: link.box_port,
+        destination_port: 0,
+        payload: &[],
+    };
+    let udp_header = &mut headers[UDP_AT..];
+    udp.emit(udp_header, link.box_ip, [0; 4]);
+    udp_header[UDP_LEN].fill(0);
+    udp_header[UDP_CHECKSUM].fill(0);
+    t.extend(headers);
     t.extend(datagram::MAGIC);
     t.push(datagram::VERSION);
     t.push(0); // kind
@@ -332,11 +346,11 @@ impl FrameTransmitter {
         // port count). Variable words are added while the preamble and the Ethernet header
         // go out.
         // (the destination's words are added at run time)
-        let pseudo = word_sum(&link.box_ip) + 17;
+        let pseudo = word_sum(&link.box_ip) + u64::from(IP_PROTOCOL_UDP);
         let udp_constant = pseudo
-            + word_sum(&t[UDP_AT..UDP_AT + 4])
-            + word_sum(&t[BOX_HEADER_AT..BOX_HEADER_AT + 8]);
-        let ip_constant = word_sum(&t[PREAMBLE_LEN + ETHERNET_HEADER_LEN..UDP_AT]);
+            + word_sum(&t[UDP_AT_ON_WIRE..UDP_LEN_AT])
+            + word_sum(&t[PAYLOAD_AT_ON_WIRE..PAYLOAD_AT_ON_WIRE + field::SEQUENCE.start]);
+        let ip_constant = word_sum(&t[IPV4_AT_ON_WIRE..UDP_AT_ON_WIRE]);
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -349,7 +363,7 @@ impl FrameTransmitter {
             destination_port: Default::default(),
             template: BlockRam::with_contents(&template_table(&t)),
             udp_term_constant: Constant::new(
-                (udp_constant + 2 * (BODY_START - UDP_AT) as u64).into(),
+                (udp_constant + 2 * (BODY_START - UDP_AT_ON_WIRE) as u64).into(),
             ),
             ip_constant_sum: Constant::new(ip_constant.into()),
             sfd_ahead: position(PREAMBLE_LEN - 2),
@@ -359,8 +373,8 @@ impl FrameTransmitter {
             raw_body_start: position(PREAMBLE_LEN),
             raw_frame_end_over_body: position(PREAMBLE_LEN + FCS_LEN - 2),
             raw_kind: Constant::new(u64::from(RAW_FRAME_KIND).into()),
-            ip_len_over_body: position(BODY_START - IP_AT),
-            udp_len_over_body: position(BODY_START - UDP_AT),
+            ip_len_over_body: position(BODY_START - IPV4_AT_ON_WIRE),
+            udp_len_over_body: position(BODY_START - UDP_AT_ON_WIRE),
             gap_clocks: position(INTER_FRAME_GAP - 1),
             ip_len_ahead: position(IP_TOTAL_LEN_AT - 2),
             ip_checksum_ahead: position(IP_CHECKSUM_AT - 2),
@@ -880,8 +894,14 @@ mod tests {
     fn frame_positions_match_the_formats() {
         // the positions of RFC 791 / RFC 768 fields behind an 8-byte preamble and a
         // 14-byte Ethernet header, and the datagram header's table (protocol::datagram)
-        assert_eq!((IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_AT), (24, 32, 42));
-        assert_eq!((UDP_LEN_AT, UDP_CHECKSUM_AT, BOX_HEADER_AT), (46, 48, 50));
+        assert_eq!(
+            (IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_AT_ON_WIRE),
+            (24, 32, 42)
+        );
+        assert_eq!(
+            (UDP_LEN_AT, UDP_CHECKSUM_AT, PAYLOAD_AT_ON_WIRE),
+            (46, 48, 50)
+        );
         assert_eq!((KIND_AT, FIELDS_AT, FIELDS_AT + FIELDS_LEN), (53, 57, 72));
         // the kernel's tests from the index's bits: the body from 74 (`body_follows` tests
         // 72, two ahead), 16 field bytes for the checksum (the 15 fields and the first
@@ -889,6 +909,9 @@ mod tests {
         assert_eq!(BODY_START, 74);
         assert_eq!(FIELDS_LEN + 1, 16);
         let t = template(&LinkConfig::DEFAULT, 7, 8);
+        // RFC 791 with the box's choices: IHL 5, identification 0, don't fragment, TTL 64, UDP
+        let ip_fixed = [0x45, 0, 0, 0, 0, 0, 0x40, 0, 64, 17, 0, 0];
+        assert_eq!(t[IPV4_AT_ON_WIRE..IPV4_AT_ON_WIRE + 12], ip_fixed);
         // the template byte is ORed in all through the header: 0 at every variable byte
         let variable = [IP_TOTAL_LEN_AT, IP_CHECKSUM_AT, UDP_LEN_AT, UDP_CHECKSUM_AT]
             .iter()

@@ -60,30 +60,20 @@ use skinbox_protocol::command::{
 };
 use skinbox_protocol::datagram::{MAGIC, VERSION};
 use skinbox_protocol::link::*;
+use skinbox_protocol::wire::{arp, ethernet, icmp, ipv4, udp};
 
-/// The ARP message of a reply up to the sender's addresses (RFC 826): hardware Ethernet
-/// (1), protocol IPv4, address lengths 6 and 4, operation 2 (reply).
-const ARP_REPLY_HEADER: [u8; 8] = [0, 1, 0x08, 0x00, 6, 4, 0, 2];
-/// Offsets in the ARP message (RFC 826): the sender's MAC (its IP follows), the target's
-/// MAC (its IP follows).
-const ARP_SENDER_MAC: usize = 8;
-const ARP_TARGET_MAC: usize = 18;
 /// Frame positions of the request's Ethernet source, IPv4 source and destination.
-const ETHERNET_SOURCE_AT: usize = 6;
-const IP_SOURCE_AT: usize = IP_AT + 12;
-const IP_DESTINATION_AT: usize = IP_AT + 16;
-/// ICMP type of an echo reply (RFC 792); its code is 0.
-const ICMP_ECHO_REPLY: u8 = 0;
+const ETHERNET_SOURCE_AT: usize = ethernet::field::SOURCE.start;
+const IP_SOURCE_AT: usize = IPV4_AT + ipv4::field::SOURCE.start;
+const IP_DESTINATION_AT: usize = IPV4_AT + ipv4::field::DESTINATION.start;
+const MAC_LEN: usize = ethernet::field::SOURCE.end - ethernet::field::SOURCE.start;
+const IP_LEN: usize = ipv4::field::SOURCE.end - ipv4::field::SOURCE.start;
 
 /// Frame positions (from the destination MAC).
-const IP_AT: usize = ETHERNET_HEADER_LEN;
-const IP_CHECKSUM_AT: usize = IP_AT + IPV4_CHECKSUM.start;
-const ICMP_AT: usize = IP_AT + IPV4_HEADER_LEN;
-/// ICMP type, code and checksum: the part of the echo reply the builder writes.
-const ICMP_WRITTEN: usize = 4;
-const UDP_AT: usize = IP_AT + IPV4_HEADER_LEN;
+const IP_CHECKSUM_AT: usize = IPV4_AT + IPV4_CHECKSUM.start;
 const UDP_CHECKSUM_AT: usize = UDP_AT + UDP_CHECKSUM.start;
-const ACK_AT: usize = UDP_AT + UDP_HEADER_LEN;
+/// The acknowledgement's header: the UDP payload.
+const ACK_AT: usize = PAYLOAD_AT;
 const ACK_BODY_AT: usize = ACK_AT + command::HEADER_LEN;
 /// Frame position of an acknowledgement's send tick.
 pub const SEND_TICK_AT: usize = ACK_BODY_AT + ack_field::SEND_TICK.start;
@@ -365,23 +355,19 @@ pub enum ReplyKind {
 
 fn arp_program(link: &LinkConfig) -> Vec<Step> {
     let mut p = Program::default();
-    let arp = ETHERNET_HEADER_LEN;
+    let sender_mac = ARP_AT + arp::field::SENDER_MAC.start;
+    let sender_ip = ARP_AT + arp::field::SENDER_IP.start;
+    let target_mac = ARP_AT + arp::field::TARGET_MAC.start;
     // the requester's addresses (the request's sender) become the Ethernet destination
     // and the target
-    p.copy(0, arp + ARP_SENDER_MAC, 6, Sum::None, true);
-    p.copy(
-        arp + ARP_TARGET_MAC,
-        arp + ARP_SENDER_MAC,
-        6 + 4,
-        Sum::None,
-        true,
-    );
-    p.constants(6, &link.box_mac, Sum::None);
-    p.constants(12, &ETHERTYPE_ARP.to_be_bytes(), Sum::None);
-    p.constants(arp, &ARP_REPLY_HEADER, Sum::None);
-    p.constants(arp + ARP_SENDER_MAC, &link.box_mac, Sum::None);
-    p.constants(arp + ARP_SENDER_MAC + 6, &link.box_ip, Sum::None);
-    let end = arp + ARP_TARGET_MAC + 6 + 4;
+    let destination_mac = ethernet::field::DESTINATION.start;
+    p.copy(destination_mac, sender_mac, MAC_LEN, Sum::None, true);
+    p.copy(target_mac, sender_mac, MAC_LEN + IP_LEN, Sum::None, true);
+    ethernet_header(&mut p, link, ETHERTYPE_ARP);
+    p.constants(ARP_AT, &ARP_REPLY_HEADER, Sum::None);
+    p.constants(sender_mac, &link.box_mac, Sum::None);
+    p.constants(sender_ip, &link.box_ip, Sum::None);
+    let end = ARP_AT + arp::PACKET_LEN;
     p.constants(end, &vec![0; MIN_FRAME_LEN - end], Sum::None);
     p.end()
 }
@@ -396,26 +382,42 @@ fn ipv4_header(
     total_len: Option<u16>,
     peer_sum: Sum,
 ) {
-    p.constants(IP_AT, &[0x45, 0x00], Sum::Ip);
-    let total_at = IP_AT + IPV4_TOTAL_LEN.start;
+    use ipv4::field;
+    let header = {
+        let mut b = [0; IPV4_HEADER_LEN];
+        box_ipv4_header(protocol, link.box_ip, [0; 4], 0).emit(&mut b);
+        b
+    };
+    // version and IHL, DSCP and ECN
+    p.constants(IPV4_AT, &header[..field::TOTAL_LEN.start], Sum::Ip);
+    let total_at = IPV4_AT + field::TOTAL_LEN.start;
     match total_len {
         Some(len) => p.constants(total_at, &len.to_be_bytes(), Sum::Ip),
         None => p.copy(total_at, total_at, 2, Sum::Ip, false),
     }
-    // identification 0, don't fragment, TTL, protocol
-    p.constants(IP_AT + 4, &[0, 0, 0x40, 0x00, IPV4_TTL, protocol], Sum::Ip);
-    p.constants(IP_SOURCE_AT, &link.box_ip, peer_sum);
+    // identification, flags and fragment offset, TTL, protocol
+    let fixed = field::IDENTIFICATION.start..field::CHECKSUM.start;
+    p.constants(IPV4_AT + fixed.start, &header[fixed], Sum::Ip);
+    p.constants(IP_SOURCE_AT, &header[field::SOURCE], peer_sum);
 }
 
 /// The request's sender becomes the destination: the first steps of an IPv4 reply.
 fn copy_addresses(p: &mut Program, peer_sum: Sum) {
-    p.copy(0, ETHERNET_SOURCE_AT, 6, Sum::None, true);
-    p.copy(IP_DESTINATION_AT, IP_SOURCE_AT, 4, peer_sum, true);
+    let destination_mac = ethernet::field::DESTINATION.start;
+    p.copy(
+        destination_mac,
+        ETHERNET_SOURCE_AT,
+        MAC_LEN,
+        Sum::None,
+        true,
+    );
+    p.copy(IP_DESTINATION_AT, IP_SOURCE_AT, IP_LEN, peer_sum, true);
 }
 
 fn ethernet_header(p: &mut Program, link: &LinkConfig, ethertype: u16) {
-    p.constants(6, &link.box_mac, Sum::None);
-    p.constants(12, &ethertype.to_be_bytes(), Sum::None);
+    p.constants(ETHERNET_SOURCE_AT, &link.box_mac, Sum::None);
+    let ethertype_at = ethernet::field::ETHERTYPE.start;
+    p.constants(ethertype_at, &ethertype.to_be_bytes(), Sum::None);
 }
 
 fn echo_program(link: &LinkConfig) -> Vec<Step> {
@@ -423,10 +425,12 @@ fn echo_program(link: &LinkConfig) -> Vec<Step> {
     copy_addresses(&mut p, Sum::Ip);
     ethernet_header(&mut p, link, ETHERTYPE_IPV4);
     ipv4_header(&mut p, link, IP_PROTOCOL_ICMP, None, Sum::Ip);
+    // type and code, the checksum; the identifier, sequence number and data stay
     p.constants(ICMP_AT, &[ICMP_ECHO_REPLY, 0], Sum::None);
-    p.fields(ICMP_AT + 2, field_byte::ICMP_CHECKSUM, 2, Sum::None);
+    let checksum_at = ICMP_AT + icmp::field::CHECKSUM.start;
+    p.fields(checksum_at, field_byte::ICMP_CHECKSUM, 2, Sum::None);
     // zero padding to the minimum frame, written where the request ended before it
-    let shortest_end = ICMP_AT + ICMP_WRITTEN + 4;
+    let shortest_end = ICMP_AT + icmp::HEADER_LEN;
     for at in shortest_end..MIN_FRAME_LEN {
         p.constants(at, &[0], Sum::None);
         p.steps.last_mut().expect("pushed").pad = true;
@@ -442,7 +446,9 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
     // the request's fields kept: its sender, source port and opcode are copied, its
     // sequence number and host time stay where they are (the same place in the ack)
     copy_addresses(&mut p, Sum::Both);
-    p.copy(UDP_AT + 2, UDP_AT, 2, Sum::Udp, true);
+    let destination_port = UDP_AT + udp::field::DESTINATION_PORT.start;
+    let source_port = UDP_AT + udp::field::SOURCE_PORT.start;
+    p.copy(destination_port, source_port, 2, Sum::Udp, true);
     let opcode_at = ACK_BODY_AT + ack_field::OPCODE;
     p.copy(opcode_at, ACK_AT + field::OPCODE, 1, Sum::Udp, true);
     let sequence_at = ACK_AT + field::SEQUENCE.start;
@@ -462,7 +468,7 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
     p.udp_sum_only(1, IP_PROTOCOL_UDP);
     p.udp_sum_only(0, (udp_len >> 8) as u8);
     p.udp_sum_only(1, udp_len as u8);
-    p.constants(UDP_AT, &link.box_port.to_be_bytes(), Sum::Udp);
+    p.constants(source_port, &link.box_port.to_be_bytes(), Sum::Udp);
     p.constants(UDP_AT + UDP_LEN.start, &udp_len.to_be_bytes(), Sum::Udp);
     // (the UDP checksum and the send tick are written at the take)
     p.constants(ACK_AT + field::MAGIC.start, &MAGIC, Sum::Udp);
@@ -1530,7 +1536,7 @@ mod tests {
             "IPv4 checksum"
         );
         // and with our own sum
-        assert_eq!(ones_sum(&frame[IP_AT..IP_AT + IPV4_HEADER_LEN]), 0xFFFF);
+        assert_eq!(ones_sum(&frame[IPV4_AT..IPV4_AT + IPV4_HEADER_LEN]), 0xFFFF);
         let ip = ip.clone();
         (headers, ip)
     }
@@ -1607,7 +1613,7 @@ mod tests {
                 let end = ICMP_AT + 8 + data_len;
                 assert_eq!(r.frame.len(), end.max(MIN_FRAME_LEN), "{data_len}");
                 let (headers, ip) = check_ipv4(&r.frame, IP_PROTOCOL_ICMP);
-                assert_eq!(usize::from(ip.total_len), end - IP_AT);
+                assert_eq!(usize::from(ip.total_len), end - IPV4_AT);
                 let Some(TransportHeader::Icmpv4(h)) = &headers.transport else {
                     panic!("ICMP")
                 };

@@ -94,12 +94,20 @@ pub mod cell_command_field {
     pub const PACKET: Field = 4..4 + crate::cell::PACKET_LEN;
 }
 
+/// Byte positions of the set-flush-timeout and set-status-period argument.
+pub mod ticks_field {
+    use crate::Field;
+    pub const TICKS: Field = 0..4;
+}
+
 /// Length of the command and acknowledgement headers.
 pub const HEADER_LEN: usize = field::RESERVED.end;
 /// Length of the acknowledgement body before its reply.
 pub const ACK_FIXED_LEN: usize = ack_field::SEND_TICK.end;
 /// Length of a stream-to destination.
 pub const DESTINATION_LEN: usize = destination_field::PORT.end;
+/// Length of a set-flush-timeout or set-status-period argument.
+pub const TICKS_LEN: usize = ticks_field::TICKS.end;
 /// Length of a cell-network command's arguments.
 pub const CELL_COMMAND_LEN: usize = cell_command_field::PACKET.end;
 /// Longest command datagram: the header and the longest arguments.
@@ -320,7 +328,7 @@ impl Request {
         match self {
             Request::StreamTo { to: None } | Request::StatusNow | Request::ReadTick => 0,
             Request::StreamTo { to: Some(_) } => DESTINATION_LEN,
-            Request::SetFlushTimeout { .. } | Request::SetStatusPeriod { .. } => 4,
+            Request::SetFlushTimeout { .. } | Request::SetStatusPeriod { .. } => TICKS_LEN,
             Request::CellCommand { .. } => CELL_COMMAND_LEN,
         }
     }
@@ -355,16 +363,16 @@ impl Request {
                 )),
             },
             Opcode::SetFlushTimeout => {
-                want(4, "arguments are 4 bytes (u32 ticks)")?;
-                let ticks = get_u32(args, 0..4);
+                want(TICKS_LEN, "arguments are 4 bytes (u32 ticks)")?;
+                let ticks = get_u32(args, ticks_field::TICKS);
                 if !(1..=MAX_FLUSH_TIMEOUT_TICKS).contains(&ticks) {
                     return Err(bad("flush timeout outside 1..=2^31-1 ticks"));
                 }
                 Ok(Request::SetFlushTimeout { ticks })
             }
             Opcode::SetStatusPeriod => {
-                want(4, "arguments are 4 bytes (u32 ticks)")?;
-                let ticks = get_u32(args, 0..4);
+                want(TICKS_LEN, "arguments are 4 bytes (u32 ticks)")?;
+                let ticks = get_u32(args, ticks_field::TICKS);
                 if ticks < MIN_STATUS_PERIOD_TICKS {
                     return Err(bad("status period below 125,000 ticks (1 ms)"));
                 }
@@ -402,7 +410,7 @@ impl Request {
         match self {
             Request::StreamTo { to: Some(d) } => d.emit(buffer),
             Request::SetFlushTimeout { ticks } | Request::SetStatusPeriod { ticks } => {
-                buffer[..4].copy_from_slice(&ticks.to_be_bytes())
+                buffer[ticks_field::TICKS].copy_from_slice(&ticks.to_be_bytes())
             }
             Request::CellCommand { port, packet } => {
                 buffer[cell_command_field::PORT] = *port;

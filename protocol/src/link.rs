@@ -80,6 +80,19 @@ pub const IPV4_CHECKSUM: crate::Field = ipv4::field::CHECKSUM;
 pub const UDP_LEN: crate::Field = udp::field::LENGTH;
 /// UDP checksum field, from the start of the UDP header (RFC 768).
 pub const UDP_CHECKSUM: crate::Field = udp::field::CHECKSUM;
+/// Frame position of the ARP packet or the IPv4 header (from the destination MAC, no
+/// preamble).
+pub const ARP_AT: usize = ETHERNET_HEADER_LEN;
+/// Frame position of the IPv4 header.
+pub const IPV4_AT: usize = ETHERNET_HEADER_LEN;
+/// Frame position of the ICMP message (IPv4 without options).
+pub const ICMP_AT: usize = IPV4_AT + IPV4_HEADER_LEN;
+/// Frame position of the UDP header (IPv4 without options).
+pub const UDP_AT: usize = IPV4_AT + IPV4_HEADER_LEN;
+/// Frame position of the UDP payload: the box datagram, command or acknowledgement header.
+pub const PAYLOAD_AT: usize = UDP_AT + UDP_HEADER_LEN;
+/// Frame position of a command's arguments (an acknowledgement's body).
+pub const ARGUMENTS_AT: usize = PAYLOAD_AT + crate::command::HEADER_LEN;
 /// Preamble and start-of-frame delimiter on the wire.
 pub const PREAMBLE_LEN: usize = 8;
 /// Frame check sequence length.
@@ -94,9 +107,13 @@ pub const MAX_RECEIVE_LEN: usize = ETHERNET_HEADER_LEN + MTU + FCS_LEN;
 pub const INTER_FRAME_GAP: usize = 12;
 /// IPv4 time to live of the box's packets.
 pub const IPV4_TTL: u8 = 64;
-pub use crate::wire::arp::REQUEST_HEADER as ARP_REQUEST_HEADER;
+pub use crate::wire::arp::{
+    REPLY_HEADER as ARP_REPLY_HEADER, REQUEST_HEADER as ARP_REQUEST_HEADER,
+};
 pub use crate::wire::ethernet::{ETHERTYPE_ARP, ETHERTYPE_IPV4};
-pub use crate::wire::icmp::TYPE_ECHO_REQUEST as ICMP_ECHO_REQUEST;
+pub use crate::wire::icmp::{
+    TYPE_ECHO_REPLY as ICMP_ECHO_REPLY, TYPE_ECHO_REQUEST as ICMP_ECHO_REQUEST,
+};
 pub use crate::wire::ipv4::{PROTOCOL_ICMP as IP_PROTOCOL_ICMP, PROTOCOL_UDP as IP_PROTOCOL_UDP};
 
 /// The IPv4 header of a packet the box sends: DSCP/ECN 0, identification 0, don't
@@ -122,6 +139,12 @@ pub const fn box_ipv4_header(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frame_positions() {
+        assert_eq!((ARP_AT, IPV4_AT, ICMP_AT, UDP_AT), (14, 14, 34, 34));
+        assert_eq!((PAYLOAD_AT, ARGUMENTS_AT), (42, 66));
+    }
 
     #[test]
     fn host_subnet_prefixes() {

@@ -17,7 +17,7 @@ use super::{array, one};
 use crate::{check_len, get_u16, Error, Format, LayoutRow, Result};
 
 /// Byte ranges and positions of the packet's fields.
-pub(crate) mod field {
+pub mod field {
     use crate::Field;
     pub const HARDWARE_TYPE: Field = 0..2;
     pub const PROTOCOL_TYPE: Field = 2..4;
@@ -41,6 +41,8 @@ pub const OPERATION_REPLY: u16 = 2;
 /// The first 8 bytes of every request for IPv4 over Ethernet: hardware type 1, protocol
 /// type 0x0800, address lengths 6 and 4, operation 1.
 pub const REQUEST_HEADER: [u8; 8] = fixed_header(OPERATION_REQUEST);
+/// The first 8 bytes of every reply: as [`REQUEST_HEADER`], operation 2.
+pub const REPLY_HEADER: [u8; 8] = fixed_header(OPERATION_REPLY);
 
 const fn fixed_header(operation: u16) -> [u8; 8] {
     let [h0, h1] = HARDWARE_ETHERNET.to_be_bytes();

@@ -10,7 +10,7 @@ use super::{array, set_u16};
 use crate::{check_len, get_u16, Format, LayoutRow, Result};
 
 /// Byte ranges of the header's fields.
-pub(crate) mod field {
+pub mod field {
     use crate::Field;
     pub const DESTINATION: Field = 0..6;
     pub const SOURCE: Field = 6..12;

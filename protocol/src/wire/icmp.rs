@@ -13,7 +13,7 @@ use super::{one, set_u16};
 use crate::{check_len, get_u16, Error, Format, LayoutRow, Result};
 
 /// Byte ranges and positions of the header's fields.
-pub(crate) mod field {
+pub mod field {
     use crate::Field;
     pub const TYPE: usize = 0;
     pub const CODE: usize = 1;

@@ -18,7 +18,7 @@ use super::{array, one, set_u16};
 use crate::{check_len, get_u16, Error, Format, LayoutRow, Result};
 
 /// Byte ranges and positions of the header's fields.
-pub(crate) mod field {
+pub mod field {
     use crate::Field;
     pub const VERSION_IHL: usize = 0;
     pub const DSCP_ECN: usize = 1;
@@ -38,9 +38,12 @@ pub const HEADER_LEN: usize = field::DESTINATION.end;
 pub const PROTOCOL_ICMP: u8 = 1;
 /// IP protocol number of UDP.
 pub const PROTOCOL_UDP: u8 = 17;
-const FLAG_DONT_FRAGMENT: u16 = 0x4000;
-const FLAG_MORE_FRAGMENTS: u16 = 0x2000;
-const FRAGMENT_OFFSET: u16 = 0x1FFF;
+/// The don't-fragment flag in the flags and fragment offset field.
+pub const FLAG_DONT_FRAGMENT: u16 = 0x4000;
+/// The more-fragments flag in the flags and fragment offset field.
+pub const FLAG_MORE_FRAGMENTS: u16 = 0x2000;
+/// The fragment offset's bits in the flags and fragment offset field.
+pub const FRAGMENT_OFFSET: u16 = 0x1FFF;
 
 /// Published layout of the header.
 pub fn layout() -> Vec<LayoutRow> {

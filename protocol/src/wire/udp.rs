@@ -13,7 +13,7 @@ use super::set_u16;
 use crate::{check_len, get_u16, Error, Format, LayoutRow, Result};
 
 /// Byte ranges of the header's fields.
-pub(crate) mod field {
+pub mod field {
     use crate::Field;
     pub const SOURCE_PORT: Field = 0..2;
     pub const DESTINATION_PORT: Field = 2..4;
