@@ -336,6 +336,10 @@ pub fn max_records(capture_bytes: usize) -> usize {
 /// [`SampleRow`] per sample) into a slice the caller allocated, in decoding order, with the
 /// times of `timing` (or [`UNTIMED`]). Rows beyond the slice are counted in
 /// [`RowWriter::beyond`], not written.
+///
+/// This is the one record path into rows: `read` fills one slice with it, and the Python
+/// package's `Reader` fills its reused buffer batch by batch, handing the slice over when
+/// [`RowWriter::is_full`] and going on in the next with [`RowWriter::retarget`].
 pub struct RowWriter<'a, R> {
     rows: &'a mut [R],
     written: usize,
@@ -373,6 +377,24 @@ impl<'a, R> RowWriter<'a, R> {
     /// Rows that did not fit.
     pub fn beyond(&self) -> u64 {
         self.beyond
+    }
+
+    /// Whether every row of the slice is written: the next row would only be counted in
+    /// [`RowWriter::beyond`]. True of an empty slice.
+    #[inline]
+    pub fn is_full(&self) -> bool {
+        self.written == self.rows.len()
+    }
+
+    /// Goes on writing into `rows` from its first row, releasing the slice before it, and
+    /// returns the rows written into that one. Everything else carries over as if the one
+    /// slice went on in the other: the timing's state, the times of the last record (for
+    /// the samples it still produces) and [`RowWriter::beyond`]; the rows are those that
+    /// one slice of both lengths would hold. An empty `rows` only releases the slice: rows
+    /// are then counted in [`RowWriter::beyond`], their times still estimated.
+    pub fn retarget(&mut self, rows: &'a mut [R]) -> usize {
+        self.rows = rows;
+        std::mem::replace(&mut self.written, 0)
     }
 
     /// The timing, for its summary.
@@ -556,6 +578,49 @@ mod tests {
         assert_eq!((e.box_id, e.cell_id, e.port), (3, 17, 2));
         assert_eq!(e.host_time_source, HOST_TIME_NONE);
         assert!(e.host_time_bound_ns.is_nan());
+    }
+
+    #[test]
+    fn a_retargeted_writer_writes_the_rows_of_one_slice() {
+        let timing = || Timing::new(125.0, PathModel::bus_model(Positions::Unknown));
+        let records: Vec<DecodedRecord> = (0..5u16)
+            .map(|i| DecodedRecord {
+                box_id: 3,
+                source: None,
+                datagram_sequence: u32::from(i),
+                port: 1,
+                flags: 0,
+                tick: 1_000_000 * u64::from(i + 1),
+                cell: CellRepr::Data(DataRepr::from_raw(7, [i32::from(i); 9]).unwrap()),
+                event_packets_missing_before: 0,
+            })
+            .collect();
+        let mut whole = [RecordRow::default(); 5];
+        let mut w = RowWriter::new(&mut whole, Some(timing()));
+        records.iter().for_each(|r| w.record(r));
+        assert_eq!((w.written(), w.beyond()), (5, 0));
+
+        let (mut first, mut second) = ([RecordRow::default(); 2], [RecordRow::default(); 3]);
+        let mut w = RowWriter::new(&mut [][..], Some(timing()));
+        assert!(w.is_full());
+        assert_eq!(w.retarget(&mut first), 0);
+        let (mut counts, mut next) = (vec![], Some(&mut second[..]));
+        for r in &records {
+            if w.is_full() {
+                counts.push(w.retarget(next.take().unwrap()));
+            }
+            w.record(r);
+        }
+        counts.push(w.retarget(&mut []));
+        assert_eq!((counts, w.beyond()), (vec![2, 3], 0));
+        // released, it counts rows and still times them
+        w.record(&records[0]);
+        assert_eq!((w.written(), w.beyond()), (0, 1));
+        // (Debug, as the rows' NaN bounds are not equal to themselves)
+        assert_eq!(
+            format!("{:?}", [&first[..], &second[..]].concat()),
+            format!("{whole:?}")
+        );
     }
 
     #[test]

@@ -2,10 +2,11 @@
 //!
 //! A new array costs the first touch of every row (the kernel zeroing its pages, about as
 //! much as decoding the record); rows rewritten into memory touched before cost a fraction
-//! of it. The decoder (`pcap::decode_pcap_with`) runs in a worker thread that writes rows
-//! into the reader's buffer only while `__next__` waits for it: each call hands the buffer
-//! over, the worker fills it and hands it back (a message each way per batch), so the
-//! buffer is never written while Python code runs in the thread that iterates.
+//! of it. The decoder (`pcap::decode_pcap_with`) runs in a worker thread whose
+//! `RowWriter` (the rows of `read`, from the same code) writes into the reader's buffer
+//! only while `__next__` waits for it: each call hands the buffer over, the worker fills it
+//! and hands it back (a message each way per batch), so the buffer is never written while
+//! Python code runs in the thread that iterates.
 
 use crate::errors::{pcap_error, value_error, CaptureFileError};
 use crate::files::DecodeOptions;
@@ -15,7 +16,7 @@ use pyo3::prelude::*;
 use pyo3::types::PySlice;
 use skinbox_host::decoder::{DecodedRecord, RecordSink};
 use skinbox_host::pcap::{self, PcapError};
-use skinbox_host::rows::{RecordRow, UNTIMED};
+use skinbox_host::rows::{RecordRow, RowWriter};
 use skinbox_host::timing::Timing;
 use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::Mutex;
@@ -30,45 +31,59 @@ enum Message {
     Done(usize, Result<String, PcapError>),
 }
 
-/// The buffer's rows, for the worker: written only between a `resume` received and the
-/// next message sent.
-struct Rows {
+/// The reader's buffer, for the worker: lent to its writer only between a `resume`
+/// received and the next message sent.
+struct Buffer {
     start: *mut RecordRow,
     len: usize,
 }
 
 // SAFETY: the reader keeps the buffer alive while the worker may write it (see `Reader`),
 // and hands it over through channels, which order the writes before the reads.
-unsafe impl Send for Rows {}
+unsafe impl Send for Buffer {}
 
-/// The worker's sink: rows into the buffer, handing it back whenever it is full.
+/// The worker's sink: the rows of the [`RowWriter`] that `read` uses too, written into the
+/// buffer while the worker holds it, which it hands back whenever it is full.
 struct ChunkSink {
-    rows: Rows,
-    written: usize,
-    /// The worker may write the buffer (a `resume` came and no message went since).
+    /// Holds the buffer's rows while the worker holds the buffer, else none: it then only
+    /// counts the rows (the reader went away), their times still estimated for the report.
+    writer: RowWriter<'static, RecordRow>,
+    buffer: Buffer,
+    /// The worker holds the buffer (a `resume` came and no message went since).
     holding: bool,
     /// The reader went away: rows are dropped, the rest of the file only decoded.
     closed: bool,
-    timing: Option<Timing>,
     resume: Receiver<()>,
     to: Sender<Message>,
 }
 
 impl ChunkSink {
+    /// Takes the buffer from the writer (the worker then no longer holds it), returning the
+    /// rows written into it (0 where it held none).
+    fn release(&mut self) -> usize {
+        self.holding = false;
+        self.writer.retarget(Default::default())
+    }
+
     /// Hands a full buffer back (if holding one) and waits until it is given again.
     #[cold]
     fn handoff(&mut self) {
         if self.holding {
-            self.holding = false;
-            if self.to.send(Message::Full(self.written)).is_err() {
+            let written = self.release();
+            if self.to.send(Message::Full(written)).is_err() {
                 self.closed = true;
                 return;
             }
         }
         match self.resume.recv() {
             Ok(()) => {
+                // SAFETY: the reader sent `resume` and waits for the next message, keeping
+                // the buffer alive and reading none of it until then; the slice is
+                // released (`release`) before any message is sent.
+                let rows =
+                    unsafe { std::slice::from_raw_parts_mut(self.buffer.start, self.buffer.len) };
+                self.writer.retarget(rows);
                 self.holding = true;
-                self.written = 0;
             }
             Err(_) => self.closed = true,
         }
@@ -78,28 +93,12 @@ impl ChunkSink {
 impl RecordSink for ChunkSink {
     #[inline]
     fn record(&mut self, record: &DecodedRecord) {
-        let times = match &mut self.timing {
-            Some(t) => t.record(record),
-            None => UNTIMED,
-        };
-        if !self.holding || self.written == self.rows.len {
-            if self.closed {
-                return;
-            }
+        // a buffer given has at least one row: full here means none given yet, or it needs
+        // handing back
+        if self.writer.is_full() && !self.closed {
             self.handoff();
-            if self.closed {
-                return;
-            }
         }
-        // SAFETY: `written < len` (a buffer given has at least one row), and the worker
-        // holds the buffer: the reader waits for the next message and keeps it alive.
-        unsafe {
-            self.rows
-                .start
-                .add(self.written)
-                .write(RecordRow::new(record, &times))
-        };
-        self.written += 1;
+        self.writer.record(record);
     }
 
     fn datagram_received(
@@ -108,9 +107,7 @@ impl RecordSink for ChunkSink {
         source: Option<std::net::SocketAddr>,
         payload: &[u8],
     ) {
-        if let Some(t) = &mut self.timing {
-            t.datagram_received(receive, source, payload);
-        }
+        self.writer.datagram_received(receive, source, payload);
     }
 }
 
@@ -196,11 +193,10 @@ impl Reader {
         let (resume, resumed) = channel();
         let (to, messages) = channel();
         let mut sink = ChunkSink {
-            rows: Rows { start, len: rows },
-            written: 0,
+            writer: RowWriter::new(Default::default(), rate_hz.map(|r| options.timing(r))),
+            buffer: Buffer { start, len: rows },
             holding: false,
             closed: false,
-            timing: rate_hz.map(|r| options.timing(r)),
             resume: resumed,
             to: to.clone(),
         };
@@ -208,8 +204,8 @@ impl Reader {
             .name("skinbox-reader".into())
             .spawn(move || {
                 let report = pcap::decode_pcap_with(&bytes, &options.pcap(), &mut sink);
-                let written = if sink.holding { sink.written } else { 0 };
-                let report = report.map(|r| report_json(&r, sink.timing.as_ref()));
+                let written = sink.release();
+                let report = report.map(|r| report_json(&r, sink.writer.timing()));
                 let _ = to.send(Message::Done(written, report));
             })
             .map_err(|e| value_error(format!("the reader's thread: {e}")))?;
