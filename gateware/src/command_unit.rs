@@ -64,10 +64,6 @@ pub struct CommandUnitConfig {
     pub status_period_ticks: u32,
 }
 
-fn constant<const N: usize>(value: u64) -> Constant<Bits<N>> {
-    Constant::new(value.into())
-}
-
 /// The lowest bit in `command_arguments` of the argument bytes `field` (the first
 /// argument byte is the top byte).
 fn argument_bit(field: Field) -> Constant<Bits<7>> {
@@ -76,14 +72,6 @@ fn argument_bit(field: Field) -> Constant<Bits<7>> {
         "argument bytes {field:?} not held"
     );
     constant((8 * (HELD_ARGUMENT_BYTES - field.end)) as u64)
-}
-
-fn many<T: Default>(n: usize) -> Vec<T> {
-    (0..n).map(|_| T::default()).collect()
-}
-
-fn mac_number(mac: [u8; 6]) -> u64 {
-    mac.iter().fold(0, |n, b| n << 8 | u64::from(*b))
 }
 
 /// The decision of steps 17-22 and the run-time configuration.
@@ -317,21 +305,21 @@ impl CommandUnit {
             ticks_bit: argument_bit(ticks_field::TICKS),
             cell_port_bit: argument_bit(cell_command_field::PORT..cell_command_field::PORT + 1),
             cell_reserved_bit: argument_bit(cell_command_field::RESERVED),
-            default_mac: constant(mac_number(link.host_mac)),
+            default_mac: constant(big_endian(&link.host_mac)),
             default_ip: constant(u32::from_be_bytes(link.host_ip).into()),
             default_port: constant(link.host_port.into()),
             default_flush_timeout: constant(config.flush_timeout_ticks.into()),
             default_status_period: constant(config.status_period_ticks.into()),
-            slot_valid: many(slots),
-            slot_ip: many(slots),
-            slot_sequence: many(slots),
-            slot_rank: many(slots),
+            slot_valid: each(slots),
+            slot_ip: each(slots),
+            slot_sequence: each(slots),
+            slot_rank: each(slots),
             slot_initial_rank: (0..slots)
                 .map(|i| constant((slots - 1 - i) as u64))
                 .collect(),
             oldest_rank: constant(slots as u64 - 1),
             stage_1: Default::default(),
-            matched: many(slots),
+            matched: each(slots),
             box_ok: Default::default(),
             is_stream_to: Default::default(),
             is_set_flush_timeout: Default::default(),
@@ -351,7 +339,7 @@ impl CommandUnit {
             stage_2: Default::default(),
             hit: Default::default(),
             hit_sequence: Default::default(),
-            oldest: many(slots),
+            oldest: each(slots),
             arguments_ok: Default::default(),
             arguments_fate: Default::default(),
             arguments_result: Default::default(),
@@ -375,7 +363,7 @@ impl CommandUnit {
             any_match: Default::default(),
             difference: Default::default(),
             taken: Default::default(),
-            target: many(slots),
+            target: each(slots),
             target_rank: Default::default(),
             value: Default::default(),
             arguments_good: Default::default(),
@@ -777,7 +765,7 @@ mod tests {
             Model {
                 hosts: Vec::new(),
                 destination: (
-                    mac_number(link.host_mac),
+                    big_endian(&link.host_mac),
                     u32::from_be_bytes(link.host_ip),
                     link.host_port,
                 ),
@@ -863,7 +851,7 @@ mod tests {
                 }
                 Ok(Request::StreamTo { to }) => {
                     self.destination = match to {
-                        Some(d) => (mac_number(d.mac), u32::from_be_bytes(d.ip), d.port),
+                        Some(d) => (big_endian(&d.mac), u32::from_be_bytes(d.ip), d.port),
                         None => (c.mac, c.ip, c.port),
                     };
                     Seen {
@@ -1243,7 +1231,7 @@ mod tests {
         assert_eq!(
             reset_state.destination,
             (
-                mac_number(link.host_mac),
+                big_endian(&link.host_mac),
                 u32::from_be_bytes(link.host_ip),
                 link.host_port
             )

@@ -73,7 +73,7 @@ impl DownlinkPinScan {
             next_is_data: Default::default(),
             next_data_bit: Default::default(),
             read_word: Default::default(),
-            bank_data: (0..banks).map(|_| Default::default()).collect(),
+            bank_data: each(banks),
             take: Default::default(),
             take_word: Default::default(),
             values: Default::default(),

@@ -101,8 +101,7 @@ const _: () = assert!(ARP_AT + arp::PACKET_LEN <= MIN_FRAME_LEN);
 
 /// A frame position as a kernel constant (compared with the 11-bit beat index).
 fn position(at: usize) -> Constant<Bits<11>> {
-    assert!(at < 1 << 11);
-    Constant::new((at as u64).into())
+    constant(at as u64)
 }
 
 /// The lowest bit of the frame bytes `field` in a shift register that captured `capture`
@@ -114,11 +113,7 @@ fn capture_bit(capture: Field, field: Field) -> Constant<Bits<6>> {
 
 /// A length as a kernel constant (compared with 16-bit lengths).
 fn length(len: usize) -> Constant<Bits<16>> {
-    Constant::new((len as u64).into())
-}
-
-fn be(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0, |v, &b| v << 8 | u64::from(b))
+    constant(len as u64)
 }
 
 fn fate_constant(fate: BoxCounter) -> Constant<Bits<5>> {
@@ -478,9 +473,9 @@ impl FrameParser {
             command_host_time: Default::default(),
             command_argument_length: Default::default(),
             command_arguments: Default::default(),
-            box_mac: Constant::new(be(&link.box_mac).into()),
-            broadcast_mac: Constant::new(be(&[0xFF; 6]).into()),
-            box_ip: Constant::new(be(&link.box_ip).into()),
+            box_mac: Constant::new(big_endian(&link.box_mac).into()),
+            broadcast_mac: Constant::new(big_endian(&[0xFF; 6]).into()),
+            box_ip: Constant::new(big_endian(&link.box_ip).into()),
             box_port: Constant::new(u64::from(link.box_port).into()),
             host_subnet: Constant::new(u64::from(subnet).into()),
             host_mask: Constant::new(u64::from(mask).into()),
@@ -488,9 +483,9 @@ impl FrameParser {
             ethertype_ipv4: Constant::new(u64::from(ETHERTYPE_IPV4).into()),
             protocol_icmp: Constant::new(u64::from(IP_PROTOCOL_ICMP).into()),
             protocol_udp: Constant::new(u64::from(IP_PROTOCOL_UDP).into()),
-            icmp_echo_request: Constant::new(be(&[ICMP_ECHO_REQUEST, 0]).into()),
-            arp_request_header: Constant::new(be(&ARP_REQUEST_HEADER).into()),
-            command_start: Constant::new(be(&command_start).into()),
+            icmp_echo_request: Constant::new(big_endian(&[ICMP_ECHO_REQUEST, 0]).into()),
+            arp_request_header: Constant::new(big_endian(&ARP_REQUEST_HEADER).into()),
+            command_start: Constant::new(big_endian(&command_start).into()),
             source_mac_at: position(ethernet::field::SOURCE.start),
             ethertype_at: position(ethernet::field::ETHERTYPE.start),
             ipv4_at: position(IPV4_AT),

@@ -86,8 +86,7 @@ const DESTINATION_PORT_LEN: usize =
 
 /// A frame position (or length) as a kernel constant; panics if it does not fit.
 fn position<const N: usize>(at: usize) -> Constant<Bits<N>> {
-    assert!(at < 1 << N, "position {at} does not fit {N} bits");
-    Constant::new((at as u64).into())
+    constant(at as u64)
 }
 
 /// The constant bytes of a frame up to the body; variable fields (the destination's too)
@@ -146,13 +145,6 @@ fn template_table(t: &[u8]) -> Vec<u64> {
     }
     table[TEMPLATE_IDLE] = u64::from(t[0]);
     table
-}
-
-/// The number whose big-endian bytes these are (at most 8): an address or port as the
-/// transmitter's destination inputs take it.
-pub fn big_endian(bytes: &[u8]) -> u64 {
-    assert!(bytes.len() <= 8, "{} bytes do not fit 64 bits", bytes.len());
-    bytes.iter().fold(0, |n, &b| n << 8 | u64::from(b))
 }
 
 /// Sum of the big-endian 16-bit words of `bytes` (odd length padded with 0), not folded.

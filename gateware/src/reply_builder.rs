@@ -629,11 +629,6 @@ fn rom(link: &LinkConfig, box_id: u16, port_count: u8) -> Rom {
     }
 }
 
-fn constant<const N: usize>(value: usize) -> Constant<Bits<N>> {
-    assert!(N >= 64 || value < 1 << N, "{value} does not fit {N} bits");
-    Constant::new((value as u64).into())
-}
-
 /// Builds the box's replies in the frame buffer and sends them as raw frames.
 #[derive(LogicBlock)]
 pub struct ReplyBuilder {
@@ -810,24 +805,24 @@ impl ReplyBuilder {
             buffer: Default::default(),
             reader: Default::default(),
             rom: BlockRam::with_contents(&rom_contents.words),
-            arp_start: constant(rom_contents.arp),
-            echo_start: constant(rom_contents.echo),
-            ack_none_start: constant(ack_none),
-            ack_destination_start: constant(ack_destination),
-            ack_counters_start: constant(ack_counters),
-            patch_start: constant(rom_contents.patch),
-            arp_len: constant(MIN_FRAME_LEN),
-            ack_none_len: constant(AckReplyKind::None.frame_len()),
-            ack_destination_len: constant(AckReplyKind::Destination.frame_len()),
-            ack_counters_len: constant(AckReplyKind::Counters.frame_len()),
-            min_frame_len: constant(MIN_FRAME_LEN),
-            ethernet_header_len: constant(ETHERNET_HEADER_LEN),
-            opcode_stream_to: constant(Opcode::StreamTo as usize),
-            opcode_status_now: constant(Opcode::StatusNow as usize),
-            result_ok: constant(AckResult::Ok as usize),
+            arp_start: constant(rom_contents.arp as u64),
+            echo_start: constant(rom_contents.echo as u64),
+            ack_none_start: constant(ack_none as u64),
+            ack_destination_start: constant(ack_destination as u64),
+            ack_counters_start: constant(ack_counters as u64),
+            patch_start: constant(rom_contents.patch as u64),
+            arp_len: constant(MIN_FRAME_LEN as u64),
+            ack_none_len: constant((AckReplyKind::None.frame_len()) as u64),
+            ack_destination_len: constant((AckReplyKind::Destination.frame_len()) as u64),
+            ack_counters_len: constant((AckReplyKind::Counters.frame_len()) as u64),
+            min_frame_len: constant(MIN_FRAME_LEN as u64),
+            ethernet_header_len: constant(ETHERNET_HEADER_LEN as u64),
+            opcode_stream_to: constant((Opcode::StreamTo as usize) as u64),
+            opcode_status_now: constant((Opcode::StatusNow as usize) as u64),
+            result_ok: constant((AckResult::Ok as usize) as u64),
             // (the tick of the clock after the take)
-            send_tick_offset: constant(TAKE_TO_FIRST_BYTE as usize - 1),
-            raw_frame_kind: constant(usize::from(RAW_FRAME_KIND)),
+            send_tick_offset: constant((TAKE_TO_FIRST_BYTE as usize - 1) as u64),
+            raw_frame_kind: constant((usize::from(RAW_FRAME_KIND)) as u64),
             step: Default::default(),
             running: Default::default(),
             read_1: Default::default(),
