@@ -46,8 +46,11 @@ pub struct BodyReader {
     starting: DFF<Bit>,
     fifo_depth: Constant<Bits<3>>,
     address: DFF<Bits<BODY_ADDRESS_BITS>>,
-    // reads still to issue
+    // reads still to issue, and whether that is not 0 or is 1, as registers of their own
+    // (the issue test and the last-read flag start at flip-flops)
     left: DFF<Bits<BODY_ADDRESS_BITS>>,
+    left_nonzero: DFF<Bit>,
+    left_one: DFF<Bit>,
     // reads in flight, and whether each is the body's last byte
     read_1: DFF<Bit>,
     read_1_last: DFF<Bit>,
@@ -73,6 +76,8 @@ impl Default for BodyReader {
             fifo_depth: Constant::new((FIFO_DEPTH as u64).into()),
             address: Default::default(),
             left: Default::default(),
+            left_nonzero: Default::default(),
+            left_one: Default::default(),
             read_1: Default::default(),
             read_1_last: Default::default(),
             read_2: Default::default(),
@@ -90,6 +95,8 @@ impl Logic for BodyReader {
             clock,
             address,
             left,
+            left_nonzero,
+            left_one,
             read_1,
             read_1_last,
             read_2,
@@ -99,7 +106,7 @@ impl Logic for BodyReader {
         );
         self.fifo.clock.next = self.clock.val();
         self.fifo.reset.next = self.reset.val();
-        self.issue.next = (self.left.q.val() != 0)
+        self.issue.next = self.left_nonzero.q.val()
             & ((bit_cast::<3, 1>(self.read_1.q.val().into())
                 + bit_cast::<3, 1>(self.read_2.q.val().into())
                 + self.fifo.count.val())
@@ -108,14 +115,18 @@ impl Logic for BodyReader {
         if self.issue.val() {
             self.address.d.next = self.address.q.val() + 1;
             self.left.d.next = self.left.q.val() - 1;
+            self.left_nonzero.d.next = !self.left_one.q.val();
+            self.left_one.d.next = self.left.q.val() == 2;
         }
         self.starting.d.next = self.start.val();
         if self.starting.q.val() {
             self.address.d.next = 0.into();
             self.left.d.next = self.length.val();
+            self.left_nonzero.d.next = self.length.val() != 0;
+            self.left_one.d.next = self.length.val() == 1;
         }
         self.read_1.d.next = self.issue.val();
-        self.read_1_last.d.next = self.left.q.val() == 1;
+        self.read_1_last.d.next = self.left_one.q.val();
         self.read_2.d.next = self.read_1.q.val();
         self.read_2_last.d.next = self.read_1_last.q.val();
         // the FIFO has room for every read in flight: the push never waits
@@ -142,6 +153,8 @@ impl Logic for BodyReader {
             self.reading.d.next = false;
             self.starting.d.next = false;
             self.left.d.next = 0.into();
+            self.left_nonzero.d.next = false;
+            self.left_one.d.next = false;
             self.read_1.d.next = false;
             self.read_2.d.next = false;
         }
