@@ -127,23 +127,70 @@ fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
     t
 }
 
-/// Address of the template table read between frames: it holds the first byte, which the
+/// Address of the header table read between frames: it holds the first byte, which the
 /// first two bytes of a frame are (the preamble), read before the frame's own addresses.
 const TEMPLATE_IDLE: usize = 127;
 
-/// The template as the transmitter's table: byte i + 2 at address i (the block RAM read
-/// takes two clocks), the first byte at [`TEMPLATE_IDLE`].
-fn template_table(t: &[u8]) -> Vec<u64> {
+// Where a header byte comes from, one bit each (`byte_source`): the template is ORed in all
+// through the header (it is 0 at the other sources' bytes); the body is alone.
+const SOURCE_TEMPLATE: u64 = 1;
+const SOURCE_TOTAL_LEN: u64 = 1 << 1; // and 1 << 2, its low byte
+const SOURCE_IP_CHECKSUM: u64 = 1 << 3; // and 1 << 4
+const SOURCE_UDP_LEN: u64 = 1 << 5; // and 1 << 6
+const SOURCE_UDP_CHECKSUM: u64 = 1 << 7; // and 1 << 8
+const SOURCE_KIND: u64 = 1 << 9;
+const SOURCE_FIELDS: u64 = 1 << 10;
+const SOURCE_BODY: u64 = 1 << 11;
+const SOURCE_DESTINATION: u64 = 1 << 12;
+const SOURCE_BITS: usize = 13;
+/// Width of a header table entry: the template byte, then the byte sources.
+const HEADER_ENTRY_BITS: usize = 8 + SOURCE_BITS;
+
+/// The sources of header byte `at` other than the template (0 for the preamble and the
+/// bytes past the header).
+fn header_sources(at: usize) -> u64 {
+    let word = |first: usize, high: u64| {
+        if at == first {
+            high
+        } else if at == first + 1 {
+            high << 1
+        } else {
+            0
+        }
+    };
+    let within = |first: usize, len: usize| (first..first + len).contains(&at);
+    let mut sources = word(IP_TOTAL_LEN_AT, SOURCE_TOTAL_LEN)
+        | word(IP_CHECKSUM_AT, SOURCE_IP_CHECKSUM)
+        | word(UDP_LEN_AT, SOURCE_UDP_LEN)
+        | word(UDP_CHECKSUM_AT, SOURCE_UDP_CHECKSUM);
+    if at == KIND_AT {
+        sources |= SOURCE_KIND;
+    }
+    if within(FIELDS_AT, FIELDS_LEN) {
+        sources |= SOURCE_FIELDS;
+    }
+    if within(DESTINATION_MAC_AT, DESTINATION_MAC_LEN)
+        || within(DESTINATION_IP_AT, DESTINATION_IP_LEN)
+        || within(DESTINATION_PORT_AT, DESTINATION_PORT_LEN)
+    {
+        sources |= SOURCE_DESTINATION;
+    }
+    sources
+}
+
+/// The transmitter's header table, read two clocks ahead: at address i the template's byte
+/// i + 2 and, above it, the sources of byte i + 3 (registered once more before they choose
+/// the byte); at [`TEMPLATE_IDLE`] the first byte and the sources of byte 2.
+fn header_table(t: &[u8]) -> Vec<u64> {
     assert_eq!(t[0], t[1], "the frame starts with two equal bytes");
     assert!(
         t.len() - 2 <= TEMPLATE_IDLE,
         "the template fits below the idle address"
     );
-    let mut table = vec![0; TEMPLATE_IDLE + 1];
-    for (a, &b) in t.iter().skip(2).enumerate() {
-        table[a] = u64::from(b);
-    }
-    table[TEMPLATE_IDLE] = u64::from(t[0]);
+    let mut table: Vec<u64> = (0..TEMPLATE_IDLE)
+        .map(|a| u64::from(*t.get(a + 2).unwrap_or(&0)) | header_sources(a + 3) << 8)
+        .collect();
+    table.push(u64::from(t[0]) | header_sources(2) << 8);
     table
 }
 
@@ -176,9 +223,9 @@ pub struct FrameTransmitter {
     pub destination_ip: Signal<In, Bits<32>>,
     /// Destination UDP port of the datagram frames, read like `destination_mac`.
     pub destination_port: Signal<In, Bits<16>>,
-    // the template in block RAM, read two clocks ahead: byte i + 2 at address i, and at
-    // `TEMPLATE_IDLE` the first byte (the preamble's, also the second), read between frames
-    template: BlockRam<8, 7>,
+    // the header table in block RAM (`header_table`): the template byte and, above it, the
+    // byte sources of the byte after it
+    template: BlockRam<HEADER_ENTRY_BITS, 7>,
     // the UDP checksum's constant words with the UDP length's constant part (the UDP and
     // datagram headers), counted twice like the length
     udp_term_constant: Constant<Bits<32>>,
@@ -202,27 +249,14 @@ pub struct FrameTransmitter {
     udp_len_over_body: Constant<Bits<16>>,
     // clocks of the inter-frame gap after the frame's last clock
     gap_clocks: Constant<Bits<4>>,
-    // the byte-source tests: first byte of the IPv4 total length, of the IPv4 checksum, of
-    // the UDP length, of the UDP checksum, the datagram kind, the first field byte and the
-    // byte after the fields, each two lower (the field position steps there too)
-    ip_len_ahead: Constant<Bits<7>>,
-    ip_checksum_ahead: Constant<Bits<7>>,
-    udp_len_ahead: Constant<Bits<7>>,
-    udp_checksum_ahead: Constant<Bits<7>>,
-    kind_ahead: Constant<Bits<7>>,
+    // the first field byte and the byte after the fields, each two lower (the field
+    // position steps there)
     fields_ahead: Constant<Bits<7>>,
     fields_end_ahead: Constant<Bits<7>>,
-    // the destination's bytes, first and past the last, two lower like the others
-    destination_mac_ahead: Constant<Bits<7>>,
-    destination_mac_end_ahead: Constant<Bits<7>>,
-    destination_ip_ahead: Constant<Bits<7>>,
-    destination_ip_end_ahead: Constant<Bits<7>>,
-    destination_port_ahead: Constant<Bits<7>>,
-    destination_port_end_ahead: Constant<Bits<7>>,
     template_idle: Constant<Bits<7>>,
     // the byte sources, one bit each (see `byte_source`)
-    source_template: Constant<Bits<13>>,
-    source_body: Constant<Bits<13>>,
+    source_template: Constant<Bits<SOURCE_BITS>>,
+    source_body: Constant<Bits<SOURCE_BITS>>,
     crc: Crc32Byte,
     sending: DFF<Bit>,
     index: DFF<Bits<11>>,
@@ -308,19 +342,18 @@ pub struct FrameTransmitter {
     stage_valid: DFF<Bit>,
     stage_crc: DFF<Bit>,
     stage_fcs: DFF<Bit>,
-    // where the byte at `index` comes from, and the template byte, both looked up ahead:
-    // bit 0 template (all through the header: it is 0 at the other sources' bytes), 1/2
-    // IPv4 total length high/low, 3/4 IPv4 checksum, 5/6 UDP length, 7/8 UDP checksum,
-    // 9 kind, 10 header fields, 11 body, 12 destination
-    byte_source: DFF<Bits<13>>,
-    // `byte_source` of the next clock, looked up a clock earlier still
-    source_ahead: DFF<Bits<13>>,
+    // where the byte at `index` comes from (`SOURCE_*`), chosen a clock ahead from the
+    // header table's sources and the two flags below
+    byte_source: DFF<Bits<SOURCE_BITS>>,
+    // the byte after the next is a header byte (from the table's sources), or a body byte
+    header_ahead: DFF<Bit>,
+    body_ahead: DFF<Bit>,
     // the index is 72 or more: the next index's following byte is in the body
     body_follows: Signal<Local, Bit>,
     // sending, and the next index is this one + 1 (otherwise it is 0)
     frame_goes_on: Signal<Local, Bit>,
-    source_next: Signal<Local, Bits<13>>,
     udp_checksum_held: DFF<Bits<16>>,
+    header_byte: Signal<Local, Bits<8>>,
     tx_byte: Signal<Local, Bits<8>>,
     ip_sum: Signal<Local, Bits<32>>,
     // the IPv4 header sum folded once, a register (the checksum's second fold a clock later)
@@ -353,7 +386,7 @@ impl FrameTransmitter {
             destination_mac: Default::default(),
             destination_ip: Default::default(),
             destination_port: Default::default(),
-            template: BlockRam::with_contents(&template_table(&t)),
+            template: BlockRam::with_contents(&header_table(&t)),
             udp_term_constant: Constant::new(
                 (udp_constant + 2 * (BODY_START - UDP_AT_ON_WIRE) as u64).into(),
             ),
@@ -368,22 +401,11 @@ impl FrameTransmitter {
             ip_len_over_body: position(BODY_START - IPV4_AT_ON_WIRE),
             udp_len_over_body: position(BODY_START - UDP_AT_ON_WIRE),
             gap_clocks: position(INTER_FRAME_GAP - 1),
-            ip_len_ahead: position(IP_TOTAL_LEN_AT - 2),
-            ip_checksum_ahead: position(IP_CHECKSUM_AT - 2),
-            udp_len_ahead: position(UDP_LEN_AT - 2),
-            udp_checksum_ahead: position(UDP_CHECKSUM_AT - 2),
-            kind_ahead: position(KIND_AT - 2),
             fields_ahead: position(FIELDS_AT - 2),
             fields_end_ahead: position(FIELDS_AT + FIELDS_LEN - 2),
-            destination_mac_ahead: position(DESTINATION_MAC_AT - 2),
-            destination_mac_end_ahead: position(DESTINATION_MAC_AT + DESTINATION_MAC_LEN - 2),
-            destination_ip_ahead: position(DESTINATION_IP_AT - 2),
-            destination_ip_end_ahead: position(DESTINATION_IP_AT + DESTINATION_IP_LEN - 2),
-            destination_port_ahead: position(DESTINATION_PORT_AT - 2),
-            destination_port_end_ahead: position(DESTINATION_PORT_AT + DESTINATION_PORT_LEN - 2),
             template_idle: position(TEMPLATE_IDLE),
-            source_template: Constant::new(1u64.into()),
-            source_body: Constant::new((1u64 << 11).into()),
+            source_template: Constant::new(SOURCE_TEMPLATE.into()),
+            source_body: Constant::new(SOURCE_BODY.into()),
             crc: Default::default(),
             sending: Default::default(),
             index: Default::default(),
@@ -440,11 +462,12 @@ impl FrameTransmitter {
             stage_crc: Default::default(),
             stage_fcs: Default::default(),
             byte_source: Default::default(),
-            source_ahead: Default::default(),
+            header_ahead: Default::default(),
+            body_ahead: Default::default(),
             body_follows: Default::default(),
             frame_goes_on: Default::default(),
-            source_next: Default::default(),
             udp_checksum_held: Default::default(),
+            header_byte: Default::default(),
             tx_byte: Default::default(),
             ip_sum: Default::default(),
             ip_fold: Default::default(),
@@ -504,7 +527,8 @@ impl Logic for FrameTransmitter {
             stage_crc,
             stage_fcs,
             byte_source,
-            source_ahead,
+            header_ahead,
+            body_ahead,
             udp_checksum_held,
             term_is_kind,
             term_is_udp_len,
@@ -584,12 +608,9 @@ impl Logic for FrameTransmitter {
         }
         self.checksum_term.d.next = self.checksum_word.val();
 
-        // The byte at `index`, from a multiplexer whose select is a register: the source of
-        // byte `k + 1` is looked up at index `k - 1`, two clocks ahead (for the next index:
-        // `index + 1` while the frame goes on, 0 otherwise, whose byte 1 is the template's;
-        // so the header positions below are spelled two lower than the bytes they name);
-        // the template byte comes from its table two clocks ahead (127 is TEMPLATE_IDLE,
-        // read between frames).
+        // The byte at `index`, from a multiplexer whose select is a register
+        // (`byte_source`); the template byte and the sources come from the header table,
+        // read two clocks ahead (127 is TEMPLATE_IDLE, read between frames).
         self.template.clock.next = self.clock.val();
         self.template.write_enable.next = false;
         self.template.write_address.next = 0.into();
@@ -609,109 +630,78 @@ impl Logic for FrameTransmitter {
             self.body_follows.next = (self.index.q.val().get_bits::<8>(3) != 0)
                 | (self.index.q.val().get_bit(2) & self.index.q.val().get_bit(1));
         }
-        // The template holds 0 at every variable byte, so it is ORed in all through the
-        // header (bit 0 is "not the body") and the header's sources are independent tests.
+        // The byte's source: the table's sources of byte `index + 3` (read at `index - 1`
+        // for the next index, `index + 1` while the frame goes on: when it does not, the
+        // flags below choose the template alone) under the flags of this index's byte after
+        // the next.
         self.frame_goes_on.next = self.sending.q.val() & !self.frame_ends.q.val();
-        self.source_next.next = self.source_template.val();
-        if self.frame_goes_on.val() & self.body_follows.val() {
+        self.header_ahead.d.next = self.frame_goes_on.val() & !self.body_follows.val();
+        self.body_ahead.d.next = self.frame_goes_on.val() & self.body_follows.val();
+        self.byte_source.d.next = self.source_template.val();
+        if self.body_ahead.q.val() {
             // the body (the FCS replaces what follows it at the output)
-            self.source_next.next = self.source_body.val();
+            self.byte_source.d.next = self.source_body.val();
+        } else if self.header_ahead.q.val() {
+            self.byte_source.d.next = self.source_template.val()
+                | self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
         }
-        if self.frame_goes_on.val() & !self.body_follows.val() {
-            if self.header_index.val() == self.ip_len_ahead.val() {
-                self.source_next.next = self.source_next.val() | 2;
-            }
-            if self.header_index.val() == self.ip_len_ahead.val() + 1 {
-                self.source_next.next = self.source_next.val() | 4;
-            }
-            if self.header_index.val() == self.ip_checksum_ahead.val() {
-                self.source_next.next = self.source_next.val() | 8;
-            }
-            if self.header_index.val() == self.ip_checksum_ahead.val() + 1 {
-                self.source_next.next = self.source_next.val() | 16;
-            }
-            if self.header_index.val() == self.udp_len_ahead.val() {
-                self.source_next.next = self.source_next.val() | 32;
-            }
-            if self.header_index.val() == self.udp_len_ahead.val() + 1 {
-                self.source_next.next = self.source_next.val() | 64;
-            }
-            if self.header_index.val() == self.udp_checksum_ahead.val() {
-                self.source_next.next = self.source_next.val() | 128;
-            }
-            if self.header_index.val() == self.udp_checksum_ahead.val() + 1 {
-                self.source_next.next = self.source_next.val() | 256;
-            }
-            if self.header_index.val() == self.kind_ahead.val() {
-                self.source_next.next = self.source_next.val() | 512;
-            }
-            if (self.header_index.val() >= self.fields_ahead.val())
-                & (self.header_index.val() < self.fields_end_ahead.val())
-            {
-                self.source_next.next = self.source_next.val() | 1024;
-            }
-            if ((self.header_index.val() >= self.destination_mac_ahead.val())
-                & (self.header_index.val() < self.destination_mac_end_ahead.val()))
-                | ((self.header_index.val() >= self.destination_ip_ahead.val())
-                    & (self.header_index.val() < self.destination_ip_end_ahead.val()))
-                | ((self.header_index.val() >= self.destination_port_ahead.val())
-                    & (self.header_index.val() < self.destination_port_end_ahead.val()))
-            {
-                self.source_next.next = self.source_next.val() | 4096;
-            }
-        }
-        self.source_ahead.d.next = self.source_next.val();
-        self.byte_source.d.next = self.source_ahead.q.val();
         // (final long before byte 48: the sum is done by byte 21)
         self.udp_checksum_held.d.next = self.udp_checksum.val();
-        self.tx_byte.next = 0.into();
+        // the header's sources ORed (each is 0 unless chosen), the body beside them (it is
+        // alone: its data passes one multiplexer, not the header's OR)
+        self.header_byte.next = 0.into();
         if self.byte_source.q.val().get_bit(0) {
-            self.tx_byte.next = self.tx_byte.val() | self.template.read_data.val();
+            self.header_byte.next = self.template.read_data.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(1) {
-            self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(8);
+            self.header_byte.next =
+                self.header_byte.val() | self.total_len.q.val().get_bits::<8>(8);
         }
         if self.byte_source.q.val().get_bit(2) {
-            self.tx_byte.next = self.tx_byte.val() | self.total_len.q.val().get_bits::<8>(0);
+            self.header_byte.next =
+                self.header_byte.val() | self.total_len.q.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(3) {
-            self.tx_byte.next = self.tx_byte.val() | self.ip_checksum.q.val().get_bits::<8>(8);
+            self.header_byte.next =
+                self.header_byte.val() | self.ip_checksum.q.val().get_bits::<8>(8);
         }
         if self.byte_source.q.val().get_bit(4) {
-            self.tx_byte.next = self.tx_byte.val() | self.ip_checksum.q.val().get_bits::<8>(0);
+            self.header_byte.next =
+                self.header_byte.val() | self.ip_checksum.q.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(5) {
-            self.tx_byte.next = self.tx_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
+            self.header_byte.next = self.header_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
         }
         if self.byte_source.q.val().get_bit(6) {
-            self.tx_byte.next = self.tx_byte.val() | self.udp_len.q.val().get_bits::<8>(0);
+            self.header_byte.next = self.header_byte.val() | self.udp_len.q.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(7) {
-            self.tx_byte.next =
-                self.tx_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(8);
+            self.header_byte.next =
+                self.header_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(8);
         }
         if self.byte_source.q.val().get_bit(8) {
-            self.tx_byte.next =
-                self.tx_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(0);
+            self.header_byte.next =
+                self.header_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(9) {
-            self.tx_byte.next = self.tx_byte.val() | self.kind_held.q.val();
+            self.header_byte.next = self.header_byte.val() | self.kind_held.q.val();
         }
         if self.byte_source.q.val().get_bit(10) {
-            self.tx_byte.next = self.tx_byte.val() | self.field_byte.q.val();
-        }
-        if self.byte_source.q.val().get_bit(11) {
-            self.tx_byte.next = self.tx_byte.val() | self.datagrams.body.data.val();
+            self.header_byte.next = self.header_byte.val() | self.field_byte.q.val();
         }
         if self.byte_source.q.val().get_bit(12) {
-            self.tx_byte.next =
-                self.tx_byte.val() | self.destination_high.q.val().get_bits::<8>(56);
+            self.header_byte.next =
+                self.header_byte.val() | self.destination_high.q.val().get_bits::<8>(56);
+        }
+        self.tx_byte.next = self.header_byte.val();
+        if self.byte_source.q.val().get_bit(11) {
+            self.tx_byte.next = self.datagrams.body.data.val();
         }
         // The body beat is taken at its index: `in_body` is set a clock ahead, from the
-        // source looked up for the next index (`source_ahead`) and the body's end.
+        // flag of the next index's byte (`body_ahead`) and the body's end.
         self.datagrams.body.ready.next = self.in_body.q.val();
         self.in_body.d.next = self.frame_goes_on.val()
-            & (self.source_ahead.q.val() == self.source_body.val())
+            & self.body_ahead.q.val()
             & (self.index.q.val() < self.body_end_less_one.q.val());
         self.stage_error.d.next = self.in_body.q.val() & !self.datagrams.body.valid.val();
         self.tx_er.d.next = self.stage_valid.q.val() & self.stage_error.q.val();
@@ -863,7 +853,8 @@ impl Logic for FrameTransmitter {
             self.index.d.next = 0.into();
             self.term_is_kind.d.next = true;
             self.term_is_udp_len.d.next = false;
-            self.source_ahead.d.next = self.source_template.val();
+            self.header_ahead.d.next = false;
+            self.body_ahead.d.next = false;
             self.in_body.d.next = false;
             self.tx_er.d.next = false;
         }
