@@ -15,7 +15,8 @@
 //! are in the clock before `done`, else offered to it (`downlink_offer` in that clock,
 //! with `downlink_port`); everything else is carried out.
 //!
-//! The work is a pipeline of registers, one stage per clock: the host match and the
+//! The work is a pipeline of registers, one stage per clock, after the host table's
+//! address compares with `peer_ip_ahead` in the clock before `command`: the host match and the
 //! argument checks; the matched host's last sequence, the oldest slot and the result of
 //! the arguments; the serial-number test (newer or not, registered); the decision. `done`
 //! is high in the clock [`COMMAND_LATENCY`] clocks after `command`, with `fate`, `result`
@@ -23,9 +24,9 @@
 //! the same edge: in the `done` clock they already hold the new values, and
 //! `status_period_set` / `status_now` are high in that clock only. The table is written a
 //! clock later, from registers (its write enables reach about 270 flip-flops: no logic in
-//! front of them). Commands must come at least `COMMAND_LATENCY` + 1 clocks apart (a frame
-//! takes at least 72),
-//! and the parser's fields must stay steady from `command` to `done` (it holds them until
+//! front of them). Commands must come at least `COMMAND_LATENCY` + 2 clocks apart (the
+//! compares see the table one clock before `command`; a frame takes at least 72), and the
+//! parser's fields must stay steady from `command` to `done` (it holds them until
 //! the next stored frame's decision).
 //!
 //! `last_accepted` is the sequence number the table holds for the sender after the
@@ -87,6 +88,9 @@ pub struct CommandUnit {
     pub peer_mac: Signal<In, Bits<48>>,
     /// The sender's IPv4 address.
     pub peer_ip: Signal<In, Bits<32>>,
+    /// The sender's IPv4 address in the clock before `command` (the frame parser's
+    /// `peer_ip_ahead`): the host table is matched a clock ahead.
+    pub peer_ip_ahead: Signal<In, Bits<32>>,
     /// The sender's UDP port.
     pub peer_port: Signal<In, Bits<16>>,
     /// The command's box id.
@@ -179,6 +183,8 @@ pub struct CommandUnit {
     slot_rank: Vec<DFF<Bits<2>>>,
     slot_initial_rank: Vec<Constant<Bits<2>>>,
     oldest_rank: Constant<Bits<2>>,
+    // slot i's address is `peer_ip_ahead` (the match's compares, a clock before stage 1)
+    ip_match: Vec<DFF<Bit>>,
     // stage 1: host match and argument checks
     stage_1: DFF<Bit>,
     matched: Vec<DFF<Bit>>,
@@ -251,6 +257,7 @@ impl CommandUnit {
             command: Default::default(),
             peer_mac: Default::default(),
             peer_ip: Default::default(),
+            peer_ip_ahead: Default::default(),
             peer_port: Default::default(),
             command_box_id: Default::default(),
             command_opcode: Default::default(),
@@ -319,6 +326,7 @@ impl CommandUnit {
                 .collect(),
             oldest_rank: constant(slots as u64 - 1),
             stage_1: Default::default(),
+            ip_match: each(slots),
             matched: each(slots),
             box_ok: Default::default(),
             is_stream_to: Default::default(),
@@ -425,6 +433,7 @@ impl Logic for CommandUnit {
             self.slot_sequence[i].clock.next = self.clock.val();
             self.slot_rank[i].clock.next = self.clock.val();
             self.matched[i].clock.next = self.clock.val();
+            self.ip_match[i].clock.next = self.clock.val();
             self.oldest[i].clock.next = self.clock.val();
             self.write_target[i].clock.next = self.clock.val();
             self.slot_valid[i].d.next = self.slot_valid[i].q.val();
@@ -438,8 +447,8 @@ impl Logic for CommandUnit {
         // `command` on).
         self.stage_1.d.next = self.command.val();
         for i in 0..self.matched.len() {
-            self.matched[i].d.next =
-                self.slot_valid[i].q.val() & (self.slot_ip[i].q.val() == self.peer_ip.val());
+            self.ip_match[i].d.next = self.slot_ip[i].q.val() == self.peer_ip_ahead.val();
+            self.matched[i].d.next = self.slot_valid[i].q.val() & self.ip_match[i].q.val();
         }
         self.box_ok.d.next = (self.command_box_id.val() == self.box_id.val())
             | (self.command_box_id.val() == self.any_box.val());
@@ -951,7 +960,10 @@ mod tests {
                 }
                 _ => 0.into(),
             };
-            u.command.next = true;
+            // the parser shows the sender's address a clock ahead
+            u.peer_ip_ahead.next = u64::from(c.ip).into();
+            self.bench.cycle();
+            self.bench.uut.command.next = true;
             self.bench.cycle();
             self.bench.uut.command.next = false;
             let mut offers = vec![];

@@ -153,6 +153,9 @@ pub struct FrameParser {
     pub peer_mac: Signal<Out, Bits<48>>,
     /// ARP: the sender protocol address; else the IPv4 source.
     pub peer_ip: Signal<Out, Bits<32>>,
+    /// `peer_ip` a clock early: in the clock before `decided` it holds what `peer_ip` holds
+    /// from a stored frame's `decided` on (the command unit matches its host table with it).
+    pub peer_ip_ahead: Signal<Out, Bits<32>>,
     /// The UDP source port.
     pub peer_port: Signal<Out, Bits<16>>,
     /// `tick` in the clock of the frame's last beat.
@@ -463,6 +466,7 @@ impl FrameParser {
             fate: Default::default(),
             peer_mac: Default::default(),
             peer_ip: Default::default(),
+            peer_ip_ahead: Default::default(),
             peer_port: Default::default(),
             receive_tick: Default::default(),
             ip_total_length: Default::default(),
@@ -1462,6 +1466,7 @@ impl Logic for FrameParser {
         self.fate.next = self.fate_out.q.val();
         self.peer_mac.next = self.held_peer_mac.q.val();
         self.peer_ip.next = self.held_peer_ip.q.val();
+        self.peer_ip_ahead.next = self.source_ip.q.val();
         self.peer_port.next = self.held_peer_port.q.val();
         self.receive_tick.next = self.held_receive_tick.q.val();
         self.ip_total_length.next = self.held_total_length.q.val();

@@ -467,6 +467,7 @@ impl Logic for InterfaceBox {
             self.parser.decided.val() & (self.parser.action.val() == self.action_command.val());
         self.commands.peer_mac.next = self.parser.peer_mac.val();
         self.commands.peer_ip.next = self.parser.peer_ip.val();
+        self.commands.peer_ip_ahead.next = self.parser.peer_ip_ahead.val();
         self.commands.peer_port.next = self.parser.peer_port.val();
         self.commands.command_box_id.next = self.parser.command_box_id.val();
         self.commands.command_opcode.next = self.parser.command_opcode.val();
