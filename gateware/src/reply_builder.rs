@@ -697,6 +697,8 @@ pub struct ReplyBuilder {
     ack_counters_len: Constant<Bits<BODY_ADDRESS_BITS>>,
     min_frame_len: Constant<Bits<BODY_ADDRESS_BITS>>,
     ethernet_header_len: Constant<Bits<BODY_ADDRESS_BITS>>,
+    // an IPv4 total length below this makes a frame below the minimum
+    min_ip_total_len: Constant<Bits<16>>,
     opcode_stream_to: Constant<Bits<8>>,
     opcode_status_now: Constant<Bits<8>>,
     result_ok: Constant<Bits<8>>,
@@ -716,6 +718,9 @@ pub struct ReplyBuilder {
     // echo: the request's end (padding from there), the body length a clock later
     frame_end: DFF<Bits<BODY_ADDRESS_BITS>>,
     sizing_echo: DFF<Bit>,
+    // the echo request's frame is below the minimum (tested at the start, from the total
+    // length, so no compare sits between `frame_end` and `body_len`)
+    echo_short: DFF<Bit>,
     // the take: tick then, the send tick a clock later
     took: DFF<Bit>,
     send_tick: DFF<Bits<64>>,
@@ -817,6 +822,7 @@ impl ReplyBuilder {
             ack_counters_len: constant((AckReplyKind::Counters.frame_len()) as u64),
             min_frame_len: constant(MIN_FRAME_LEN as u64),
             ethernet_header_len: constant(ETHERNET_HEADER_LEN as u64),
+            min_ip_total_len: constant((MIN_FRAME_LEN - ETHERNET_HEADER_LEN) as u64),
             opcode_stream_to: constant((Opcode::StreamTo as usize) as u64),
             opcode_status_now: constant((Opcode::StatusNow as usize) as u64),
             result_ok: constant((AckResult::Ok as usize) as u64),
@@ -834,6 +840,7 @@ impl ReplyBuilder {
             body_len: Default::default(),
             frame_end: Default::default(),
             sizing_echo: Default::default(),
+            echo_short: Default::default(),
             took: Default::default(),
             send_tick: Default::default(),
             counter_address: Default::default(),
@@ -904,6 +911,7 @@ impl Logic for ReplyBuilder {
             body_len,
             frame_end,
             sizing_echo,
+            echo_short,
             took,
             send_tick,
             counter_address,
@@ -1173,6 +1181,9 @@ impl Logic for ReplyBuilder {
             self.sizing_echo.d.next = self.start_echo.val();
             self.frame_end.d.next = self.ip_total_length.val().get_bits::<BODY_ADDRESS_BITS>(0)
                 + self.ethernet_header_len.val();
+            // (the parser's total length is within its frame, at most 1,504: the sum above
+            // does not wrap)
+            self.echo_short.d.next = self.ip_total_length.val() < self.min_ip_total_len.val();
             if self.start_arp.val() {
                 self.step.d.next = self.arp_start.val();
                 self.body_len.d.next = self.arp_len.val();
@@ -1196,7 +1207,7 @@ impl Logic for ReplyBuilder {
         // an echo reply is the request's length, at least the minimum frame
         if self.sizing_echo.q.val() {
             self.body_len.d.next = self.frame_end.q.val();
-            if self.frame_end.q.val() < self.min_frame_len.val() {
+            if self.echo_short.q.val() {
                 self.body_len.d.next = self.min_frame_len.val();
             }
         }
