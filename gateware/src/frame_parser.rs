@@ -35,6 +35,7 @@
 //! high.
 
 use crate::hdl::*;
+use crate::ones_complement_sum::OnesComplementSum;
 use crate::stream::ByteStreamSink;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::command::{self, HEADER_LEN, KIND_COMMAND};
@@ -337,16 +338,11 @@ pub struct FrameParser {
     in_ip_history: DFF<Bits<3>>,
     payload_length: DFF<Bits<16>>,
     arguments_expected: DFF<Bits<16>>,
-    // sums: 16 bits and the end-around carry
-    header_sum: DFF<Bits<16>>,
-    header_carry: DFF<Bit>,
-    transport_sum: DFF<Bits<16>>,
-    transport_carry: DFF<Bit>,
-    rest_sum: DFF<Bits<16>>,
-    rest_carry: DFF<Bit>,
-    header_next: Signal<Local, Bits<17>>,
-    transport_next: Signal<Local, Bits<17>>,
-    rest_next: Signal<Local, Bits<17>>,
+    // the sums: the IPv4 header, the transport message (with the UDP pseudo header), and
+    // the ICMP message from its identifier
+    header_sum: OnesComplementSum,
+    transport_sum: OnesComplementSum,
+    rest_sum: OnesComplementSum,
     argument_byte: Signal<Local, Bits<8>>,
     // end of frame
     end_length_error: DFF<Bit>,
@@ -632,14 +628,8 @@ impl FrameParser {
             payload_length: Default::default(),
             arguments_expected: Default::default(),
             header_sum: Default::default(),
-            header_carry: Default::default(),
             transport_sum: Default::default(),
-            transport_carry: Default::default(),
             rest_sum: Default::default(),
-            rest_carry: Default::default(),
-            header_next: Default::default(),
-            transport_next: Default::default(),
-            rest_next: Default::default(),
             argument_byte: Default::default(),
             end_length_error: Default::default(),
             end_error: Default::default(),
@@ -808,12 +798,6 @@ impl Logic for FrameParser {
             in_ip_history,
             payload_length,
             arguments_expected,
-            header_sum,
-            header_carry,
-            transport_sum,
-            transport_carry,
-            rest_sum,
-            rest_carry,
             end_length_error,
             end_error,
             end_stored,
@@ -1030,15 +1014,30 @@ impl Logic for FrameParser {
         if self.in_ip.q.val() {
             self.argument_byte.next = self.beat_data.q.val();
         }
-        self.header_next.next = bit_cast::<17, 16>(self.header_sum.q.val())
-            + bit_cast::<17, 16>(self.beat_word.q.val())
-            + bit_cast::<17, 1>(self.header_carry.q.val().into());
-        self.rest_next.next = bit_cast::<17, 16>(self.rest_sum.q.val())
-            + bit_cast::<17, 16>(self.beat_word.q.val())
-            + bit_cast::<17, 1>(self.rest_carry.q.val().into());
-        self.transport_next.next = bit_cast::<17, 16>(self.transport_sum.q.val())
-            + bit_cast::<17, 16>(self.transport_word.q.val())
-            + bit_cast::<17, 1>(self.transport_carry.q.val().into());
+        // the sums add a word a clock (the beat's, or the transport's with the pseudo
+        // header) while the beat is in their range; they restart at a frame's first beat
+        // (the transport's at the IPv4 protocol, with UDP's pseudo-header protocol word)
+        self.header_sum.clock.next = self.clock.val();
+        self.header_sum.word.next = self.beat_word.q.val();
+        self.header_sum.add.next = self.beat_valid.q.val() & self.at_ip_header.q.val();
+        self.header_sum.restart.next = self.beat_valid.q.val() & self.at_first.q.val();
+        self.header_sum.start.next = 0.into();
+        self.rest_sum.clock.next = self.clock.val();
+        self.rest_sum.word.next = self.beat_word.q.val();
+        self.rest_sum.add.next =
+            self.beat_valid.q.val() & self.in_ip.q.val() & self.at_from_icmp_rest.q.val();
+        self.rest_sum.restart.next = self.beat_valid.q.val() & self.at_first.q.val();
+        self.rest_sum.start.next = 0.into();
+        self.transport_sum.clock.next = self.clock.val();
+        self.transport_sum.word.next = self.transport_word.q.val();
+        self.transport_sum.add.next = self.beat_valid.q.val()
+            & ((self.is_udp.q.val() & self.at_pseudo_header.q.val())
+                | (self.in_ip.q.val() & self.at_from_transport.q.val()));
+        self.transport_sum.restart.next = self.beat_valid.q.val() & self.at_ip_protocol.q.val();
+        self.transport_sum.start.next = 0.into();
+        if self.beat_data.q.val() == self.protocol_udp.val() {
+            self.transport_sum.start.next = bit_cast::<16, 8>(self.protocol_udp.val());
+        }
 
         if self.beat_valid.q.val() {
             if self.at_destination.q.val() {
@@ -1165,29 +1164,6 @@ impl Logic for FrameParser {
                 self.ip_left.d.next = self.payload_length.q.val();
                 self.in_ip.d.next = self.payload_length.q.val() != 0;
             }
-            // sums
-            if self.at_ip_header.q.val() {
-                self.header_sum.d.next = self.header_next.val().get_bits::<16>(0);
-                self.header_carry.d.next = self.header_next.val().get_bit(16);
-            }
-            if (self.is_udp.q.val() & self.at_pseudo_header.q.val())
-                | (self.in_ip.q.val() & (self.at_from_transport.q.val()))
-            {
-                self.transport_sum.d.next = self.transport_next.val().get_bits::<16>(0);
-                self.transport_carry.d.next = self.transport_next.val().get_bit(16);
-            }
-            if self.at_ip_protocol.q.val() {
-                // UDP: the pseudo header's protocol word
-                self.transport_sum.d.next = 0.into();
-                if self.beat_data.q.val() == self.protocol_udp.val() {
-                    self.transport_sum.d.next = bit_cast::<16, 8>(self.protocol_udp.val());
-                }
-                self.transport_carry.d.next = false;
-            }
-            if self.in_ip.q.val() & (self.at_from_icmp_rest.q.val()) {
-                self.rest_sum.d.next = self.rest_next.val().get_bits::<16>(0);
-                self.rest_carry.d.next = self.rest_next.val().get_bit(16);
-            }
             if self.at_first.q.val() {
                 self.is_arp.d.next = false;
                 self.is_udp.d.next = false;
@@ -1205,10 +1181,6 @@ impl Logic for FrameParser {
                 self.argument_9.d.next = 0.into();
                 self.argument_10.d.next = 0.into();
                 self.argument_11.d.next = 0.into();
-                self.header_sum.d.next = 0.into();
-                self.header_carry.d.next = false;
-                self.rest_sum.d.next = 0.into();
-                self.rest_carry.d.next = false;
             }
             if self.beat_last.q.val() {
                 self.end_length_error.d.next = self.beat_length_error.q.val();
@@ -1248,9 +1220,7 @@ impl Logic for FrameParser {
             .get_bits::<4>(self.ihl_bit.val().index())
             > 5;
         // a folded sum of 0xFFFF: sum + carry == 0xFFFF
-        self.s1_header_sum_ok.d.next = ((self.header_sum.q.val() == 0xFFFF)
-            & !self.header_carry.q.val())
-            | ((self.header_sum.q.val() == 0xFFFE) & self.header_carry.q.val());
+        self.s1_header_sum_ok.d.next = self.header_sum.verifies.val();
         self.s1_total_from_20.d.next = self.total_length.q.val() >= self.ip_header_len.val();
         self.s1_total_from_28.d.next =
             self.total_length.q.val() >= self.ip_and_transport_header_len.val();
@@ -1276,9 +1246,7 @@ impl Logic for FrameParser {
             .val()
             .get_bits::<16>(self.icmp_type_code_bit.val().index())
             == self.icmp_echo_request.val();
-        self.s1_transport_sum_ok.d.next = ((self.transport_sum.q.val() == 0xFFFF)
-            & !self.transport_carry.q.val())
-            | ((self.transport_sum.q.val() == 0xFFFE) & self.transport_carry.q.val());
+        self.s1_transport_sum_ok.d.next = self.transport_sum.verifies.val();
         self.s1_udp_length_ok.d.next = self
             .transport
             .q
@@ -1314,11 +1282,7 @@ impl Logic for FrameParser {
             & (self.reserved.q.val() == 0);
         self.s1_argument_length_ok.d.next =
             self.argument_length.q.val() == self.arguments_expected.q.val();
-        self.rest_folded.d.next =
-            self.rest_sum.q.val() + bit_cast::<16, 1>(self.rest_carry.q.val().into());
-        if (self.rest_sum.q.val() == 0xFFFF) & self.rest_carry.q.val() {
-            self.rest_folded.d.next = 1.into();
-        }
+        self.rest_folded.d.next = self.rest_sum.folded.val();
 
         // ---- stage 2: the checks of the rule table ----
         self.p2.d.next = self.p1.q.val();

@@ -52,6 +52,7 @@ pub mod hdl;
 pub mod interface_box;
 pub mod mac_receiver;
 pub mod mdio;
+pub mod ones_complement_sum;
 pub mod packet_store;
 pub mod port_slots;
 pub mod record_arbiter;
