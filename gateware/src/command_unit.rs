@@ -204,6 +204,8 @@ pub struct CommandUnit {
     status_period_ok: DFF<Bit>,
     cell_port_ok: DFF<Bit>,
     reserved_zero: DFF<Bit>,
+    // a cell command's target ports, one bit each (every bit for `ALL_PORTS`)
+    target_ports: DFF<Bits<64>>,
     // stage 2: the matched host's sequence, the oldest slot, the arguments' verdict
     stage_2: DFF<Bit>,
     hit: DFF<Bit>,
@@ -215,6 +217,13 @@ pub struct CommandUnit {
     // stage 3: the matched host's sequence is not older than the command's
     stage_3: DFF<Bit>,
     not_newer: DFF<Bit>,
+    // what the command does if its sequence number is newer: the box id and arguments are
+    // right and it is this opcode (so the decision gates one flag with the serial test)
+    apply_stream_to: DFF<Bit>,
+    apply_flush_timeout: DFF<Bit>,
+    apply_status_period: DFF<Bit>,
+    apply_status_now: DFF<Bit>,
+    apply_cell_command: DFF<Bit>,
     // stage 5: the table write a clock after the decision: the slot (one-hot) and the rank
     // it had
     write_table: DFF<Bit>,
@@ -237,13 +246,15 @@ pub struct CommandUnit {
     any_match: Signal<Local, Bit>,
     difference: Signal<Local, Bits<32>>,
     taken: Signal<Local, Bit>,
+    newer: Signal<Local, Bit>,
     target: Vec<Signal<Local, Bit>>,
     target_rank: Signal<Local, Bits<2>>,
     value: Signal<Local, Bits<32>>,
     arguments_good: Signal<Local, Bit>,
+    opcode_known: Signal<Local, Bit>,
     cell_command_taken: Signal<Local, Bit>,
     downlink_room: Signal<Local, Bit>,
-    full_shifted: Signal<Local, Bits<64>>,
+    cell_port: Signal<Local, Bits<8>>,
 }
 
 impl CommandUnit {
@@ -344,6 +355,7 @@ impl CommandUnit {
             status_period_ok: Default::default(),
             cell_port_ok: Default::default(),
             reserved_zero: Default::default(),
+            target_ports: Default::default(),
             stage_2: Default::default(),
             hit: Default::default(),
             hit_sequence: Default::default(),
@@ -353,6 +365,11 @@ impl CommandUnit {
             arguments_result: Default::default(),
             stage_3: Default::default(),
             not_newer: Default::default(),
+            apply_stream_to: Default::default(),
+            apply_flush_timeout: Default::default(),
+            apply_status_period: Default::default(),
+            apply_status_now: Default::default(),
+            apply_cell_command: Default::default(),
             write_table: Default::default(),
             write_target: (0..slots).map(|_| Default::default()).collect(),
             write_rank: Default::default(),
@@ -371,13 +388,15 @@ impl CommandUnit {
             any_match: Default::default(),
             difference: Default::default(),
             taken: Default::default(),
+            newer: Default::default(),
             target: each(slots),
             target_rank: Default::default(),
             value: Default::default(),
             arguments_good: Default::default(),
+            opcode_known: Default::default(),
             cell_command_taken: Default::default(),
             downlink_room: Default::default(),
-            full_shifted: Default::default(),
+            cell_port: Default::default(),
         }
     }
 }
@@ -405,6 +424,7 @@ impl Logic for CommandUnit {
             status_period_ok,
             cell_port_ok,
             reserved_zero,
+            target_ports,
             stage_2,
             hit,
             hit_sequence,
@@ -413,6 +433,11 @@ impl Logic for CommandUnit {
             arguments_result,
             stage_3,
             not_newer,
+            apply_stream_to,
+            apply_flush_timeout,
+            apply_status_period,
+            apply_status_now,
+            apply_cell_command,
             write_table,
             write_rank,
             done_out,
@@ -486,16 +511,21 @@ impl Logic for CommandUnit {
             (self.value.val() != 0) & (self.value.val() <= self.max_flush_timeout.val());
         self.status_period_ok.d.next = self.value.val() >= self.min_status_period.val();
         // cell command: the port in byte 0, three reserved bytes
-        self.cell_port_ok.d.next = (self
+        self.cell_port.next = self
             .command_arguments
             .val()
-            .get_bits::<8>(self.cell_port_bit.val().index())
-            == self.all_ports.val())
-            | (self
-                .command_arguments
-                .val()
-                .get_bits::<8>(self.cell_port_bit.val().index())
-                < self.port_count.val());
+            .get_bits::<8>(self.cell_port_bit.val().index());
+        self.cell_port_ok.d.next = (self.cell_port.val() == self.all_ports.val())
+            | (self.cell_port.val() < self.port_count.val());
+        // (ports from 64 on target nothing, as a cell command's port never is one)
+        self.target_ports.d.next = 0.into();
+        if self.cell_port.val().get_bits::<2>(6) == 0 {
+            self.target_ports.d.next = bit_cast::<64, 1>(true.into())
+                << bit_cast::<64, 6>(self.cell_port.val().get_bits::<6>(0));
+        }
+        if self.cell_port.val() == self.all_ports.val() {
+            self.target_ports.d.next = 0xFFFF_FFFF_FFFF_FFFF_u64.into();
+        }
         self.reserved_zero.d.next = self
             .command_arguments
             .val()
@@ -517,36 +547,32 @@ impl Logic for CommandUnit {
         self.hit.d.next = self.any_match.val();
         self.hit_sequence.d.next = self.sequence_term.val();
         self.arguments_good.next = false;
-        self.arguments_fate.d.next = self.fate_bad_argument.val();
-        self.arguments_result.d.next = self.result_bad_argument.val();
-        if self.is_stream_to.q.val() {
-            if self.length_0.q.val()
-                | (self.length_destination.q.val() & self.destination_ok.q.val())
-            {
-                self.arguments_good.next = true;
-            }
-        } else if self.is_set_flush_timeout.q.val() {
-            if self.length_value.q.val() & self.flush_timeout_ok.q.val() {
-                self.arguments_good.next = true;
-            }
-        } else if self.is_set_status_period.q.val() {
-            if self.length_value.q.val() & self.status_period_ok.q.val() {
-                self.arguments_good.next = true;
-            }
-        } else if self.is_status_now.q.val() | self.is_read_tick.q.val() {
-            if self.length_0.q.val() {
-                self.arguments_good.next = true;
-            }
-        } else if self.is_cell_command.q.val() {
-            if self.length_cell_command.q.val()
+        // (the opcode flags are exclusive: the verdict is an OR of one term per opcode)
+        self.arguments_good.next = (self.is_stream_to.q.val()
+            & (self.length_0.q.val()
+                | (self.length_destination.q.val() & self.destination_ok.q.val())))
+            | (self.is_set_flush_timeout.q.val()
+                & self.length_value.q.val()
+                & self.flush_timeout_ok.q.val())
+            | (self.is_set_status_period.q.val()
+                & self.length_value.q.val()
+                & self.status_period_ok.q.val())
+            | ((self.is_status_now.q.val() | self.is_read_tick.q.val()) & self.length_0.q.val())
+            | (self.is_cell_command.q.val()
+                & self.length_cell_command.q.val()
                 & self.cell_port_ok.q.val()
-                & self.reserved_zero.q.val()
-            {
-                self.arguments_good.next = true;
-            }
-        } else {
-            self.arguments_fate.d.next = self.fate_unknown_opcode.val();
-            self.arguments_result.d.next = self.result_unknown_opcode.val();
+                & self.reserved_zero.q.val());
+        self.opcode_known.next = self.is_stream_to.q.val()
+            | self.is_set_flush_timeout.q.val()
+            | self.is_set_status_period.q.val()
+            | self.is_status_now.q.val()
+            | self.is_read_tick.q.val()
+            | self.is_cell_command.q.val();
+        self.arguments_fate.d.next = self.fate_unknown_opcode.val();
+        self.arguments_result.d.next = self.result_unknown_opcode.val();
+        if self.opcode_known.val() {
+            self.arguments_fate.d.next = self.fate_bad_argument.val();
+            self.arguments_result.d.next = self.result_bad_argument.val();
         }
         if self.arguments_good.val() {
             self.arguments_fate.d.next = self.fate_accepted.val();
@@ -560,12 +586,23 @@ impl Logic for CommandUnit {
         self.not_newer.d.next = self.hit.q.val()
             & ((self.command_sequence.val() == self.hit_sequence.q.val())
                 | self.difference.val().get_bit(31));
+        self.apply_stream_to.d.next =
+            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_stream_to.q.val();
+        self.apply_flush_timeout.d.next =
+            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_set_flush_timeout.q.val();
+        self.apply_status_period.d.next =
+            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_set_status_period.q.val();
+        self.apply_status_now.d.next =
+            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_status_now.q.val();
+        self.apply_cell_command.d.next =
+            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_cell_command.q.val();
 
         // Stage 4: the decision, the table and the configuration.
         self.done_out.d.next = self.stage_3.q.val();
         self.status_period_set_out.d.next = false;
         self.status_now_out.d.next = false;
         self.taken.next = self.stage_3.q.val() & self.box_ok.q.val() & !self.not_newer.q.val();
+        self.newer.next = self.stage_3.q.val() & !self.not_newer.q.val();
         self.target_rank.next = 0.into();
         for i in 0..self.target.len() {
             self.target[i].next = self.oldest[i].q.val();
@@ -576,19 +613,10 @@ impl Logic for CommandUnit {
                 self.target_rank.next = self.target_rank.val() | self.slot_rank[i].q.val();
             }
         }
-        self.cell_command_taken.next =
-            self.taken.val() & self.arguments_ok.q.val() & self.is_cell_command.q.val();
-        self.downlink_port.next = self
-            .command_arguments
-            .val()
-            .get_bits::<8>(self.cell_port_bit.val().index());
-        self.full_shifted.next =
-            self.downlink_full_ports.val() >> bit_cast::<64, 8>(self.downlink_port.val());
-        self.downlink_room.next = !self.downlink_busy.val() & !self.full_shifted.val().get_bit(0);
-        if self.downlink_port.val() == self.all_ports.val() {
-            self.downlink_room.next =
-                !self.downlink_busy.val() & (self.downlink_full_ports.val() == 0);
-        }
+        self.cell_command_taken.next = self.newer.val() & self.apply_cell_command.q.val();
+        self.downlink_port.next = self.cell_port.val();
+        self.downlink_room.next = !self.downlink_busy.val()
+            & ((self.downlink_full_ports.val() & self.target_ports.q.val()) == 0);
         self.downlink_offer.next = self.cell_command_taken.val() & self.downlink_room.val();
         if self.stage_3.q.val() {
             if !self.box_ok.q.val() {
@@ -628,8 +656,8 @@ impl Logic for CommandUnit {
                 }
             }
         }
-        if self.taken.val() & self.arguments_ok.q.val() {
-            if self.is_stream_to.q.val() {
+        if self.newer.val() {
+            if self.apply_stream_to.q.val() {
                 if self.length_0.q.val() {
                     self.destination_mac_out.d.next = self.peer_mac.val();
                     self.destination_ip_out.d.next = self.peer_ip.val();
@@ -649,14 +677,14 @@ impl Logic for CommandUnit {
                         .get_bits::<16>(self.destination_port_bit.val().index());
                 }
             }
-            if self.is_set_flush_timeout.q.val() {
+            if self.apply_flush_timeout.q.val() {
                 self.flush_timeout_out.d.next = self.value.val();
             }
-            if self.is_set_status_period.q.val() {
+            if self.apply_status_period.q.val() {
                 self.status_period_out.d.next = self.value.val();
                 self.status_period_set_out.d.next = true;
             }
-            if self.is_status_now.q.val() {
+            if self.apply_status_now.q.val() {
                 self.status_now_out.d.next = true;
             }
         }
