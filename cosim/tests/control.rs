@@ -311,42 +311,10 @@ fn a_random_mix_of_good_and_bad_frames_is_counted_by_reason() {
 fn mutated_frames_never_panic_and_are_each_counted_once() {
     let mut rng = Rng(0xF00D);
     let mut b = BoxControl::new(config());
-    let seeds = [
-        arp_request(BOX_IP, HOST_MAC, HOST_IP),
-        ping(BOX_MAC, BOX_IP, 1, 2, b"abcdefgh"),
-        command(HOST_IP, 5, Request::StatusNow),
-        command(
-            HOST_IP,
-            6,
-            Request::CellCommand {
-                port: 1,
-                packet: [0; PACKET_LEN],
-            },
-        ),
-    ];
+    let seeds = mutation_seeds();
     let cases = 3000u32;
     for i in 0..cases {
-        let mut f = seeds[i as usize % seeds.len()].clone();
-        f.truncate(f.len() - 4);
-        // flip, cut or grow, then a right FCS so the mutation reaches the parsers
-        for _ in 0..1 + rng.below(4) {
-            match rng.below(3) {
-                0 => {
-                    let at = rng.below(f.len() as u64) as usize;
-                    f[at] = rng.next() as u8;
-                }
-                1 => {
-                    let n = 14 + rng.below(f.len() as u64 - 13) as usize;
-                    f.truncate(n);
-                }
-                _ => {
-                    let n = rng.below(64) as usize;
-                    let tail = rng.bytes(n);
-                    f.extend_from_slice(&tail);
-                }
-            }
-        }
-        let frame = with_fcs(f);
+        let frame = mutated_frame(&mut rng, &seeds[i as usize % seeds.len()]);
         let out = b.receive(&frame, u64::from(i));
         if let Some(reply) = &out.reply {
             // whatever it answers is a well-formed frame

@@ -383,6 +383,52 @@ fn reply_latency_is_the_sum_of_the_blocks_latencies() {
     }
 }
 
+/// 3,000 frames mutated from an ARP request, a ping and two commands (bytes changed, cut,
+/// grown, each with a right FCS) through the RTL receive path, 12 us apart (every answer
+/// has left before the next frame): every answer equals the control model's byte for byte,
+/// and the status-now acknowledgement at the end carries the model's counters, every frame
+/// counted once.
+#[test]
+fn mutated_frames_are_answered_and_counted_as_the_model_says() {
+    let config = box_config();
+    let mut rng = Rng(0xF00D);
+    let seeds = mutation_seeds();
+    let cases = 3000;
+    let mut host_frames: Vec<HostFrame> = (0..cases)
+        .map(|i| HostFrame {
+            edge: 20_000 + 1_500 * i as u64,
+            frame: mutated_frame(&mut rng, &seeds[i % seeds.len()]),
+        })
+        .collect();
+    let edge = 20_000 + 1_500 * cases as u64 + 10_000;
+    host_frames.push(HostFrame {
+        edge,
+        frame: command(HOST_IP, u32::MAX / 2, Request::StatusNow),
+    });
+    let duration_ns = (edge + 10_000) * TICK_NS;
+    let run = run_both(&spec(
+        config.clone(),
+        vec![vec![]; config.ports],
+        host_frames.clone(),
+        duration_ns,
+    ));
+    let m = check_answers(
+        &run,
+        &host_frames,
+        model(skinbox_cosim::emulator::control_config(&config)),
+        |_| true,
+    );
+    assert_eq!(m.counters.get(BoxCounter::FramesReceived), cases as u32 + 1);
+    assert_eq!(m.counters.unaccounted_frames(), 0);
+    // the mutations reach past the FCS: answered and refused frames both occurred
+    let answered = run.replies.len();
+    assert!(
+        answered > cases / 10 && answered < cases,
+        "{answered} answers"
+    );
+    assert!(m.counters.get(BoxCounter::ReplyBusy) == 0);
+}
+
 /// Requests that come while the previous reply still holds the buffer are counted
 /// `reply_busy` and not answered; once the reply has left, the next is answered. The
 /// reference model predicts which (RTL == reference), and the status-now acknowledgement at

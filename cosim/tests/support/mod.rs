@@ -169,6 +169,49 @@ impl Rng {
     }
 }
 
+/// The frames mutations start from: an ARP request, a ping, a status-now and a cell
+/// command, all to the box.
+pub fn mutation_seeds() -> Vec<Vec<u8>> {
+    vec![
+        arp_request(BOX_IP, HOST_MAC, HOST_IP),
+        ping(BOX_MAC, BOX_IP, 1, 2, b"abcdefgh"),
+        command(HOST_IP, 5, Request::StatusNow),
+        command(
+            HOST_IP,
+            6,
+            Request::CellCommand {
+                port: 1,
+                packet: [0; PACKET_LEN],
+            },
+        ),
+    ]
+}
+
+/// `seed` (a frame with its FCS) with one to four random mutations (a byte changed, the
+/// frame cut to 14 bytes or more, up to 63 random bytes added) and then a right FCS, so
+/// that the mutation reaches the parsers rather than the FCS check.
+pub fn mutated_frame(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
+    let mut f = seed[..seed.len() - 4].to_vec();
+    for _ in 0..1 + rng.below(4) {
+        match rng.below(3) {
+            0 => {
+                let at = rng.below(f.len() as u64) as usize;
+                f[at] = rng.next() as u8;
+            }
+            1 => {
+                let n = 14 + rng.below(f.len() as u64 - 13) as usize;
+                f.truncate(n);
+            }
+            _ => {
+                let n = rng.below(64) as usize;
+                let tail = rng.bytes(n);
+                f.extend_from_slice(&tail);
+            }
+        }
+    }
+    with_fcs(f)
+}
+
 /// What the test expects of one frame.
 pub struct Case {
     pub frame: Vec<u8>,
