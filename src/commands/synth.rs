@@ -46,6 +46,11 @@ pub struct Args {
     /// also checks the PHY reset, the LED and the MDIO sequence.
     #[arg(long, conflicts_with = "shard")]
     sim: bool,
+    /// Instead of the flow: yosys alone with each of the box's blocks kept apart, and each
+    /// block's LUT4, carry, flip-flop and block RAM cells printed with the network part's
+    /// sum (no placement; OUT_DIR/blocks-stat.json).
+    #[arg(long, conflicts_with_all = ["shard", "merge", "sim", "seeds"])]
+    blocks: bool,
     /// Scene window of --sim, ms.
     #[arg(long, default_value_t = skinbox_synth::netlist_sim::DEFAULT_WINDOW_NS as f64 / 1e6,
           requires = "sim")]
@@ -144,6 +149,11 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
                 started.elapsed().as_secs_f64()
             )
         });
+    }
+    if args.blocks {
+        let blocks = skinbox_synth::blocks::run(&toolchain, &options, &mut progress);
+        bar.finish_and_clear();
+        return print_blocks(&blocks?, json);
     }
     let report = match args.shard {
         Some(shard) => {
@@ -359,4 +369,43 @@ fn print_report(r: &SynthReport) {
         "  time    yosys {:.0} s, nextpnr {:.0} s, ecppack {:.0} s, total {:.0} s",
         r.seconds.yosys, r.seconds.nextpnr, r.seconds.ecppack, r.seconds.total
     );
+}
+
+/// Prints `skinbox synth --blocks`: a table, or JSON with the network part's sum.
+fn print_blocks(blocks: &[skinbox_synth::blocks::BlockUse], json: bool) -> anyhow::Result<()> {
+    use skinbox_synth::blocks::{BlockUse, NETWORK_BLOCKS};
+    let network = BlockUse::total(
+        "network part",
+        blocks
+            .iter()
+            .filter(|b| NETWORK_BLOCKS.contains(&b.block.as_str())),
+    );
+    let all = BlockUse::total("all blocks", blocks);
+    if json {
+        let value = serde_json::json!({ "blocks": blocks, "network": network, "all": all });
+        println!("{}", serde_json::to_string_pretty(&value)?);
+        return Ok(());
+    }
+    println!(
+        "{:<24} {:>6} {:>6} {:>6} {:>7} {:>6}",
+        "block", "LUT4", "CCU2C", "FF", "DP16KD", "DPRAM"
+    );
+    for b in blocks.iter().chain([&network, &all]) {
+        let mark = if NETWORK_BLOCKS.contains(&b.block.as_str()) {
+            "*"
+        } else {
+            " "
+        };
+        println!(
+            "{:<24} {:>6} {:>6} {:>6} {:>7} {:>6}",
+            format!("{}{mark}", b.block),
+            b.lut4,
+            b.ccu2c,
+            b.ff,
+            b.dp16kd,
+            b.dpram
+        );
+    }
+    println!("(* the network part; each block optimised on its own)");
+    Ok(())
 }

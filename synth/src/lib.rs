@@ -5,6 +5,7 @@
 //! with the board's constraints and `ecppack`, and returns a [`flow::SynthReport`] built
 //! from the tools' JSON reports ([`report`]).
 
+pub mod blocks;
 pub mod flow;
 pub mod netlist_sim;
 pub mod report;
