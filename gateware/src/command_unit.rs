@@ -134,6 +134,12 @@ pub struct CommandUnit {
     pub status_period_set: Signal<Out, Bit>,
     /// One clock (the `done` clock): a status-now was carried out.
     pub status_now: Signal<Out, Bit>,
+    /// From `done` on, held like `result`: the command was an accepted stream-to (its
+    /// acknowledgement carries the destination).
+    pub accepted_stream_to: Signal<Out, Bit>,
+    /// From `done` on, held like `result`: the command was an accepted status-now (its
+    /// acknowledgement carries the box counters).
+    pub accepted_status_now: Signal<Out, Bit>,
     // build-time values
     box_id: Constant<Bits<16>>,
     any_box: Constant<Bits<16>>,
@@ -241,6 +247,8 @@ pub struct CommandUnit {
     status_period_out: DFF<Bits<32>>,
     status_period_set_out: DFF<Bit>,
     status_now_out: DFF<Bit>,
+    accepted_stream_to_out: DFF<Bit>,
+    accepted_status_now_out: DFF<Bit>,
     // decision signals
     sequence_term: Signal<Local, Bits<32>>,
     any_match: Signal<Local, Bit>,
@@ -290,6 +298,8 @@ impl CommandUnit {
             status_period_ticks: Default::default(),
             status_period_set: Default::default(),
             status_now: Default::default(),
+            accepted_stream_to: Default::default(),
+            accepted_status_now: Default::default(),
             box_id: constant(config.box_id.into()),
             any_box: constant(ANY_BOX.into()),
             all_ports: constant(ALL_PORTS.into()),
@@ -384,6 +394,8 @@ impl CommandUnit {
             status_period_out: Default::default(),
             status_period_set_out: Default::default(),
             status_now_out: Default::default(),
+            accepted_stream_to_out: Default::default(),
+            accepted_status_now_out: Default::default(),
             sequence_term: Default::default(),
             any_match: Default::default(),
             difference: Default::default(),
@@ -450,7 +462,9 @@ impl Logic for CommandUnit {
             flush_timeout_out,
             status_period_out,
             status_period_set_out,
-            status_now_out
+            status_now_out,
+            accepted_stream_to_out,
+            accepted_status_now_out
         );
         for i in 0..self.slot_valid.len() {
             self.slot_valid[i].clock.next = self.clock.val();
@@ -619,6 +633,8 @@ impl Logic for CommandUnit {
             & ((self.downlink_full_ports.val() & self.target_ports.q.val()) == 0);
         self.downlink_offer.next = self.cell_command_taken.val() & self.downlink_room.val();
         if self.stage_3.q.val() {
+            self.accepted_stream_to_out.d.next = self.newer.val() & self.apply_stream_to.q.val();
+            self.accepted_status_now_out.d.next = self.newer.val() & self.apply_status_now.q.val();
             if !self.box_ok.q.val() {
                 self.fate_out.d.next = self.fate_other_box.val();
                 self.result_out.d.next = self.result_other_box.val();
@@ -700,6 +716,8 @@ impl Logic for CommandUnit {
         self.status_period_ticks.next = self.status_period_out.q.val();
         self.status_period_set.next = self.status_period_set_out.q.val();
         self.status_now.next = self.status_now_out.q.val();
+        self.accepted_stream_to.next = self.accepted_stream_to_out.q.val();
+        self.accepted_status_now.next = self.accepted_status_now_out.q.val();
 
         if self.reset.val() {
             for i in 0..self.slot_valid.len() {
@@ -723,6 +741,8 @@ impl Logic for CommandUnit {
             self.status_period_out.d.next = self.default_status_period.val();
             self.status_period_set_out.d.next = false;
             self.status_now_out.d.next = false;
+            self.accepted_stream_to_out.d.next = false;
+            self.accepted_status_now_out.d.next = false;
         }
     }
 }

@@ -501,6 +501,8 @@ impl Logic for InterfaceBox {
         self.replies.icmp_rest_sum.next = self.parser.icmp_rest_sum.val();
         self.replies.command_opcode.next = self.parser.command_opcode.val();
         self.replies.result.next = self.commands.result.val();
+        self.replies.accepted_stream_to.next = self.commands.accepted_stream_to.val();
+        self.replies.accepted_status_now.next = self.commands.accepted_status_now.val();
         self.replies.last_accepted.next = self.commands.last_accepted.val();
         self.replies.destination_mac.next = self.commands.destination_mac.val();
         self.replies.destination_ip.next = self.commands.destination_ip.val();

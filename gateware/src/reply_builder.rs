@@ -56,7 +56,7 @@ use crate::hdl::*;
 use crate::stream::{DatagramSource, RAW_FRAME_KIND};
 use skinbox_protocol::box_counters::{self, BoxCounter, BOX_COUNTERS_LEN};
 use skinbox_protocol::command::{
-    self, ack_field, destination_field, AckResult, Opcode, ACK_FIXED_LEN, DESTINATION_LEN, KIND_ACK,
+    self, ack_field, destination_field, ACK_FIXED_LEN, DESTINATION_LEN, KIND_ACK,
 };
 use skinbox_protocol::datagram::{MAGIC, VERSION};
 use skinbox_protocol::link::*;
@@ -662,6 +662,10 @@ pub struct ReplyBuilder {
     pub command_opcode: Signal<In, Bits<8>>,
     /// The command's result (`AckResult`).
     pub result: Signal<In, Bits<8>>,
+    /// The command was an accepted stream-to: the acknowledgement carries the destination.
+    pub accepted_stream_to: Signal<In, Bit>,
+    /// The command was an accepted status-now: the acknowledgement carries the counters.
+    pub accepted_status_now: Signal<In, Bit>,
     /// The last sequence number accepted from the command's sender.
     pub last_accepted: Signal<In, Bits<32>>,
     /// The datagrams' destination now in effect: MAC...
@@ -699,9 +703,6 @@ pub struct ReplyBuilder {
     ethernet_header_len: Constant<Bits<BODY_ADDRESS_BITS>>,
     // an IPv4 total length below this makes a frame below the minimum
     min_ip_total_len: Constant<Bits<16>>,
-    opcode_stream_to: Constant<Bits<8>>,
-    opcode_status_now: Constant<Bits<8>>,
-    result_ok: Constant<Bits<8>>,
     send_tick_offset: Constant<Bits<64>>,
     raw_frame_kind: Constant<Bits<8>>,
     // the sequencer: ROM address, a program is running, ROM words in flight
@@ -797,6 +798,8 @@ impl ReplyBuilder {
             icmp_rest_sum: Default::default(),
             command_opcode: Default::default(),
             result: Default::default(),
+            accepted_stream_to: Default::default(),
+            accepted_status_now: Default::default(),
             last_accepted: Default::default(),
             destination_mac: Default::default(),
             destination_ip: Default::default(),
@@ -823,9 +826,6 @@ impl ReplyBuilder {
             min_frame_len: constant(MIN_FRAME_LEN as u64),
             ethernet_header_len: constant(ETHERNET_HEADER_LEN as u64),
             min_ip_total_len: constant((MIN_FRAME_LEN - ETHERNET_HEADER_LEN) as u64),
-            opcode_stream_to: constant((Opcode::StreamTo as usize) as u64),
-            opcode_status_now: constant((Opcode::StatusNow as usize) as u64),
-            result_ok: constant((AckResult::Ok as usize) as u64),
             // (the tick of the clock after the take)
             send_tick_offset: constant((TAKE_TO_FIRST_BYTE as usize - 1) as u64),
             raw_frame_kind: constant((usize::from(RAW_FRAME_KIND)) as u64),
@@ -1189,14 +1189,10 @@ impl Logic for ReplyBuilder {
                 self.body_len.d.next = self.arp_len.val();
             } else if self.start_echo.val() {
                 self.step.d.next = self.echo_start.val();
-            } else if (self.command_opcode.val() == self.opcode_stream_to.val())
-                & (self.result.val() == self.result_ok.val())
-            {
+            } else if self.accepted_stream_to.val() {
                 self.step.d.next = self.ack_destination_start.val();
                 self.body_len.d.next = self.ack_destination_len.val();
-            } else if (self.command_opcode.val() == self.opcode_status_now.val())
-                & (self.result.val() == self.result_ok.val())
-            {
+            } else if self.accepted_status_now.val() {
                 self.step.d.next = self.ack_counters_start.val();
                 self.body_len.d.next = self.ack_counters_len.val();
             } else {
@@ -1293,7 +1289,9 @@ mod tests {
         ArpPacket, Icmpv4Type, NetHeaders, PacketBuilder, PacketHeaders, TransportHeader,
     };
     use skinbox_protocol::box_counters::{BoxCounters, LinkSpeed};
-    use skinbox_protocol::command::{AckReply, AckRepr, CommandRepr, Destination, Request};
+    use skinbox_protocol::command::{
+        AckReply, AckRepr, AckResult, CommandRepr, Destination, Opcode, Request,
+    };
 
     const BOX_ID: u16 = 0x0102;
     const PORTS: u8 = 8;
@@ -1403,6 +1401,9 @@ mod tests {
         u.icmp_rest_sum.next = u64::from(held.icmp_rest_sum).into();
         u.command_opcode.next = u64::from(held.opcode).into();
         u.result.next = u64::from(held.result as u8).into();
+        let accepted = |opcode: Opcode| held.opcode == opcode as u8 && held.result == AckResult::Ok;
+        u.accepted_stream_to.next = accepted(Opcode::StreamTo);
+        u.accepted_status_now.next = accepted(Opcode::StatusNow);
         u.last_accepted.next = u64::from(held.last_accepted).into();
         u.destination_mac.next = number(&held.destination.mac).into();
         u.destination_ip.next = number(&held.destination.ip).into();
