@@ -72,11 +72,20 @@ impl DecodeOptions {
     }
 }
 
-/// The report with the host-time summary, as JSON text.
-pub fn report_json(report: &Report, timing: Option<&Timing>) -> PyResult<String> {
+/// The report with the host-time summary, as JSON text; with the CPU time of a timing
+/// thread (`host.timing_cpu_s`, beside the decoding thread's `host.cpu_s`) where the rows
+/// were timed in one.
+pub fn report_json(
+    report: &Report,
+    timing: Option<&Timing>,
+    timing_cpu_s: Option<f64>,
+) -> PyResult<String> {
     let mut value = serde_json::to_value(report).map_err(|e| value_error(e.to_string()))?;
     value["host_times"] = serde_json::to_value(timing.map(|t| t.summary()).unwrap_or_default())
         .map_err(|e| value_error(e.to_string()))?;
+    if let (Some(cpu_s), Some(host)) = (timing_cpu_s, value["host"].as_object_mut()) {
+        host.insert("timing_cpu_s".into(), cpu_s.into());
+    }
     Ok(value.to_string())
 }
 
@@ -87,6 +96,8 @@ pub(crate) struct Filled {
     written: usize,
     beyond: u64,
     timing: Option<Timing>,
+    /// The CPU time of a thread of its own that timed the rows, s.
+    timing_cpu_s: Option<f64>,
 }
 
 /// Fills `rows` from their first with the rows of the capture `bytes`, timed by `timing`
@@ -107,6 +118,7 @@ where
         written: writer.written(),
         beyond: writer.beyond(),
         timing: writer.into_timing(),
+        timing_cpu_s: None,
     }
 }
 
@@ -184,13 +196,15 @@ fn fill_records_timed(
         let timer = std::thread::Builder::new()
             .name("skinbox-timing".into())
             .spawn_scoped(s, move || {
+                let cpu = skinbox_host::thread_cpu_ns();
                 let mut source = None;
                 for (rows, mut datagrams) in parts {
                     time_rows(&mut timing, &mut source, rows, &datagrams);
                     datagrams.clear();
                     let _ = spare_to.send(datagrams);
                 }
-                timing
+                let cpu_s = skinbox_host::thread_cpu_ns().saturating_sub(cpu) as f64 * 1e-9;
+                (timing, cpu_s)
             })
             .expect("a thread for the times");
         let n = TIMED_PART_ROWS.min(rows.len());
@@ -207,7 +221,7 @@ fn fill_records_timed(
         sink.hand_over(&mut []);
         let (written, beyond) = (sink.handed, sink.writer.beyond());
         drop(sink);
-        let timing = match timer.join() {
+        let (timing, timing_cpu_s) = match timer.join() {
             Ok(t) => t,
             Err(panic) => std::panic::resume_unwind(panic),
         };
@@ -216,6 +230,7 @@ fn fill_records_timed(
             written,
             beyond,
             timing: Some(timing),
+            timing_cpu_s: Some(timing_cpu_s),
         }
     })
 }
@@ -284,6 +299,7 @@ where
         written,
         beyond,
         timing,
+        timing_cpu_s,
     } = filled;
     let report = report.map_err(pcap_error)?;
     if beyond != 0 || exact.is_some_and(|n| n != written) {
@@ -292,7 +308,7 @@ where
             written as u64 + beyond
         )));
     }
-    let json = report_json(&report, timing.as_ref())?;
+    let json = report_json(&report, timing.as_ref(), timing_cpu_s)?;
     let array = array.into_any();
     let rows = if written == capacity {
         array

@@ -181,3 +181,4 @@ def test_times_of_the_timing_thread_equal_one_threads(options, tmp_path):
             records[field], batches[field], equal_nan=records[field].dtype.kind == "f"
         ), field
     assert (records["host_time_source"] != skinbox.HOST_TIME_NONE).all()
+    assert report["host"]["timing_cpu_s"] > 0, "the timing thread's CPU time"
