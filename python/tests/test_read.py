@@ -165,16 +165,17 @@ def test_without_times_the_records_are_the_same(captures):
 
 @pytest.mark.parametrize("options", [{}, {"sample_rate_hz": 125.0}])
 def test_times_of_the_timing_thread_equal_one_threads(options, tmp_path):
-    """`read` fills in the times in a second thread, handing it the rows in parts of 4,096;
-    a `Reader` times them in the decoding thread. Two boxes with losses, over several
-    parts: every field the same, bit for bit."""
+    """`read` and `Reader` fill in the times in a second thread, handed the rows in parts
+    of 4,096 (the reader's within its batches of 10,000): two boxes with losses, the parts'
+    ends at other rows in each, every field the same, bit for bit. (The other tests hold
+    both to `skinbox decode`, whose times come from one thread.)"""
     path = tmp_path / "parts.pcap"
     skinbox.write_synthetic_capture(
         path, cells=48, samples_per_cell=300, event_every=2, boxes=2, drop_every=5, seed=3
     )
     records, report = skinbox.read(path, **options)
     assert len(records) > 4 * 4096 and report["losses"]["datagrams_missing"] > 0
-    batches = np.concatenate([b.copy() for b in skinbox.Reader(path, rows=1000, **options)])
+    batches = np.concatenate([b.copy() for b in skinbox.Reader(path, rows=10_000, **options)])
     assert len(batches) == len(records)
     for field in records.dtype.names:
         assert np.array_equal(
