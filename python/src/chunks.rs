@@ -6,7 +6,10 @@
 //! `RowWriter` (the rows of `read`, from the same code) writes into the reader's buffer
 //! only while `__next__` waits for it: each call hands the buffer over, the worker fills it
 //! and hands it back (a message each way per batch), so the buffer is never written while
-//! Python code runs in the thread that iterates.
+//! Python code runs in the thread that iterates. With times the worker writes the rows
+//! without them, a part of the buffer at a time, and a timing thread fills them in
+//! (timed.rs) while the worker decodes the next part; the buffer's `Full` and `Done` go to
+//! the reader through the timing thread, after the parts before them.
 
 use crate::errors::{pcap_error, value_error, CaptureFileError};
 use crate::files::DecodeOptions;

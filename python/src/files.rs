@@ -1,4 +1,6 @@
-//! `read` and `samples`: a pcap or pcapng through the decoder into numpy rows.
+//! `read` and `samples`: a pcap or pcapng through the decoder into numpy rows. `read`'s
+//! records with times are decoded in one thread and timed in a second (timed.rs);
+//! `samples` (one row per sample, not per record) are written and timed in one.
 
 use crate::errors::{pcap_error, value_error};
 use crate::rows::{as_record_rows, as_sample_rows, RecordElement, SampleElement};
