@@ -164,7 +164,7 @@ def test_without_times_the_records_are_the_same(captures):
 
 
 @pytest.mark.parametrize("options", [{}, {"sample_rate_hz": 125.0}])
-def test_times_of_the_timing_thread_equal_one_threads(options, tmp_path):
+def test_timed_parts_give_the_same_rows_wherever_they_end(options, tmp_path):
     """`read` and `Reader` fill in the times in a second thread, handed the rows in parts
     of 4,096 (the reader's within its batches of 10,000): two boxes with losses, the parts'
     ends at other rows in each, every field the same, bit for bit. (The other tests hold
