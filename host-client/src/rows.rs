@@ -393,8 +393,17 @@ impl<'a, R> RowWriter<'a, R> {
     /// one slice of both lengths would hold. An empty `rows` only releases the slice: rows
     /// are then counted in [`RowWriter::beyond`], their times still estimated.
     pub fn retarget(&mut self, rows: &'a mut [R]) -> usize {
-        self.rows = rows;
-        std::mem::replace(&mut self.written, 0)
+        self.swap_rows(rows).len()
+    }
+
+    /// As [`RowWriter::retarget`], returning the rows written into the slice before (the
+    /// rest of it released) rather than their count: for a caller that hands them on, as
+    /// the Python package's `read` hands each part of its array to the thread that fills in
+    /// the rows' times.
+    pub fn swap_rows(&mut self, rows: &'a mut [R]) -> &'a mut [R] {
+        let before = std::mem::replace(&mut self.rows, rows);
+        let written = std::mem::replace(&mut self.written, 0);
+        before.split_at_mut(written).0
     }
 
     /// The timing, for its summary.

@@ -6,11 +6,15 @@
 //! `RowWriter` (the rows of `read`, from the same code) writes into the reader's buffer
 //! only while `__next__` waits for it: each call hands the buffer over, the worker fills it
 //! and hands it back (a message each way per batch), so the buffer is never written while
-//! Python code runs in the thread that iterates.
+//! Python code runs in the thread that iterates. With times the worker writes the rows
+//! without them, a part of the buffer at a time, and a timing thread fills them in
+//! (timed.rs) while the worker decodes the next part; the buffer's `Full` and `Done` go to
+//! the reader through the timing thread, after the parts before them.
 
 use crate::errors::{pcap_error, value_error, CaptureFileError};
 use crate::files::DecodeOptions;
 use crate::rows::RecordElement;
+use crate::timed::{time_rows, Datagrams};
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PySlice;
@@ -18,7 +22,7 @@ use skinbox_host::decoder::{DecodedRecord, RecordSink};
 use skinbox_host::pcap::{self, PcapError};
 use skinbox_host::rows::{RecordRow, RowWriter};
 use skinbox_host::timing::Timing;
-use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender};
 use std::sync::Mutex;
 use std::time::Duration;
 
@@ -42,47 +46,132 @@ struct Buffer {
 // and hands it over through channels, which order the writes before the reads.
 unsafe impl Send for Buffer {}
 
+/// Rows of the buffer a part holds with times: the worker hands each part, written
+/// without times, to the timing thread, which fills in the times while the worker decodes
+/// the next (as `read` does, files.rs).
+const TIMED_PART_ROWS: usize = 4096;
+
+/// Rows of the reader's buffer written without times, for the timing thread.
+struct Part {
+    start: *mut RecordRow,
+    len: usize,
+}
+
+// SAFETY: as `Buffer`: the rows are the buffer's, which the reader keeps alive and reads
+// only after the message that follows the part through the timing thread.
+unsafe impl Send for Part {}
+
+/// What the worker tells the timing thread.
+enum Stage {
+    /// Rows to time, with the datagrams before and among them.
+    Part(Part, Datagrams),
+    /// The buffer holds this many rows: for the reader, once every part before is timed.
+    Full(usize),
+    /// The file is decoded: the rows since the last `Full`, and the report.
+    Done(usize, Box<Result<skinbox_host::Report, PcapError>>),
+}
+
+/// The worker's link to the timing thread.
+struct ToTimer {
+    to: SyncSender<Stage>,
+    /// The datagrams of the current part.
+    datagrams: Datagrams,
+    /// Emptied datagram lists back from the timing thread.
+    spare: Receiver<Datagrams>,
+}
+
 /// The worker's sink: the rows of the [`RowWriter`] that `read` uses too, written into the
-/// buffer while the worker holds it, which it hands back whenever it is full.
+/// buffer while the worker holds it, which it hands back whenever it is full. With times,
+/// the rows are written without them, a part at a time, and the timing thread fills them
+/// in (`timer`) before the buffer goes back to the reader.
 struct ChunkSink {
-    /// Holds the buffer's rows while the worker holds the buffer, else none: it then only
-    /// counts the rows (the reader went away), their times still estimated for the report.
+    /// Holds the current part of the buffer's rows while the worker holds the buffer, else
+    /// none: it then only counts the rows (the reader went away).
     writer: RowWriter<'static, RecordRow>,
     buffer: Buffer,
+    /// Where in the buffer the writer's part begins.
+    part_at: usize,
     /// The worker holds the buffer (a `resume` came and no message went since).
     holding: bool,
     /// The reader went away: rows are dropped, the rest of the file only decoded.
     closed: bool,
     resume: Receiver<()>,
     to: Sender<Message>,
+    timer: Option<ToTimer>,
 }
 
 impl ChunkSink {
-    /// Takes the buffer from the writer (the worker then no longer holds it), returning the
-    /// rows written into it (0 where it held none).
-    fn release(&mut self) -> usize {
-        self.holding = false;
-        self.writer.retarget(Default::default())
+    /// Lends the writer the buffer's rows from `at`: a part with times, else the rest.
+    fn lend(&mut self, at: usize) -> &'static mut [RecordRow] {
+        let len = match self.timer {
+            Some(_) => TIMED_PART_ROWS.min(self.buffer.len - at),
+            None => self.buffer.len - at,
+        };
+        // SAFETY: the worker holds the buffer (see `handoff`), `at + len` is within it, and
+        // the rows lent before `at` were taken back from the writer (`swap_rows`).
+        let rows = unsafe { std::slice::from_raw_parts_mut(self.buffer.start.add(at), len) };
+        self.part_at = at;
+        self.writer.swap_rows(rows)
     }
 
-    /// Hands a full buffer back (if holding one) and waits until it is given again.
+    /// Hands the rows the writer took back to the timing thread (if any), with the
+    /// datagrams kept for them.
+    fn time(&mut self, rows: &'static mut [RecordRow]) {
+        if let Some(t) = &mut self.timer {
+            let datagrams = t.spare.try_recv().unwrap_or_default();
+            let datagrams = std::mem::replace(&mut t.datagrams, datagrams);
+            let part = Part {
+                start: rows.as_mut_ptr(),
+                len: rows.len(),
+            };
+            if t.to.send(Stage::Part(part, datagrams)).is_err() {
+                self.closed = true;
+            }
+        }
+    }
+
+    /// Takes the buffer from the writer (the worker then no longer holds it), returning the
+    /// rows written into it (0 where it held none); their last part goes to be timed.
+    fn release(&mut self) -> usize {
+        self.holding = false;
+        let rows = self.writer.swap_rows(Default::default());
+        let written = self.part_at + rows.len();
+        self.part_at = 0;
+        self.time(rows);
+        written
+    }
+
+    /// Tells the reader (through the timing thread, with times) what `message` says.
+    fn send(&mut self, message: Message) -> bool {
+        match (&self.timer, message) {
+            (Some(t), Message::Full(n)) => t.to.send(Stage::Full(n)).is_ok(),
+            (_, message) => self.to.send(message).is_ok(),
+        }
+    }
+
+    /// Goes on in the next part of the buffer, or hands a full buffer back (if holding
+    /// one) and waits until it is given again.
     #[cold]
     fn handoff(&mut self) {
         if self.holding {
+            let end = self.part_at + self.writer.written();
+            if self.timer.is_some() && end < self.buffer.len {
+                let rows = self.lend(end);
+                self.time(rows);
+                return;
+            }
             let written = self.release();
-            if self.to.send(Message::Full(written)).is_err() {
+            if !self.send(Message::Full(written)) {
                 self.closed = true;
                 return;
             }
         }
         match self.resume.recv() {
             Ok(()) => {
-                // SAFETY: the reader sent `resume` and waits for the next message, keeping
-                // the buffer alive and reading none of it until then; the slice is
-                // released (`release`) before any message is sent.
-                let rows =
-                    unsafe { std::slice::from_raw_parts_mut(self.buffer.start, self.buffer.len) };
-                self.writer.retarget(rows);
+                // the reader sent `resume` and waits for the next message, keeping the
+                // buffer alive and reading none of it until then; the rows are taken back
+                // from the writer (`release`) before any message is sent.
+                self.lend(0);
                 self.holding = true;
             }
             Err(_) => self.closed = true,
@@ -93,8 +182,8 @@ impl ChunkSink {
 impl RecordSink for ChunkSink {
     #[inline]
     fn record(&mut self, record: &DecodedRecord) {
-        // a buffer given has at least one row: full here means none given yet, or it needs
-        // handing back
+        // a buffer given has at least one row: full here means none given yet, or a part
+        // to hand on, or the buffer to hand back
         if self.writer.is_full() && !self.closed {
             self.handoff();
         }
@@ -107,7 +196,46 @@ impl RecordSink for ChunkSink {
         source: Option<std::net::SocketAddr>,
         payload: &[u8],
     ) {
-        self.writer.datagram_received(receive, source, payload);
+        match &mut self.timer {
+            Some(t) if !self.closed => {
+                t.datagrams
+                    .push(self.writer.written(), receive, source, payload)
+            }
+            Some(_) => {}
+            None => self.writer.datagram_received(receive, source, payload),
+        }
+    }
+}
+
+/// The timing thread of a reader with times: fills in the times of each part and passes
+/// the worker's messages on to the reader once the parts before them are timed.
+fn timing_thread(
+    mut timing: Timing,
+    from: Receiver<Stage>,
+    to: Sender<Message>,
+    spare: Sender<Datagrams>,
+) {
+    let mut source = None;
+    for stage in from {
+        match stage {
+            Stage::Part(part, mut datagrams) => {
+                // SAFETY: the worker wrote these rows while holding the buffer and sent
+                // them here before the `Full` or `Done` that returns the buffer to the
+                // reader, which this thread passes on only after timing them; the reader
+                // keeps the buffer alive until then.
+                let rows = unsafe { std::slice::from_raw_parts_mut(part.start, part.len) };
+                time_rows(&mut timing, &mut source, rows, &datagrams);
+                datagrams.clear();
+                let _ = spare.send(datagrams);
+            }
+            Stage::Full(n) => {
+                let _ = to.send(Message::Full(n));
+            }
+            Stage::Done(n, report) => {
+                let report = (*report).map(|r| report_json(&r, Some(&timing)));
+                let _ = to.send(Message::Done(n, report));
+            }
+        }
     }
 }
 
@@ -192,21 +320,48 @@ impl Reader {
         let start = buffer.data().cast::<RecordRow>();
         let (resume, resumed) = channel();
         let (to, messages) = channel();
+        let timer = match rate_hz {
+            Some(rate) => {
+                let (stage_to, stages) = sync_channel(8);
+                let (spare_to, spare) = channel();
+                let (timing, to) = (options.timing(rate), to.clone());
+                std::thread::Builder::new()
+                    .name("skinbox-timing".into())
+                    .spawn(move || timing_thread(timing, stages, to, spare_to))
+                    .map_err(|e| value_error(format!("the reader's timing thread: {e}")))?;
+                Some(ToTimer {
+                    to: stage_to,
+                    datagrams: Datagrams::default(),
+                    spare,
+                })
+            }
+            None => None,
+        };
         let mut sink = ChunkSink {
-            writer: RowWriter::new(Default::default(), rate_hz.map(|r| options.timing(r))),
+            writer: RowWriter::new(Default::default(), None),
             buffer: Buffer { start, len: rows },
+            part_at: 0,
             holding: false,
             closed: false,
             resume: resumed,
-            to: to.clone(),
+            to,
+            timer,
         };
         std::thread::Builder::new()
             .name("skinbox-reader".into())
             .spawn(move || {
                 let report = pcap::decode_pcap_with(&bytes, &options.pcap(), &mut sink);
                 let written = sink.release();
-                let report = report.map(|r| report_json(&r, sink.writer.timing()));
-                let _ = to.send(Message::Done(written, report));
+                match sink.timer.take() {
+                    // the timing thread adds the times' summary
+                    Some(t) => {
+                        let _ = t.to.send(Stage::Done(written, Box::new(report)));
+                    }
+                    None => {
+                        let report = report.map(|r| report_json(&r, None));
+                        let _ = sink.to.send(Message::Done(written, report));
+                    }
+                }
             })
             .map_err(|e| value_error(format!("the reader's thread: {e}")))?;
         Ok(Reader {

@@ -12,6 +12,7 @@ mod live;
 mod mapped;
 mod rows;
 mod synthetic;
+mod timed;
 
 use pyo3::prelude::*;
 use pyo3::types::PyList;

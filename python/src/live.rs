@@ -12,6 +12,7 @@
 use crate::errors::{value_error, CaptureError};
 use crate::files::DecodeOptions;
 use crate::rows::RecordElement;
+use crate::timed::{time_rows, Datagrams};
 use numpy::PyArray1;
 use pyo3::prelude::*;
 use skinbox_host::decoder::{DecodedRecord, RecordSink};
@@ -38,26 +39,16 @@ enum Message {
     Done(Result<String, String>),
 }
 
-/// A datagram the timing reads, in its place among the rows: it came before row `at_row`.
-struct Received {
-    at_row: usize,
-    receive: Option<Duration>,
-    source: Option<SocketAddr>,
-    /// Its bytes in the batch's `payloads`.
-    payload: std::ops::Range<usize>,
-}
-
 /// A batch on its way to the timing thread: rows without times and the datagrams.
 #[derive(Default)]
 struct Untimed {
     rows: Vec<RecordElement>,
-    datagrams: Vec<Received>,
-    payloads: Vec<u8>,
+    datagrams: Datagrams,
 }
 
 /// The datagram lists of a timed batch, emptied, for the receiving thread to reuse (memory
 /// written before costs less than new memory).
-type Spare = (Vec<Received>, Vec<u8>);
+type Spare = Datagrams;
 
 /// What the receiving thread tells the timing thread: as [`Message`], rows untimed.
 enum Stage {
@@ -82,69 +73,16 @@ impl Batcher {
         if self.batch.rows.is_empty() && self.batch.datagrams.is_empty() {
             return;
         }
-        let (datagrams, payloads) = self.spare.try_recv().unwrap_or_default();
+        let datagrams = self.spare.try_recv().unwrap_or_default();
         let batch = std::mem::replace(
             &mut self.batch,
             Untimed {
                 rows: Vec::with_capacity(self.batch_records),
                 datagrams,
-                payloads,
             },
         );
         // A consumer that went away stops wanting rows: nothing to do about it here.
         let _ = self.to.send(Stage::Batch(batch));
-    }
-}
-
-/// `v.round()`, as `skinbox_host::rows` rounds the host times: without the library call
-/// where `v` is an integer already (every `f64` of magnitude 2^52 or more).
-#[inline]
-fn round(v: f64) -> f64 {
-    if v.abs() >= 4_503_599_627_370_496.0 {
-        v
-    } else {
-        v.round()
-    }
-}
-
-/// Fills in the times of a batch's rows, taking its datagrams in their places, as the
-/// receiving thread would have; `timing.record` reads a record's box (id and the source
-/// of its datagram: `source`, the last one taken, which may be in an earlier batch), port,
-/// cell and tick, which the row holds.
-fn time_rows(timing: &mut Timing, source: &mut Option<SocketAddr>, batch: &mut Untimed) {
-    use skinbox_host::rows::host_time_source_code;
-    use skinbox_protocol::{CellRepr, DataRepr};
-    let mut datagrams = batch.datagrams.iter().peekable();
-    for (i, element) in batch.rows.iter_mut().enumerate() {
-        while let Some(d) = datagrams.next_if(|d| d.at_row <= i) {
-            timing.datagram_received(d.receive, d.source, &batch.payloads[d.payload.clone()]);
-            *source = d.source;
-        }
-        let row = &mut element.0;
-        // (the timing reads only the cell id of the packet)
-        let cell = DataRepr {
-            cell_id: row.cell_id,
-            ..DataRepr::default()
-        };
-        let times = timing.record(&DecodedRecord {
-            box_id: row.box_id,
-            source: *source,
-            datagram_sequence: row.datagram_sequence,
-            port: row.port,
-            flags: row.flags,
-            tick: row.tick,
-            cell: CellRepr::Data(cell),
-            event_packets_missing_before: row.event_packets_missing_before,
-        });
-        row.sample_box_time_ns = times.sample_box_ns;
-        row.sample_index = times.sample_index;
-        row.host_time_ns = times.sample_host_ns.map_or(0, |v| round(v) as i64);
-        row.host_time_bound_ns = times.host_error_bound_ns.map_or(f64::NAN, round);
-        row.host_time_source = host_time_source_code(times.source);
-    }
-    for d in datagrams {
-        timing.datagram_received(d.receive, d.source, &batch.payloads[d.payload.clone()]);
-        *source = d.source;
     }
 }
 
@@ -162,12 +100,12 @@ fn timing_thread(
         let message = match stage {
             Stage::Batch(mut batch) => {
                 if let Some(t) = &mut timing {
-                    time_rows(t, &mut source, &mut batch);
+                    let rows = crate::rows::as_record_rows(&mut batch.rows);
+                    time_rows(t, &mut source, rows, &batch.datagrams);
                 }
                 // the datagrams' memory back to the receiving thread, to fill again
                 batch.datagrams.clear();
-                batch.payloads.clear();
-                let _ = spare.send((batch.datagrams, batch.payloads));
+                let _ = spare.send(batch.datagrams);
                 if batch.rows.is_empty() {
                     continue;
                 }
@@ -224,14 +162,7 @@ impl RecordSink for BatchSink {
         let mut b = self.0.borrow_mut();
         if b.timed {
             let b = &mut b.batch;
-            let start = b.payloads.len();
-            b.payloads.extend_from_slice(payload);
-            b.datagrams.push(Received {
-                at_row: b.rows.len(),
-                receive,
-                source,
-                payload: start..b.payloads.len(),
-            });
+            b.datagrams.push(b.rows.len(), receive, source, payload);
         }
     }
 }
