@@ -311,9 +311,11 @@ enum Back {
 pub const PIPELINE_BATCH_SAMPLES: usize = 1024;
 /// Messages a batch holds at most.
 const PIPELINE_BATCH_MESSAGES: usize = 64;
-/// Batches sent and not yet taken by the outputs' thread; past them the decoding thread
-/// waits.
-const PIPELINE_DEPTH: usize = 4;
+/// Batches sent and not yet taken by the outputs' thread (16: about 2 MB of samples, a few
+/// ms of the decoding thread's work, so that the outputs' thread losing its core for a
+/// moment on a shared machine does not stop the decoding thread); past them the decoding
+/// thread waits.
+const PIPELINE_DEPTH: usize = 16;
 
 /// The decoding thread's end of the outputs' thread: batches of messages out; emptied
 /// batches and sample vectors back, for reuse.
