@@ -142,24 +142,27 @@ impl RosMessage for CellSample {
 
     #[inline]
     fn encode_fields(&self, w: &mut CdrWriter) {
-        w.block::<CELL_SAMPLE_MAX_BYTES>(|w| {
-            w.u16(self.box_id);
-            w.u8(self.port);
-            w.u16(self.cell_id);
-            w.u8(self.kind);
-            w.u16(self.event_mask);
-            w.f64_array(&self.values);
-            w.i32(self.event_sequence);
-            w.bool(self.second_part);
-            w.u16(self.event_packets_missing_before);
-            w.u8(self.flags);
-            w.u32(self.datagram_sequence);
-            w.u64(self.box_time_ns);
-            w.f64(self.sample_box_time_ns);
-            w.i64(self.host_time_ns);
-            w.f64(self.host_time_bound_ns);
-            w.u8(self.host_time_source);
-        });
+        w.block::<CELL_SAMPLE_MAX_BYTES>(
+            #[inline(always)]
+            |w| {
+                w.u16(self.box_id);
+                w.u8(self.port);
+                w.u16(self.cell_id);
+                w.u8(self.kind);
+                w.u16(self.event_mask);
+                w.f64_array(&self.values);
+                w.i32(self.event_sequence);
+                w.bool(self.second_part);
+                w.u16(self.event_packets_missing_before);
+                w.u8(self.flags);
+                w.u32(self.datagram_sequence);
+                w.u64(self.box_time_ns);
+                w.f64(self.sample_box_time_ns);
+                w.i64(self.host_time_ns);
+                w.f64(self.host_time_bound_ns);
+                w.u8(self.host_time_source);
+            },
+        );
     }
 
     fn fields(&self) -> Vec<(String, Value)> {

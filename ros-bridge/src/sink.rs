@@ -197,15 +197,232 @@ pub struct Published {
 pub struct RosSink {
     timing: Timing,
     settings: SinkSettings,
-    outputs: Vec<Box<dyn Output + Send>>,
-    w: CdrWriter,
+    back: Back,
     batch: CellSampleBatch,
     receive_ns: Option<u64>,
     /// Each box's track, found by the last box first (a datagram's records are one box's).
     boxes: Vec<(BoxKey, BoxTrack)>,
     last_box: usize,
     published: Published,
+}
+
+/// A message as values, with its log time, on its way to the outputs' thread.
+enum Message {
+    Samples(u64, CellSampleBatch),
+    Status(u64, BoxStatus),
+    Activity(u64, SkinActivity),
+}
+
+/// The outputs and the CDR writer: where messages become CDR and go out. The first
+/// error stops them and is kept.
+struct Outputs {
+    outputs: Vec<Box<dyn Output + Send>>,
+    w: CdrWriter,
     error: Option<std::io::Error>,
+}
+
+impl Outputs {
+    fn new(outputs: Vec<Box<dyn Output + Send>>) -> Outputs {
+        Outputs {
+            outputs,
+            w: CdrWriter::new(),
+            error: None,
+        }
+    }
+
+    fn send<M: RosMessage>(&mut self, topic: Topic, log_time_ns: u64, m: &M) {
+        if self.error.is_some() {
+            return;
+        }
+        m.encode(&mut self.w);
+        for o in &mut self.outputs {
+            if let Err(e) = o.publish(topic, log_time_ns, self.w.bytes()) {
+                self.error = Some(e);
+                return;
+            }
+        }
+    }
+
+    fn send_batch(&mut self, log_time: u64, batch: &CellSampleBatch) {
+        if self.error.is_some() {
+            return;
+        }
+        if let Err(e) = self.try_send_batch(log_time, batch) {
+            self.error = Some(e);
+        }
+    }
+
+    /// The batch to every output: whole to those without a size limit (encoded once), in
+    /// parts of as many samples as fit to the others.
+    fn try_send_batch(&mut self, log_time: u64, batch: &CellSampleBatch) -> std::io::Result<()> {
+        let w = &mut self.w;
+        let mut whole = false;
+        for o in &mut self.outputs {
+            let Some(limit) = o.max_samples_message_bytes() else {
+                if !whole {
+                    batch.encode(w);
+                    whole = true;
+                }
+                o.publish(Topic::Samples, log_time, w.bytes())?;
+                continue;
+            };
+            whole = false;
+            batch.encode_header(w);
+            let header = w.len();
+            // The sequence length (4 bytes, aligned) and the samples at their largest.
+            let fit = (limit.saturating_sub(header + 8) / CELL_SAMPLE_MAX_BYTES).max(1);
+            for part in batch.samples.chunks(fit) {
+                w.truncate(header);
+                batch.encode_samples(w, part);
+                o.publish(Topic::Samples, log_time, w.bytes())?;
+            }
+        }
+        Ok(())
+    }
+
+    fn publish(&mut self, m: &Message) {
+        match m {
+            Message::Samples(t, b) => self.send_batch(*t, b),
+            Message::Status(t, s) => self.send(Topic::Status, *t, s),
+            Message::Activity(t, a) => self.send(Topic::Activity, *t, a),
+        }
+    }
+
+    /// Closes every output; the first error.
+    fn close(mut self) -> std::io::Result<()> {
+        if let Some(e) = self.error.take() {
+            return Err(e);
+        }
+        for o in &mut self.outputs {
+            o.close()?;
+        }
+        Ok(())
+    }
+}
+
+/// Where the sink's messages go: to the outputs on this thread, or to their own thread.
+enum Back {
+    Inline(Outputs),
+    Thread(Pipeline),
+}
+
+/// Samples a batch of messages for the outputs' thread holds at most (about 140 kB of
+/// [`CellSample`]s, so that they are still in a cache shared by the two threads).
+pub const PIPELINE_BATCH_SAMPLES: usize = 1024;
+/// Messages a batch holds at most.
+const PIPELINE_BATCH_MESSAGES: usize = 64;
+/// Batches sent and not yet taken by the outputs' thread (16: about 2 MB of samples, a few
+/// ms of the decoding thread's work, so that the outputs' thread losing its core for a
+/// moment on a shared machine does not stop the decoding thread); past them the decoding
+/// thread waits.
+const PIPELINE_DEPTH: usize = 16;
+
+/// The decoding thread's end of the outputs' thread: batches of messages out; emptied
+/// batches and sample vectors back, for reuse.
+struct Pipeline {
+    to_outputs: Option<std::sync::mpsc::SyncSender<Vec<Message>>>,
+    returned: std::sync::mpsc::Receiver<(Vec<Message>, Vec<Vec<CellSample>>)>,
+    thread: Option<std::thread::JoinHandle<Outputs>>,
+    pending: Vec<Message>,
+    pending_samples: usize,
+    spare_batches: Vec<Vec<Message>>,
+    spare_samples: Vec<Vec<CellSample>>,
+}
+
+impl Pipeline {
+    fn start(outputs: Outputs) -> std::io::Result<Pipeline> {
+        let (to_outputs, batches) = std::sync::mpsc::sync_channel::<Vec<Message>>(PIPELINE_DEPTH);
+        let (give_back, returned) = std::sync::mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("ros-outputs".into())
+            .spawn(move || {
+                let mut outputs = outputs;
+                while let Ok(mut batch) = batches.recv() {
+                    let mut samples = Vec::new();
+                    for m in batch.drain(..) {
+                        outputs.publish(&m);
+                        if let Message::Samples(_, b) = m {
+                            let mut s = b.samples;
+                            s.clear();
+                            samples.push(s);
+                        }
+                    }
+                    if outputs.error.is_some() {
+                        // The decoding thread finds the channel closed and stops sending.
+                        break;
+                    }
+                    let _ = give_back.send((batch, samples));
+                }
+                outputs
+            })?;
+        Ok(Pipeline {
+            to_outputs: Some(to_outputs),
+            returned,
+            thread: Some(thread),
+            pending: Vec::with_capacity(PIPELINE_BATCH_MESSAGES),
+            pending_samples: 0,
+            spare_batches: Vec::new(),
+            spare_samples: Vec::new(),
+        })
+    }
+
+    /// An empty sample vector: one the outputs' thread gave back, where there is one.
+    #[inline]
+    fn samples_vec(&mut self) -> Vec<CellSample> {
+        if self.spare_samples.is_empty() {
+            self.take_returned();
+        }
+        self.spare_samples.pop().unwrap_or_default()
+    }
+
+    fn take_returned(&mut self) {
+        while let Ok((batch, samples)) = self.returned.try_recv() {
+            self.spare_batches.push(batch);
+            self.spare_samples.extend(samples);
+        }
+    }
+
+    #[inline]
+    fn push(&mut self, m: Message, samples: usize) {
+        self.pending.push(m);
+        self.pending_samples += samples;
+        if self.pending_samples >= PIPELINE_BATCH_SAMPLES
+            || self.pending.len() >= PIPELINE_BATCH_MESSAGES
+        {
+            self.flush();
+        }
+    }
+
+    /// The pending messages to the outputs' thread (waiting while it is
+    /// [`PIPELINE_DEPTH`] batches behind).
+    fn flush(&mut self) {
+        if self.pending.is_empty() {
+            return;
+        }
+        self.take_returned();
+        let next = self
+            .spare_batches
+            .pop()
+            .unwrap_or_else(|| Vec::with_capacity(PIPELINE_BATCH_MESSAGES));
+        let batch = std::mem::replace(&mut self.pending, next);
+        self.pending_samples = 0;
+        if let Some(tx) = &self.to_outputs {
+            if tx.send(batch).is_err() {
+                // The outputs failed: their thread keeps the error for finish.
+                self.to_outputs = None;
+            }
+        }
+    }
+
+    /// Sends what is pending and waits for the outputs' thread to end.
+    fn join(mut self) -> std::io::Result<Outputs> {
+        self.flush();
+        self.to_outputs = None;
+        match self.thread.take().map(|t| t.join()) {
+            Some(Ok(outputs)) => Ok(outputs),
+            _ => Err(std::io::Error::other("the ROS outputs' thread panicked")),
+        }
+    }
 }
 
 /// The track of box `key` in `boxes`, made on its first use; `last` is the box found
@@ -237,23 +454,41 @@ fn now_ns() -> u64 {
 }
 
 impl RosSink {
-    /// A sink timing records with `timing` and sending to `outputs`.
+    /// A sink timing records with `timing` and sending to `outputs`, on the caller's
+    /// thread: each message goes out before the call that made it returns.
     pub fn new(
         timing: Timing,
         settings: SinkSettings,
         outputs: Vec<Box<dyn Output + Send>>,
     ) -> Self {
+        RosSink::with_back(timing, settings, Back::Inline(Outputs::new(outputs)))
+    }
+
+    /// As [`RosSink::new`], with the CDR encoding and the outputs on a thread of their
+    /// own: the caller's thread decodes, times and gathers the messages as values and
+    /// hands them over in batches (of up to [`PIPELINE_BATCH_SAMPLES`] samples; a few
+    /// batches ahead at most, then it waits). The outputs get the same messages in the
+    /// same order as from [`RosSink::new`], only later: for recordings, not for live
+    /// outputs whose latency counts. An output's error shows at [`RosSink::finish`].
+    pub fn pipelined(
+        timing: Timing,
+        settings: SinkSettings,
+        outputs: Vec<Box<dyn Output + Send>>,
+    ) -> std::io::Result<Self> {
+        let back = Back::Thread(Pipeline::start(Outputs::new(outputs))?);
+        Ok(RosSink::with_back(timing, settings, back))
+    }
+
+    fn with_back(timing: Timing, settings: SinkSettings, back: Back) -> Self {
         RosSink {
             timing,
             settings,
-            outputs,
-            w: CdrWriter::new(),
+            back,
             batch: CellSampleBatch::default(),
             receive_ns: None,
             boxes: Vec::new(),
             last_box: 0,
             published: Published::default(),
-            error: None,
         }
     }
 
@@ -265,19 +500,6 @@ impl RosSink {
     /// Messages sent so far.
     pub fn published(&self) -> Published {
         self.published
-    }
-
-    fn send<M: RosMessage>(&mut self, topic: Topic, log_time_ns: u64, m: &M) {
-        if self.error.is_some() {
-            return;
-        }
-        m.encode(&mut self.w);
-        for o in &mut self.outputs {
-            if let Err(e) = o.publish(topic, log_time_ns, self.w.bytes()) {
-                self.error = Some(e);
-                return;
-            }
-        }
     }
 
     /// The log time of a message about a datagram: its receive time, else the host time of
@@ -300,43 +522,25 @@ impl RosSink {
         self.batch.box_id = key.box_id;
         self.batch.box_address = key.source.map(|a| a.to_string()).unwrap_or_default();
         self.batch.datagram_sequence = sequence;
+        let samples = self.batch.samples.len();
         self.published.samples_messages += 1;
-        self.published.samples += self.batch.samples.len() as u64;
-        if self.error.is_none() {
-            if let Err(e) = self.send_batch(log_time) {
-                self.error = Some(e);
+        self.published.samples += samples as u64;
+        match &mut self.back {
+            Back::Inline(o) => {
+                o.send_batch(log_time, &self.batch);
+                self.batch.samples.clear();
+            }
+            Back::Thread(p) => {
+                let batch = CellSampleBatch {
+                    stamp: self.batch.stamp,
+                    box_id: self.batch.box_id,
+                    box_address: std::mem::take(&mut self.batch.box_address),
+                    datagram_sequence: sequence,
+                    samples: std::mem::replace(&mut self.batch.samples, p.samples_vec()),
+                };
+                p.push(Message::Samples(log_time, batch), samples);
             }
         }
-        self.batch.samples.clear();
-    }
-
-    /// The batch to every output: whole to those without a size limit (encoded once), in
-    /// parts of as many samples as fit to the others.
-    fn send_batch(&mut self, log_time: u64) -> std::io::Result<()> {
-        let batch = &self.batch;
-        let w = &mut self.w;
-        let mut whole = false;
-        for o in &mut self.outputs {
-            let Some(limit) = o.max_samples_message_bytes() else {
-                if !whole {
-                    batch.encode(w);
-                    whole = true;
-                }
-                o.publish(Topic::Samples, log_time, w.bytes())?;
-                continue;
-            };
-            whole = false;
-            batch.encode_header(w);
-            let header = w.len();
-            // The sequence length (4 bytes, aligned) and the samples at their largest.
-            let fit = (limit.saturating_sub(header + 8) / CELL_SAMPLE_MAX_BYTES).max(1);
-            for part in batch.samples.chunks(fit) {
-                w.truncate(header);
-                batch.encode_samples(w, part);
-                o.publish(Topic::Samples, log_time, w.bytes())?;
-            }
-        }
-        Ok(())
     }
 
     fn status(&mut self, key: BoxKey, payload: &[u8]) {
@@ -390,7 +594,10 @@ impl RosSink {
             time_map_restarts: time.as_ref().map_or(0, |t| t.restarts),
         };
         self.published.status_messages += 1;
-        self.send(Topic::Status, log_time, &m);
+        match &mut self.back {
+            Back::Inline(o) => o.send(Topic::Status, log_time, &m),
+            Back::Thread(p) => p.push(Message::Status(log_time, m), 0),
+        }
     }
 
     fn activity(&mut self, key: BoxKey, at_ns: u64) {
@@ -441,17 +648,19 @@ impl RosSink {
         };
         track.period_start_ns = Some(at_ns);
         self.published.activity_messages += 1;
-        self.send(Topic::Activity, at_ns, &m);
+        match &mut self.back {
+            Back::Inline(o) => o.send(Topic::Activity, at_ns, &m),
+            Back::Thread(p) => p.push(Message::Activity(at_ns, m), 0),
+        }
     }
 
     /// Ends: closes every output; the first error, or the messages sent.
-    pub fn finish(mut self) -> std::io::Result<Published> {
-        if let Some(e) = self.error.take() {
-            return Err(e);
-        }
-        for o in &mut self.outputs {
-            o.close()?;
-        }
+    pub fn finish(self) -> std::io::Result<Published> {
+        let outputs = match self.back {
+            Back::Inline(o) => o,
+            Back::Thread(p) => p.join()?,
+        };
+        outputs.close()?;
         Ok(self.published)
     }
 }

@@ -193,11 +193,18 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 eprintln!("ROS 2 topics over DDS in domain {}", dds.domain());
                 outputs.push(Box::new(DdsReport(dds)));
             }
-            Some(skinbox_ros::sink::RosSink::new(
-                args.timing.timing(rate_hz)?,
-                args.ros.settings()?,
-                outputs,
-            ))
+            let timing = args.timing.timing(rate_hz)?;
+            let settings = args.ros.settings()?;
+            if args.ros.foxglove.is_none() && !args.ros.ros2 {
+                // A recording only: the messages and the file on a thread of their own,
+                // off the receiving thread.
+                Some(skinbox_ros::sink::RosSink::pipelined(
+                    timing, settings, outputs,
+                )?)
+            } else {
+                // Live outputs: each message out as its datagram is decoded.
+                Some(skinbox_ros::sink::RosSink::new(timing, settings, outputs))
+            }
         } else {
             None
         };

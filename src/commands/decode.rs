@@ -146,8 +146,9 @@ fn record_mcap(
     json: bool,
 ) -> anyhow::Result<()> {
     let out = skinbox_ros::mcap_out::McapOutput::create(path)?;
+    // Decoding and timing on this thread, the messages and the file on another.
     let mut sink =
-        skinbox_ros::sink::RosSink::new(timing, args.ros.settings()?, vec![Box::new(out)]);
+        skinbox_ros::sink::RosSink::pipelined(timing, args.ros.settings()?, vec![Box::new(out)])?;
     let report = pcap::decode_pcap_with(bytes, options, &mut sink)?;
     let published = sink.finish()?;
     if json {
