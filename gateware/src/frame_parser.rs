@@ -97,6 +97,8 @@ const _: () = assert!(COMMAND_SEQUENCE.end == COMMAND_HOST_TIME.start);
 const _: () = assert!(COMMAND_HOST_TIME.end == COMMAND_LENGTH.start);
 const _: () = assert!(COMMAND_LENGTH.end == COMMAND_RESERVED.start);
 const _: () = assert!(COMMAND_RESERVED.end == ARGUMENTS_AT);
+// the beat tests that skip the index's choice need positions above 0
+const _: () = assert!(IP_CHECKSUM.start > 0);
 // the ARP body ends inside the 60 bytes every frame has
 const _: () = assert!(ARP_AT + arp::PACKET_LEN <= MIN_FRAME_LEN);
 
@@ -976,17 +978,19 @@ impl Logic for FrameParser {
         }
         // the byte as a 16-bit word: even frame positions are high bytes
         self.word_in.next = bit_cast::<16, 8>(self.frame.data.val()) << 8;
-        if self.index_in.val().get_bit(0) {
+        // (the index is 0 out of a frame: its tests against positions other than 0 need
+        // `next_index` only, in parallel with `in_frame`, not through the choice)
+        if self.in_frame.q.val() & self.next_index.q.val().get_bit(0) {
             self.word_in.next = bit_cast::<16, 8>(self.frame.data.val());
         }
         self.beat_word.d.next = self.word_in.val();
         // UDP pseudo header: the UDP length (the IPv4 payload length) in the clock of byte
         // 24, nothing in that of byte 25 (the IPv4 checksum), then the addresses
         self.transport_word.d.next = self.word_in.val();
-        if self.index_in.val() == self.ip_checksum_at.val() {
+        if self.in_frame.q.val() & (self.next_index.q.val() == self.ip_checksum_at.val()) {
             self.transport_word.d.next = self.payload_length.q.val();
         }
-        if self.index_in.val() == self.ip_checksum_low_at.val() {
+        if self.in_frame.q.val() & (self.next_index.q.val() == self.ip_checksum_low_at.val()) {
             self.transport_word.d.next = 0.into();
         }
         if self.frame.valid.val() {
