@@ -55,6 +55,7 @@ pub struct DatagramArbiter {
     after_offer: Signal<Local, Bits<MAX_SOURCES>>,
     offered_below: Signal<Local, Bit>,
     taken: Signal<Local, Bit>,
+    last_beat_taken: Signal<Local, Bit>,
 }
 
 impl DatagramArbiter {
@@ -84,6 +85,7 @@ impl DatagramArbiter {
             after_offer: Default::default(),
             offered_below: Default::default(),
             taken: Default::default(),
+            last_beat_taken: Default::default(),
         }
     }
 }
@@ -170,11 +172,18 @@ impl Logic for DatagramArbiter {
             self.after_last_grant.d.next = self.after_offer.val();
             self.body_open.d.next = true;
         }
-        if self.body_open.q.val()
-            & self.datagrams.body.valid.val()
-            & self.datagrams.body.last.val()
-            & self.datagrams.body.ready.val()
-        {
+        // the granted source's last beat is taken: its own valid and last under the last
+        // grant (not through the body multiplexer, which `body_open` selects too)
+        self.last_beat_taken.next = false;
+        for i in 0..self.sources.len() {
+            if self.last_grant.q.val().get_bit(i)
+                & self.sources[i].body.valid.val()
+                & self.sources[i].body.last.val()
+            {
+                self.last_beat_taken.next = true;
+            }
+        }
+        if self.body_open.q.val() & self.last_beat_taken.val() & self.datagrams.body.ready.val() {
             self.body_open.d.next = false;
         }
         if self.reset.val() {

@@ -124,6 +124,14 @@ pub struct MdioMaster {
     divider: DFF<Bits<6>>,
     busy: DFF<Bit>,
     bit_index: DFF<Bits<6>>,
+    // the tests of `bit_index`, registered: it changes only at `at_fall`, 64 clocks apart,
+    // so each holds from the clock after a change (no compare in front of the frame's
+    // registers)
+    bit_is_47: DFF<Bit>,
+    bit_is_63: DFF<Bit>,
+    bit_from_31: DFF<Bit>,
+    bit_from_45: DFF<Bit>,
+    bit_from_48: DFF<Bit>,
     step: DFF<Bits<3>>,
     /// MDC periods left to wait, minus one: the wait is over when it has gone below zero
     /// (bit 19 set), so no comparison with zero sits in front of the decisions.
@@ -180,6 +188,11 @@ impl MdioMaster {
             divider: Default::default(),
             busy: Default::default(),
             bit_index: Default::default(),
+            bit_is_47: Default::default(),
+            bit_is_63: Default::default(),
+            bit_from_31: Default::default(),
+            bit_from_45: Default::default(),
+            bit_from_48: Default::default(),
             step: Default::default(),
             countdown: Default::default(),
             at_fall: Default::default(),
@@ -211,6 +224,11 @@ impl Logic for MdioMaster {
             divider,
             busy,
             bit_index,
+            bit_is_47,
+            bit_is_63,
+            bit_from_31,
+            bit_from_45,
+            bit_from_48,
             step,
             countdown,
             at_fall,
@@ -231,6 +249,11 @@ impl Logic for MdioMaster {
         // steps 3 and 4 are the reads
         self.reading.next = self.step.q.val() >= 3;
         self.next_bit.next = self.bit_index.q.val() + 1;
+        self.bit_is_47.d.next = self.bit_index.q.val() == 47;
+        self.bit_is_63.d.next = self.bit_index.q.val() == 63;
+        self.bit_from_31.d.next = self.bit_index.q.val() >= 31;
+        self.bit_from_45.d.next = self.bit_index.q.val() >= 45;
+        self.bit_from_48.d.next = self.bit_index.q.val() >= 48;
         self.mode.next = self.data.q.val().get_bits::<3>(8);
         // the SPEED_ codes as literals (the Verilog has no Rust constants)
         self.speed.next = 3.into();
@@ -248,10 +271,10 @@ impl Logic for MdioMaster {
         }
         // the last clock before MDC rises: read data is sampled here
         if self.at_sample.q.val() & self.busy.q.val() & self.reading.val() {
-            if self.bit_index.q.val() == 47 {
+            if self.bit_is_47.q.val() {
                 self.turnaround_low.d.next = !self.sampled.q.val();
             }
-            if self.bit_index.q.val() >= 48 {
+            if self.bit_from_48.q.val() {
                 self.data.d.next =
                     (self.data.q.val() << 1) | bit_cast::<16, 1>(self.sampled.q.val().into());
             }
@@ -259,7 +282,7 @@ impl Logic for MdioMaster {
         // the last clock before MDC falls: the next bit goes out with the falling edge
         if self.at_fall.q.val() {
             if self.busy.q.val() {
-                if self.bit_index.q.val() == 63 {
+                if self.bit_is_63.q.val() {
                     self.busy.d.next = false;
                     self.oe.d.next = false;
                     self.out.d.next = true;
@@ -285,12 +308,12 @@ impl Logic for MdioMaster {
                     self.out.d.next = true;
                     // the next bit is bit_index + 1: the tests compare bit_index itself, so
                     // no adder sits in front of MDIO's registers
-                    if self.bit_index.q.val() >= 31 {
+                    if self.bit_from_31.q.val() {
                         self.out.d.next = self.shift.q.val().get_bit(31);
                         self.shift.d.next = self.shift.q.val() << 1;
                     }
                     // a read releases MDIO from the turnaround (bit 46) on
-                    self.oe.d.next = !(self.reading.val() & (self.bit_index.q.val() >= 45));
+                    self.oe.d.next = !(self.reading.val() & self.bit_from_45.q.val());
                 }
             } else if self.countdown.q.val().get_bit(19) {
                 self.busy.d.next = true;
