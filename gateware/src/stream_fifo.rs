@@ -32,6 +32,10 @@ pub struct StreamFifo {
     entry_2: DFF<Bits<10>>,
     entry_3: DFF<Bits<10>>,
     held: DFF<Bits<3>>,
+    // held != 0 and held == 4, as registers of their own (`valid` and `ready` start at a
+    // flip-flop; both 0 at power-up, as `held`)
+    not_empty: DFF<Bit>,
+    full: DFF<Bit>,
     push: Signal<Local, Bit>,
     pop: Signal<Local, Bit>,
     // the entry the pushed beat goes to
@@ -42,17 +46,17 @@ pub struct StreamFifo {
 impl Logic for StreamFifo {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, entry_0, entry_1, entry_2, entry_3, held);
+        dff_setup!(self, clock, entry_0, entry_1, entry_2, entry_3, held, not_empty, full);
         self.count.next = self.held.q.val();
-        self.beats_in.ready.next = self.held.q.val() != 4;
-        self.beats_out.valid.next = self.held.q.val() != 0;
+        self.beats_in.ready.next = !self.full.q.val();
+        self.beats_out.valid.next = self.not_empty.q.val();
         self.beats_out.data.next = self.entry_0.q.val().get_bits::<8>(0);
         self.beats_out.last.next = self.entry_0.q.val().get_bit(8);
         self.beats_out.error.next = self.entry_0.q.val().get_bit(9);
         // (from the count, not from the outputs: Verilator orders the statements apart
         // only when no assigned output is read back)
-        self.push.next = self.beats_in.valid.val() & (self.held.q.val() != 4);
-        self.pop.next = (self.held.q.val() != 0) & self.beats_out.ready.val();
+        self.push.next = self.beats_in.valid.val() & !self.full.q.val();
+        self.pop.next = self.not_empty.q.val() & self.beats_out.ready.val();
         self.beat.next = bit_cast::<10, 8>(self.beats_in.data.val())
             | (bit_cast::<10, 1>(self.beats_in.last.val().into()) << 8)
             | (bit_cast::<10, 1>(self.beats_in.error.val().into()) << 9);
@@ -79,11 +83,17 @@ impl Logic for StreamFifo {
         }
         if self.push.val() & !self.pop.val() {
             self.held.d.next = self.held.q.val() + 1;
+            self.not_empty.d.next = true;
+            self.full.d.next = self.held.q.val() == 3;
         } else if !self.push.val() & self.pop.val() {
             self.held.d.next = self.held.q.val() - 1;
+            self.not_empty.d.next = self.held.q.val() != 1;
+            self.full.d.next = false;
         }
         if self.reset.val() {
             self.held.d.next = 0.into();
+            self.not_empty.d.next = false;
+            self.full.d.next = false;
         }
     }
 }
