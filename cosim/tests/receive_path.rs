@@ -122,6 +122,30 @@ fn check_answers(
     m
 }
 
+/// Runs `host_frames` on the RTL and the reference model (which must agree) with the
+/// ports' traffic, and checks every answer against the control model's (the buffer free
+/// for every frame: they come far enough apart); returns the run and the model after it.
+fn answer_all(
+    config: &BoxConfig,
+    ports: Vec<Vec<SentPacket>>,
+    host_frames: &[HostFrame],
+    duration_ns: u64,
+) -> (SimRun, BoxControl) {
+    let run = run_both(&spec(
+        config.clone(),
+        ports,
+        host_frames.to_vec(),
+        duration_ns,
+    ));
+    let m = check_answers(
+        &run,
+        host_frames,
+        model(skinbox_cosim::emulator::control_config(config)),
+        |_| true,
+    );
+    (run, m)
+}
+
 #[test]
 fn answers_equal_the_control_model_on_random_good_and_bad_frames() {
     let config = box_config();
@@ -153,18 +177,7 @@ fn answers_equal_the_control_model_on_random_good_and_bad_frames() {
         duration_ns as f64 - 200_000.0,
         400_000.0,
     );
-    let run = run_both(&spec(
-        config.clone(),
-        ports,
-        host_frames.clone(),
-        duration_ns,
-    ));
-    let m = check_answers(
-        &run,
-        &host_frames,
-        model(skinbox_cosim::emulator::control_config(&config)),
-        |_| true,
-    );
+    let (run, m) = answer_all(&config, ports, &host_frames, duration_ns);
     // every kind of fate the generator makes occurred and was counted, and the status
     // report after the last frame carries the same counters
     assert!(fates.len() >= 15, "fates {fates:?}");
@@ -241,18 +254,7 @@ fn commands_reconfigure_the_uplink_under_line_rate_traffic() {
         },
     ];
     let duration_ns = at(7.0) * TICK_NS;
-    let run = run_both(&spec(
-        config.clone(),
-        ports,
-        host_frames.clone(),
-        duration_ns,
-    ));
-    let m = check_answers(
-        &run,
-        &host_frames,
-        model(skinbox_cosim::emulator::control_config(&config)),
-        |_| true,
-    );
+    let (run, m) = answer_all(&config, ports, &host_frames, duration_ns);
     assert_eq!(m.counters.get(BoxCounter::ArpAnswered), 1);
     assert_eq!(m.counters.get(BoxCounter::PingsAnswered), 1);
     assert_eq!(m.counters.get(BoxCounter::CommandsAccepted), 4);
@@ -354,17 +356,11 @@ fn reply_latency_is_the_sum_of_the_blocks_latencies() {
         })
         .collect();
     let duration_ns = 120_000 * TICK_NS;
-    let run = run_both(&spec(
-        config.clone(),
+    let (run, _) = answer_all(
+        &config,
         vec![vec![]; config.ports],
-        host_frames.clone(),
-        duration_ns,
-    ));
-    check_answers(
-        &run,
         &host_frames,
-        model(skinbox_cosim::emulator::control_config(&config)),
-        |_| true,
+        duration_ns,
     );
     assert_eq!(run.replies.len(), 3);
     for ((f, (_, kind)), ack) in host_frames.iter().zip(requests).zip(&run.replies) {
@@ -406,17 +402,11 @@ fn mutated_frames_are_answered_and_counted_as_the_model_says() {
         frame: command(HOST_IP, u32::MAX / 2, Request::StatusNow),
     });
     let duration_ns = (edge + 10_000) * TICK_NS;
-    let run = run_both(&spec(
-        config.clone(),
+    let (run, m) = answer_all(
+        &config,
         vec![vec![]; config.ports],
-        host_frames.clone(),
-        duration_ns,
-    ));
-    let m = check_answers(
-        &run,
         &host_frames,
-        model(skinbox_cosim::emulator::control_config(&config)),
-        |_| true,
+        duration_ns,
     );
     assert_eq!(m.counters.get(BoxCounter::FramesReceived), cases as u32 + 1);
     assert_eq!(m.counters.unaccounted_frames(), 0);
