@@ -615,8 +615,8 @@ impl Logic for CommandUnit {
         self.done_out.d.next = self.stage_3.q.val();
         self.status_period_set_out.d.next = false;
         self.status_now_out.d.next = false;
-        self.taken.next = self.stage_3.q.val() & self.box_ok.q.val() & !self.not_newer.q.val();
         self.newer.next = self.stage_3.q.val() & !self.not_newer.q.val();
+        self.taken.next = self.newer.val() & self.box_ok.q.val();
         self.target_rank.next = 0.into();
         for i in 0..self.target.len() {
             self.target[i].next = self.oldest[i].q.val();
