@@ -2,7 +2,7 @@
 //! `cosim::control`) for a well-formed command from the host subnet, and the run-time
 //! configuration the accepted commands set.
 //!
-//! The frame parser raises `command` for one clock with the command's fields held on its
+//! The frame parser raises `command` for one clock with the command's fields on its
 //! outputs. The unit checks, in this order: the box id (the box's or `ANY_BOX`, else
 //! `OtherBox`); the sequence number against the last one accepted from the sender's IPv4
 //! address, in a table of `HOST_SLOTS` hosts ("newer" in serial-number arithmetic,
@@ -16,7 +16,7 @@
 //! with `downlink_port`); everything else is carried out.
 //!
 //! The work is a pipeline of registers, one stage per clock, after the host table's
-//! address compares with `peer_ip_ahead` in the clock before `command`: the host match and the
+//! address compares with `peer_ip` in the clock before `command`: the host match and the
 //! argument checks; the matched host's last sequence, the oldest slot and the result of
 //! the arguments; the serial-number test (newer or not, registered); the decision. `done`
 //! is high in the clock [`COMMAND_LATENCY`] clocks after `command`, with `fate`, `result`
@@ -26,14 +26,15 @@
 //! clock later, from registers (its write enables reach about 270 flip-flops: no logic in
 //! front of them). Commands must come at least `COMMAND_LATENCY` + 2 clocks apart (the
 //! compares see the table one clock before `command`; a frame takes at least 72), and the
-//! parser's fields must stay steady from `command` to `done` (it holds them until
-//! the next stored frame's decision).
+//! parser's fields must stay steady from the clock before `command` to `done` (they are
+//! its captures of the frame, which the next frame reaches no earlier than 13 clocks after
+//! the last beat: see `frame_parser`).
 //!
 //! `last_accepted` is the sequence number the table holds for the sender after the
 //! command: the command's own when it was taken, else the one it holds (0 for a host
 //! not in the table, which only a command for another box can leave there).
 
-use crate::frame_parser::HELD_ARGUMENT_BYTES;
+use crate::command_decoder::HELD_ARGUMENT_BYTES;
 use crate::hdl::*;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::command::{
@@ -82,15 +83,13 @@ pub struct CommandUnit {
     pub clock: Signal<In, Clock>,
     /// Synchronous reset: forgets every host, configuration back to the build-time values.
     pub reset: Signal<In, Bit>,
-    /// One clock: a command passed steps 1-16 and was stored (its fields are held).
+    /// One clock: a command passed steps 1-16 and was stored (its fields are steady).
     pub command: Signal<In, Bit>,
     /// The sender's MAC (the Ethernet source).
     pub peer_mac: Signal<In, Bits<48>>,
-    /// The sender's IPv4 address.
+    /// The sender's IPv4 address, from the clock before `command` on: the host table is
+    /// matched a clock ahead.
     pub peer_ip: Signal<In, Bits<32>>,
-    /// The sender's IPv4 address in the clock before `command` (the frame parser's
-    /// `peer_ip_ahead`): the host table is matched a clock ahead.
-    pub peer_ip_ahead: Signal<In, Bits<32>>,
     /// The sender's UDP port.
     pub peer_port: Signal<In, Bits<16>>,
     /// The command's box id.
@@ -189,7 +188,7 @@ pub struct CommandUnit {
     slot_rank: Vec<DFF<Bits<2>>>,
     slot_initial_rank: Vec<Constant<Bits<2>>>,
     oldest_rank: Constant<Bits<2>>,
-    // slot i's address is `peer_ip_ahead` (the match's compares, a clock before stage 1)
+    // slot i's address is `peer_ip` (the match's compares, a clock before stage 1)
     ip_match: Vec<DFF<Bit>>,
     // stage 1: host match and argument checks
     stage_1: DFF<Bit>,
@@ -276,7 +275,6 @@ impl CommandUnit {
             command: Default::default(),
             peer_mac: Default::default(),
             peer_ip: Default::default(),
-            peer_ip_ahead: Default::default(),
             peer_port: Default::default(),
             command_box_id: Default::default(),
             command_opcode: Default::default(),
@@ -486,7 +484,7 @@ impl Logic for CommandUnit {
         // `command` on).
         self.stage_1.d.next = self.command.val();
         for i in 0..self.matched.len() {
-            self.ip_match[i].d.next = self.slot_ip[i].q.val() == self.peer_ip_ahead.val();
+            self.ip_match[i].d.next = self.slot_ip[i].q.val() == self.peer_ip.val();
             self.matched[i].d.next = self.slot_valid[i].q.val() & self.ip_match[i].q.val();
         }
         self.box_ok.d.next = (self.command_box_id.val() == self.box_id.val())
@@ -1008,8 +1006,6 @@ mod tests {
                 }
                 _ => 0.into(),
             };
-            // the parser shows the sender's address a clock ahead
-            u.peer_ip_ahead.next = u64::from(c.ip).into();
             self.bench.cycle();
             self.bench.uut.command.next = true;
             self.bench.cycle();

@@ -9,12 +9,16 @@
 //! clock after it was on `frame` when the frame is STORED (`buffer_locked` was low in the
 //! clock its first beat was on `frame`), and feeds:
 //!
-//! - field captures by byte position (shift registers enabled over their bytes): the
-//!   destination MAC, the EtherType, bytes 14..22 (the ARP request header, or IPv4
-//!   version/IHL to fragment field), the IPv4 total length and protocol, the peer's MAC and
-//!   IP (ARP sender from the ARP body, else Ethernet and IPv4 source), the target IP (ARP
-//!   target, else IPv4 destination), the transport header (bytes 34..42) and the command
-//!   header and its first 12 argument bytes;
+//! - the layers that listen to the same beats ([`crate::stream::FrameBeats`]): the
+//!   Ethernet layer ([`EthernetDemux`]: destination MAC and EtherType, steps 3-5) and the
+//!   command layer ([`CommandDecoder`]: the command header's fields, the first argument
+//!   bytes and the header's form for step 16);
+//! - field captures by byte position (shift registers enabled over their bytes) for ARP,
+//!   IPv4 and the transport: bytes 14..22 (the ARP request header, or IPv4 version/IHL to
+//!   fragment field), the IPv4 total length and protocol, the peer's MAC and IP (ARP
+//!   sender from the ARP body, else Ethernet and IPv4 source), the target IP (ARP target,
+//!   else IPv4 destination) and the transport header (bytes 34..42); one capture serves
+//!   ARP and IPv4 where their fields share bytes;
 //! - three ones'-complement sums, one byte per clock with an end-around carry: the IPv4
 //!   header (bytes 14..34), the transport message (ICMP, or UDP with its pseudo header) and
 //!   the ICMP message from its byte 4 (the echo reply's checksum is its complement). The
@@ -22,45 +26,39 @@
 //!   Ethernet padding or the FCS, and a packet longer than the frame is found by whether
 //!   the first FCS byte was still inside it.
 //!
-//! After the last beat a pipeline compares the captured fields with the build-time
-//! constants (one clock), groups the checks (one clock), resolves them in the model's order
-//! (one clock) and drives `decided` for one clock with `action` and `fate`, exactly
-//! [`DECISION_LATENCY`] clocks after the last beat was on `frame`. A frame that passed steps
-//! 1-16 but was not stored gets action NONE and fate `ReplyBusy`. The `peer_*`,
-//! `receive_tick`, `ip_total_length`, `icmp_rest_sum` and `command_*` outputs change only
-//! at the `decided` of a stored frame and hold until the next one.
+//! After the last beat the captured fields are compared with the build-time constants (one
+//! clock), and the rule table ([`ReceiveRules`]) applies the checks in the model's order
+//! and drives `decided` for one clock with `action` (`receive_rules::ACTION_*`) and
+//! `fate`, exactly [`DECISION_LATENCY`] clocks after the last beat was on `frame`. A frame
+//! that passed steps 1-16 but was not stored gets action NONE and fate `ReplyBusy`. The reply builder's
+//! fields (`receive_tick`, `ip_total_length`, `icmp_rest_sum`) change only at the
+//! `decided` of a stored frame and hold until the next one (a reply is built while later
+//! frames go by). The command unit's (`peer_*`, `command_*`) are the captures themselves,
+//! with no second copy: they show the last frame's fields from the clock before `decided`
+//! until the next frame reaches them (its byte 6 registered: at least
+//! [`DECISION_LATENCY`] + 7 clocks after the last beat), which covers the command unit's
+//! `command` to `done`.
 //!
 //! Frames must be at least [`DECISION_LATENCY`] clocks apart (last beat to next first beat;
 //! the MAC's are at least 20: preamble, SFD and the inter-frame gap). `ready` is always
 //! high.
 
+use crate::command_decoder::CommandDecoder;
+use crate::ethernet_demux::EthernetDemux;
 use crate::hdl::*;
 use crate::ones_complement_sum::OnesComplementSum;
+use crate::receive_rules::{ReceiveRules, RULES_LATENCY};
 use crate::stream::ByteStreamSink;
-use skinbox_protocol::box_counters::BoxCounter;
-use skinbox_protocol::command::{self, HEADER_LEN, KIND_COMMAND};
-use skinbox_protocol::datagram::{MAGIC, VERSION};
 use skinbox_protocol::link::{
-    LinkConfig, ARGUMENTS_AT, ARP_AT, ARP_REQUEST_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, ICMP_AT,
-    ICMP_ECHO_REQUEST, IPV4_AT, IPV4_HEADER_LEN, IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP, MIN_FRAME_LEN,
-    PAYLOAD_AT, UDP_AT, UDP_HEADER_LEN,
+    LinkConfig, ARGUMENTS_AT, ARP_AT, ARP_REQUEST_HEADER, ICMP_AT, ICMP_ECHO_REQUEST, IPV4_AT,
+    IPV4_HEADER_LEN, IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP, MIN_FRAME_LEN, PAYLOAD_AT, UDP_AT,
 };
 use skinbox_protocol::wire::{arp, ethernet, icmp, ipv4, udp};
 use skinbox_protocol::Field;
 
-/// Action: nothing to answer.
-pub const ACTION_NONE: u8 = 0;
-/// Action: answer an ARP request for the box's IP.
-pub const ACTION_ARP: u8 = 1;
-/// Action: answer an ICMP echo request.
-pub const ACTION_ECHO: u8 = 2;
-/// Action: a well-formed command from the host subnet (the command unit decides its fate).
-pub const ACTION_COMMAND: u8 = 3;
 /// Clocks from the last beat on `frame` (clock `c`) to `decided` (high in clock `c +
 /// DECISION_LATENCY`).
-pub const DECISION_LATENCY: u64 = 6;
-/// Bytes of command arguments held in `command_arguments`.
-pub const HELD_ARGUMENT_BYTES: usize = 12;
+pub const DECISION_LATENCY: u64 = 3 + RULES_LATENCY;
 
 // Frame positions of the captured fields: an Ethernet II frame carrying ARP, or IPv4
 // without options, then ICMP or UDP, then a command.
@@ -79,12 +77,6 @@ const ARP_TARGET_IP: Field = shifted(arp::field::TARGET_IP, ARP_AT);
 const HEADER_BYTES: Field = ARP_AT..ARP_AT + ARP_REQUEST_HEADER.len();
 /// Captured in `transport`: the ICMP or UDP header.
 const TRANSPORT: Field = UDP_AT..PAYLOAD_AT;
-/// Captured in `command_head`: the command header to its flags.
-const COMMAND_HEAD: Field = PAYLOAD_AT..PAYLOAD_AT + command::field::SEQUENCE.start;
-const COMMAND_SEQUENCE: Field = shifted(command::field::SEQUENCE, PAYLOAD_AT);
-const COMMAND_HOST_TIME: Field = shifted(command::field::HOST_TIME, PAYLOAD_AT);
-const COMMAND_LENGTH: Field = shifted(command::field::LENGTH, PAYLOAD_AT);
-const COMMAND_RESERVED: Field = shifted(command::field::RESERVED, PAYLOAD_AT);
 /// The ICMP message from its identifier: what the echo reply's checksum sums.
 const ICMP_REST_AT: usize = ICMP_AT + icmp::field::IDENTIFIER.start;
 // one decode ends a capture and starts the next where the fields are adjacent
@@ -93,10 +85,6 @@ const _: () = assert!(ICMP_AT == UDP_AT && TRANSPORT.end == ICMP_AT + icmp::HEAD
 const _: () = assert!(HEADER_BYTES.end == IPV4_AT + ipv4::field::TTL);
 const _: () = assert!(ARP_SENDER_MAC.end == ARP_SENDER_IP.start);
 const _: () = assert!(IP_SOURCE.end == IP_DESTINATION.start && IP_DESTINATION.end == UDP_AT);
-const _: () = assert!(COMMAND_SEQUENCE.end == COMMAND_HOST_TIME.start);
-const _: () = assert!(COMMAND_HOST_TIME.end == COMMAND_LENGTH.start);
-const _: () = assert!(COMMAND_LENGTH.end == COMMAND_RESERVED.start);
-const _: () = assert!(COMMAND_RESERVED.end == ARGUMENTS_AT);
 // the beat tests that skip the index's choice need positions above 0
 const _: () = assert!(IP_CHECKSUM.start > 0);
 // the ARP body ends inside the 60 bytes every frame has
@@ -117,10 +105,6 @@ fn capture_bit(capture: Field, field: Field) -> Constant<Bits<6>> {
 /// A length as a kernel constant (compared with 16-bit lengths).
 fn length(len: usize) -> Constant<Bits<16>> {
     constant(len as u64)
-}
-
-fn fate_constant(fate: BoxCounter) -> Constant<Bits<5>> {
-    Constant::new((fate as u64).into())
 }
 
 /// Checks received frames (steps 1-16 of docs/control.md) and writes them into the frame
@@ -156,9 +140,6 @@ pub struct FrameParser {
     pub peer_mac: Signal<Out, Bits<48>>,
     /// ARP: the sender protocol address; else the IPv4 source.
     pub peer_ip: Signal<Out, Bits<32>>,
-    /// `peer_ip` a clock early: in the clock before `decided` it holds what `peer_ip` holds
-    /// from a stored frame's `decided` on (the command unit matches its host table with it).
-    pub peer_ip_ahead: Signal<Out, Bits<32>>,
     /// The UDP source port.
     pub peer_port: Signal<Out, Bits<16>>,
     /// `tick` in the clock of the frame's last beat.
@@ -173,27 +154,20 @@ pub struct FrameParser {
     pub command_opcode: Signal<Out, Bits<8>>,
     /// Command sequence number.
     pub command_sequence: Signal<Out, Bits<32>>,
-    /// Command host time.
-    pub command_host_time: Signal<Out, Bits<64>>,
     /// Command argument length.
     pub command_argument_length: Signal<Out, Bits<16>>,
     /// The first 12 argument bytes, the first in bits 95..88; bytes past the arguments 0.
     pub command_arguments: Signal<Out, Bits<96>>,
 
     // build-time constants
-    box_mac: Constant<Bits<48>>,
-    broadcast_mac: Constant<Bits<48>>,
     box_ip: Constant<Bits<32>>,
     box_port: Constant<Bits<16>>,
     host_subnet: Constant<Bits<32>>,
     host_mask: Constant<Bits<32>>,
-    ethertype_arp: Constant<Bits<16>>,
-    ethertype_ipv4: Constant<Bits<16>>,
     protocol_icmp: Constant<Bits<8>>,
     protocol_udp: Constant<Bits<8>>,
     icmp_echo_request: Constant<Bits<16>>,
     arp_request_header: Constant<Bits<64>>,
-    command_start: Constant<Bits<32>>,
     // frame positions
     source_mac_at: Constant<Bits<11>>,
     ethertype_at: Constant<Bits<11>>,
@@ -201,7 +175,6 @@ pub struct FrameParser {
     header_bytes_end: Constant<Bits<11>>,
     ip_total_len_at: Constant<Bits<11>>,
     ip_total_len_end: Constant<Bits<11>>,
-    arguments_expected_at: Constant<Bits<11>>,
     ip_protocol_at: Constant<Bits<11>>,
     ip_checksum_at: Constant<Bits<11>>,
     ip_checksum_low_at: Constant<Bits<11>>,
@@ -214,14 +187,8 @@ pub struct FrameParser {
     arp_target_ip_at: Constant<Bits<11>>,
     arp_target_ip_end: Constant<Bits<11>>,
     transport_at: Constant<Bits<11>>,
+    transport_end: Constant<Bits<11>>,
     icmp_rest_at: Constant<Bits<11>>,
-    command_at: Constant<Bits<11>>,
-    sequence_at: Constant<Bits<11>>,
-    host_time_at: Constant<Bits<11>>,
-    argument_length_at: Constant<Bits<11>>,
-    reserved_at: Constant<Bits<11>>,
-    command_header_last: Constant<Bits<11>>,
-    arguments_at: Constant<Bits<11>>,
     // field positions in the captures
     version_bit: Constant<Bits<6>>,
     ihl_bit: Constant<Bits<6>>,
@@ -232,32 +199,10 @@ pub struct FrameParser {
     udp_destination_port_bit: Constant<Bits<6>>,
     udp_length_bit: Constant<Bits<6>>,
     udp_checksum_bit: Constant<Bits<6>>,
-    command_start_bit: Constant<Bits<6>>,
-    command_box_id_bit: Constant<Bits<6>>,
-    command_opcode_bit: Constant<Bits<6>>,
-    command_flags_bit: Constant<Bits<6>>,
     // lengths
     ip_header_len: Constant<Bits<16>>,
-    udp_and_command_header_len: Constant<Bits<16>>,
     ip_and_transport_header_len: Constant<Bits<16>>,
     ip_to_arguments_len: Constant<Bits<16>>,
-    action_none: Constant<Bits<2>>,
-    action_arp: Constant<Bits<2>>,
-    action_echo: Constant<Bits<2>>,
-    action_command: Constant<Bits<2>>,
-    fate_bad_length: Constant<Bits<5>>,
-    fate_bad_fcs: Constant<Bits<5>>,
-    fate_not_for_us: Constant<Bits<5>>,
-    fate_ipv4_bad_header: Constant<Bits<5>>,
-    fate_ipv4_options: Constant<Bits<5>>,
-    fate_ipv4_fragment: Constant<Bits<5>>,
-    fate_bad_transport: Constant<Bits<5>>,
-    fate_unknown_udp_port: Constant<Bits<5>>,
-    fate_arp_answered: Constant<Bits<5>>,
-    fate_pings_answered: Constant<Bits<5>>,
-    fate_refused_foreign_subnet: Constant<Bits<5>>,
-    fate_refused_malformed: Constant<Bits<5>>,
-    fate_reply_busy: Constant<Bits<5>>,
 
     // input side: the beat index and the stored flag
     in_frame: DFF<Bit>,
@@ -273,14 +218,10 @@ pub struct FrameParser {
     beat_index: DFF<Bits<11>>,
     // where the registered beat is in the frame
     at_first: DFF<Bit>,
-    at_destination: DFF<Bit>,
     at_source: DFF<Bit>,
-    at_ethertype: DFF<Bit>,
-    at_network_start: DFF<Bit>,
     at_header_bytes: DFF<Bit>,
     at_total: DFF<Bit>,
     at_total_length_end: DFF<Bit>,
-    at_arguments_expected: DFF<Bit>,
     at_ip_header_last: DFF<Bit>,
     at_arp_sender_mac: DFF<Bit>,
     at_ip_protocol: DFF<Bit>,
@@ -289,12 +230,6 @@ pub struct FrameParser {
     at_ip_destination: DFF<Bit>,
     at_arp_target_ip: DFF<Bit>,
     at_transport: DFF<Bit>,
-    at_command_head: DFF<Bit>,
-    at_sequence: DFF<Bit>,
-    at_host_time: DFF<Bit>,
-    at_argument_length: DFF<Bit>,
-    at_reserved: DFF<Bit>,
-    at_command_header_last: DFF<Bit>,
     at_ip_header: DFF<Bit>,
     at_pseudo_header: DFF<Bit>,
     at_from_transport: DFF<Bit>,
@@ -304,9 +239,6 @@ pub struct FrameParser {
     index_in: Signal<Local, Bits<11>>,
     word_in: Signal<Local, Bits<16>>,
     // captures
-    destination_mac: DFF<Bits<48>>,
-    ethertype: DFF<Bits<16>>,
-    is_arp: DFF<Bit>,
     header: DFF<Bits<64>>,
     total_length: DFF<Bits<16>>,
     protocol: DFF<Bits<8>>,
@@ -315,37 +247,22 @@ pub struct FrameParser {
     source_ip: DFF<Bits<32>>,
     target_ip: DFF<Bits<32>>,
     transport: DFF<Bits<64>>,
-    command_head: DFF<Bits<64>>,
-    sequence_number: DFF<Bits<32>>,
-    host_time: DFF<Bits<64>>,
-    argument_length: DFF<Bits<16>>,
-    reserved: DFF<Bits<16>>,
-    argument_slot: DFF<Bits<12>>,
-    argument_0: DFF<Bits<8>>,
-    argument_1: DFF<Bits<8>>,
-    argument_2: DFF<Bits<8>>,
-    argument_3: DFF<Bits<8>>,
-    argument_4: DFF<Bits<8>>,
-    argument_5: DFF<Bits<8>>,
-    argument_6: DFF<Bits<8>>,
-    argument_7: DFF<Bits<8>>,
-    argument_8: DFF<Bits<8>>,
-    argument_9: DFF<Bits<8>>,
-    argument_10: DFF<Bits<8>>,
-    argument_11: DFF<Bits<8>>,
     // the IPv4 payload's bytes after the current one, and whether the current one (from
     // byte 34) is in it
     ip_left: DFF<Bits<16>>,
     in_ip: DFF<Bit>,
     in_ip_history: DFF<Bits<3>>,
     payload_length: DFF<Bits<16>>,
-    arguments_expected: DFF<Bits<16>>,
     // the sums: the IPv4 header, the transport message (with the UDP pseudo header), and
     // the ICMP message from its identifier
     header_sum: OnesComplementSum,
     transport_sum: OnesComplementSum,
     rest_sum: OnesComplementSum,
-    argument_byte: Signal<Local, Bits<8>>,
+    // the layers
+    ethernet: EthernetDemux,
+    command: CommandDecoder,
+    // the rule table
+    rules: ReceiveRules,
     // end of frame
     end_length_error: DFF<Bit>,
     end_error: DFF<Bit>,
@@ -353,12 +270,9 @@ pub struct FrameParser {
     end_fits: DFF<Bit>,
     // stage 1: compares
     p1: DFF<Bit>,
+    p2: DFF<Bit>,
     s1_length_error: DFF<Bit>,
     s1_error: DFF<Bit>,
-    s1_to_box: DFF<Bit>,
-    s1_broadcast: DFF<Bit>,
-    s1_arp: DFF<Bit>,
-    s1_ipv4: DFF<Bit>,
     s1_arp_request: DFF<Bit>,
     s1_target_box: DFF<Bit>,
     s1_version_4: DFF<Bit>,
@@ -378,57 +292,13 @@ pub struct FrameParser {
     s1_udp_no_checksum: DFF<Bit>,
     s1_port_box: DFF<Bit>,
     s1_in_subnet: DFF<Bit>,
-    s1_command_start: DFF<Bit>,
-    s1_command_zeros: DFF<Bit>,
-    s1_argument_length_ok: DFF<Bit>,
     rest_folded: DFF<Bits<16>>,
     // stage 2: the checks
-    p2: DFF<Bit>,
-    s2_length_error: DFF<Bit>,
-    s2_error: DFF<Bit>,
-    s2_not_for_us: DFF<Bit>,
-    s2_arp: DFF<Bit>,
-    s2_arp_answered: DFF<Bit>,
-    s2_ipv4: DFF<Bit>,
-    s2_bad_version: DFF<Bit>,
-    s2_options: DFF<Bit>,
-    s2_bad_header: DFF<Bit>,
-    s2_fragment: DFF<Bit>,
-    s2_ip_not_for_us: DFF<Bit>,
-    s2_icmp: DFF<Bit>,
-    s2_icmp_bad: DFF<Bit>,
-    s2_echo_request: DFF<Bit>,
-    s2_udp: DFF<Bit>,
-    s2_udp_bad: DFF<Bit>,
-    s2_other_port: DFF<Bit>,
-    s2_foreign: DFF<Bit>,
-    s2_malformed: DFF<Bit>,
     // stage 3: the Ethernet level and the IPv4 level resolved
-    p3: DFF<Bit>,
-    s3_use_ip: DFF<Bit>,
-    s3_frame_fate: DFF<Bits<5>>,
-    s3_frame_action: DFF<Bits<2>>,
-    s3_ip_fate: DFF<Bits<5>>,
-    s3_ip_action: DFF<Bits<2>>,
-    p4: DFF<Bit>,
-    s4_fate: Signal<Local, Bits<5>>,
-    s4_action: Signal<Local, Bits<2>>,
     // outputs
-    decided_out: DFF<Bit>,
-    action_out: DFF<Bits<2>>,
-    fate_out: DFF<Bits<5>>,
-    held_peer_mac: DFF<Bits<48>>,
-    held_peer_ip: DFF<Bits<32>>,
-    held_peer_port: DFF<Bits<16>>,
     held_receive_tick: DFF<Bits<64>>,
     held_total_length: DFF<Bits<16>>,
     held_rest_sum: DFF<Bits<16>>,
-    held_box_id: DFF<Bits<16>>,
-    held_opcode: DFF<Bits<8>>,
-    held_sequence: DFF<Bits<32>>,
-    held_host_time: DFF<Bits<64>>,
-    held_argument_length: DFF<Bits<16>>,
-    held_arguments: DFF<Bits<96>>,
 }
 
 impl FrameParser {
@@ -438,11 +308,7 @@ impl FrameParser {
         let prefix = u32::from(link.host_subnet_prefix_len.min(32));
         let mask = u32::MAX.checked_shl(32 - prefix).unwrap_or(0);
         let subnet = u32::from_be_bytes(link.host_subnet) & mask;
-        let command_start = [MAGIC[0], MAGIC[1], VERSION, KIND_COMMAND];
-        let c2 = |v: u8| Constant::new(u64::from(v).into());
         let udp_field = |f: Field| shifted(f, UDP_AT);
-        let command_field = |f: Field| shifted(f, PAYLOAD_AT);
-        let command_byte = |at: usize| command_field(at..at + 1);
         let version_ihl = IPV4_AT + ipv4::field::VERSION_IHL;
         let ihl_bit = capture_bit(HEADER_BYTES, version_ihl..version_ihl + 1)
             .val()
@@ -464,7 +330,6 @@ impl FrameParser {
             fate: Default::default(),
             peer_mac: Default::default(),
             peer_ip: Default::default(),
-            peer_ip_ahead: Default::default(),
             peer_port: Default::default(),
             receive_tick: Default::default(),
             ip_total_length: Default::default(),
@@ -472,29 +337,22 @@ impl FrameParser {
             command_box_id: Default::default(),
             command_opcode: Default::default(),
             command_sequence: Default::default(),
-            command_host_time: Default::default(),
             command_argument_length: Default::default(),
             command_arguments: Default::default(),
-            box_mac: Constant::new(big_endian(&link.box_mac).into()),
-            broadcast_mac: Constant::new(big_endian(&[0xFF; 6]).into()),
             box_ip: Constant::new(big_endian(&link.box_ip).into()),
             box_port: Constant::new(u64::from(link.box_port).into()),
             host_subnet: Constant::new(u64::from(subnet).into()),
             host_mask: Constant::new(u64::from(mask).into()),
-            ethertype_arp: Constant::new(u64::from(ETHERTYPE_ARP).into()),
-            ethertype_ipv4: Constant::new(u64::from(ETHERTYPE_IPV4).into()),
             protocol_icmp: Constant::new(u64::from(IP_PROTOCOL_ICMP).into()),
             protocol_udp: Constant::new(u64::from(IP_PROTOCOL_UDP).into()),
             icmp_echo_request: Constant::new(big_endian(&[ICMP_ECHO_REQUEST, 0]).into()),
             arp_request_header: Constant::new(big_endian(&ARP_REQUEST_HEADER).into()),
-            command_start: Constant::new(big_endian(&command_start).into()),
             source_mac_at: position(ethernet::field::SOURCE.start),
             ethertype_at: position(ethernet::field::ETHERTYPE.start),
             ipv4_at: position(IPV4_AT),
             header_bytes_end: position(HEADER_BYTES.end),
             ip_total_len_at: position(IP_TOTAL_LEN.start),
             ip_total_len_end: position(IP_TOTAL_LEN.end),
-            arguments_expected_at: position(IP_TOTAL_LEN.end + 1),
             ip_protocol_at: position(IP_PROTOCOL),
             ip_checksum_at: position(IP_CHECKSUM.start),
             ip_checksum_low_at: position(IP_CHECKSUM.start + 1),
@@ -507,14 +365,8 @@ impl FrameParser {
             arp_target_ip_at: position(ARP_TARGET_IP.start),
             arp_target_ip_end: position(ARP_TARGET_IP.end),
             transport_at: position(TRANSPORT.start),
+            transport_end: position(TRANSPORT.end),
             icmp_rest_at: position(ICMP_REST_AT),
-            command_at: position(COMMAND_HEAD.start),
-            sequence_at: position(COMMAND_SEQUENCE.start),
-            host_time_at: position(COMMAND_HOST_TIME.start),
-            argument_length_at: position(COMMAND_LENGTH.start),
-            reserved_at: position(COMMAND_RESERVED.start),
-            command_header_last: position(ARGUMENTS_AT - 1),
-            arguments_at: position(ARGUMENTS_AT),
             version_bit: Constant::new((ihl_bit + 4).into()),
             ihl_bit: Constant::new(ihl_bit.into()),
             fragment_offset_bit: Constant::new(fragment_bit.into()),
@@ -529,31 +381,9 @@ impl FrameParser {
             ),
             udp_length_bit: capture_bit(TRANSPORT, udp_field(udp::field::LENGTH)),
             udp_checksum_bit: capture_bit(TRANSPORT, udp_field(udp::field::CHECKSUM)),
-            command_start_bit: capture_bit(COMMAND_HEAD, command_field(0..4)),
-            command_box_id_bit: capture_bit(COMMAND_HEAD, command_field(command::field::BOX_ID)),
-            command_opcode_bit: capture_bit(COMMAND_HEAD, command_byte(command::field::OPCODE)),
-            command_flags_bit: capture_bit(COMMAND_HEAD, command_byte(command::field::FLAGS)),
             ip_header_len: length(IPV4_HEADER_LEN),
-            udp_and_command_header_len: length(UDP_HEADER_LEN + HEADER_LEN),
             ip_and_transport_header_len: length(PAYLOAD_AT - IPV4_AT),
             ip_to_arguments_len: length(ARGUMENTS_AT - IPV4_AT),
-            action_none: c2(ACTION_NONE),
-            action_arp: c2(ACTION_ARP),
-            action_echo: c2(ACTION_ECHO),
-            action_command: c2(ACTION_COMMAND),
-            fate_bad_length: fate_constant(BoxCounter::BadLength),
-            fate_bad_fcs: fate_constant(BoxCounter::BadFcs),
-            fate_not_for_us: fate_constant(BoxCounter::NotForUs),
-            fate_ipv4_bad_header: fate_constant(BoxCounter::Ipv4BadHeader),
-            fate_ipv4_options: fate_constant(BoxCounter::Ipv4Options),
-            fate_ipv4_fragment: fate_constant(BoxCounter::Ipv4Fragment),
-            fate_bad_transport: fate_constant(BoxCounter::BadTransport),
-            fate_unknown_udp_port: fate_constant(BoxCounter::UnknownUdpPort),
-            fate_arp_answered: fate_constant(BoxCounter::ArpAnswered),
-            fate_pings_answered: fate_constant(BoxCounter::PingsAnswered),
-            fate_refused_foreign_subnet: fate_constant(BoxCounter::RefusedForeignSubnet),
-            fate_refused_malformed: fate_constant(BoxCounter::RefusedMalformed),
-            fate_reply_busy: fate_constant(BoxCounter::ReplyBusy),
             in_frame: Default::default(),
             next_index: Default::default(),
             stored: Default::default(),
@@ -565,14 +395,10 @@ impl FrameParser {
             beat_data: Default::default(),
             beat_index: Default::default(),
             at_first: Default::default(),
-            at_destination: Default::default(),
             at_source: Default::default(),
-            at_ethertype: Default::default(),
-            at_network_start: Default::default(),
             at_header_bytes: Default::default(),
             at_total: Default::default(),
             at_total_length_end: Default::default(),
-            at_arguments_expected: Default::default(),
             at_ip_header_last: Default::default(),
             at_arp_sender_mac: Default::default(),
             at_ip_protocol: Default::default(),
@@ -581,12 +407,6 @@ impl FrameParser {
             at_ip_destination: Default::default(),
             at_arp_target_ip: Default::default(),
             at_transport: Default::default(),
-            at_command_head: Default::default(),
-            at_sequence: Default::default(),
-            at_host_time: Default::default(),
-            at_argument_length: Default::default(),
-            at_reserved: Default::default(),
-            at_command_header_last: Default::default(),
             at_ip_header: Default::default(),
             at_pseudo_header: Default::default(),
             at_from_transport: Default::default(),
@@ -595,9 +415,6 @@ impl FrameParser {
             transport_word: Default::default(),
             index_in: Default::default(),
             word_in: Default::default(),
-            destination_mac: Default::default(),
-            ethertype: Default::default(),
-            is_arp: Default::default(),
             header: Default::default(),
             total_length: Default::default(),
             protocol: Default::default(),
@@ -606,44 +423,24 @@ impl FrameParser {
             source_ip: Default::default(),
             target_ip: Default::default(),
             transport: Default::default(),
-            command_head: Default::default(),
-            sequence_number: Default::default(),
-            host_time: Default::default(),
-            argument_length: Default::default(),
-            reserved: Default::default(),
-            argument_slot: Default::default(),
-            argument_0: Default::default(),
-            argument_1: Default::default(),
-            argument_2: Default::default(),
-            argument_3: Default::default(),
-            argument_4: Default::default(),
-            argument_5: Default::default(),
-            argument_6: Default::default(),
-            argument_7: Default::default(),
-            argument_8: Default::default(),
-            argument_9: Default::default(),
-            argument_10: Default::default(),
-            argument_11: Default::default(),
             ip_left: Default::default(),
             in_ip: Default::default(),
             in_ip_history: Default::default(),
             payload_length: Default::default(),
-            arguments_expected: Default::default(),
             header_sum: Default::default(),
+            ethernet: EthernetDemux::new(link.box_mac),
+            command: Default::default(),
+            rules: Default::default(),
             transport_sum: Default::default(),
             rest_sum: Default::default(),
-            argument_byte: Default::default(),
             end_length_error: Default::default(),
             end_error: Default::default(),
             end_stored: Default::default(),
             end_fits: Default::default(),
             p1: Default::default(),
+            p2: Default::default(),
             s1_length_error: Default::default(),
             s1_error: Default::default(),
-            s1_to_box: Default::default(),
-            s1_broadcast: Default::default(),
-            s1_arp: Default::default(),
-            s1_ipv4: Default::default(),
             s1_arp_request: Default::default(),
             s1_target_box: Default::default(),
             s1_version_4: Default::default(),
@@ -663,54 +460,10 @@ impl FrameParser {
             s1_udp_no_checksum: Default::default(),
             s1_port_box: Default::default(),
             s1_in_subnet: Default::default(),
-            s1_command_start: Default::default(),
-            s1_command_zeros: Default::default(),
-            s1_argument_length_ok: Default::default(),
             rest_folded: Default::default(),
-            p2: Default::default(),
-            s2_length_error: Default::default(),
-            s2_error: Default::default(),
-            s2_not_for_us: Default::default(),
-            s2_arp: Default::default(),
-            s2_arp_answered: Default::default(),
-            s2_ipv4: Default::default(),
-            s2_bad_version: Default::default(),
-            s2_options: Default::default(),
-            s2_bad_header: Default::default(),
-            s2_fragment: Default::default(),
-            s2_ip_not_for_us: Default::default(),
-            s2_icmp: Default::default(),
-            s2_icmp_bad: Default::default(),
-            s2_echo_request: Default::default(),
-            s2_udp: Default::default(),
-            s2_udp_bad: Default::default(),
-            s2_other_port: Default::default(),
-            s2_foreign: Default::default(),
-            s2_malformed: Default::default(),
-            p3: Default::default(),
-            s3_use_ip: Default::default(),
-            s3_frame_fate: Default::default(),
-            s3_frame_action: Default::default(),
-            s3_ip_fate: Default::default(),
-            s3_ip_action: Default::default(),
-            p4: Default::default(),
-            s4_fate: Default::default(),
-            s4_action: Default::default(),
-            decided_out: Default::default(),
-            action_out: Default::default(),
-            fate_out: Default::default(),
-            held_peer_mac: Default::default(),
-            held_peer_ip: Default::default(),
-            held_peer_port: Default::default(),
             held_receive_tick: Default::default(),
             held_total_length: Default::default(),
             held_rest_sum: Default::default(),
-            held_box_id: Default::default(),
-            held_opcode: Default::default(),
-            held_sequence: Default::default(),
-            held_host_time: Default::default(),
-            held_argument_length: Default::default(),
-            held_arguments: Default::default(),
         }
     }
 }
@@ -738,14 +491,10 @@ impl Logic for FrameParser {
             beat_data,
             beat_index,
             at_first,
-            at_destination,
             at_source,
-            at_ethertype,
-            at_network_start,
             at_header_bytes,
             at_total,
             at_total_length_end,
-            at_arguments_expected,
             at_ip_header_last,
             at_arp_sender_mac,
             at_ip_protocol,
@@ -754,21 +503,12 @@ impl Logic for FrameParser {
             at_ip_destination,
             at_arp_target_ip,
             at_transport,
-            at_command_head,
-            at_sequence,
-            at_host_time,
-            at_argument_length,
-            at_reserved,
-            at_command_header_last,
             at_ip_header,
             at_pseudo_header,
             at_from_transport,
             at_from_icmp_rest,
             beat_word,
             transport_word,
-            destination_mac,
-            ethertype,
-            is_arp,
             header,
             total_length,
             protocol,
@@ -777,40 +517,18 @@ impl Logic for FrameParser {
             source_ip,
             target_ip,
             transport,
-            command_head,
-            sequence_number,
-            host_time,
-            argument_length,
-            reserved,
-            argument_slot,
-            argument_0,
-            argument_1,
-            argument_2,
-            argument_3,
-            argument_4,
-            argument_5,
-            argument_6,
-            argument_7,
-            argument_8,
-            argument_9,
-            argument_10,
-            argument_11,
             ip_left,
             in_ip,
             in_ip_history,
             payload_length,
-            arguments_expected,
             end_length_error,
             end_error,
             end_stored,
             end_fits,
             p1,
+            p2,
             s1_length_error,
             s1_error,
-            s1_to_box,
-            s1_broadcast,
-            s1_arp,
-            s1_ipv4,
             s1_arp_request,
             s1_target_box,
             s1_version_4,
@@ -830,52 +548,10 @@ impl Logic for FrameParser {
             s1_udp_no_checksum,
             s1_port_box,
             s1_in_subnet,
-            s1_command_start,
-            s1_command_zeros,
-            s1_argument_length_ok,
             rest_folded,
-            p2,
-            s2_length_error,
-            s2_error,
-            s2_not_for_us,
-            s2_arp,
-            s2_arp_answered,
-            s2_ipv4,
-            s2_bad_version,
-            s2_options,
-            s2_bad_header,
-            s2_fragment,
-            s2_ip_not_for_us,
-            s2_icmp,
-            s2_icmp_bad,
-            s2_echo_request,
-            s2_udp,
-            s2_udp_bad,
-            s2_other_port,
-            s2_foreign,
-            s2_malformed,
-            p3,
-            s3_use_ip,
-            s3_frame_fate,
-            s3_frame_action,
-            s3_ip_fate,
-            s3_ip_action,
-            p4,
-            decided_out,
-            action_out,
-            fate_out,
-            held_peer_mac,
-            held_peer_ip,
-            held_peer_port,
             held_receive_tick,
             held_total_length,
-            held_rest_sum,
-            held_box_id,
-            held_opcode,
-            held_sequence,
-            held_host_time,
-            held_argument_length,
-            held_arguments
+            held_rest_sum
         );
         self.frame.ready.next = true;
 
@@ -893,17 +569,10 @@ impl Logic for FrameParser {
         // starts at its first byte and ends at the byte after it or at a frame's start)
         if self.frame.valid.val() {
             self.at_first.d.next = self.index_in.val() == 0;
-            self.at_destination.d.next = !self.in_frame.q.val()
-                | (self.at_destination.q.val() & (self.index_in.val() != self.source_mac_at.val()));
             self.at_source.d.next = (self.index_in.val() == self.source_mac_at.val())
                 | (self.at_source.q.val()
                     & (self.index_in.val() != self.ethertype_at.val())
                     & self.in_frame.q.val());
-            self.at_ethertype.d.next = (self.index_in.val() == self.ethertype_at.val())
-                | (self.at_ethertype.q.val()
-                    & (self.index_in.val() != self.ipv4_at.val())
-                    & self.in_frame.q.val());
-            self.at_network_start.d.next = self.index_in.val() == self.ipv4_at.val();
             self.at_header_bytes.d.next = (self.index_in.val() == self.ipv4_at.val())
                 | (self.at_header_bytes.q.val()
                     & (self.index_in.val() != self.header_bytes_end.val())
@@ -913,8 +582,6 @@ impl Logic for FrameParser {
                     & (self.index_in.val() != self.ip_total_len_end.val())
                     & self.in_frame.q.val());
             self.at_total_length_end.d.next = self.index_in.val() == self.ip_total_len_end.val();
-            self.at_arguments_expected.d.next =
-                self.index_in.val() == self.arguments_expected_at.val();
             self.at_ip_header_last.d.next = self.index_in.val() == self.ip_header_last.val();
             self.at_arp_sender_mac.d.next = (self.index_in.val() == self.arp_sender_mac_at.val())
                 | (self.at_arp_sender_mac.q.val()
@@ -939,30 +606,8 @@ impl Logic for FrameParser {
                     & self.in_frame.q.val());
             self.at_transport.d.next = (self.index_in.val() == self.transport_at.val())
                 | (self.at_transport.q.val()
-                    & (self.index_in.val() != self.command_at.val())
+                    & (self.index_in.val() != self.transport_end.val())
                     & self.in_frame.q.val());
-            self.at_command_head.d.next = (self.index_in.val() == self.command_at.val())
-                | (self.at_command_head.q.val()
-                    & (self.index_in.val() != self.sequence_at.val())
-                    & self.in_frame.q.val());
-            self.at_sequence.d.next = (self.index_in.val() == self.sequence_at.val())
-                | (self.at_sequence.q.val()
-                    & (self.index_in.val() != self.host_time_at.val())
-                    & self.in_frame.q.val());
-            self.at_host_time.d.next = (self.index_in.val() == self.host_time_at.val())
-                | (self.at_host_time.q.val()
-                    & (self.index_in.val() != self.argument_length_at.val())
-                    & self.in_frame.q.val());
-            self.at_argument_length.d.next = (self.index_in.val() == self.argument_length_at.val())
-                | (self.at_argument_length.q.val()
-                    & (self.index_in.val() != self.reserved_at.val())
-                    & self.in_frame.q.val());
-            self.at_reserved.d.next = (self.index_in.val() == self.reserved_at.val())
-                | (self.at_reserved.q.val()
-                    & (self.index_in.val() != self.arguments_at.val())
-                    & self.in_frame.q.val());
-            self.at_command_header_last.d.next =
-                self.index_in.val() == self.command_header_last.val();
             self.at_ip_header.d.next = (self.index_in.val() == self.ipv4_at.val())
                 | (self.at_ip_header.q.val()
                     & (self.index_in.val() != self.transport_at.val())
@@ -1014,10 +659,23 @@ impl Logic for FrameParser {
         self.buffer_write_data.next = self.beat_data.q.val();
 
         // ---- captures by byte position ----
-        self.argument_byte.next = 0.into();
-        if self.in_ip.q.val() {
-            self.argument_byte.next = self.beat_data.q.val();
-        }
+        // the layers listen to the beats
+        self.ethernet.clock.next = self.clock.val();
+        self.ethernet.beats.next_valid.next = self.frame.valid.val();
+        self.ethernet.beats.next_index.next = self.index_in.val();
+        self.ethernet.beats.in_frame.next = self.in_frame.q.val();
+        self.ethernet.beats.beat_valid.next = self.beat_valid.q.val();
+        self.ethernet.beats.beat_data.next = self.beat_data.q.val();
+        self.ethernet.beat_first.next = self.at_first.q.val();
+        self.command.clock.next = self.clock.val();
+        self.command.beats.next_valid.next = self.frame.valid.val();
+        self.command.beats.next_index.next = self.index_in.val();
+        self.command.beats.in_frame.next = self.in_frame.q.val();
+        self.command.beats.beat_valid.next = self.beat_valid.q.val();
+        self.command.beats.beat_data.next = self.beat_data.q.val();
+        self.command.beat_first.next = self.at_first.q.val();
+        self.command.beat_in_packet.next = self.in_ip.q.val();
+        self.command.payload_length.next = self.payload_length.q.val();
         // the sums add a word a clock (the beat's, or the transport's with the pseudo
         // header) while the beat is in their range; they restart at a frame's first beat
         // (the transport's at the IPv4 protocol, with UDP's pseudo-header protocol word)
@@ -1044,20 +702,11 @@ impl Logic for FrameParser {
         }
 
         if self.beat_valid.q.val() {
-            if self.at_destination.q.val() {
-                self.destination_mac.d.next =
-                    (self.destination_mac.q.val() << 8) | bit_cast::<48, 8>(self.beat_data.q.val());
-            }
-            if (self.at_source.q.val()) | (self.is_arp.q.val() & self.at_arp_sender_mac.q.val()) {
+            if (self.at_source.q.val())
+                | (self.ethernet.is_arp.val() & self.at_arp_sender_mac.q.val())
+            {
                 self.source_mac.d.next =
                     (self.source_mac.q.val() << 8) | bit_cast::<48, 8>(self.beat_data.q.val());
-            }
-            if self.at_ethertype.q.val() {
-                self.ethertype.d.next =
-                    (self.ethertype.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
-            }
-            if self.at_network_start.q.val() {
-                self.is_arp.d.next = self.ethertype.q.val() == self.ethertype_arp.val();
             }
             if self.at_header_bytes.q.val() {
                 self.header.d.next =
@@ -1071,14 +720,14 @@ impl Logic for FrameParser {
                 self.protocol.d.next = self.beat_data.q.val();
                 self.is_udp.d.next = self.beat_data.q.val() == self.protocol_udp.val();
             }
-            if (!self.is_arp.q.val() & self.at_ip_source.q.val())
-                | (self.is_arp.q.val() & self.at_arp_sender_ip.q.val())
+            if (!self.ethernet.is_arp.val() & self.at_ip_source.q.val())
+                | (self.ethernet.is_arp.val() & self.at_arp_sender_ip.q.val())
             {
                 self.source_ip.d.next =
                     (self.source_ip.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
             }
-            if (!self.is_arp.q.val() & self.at_ip_destination.q.val())
-                | (self.is_arp.q.val() & self.at_arp_target_ip.q.val())
+            if (!self.ethernet.is_arp.val() & self.at_ip_destination.q.val())
+                | (self.ethernet.is_arp.val() & self.at_arp_target_ip.q.val())
             {
                 self.target_ip.d.next =
                     (self.target_ip.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
@@ -1086,67 +735,6 @@ impl Logic for FrameParser {
             if self.at_transport.q.val() {
                 self.transport.d.next =
                     (self.transport.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
-            }
-            if self.at_command_head.q.val() {
-                self.command_head.d.next =
-                    (self.command_head.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
-            }
-            if self.at_sequence.q.val() {
-                self.sequence_number.d.next =
-                    (self.sequence_number.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
-            }
-            if self.at_host_time.q.val() {
-                self.host_time.d.next =
-                    (self.host_time.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
-            }
-            if self.at_argument_length.q.val() {
-                self.argument_length.d.next =
-                    (self.argument_length.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
-            }
-            if self.at_reserved.q.val() {
-                self.reserved.d.next =
-                    (self.reserved.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
-            }
-            // arguments: one slot per byte from 66, inside the IPv4 packet only
-            self.argument_slot.d.next = self.argument_slot.q.val() >> 1;
-            if self.at_command_header_last.q.val() {
-                self.argument_slot.d.next = 0x800.into();
-            }
-            if self.argument_slot.q.val().get_bit(11) {
-                self.argument_0.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(10) {
-                self.argument_1.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(9) {
-                self.argument_2.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(8) {
-                self.argument_3.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(7) {
-                self.argument_4.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(6) {
-                self.argument_5.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(5) {
-                self.argument_6.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(4) {
-                self.argument_7.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(3) {
-                self.argument_8.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(2) {
-                self.argument_9.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(1) {
-                self.argument_10.d.next = self.argument_byte.val();
-            }
-            if self.argument_slot.q.val().get_bit(0) {
-                self.argument_11.d.next = self.argument_byte.val();
             }
             // the IPv4 payload's extent: whether the beat (from byte 34) is inside it
             self.in_ip_history.d.next =
@@ -1158,33 +746,14 @@ impl Logic for FrameParser {
             if self.at_total_length_end.q.val() {
                 self.payload_length.d.next = self.total_length.q.val() - self.ip_header_len.val();
             }
-            if self.at_arguments_expected.q.val() {
-                // a command's arguments: the payload after the UDP and command headers
-                self.arguments_expected.d.next =
-                    self.payload_length.q.val() - self.udp_and_command_header_len.val();
-            }
             if self.at_ip_header_last.q.val() {
                 // the IPv4 payload's bytes from 34 on
                 self.ip_left.d.next = self.payload_length.q.val();
                 self.in_ip.d.next = self.payload_length.q.val() != 0;
             }
             if self.at_first.q.val() {
-                self.is_arp.d.next = false;
                 self.is_udp.d.next = false;
                 self.in_ip.d.next = false;
-                self.argument_slot.d.next = 0.into();
-                self.argument_0.d.next = 0.into();
-                self.argument_1.d.next = 0.into();
-                self.argument_2.d.next = 0.into();
-                self.argument_3.d.next = 0.into();
-                self.argument_4.d.next = 0.into();
-                self.argument_5.d.next = 0.into();
-                self.argument_6.d.next = 0.into();
-                self.argument_7.d.next = 0.into();
-                self.argument_8.d.next = 0.into();
-                self.argument_9.d.next = 0.into();
-                self.argument_10.d.next = 0.into();
-                self.argument_11.d.next = 0.into();
             }
             if self.beat_last.q.val() {
                 self.end_length_error.d.next = self.beat_length_error.q.val();
@@ -1197,12 +766,10 @@ impl Logic for FrameParser {
 
         // ---- stage 1 (the clock after the last beat was registered): compares ----
         self.p1.d.next = self.beat_valid.q.val() & self.beat_last.q.val();
+        // (the checks of the frame's end, `s1_fits` and the errors, stand a clock later)
+        self.p2.d.next = self.p1.q.val();
         self.s1_length_error.d.next = self.end_length_error.q.val();
         self.s1_error.d.next = self.end_error.q.val();
-        self.s1_to_box.d.next = self.destination_mac.q.val() == self.box_mac.val();
-        self.s1_broadcast.d.next = self.destination_mac.q.val() == self.broadcast_mac.val();
-        self.s1_arp.d.next = self.is_arp.q.val();
-        self.s1_ipv4.d.next = self.ethertype.q.val() == self.ethertype_ipv4.val();
         self.s1_arp_request.d.next = self.header.q.val() == self.arp_request_header.val();
         self.s1_target_box.d.next = self.target_ip.q.val() == self.box_ip.val();
         self.s1_version_4.d.next = self
@@ -1271,180 +838,60 @@ impl Logic for FrameParser {
             == self.box_port.val();
         self.s1_in_subnet.d.next =
             (self.source_ip.q.val() & self.host_mask.val()) == self.host_subnet.val();
-        self.s1_command_start.d.next = self
-            .command_head
-            .q
-            .val()
-            .get_bits::<32>(self.command_start_bit.val().index())
-            == self.command_start.val();
-        self.s1_command_zeros.d.next = (self
-            .command_head
-            .q
-            .val()
-            .get_bits::<8>(self.command_flags_bit.val().index())
-            == 0)
-            & (self.reserved.q.val() == 0);
-        self.s1_argument_length_ok.d.next =
-            self.argument_length.q.val() == self.arguments_expected.q.val();
         self.rest_folded.d.next = self.rest_sum.folded.val();
 
-        // ---- stage 2: the checks of the rule table ----
-        self.p2.d.next = self.p1.q.val();
-        self.s2_length_error.d.next = self.s1_length_error.q.val();
-        self.s2_error.d.next = self.s1_error.q.val();
-        self.s2_not_for_us.d.next = !(self.s1_to_box.q.val() | self.s1_broadcast.q.val());
-        self.s2_arp.d.next = self.s1_arp.q.val();
-        self.s2_arp_answered.d.next = self.s1_arp_request.q.val() & self.s1_target_box.q.val();
-        self.s2_ipv4.d.next = self.s1_ipv4.q.val() & !self.s1_broadcast.q.val();
-        self.s2_bad_version.d.next = !self.s1_version_4.q.val() | self.s1_ihl_below_5.q.val();
-        self.s2_options.d.next = self.s1_ihl_above_5.q.val();
-        self.s2_bad_header.d.next =
+        // ---- the rule table (steps 1-16a) over the checks ----
+        self.rules.clock.next = self.clock.val();
+        self.rules.reset.next = self.reset.val();
+        self.rules.check.next = self.p2.q.val();
+        self.rules.bad_length.next = self.s1_length_error.q.val();
+        self.rules.bad_fcs.next = self.s1_error.q.val();
+        self.rules.not_to_box.next = !(self.ethernet.to_box.val() | self.ethernet.broadcast.val());
+        self.rules.arp.next = self.ethernet.is_arp.val();
+        self.rules.arp_for_box.next = self.s1_arp_request.q.val() & self.s1_target_box.q.val();
+        self.rules.ipv4.next = self.ethernet.ipv4.val() & !self.ethernet.broadcast.val();
+        self.rules.bad_version.next = !self.s1_version_4.q.val() | self.s1_ihl_below_5.q.val();
+        self.rules.options.next = self.s1_ihl_above_5.q.val();
+        self.rules.bad_header.next =
             !self.s1_header_sum_ok.q.val() | !self.s1_total_from_20.q.val() | !self.s1_fits.q.val();
-        self.s2_fragment.d.next = self.s1_fragment.q.val();
-        self.s2_ip_not_for_us.d.next = !self.s1_target_box.q.val();
-        self.s2_icmp.d.next = self.s1_icmp.q.val();
-        self.s2_icmp_bad.d.next =
+        self.rules.fragment.next = self.s1_fragment.q.val();
+        self.rules.ip_not_to_box.next = !self.s1_target_box.q.val();
+        self.rules.icmp.next = self.s1_icmp.q.val();
+        self.rules.icmp_bad.next =
             !self.s1_total_from_28.q.val() | !self.s1_transport_sum_ok.q.val();
-        self.s2_echo_request.d.next = self.s1_echo_request.q.val();
-        self.s2_udp.d.next = self.s1_udp.q.val();
-        self.s2_udp_bad.d.next = !self.s1_total_from_28.q.val()
+        self.rules.echo_request.next = self.s1_echo_request.q.val();
+        self.rules.udp.next = self.s1_udp.q.val();
+        self.rules.udp_bad.next = !self.s1_total_from_28.q.val()
             | !self.s1_udp_length_ok.q.val()
             | (!self.s1_udp_no_checksum.q.val() & !self.s1_transport_sum_ok.q.val());
-        self.s2_other_port.d.next = !self.s1_port_box.q.val();
-        self.s2_foreign.d.next = !self.s1_in_subnet.q.val();
-        self.s2_malformed.d.next = !(self.s1_total_from_52.q.val()
-            & self.s1_command_start.q.val()
-            & self.s1_command_zeros.q.val()
-            & self.s1_argument_length_ok.q.val());
-
-        // ---- stage 3: steps 1-5 and steps 6-16, each in the model's order ----
-        self.p3.d.next = self.p2.q.val();
-        self.s3_use_ip.d.next = false;
-        self.s3_frame_action.d.next = self.action_none.val();
-        if self.s2_length_error.q.val() {
-            self.s3_frame_fate.d.next = self.fate_bad_length.val();
-        } else if self.s2_error.q.val() {
-            self.s3_frame_fate.d.next = self.fate_bad_fcs.val();
-        } else if self.s2_not_for_us.q.val() {
-            self.s3_frame_fate.d.next = self.fate_not_for_us.val();
-        } else if self.s2_arp.q.val() {
-            if self.s2_arp_answered.q.val() {
-                self.s3_frame_fate.d.next = self.fate_arp_answered.val();
-                self.s3_frame_action.d.next = self.action_arp.val();
-            } else {
-                self.s3_frame_fate.d.next = self.fate_not_for_us.val();
-            }
-        } else if self.s2_ipv4.q.val() {
-            self.s3_frame_fate.d.next = self.fate_not_for_us.val();
-            self.s3_use_ip.d.next = true;
-        } else {
-            self.s3_frame_fate.d.next = self.fate_not_for_us.val();
-        }
-        self.s3_ip_action.d.next = self.action_none.val();
-        if self.s2_bad_version.q.val() {
-            self.s3_ip_fate.d.next = self.fate_ipv4_bad_header.val();
-        } else if self.s2_options.q.val() {
-            self.s3_ip_fate.d.next = self.fate_ipv4_options.val();
-        } else if self.s2_bad_header.q.val() {
-            self.s3_ip_fate.d.next = self.fate_ipv4_bad_header.val();
-        } else if self.s2_fragment.q.val() {
-            self.s3_ip_fate.d.next = self.fate_ipv4_fragment.val();
-        } else if self.s2_ip_not_for_us.q.val() {
-            self.s3_ip_fate.d.next = self.fate_not_for_us.val();
-        } else if self.s2_icmp.q.val() {
-            if self.s2_icmp_bad.q.val() {
-                self.s3_ip_fate.d.next = self.fate_bad_transport.val();
-            } else if self.s2_echo_request.q.val() {
-                self.s3_ip_fate.d.next = self.fate_pings_answered.val();
-                self.s3_ip_action.d.next = self.action_echo.val();
-            } else {
-                self.s3_ip_fate.d.next = self.fate_not_for_us.val();
-            }
-        } else if self.s2_udp.q.val() {
-            if self.s2_udp_bad.q.val() {
-                self.s3_ip_fate.d.next = self.fate_bad_transport.val();
-            } else if self.s2_other_port.q.val() {
-                self.s3_ip_fate.d.next = self.fate_unknown_udp_port.val();
-            } else if self.s2_foreign.q.val() {
-                self.s3_ip_fate.d.next = self.fate_refused_foreign_subnet.val();
-            } else if self.s2_malformed.q.val() {
-                self.s3_ip_fate.d.next = self.fate_refused_malformed.val();
-            } else {
-                self.s3_ip_fate.d.next = 0.into();
-                self.s3_ip_action.d.next = self.action_command.val();
-            }
-        } else {
-            self.s3_ip_fate.d.next = self.fate_not_for_us.val();
-        }
-
-        // ---- stage 4: the decision; an answer without the buffer is ReplyBusy ----
-        self.s4_fate.next = self.s3_frame_fate.q.val();
-        self.s4_action.next = self.s3_frame_action.q.val();
-        if self.s3_use_ip.q.val() {
-            self.s4_fate.next = self.s3_ip_fate.q.val();
-            self.s4_action.next = self.s3_ip_action.q.val();
-        }
-        self.p4.d.next = self.p3.q.val();
-        self.decided_out.d.next = self.p4.q.val();
-        self.fate_out.d.next = self.s4_fate.val();
-        self.action_out.d.next = self.s4_action.val();
-        if (self.s4_action.val() != self.action_none.val()) & !self.end_stored.q.val() {
-            self.fate_out.d.next = self.fate_reply_busy.val();
-            self.action_out.d.next = self.action_none.val();
-        }
-        if self.p4.q.val() & self.end_stored.q.val() {
-            self.held_peer_mac.d.next = self.source_mac.q.val();
-            self.held_peer_ip.d.next = self.source_ip.q.val();
-            self.held_peer_port.d.next = self
-                .transport
-                .q
-                .val()
-                .get_bits::<16>(self.udp_source_port_bit.val().index());
+        self.rules.other_port.next = !self.s1_port_box.q.val();
+        self.rules.foreign.next = !self.s1_in_subnet.q.val();
+        self.rules.malformed.next =
+            !(self.s1_total_from_52.q.val() & self.command.well_formed.val());
+        self.rules.stored.next = self.end_stored.q.val();
+        if self.rules.deciding.val() & self.end_stored.q.val() {
             self.held_receive_tick.d.next = self.last_tick.q.val();
             self.held_total_length.d.next = self.total_length.q.val();
             self.held_rest_sum.d.next = self.rest_folded.q.val();
-            self.held_box_id.d.next = self
-                .command_head
-                .q
-                .val()
-                .get_bits::<16>(self.command_box_id_bit.val().index());
-            self.held_opcode.d.next = self
-                .command_head
-                .q
-                .val()
-                .get_bits::<8>(self.command_opcode_bit.val().index());
-            self.held_sequence.d.next = self.sequence_number.q.val();
-            self.held_host_time.d.next = self.host_time.q.val();
-            self.held_argument_length.d.next = self.argument_length.q.val();
-            self.held_arguments.d.next = (bit_cast::<96, 8>(self.argument_0.q.val()) << 88)
-                | (bit_cast::<96, 8>(self.argument_1.q.val()) << 80)
-                | (bit_cast::<96, 8>(self.argument_2.q.val()) << 72)
-                | (bit_cast::<96, 8>(self.argument_3.q.val()) << 64)
-                | (bit_cast::<96, 8>(self.argument_4.q.val()) << 56)
-                | (bit_cast::<96, 8>(self.argument_5.q.val()) << 48)
-                | (bit_cast::<96, 8>(self.argument_6.q.val()) << 40)
-                | (bit_cast::<96, 8>(self.argument_7.q.val()) << 32)
-                | (bit_cast::<96, 8>(self.argument_8.q.val()) << 24)
-                | (bit_cast::<96, 8>(self.argument_9.q.val()) << 16)
-                | (bit_cast::<96, 8>(self.argument_10.q.val()) << 8)
-                | bit_cast::<96, 8>(self.argument_11.q.val());
         }
-        self.decided.next = self.decided_out.q.val();
-        self.action.next = self.action_out.q.val();
-        self.fate.next = self.fate_out.q.val();
-        self.peer_mac.next = self.held_peer_mac.q.val();
-        self.peer_ip.next = self.held_peer_ip.q.val();
-        self.peer_ip_ahead.next = self.source_ip.q.val();
-        self.peer_port.next = self.held_peer_port.q.val();
+        self.decided.next = self.rules.decided.val();
+        self.action.next = self.rules.action.val();
+        self.fate.next = self.rules.fate.val();
+        self.peer_mac.next = self.source_mac.q.val();
+        self.peer_ip.next = self.source_ip.q.val();
+        self.peer_port.next = self
+            .transport
+            .q
+            .val()
+            .get_bits::<16>(self.udp_source_port_bit.val().index());
         self.receive_tick.next = self.held_receive_tick.q.val();
         self.ip_total_length.next = self.held_total_length.q.val();
         self.icmp_rest_sum.next = self.held_rest_sum.q.val();
-        self.command_box_id.next = self.held_box_id.q.val();
-        self.command_opcode.next = self.held_opcode.q.val();
-        self.command_sequence.next = self.held_sequence.q.val();
-        self.command_host_time.next = self.held_host_time.q.val();
-        self.command_argument_length.next = self.held_argument_length.q.val();
-        self.command_arguments.next = self.held_arguments.q.val();
+        self.command_box_id.next = self.command.box_id.val();
+        self.command_opcode.next = self.command.opcode.val();
+        self.command_sequence.next = self.command.sequence_number.val();
+        self.command_argument_length.next = self.command.argument_length.val();
+        self.command_arguments.next = self.command.arguments.val();
 
         if self.reset.val() {
             self.in_frame.d.next = false;
@@ -1452,9 +899,6 @@ impl Logic for FrameParser {
             self.beat_last.d.next = false;
             self.p1.d.next = false;
             self.p2.d.next = false;
-            self.p3.d.next = false;
-            self.p4.d.next = false;
-            self.decided_out.d.next = false;
         }
     }
 }
@@ -1462,9 +906,11 @@ impl Logic for FrameParser {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::receive_rules::{ACTION_ARP, ACTION_COMMAND, ACTION_ECHO, ACTION_NONE};
     use crate::testbench::{Bench, TestRng};
     use etherparse::checksum::Sum16BitWords;
     use etherparse::{Ipv4Header, PacketBuilder};
+    use skinbox_protocol::box_counters::BoxCounter;
     use skinbox_protocol::command::{Command, CommandRepr, Destination, Request};
 
     const LINK: LinkConfig = LinkConfig::DEFAULT;
@@ -1586,7 +1032,6 @@ mod tests {
         box_id: u16,
         opcode: u8,
         sequence: u32,
-        host_time: u64,
         argument_length: u16,
         arguments: [u8; 12],
         writes: Vec<(usize, u8)>,
@@ -1693,7 +1138,6 @@ mod tests {
                         box_id: u.command_box_id.val().to_u16(),
                         opcode: u.command_opcode.val().to_u8(),
                         sequence: u.command_sequence.val().to_u32(),
-                        host_time: u.command_host_time.val().to_u64(),
                         argument_length: u.command_argument_length.val().to_u16(),
                         arguments,
                         writes: vec![],
@@ -1867,7 +1311,6 @@ mod tests {
                 assert_eq!(seen.box_id, c.box_id(), "{what}: box id");
                 assert_eq!(seen.opcode, c.opcode(), "{what}: opcode");
                 assert_eq!(seen.sequence, c.sequence(), "{what}: sequence");
-                assert_eq!(seen.host_time, c.host_time(), "{what}: host time");
                 assert_eq!(
                     usize::from(seen.argument_length),
                     c.arguments().len(),
@@ -2267,22 +1710,12 @@ mod tests {
                 (ACTION_NONE, fate as usize),
                 "{what}"
             );
-            let held = Seen {
-                writes: vec![],
-                last_tick: 0,
-                action: 0,
-                fate: 0,
-                ..seen
-            };
-            let before = Seen {
-                writes: vec![],
-                last_tick: 0,
-                action: 0,
-                fate: 0,
-                ..stored.clone()
-            };
+            // the reply builder's fields hold; the command unit's follow the frame (they
+            // are read between a stored command's decision and the next frame only)
+            let held = |s: &Seen| (s.receive_tick, s.total_length, s.icmp_rest_sum);
             assert_eq!(
-                held, before,
+                held(&seen),
+                held(&stored),
                 "{what}: held fields changed by an unstored frame"
             );
         }

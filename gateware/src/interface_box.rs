@@ -16,12 +16,13 @@ use crate::cell_downlink::{frame_bits, pin_scan_clocks, CellDownlink, REFILL_LAT
 use crate::command_unit::{CommandUnit, CommandUnitConfig};
 use crate::counter_file::{counter_file, CounterFile};
 use crate::datagram_arbiter::DatagramArbiter;
-use crate::frame_parser::{FrameParser, ACTION_ARP, ACTION_COMMAND, ACTION_ECHO, ACTION_NONE};
+use crate::frame_parser::FrameParser;
 use crate::frame_transmitter::FrameTransmitter;
 use crate::geometry::{group_onehot, GROUP_PORTS, MAX_PORTS};
 use crate::hdl::*;
 use crate::mac_receiver::MacReceiver;
 use crate::packet_store::PacketStore;
+use crate::receive_rules::{ACTION_ARP, ACTION_COMMAND, ACTION_ECHO, ACTION_NONE};
 use crate::record_batcher::RecordBatcher;
 use crate::replica_register::ReplicaRegister;
 use crate::reply_builder::ReplyBuilder;
@@ -467,7 +468,6 @@ impl Logic for InterfaceBox {
             self.parser.decided.val() & (self.parser.action.val() == self.action_command.val());
         self.commands.peer_mac.next = self.parser.peer_mac.val();
         self.commands.peer_ip.next = self.parser.peer_ip.val();
-        self.commands.peer_ip_ahead.next = self.parser.peer_ip_ahead.val();
         self.commands.peer_port.next = self.parser.peer_port.val();
         self.commands.command_box_id.next = self.parser.command_box_id.val();
         self.commands.command_opcode.next = self.parser.command_opcode.val();
@@ -499,7 +499,6 @@ impl Logic for InterfaceBox {
         self.replies.receive_tick.next = self.parser.receive_tick.val();
         self.replies.ip_total_length.next = self.parser.ip_total_length.val();
         self.replies.icmp_rest_sum.next = self.parser.icmp_rest_sum.val();
-        self.replies.command_opcode.next = self.parser.command_opcode.val();
         self.replies.result.next = self.commands.result.val();
         self.replies.accepted_stream_to.next = self.commands.accepted_stream_to.val();
         self.replies.accepted_status_now.next = self.commands.accepted_status_now.val();

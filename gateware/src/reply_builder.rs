@@ -658,8 +658,6 @@ pub struct ReplyBuilder {
     pub ip_total_length: Signal<In, Bits<16>>,
     /// Folded ones'-complement sum of the echo request's ICMP message from byte 4.
     pub icmp_rest_sum: Signal<In, Bits<16>>,
-    /// The command's opcode byte.
-    pub command_opcode: Signal<In, Bits<8>>,
     /// The command's result (`AckResult`).
     pub result: Signal<In, Bits<8>>,
     /// The command was an accepted stream-to: the acknowledgement carries the destination.
@@ -796,7 +794,6 @@ impl ReplyBuilder {
             receive_tick: Default::default(),
             ip_total_length: Default::default(),
             icmp_rest_sum: Default::default(),
-            command_opcode: Default::default(),
             result: Default::default(),
             accepted_stream_to: Default::default(),
             accepted_status_now: Default::default(),
@@ -1399,7 +1396,6 @@ mod tests {
         u.receive_tick.next = held.receive_tick.into();
         u.ip_total_length.next = u64::from(held.ip_total_length).into();
         u.icmp_rest_sum.next = u64::from(held.icmp_rest_sum).into();
-        u.command_opcode.next = u64::from(held.opcode).into();
         u.result.next = u64::from(held.result as u8).into();
         let accepted = |opcode: Opcode| held.opcode == opcode as u8 && held.result == AckResult::Ok;
         u.accepted_stream_to.next = accepted(Opcode::StreamTo);

@@ -97,3 +97,21 @@ pub struct DatagramSink {
     /// The body.
     pub body: ByteStreamSink,
 }
+
+/// A received frame's beats as the receive layers listen to them: each beat in the clock
+/// it arrives, with its frame position, and one clock later registered. A listener sets
+/// its position flags from the arriving beat (equality decodes of `next_index` only) and
+/// takes bytes from the registered one, so no range compare sits in front of its logic.
+#[derive(LogicInterface, Default)]
+pub struct FrameBeats {
+    /// A beat arrives this clock.
+    pub next_valid: Signal<In, Bit>,
+    /// Its frame position (0 outside a frame).
+    pub next_index: Signal<In, Bits<11>>,
+    /// A beat of the same frame came before it.
+    pub in_frame: Signal<In, Bit>,
+    /// The registered beat (the one that arrived last clock) is valid.
+    pub beat_valid: Signal<In, Bit>,
+    /// The registered beat's byte.
+    pub beat_data: Signal<In, Bits<8>>,
+}
