@@ -30,14 +30,15 @@
 //! clock), and the rule table ([`ReceiveRules`]) applies the checks in the model's order
 //! and drives `decided` for one clock with `action` (`receive_rules::ACTION_*`) and
 //! `fate`, exactly [`DECISION_LATENCY`] clocks after the last beat was on `frame`. A frame
-//! that passed steps 1-16 but was not stored gets action NONE and fate `ReplyBusy`. The reply builder's
-//! fields (`receive_tick`, `ip_total_length`, `icmp_rest_sum`) change only at the
-//! `decided` of a stored frame and hold until the next one (a reply is built while later
-//! frames go by). The command unit's (`peer_*`, `command_*`) are the captures themselves,
-//! with no second copy: they show the last frame's fields from the clock before `decided`
-//! until the next frame reaches them (its byte 6 registered: at least
-//! [`DECISION_LATENCY`] + 7 clocks after the last beat), which covers the command unit's
-//! `command` to `done`.
+//! that passed steps 1-16 but was not stored gets action NONE and fate `ReplyBusy`.
+//!
+//! The reply builder's fields change only with a stored frame (`receive_tick` at its last
+//! beat, `ip_total_length` and `icmp_rest_sum` at its `decided`) and hold until the next
+//! one (a reply is built while later frames go by). The command unit's (`peer_*`,
+//! `command_*`) are the captures themselves, with no second copy: they show the last
+//! frame's fields from the clock before `decided` until the next frame reaches them (its
+//! byte 6 registered: at least [`DECISION_LATENCY`] + 7 clocks after the last beat), which
+//! covers the command unit's `command` to `done`.
 //!
 //! Frames must be at least [`DECISION_LATENCY`] clocks apart (last beat to next first beat;
 //! the MAC's are at least 20: preamble, SFD and the inter-frame gap). `ready` is always
@@ -208,7 +209,6 @@ pub struct FrameParser {
     in_frame: DFF<Bit>,
     next_index: DFF<Bits<11>>,
     stored: DFF<Bit>,
-    last_tick: DFF<Bits<64>>,
     // the registered beat
     beat_valid: DFF<Bit>,
     beat_last: DFF<Bit>,
@@ -292,7 +292,6 @@ pub struct FrameParser {
     s1_udp_no_checksum: DFF<Bit>,
     s1_port_box: DFF<Bit>,
     s1_in_subnet: DFF<Bit>,
-    rest_folded: DFF<Bits<16>>,
     // stage 2: the checks
     // stage 3: the Ethernet level and the IPv4 level resolved
     // outputs
@@ -387,7 +386,6 @@ impl FrameParser {
             in_frame: Default::default(),
             next_index: Default::default(),
             stored: Default::default(),
-            last_tick: Default::default(),
             beat_valid: Default::default(),
             beat_last: Default::default(),
             beat_error: Default::default(),
@@ -460,7 +458,6 @@ impl FrameParser {
             s1_udp_no_checksum: Default::default(),
             s1_port_box: Default::default(),
             s1_in_subnet: Default::default(),
-            rest_folded: Default::default(),
             held_receive_tick: Default::default(),
             held_total_length: Default::default(),
             held_rest_sum: Default::default(),
@@ -483,7 +480,6 @@ impl Logic for FrameParser {
             in_frame,
             next_index,
             stored,
-            last_tick,
             beat_valid,
             beat_last,
             beat_error,
@@ -548,7 +544,6 @@ impl Logic for FrameParser {
             s1_udp_no_checksum,
             s1_port_box,
             s1_in_subnet,
-            rest_folded,
             held_receive_tick,
             held_total_length,
             held_rest_sum
@@ -648,8 +643,14 @@ impl Logic for FrameParser {
                 self.stored.d.next = !self.buffer_locked.val();
             }
             self.in_frame.d.next = !self.frame.last.val();
-            if self.frame.last.val() {
-                self.last_tick.d.next = self.tick.val();
+            // the tick of a stored frame's last beat, held until the next stored frame's
+            // (only a stored frame is answered, and none is stored while a reply holds the
+            // buffer)
+            if self.frame.last.val()
+                & ((self.in_frame.q.val() & self.stored.q.val())
+                    | (!self.in_frame.q.val() & !self.buffer_locked.val()))
+            {
+                self.held_receive_tick.d.next = self.tick.val();
             }
         }
 
@@ -838,7 +839,6 @@ impl Logic for FrameParser {
             == self.box_port.val();
         self.s1_in_subnet.d.next =
             (self.source_ip.q.val() & self.host_mask.val()) == self.host_subnet.val();
-        self.rest_folded.d.next = self.rest_sum.folded.val();
 
         // ---- the rule table (steps 1-16a) over the checks ----
         self.rules.clock.next = self.clock.val();
@@ -870,9 +870,8 @@ impl Logic for FrameParser {
             !(self.s1_total_from_52.q.val() & self.command.well_formed.val());
         self.rules.stored.next = self.end_stored.q.val();
         if self.rules.deciding.val() & self.end_stored.q.val() {
-            self.held_receive_tick.d.next = self.last_tick.q.val();
             self.held_total_length.d.next = self.total_length.q.val();
-            self.held_rest_sum.d.next = self.rest_folded.q.val();
+            self.held_rest_sum.d.next = self.rest_sum.folded.val();
         }
         self.decided.next = self.rules.decided.val();
         self.action.next = self.rules.action.val();
