@@ -4,8 +4,9 @@
 //! frame parser's step 16 (`RefusedMalformed`).
 //!
 //! It listens to the parser's beats (each beat as it arrives with its frame position, and
-//! one clock later registered): one [`FieldCapture`] per header field it uses (start, box
-//! id, opcode, flags, sequence number, argument length, reserved), one slot register per
+//! one clock later registered): one [`FieldCapture`] per header field it passes on (box id,
+//! opcode, sequence number, argument length), one [`FieldMatch`] per field it only
+//! compares with constants (start, flags, reserved), one slot register per
 //! argument byte (cleared at the header's last byte; bytes after the IPv4 packet's end are
 //! taken as 0, as are bytes a short frame never reached), and the argument length the IPv4
 //! payload length leaves (`payload_length` less the UDP and command headers).
@@ -18,6 +19,7 @@
 //! beat): the command unit reads them from its `command` to its `done`.
 
 use crate::field_capture::FieldCapture;
+use crate::field_match::FieldMatch;
 use crate::hdl::*;
 use crate::stream::FrameBeats;
 use skinbox_protocol::command::{self, field, HEADER_LEN, KIND_COMMAND};
@@ -72,14 +74,13 @@ pub struct CommandDecoder {
     pub argument_length: Signal<Out, Bits<16>>,
     /// Its first [`HELD_ARGUMENT_BYTES`] argument bytes, the first in the high byte.
     pub arguments: Signal<Out, Bits<96>>,
-    start: FieldCapture<32>,
+    start: FieldMatch,
     box_id_field: FieldCapture<16>,
     opcode_field: FieldCapture<8>,
-    flags: FieldCapture<8>,
+    flags: FieldMatch,
     sequence_field: FieldCapture<32>,
     length_field: FieldCapture<16>,
-    reserved: FieldCapture<16>,
-    command_start: Constant<Bits<32>>,
+    reserved: FieldMatch,
     payload_length_known_at: Constant<Bits<11>>,
     header_last_at: Constant<Bits<11>>,
     udp_and_command_header_len: Constant<Bits<16>>,
@@ -122,14 +123,13 @@ impl Default for CommandDecoder {
             sequence_number: Default::default(),
             argument_length: Default::default(),
             arguments: Default::default(),
-            start: FieldCapture::of(START),
+            start: FieldMatch::of(START, &command_start),
             box_id_field: FieldCapture::of(in_frame(field::BOX_ID)),
             opcode_field: FieldCapture::of(byte_in_frame(field::OPCODE)),
-            flags: FieldCapture::of(byte_in_frame(field::FLAGS)),
+            flags: FieldMatch::of(byte_in_frame(field::FLAGS), &[0]),
             sequence_field: FieldCapture::of(in_frame(field::SEQUENCE)),
             length_field: FieldCapture::of(in_frame(field::LENGTH)),
-            reserved: FieldCapture::of(in_frame(field::RESERVED)),
-            command_start: constant(big_endian(&command_start)),
+            reserved: FieldMatch::of(in_frame(field::RESERVED), &[0, 0]),
             payload_length_known_at: constant(PAYLOAD_LENGTH_KNOWN_AT as u64),
             header_last_at: constant(ARGUMENTS_AT as u64 - 1),
             udp_and_command_header_len: constant((UDP_HEADER_LEN + HEADER_LEN) as u64),
@@ -277,8 +277,8 @@ impl Logic for CommandDecoder {
         }
 
         // the checks (registered every clock; read a clock after the last beat)
-        self.start_ok.d.next = self.start.value.val() == self.command_start.val();
-        self.zeros_ok.d.next = (self.flags.value.val() == 0) & (self.reserved.value.val() == 0);
+        self.start_ok.d.next = self.start.equals.val();
+        self.zeros_ok.d.next = self.flags.equals.val() & self.reserved.equals.val();
         self.length_ok.d.next = self.length_field.value.val() == self.arguments_expected.q.val();
         self.well_formed.next =
             self.start_ok.q.val() & self.zeros_ok.q.val() & self.length_ok.q.val();

@@ -48,6 +48,7 @@ pub mod downlink_pin_scan;
 pub mod downlink_refill;
 pub mod ethernet_demux;
 pub mod field_capture;
+pub mod field_match;
 pub mod frame_parser;
 pub mod frame_transmitter;
 pub mod geometry;
