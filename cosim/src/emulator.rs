@@ -1,6 +1,6 @@
 //! A box without a board: the reference model of the box's uplink
 //! ([`crate::reference::SlicedReference`]) and its control model
-//! ([`crate::control::BoxControl`]) played together, free of I/O. `skinbox emulate` puts a
+//! ([`skinbox_model::control::BoxControl`]) played together, free of I/O. `skinbox emulate` puts a
 //! real UDP socket and a clock around it.
 //!
 //! A command payload from a UDP sender goes to the control model as what arrived on the
@@ -11,10 +11,10 @@
 //! stream-to claims the stream, the datagrams are counted but sent nowhere (the build-time
 //! destination of a real box is a documentation address).
 
-use crate::control::{BoxControl, ControlConfig, Effect, Outcome, Reply};
 use crate::reference::{PreparedReference, SlicedReference};
 use crate::run::TICK_ZERO_CYCLE;
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_model::control::{BoxControl, ControlConfig, Effect, Outcome, Reply};
 use skinbox_protocol::command::Destination;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::link::{LinkConfig, IPV4_TTL, IP_PROTOCOL_UDP};
@@ -424,7 +424,7 @@ pub fn serve(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::udp_frame;
+    use skinbox_model::control::udp_frame;
     use skinbox_protocol::command::{CommandRepr, Request};
     use skinbox_protocol::link::PREAMBLE_LEN;
 

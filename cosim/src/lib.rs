@@ -15,8 +15,6 @@
 pub mod bench;
 mod binding;
 pub mod cache_lock;
-pub mod control;
-pub mod downlink;
 pub mod dut;
 pub mod emulator;
 pub mod error;

@@ -2,11 +2,11 @@
 //! pin lines it makes, and the analysis of the frames (every one checked), shared by the RTL
 //! runner ([`crate::sim`]) and the reference model ([`crate::reference`]).
 
-use crate::downlink::PinChange;
 use crate::error::CosimError;
 use crate::frames::{check, is_reply, min_gap, Frame};
 use crate::line::{back_to_back, jittered_transitions, Jitter, Transition, UartByte};
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_model::downlink::PinChange;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::status::PortCounter;
@@ -55,7 +55,7 @@ impl HostFrame {
     pub fn from_ethernet(edge: u64, ethernet: &[u8]) -> HostFrame {
         let mut frame = ethernet.to_vec();
         frame.resize(frame.len().max(skinbox_protocol::link::MIN_FRAME_LEN), 0);
-        let fcs = crate::control::crc32(&frame);
+        let fcs = skinbox_model::control::crc32(&frame);
         frame.extend_from_slice(&fcs.to_le_bytes());
         HostFrame { edge, frame }
     }

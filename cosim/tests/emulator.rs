@@ -327,12 +327,12 @@ fn assert_decided_at_arrival(sent: &[Sent], acks: &[AckRepr]) -> Vec<f64> {
 /// The RTL's results for `sent` decided at the ticks `acks` name: the control model, which
 /// the receive-path and downlink tests hold equal to the RTL, fed the same frames at them.
 fn model_results(
-    model: &mut skinbox_cosim::control::BoxControl,
+    model: &mut skinbox_model::control::BoxControl,
     from: SocketAddrV4,
     sent: &[Sent],
     acks: &[AckRepr],
 ) -> Vec<AckResult> {
-    use skinbox_cosim::control::Reply;
+    use skinbox_model::control::Reply;
     sent.iter()
         .zip(acks)
         .map(|(s, a)| {
@@ -367,8 +367,8 @@ fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
         ..EmulatorSettings::default()
     };
     let prepared = prepare_emulator(&settings, listen).unwrap();
-    let mut model = skinbox_cosim::control::BoxControl::new(
-        skinbox_cosim::control::ControlConfig::of(&prepared.config),
+    let mut model = skinbox_model::control::BoxControl::new(
+        skinbox_model::control::ControlConfig::of(&prepared.config),
     );
     let host = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let from = match host.local_addr().unwrap() {
@@ -413,7 +413,7 @@ fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
         // on random ones)
         let mut noise = 0x2545_F491_4F6C_DD1Du64;
         for _ in 0..200 {
-            let mut m = skinbox_cosim::control::BoxControl::new(*model.config());
+            let mut m = skinbox_model::control::BoxControl::new(*model.config());
             let jittered: Vec<AckRepr> = acks
                 .iter()
                 .zip(&schedule)
@@ -473,7 +473,7 @@ fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
         );
         // at exactly 32 us the RTL refuses 6 (issue #40); the emulator's results are the
         // RTL's at the spacing the commands arrived with (above)
-        let mut m = skinbox_cosim::control::BoxControl::new(*model.config());
+        let mut m = skinbox_model::control::BoxControl::new(*model.config());
         let nominal: Vec<AckRepr> = acks
             .iter()
             .enumerate()
@@ -499,8 +499,8 @@ fn emulator_acknowledgements_on_loopback_are_the_rtls_at_the_arrival_spacing() {
 /// acknowledgement is the control model's at its receive tick, field for field.
 #[test]
 fn the_receive_path_tests_commands_on_loopback_are_answered_as_the_box_answers() {
-    use skinbox_cosim::control::{BoxControl, ControlConfig, Reply};
     use skinbox_cosim::emulator::{prepare as prepare_emulator, EmulatorSettings};
+    use skinbox_model::control::{BoxControl, ControlConfig, Reply};
     use skinbox_protocol::box_counters::BoxCounter;
     use std::collections::{BTreeMap, HashMap, VecDeque};
     use std::net::{Ipv4Addr, SocketAddr, UdpSocket};

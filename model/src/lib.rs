@@ -4,4 +4,6 @@
 //! [`timing`] is the contract between the gateware and every model here: each latency the
 //! gateware implements, named once, with the clocks it counts from and to.
 
+pub mod control;
+pub mod downlink;
 pub mod timing;

@@ -109,8 +109,9 @@ pub const COMMAND_LATENCY: u64 = 4;
 /// command is offered to the downlink (`command_unit::DOWNLINK_OFFER_AFTER_COMMAND`).
 pub const DOWNLINK_OFFER_AFTER_COMMAND: u64 = 3;
 
-/// Clocks from a frame's receive tick to the downlink offer of the cell command it
-/// carries: the parser's decision, then the command unit.
+/// Clocks from a command's receive tick to the clock in which the command unit offers a
+/// cell command to the downlink: the parser's decision, then the command unit's pipeline
+/// up to the clock before `done`.
 pub const DOWNLINK_OFFER_AFTER_RECEIVE_TICK: u64 =
     PARSER_DECISION_LATENCY + DOWNLINK_OFFER_AFTER_COMMAND;
 

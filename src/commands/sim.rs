@@ -612,7 +612,7 @@ fn is_sync(bytes: &[u8; skinbox_protocol::cell::PACKET_LEN]) -> bool {
 /// The box's transmit pins must be as planned: the cells were driven with the plan.
 fn check_downlink(
     plan: &skinbox_cosim::scene::DownlinkPlan,
-    pins: &[skinbox_cosim::downlink::PinChange],
+    pins: &[skinbox_model::downlink::PinChange],
     spec: &skinbox_cosim::run::SimSpec,
 ) -> anyhow::Result<DownlinkOutput> {
     let last_tick = skinbox_cosim::run::cycles(spec) - skinbox_cosim::run::TICK_ZERO_CYCLE;

@@ -5,8 +5,6 @@
 
 use super::front::{PortFront, StartedPacket};
 use super::receive::ReceiveSide;
-use crate::control::Effect;
-use crate::downlink::PinChange;
 use crate::harness::{LINK_SPEED, LINK_UP};
 use skinbox_gateware::cell_deframer::DECISION_CLOCKS;
 use skinbox_gateware::counter_file::INCREMENT_WRITE_EDGE;
@@ -16,6 +14,8 @@ use skinbox_gateware::packet_store::{FIFO_DEPTH, RECORD_BEATS};
 use skinbox_gateware::status_reporter::{
     BOX_COUNTER_WORDS, CLOCKS_PER_WORD, HEADER_WORDS, WORD_VALUE_CLOCK,
 };
+use skinbox_model::control::Effect;
+use skinbox_model::downlink::PinChange;
 use skinbox_protocol::box_counters::{BoxCounter, BoxCounters, BOX_COUNTERS_LEN};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::Destination;

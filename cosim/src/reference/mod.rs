@@ -23,8 +23,6 @@ mod back;
 mod front;
 mod receive;
 
-use crate::control::{BoxControl, ControlConfig};
-use crate::downlink::PinChange;
 use crate::error::CosimError;
 use crate::frames::Frame;
 use crate::harness::{LINK_SPEED, LINK_UP};
@@ -44,6 +42,8 @@ use skinbox_gateware::interface_box::RECEIVE_TICK_LAG;
 use skinbox_gateware::mac_receiver::MAC_LATENCY;
 use skinbox_gateware::status_reporter::PORTS_PER_STATUS;
 use skinbox_gateware::uart_rx::bit_middles;
+use skinbox_model::control::{BoxControl, ControlConfig};
+use skinbox_model::downlink::PinChange;
 use skinbox_protocol::command::Destination;
 use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP};
