@@ -26,41 +26,6 @@ pub struct SentPacket {
     pub bit_ns: f64,
 }
 
-/// A frame the host sends to the box, on GMII receive.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct HostFrame {
-    /// The rising edge that samples its first preamble byte (cycles as in
-    /// [`crate::GmiiByte`]).
-    pub edge: u64,
-    /// The frame: destination MAC to FCS.
-    pub frame: Vec<u8>,
-}
-
-impl HostFrame {
-    /// The frame as it is on the wire: preamble, SFD, frame.
-    pub fn wire(&self) -> Vec<u8> {
-        let mut w = vec![0x55; 7];
-        w.push(0xD5);
-        w.extend(&self.frame);
-        w
-    }
-
-    /// The rising edge that samples its last byte.
-    pub fn last_edge(&self) -> u64 {
-        self.edge + 8 + self.frame.len() as u64 - 1
-    }
-
-    /// An Ethernet frame as a capture holds it (destination MAC to payload, no FCS) as a
-    /// MAC sends it: padded with zeros to 60 bytes, its FCS appended.
-    pub fn from_ethernet(edge: u64, ethernet: &[u8]) -> HostFrame {
-        let mut frame = ethernet.to_vec();
-        frame.resize(frame.len().max(skinbox_protocol::link::MIN_FRAME_LEN), 0);
-        let fcs = skinbox_model::control::crc32(&frame);
-        frame.extend_from_slice(&fcs.to_le_bytes());
-        HostFrame { edge, frame }
-    }
-}
-
 /// What to simulate.
 #[derive(Debug, Clone)]
 pub struct SimSpec {
@@ -81,20 +46,9 @@ pub struct SimSpec {
     pub host_frames: Vec<HostFrame>,
 }
 
-/// Clock cycles the box is held in reset at the start.
-pub const RESET_CYCLES: u64 = 4;
-
-/// Cycles before box tick 0: the reset and the box's reset register
-/// ([`skinbox_gateware::interface_box::RESET_LATENCY`]). A stamp of tick `t` means the
-/// edge of cycle `t + TICK_ZERO_CYCLE`.
-pub const TICK_ZERO_CYCLE: u64 = RESET_CYCLES + skinbox_gateware::interface_box::RESET_LATENCY;
-
-/// The first cycle the box's ports see their pins: after the reset, the counters'
-/// clearing ([`skinbox_gateware::counter_file::CLEAR_CLOCKS`]) and a clock. A packet whose
-/// start edge comes earlier is cut: the box sees only its tail (a scene's spec starts this
-/// long before its window, `scene::PORTS_READY_NS`).
-pub const PORTS_READY_CYCLE: u64 =
-    TICK_ZERO_CYCLE + skinbox_gateware::counter_file::CLEAR_CLOCKS + 1;
+pub use skinbox_model::frame::HostFrame;
+/// The reset of a run and box tick 0 ([`skinbox_model::timing`]).
+pub use skinbox_model::timing::{PORTS_READY_CYCLE, RESET_CYCLES, TICK_ZERO_CYCLE};
 
 /// What came out, checked.
 #[derive(Debug, Clone, Default, serde::Serialize)]

@@ -464,7 +464,7 @@ fn host_frames_output(
 ) -> HostFramesOutput {
     use etherparse::{NetSlice, SlicedPacket, TransportSlice};
     use skinbox_cosim::run::TICK_ZERO_CYCLE;
-    use skinbox_gateware::interface_box::RECEIVE_TICK_LAG;
+    use skinbox_model::timing::RECEIVE_TICK_LAG;
     use skinbox_protocol::command::AckRepr;
     let tick = |f: &skinbox_cosim::run::HostFrame| {
         (f.last_edge() + RECEIVE_TICK_LAG).saturating_sub(TICK_ZERO_CYCLE)

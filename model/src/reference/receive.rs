@@ -1,5 +1,5 @@
 //! The receive side of the reference model: the host's frames, what the box decides about
-//! each (the control model, [`skinbox_model::control`]), when, and the replies it queues for the
+//! each (the control model, [`crate::control`]), when, and the replies it queues for the
 //! transmitter. The back end asks it, cycle by cycle, for its events: a frame decided, a
 //! command carried out, a reply ready for the datagram arbiter (its third source).
 //!
@@ -9,8 +9,8 @@
 //! a fixed time after that; a reply's build takes a fixed time per kind; the buffer is free
 //! again when the transmitter took the reply's last byte.
 
-use crate::run::HostFrame;
-use skinbox_model::control::{BoxControl, Effect, Reply};
+use crate::control::{BoxControl, Effect, Reply};
+use crate::frame::HostFrame;
 use skinbox_protocol::box_counters::{BoxCounter, BoxCounters};
 use skinbox_protocol::command::AckReply;
 use skinbox_protocol::link::{LinkConfig, FCS_LEN, PREAMBLE_LEN};
