@@ -158,7 +158,7 @@ pub(crate) fn analyse(
     };
     let mut pcap = match &spec.pcap {
         Some(path) => Some(
-            skinbox_host::pcap::PcapFrameWriter::new(std::fs::File::create(path).map_err(
+            skinbox_protocol::pcap::PcapFrameWriter::new(std::fs::File::create(path).map_err(
                 |source| CosimError::Io {
                     path: path.clone(),
                     source,
@@ -183,7 +183,7 @@ pub(crate) fn analyse(
     let mut host_frames = spec.host_frames.iter().peekable();
     let mut write_host_frames =
         |until: u64,
-         pcap: &mut Option<skinbox_host::pcap::PcapFrameWriter<std::fs::File>>|
+         pcap: &mut Option<skinbox_protocol::pcap::PcapFrameWriter<std::fs::File>>|
          -> Result<(), CosimError> {
             while let Some(f) = host_frames.next_if(|f| f.edge <= until) {
                 if let Some(pcap) = pcap {
