@@ -16,7 +16,6 @@ pub mod bench;
 mod binding;
 pub mod cache_lock;
 pub mod dut;
-pub mod emulator;
 pub mod error;
 pub mod frames;
 pub mod harness;

@@ -140,7 +140,7 @@ fn answer_all(
     let m = check_answers(
         &run,
         host_frames,
-        model(skinbox_cosim::emulator::control_config(config)),
+        model(skinbox_model::emulator::control_config(config)),
         |_| true,
     );
     (run, m)

@@ -7,6 +7,8 @@
 //! - [`control`]: what the box does with every frame it receives (ARP, ping, commands,
 //!   counters).
 //! - [`downlink`]: the cell commands on the UART transmit pins.
+//! - [`emulator`]: the uplink and control models played together in time slices, free of
+//!   I/O, for a box emulated on a UDP socket.
 //! - [`timing`]: the contract between the gateware and every model here, each latency the
 //!   gateware implements, named once with the clocks it counts from and to.
 //! - [`frame`], [`pins`], [`inputs`]: what the models take and give.
@@ -17,6 +19,7 @@
 
 pub mod control;
 pub mod downlink;
+pub mod emulator;
 pub mod frame;
 pub mod inputs;
 pub mod pins;
