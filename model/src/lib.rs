@@ -2,7 +2,7 @@
 //! pin transitions and host frames it receives, and when, byte for byte and clock for clock
 //! as the gateware does (the co-simulation's tests hold every model to the RTL).
 //!
-//! - [`reference`]: the uplink, cell packets on the UART pins to datagrams on GMII, and
+//! - [`reference`](mod@reference): the uplink, cell packets on the UART pins to datagrams on GMII, and
 //!   the receive path playing [`control`] at the gateware's clocks.
 //! - [`control`]: what the box does with every frame it receives (ARP, ping, commands,
 //!   counters).
