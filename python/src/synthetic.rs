@@ -215,7 +215,7 @@ pub fn write_bench_capture(
             .map_err(|e| e.to_string())?
             .flush()
             .map_err(|e| e.to_string())?;
-        Ok::<u64, String>(capture.cell_packets())
+        Ok::<u64, String>(capture.data_packets + capture.event_packets)
     })
     .map_err(value_error)
 }
