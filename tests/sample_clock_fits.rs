@@ -93,13 +93,13 @@ fn incremental_fits_time_every_record_as_the_batch_fits_do() {
         compared += compare(name, &bytes, rate.parse().unwrap(), 65);
     }
     // the bench capture: 2,000 cells on 32 ports, half data, half event
-    let bench = skinbox_cosim::synthetic::bench_payloads(1_000_000, 1).unwrap();
+    let bench = skinbox_cosim::synthetic::bench_capture(1_000_000, 1).unwrap();
     let mut writer = skinbox_host::pcap::PcapFrameWriter::new(Vec::new()).unwrap();
     let (from, to) = (
         std::net::SocketAddr::from(([10, 0, 0, 2], 54091)),
         std::net::SocketAddr::from(([10, 0, 0, 1], 54091)),
     );
-    for (i, p) in bench.payloads.iter().enumerate() {
+    for (i, p) in bench.payloads().iter().enumerate() {
         let at = std::time::Duration::from_nanos(1_000_000_000 + i as u64 * 12_200);
         writer.write_udp(at, from, to, p).unwrap();
     }

@@ -2,14 +2,7 @@
 
 use crate::GmiiByte;
 
-/// One frame as it left the box.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Frame {
-    /// Clock cycle of the first preamble byte.
-    pub first_cycle: u64,
-    /// Preamble to FCS.
-    pub bytes: Vec<u8>,
-}
+pub use skinbox_model::frame::Frame;
 
 /// Splits GMII bytes into frames: a frame ends where `tx_en` fell (cycles not
 /// consecutive). Also returns the shortest gap between frames, in clocks.

@@ -2,17 +2,12 @@
 
 use crate::line::Transition;
 use crate::{Dut, GmiiByte};
-use skinbox_protocol::box_counters::LinkSpeed;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-/// The link state the harness gives the box (its `link_up` and `link_speed` inputs, which
-/// the board top drives from the PHY over MDIO): there is no PHY, so the link is not
-/// reported up and its speed is not known. The reference model's status datagrams carry
-/// the same.
-pub const LINK_UP: bool = false;
-/// See [`LINK_UP`].
-pub const LINK_SPEED: LinkSpeed = LinkSpeed::Unknown;
+/// The link state the harness gives the box: no PHY, so not up and of unknown speed, as the
+/// models assume it.
+pub use skinbox_model::inputs::{LINK_SPEED, LINK_UP};
 
 /// Holds the box in reset for `reset_cycles`, then plays every port's transitions (one
 /// list per port, in edge order) until `cycles` edges have run. Returns the GMII bytes.

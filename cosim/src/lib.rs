@@ -10,15 +10,18 @@
 //! [`dut::Dut`] is the safe handle to one instance: set UART pins and reset, run clock
 //! cycles, receive the GMII bytes.
 //!
+//! [`harness`] plays pin lines ([`line`](mod@line)) into it; [`run`] and [`sim`] run a
+//! spec on the RTL or on the reference model and check every frame with
+//! `skinbox_frame_check`. The box's behaviour models (reference, control, downlink,
+//! emulator core) and their timing contract with the gateware are the `skinbox_model`
+//! crate's; [`reference`](mod@reference) runs its reference model on a spec.
+//!
 //! [`BoxConfig`]: skinbox_gateware::interface_box::BoxConfig
 
 pub mod bench;
 mod binding;
 pub mod cache_lock;
-pub mod control;
-pub mod downlink;
 pub mod dut;
-pub mod emulator;
 pub mod error;
 pub mod frames;
 pub mod harness;

@@ -28,14 +28,7 @@ impl UartByte {
     }
 }
 
-/// A pin level change, as the clock edge that first samples it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub struct Transition {
-    /// The first rising edge that samples the new level.
-    pub edge: u64,
-    /// The new level.
-    pub level: bool,
-}
+pub use skinbox_model::pins::Transition;
 
 /// The edge that first samples a change at `t_ns`.
 pub fn first_edge(t_ns: f64) -> u64 {

@@ -2,11 +2,11 @@
 //! pin lines it makes, and the analysis of the frames (every one checked), shared by the RTL
 //! runner ([`crate::sim`]) and the reference model ([`crate::reference`]).
 
-use crate::downlink::PinChange;
 use crate::error::CosimError;
 use crate::frames::{check, is_reply, min_gap, Frame};
 use crate::line::{back_to_back, jittered_transitions, Jitter, Transition, UartByte};
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_model::downlink::PinChange;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::status::PortCounter;
@@ -24,41 +24,6 @@ pub struct SentPacket {
     pub start_ns: f64,
     /// Bit length of the sending UART, ns.
     pub bit_ns: f64,
-}
-
-/// A frame the host sends to the box, on GMII receive.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct HostFrame {
-    /// The rising edge that samples its first preamble byte (cycles as in
-    /// [`crate::GmiiByte`]).
-    pub edge: u64,
-    /// The frame: destination MAC to FCS.
-    pub frame: Vec<u8>,
-}
-
-impl HostFrame {
-    /// The frame as it is on the wire: preamble, SFD, frame.
-    pub fn wire(&self) -> Vec<u8> {
-        let mut w = vec![0x55; 7];
-        w.push(0xD5);
-        w.extend(&self.frame);
-        w
-    }
-
-    /// The rising edge that samples its last byte.
-    pub fn last_edge(&self) -> u64 {
-        self.edge + 8 + self.frame.len() as u64 - 1
-    }
-
-    /// An Ethernet frame as a capture holds it (destination MAC to payload, no FCS) as a
-    /// MAC sends it: padded with zeros to 60 bytes, its FCS appended.
-    pub fn from_ethernet(edge: u64, ethernet: &[u8]) -> HostFrame {
-        let mut frame = ethernet.to_vec();
-        frame.resize(frame.len().max(skinbox_protocol::link::MIN_FRAME_LEN), 0);
-        let fcs = crate::control::crc32(&frame);
-        frame.extend_from_slice(&fcs.to_le_bytes());
-        HostFrame { edge, frame }
-    }
 }
 
 /// What to simulate.
@@ -81,20 +46,9 @@ pub struct SimSpec {
     pub host_frames: Vec<HostFrame>,
 }
 
-/// Clock cycles the box is held in reset at the start.
-pub const RESET_CYCLES: u64 = 4;
-
-/// Cycles before box tick 0: the reset and the box's reset register
-/// ([`skinbox_gateware::interface_box::RESET_LATENCY`]). A stamp of tick `t` means the
-/// edge of cycle `t + TICK_ZERO_CYCLE`.
-pub const TICK_ZERO_CYCLE: u64 = RESET_CYCLES + skinbox_gateware::interface_box::RESET_LATENCY;
-
-/// The first cycle the box's ports see their pins: after the reset, the counters'
-/// clearing ([`skinbox_gateware::counter_file::CLEAR_CLOCKS`]) and a clock. A packet whose
-/// start edge comes earlier is cut: the box sees only its tail (a scene's spec starts this
-/// long before its window, `scene::PORTS_READY_NS`).
-pub const PORTS_READY_CYCLE: u64 =
-    TICK_ZERO_CYCLE + skinbox_gateware::counter_file::CLEAR_CLOCKS + 1;
+pub use skinbox_model::frame::HostFrame;
+/// The reset of a run and box tick 0 ([`skinbox_model::timing`]).
+pub use skinbox_model::timing::{PORTS_READY_CYCLE, RESET_CYCLES, TICK_ZERO_CYCLE};
 
 /// What came out, checked.
 #[derive(Debug, Clone, Default, serde::Serialize)]
@@ -204,7 +158,7 @@ pub(crate) fn analyse(
     };
     let mut pcap = match &spec.pcap {
         Some(path) => Some(
-            skinbox_host::pcap::PcapFrameWriter::new(std::fs::File::create(path).map_err(
+            skinbox_protocol::pcap::PcapFrameWriter::new(std::fs::File::create(path).map_err(
                 |source| CosimError::Io {
                     path: path.clone(),
                     source,
@@ -229,7 +183,7 @@ pub(crate) fn analyse(
     let mut host_frames = spec.host_frames.iter().peekable();
     let mut write_host_frames =
         |until: u64,
-         pcap: &mut Option<skinbox_host::pcap::PcapFrameWriter<std::fs::File>>|
+         pcap: &mut Option<skinbox_protocol::pcap::PcapFrameWriter<std::fs::File>>|
          -> Result<(), CosimError> {
             while let Some(f) = host_frames.next_if(|f| f.edge <= until) {
                 if let Some(pcap) = pcap {

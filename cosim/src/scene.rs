@@ -1,12 +1,13 @@
 //! A scene of the cell models on the box's pins: one bus per port.
 
-use crate::control::{udp_frame, BoxControl, ControlConfig};
-use crate::downlink::{PacketStart, PinChange};
 use crate::line::Jitter;
 use crate::run::{HostFrame, SentPacket, SimSpec, TICK_ZERO_CYCLE};
 use skinbox_cells::bus::DOWNLINK_PACKET_NS;
 use skinbox_cells::scene::{BusDownlink, GenerateOptions, Generated, Scene};
-use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
+use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_model::control::{udp_frame, BoxControl, ControlConfig};
+use skinbox_model::downlink::{PacketStart, PinChange};
+use skinbox_model::timing::RECEIVE_TICK_LAG;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::cell_command::{CellCommand, CellCommandRepr};
@@ -138,7 +139,7 @@ pub fn scene_ns_of_tick(tick: u64, from_ns: u64) -> u64 {
 /// `from_ns` for `duration_ns`: each command inside the window becomes a command frame
 /// from the host (the link's host address, sequence numbers from 1) at its time on GMII
 /// receive; the box's rules and downlink (the control model with its clock model of the
-/// downlink, [`crate::downlink`]) say which it queues and when each packet leaves which
+/// downlink, [`skinbox_model::downlink`]) say which it queues and when each packet leaves which
 /// pin. A time sync carries the tick at which its packet's first start bit leaves the box.
 /// Commands before the window reach the cells at their own time.
 pub fn plan_downlink(

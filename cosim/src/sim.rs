@@ -2,7 +2,6 @@
 //! The spec and the analysis are in [`crate::run`] (re-exported here); this module runs the
 //! verilated box and chooses between it and the reference model.
 
-use crate::downlink::PinChange;
 use crate::error::CosimError;
 use crate::frames::assemble;
 use crate::harness::play_with_progress;
@@ -12,6 +11,7 @@ pub use crate::run::{
     cycles, lines, HostFrame, SentPacket, SimReport, SimRun, SimSpec, RESET_CYCLES, TICK_ZERO_CYCLE,
 };
 use crate::Dut;
+use skinbox_model::downlink::PinChange;
 use std::time::Instant;
 
 /// Runs `spec` on the verilated box.

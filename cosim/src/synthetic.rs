@@ -17,7 +17,6 @@ use crate::line::Jitter;
 use crate::reference::run_reference;
 use crate::run::{SentPacket, SimSpec, PORTS_READY_CYCLE, TICK_ZERO_CYCLE};
 use skinbox_gateware::interface_box::BoxConfig;
-use skinbox_host::bench::BenchPayloads;
 use skinbox_protocol::cell::UART_BITS_PER_PACKET;
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::{
@@ -315,10 +314,11 @@ pub fn generate(config: &SyntheticConfig) -> Result<SynthCapture, CosimError> {
     Ok(capture)
 }
 
-/// A capture of at least `min_packets` cell packets for the host benchmarks: 2,000 cells on
+/// A capture of at least `min_packets` cell packets for the host benchmarks (their
+/// `BenchPayloads` are its [`SynthCapture::payloads`] and packet counts): 2,000 cells on
 /// 32 ports at 125 Hz, half in data mode and half in event mode, through a box with a 1 ms
 /// flush timeout, so that nearly every datagram is full (55 records).
-pub fn bench_payloads(min_packets: usize, seed: u64) -> Result<BenchPayloads, CosimError> {
+pub fn bench_capture(min_packets: usize, seed: u64) -> Result<SynthCapture, CosimError> {
     let mut config = SyntheticConfig {
         cells: 2_000,
         ports: 32,
@@ -332,11 +332,7 @@ pub fn bench_payloads(min_packets: usize, seed: u64) -> Result<BenchPayloads, Co
         let capture = generate(&config)?;
         let have = capture.cell_packets().max(1);
         if have >= min_packets {
-            return Ok(BenchPayloads {
-                payloads: capture.payloads(),
-                data_packets: capture.data_packets,
-                event_packets: capture.event_packets,
-            });
+            return Ok(capture);
         }
         // Packets grow with samples: scale once, with a margin for the random walk.
         let scale = min_packets as f64 / have as f64 * 1.05;

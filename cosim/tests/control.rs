@@ -4,7 +4,7 @@
 //! frames whose expected fate the generator knows from how it built each one.
 
 use etherparse::{ArpOperation, Icmpv4Type, IpNumber, NetSlice, SlicedPacket, TransportSlice};
-use skinbox_cosim::control::{BoxControl, Effect, Reply, HOST_SLOTS};
+use skinbox_model::control::{BoxControl, Effect, Reply, HOST_SLOTS};
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::{

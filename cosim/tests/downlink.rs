@@ -7,13 +7,14 @@
 
 mod support;
 
-use skinbox_cosim::control::{BoxControl, ControlConfig, DOWNLINK_OFFER_AFTER_RECEIVE_TICK};
-use skinbox_cosim::downlink::{DownlinkModel, PinChange};
 use skinbox_cosim::harness::{LINK_SPEED, LINK_UP};
 use skinbox_cosim::reference::run_reference;
 use skinbox_cosim::run::{HostFrame, SimSpec, TICK_ZERO_CYCLE};
 use skinbox_cosim::sim::run_rtl;
 use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
+use skinbox_model::control::{BoxControl, ControlConfig};
+use skinbox_model::downlink::{DownlinkModel, PinChange};
+use skinbox_model::timing::DOWNLINK_OFFER_AFTER_RECEIVE_TICK;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::{AckRepr, AckResult, Request, ALL_PORTS};
@@ -117,7 +118,7 @@ fn cell_commands_leave_on_the_uart_pins_as_the_reference_says_while_the_uplink_r
     assert_eq!(acks.len(), host_frames.len());
     for (i, f) in host_frames.iter().enumerate() {
         let outcome = m.receive(&f.frame, receive_tick(f));
-        let Some(skinbox_cosim::control::Reply::Ack { ack, .. }) = outcome.reply else {
+        let Some(skinbox_model::control::Reply::Ack { ack, .. }) = outcome.reply else {
             panic!("frame {i}: no acknowledgement from the model");
         };
         assert_eq!(acks[i].result, ack.result, "frame {i}");

@@ -1,19 +1,19 @@
 //! The box's receive path at RTL: frames built with etherparse and the crc crate are driven
 //! on the verilated box's GMII receive while its ports carry cell traffic, and every answer
 //! it sends (ARP reply, echo reply, acknowledgement) must equal, byte for byte, what the
-//! control model (`skinbox_cosim::control`, itself held to independent oracles in
+//! control model (`skinbox_model::control`, itself held to independent oracles in
 //! tests/control.rs) answers to the same frames; the box counters in its status-now
 //! acknowledgements must equal the model's. The uplink meanwhile loses nothing.
 
 mod support;
 
-use skinbox_cosim::control::{BoxControl, ControlConfig, Reply};
 use skinbox_cosim::frames::Frame;
 use skinbox_cosim::harness::{LINK_SPEED, LINK_UP};
 use skinbox_cosim::reference::run_reference;
 use skinbox_cosim::run::{HostFrame, SentPacket, SimRun, SimSpec, TICK_ZERO_CYCLE};
 use skinbox_cosim::sim::run_rtl;
 use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
+use skinbox_model::control::{BoxControl, ControlConfig, Reply};
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::{UART_BAUD, UART_BITS_PER_PACKET};
 use skinbox_protocol::command::{AckRepr, Request};
@@ -140,7 +140,7 @@ fn answer_all(
     let m = check_answers(
         &run,
         host_frames,
-        model(skinbox_cosim::emulator::control_config(config)),
+        model(skinbox_model::emulator::control_config(config)),
         |_| true,
     );
     (run, m)

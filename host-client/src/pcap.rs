@@ -13,9 +13,9 @@ use crate::frame::{self, LinkType, UdpDatagram};
 use crate::other_traffic::OtherTraffic;
 use crate::report::{FrameCounts, HostCost, Report};
 use pcap_file::pcap::PcapParseError;
-use pcap_file::pcap::{PcapHeader, PcapPacket, PcapParser, PcapWriter};
+use pcap_file::pcap::PcapParser;
 use pcap_file::pcapng::{Block, PcapNgParseError, PcapNgParser};
-use pcap_file::{DataLink, Endianness};
+use pcap_file::DataLink;
 use std::io::Write;
 use std::net::SocketAddr;
 use std::path::Path;
@@ -339,33 +339,29 @@ pub fn udp_payloads(
     Ok((out, scan))
 }
 
-/// Writes Ethernet II frames to a pcap (nanosecond timestamps).
+/// Writes Ethernet II frames to a pcap (nanosecond timestamps): the protocol crate's writer
+/// ([`skinbox_protocol::pcap::PcapFrameWriter`]), which also takes UDP payloads.
 pub struct PcapFrameWriter<W: Write> {
-    writer: PcapWriter<W>,
+    writer: skinbox_protocol::pcap::PcapFrameWriter<W>,
+}
+
+impl From<skinbox_protocol::pcap::PcapWriteError> for PcapError {
+    fn from(e: skinbox_protocol::pcap::PcapWriteError) -> Self {
+        PcapError::Write(e.0)
+    }
 }
 
 impl<W: Write> PcapFrameWriter<W> {
     /// Writes the pcap header.
     pub fn new(writer: W) -> Result<Self, PcapError> {
-        let header = PcapHeader {
-            datalink: DataLink::ETHERNET,
-            ts_resolution: pcap_file::pcap::PcapTsResolution::NanoSecond,
-            endianness: Endianness::native(),
-            ..PcapHeader::default()
-        };
-        let writer =
-            PcapWriter::with_header(writer, header).map_err(|e| PcapError::Write(e.to_string()))?;
-        Ok(PcapFrameWriter { writer })
+        Ok(PcapFrameWriter {
+            writer: skinbox_protocol::pcap::PcapFrameWriter::new(writer)?,
+        })
     }
 
     /// Writes one frame.
     pub fn write_frame(&mut self, timestamp: Duration, frame: &[u8]) -> Result<(), PcapError> {
-        let packet = PcapPacket::new(timestamp, frame.len() as u32, frame)
-            .map_err(|e| PcapError::Write(e.to_string()))?;
-        self.writer
-            .write_packet(&packet)
-            .map_err(|e| PcapError::Write(e.to_string()))?;
-        Ok(())
+        Ok(self.writer.write_frame(timestamp, frame)?)
     }
 
     /// Writes a UDP payload inside an Ethernet II / IPv4 / UDP frame.
@@ -383,10 +379,7 @@ impl<W: Write> PcapFrameWriter<W> {
     }
 
     /// Flushes and returns the writer.
-    pub fn finish(mut self) -> Result<W, PcapError> {
-        self.writer
-            .flush()
-            .map_err(|e| PcapError::Write(e.to_string()))?;
-        Ok(self.writer.into_inner())
+    pub fn finish(self) -> Result<W, PcapError> {
+        Ok(self.writer.finish()?)
     }
 }

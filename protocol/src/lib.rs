@@ -11,7 +11,8 @@
 //!   [`status`] body with per-port counters, and optionally the [`box_counters`] block;
 //! - [`command`]: commands to the box (kind 3) and its acknowledgements (kind 4);
 //! - [`wire`]: the Ethernet II, ARP, IPv4, ICMP echo and UDP headers around them, and the
-//!   Internet checksum.
+//!   Internet checksum;
+//! - [`pcap`]: Ethernet frames in a pcap capture file.
 //!
 //! Each format follows one contract, after smoltcp's `wire` module:
 //! - `Packet<T: AsRef<[u8]>>` is a zero-copy view; field offsets live once in a private
@@ -34,6 +35,7 @@ pub mod datagram;
 mod error;
 pub mod event;
 pub mod link;
+pub mod pcap;
 pub mod record;
 pub mod status;
 pub mod wire;

@@ -2,7 +2,8 @@
 
 use crate::errors::{value_error, EmulatorError};
 use pyo3::prelude::*;
-use skinbox_cosim::emulator::{self, EmulatorSettings, EmulatorStats, ServeSummary};
+use skinbox_emulator::{self as emulator, EmulatorSettings, ServeSummary};
+use skinbox_model::emulator::EmulatorStats;
 use std::net::{SocketAddr, SocketAddrV4, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};

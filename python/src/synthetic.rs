@@ -196,13 +196,13 @@ pub fn write_bench_capture(
     seed: u64,
 ) -> PyResult<u64> {
     py.detach(|| {
-        let capture = synthetic::bench_payloads(packets, seed).map_err(|e| e.to_string())?;
+        let capture = synthetic::bench_capture(packets, seed).map_err(|e| e.to_string())?;
         let file = std::fs::File::create(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let mut writer =
             PcapFrameWriter::new(std::io::BufWriter::new(file)).map_err(|e| e.to_string())?;
         let source = SocketAddr::from(([10, 0, 0, 2], 54091));
         let host = SocketAddr::from(([10, 0, 0, 1], 54091));
-        for (i, payload) in capture.payloads.iter().enumerate() {
+        for (i, payload) in capture.payloads().iter().enumerate() {
             // 12.2 us apart: a full link's datagram rate
             let at = Duration::from_secs(HOST_EPOCH_S) + Duration::from_nanos(i as u64 * 12_200);
             writer
@@ -215,7 +215,7 @@ pub fn write_bench_capture(
             .map_err(|e| e.to_string())?
             .flush()
             .map_err(|e| e.to_string())?;
-        Ok::<u64, String>(capture.cell_packets())
+        Ok::<u64, String>(capture.data_packets + capture.event_packets)
     })
     .map_err(value_error)
 }

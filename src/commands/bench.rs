@@ -87,6 +87,20 @@ pub struct LiveBenchArgs {
     pub buffer_rate: f64,
 }
 
+/// The host benchmarks' capture of at least `min_packets` cell packets
+/// ([`skinbox_cosim::synthetic::bench_capture`]) as their payloads.
+fn bench_payloads(
+    min_packets: usize,
+    seed: u64,
+) -> anyhow::Result<skinbox_host::bench::BenchPayloads> {
+    let capture = skinbox_cosim::synthetic::bench_capture(min_packets, seed)?;
+    Ok(skinbox_host::bench::BenchPayloads {
+        payloads: capture.payloads(),
+        data_packets: capture.data_packets,
+        event_packets: capture.event_packets,
+    })
+}
+
 /// Runs one benchmark.
 pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
     match what {
@@ -137,7 +151,7 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 !a.chunk_kib.is_empty() && a.chunk_kib.iter().all(|k| *k > 0),
                 "--chunk-kib: one or more sizes, each at least 1"
             );
-            let capture = skinbox_cosim::synthetic::bench_payloads(a.packets, 7)?;
+            let capture = bench_payloads(a.packets, 7)?;
             let path =
                 std::env::temp_dir().join(format!("skinbox-bench-{}.mcap", std::process::id()));
             let chunks: Vec<u64> = a.chunk_kib.iter().map(|k| k * 1024).collect();
@@ -194,7 +208,7 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
             Ok(())
         }
         BenchCommand::Decode(a) => {
-            let capture = skinbox_cosim::synthetic::bench_payloads(a.packets, 7)?;
+            let capture = bench_payloads(a.packets, 7)?;
             let r = skinbox_host::bench::bench_decode(&capture, a.rounds);
             if json {
                 return super::print_json(&r);
@@ -235,7 +249,7 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                 recv_buffers: a.recv_buffers,
                 buffer_rate: a.buffer_rate,
             };
-            let capture = skinbox_cosim::synthetic::bench_payloads(config.packets_needed(), 11)?;
+            let capture = bench_payloads(config.packets_needed(), 11)?;
             let r = skinbox_host::bench::bench_live(&config, &capture)?;
             if json {
                 return super::print_json(&r);

@@ -2,7 +2,7 @@
 //! playing a scene in real time and its control model answering commands.
 
 use anyhow::Context;
-use skinbox_cosim::emulator::{self, EmulatorSettings, ServeSummary};
+use skinbox_emulator::{self as emulator, EmulatorSettings, ServeSummary};
 use std::net::{SocketAddrV4, UdpSocket};
 use std::time::{Duration, Instant};
 

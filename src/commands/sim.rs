@@ -464,7 +464,7 @@ fn host_frames_output(
 ) -> HostFramesOutput {
     use etherparse::{NetSlice, SlicedPacket, TransportSlice};
     use skinbox_cosim::run::TICK_ZERO_CYCLE;
-    use skinbox_gateware::interface_box::RECEIVE_TICK_LAG;
+    use skinbox_model::timing::RECEIVE_TICK_LAG;
     use skinbox_protocol::command::AckRepr;
     let tick = |f: &skinbox_cosim::run::HostFrame| {
         (f.last_edge() + RECEIVE_TICK_LAG).saturating_sub(TICK_ZERO_CYCLE)
@@ -612,7 +612,7 @@ fn is_sync(bytes: &[u8; skinbox_protocol::cell::PACKET_LEN]) -> bool {
 /// The box's transmit pins must be as planned: the cells were driven with the plan.
 fn check_downlink(
     plan: &skinbox_cosim::scene::DownlinkPlan,
-    pins: &[skinbox_cosim::downlink::PinChange],
+    pins: &[skinbox_model::downlink::PinChange],
     spec: &skinbox_cosim::run::SimSpec,
 ) -> anyhow::Result<DownlinkOutput> {
     let last_tick = skinbox_cosim::run::cycles(spec) - skinbox_cosim::run::TICK_ZERO_CYCLE;

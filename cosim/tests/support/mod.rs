@@ -8,10 +8,10 @@ use etherparse::{
     ArpHardwareId, ArpOperation, ArpPacket, EtherType, IpNumber, Ipv4Header, Ipv4Options,
     PacketBuilder,
 };
-use skinbox_cosim::control::{ControlConfig, Effect, Reply};
 use skinbox_cosim::run::SentPacket;
 use skinbox_frame_check::{check, encode, UdpAddresses};
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_model::control::{ControlConfig, Effect, Reply};
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::{

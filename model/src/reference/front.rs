@@ -8,7 +8,7 @@
 //! registers hold what edge `c` stored, and what they compute is stored by edge `c + 1`.
 //! `level(e)` is what the synchroniser's first flop captured at edge `e`.
 
-use crate::line::Transition;
+use crate::pins::Transition;
 use skinbox_protocol::cell::{CellFraming, PACKET_LEN};
 use skinbox_protocol::status::PortCounter;
 use std::cell::Cell;
@@ -17,7 +17,7 @@ use std::cell::Cell;
 #[derive(Debug, Clone, Copy)]
 pub(super) struct FrontTiming {
     /// Cycles from the first low sample of a start bit to the sample of each bit
-    /// (`skinbox_gateware::uart_rx::bit_middles`).
+    /// ([`crate::timing::bit_middles`]).
     pub middles: [u64; 10],
     /// The engine's scan period: port `p` is visited in the cycles `c` with
     /// `(c - scan_origin - p) mod scan_period = 0`.
@@ -177,7 +177,7 @@ const FRAMING_ERROR: u8 = 1 << PortCounter::FramingErrors as u8;
 const RESYNC: u8 = 1 << PortCounter::Resyncs as u8;
 
 /// Clocks from a visit to the engine's decision about it.
-const DECISION: u64 = skinbox_gateware::cell_deframer::DECISION_CLOCKS;
+const DECISION: u64 = crate::timing::DEFRAMER_DECISION_CLOCKS;
 
 /// The deframing engine on port `port`'s pin: packets and counter events up to `end`.
 pub(super) fn port_front(

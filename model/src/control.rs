@@ -42,6 +42,7 @@
 //! `(sequence - last) as i32 > 0`.
 
 use crate::downlink::DownlinkModel;
+use crate::timing::DOWNLINK_OFFER_AFTER_RECEIVE_TICK;
 use skinbox_gateware::crc32::POLYNOMIAL_REFLECTED;
 use skinbox_protocol::box_counters::{BoxCounter, BoxCounters, LinkSpeed};
 use skinbox_protocol::command::{
@@ -97,12 +98,6 @@ impl ControlConfig {
         }
     }
 }
-
-/// Ticks from a command's receive tick to the clock in which the command unit offers a
-/// cell command to the downlink: the parser's decision, then the command unit's pipeline
-/// up to the clock before `done`.
-pub const DOWNLINK_OFFER_AFTER_RECEIVE_TICK: u64 = skinbox_gateware::frame_parser::DECISION_LATENCY
-    + skinbox_gateware::command_unit::DOWNLINK_OFFER_AFTER_COMMAND;
 
 /// What a carried-out command changes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -10,7 +10,7 @@
 //! leave reset together). An idle downlink costs nothing: frames without a queued packet
 //! are skipped.
 
-use skinbox_gateware::cell_downlink::{bit_start, frame_bits, QUEUE_PACKETS, REFILL_LATENCY};
+use crate::timing::{bit_start, frame_bits, DOWNLINK_QUEUE_PACKETS, DOWNLINK_REFILL_LATENCY};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::ALL_PORTS;
 use std::collections::VecDeque;
@@ -173,7 +173,7 @@ impl DownlinkModel {
         let visit = self.next_visit();
         let s = self.next_port;
         let start_bit = (self.frame + 1) * self.frame_bits;
-        debug_assert!(visit + REFILL_LATENCY < self.bit_start(start_bit));
+        debug_assert!(visit + DOWNLINK_REFILL_LATENCY < self.bit_start(start_bit));
         self.next_port += 1;
         if self.next_port == self.ports.len() {
             self.next_port = 0;
@@ -256,7 +256,7 @@ impl DownlinkModel {
     /// way, or a target port full). Ticks must not go back.
     pub fn offer(&mut self, tick: u64, port: u8, packet: [u8; PACKET_LEN]) -> bool {
         self.advance_to(tick);
-        let full = |p: &Port| p.count == QUEUE_PACKETS;
+        let full = |p: &Port| p.count == DOWNLINK_QUEUE_PACKETS;
         let busy = self.busy_until.is_some_and(|until| tick <= until);
         let refused = busy
             || if port == ALL_PORTS {

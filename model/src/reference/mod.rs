@@ -13,8 +13,8 @@
 //!   advance there, and they are advanced arithmetically).
 //!
 //! It predicts every frame byte for byte and the cycle of its first byte on GMII; the tests
-//! compare it with the RTL on the regression scenes. Its timing constants come from the
-//! gateware and protocol crates where they are named there; the few clock latencies that
+//! compare it with the RTL on the regression scenes. Its latencies are the timing contract's
+//! ([`crate::timing`]) and the protocol crate's sizes; the few clock latencies that
 //! are properties of the register structure (two clocks from a start edge to the
 //! accumulator, two from a transmitter start to GMII, and so on) are written in the two
 //! modules with the reasoning, and the byte-for-byte tests hold them to the RTL.
@@ -23,39 +23,30 @@ mod back;
 mod front;
 mod receive;
 
-use crate::control::{BoxControl, ControlConfig};
+use crate::control::{udp_frame, BoxControl, ControlConfig};
 use crate::downlink::PinChange;
-use crate::error::CosimError;
-use crate::frames::Frame;
-use crate::harness::{LINK_SPEED, LINK_UP};
-use crate::line::Transition;
-use crate::run::{analyse, cycles, lines, HostFrame, SimRun, SimSpec, TICK_ZERO_CYCLE};
+use crate::frame::{Frame, HostFrame};
+use crate::inputs::{LINK_SPEED, LINK_UP};
+use crate::pins::Transition;
+use crate::timing::{
+    bit_middles, scan_period, truncation_clocks, BODY_START, BUILD_ACK_CLOCKS, BUILD_ARP_CLOCKS,
+    BUILD_ECHO_CLOCKS, COMMAND_LATENCY, FATE_VISIBLE_AFTER, FRAMES_RECEIVED_VISIBLE_AFTER,
+    MAC_LATENCY, PARSER_DECISION_LATENCY, PORTS_PER_STATUS, PORT_COUNTERS_CLEAR_CLOCKS,
+    RECEIVE_TICK_LAG, TAKE_TO_FIRST_BYTE, TICK_ZERO_CYCLE, UNLOCK_AFTER_LAST_TAKE,
+};
 use back::{Back, BackTiming, Sent};
 use front::{port_front, FrontTiming, PortFront};
 use receive::{ReceiveSide, ReceiveTiming};
-use skinbox_frame_check::{encode, UdpAddresses};
-use skinbox_gateware::cell_deframer::{scan_period, truncation_clocks};
-use skinbox_gateware::command_unit::COMMAND_LATENCY;
-use skinbox_gateware::counter_file::CLEAR_CLOCKS;
-use skinbox_gateware::frame_parser::DECISION_LATENCY;
-use skinbox_gateware::frame_transmitter::BODY_START;
-use skinbox_gateware::interface_box::BoxConfig;
-use skinbox_gateware::interface_box::RECEIVE_TICK_LAG;
-use skinbox_gateware::mac_receiver::MAC_LATENCY;
-use skinbox_gateware::status_reporter::PORTS_PER_STATUS;
-use skinbox_gateware::uart_rx::bit_middles;
+use skinbox_gateware::interface_box::{BoxConfig, ConfigError};
 use skinbox_protocol::command::Destination;
 use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::link::{FCS_LEN, INTER_FRAME_GAP};
-use std::time::Instant;
-
-pub(crate) use skinbox_gateware::geometry::SLOTS;
 
 /// The fixed numbers of front and back end for `config`.
 fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
-    // counters clear for CLEAR_CLOCKS after the blocks leave reset; the ports leave reset
-    // a clock later
-    let counters_ready_from = TICK_ZERO_CYCLE + CLEAR_CLOCKS;
+    // counters clear for PORT_COUNTERS_CLEAR_CLOCKS after the blocks leave reset; the ports
+    // leave reset a clock later
+    let counters_ready_from = TICK_ZERO_CYCLE + PORT_COUNTERS_CLEAR_CLOCKS;
     let front = FrontTiming {
         middles: bit_middles(config.clock_hz, config.baud),
         scan_period: scan_period(config.ports) as u64,
@@ -75,9 +66,9 @@ fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
         // the boot id counts the reset the run starts with
         boot_id: config.boot_seed.wrapping_add(1),
         box_id: config.box_id,
-        body_start: BODY_START as u64,
+        body_start: BODY_START,
         frame_tail: (FCS_LEN + INTER_FRAME_GAP) as u64,
-        start_to_first_byte: START_TO_FIRST_BYTE,
+        start_to_first_byte: TAKE_TO_FIRST_BYTE,
         scan_period: scan_period(config.ports) as u64,
     };
     (front, back)
@@ -98,7 +89,7 @@ pub fn prepare(
     config: &BoxConfig,
     lines: &[Vec<Transition>],
     end: u64,
-) -> Result<PreparedReference, CosimError> {
+) -> Result<PreparedReference, ConfigError> {
     config.validate()?;
     let (front_timing, back_timing) = timings(config);
     let mut fronts: Vec<PortFront> = lines
@@ -209,16 +200,12 @@ impl SlicedReference<'_> {
     }
 }
 
-/// The receive path's fixed numbers, from the gateware's blocks.
+/// The receive path's fixed numbers.
 fn receive_timing() -> ReceiveTiming {
-    use skinbox_gateware::box_counter_file::{FATE_VISIBLE_AFTER, FRAMES_RECEIVED_VISIBLE_AFTER};
-    use skinbox_gateware::reply_builder::{
-        build_clocks, AckReplyKind, ReplyKind, UNLOCK_AFTER_LAST_TAKE,
-    };
     ReceiveTiming {
         // the preamble and SFD, then the MAC's registers
         first_beat_after_edge: PREAMBLE_LEN as u64 + MAC_LATENCY,
-        decided_after_last_edge: MAC_LATENCY + DECISION_LATENCY,
+        decided_after_last_edge: MAC_LATENCY + PARSER_DECISION_LATENCY,
         receive_tick_after_last_edge: RECEIVE_TICK_LAG,
         command_latency: COMMAND_LATENCY,
         frames_received_visible_after: FRAMES_RECEIVED_VISIBLE_AFTER,
@@ -227,64 +214,34 @@ fn receive_timing() -> ReceiveTiming {
         // status reporter registers a report asked for now
         config_after_done: 0,
         report_now_after_done: 1,
-        build_arp: build_clocks(ReplyKind::Arp),
-        build_echo: build_clocks(ReplyKind::Echo),
-        build_ack: [
-            AckReplyKind::None,
-            AckReplyKind::Destination,
-            AckReplyKind::Counters,
-        ]
-        .map(|r| build_clocks(ReplyKind::Ack(r))),
+        build_arp: BUILD_ARP_CLOCKS,
+        build_echo: BUILD_ECHO_CLOCKS,
+        build_ack: BUILD_ACK_CLOCKS,
         unlock_after_last_take: UNLOCK_AFTER_LAST_TAKE,
     }
 }
 
-/// Clocks from the cycle a transmitter start is decided to the first GMII byte.
-const START_TO_FIRST_BYTE: u64 = skinbox_gateware::frame_transmitter::TAKE_TO_FIRST_BYTE;
-
-/// Runs `spec` on the reference model.
-pub fn run_reference(spec: &SimSpec) -> Result<SimRun, CosimError> {
-    run_reference_with_progress(spec, &mut |_, _| {})
-}
-
-/// As [`run_reference`], calling `progress(cycles done, cycles in all)` as it goes.
-pub fn run_reference_with_progress(
-    spec: &SimSpec,
-    progress: &mut dyn FnMut(u64, u64),
-) -> Result<SimRun, CosimError> {
-    let started = Instant::now();
-    let (lines, true_starts) = lines(spec);
-    let (frames, uart_tx) = predict_frames_with_progress(
-        &spec.config,
-        &lines,
-        &spec.host_frames,
-        cycles(spec),
-        progress,
-    )?;
-    let wall = started.elapsed().as_secs_f64();
-    let mut run = analyse(spec, &frames, &true_starts, wall)?;
-    run.uart_tx = uart_tx;
-    Ok(run)
-}
-
 /// The frames the box sends when its pins carry `lines` (one transition list per port, as
-/// the RTL harness plays them, after [`crate::run::RESET_CYCLES`] of reset) for `cycles` clocks: each
+/// the RTL harness plays them, after [`crate::timing::RESET_CYCLES`] of reset) for `cycles` clocks: each
 /// frame preamble to FCS with the cycle of its first byte, cut where the run ends.
 pub fn predict_frames(
     config: &BoxConfig,
     lines: &[Vec<Transition>],
     cycles: u64,
-) -> Result<Vec<Frame>, CosimError> {
-    Ok(predict_frames_with_progress(config, lines, &[], cycles, &mut |_, _| {})?.0)
+) -> Result<Vec<Frame>, ConfigError> {
+    Ok(predict_with_host_frames(config, lines, &[], cycles, &mut |_, _| {})?.0)
 }
 
-fn predict_frames_with_progress(
+/// As [`predict_frames`], with the frames the host sends the box (the receive path answers
+/// them and carries out their commands), calling `progress(cycles done, cycles in all)` as
+/// it goes; also returns the downlink, every change of a UART transmit pin.
+pub fn predict_with_host_frames(
     config: &BoxConfig,
     lines: &[Vec<Transition>],
     host_frames: &[HostFrame],
     end: u64,
     progress: &mut dyn FnMut(u64, u64),
-) -> Result<(Vec<Frame>, Vec<PinChange>), CosimError> {
+) -> Result<(Vec<Frame>, Vec<PinChange>), ConfigError> {
     let prepared = prepare(config, lines, end)?;
     let receive = (!host_frames.is_empty()).then(|| {
         let mut control = BoxControl::new(ControlConfig::of(config));
@@ -320,22 +277,7 @@ fn predict_frames_with_progress(
                 datagram,
                 box_counters,
                 destination,
-            } => {
-                let addresses = UdpAddresses {
-                    source_mac: link.box_mac,
-                    destination_mac: destination.mac,
-                    source_ip: link.box_ip,
-                    destination_ip: destination.ip,
-                    source_port: link.box_port,
-                    destination_port: destination.port,
-                };
-                encode(&addresses, &payload(datagram, box_counters.as_ref())).map_err(|source| {
-                    CosimError::Frame {
-                        step: "encoding a predicted frame",
-                        source,
-                    }
-                })?
-            }
+            } => udp_frame(link, destination, &payload(datagram, box_counters.as_ref())),
             Sent::Reply(wire) => wire.clone(),
         };
         // the run ends at cycle `end`: a frame still going is cut there, as on the pins

@@ -7,14 +7,11 @@ use super::front::{PortFront, StartedPacket};
 use super::receive::ReceiveSide;
 use crate::control::Effect;
 use crate::downlink::PinChange;
-use crate::harness::{LINK_SPEED, LINK_UP};
-use skinbox_gateware::cell_deframer::DECISION_CLOCKS;
-use skinbox_gateware::counter_file::INCREMENT_WRITE_EDGE;
-use skinbox_gateware::datagram_arbiter::OFFER_LATENCY;
-use skinbox_gateware::frame_transmitter::TAKE_TO_RAW_BODY;
-use skinbox_gateware::packet_store::{FIFO_DEPTH, RECORD_BEATS};
-use skinbox_gateware::status_reporter::{
-    BOX_COUNTER_WORDS, CLOCKS_PER_WORD, HEADER_WORDS, WORD_VALUE_CLOCK,
+use crate::inputs::{LINK_SPEED, LINK_UP};
+use crate::timing::{
+    ARBITER_OFFER_LATENCY, DEFRAMER_DECISION_CLOCKS, INCREMENT_WRITE_EDGE, RECORD_BEATS, SLOTS,
+    STATUS_BOX_COUNTER_WORDS, STATUS_CLOCKS_PER_WORD, STATUS_HEADER_WORDS, STATUS_WORD_VALUE_CLOCK,
+    STORE_FIFO_DEPTH, TAKE_TO_RAW_BODY,
 };
 use skinbox_protocol::box_counters::{BoxCounter, BoxCounters, BOX_COUNTERS_LEN};
 use skinbox_protocol::cell::PACKET_LEN;
@@ -26,7 +23,7 @@ use skinbox_protocol::{DatagramRepr, PortCounters, RecordRepr, StatusRepr};
 use std::collections::VecDeque;
 
 // `offer` is the arbiter's one offer register
-const _: () = assert!(OFFER_LATENCY == 1);
+const _: () = assert!(ARBITER_OFFER_LATENCY == 1);
 
 /// Fixed numbers of the back end.
 #[derive(Debug, Clone)]
@@ -494,7 +491,7 @@ impl<'a> Back<'a> {
 
         // store reader: scan, grant, issue (on the registers as they are)
         let in_flight = usize::from(self.read1.is_some()) + usize::from(self.read2.is_some());
-        let issue = self.reading.is_some() && self.fifo.len() + in_flight < FIFO_DEPTH;
+        let issue = self.reading.is_some() && self.fifo.len() + in_flight < STORE_FIFO_DEPTH;
         // the slot freed this cycle (registered: the record's last issue was a clock ago)
         let read_done = self.freeing.take();
         let mut next_reading = self.reading;
@@ -664,7 +661,7 @@ impl<'a> Back<'a> {
             let buffer = &mut self.buffers[port];
             let used = buffer.slots.len() + usize::from(read_done == Some(port));
             match step {
-                Step::Check => buffer.full_at_check = used == super::SLOTS,
+                Step::Check => buffer.full_at_check = used == SLOTS,
                 Step::Start => {
                     buffer.dropping = buffer.full_at_check;
                     buffer.flag_of_writing = buffer.loss_pending;
@@ -737,10 +734,11 @@ impl<'a> Back<'a> {
                 self.report_tick = tick;
                 self.page_ports = self.t.ports_per_status.min(self.t.ports - self.first_port);
                 // words: boot id, datagrams, records, first port, 8 counters per port
-                let words = (HEADER_WORDS + 8 * self.page_ports + BOX_COUNTER_WORDS) as u64;
+                let words =
+                    (STATUS_HEADER_WORDS + 8 * self.page_ports + STATUS_BOX_COUNTER_WORDS) as u64;
                 self.report = Report::Build {
                     from: c + 1,
-                    request_at: c + 1 + CLOCKS_PER_WORD * words,
+                    request_at: c + 1 + STATUS_CLOCKS_PER_WORD * words,
                 };
             }
             Report::Build { from, request_at } => {
@@ -779,9 +777,9 @@ impl<'a> Back<'a> {
             ..BoxCounters::default()
         };
         if let Some(receive) = &self.receive {
-            let block_start = (HEADER_WORDS + 8 * self.page_ports) as u64;
+            let block_start = (STATUS_HEADER_WORDS + 8 * self.page_ports) as u64;
             for (i, counter) in BoxCounter::ALL.iter().enumerate() {
-                let read = from + CLOCKS_PER_WORD * (block_start + 1 + i as u64);
+                let read = from + STATUS_CLOCKS_PER_WORD * (block_start + 1 + i as u64);
                 block.counts[i] = receive.counters_at(read).get(*counter);
             }
         }
@@ -789,10 +787,10 @@ impl<'a> Back<'a> {
     }
 
     /// The body written from cycle `from`: word `w` takes its value in cycle
-    /// `from + CLOCKS_PER_WORD w + WORD_VALUE_CLOCK`, counters through an address taken at
-    /// the edge after `from + CLOCKS_PER_WORD w`.
+    /// `from + STATUS_CLOCKS_PER_WORD w + STATUS_WORD_VALUE_CLOCK`, counters through an address taken at
+    /// the edge after `from + STATUS_CLOCKS_PER_WORD w`.
     fn status_body(&mut self, from: u64) -> StatusRepr {
-        let word_read = |w: u64| from + CLOCKS_PER_WORD * w;
+        let word_read = |w: u64| from + STATUS_CLOCKS_PER_WORD * w;
         let mut ports = Vec::with_capacity(self.page_ports);
         for i in 0..self.page_ports {
             let port = self.first_port + i;
@@ -801,7 +799,7 @@ impl<'a> Back<'a> {
             self.counting[port].advance(
                 port,
                 self.t.scan_period,
-                self.t.tick_offset + DECISION_CLOCKS,
+                self.t.tick_offset + DEFRAMER_DECISION_CLOCKS,
                 last_read + 1,
             );
             let mut counters = PortCounters::default();
@@ -813,8 +811,8 @@ impl<'a> Back<'a> {
         }
         StatusRepr {
             boot_id: self.t.boot_id,
-            datagrams_sent: self.sent_before(word_read(1) + WORD_VALUE_CLOCK).0,
-            records_sent: self.sent_before(word_read(2) + WORD_VALUE_CLOCK).1,
+            datagrams_sent: self.sent_before(word_read(1) + STATUS_WORD_VALUE_CLOCK).0,
+            records_sent: self.sent_before(word_read(2) + STATUS_WORD_VALUE_CLOCK).1,
             first_port: self.first_port as u8,
             ports,
         }

@@ -10,7 +10,7 @@
 //! again when the transmitter took the reply's last byte.
 
 use crate::control::{BoxControl, Effect, Reply};
-use crate::run::HostFrame;
+use crate::frame::HostFrame;
 use skinbox_protocol::box_counters::{BoxCounter, BoxCounters};
 use skinbox_protocol::command::AckReply;
 use skinbox_protocol::link::{LinkConfig, FCS_LEN, PREAMBLE_LEN};

@@ -1,0 +1,261 @@
+//! A box without a board on a real UDP socket (`skinbox emulate`): a scene's cells on the
+//! pins of the box's models ([`skinbox_model::emulator::EmulatedBox`]), played in real
+//! time; commands from the socket are decided at their kernel receive timestamps.
+
+use skinbox_cosim::CosimError;
+use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_model::emulator::{EmulatedBox, EmulatorStats, Outgoing};
+use skinbox_model::reference::PreparedReference;
+use skinbox_protocol::link::LinkConfig;
+use std::net::SocketAddrV4;
+
+/// What an emulated box on a socket plays and how it starts (the settings of `skinbox
+/// emulate`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EmulatorSettings {
+    /// A built-in scene's name or a scene file (`None`: stroking_upper_arm).
+    pub scene: Option<String>,
+    /// Scene time at which the box starts to listen, ms (after the warm-up by default).
+    pub from_ms: f64,
+    /// Scene time the cells send, ms; after it the box goes on with status reports only.
+    pub duration_ms: f64,
+    /// Number of buses, one box port each (overrides the scene).
+    pub buses: Option<usize>,
+    /// Number of cells (overrides the scene).
+    pub cells: Option<usize>,
+    /// Flush timeout after reset, us.
+    pub flush_timeout_us: f64,
+    /// Status period after reset, ms.
+    pub status_period_ms: f64,
+    /// The host subnet commands are taken from: address and prefix length.
+    pub host_subnet: ([u8; 4], u8),
+    /// Box id.
+    pub box_id: u16,
+}
+
+impl Default for EmulatorSettings {
+    fn default() -> Self {
+        EmulatorSettings {
+            scene: None,
+            from_ms: 1000.0,
+            duration_ms: 10_000.0,
+            buses: None,
+            cells: None,
+            flush_timeout_us: 100.0,
+            status_period_ms: 100.0,
+            host_subnet: ([127, 0, 0, 0], 8),
+            box_id: 1,
+        }
+    }
+}
+
+/// A scene played through the reference model, ready for [`serve`].
+pub struct PreparedEmulator {
+    prepared: PreparedReference,
+    /// The box's configuration (its address is the listening address).
+    pub config: BoxConfig,
+    /// The scene's name.
+    pub scene: String,
+    /// The box's ports (the scene's buses).
+    pub ports: usize,
+}
+
+/// Loads and generates the scene of `settings` and prepares the box listening on `listen`.
+pub fn prepare(
+    settings: &EmulatorSettings,
+    listen: SocketAddrV4,
+) -> Result<PreparedEmulator, CosimError> {
+    let mut scene = skinbox_cells::scene::Scene::find(settings.scene.as_deref())?;
+    if let Some(b) = settings.buses {
+        scene.config.scene.buses = b;
+    }
+    if let Some(c) = settings.cells {
+        scene.config.scene.cells = c;
+    }
+    scene.check()?;
+    let generated =
+        skinbox_cosim::scene::generate(&scene, (settings.from_ms + settings.duration_ms) * 1e-3)?;
+    let ports = generated.buses.len();
+    if !(1..=64).contains(&ports) {
+        return Err(CosimError::Ports(ports));
+    }
+    let (host_subnet, host_subnet_prefix_len) = settings.host_subnet;
+    let config = BoxConfig {
+        ports,
+        flush_timeout_ticks: (settings.flush_timeout_us * 125.0).round() as u64,
+        status_period_ticks: (settings.status_period_ms * 125_000.0).round() as u64,
+        box_id: settings.box_id,
+        link: LinkConfig {
+            box_ip: listen.ip().octets(),
+            box_port: listen.port(),
+            host_subnet,
+            host_subnet_prefix_len,
+            ..LinkConfig::DEFAULT
+        },
+        ..BoxConfig::default()
+    };
+    config.validate()?;
+    let spec = skinbox_cosim::scene::spec(
+        &generated,
+        config.clone(),
+        (settings.from_ms * 1e6) as u64,
+        (settings.duration_ms * 1e6) as u64,
+    );
+    let (lines, _) = skinbox_cosim::run::lines(&spec);
+    let prepared =
+        skinbox_model::reference::prepare(&config, &lines, skinbox_cosim::run::cycles(&spec))?;
+    Ok(PreparedEmulator {
+        prepared,
+        config,
+        scene: scene.name().to_string(),
+        ports,
+    })
+}
+
+impl PreparedEmulator {
+    /// The box leaving reset, its pins as the scene has them.
+    pub fn start(&self) -> EmulatedBox<'_> {
+        EmulatedBox::new(&self.prepared, &self.config)
+    }
+}
+
+/// What [`serve`] did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ServeSummary {
+    /// Wall-clock time served, s.
+    pub wall_s: f64,
+    /// Box ticks reached.
+    pub box_ticks: u64,
+    /// What the box did.
+    #[serde(flatten)]
+    pub stats: EmulatorStats,
+    /// The box's counters at the end.
+    pub box_counters: skinbox_host::report::BoxCountersReport,
+    /// The same as the box keeps them.
+    #[serde(skip)]
+    pub counters: skinbox_protocol::box_counters::BoxCounters,
+    /// Datagrams the socket could not send.
+    pub send_errors: u64,
+}
+
+/// Runs the box of `prepared` on `socket` in real time (`speed`: scene time per wall-clock
+/// time) until `stop` is set or `deadline`: it sends its datagrams once a stream-to claims
+/// them and answers every command. `progress` sees the box's counts after each step.
+///
+/// Each command is decided at its arrival: the kernel's receive timestamp of its datagram
+/// (SO_TIMESTAMPNS) on the box's time line, as the box decides at the tick the frame's last
+/// byte arrived, so downlink queues fill and drain at the spacing the commands came with,
+/// not at the pace this loop reads them. The datagrams waiting are all taken, in arrival
+/// order, before the uplink runs on to the present. docs/control.md ("The emulator") says
+/// where this can still differ from the box.
+pub fn serve(
+    prepared: &PreparedEmulator,
+    socket: &std::net::UdpSocket,
+    speed: f64,
+    stop: &std::sync::atomic::AtomicBool,
+    deadline: Option<std::time::Instant>,
+    progress: &mut dyn FnMut(&EmulatorStats),
+) -> std::io::Result<ServeSummary> {
+    use std::net::SocketAddr;
+    use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+    // Without kernel stamps each command is decided when it is read.
+    let stamped = skinbox_host::live::enable_receive_timestamps(socket).is_ok();
+    let mut emulated = prepared.start();
+    // the start on both clocks: the loop's (monotonic) and the kernel's receive stamps'
+    // (the wall clock), read close together (a read between two wall clock reads at most
+    // 5 us apart, taken at their middle)
+    let wall = || {
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap_or_default()
+    };
+    let (started, started_realtime) = {
+        let mut best = None;
+        for _ in 0..20 {
+            let (before, at, after) = (wall(), Instant::now(), wall());
+            let spread = after.saturating_sub(before);
+            if best.is_none_or(|(s, _, _)| spread < s) {
+                best = Some((spread, at, before + spread / 2));
+            }
+            if spread < Duration::from_micros(5) {
+                break;
+            }
+        }
+        best.map_or_else(|| (Instant::now(), wall()), |(_, at, w)| (at, w))
+    };
+    let ticks = |elapsed: Duration| -> u64 {
+        (elapsed.as_secs_f64() * speed * skinbox_protocol::TICKS_PER_SECOND as f64) as u64
+    };
+    let tick_now = |at: Instant| -> u64 { ticks(at.duration_since(started)) };
+    let mut send_errors = 0u64;
+    let send = |socket: &std::net::UdpSocket, o: &Outgoing| {
+        u64::from(socket.send_to(&o.payload, o.to).is_err())
+    };
+    socket.set_read_timeout(Some(Duration::from_micros(500)))?;
+    let mut buf = vec![0u8; 65536];
+    // the last command's tick: the box's decisions never go back in time
+    let mut last_command = 0u64;
+    // a datagram was just taken: take every other one waiting before the uplink runs on
+    let mut draining = false;
+    loop {
+        let now = Instant::now();
+        if deadline.is_some_and(|d| now >= d) || stop.load(std::sync::atomic::Ordering::Relaxed) {
+            break;
+        }
+        if !draining {
+            for o in emulated.advance(tick_now(now)) {
+                send_errors += send(socket, &o);
+            }
+        }
+        match skinbox_host::live::recv_stamped(socket, &mut buf, draining) {
+            Ok((n, Some(SocketAddr::V4(from)), stamp)) => {
+                draining = true;
+                let read = tick_now(Instant::now());
+                // the arrival on the box's time line; a stamp from before the start or
+                // more than a millisecond after the read (the wall clock stepped) is
+                // taken as the read
+                let late = ticks(Duration::from_millis(1));
+                let arrival = stamp
+                    .filter(|_| stamped)
+                    .and_then(|s| s.checked_sub(started_realtime))
+                    .map(ticks)
+                    .filter(|&t| t <= read + late)
+                    .unwrap_or(read)
+                    .max(last_command);
+                last_command = arrival;
+                for o in emulated.advance(arrival) {
+                    send_errors += send(socket, &o);
+                }
+                if let Some(ack) = emulated.command(from, &buf[..n], arrival, || {
+                    tick_now(Instant::now()).max(arrival)
+                }) {
+                    send_errors += send(socket, &ack);
+                }
+            }
+            // IPv6 senders cannot reach an IPv4 box
+            Ok(_) => draining = true,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::Interrupted
+                ) =>
+            {
+                draining = false
+            }
+            // an ICMP port unreachable of an earlier send shows up here on Linux
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => send_errors += 1,
+            Err(e) => return Err(e),
+        }
+        progress(&emulated.stats);
+    }
+    Ok(ServeSummary {
+        wall_s: started.elapsed().as_secs_f64(),
+        box_ticks: tick_now(Instant::now()),
+        stats: emulated.stats,
+        box_counters: (&emulated.control().counters).into(),
+        counters: emulated.control().counters,
+        send_errors,
+    })
+}
