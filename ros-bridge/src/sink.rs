@@ -643,7 +643,7 @@ const PIPELINE_DEPTH: usize = 16;
 struct Pipeline {
     to_outputs: Option<std::sync::mpsc::SyncSender<Vec<Item>>>,
     returned: std::sync::mpsc::Receiver<(Vec<Item>, Published)>,
-    thread: Option<std::thread::JoinHandle<Gather>>,
+    thread: Option<std::thread::JoinHandle<std::io::Result<Published>>>,
     pending: Vec<Item>,
     spare: Vec<Vec<Item>>,
     /// The source address of the last record handed over.
@@ -670,7 +670,9 @@ impl Pipeline {
                     }
                     let _ = give_back.send((batch, gather.published));
                 }
-                gather
+                // The outputs finish here too (an MCAP file's summary and indexes).
+                let published = gather.published;
+                gather.outputs.close().map(|()| published)
             })?;
         Ok(Pipeline {
             to_outputs: Some(to_outputs),
@@ -718,12 +720,13 @@ impl Pipeline {
         }
     }
 
-    /// Sends what is pending and waits for the outputs' thread to end.
-    fn join(mut self) -> std::io::Result<Gather> {
+    /// Sends what is pending, waits for the outputs' thread to close the outputs and end;
+    /// the first error, or the messages sent.
+    fn join(mut self) -> std::io::Result<Published> {
         self.flush();
         self.to_outputs = None;
         match self.thread.take().map(|t| t.join()) {
-            Some(Ok(gather)) => Ok(gather),
+            Some(Ok(result)) => result,
             _ => Err(std::io::Error::other("the ROS outputs' thread panicked")),
         }
     }
@@ -811,12 +814,13 @@ impl RosSink {
 
     /// Ends: closes every output; the first error, or the messages sent.
     pub fn finish(self) -> std::io::Result<Published> {
-        let gather = match self.back {
-            Back::Inline(g) => *g,
-            Back::Thread(p) => p.join()?,
-        };
-        gather.outputs.close()?;
-        Ok(gather.published)
+        match self.back {
+            Back::Inline(g) => {
+                let published = g.published;
+                g.outputs.close().map(|()| published)
+            }
+            Back::Thread(p) => p.join(),
+        }
     }
 }
 
