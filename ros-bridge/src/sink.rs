@@ -629,10 +629,10 @@ enum Back {
     Thread(Pipeline),
 }
 
-/// Items (records, mostly) a batch for the outputs' thread holds at most (about 100 kB,
+/// Items (records, mostly) a batch for the outputs' thread holds at most (about 80 kB,
 /// so that they are still in a cache shared by the two threads).
 pub const PIPELINE_BATCH_ITEMS: usize = 1024;
-/// Batches sent and not yet taken by the outputs' thread (16: about 1.6 MB of records, a
+/// Batches sent and not yet taken by the outputs' thread (16: about 1.3 MB of records, a
 /// few ms of the decoding thread's work, so that the outputs' thread losing its core for a
 /// moment on a shared machine does not stop the decoding thread); past them the decoding
 /// thread waits.
