@@ -202,39 +202,61 @@ pub struct RosSink {
 }
 
 /// A record with its times, as far as the decoding thread takes it: what its
-/// [`CellSample`] and the port sums are made of (the rest is [`Gather::record`]'s).
+/// [`CellSample`] and the port sums are made of (the rest, the units and the rounding of
+/// the host times too, is [`Gather::record`]'s).
 #[derive(Debug, Clone, Copy)]
 struct TimedRecord {
     tick: u64,
     sample_box_ns: f64,
-    host_time_ns: i64,
-    host_time_bound_ns: f64,
+    /// [`RecordTimes::sample_host_ns`] where `HAS_HOST` is set.
+    sample_host_ns: f64,
+    /// [`RecordTimes::host_error_bound_ns`] where `HAS_BOUND` is set.
+    host_error_bound_ns: f64,
     cell: CellRepr,
     datagram_sequence: u32,
     box_id: u16,
     event_packets_missing_before: u16,
     port: u8,
     flags: u8,
-    host_time_source: u8,
+    source: HostTimeSource,
+    /// `HAS_HOST`, `HAS_BOUND`.
+    has: u8,
 }
+
+const HAS_HOST: u8 = 1;
+const HAS_BOUND: u8 = 2;
 
 impl TimedRecord {
     #[inline]
     fn new(record: &DecodedRecord, times: &RecordTimes) -> TimedRecord {
-        let (host_time_ns, host_time_bound_ns, host_time_source) = host_time(times);
         TimedRecord {
             tick: record.tick,
             sample_box_ns: times.sample_box_ns,
-            host_time_ns,
-            host_time_bound_ns,
+            sample_host_ns: times.sample_host_ns.unwrap_or(0.0),
+            host_error_bound_ns: times.host_error_bound_ns.unwrap_or(0.0),
             cell: record.cell,
             datagram_sequence: record.datagram_sequence,
             box_id: record.box_id,
             event_packets_missing_before: record.event_packets_missing_before,
             port: record.port,
             flags: record.flags,
-            host_time_source,
+            source: times.source,
+            has: (u8::from(times.sample_host_ns.is_some()) * HAS_HOST)
+                | (u8::from(times.host_error_bound_ns.is_some()) * HAS_BOUND),
         }
+    }
+
+    /// The host time fields of its sample, as a row has them ([`host_time`]).
+    #[inline]
+    fn host_time(&self) -> (i64, f64, u8) {
+        host_time(&RecordTimes {
+            sample_box_s: 0.0,
+            sample_box_ns: self.sample_box_ns,
+            sample_index: 0,
+            sample_host_ns: (self.has & HAS_HOST != 0).then_some(self.sample_host_ns),
+            host_error_bound_ns: (self.has & HAS_BOUND != 0).then_some(self.host_error_bound_ns),
+            source: self.source,
+        })
     }
 }
 
@@ -442,6 +464,7 @@ impl Gather {
             p.sum += v;
             p.n += 1;
         }
+        let (host_time_ns, host_time_bound_ns, host_time_source) = r.host_time();
         self.batch.samples.push(CellSample {
             box_id: r.box_id,
             port: r.port,
@@ -456,9 +479,9 @@ impl Gather {
             datagram_sequence: r.datagram_sequence,
             box_time_ns: r.tick.wrapping_mul(skinbox_protocol::TICK_NS),
             sample_box_time_ns: r.sample_box_ns,
-            host_time_ns: r.host_time_ns,
-            host_time_bound_ns: r.host_time_bound_ns,
-            host_time_source: r.host_time_source,
+            host_time_ns,
+            host_time_bound_ns,
+            host_time_source,
         });
     }
 
