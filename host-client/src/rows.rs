@@ -107,7 +107,11 @@ fn round(v: f64) -> f64 {
     }
 }
 
-fn host_time(times: &RecordTimes) -> (i64, f64, u8) {
+/// A record's host time fields as the rows carry them: the host time in ns, rounded (0
+/// without one), its error bound in ns, rounded (NaN without one), and its source's code
+/// ([`host_time_source_code`]).
+#[inline]
+pub fn host_time(times: &RecordTimes) -> (i64, f64, u8) {
     (
         times.sample_host_ns.map_or(0, |v| round(v) as i64),
         times.host_error_bound_ns.map_or(f64::NAN, round),

@@ -133,6 +133,12 @@ fn mcap_round(
     } else {
         skinbox_host::thread_cpu_ns
     };
+    // The last round's file goes first, untimed: truncating 145 MB of page cache in the
+    // round would cost its thread ~10-15 ms of kernel time, which a new recording does not.
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+        _ => {}
+    }
     let started = Instant::now();
     let cpu = cpu_ns();
     let thread_cpu = skinbox_host::thread_cpu_ns();

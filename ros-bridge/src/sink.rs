@@ -7,12 +7,12 @@
 use crate::cdr::CdrWriter;
 use crate::msg::*;
 use skinbox_host::decoder::{BoxKey, DatagramOutcome};
-use skinbox_host::rows::RecordRow;
-use skinbox_host::timing::{HostTimeSource, Timing};
+use skinbox_host::rows::{host_time, KIND_DATA, KIND_EVENT};
+use skinbox_host::timing::{BoxTimeSummary, HostTimeSource, RecordTimes, Timing};
 use skinbox_host::{DecodedRecord, RecordSink};
 use skinbox_protocol::datagram::{Datagram, DatagramBody};
 use skinbox_protocol::record::FLAG_LOSS_BEFORE;
-use skinbox_protocol::{Channel, DatagramRepr};
+use skinbox_protocol::{CellRepr, Channel, ChannelMask, DatagramRepr};
 use std::net::SocketAddr;
 use std::time::Duration;
 
@@ -196,21 +196,94 @@ pub struct Published {
 /// kept ([`RosSink::finish`]).
 pub struct RosSink {
     timing: Timing,
-    settings: SinkSettings,
     back: Back,
-    batch: CellSampleBatch,
+    /// The receive time of the datagram being decoded, ns.
     receive_ns: Option<u64>,
-    /// Each box's track, found by the last box first (a datagram's records are one box's).
-    boxes: Vec<(BoxKey, BoxTrack)>,
-    last_box: usize,
-    published: Published,
 }
 
-/// A message as values, with its log time, on its way to the outputs' thread.
-enum Message {
-    Samples(u64, CellSampleBatch),
-    Status(u64, BoxStatus),
-    Activity(u64, SkinActivity),
+/// A record with its times, as far as the decoding thread takes it: what its
+/// [`CellSample`] and the port sums are made of (the rest, the units and the rounding of
+/// the host times too, is [`Gather::record`]'s).
+#[derive(Debug, Clone, Copy)]
+struct TimedRecord {
+    tick: u64,
+    sample_box_ns: f64,
+    /// [`RecordTimes::sample_host_ns`] where `HAS_HOST` is set.
+    sample_host_ns: f64,
+    /// [`RecordTimes::host_error_bound_ns`] where `HAS_BOUND` is set.
+    host_error_bound_ns: f64,
+    cell: CellRepr,
+    datagram_sequence: u32,
+    box_id: u16,
+    event_packets_missing_before: u16,
+    port: u8,
+    flags: u8,
+    source: HostTimeSource,
+    /// `HAS_HOST`, `HAS_BOUND`.
+    has: u8,
+}
+
+const HAS_HOST: u8 = 1;
+const HAS_BOUND: u8 = 2;
+
+impl TimedRecord {
+    #[inline]
+    fn new(record: &DecodedRecord, times: &RecordTimes) -> TimedRecord {
+        TimedRecord {
+            tick: record.tick,
+            sample_box_ns: times.sample_box_ns,
+            sample_host_ns: times.sample_host_ns.unwrap_or(0.0),
+            host_error_bound_ns: times.host_error_bound_ns.unwrap_or(0.0),
+            cell: record.cell,
+            datagram_sequence: record.datagram_sequence,
+            box_id: record.box_id,
+            event_packets_missing_before: record.event_packets_missing_before,
+            port: record.port,
+            flags: record.flags,
+            source: times.source,
+            has: (u8::from(times.sample_host_ns.is_some()) * HAS_HOST)
+                | (u8::from(times.host_error_bound_ns.is_some()) * HAS_BOUND),
+        }
+    }
+
+    /// The host time fields of its sample, as a row has them ([`host_time`]).
+    #[inline]
+    fn host_time(&self) -> (i64, f64, u8) {
+        host_time(&RecordTimes {
+            sample_box_s: 0.0,
+            sample_box_ns: self.sample_box_ns,
+            sample_index: 0,
+            sample_host_ns: (self.has & HAS_HOST != 0).then_some(self.sample_host_ns),
+            host_error_bound_ns: (self.has & HAS_BOUND != 0).then_some(self.host_error_bound_ns),
+            source: self.source,
+        })
+    }
+}
+
+/// A records or status datagram decoded, after its records.
+#[derive(Debug)]
+struct DecodedDatagram {
+    key: BoxKey,
+    sequence: u32,
+    /// Host time of its activity period check (its receive time, else the time it was
+    /// decoded), ns.
+    at_ns: u64,
+    /// `None` for a records datagram; for a status datagram its payload and its box's
+    /// time mapping as the timing had it then.
+    status: Option<Box<(Vec<u8>, Option<BoxTimeSummary>)>>,
+}
+
+/// What the decoding thread hands to the outputs' thread, in the order it happened.
+#[derive(Debug)]
+enum Item {
+    /// A datagram received at this time, ns.
+    Received(Option<u64>),
+    /// The records from here on are from this source address.
+    Source(Option<SocketAddr>),
+    /// A record.
+    Record(TimedRecord),
+    /// A datagram decoded.
+    Decoded(DecodedDatagram),
 }
 
 /// The outputs and the CDR writer: where messages become CDR and go out. The first
@@ -280,14 +353,6 @@ impl Outputs {
         Ok(())
     }
 
-    fn publish(&mut self, m: &Message) {
-        match m {
-            Message::Samples(t, b) => self.send_batch(*t, b),
-            Message::Status(t, s) => self.send(Topic::Status, *t, s),
-            Message::Activity(t, a) => self.send(Topic::Activity, *t, a),
-        }
-    }
-
     /// Closes every output; the first error.
     fn close(mut self) -> std::io::Result<()> {
         if let Some(e) = self.error.take() {
@@ -300,206 +365,124 @@ impl Outputs {
     }
 }
 
-/// Where the sink's messages go: to the outputs on this thread, or to their own thread.
-enum Back {
-    Inline(Outputs),
-    Thread(Pipeline),
+/// Everything after decoding and timing: the records of a datagram gathered into its
+/// [`CellSampleBatch`] (units, the sample), the per-box counts and per-port sums, the
+/// status and activity messages, and the outputs. On the decoding thread
+/// ([`RosSink::new`]) or on the outputs' own ([`RosSink::pipelined`]), the same work in
+/// the same order.
+struct Gather {
+    settings: SinkSettings,
+    outputs: Outputs,
+    batch: CellSampleBatch,
+    receive_ns: Option<u64>,
+    /// The source address of the records.
+    source: Option<SocketAddr>,
+    /// Each box's track, found by the last box first (a datagram's records are one box's).
+    boxes: Vec<(BoxKey, BoxTrack)>,
+    last_box: usize,
+    published: Published,
 }
 
-/// Samples a batch of messages for the outputs' thread holds at most (about 140 kB of
-/// [`CellSample`]s, so that they are still in a cache shared by the two threads).
-pub const PIPELINE_BATCH_SAMPLES: usize = 1024;
-/// Messages a batch holds at most.
-const PIPELINE_BATCH_MESSAGES: usize = 64;
-/// Batches sent and not yet taken by the outputs' thread (16: about 2 MB of samples, a few
-/// ms of the decoding thread's work, so that the outputs' thread losing its core for a
-/// moment on a shared machine does not stop the decoding thread); past them the decoding
-/// thread waits.
-const PIPELINE_DEPTH: usize = 16;
-
-/// The decoding thread's end of the outputs' thread: batches of messages out; emptied
-/// batches and sample vectors back, for reuse.
-struct Pipeline {
-    to_outputs: Option<std::sync::mpsc::SyncSender<Vec<Message>>>,
-    returned: std::sync::mpsc::Receiver<(Vec<Message>, Vec<Vec<CellSample>>)>,
-    thread: Option<std::thread::JoinHandle<Outputs>>,
-    pending: Vec<Message>,
-    pending_samples: usize,
-    spare_batches: Vec<Vec<Message>>,
-    spare_samples: Vec<Vec<CellSample>>,
-}
-
-impl Pipeline {
-    fn start(outputs: Outputs) -> std::io::Result<Pipeline> {
-        let (to_outputs, batches) = std::sync::mpsc::sync_channel::<Vec<Message>>(PIPELINE_DEPTH);
-        let (give_back, returned) = std::sync::mpsc::channel();
-        let thread = std::thread::Builder::new()
-            .name("ros-outputs".into())
-            .spawn(move || {
-                let mut outputs = outputs;
-                while let Ok(mut batch) = batches.recv() {
-                    let mut samples = Vec::new();
-                    for m in batch.drain(..) {
-                        outputs.publish(&m);
-                        if let Message::Samples(_, b) = m {
-                            let mut s = b.samples;
-                            s.clear();
-                            samples.push(s);
-                        }
-                    }
-                    if outputs.error.is_some() {
-                        // The decoding thread finds the channel closed and stops sending.
-                        break;
-                    }
-                    let _ = give_back.send((batch, samples));
-                }
-                outputs
-            })?;
-        Ok(Pipeline {
-            to_outputs: Some(to_outputs),
-            returned,
-            thread: Some(thread),
-            pending: Vec::with_capacity(PIPELINE_BATCH_MESSAGES),
-            pending_samples: 0,
-            spare_batches: Vec::new(),
-            spare_samples: Vec::new(),
-        })
-    }
-
-    /// An empty sample vector: one the outputs' thread gave back, where there is one.
-    #[inline]
-    fn samples_vec(&mut self) -> Vec<CellSample> {
-        if self.spare_samples.is_empty() {
-            self.take_returned();
-        }
-        self.spare_samples.pop().unwrap_or_default()
-    }
-
-    fn take_returned(&mut self) {
-        while let Ok((batch, samples)) = self.returned.try_recv() {
-            self.spare_batches.push(batch);
-            self.spare_samples.extend(samples);
-        }
-    }
-
-    #[inline]
-    fn push(&mut self, m: Message, samples: usize) {
-        self.pending.push(m);
-        self.pending_samples += samples;
-        if self.pending_samples >= PIPELINE_BATCH_SAMPLES
-            || self.pending.len() >= PIPELINE_BATCH_MESSAGES
-        {
-            self.flush();
-        }
-    }
-
-    /// The pending messages to the outputs' thread (waiting while it is
-    /// [`PIPELINE_DEPTH`] batches behind).
-    fn flush(&mut self) {
-        if self.pending.is_empty() {
-            return;
-        }
-        self.take_returned();
-        let next = self
-            .spare_batches
-            .pop()
-            .unwrap_or_else(|| Vec::with_capacity(PIPELINE_BATCH_MESSAGES));
-        let batch = std::mem::replace(&mut self.pending, next);
-        self.pending_samples = 0;
-        if let Some(tx) = &self.to_outputs {
-            if tx.send(batch).is_err() {
-                // The outputs failed: their thread keeps the error for finish.
-                self.to_outputs = None;
-            }
-        }
-    }
-
-    /// Sends what is pending and waits for the outputs' thread to end.
-    fn join(mut self) -> std::io::Result<Outputs> {
-        self.flush();
-        self.to_outputs = None;
-        match self.thread.take().map(|t| t.join()) {
-            Some(Ok(outputs)) => Ok(outputs),
-            _ => Err(std::io::Error::other("the ROS outputs' thread panicked")),
-        }
-    }
-}
-
-/// The track of box `key` in `boxes`, made on its first use; `last` is the box found
-/// before, tried first.
-#[inline]
-fn track_of<'a>(
-    boxes: &'a mut Vec<(BoxKey, BoxTrack)>,
-    last: &mut usize,
-    key: BoxKey,
-) -> &'a mut BoxTrack {
-    let i = match boxes.get(*last) {
-        Some((k, _)) if *k == key => *last,
-        _ => match boxes.iter().position(|(k, _)| *k == key) {
-            Some(i) => i,
-            None => {
-                boxes.push((key, BoxTrack::default()));
-                boxes.len() - 1
-            }
-        },
-    };
-    *last = i;
-    &mut boxes[i].1
-}
-
-fn now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
-
-impl RosSink {
-    /// A sink timing records with `timing` and sending to `outputs`, on the caller's
-    /// thread: each message goes out before the call that made it returns.
-    pub fn new(
-        timing: Timing,
-        settings: SinkSettings,
-        outputs: Vec<Box<dyn Output + Send>>,
-    ) -> Self {
-        RosSink::with_back(timing, settings, Back::Inline(Outputs::new(outputs)))
-    }
-
-    /// As [`RosSink::new`], with the CDR encoding and the outputs on a thread of their
-    /// own: the caller's thread decodes, times and gathers the messages as values and
-    /// hands them over in batches (of up to [`PIPELINE_BATCH_SAMPLES`] samples; a few
-    /// batches ahead at most, then it waits). The outputs get the same messages in the
-    /// same order as from [`RosSink::new`], only later: for recordings, not for live
-    /// outputs whose latency counts. An output's error shows at [`RosSink::finish`].
-    pub fn pipelined(
-        timing: Timing,
-        settings: SinkSettings,
-        outputs: Vec<Box<dyn Output + Send>>,
-    ) -> std::io::Result<Self> {
-        let back = Back::Thread(Pipeline::start(Outputs::new(outputs))?);
-        Ok(RosSink::with_back(timing, settings, back))
-    }
-
-    fn with_back(timing: Timing, settings: SinkSettings, back: Back) -> Self {
-        RosSink {
-            timing,
+impl Gather {
+    fn new(settings: SinkSettings, outputs: Outputs) -> Gather {
+        Gather {
             settings,
-            back,
+            outputs,
             batch: CellSampleBatch::default(),
             receive_ns: None,
+            source: None,
             boxes: Vec::new(),
             last_box: 0,
             published: Published::default(),
         }
     }
 
-    /// The timing, for its summary.
-    pub fn timing(&self) -> &Timing {
-        &self.timing
+    #[inline]
+    fn take(&mut self, item: &Item) {
+        match item {
+            Item::Record(r) => self.record(r),
+            Item::Received(t) => self.received(*t),
+            Item::Source(s) => self.source = *s,
+            Item::Decoded(d) => self.decoded(
+                d.key,
+                d.sequence,
+                d.at_ns,
+                d.status.as_deref().map(|(p, t)| (p.as_slice(), t.as_ref())),
+            ),
+        }
     }
 
-    /// Messages sent so far.
-    pub fn published(&self) -> Published {
-        self.published
+    fn received(&mut self, receive_ns: Option<u64>) {
+        self.receive_ns = receive_ns;
+        self.batch.samples.clear();
+    }
+
+    #[inline]
+    fn record(&mut self, r: &TimedRecord) {
+        let mut values = [f64::NAN; Channel::COUNT];
+        let (kind, mask, event_sequence, second_part, cell_id) = match &r.cell {
+            CellRepr::Data(d) => {
+                for c in Channel::ALL {
+                    values[c.index()] = c.to_units(d.raw(c));
+                }
+                (KIND_DATA, ChannelMask::ALL.bits(), -1, false, d.cell_id)
+            }
+            CellRepr::Event(e) => {
+                for (c, raw) in e.events() {
+                    values[c.index()] = c.to_units(raw);
+                }
+                (
+                    KIND_EVENT,
+                    e.channels.bits(),
+                    i32::from(e.sequence),
+                    e.second_part,
+                    e.cell_id,
+                )
+            }
+        };
+        let key = BoxKey {
+            box_id: r.box_id,
+            source: self.source,
+        };
+        let track = track_of(&mut self.boxes, &mut self.last_box, key);
+        track.records_received += 1;
+        track.event_packets_missing += u64::from(r.event_packets_missing_before);
+        track.period_event_packets_missing += u64::from(r.event_packets_missing_before);
+        track.flagged += u64::from(r.flags & FLAG_LOSS_BEFORE != 0);
+        let p = track.port(r.port);
+        p.seen = true;
+        p.packets += 1;
+        p.events += u64::from(if kind == KIND_EVENT {
+            mask.count_ones()
+        } else {
+            0
+        });
+        p.cells.insert(cell_id);
+        let v = values[self.settings.activity_channel.index()];
+        if !v.is_nan() {
+            p.max = if p.n == 0 { v } else { p.max.max(v) };
+            p.sum += v;
+            p.n += 1;
+        }
+        let (host_time_ns, host_time_bound_ns, host_time_source) = r.host_time();
+        self.batch.samples.push(CellSample {
+            box_id: r.box_id,
+            port: r.port,
+            cell_id,
+            kind,
+            event_mask: mask,
+            values,
+            event_sequence,
+            second_part,
+            event_packets_missing_before: r.event_packets_missing_before,
+            flags: r.flags,
+            datagram_sequence: r.datagram_sequence,
+            box_time_ns: r.tick.wrapping_mul(skinbox_protocol::TICK_NS),
+            sample_box_time_ns: r.sample_box_ns,
+            host_time_ns,
+            host_time_bound_ns,
+            host_time_source,
+        });
     }
 
     /// The log time of a message about a datagram: its receive time, else the host time of
@@ -516,47 +499,63 @@ impl RosSink {
         })
     }
 
+    /// A records or status datagram of box `key` decoded (after its records): `status`
+    /// has a status datagram's payload and its box's time mapping.
+    fn decoded(
+        &mut self,
+        key: BoxKey,
+        sequence: u32,
+        at_ns: u64,
+        status: Option<(&[u8], Option<&BoxTimeSummary>)>,
+    ) {
+        // Records and status datagrams share the box's sequence numbers.
+        let track = track_of(&mut self.boxes, &mut self.last_box, key);
+        if let Some(last) = track.last_sequence {
+            let gap = sequence.wrapping_sub(last).wrapping_sub(1);
+            if gap < 1 << 31 {
+                track.datagrams_missing += u64::from(gap);
+                track.period_datagrams_missing += u64::from(gap);
+            }
+        }
+        track.last_sequence = Some(sequence);
+        match status {
+            None => {
+                track.datagrams_received += 1;
+                if !self.batch.samples.is_empty() {
+                    self.take_batch(key, sequence);
+                }
+            }
+            Some((payload, time)) => self.status(key, payload, time, at_ns),
+        }
+        self.activity(key, at_ns);
+    }
+
     fn take_batch(&mut self, key: BoxKey, sequence: u32) {
         let log_time = self.log_time();
         self.batch.stamp = Time::from_ns(log_time);
         self.batch.box_id = key.box_id;
         self.batch.box_address = key.source.map(|a| a.to_string()).unwrap_or_default();
         self.batch.datagram_sequence = sequence;
-        let samples = self.batch.samples.len();
         self.published.samples_messages += 1;
-        self.published.samples += samples as u64;
-        match &mut self.back {
-            Back::Inline(o) => {
-                o.send_batch(log_time, &self.batch);
-                self.batch.samples.clear();
-            }
-            Back::Thread(p) => {
-                let batch = CellSampleBatch {
-                    stamp: self.batch.stamp,
-                    box_id: self.batch.box_id,
-                    box_address: std::mem::take(&mut self.batch.box_address),
-                    datagram_sequence: sequence,
-                    samples: std::mem::replace(&mut self.batch.samples, p.samples_vec()),
-                };
-                p.push(Message::Samples(log_time, batch), samples);
-            }
-        }
+        self.published.samples += self.batch.samples.len() as u64;
+        self.outputs.send_batch(log_time, &self.batch);
+        self.batch.samples.clear();
     }
 
-    fn status(&mut self, key: BoxKey, payload: &[u8]) {
+    fn status(
+        &mut self,
+        key: BoxKey,
+        payload: &[u8],
+        time: Option<&BoxTimeSummary>,
+        log_time: u64,
+    ) {
         let Ok((repr, counters)) = DatagramRepr::parse_box_counters(payload) else {
             return;
         };
         let DatagramBody::Status(s) = &repr.body else {
             return;
         };
-        let log_time = self.receive_ns.unwrap_or_else(now_ns);
         let track = track_of(&mut self.boxes, &mut self.last_box, key);
-        let time = self
-            .timing
-            .summary()
-            .into_iter()
-            .find(|t| t.box_id == key.box_id && t.address == key.source);
         let m = BoxStatus {
             stamp: Time::from_ns(log_time),
             box_id: key.box_id,
@@ -584,20 +583,14 @@ impl RosSink {
             event_packets_missing: track.event_packets_missing,
             records_flagged_loss_before: track.flagged,
             host_time_source: skinbox_host::rows::host_time_source_code(
-                time.as_ref().map_or(HostTimeSource::None, |t| t.source),
+                time.map_or(HostTimeSource::None, |t| t.source),
             ),
-            drift_ppm: time.as_ref().and_then(|t| t.drift_ppm).unwrap_or(f64::NAN),
-            time_error_bound_ns: time
-                .as_ref()
-                .and_then(|t| t.error_bound_ns)
-                .unwrap_or(f64::NAN),
-            time_map_restarts: time.as_ref().map_or(0, |t| t.restarts),
+            drift_ppm: time.and_then(|t| t.drift_ppm).unwrap_or(f64::NAN),
+            time_error_bound_ns: time.and_then(|t| t.error_bound_ns).unwrap_or(f64::NAN),
+            time_map_restarts: time.map_or(0, |t| t.restarts),
         };
         self.published.status_messages += 1;
-        match &mut self.back {
-            Back::Inline(o) => o.send(Topic::Status, log_time, &m),
-            Back::Thread(p) => p.push(Message::Status(log_time, m), 0),
-        }
+        self.outputs.send(Topic::Status, log_time, &m);
     }
 
     fn activity(&mut self, key: BoxKey, at_ns: u64) {
@@ -648,20 +641,209 @@ impl RosSink {
         };
         track.period_start_ns = Some(at_ns);
         self.published.activity_messages += 1;
-        match &mut self.back {
-            Back::Inline(o) => o.send(Topic::Activity, at_ns, &m),
-            Back::Thread(p) => p.push(Message::Activity(at_ns, m), 0),
+        self.outputs.send(Topic::Activity, at_ns, &m);
+    }
+}
+
+/// Where the sink's records go after timing: gathered into messages and sent on this
+/// thread, or handed to the outputs' thread.
+enum Back {
+    Inline(Box<Gather>),
+    Thread(Pipeline),
+}
+
+/// Items (records, mostly) a batch for the outputs' thread holds at most (about 80 kB,
+/// so that they are still in a cache shared by the two threads).
+pub const PIPELINE_BATCH_ITEMS: usize = 1024;
+/// Batches sent and not yet taken by the outputs' thread (16: about 1.3 MB of records, a
+/// few ms of the decoding thread's work, so that the outputs' thread losing its core for a
+/// moment on a shared machine does not stop the decoding thread); past them the decoding
+/// thread waits.
+const PIPELINE_DEPTH: usize = 16;
+
+/// The decoding thread's end of the outputs' thread: batches of items out; emptied
+/// batches back for reuse, with the messages made so far.
+struct Pipeline {
+    to_outputs: Option<std::sync::mpsc::SyncSender<Vec<Item>>>,
+    returned: std::sync::mpsc::Receiver<(Vec<Item>, Published)>,
+    thread: Option<std::thread::JoinHandle<std::io::Result<Published>>>,
+    pending: Vec<Item>,
+    spare: Vec<Vec<Item>>,
+    /// The source address of the last record handed over.
+    source: Option<SocketAddr>,
+    published: Published,
+}
+
+impl Pipeline {
+    fn start(gather: Gather) -> std::io::Result<Pipeline> {
+        let (to_outputs, batches) = std::sync::mpsc::sync_channel::<Vec<Item>>(PIPELINE_DEPTH);
+        let (give_back, returned) = std::sync::mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("ros-outputs".into())
+            .spawn(move || {
+                let mut gather = gather;
+                while let Ok(mut batch) = batches.recv() {
+                    for item in &batch {
+                        gather.take(item);
+                    }
+                    batch.clear();
+                    if gather.outputs.error.is_some() {
+                        // The decoding thread finds the channel closed and stops sending.
+                        break;
+                    }
+                    let _ = give_back.send((batch, gather.published));
+                }
+                // The outputs finish here too (an MCAP file's summary and indexes).
+                let published = gather.published;
+                gather.outputs.close().map(|()| published)
+            })?;
+        Ok(Pipeline {
+            to_outputs: Some(to_outputs),
+            returned,
+            thread: Some(thread),
+            pending: Vec::with_capacity(PIPELINE_BATCH_ITEMS),
+            spare: Vec::new(),
+            source: None,
+            published: Published::default(),
+        })
+    }
+
+    fn take_returned(&mut self) {
+        while let Ok((batch, published)) = self.returned.try_recv() {
+            self.spare.push(batch);
+            self.published = published;
+        }
+    }
+
+    #[inline]
+    fn push(&mut self, item: Item) {
+        self.pending.push(item);
+        if self.pending.len() >= PIPELINE_BATCH_ITEMS {
+            self.flush();
+        }
+    }
+
+    /// The pending items to the outputs' thread (waiting while it is [`PIPELINE_DEPTH`]
+    /// batches behind).
+    fn flush(&mut self) {
+        if self.pending.is_empty() {
+            return;
+        }
+        self.take_returned();
+        let next = self
+            .spare
+            .pop()
+            .unwrap_or_else(|| Vec::with_capacity(PIPELINE_BATCH_ITEMS));
+        let batch = std::mem::replace(&mut self.pending, next);
+        if let Some(tx) = &self.to_outputs {
+            if tx.send(batch).is_err() {
+                // The outputs failed: their thread keeps the error for finish.
+                self.to_outputs = None;
+            }
+        }
+    }
+
+    /// Sends what is pending, waits for the outputs' thread to close the outputs and end;
+    /// the first error, or the messages sent.
+    fn join(mut self) -> std::io::Result<Published> {
+        self.flush();
+        self.to_outputs = None;
+        match self.thread.take().map(|t| t.join()) {
+            Some(Ok(result)) => result,
+            _ => Err(std::io::Error::other("the ROS outputs' thread panicked")),
+        }
+    }
+}
+
+/// The track of box `key` in `boxes`, made on its first use; `last` is the box found
+/// before, tried first.
+#[inline]
+fn track_of<'a>(
+    boxes: &'a mut Vec<(BoxKey, BoxTrack)>,
+    last: &mut usize,
+    key: BoxKey,
+) -> &'a mut BoxTrack {
+    let i = match boxes.get(*last) {
+        Some((k, _)) if *k == key => *last,
+        _ => match boxes.iter().position(|(k, _)| *k == key) {
+            Some(i) => i,
+            None => {
+                boxes.push((key, BoxTrack::default()));
+                boxes.len() - 1
+            }
+        },
+    };
+    *last = i;
+    &mut boxes[i].1
+}
+
+fn now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
+impl RosSink {
+    /// A sink timing records with `timing` and sending to `outputs`, on the caller's
+    /// thread: each message goes out before the call that made it returns.
+    pub fn new(
+        timing: Timing,
+        settings: SinkSettings,
+        outputs: Vec<Box<dyn Output + Send>>,
+    ) -> Self {
+        let gather = Gather::new(settings, Outputs::new(outputs));
+        RosSink::with_back(timing, Back::Inline(Box::new(gather)))
+    }
+
+    /// As [`RosSink::new`], with all but decoding and timing on a thread of their own:
+    /// the caller's thread decodes and times the records and hands them over with the
+    /// datagrams' events in batches (of up to [`PIPELINE_BATCH_ITEMS`]; a few batches ahead
+    /// at most, then it waits); the other thread gathers the messages (units, samples,
+    /// counts and sums), encodes the CDR and runs the outputs. The outputs get the same
+    /// messages in the same order as from [`RosSink::new`], only later: for recordings,
+    /// not for live outputs whose latency counts. An output's error shows at
+    /// [`RosSink::finish`].
+    pub fn pipelined(
+        timing: Timing,
+        settings: SinkSettings,
+        outputs: Vec<Box<dyn Output + Send>>,
+    ) -> std::io::Result<Self> {
+        let gather = Gather::new(settings, Outputs::new(outputs));
+        let back = Back::Thread(Pipeline::start(gather)?);
+        Ok(RosSink::with_back(timing, back))
+    }
+
+    fn with_back(timing: Timing, back: Back) -> Self {
+        RosSink {
+            timing,
+            back,
+            receive_ns: None,
+        }
+    }
+
+    /// The timing, for its summary.
+    pub fn timing(&self) -> &Timing {
+        &self.timing
+    }
+
+    /// Messages sent so far (pipelined: as far as the outputs' thread has come; all of
+    /// them from [`RosSink::finish`]).
+    pub fn published(&self) -> Published {
+        match &self.back {
+            Back::Inline(g) => g.published,
+            Back::Thread(p) => p.published,
         }
     }
 
     /// Ends: closes every output; the first error, or the messages sent.
     pub fn finish(self) -> std::io::Result<Published> {
-        let outputs = match self.back {
-            Back::Inline(o) => o,
-            Back::Thread(p) => p.join()?,
-        };
-        outputs.close()?;
-        Ok(self.published)
+        match self.back {
+            Back::Inline(g) => {
+                let published = g.published;
+                g.outputs.close().map(|()| published)
+            }
+            Back::Thread(p) => p.join(),
+        }
     }
 }
 
@@ -669,32 +851,20 @@ impl RecordSink for RosSink {
     #[inline]
     fn record(&mut self, record: &DecodedRecord) {
         let times = self.timing.record(record);
-        let row = RecordRow::new(record, &times);
-        let key = BoxKey {
-            box_id: record.box_id,
-            source: record.source,
-        };
-        let track = track_of(&mut self.boxes, &mut self.last_box, key);
-        track.records_received += 1;
-        track.event_packets_missing += u64::from(record.event_packets_missing_before);
-        track.period_event_packets_missing += u64::from(record.event_packets_missing_before);
-        track.flagged += u64::from(record.flags & FLAG_LOSS_BEFORE != 0);
-        let p = track.port(record.port);
-        p.seen = true;
-        p.packets += 1;
-        p.events += u64::from(if row.kind == skinbox_host::rows::KIND_EVENT {
-            row.mask.count_ones()
-        } else {
-            0
-        });
-        p.cells.insert(row.cell_id);
-        let v = row.values[self.settings.activity_channel.index()];
-        if !v.is_nan() {
-            p.max = if p.n == 0 { v } else { p.max.max(v) };
-            p.sum += v;
-            p.n += 1;
+        let r = TimedRecord::new(record, &times);
+        match &mut self.back {
+            Back::Inline(g) => {
+                g.source = record.source;
+                g.record(&r);
+            }
+            Back::Thread(p) => {
+                if record.source != p.source {
+                    p.source = record.source;
+                    p.push(Item::Source(record.source));
+                }
+                p.push(Item::Record(r));
+            }
         }
-        self.batch.samples.push(CellSample::from(&row));
     }
 
     fn datagram_received(
@@ -704,7 +874,10 @@ impl RecordSink for RosSink {
         payload: &[u8],
     ) {
         self.receive_ns = receive.map(|d| d.as_nanos() as u64);
-        self.batch.samples.clear();
+        match &mut self.back {
+            Back::Inline(g) => g.received(self.receive_ns),
+            Back::Thread(p) => p.push(Item::Received(self.receive_ns)),
+        }
         self.timing.datagram_received(receive, source, payload);
     }
 
@@ -721,33 +894,36 @@ impl RecordSink for RosSink {
             box_id: d.box_id(),
             source,
         };
-        if !matches!(
-            outcome,
-            DatagramOutcome::Records { .. } | DatagramOutcome::Status
-        ) {
-            return;
-        }
-        // Records and status datagrams share the box's sequence numbers.
-        let track = track_of(&mut self.boxes, &mut self.last_box, key);
+        let is_status = match outcome {
+            DatagramOutcome::Records { .. } => false,
+            DatagramOutcome::Status => true,
+            _ => return,
+        };
         let sequence = d.sequence();
-        if let Some(last) = track.last_sequence {
-            let gap = sequence.wrapping_sub(last).wrapping_sub(1);
-            if gap < 1 << 31 {
-                track.datagrams_missing += u64::from(gap);
-                track.period_datagrams_missing += u64::from(gap);
+        let at_ns = self.receive_ns.unwrap_or_else(now_ns);
+        // The box's time mapping as it is now, for a status message.
+        let time = || {
+            self.timing
+                .summary()
+                .into_iter()
+                .find(|t| t.box_id == key.box_id && t.address == key.source)
+        };
+        match &mut self.back {
+            Back::Inline(g) => {
+                let time = if is_status { time() } else { None };
+                let status = is_status.then_some((payload, time.as_ref()));
+                g.decoded(key, sequence, at_ns, status);
+            }
+            Back::Thread(p) => {
+                let status = is_status.then(|| Box::new((payload.to_vec(), time())));
+                p.push(Item::Decoded(DecodedDatagram {
+                    key,
+                    sequence,
+                    at_ns,
+                    status,
+                }));
             }
         }
-        track.last_sequence = Some(sequence);
-        if let DatagramOutcome::Records { .. } = outcome {
-            track.datagrams_received += 1;
-            if !self.batch.samples.is_empty() {
-                self.take_batch(key, sequence);
-            }
-        } else {
-            self.status(key, payload);
-        }
-        let at = self.receive_ns.unwrap_or_else(now_ns);
-        self.activity(key, at);
     }
 }
 
