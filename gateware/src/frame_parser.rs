@@ -10,15 +10,14 @@
 //! clock its first beat was on `frame`), and feeds:
 //!
 //! - the layers that listen to the same beats ([`crate::stream::FrameBeats`]): the
-//!   Ethernet layer ([`EthernetDemux`]: destination MAC and EtherType, steps 3-5) and the
-//!   command layer ([`CommandDecoder`]: the command header's fields, the first argument
-//!   bytes and the header's form for step 16);
-//! - field captures by byte position (shift registers enabled over their bytes) for ARP,
-//!   IPv4 and the transport: bytes 14..22 (the ARP request header, or IPv4 version/IHL to
-//!   fragment field), the IPv4 total length and protocol, the peer's MAC and IP (ARP
-//!   sender from the ARP body, else Ethernet and IPv4 source), the target IP (ARP target,
-//!   else IPv4 destination) and the transport header (bytes 34..42); one capture serves
-//!   ARP and IPv4 where their fields share bytes;
+//!   Ethernet layer ([`EthernetDemux`]: destination MAC and EtherType, steps 3-5), the ARP
+//!   layer ([`ArpReceiver`]: a request for the box's address, step 4) and the command
+//!   layer ([`CommandDecoder`]: the command header's fields, the first argument bytes and
+//!   the header's form for step 16);
+//! - the IPv4 header's fields: version and IHL, flags and fragment offset, total length
+//!   and protocol captured, the destination compared with the box's address as it passes
+//!   ([`FieldMatch`]); the sender's MAC and IPv4 address (Ethernet and IPv4 source, for
+//!   the command unit) and the transport header (bytes 34..42) captured;
 //! - three ones'-complement sums, one byte per clock with an end-around carry: the IPv4
 //!   header (bytes 14..34), the transport message (ICMP, or UDP with its pseudo header) and
 //!   the ICMP message from its byte 4 (the echo reply's checksum is its complement). The
@@ -44,15 +43,18 @@
 //! the MAC's are at least 20: preamble, SFD and the inter-frame gap). `ready` is always
 //! high.
 
+use crate::arp_receiver::ArpReceiver;
 use crate::command_decoder::CommandDecoder;
 use crate::ethernet_demux::EthernetDemux;
+use crate::field_capture::FieldCapture;
+use crate::field_match::FieldMatch;
 use crate::hdl::*;
 use crate::ones_complement_sum::OnesComplementSum;
 use crate::receive_rules::{ReceiveRules, RULES_LATENCY};
 use crate::stream::ByteStreamSink;
 use skinbox_protocol::link::{
-    LinkConfig, ARGUMENTS_AT, ARP_AT, ARP_REQUEST_HEADER, ICMP_AT, ICMP_ECHO_REQUEST, IPV4_AT,
-    IPV4_HEADER_LEN, IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP, MIN_FRAME_LEN, PAYLOAD_AT, UDP_AT,
+    LinkConfig, ARGUMENTS_AT, ARP_AT, ICMP_AT, ICMP_ECHO_REQUEST, IPV4_AT, IPV4_HEADER_LEN,
+    IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP, MIN_FRAME_LEN, PAYLOAD_AT, UDP_AT,
 };
 use skinbox_protocol::wire::{arp, ethernet, icmp, ipv4, udp};
 use skinbox_protocol::Field;
@@ -71,11 +73,6 @@ const IP_PROTOCOL: usize = IPV4_AT + ipv4::field::PROTOCOL;
 const IP_CHECKSUM: Field = shifted(ipv4::field::CHECKSUM, IPV4_AT);
 const IP_SOURCE: Field = shifted(ipv4::field::SOURCE, IPV4_AT);
 const IP_DESTINATION: Field = shifted(ipv4::field::DESTINATION, IPV4_AT);
-const ARP_SENDER_MAC: Field = shifted(arp::field::SENDER_MAC, ARP_AT);
-const ARP_SENDER_IP: Field = shifted(arp::field::SENDER_IP, ARP_AT);
-const ARP_TARGET_IP: Field = shifted(arp::field::TARGET_IP, ARP_AT);
-/// Captured in `header`: the ARP request header, or IPv4 version/IHL to the fragment field.
-const HEADER_BYTES: Field = ARP_AT..ARP_AT + ARP_REQUEST_HEADER.len();
 /// Captured in `transport`: the ICMP or UDP header.
 const TRANSPORT: Field = UDP_AT..PAYLOAD_AT;
 /// The ICMP message from its identifier: what the echo reply's checksum sums.
@@ -83,8 +80,6 @@ const ICMP_REST_AT: usize = ICMP_AT + icmp::field::IDENTIFIER.start;
 // one decode ends a capture and starts the next where the fields are adjacent
 const _: () = assert!(ethernet::field::ETHERTYPE.end == IPV4_AT && IPV4_AT == ARP_AT);
 const _: () = assert!(ICMP_AT == UDP_AT && TRANSPORT.end == ICMP_AT + icmp::HEADER_LEN);
-const _: () = assert!(HEADER_BYTES.end == IPV4_AT + ipv4::field::TTL);
-const _: () = assert!(ARP_SENDER_MAC.end == ARP_SENDER_IP.start);
 const _: () = assert!(IP_SOURCE.end == IP_DESTINATION.start && IP_DESTINATION.end == UDP_AT);
 // the beat tests that skip the index's choice need positions above 0
 const _: () = assert!(IP_CHECKSUM.start > 0);
@@ -161,40 +156,28 @@ pub struct FrameParser {
     pub command_arguments: Signal<Out, Bits<96>>,
 
     // build-time constants
-    box_ip: Constant<Bits<32>>,
     box_port: Constant<Bits<16>>,
     host_subnet: Constant<Bits<32>>,
     host_mask: Constant<Bits<32>>,
     protocol_icmp: Constant<Bits<8>>,
     protocol_udp: Constant<Bits<8>>,
     icmp_echo_request: Constant<Bits<16>>,
-    arp_request_header: Constant<Bits<64>>,
     // frame positions
     source_mac_at: Constant<Bits<11>>,
     ethertype_at: Constant<Bits<11>>,
     ipv4_at: Constant<Bits<11>>,
-    header_bytes_end: Constant<Bits<11>>,
     ip_total_len_at: Constant<Bits<11>>,
     ip_total_len_end: Constant<Bits<11>>,
     ip_protocol_at: Constant<Bits<11>>,
     ip_checksum_at: Constant<Bits<11>>,
     ip_checksum_low_at: Constant<Bits<11>>,
     ip_source_at: Constant<Bits<11>>,
-    ip_destination_at: Constant<Bits<11>>,
+    ip_source_end: Constant<Bits<11>>,
     ip_header_last: Constant<Bits<11>>,
-    arp_sender_mac_at: Constant<Bits<11>>,
-    arp_sender_ip_at: Constant<Bits<11>>,
-    arp_sender_ip_end: Constant<Bits<11>>,
-    arp_target_ip_at: Constant<Bits<11>>,
-    arp_target_ip_end: Constant<Bits<11>>,
     transport_at: Constant<Bits<11>>,
     transport_end: Constant<Bits<11>>,
     icmp_rest_at: Constant<Bits<11>>,
     // field positions in the captures
-    version_bit: Constant<Bits<6>>,
-    ihl_bit: Constant<Bits<6>>,
-    fragment_offset_bit: Constant<Bits<6>>,
-    more_fragments_bit: Constant<Bits<6>>,
     icmp_type_code_bit: Constant<Bits<6>>,
     udp_source_port_bit: Constant<Bits<6>>,
     udp_destination_port_bit: Constant<Bits<6>>,
@@ -219,16 +202,11 @@ pub struct FrameParser {
     // where the registered beat is in the frame
     at_first: DFF<Bit>,
     at_source: DFF<Bit>,
-    at_header_bytes: DFF<Bit>,
     at_total: DFF<Bit>,
     at_total_length_end: DFF<Bit>,
     at_ip_header_last: DFF<Bit>,
-    at_arp_sender_mac: DFF<Bit>,
     at_ip_protocol: DFF<Bit>,
     at_ip_source: DFF<Bit>,
-    at_arp_sender_ip: DFF<Bit>,
-    at_ip_destination: DFF<Bit>,
-    at_arp_target_ip: DFF<Bit>,
     at_transport: DFF<Bit>,
     at_ip_header: DFF<Bit>,
     at_pseudo_header: DFF<Bit>,
@@ -239,13 +217,11 @@ pub struct FrameParser {
     index_in: Signal<Local, Bits<11>>,
     word_in: Signal<Local, Bits<16>>,
     // captures
-    header: DFF<Bits<64>>,
     total_length: DFF<Bits<16>>,
     protocol: DFF<Bits<8>>,
     is_udp: DFF<Bit>,
     source_mac: DFF<Bits<48>>,
     source_ip: DFF<Bits<32>>,
-    target_ip: DFF<Bits<32>>,
     transport: DFF<Bits<64>>,
     // the IPv4 payload's bytes after the current one, and whether the current one (from
     // byte 34) is in it
@@ -258,8 +234,13 @@ pub struct FrameParser {
     header_sum: OnesComplementSum,
     transport_sum: OnesComplementSum,
     rest_sum: OnesComplementSum,
-    // the layers
+    // the layers, and the IPv4 header's fields
     ethernet: EthernetDemux,
+    arp: ArpReceiver,
+    version_ihl: FieldCapture<8>,
+    flags_fragment: FieldCapture<16>,
+    ip_destination: FieldMatch,
+    more_fragments_bit: Constant<Bits<4>>,
     command: CommandDecoder,
     // the rule table
     rules: ReceiveRules,
@@ -273,8 +254,6 @@ pub struct FrameParser {
     p2: DFF<Bit>,
     s1_length_error: DFF<Bit>,
     s1_error: DFF<Bit>,
-    s1_arp_request: DFF<Bit>,
-    s1_target_box: DFF<Bit>,
     s1_version_4: DFF<Bit>,
     s1_ihl_below_5: DFF<Bit>,
     s1_ihl_above_5: DFF<Bit>,
@@ -308,12 +287,6 @@ impl FrameParser {
         let mask = u32::MAX.checked_shl(32 - prefix).unwrap_or(0);
         let subnet = u32::from_be_bytes(link.host_subnet) & mask;
         let udp_field = |f: Field| shifted(f, UDP_AT);
-        let version_ihl = IPV4_AT + ipv4::field::VERSION_IHL;
-        let ihl_bit = capture_bit(HEADER_BYTES, version_ihl..version_ihl + 1)
-            .val()
-            .to_u64();
-        let flags = shifted(ipv4::field::FLAGS_FRAGMENT_OFFSET, IPV4_AT);
-        let fragment_bit = capture_bit(HEADER_BYTES, flags).val().to_u64();
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -338,40 +311,26 @@ impl FrameParser {
             command_sequence: Default::default(),
             command_argument_length: Default::default(),
             command_arguments: Default::default(),
-            box_ip: Constant::new(big_endian(&link.box_ip).into()),
             box_port: Constant::new(u64::from(link.box_port).into()),
             host_subnet: Constant::new(u64::from(subnet).into()),
             host_mask: Constant::new(u64::from(mask).into()),
             protocol_icmp: Constant::new(u64::from(IP_PROTOCOL_ICMP).into()),
             protocol_udp: Constant::new(u64::from(IP_PROTOCOL_UDP).into()),
             icmp_echo_request: Constant::new(big_endian(&[ICMP_ECHO_REQUEST, 0]).into()),
-            arp_request_header: Constant::new(big_endian(&ARP_REQUEST_HEADER).into()),
             source_mac_at: position(ethernet::field::SOURCE.start),
             ethertype_at: position(ethernet::field::ETHERTYPE.start),
             ipv4_at: position(IPV4_AT),
-            header_bytes_end: position(HEADER_BYTES.end),
             ip_total_len_at: position(IP_TOTAL_LEN.start),
             ip_total_len_end: position(IP_TOTAL_LEN.end),
             ip_protocol_at: position(IP_PROTOCOL),
             ip_checksum_at: position(IP_CHECKSUM.start),
             ip_checksum_low_at: position(IP_CHECKSUM.start + 1),
             ip_source_at: position(IP_SOURCE.start),
-            ip_destination_at: position(IP_DESTINATION.start),
+            ip_source_end: position(IP_SOURCE.end),
             ip_header_last: position(UDP_AT - 1),
-            arp_sender_mac_at: position(ARP_SENDER_MAC.start),
-            arp_sender_ip_at: position(ARP_SENDER_IP.start),
-            arp_sender_ip_end: position(ARP_SENDER_IP.end),
-            arp_target_ip_at: position(ARP_TARGET_IP.start),
-            arp_target_ip_end: position(ARP_TARGET_IP.end),
             transport_at: position(TRANSPORT.start),
             transport_end: position(TRANSPORT.end),
             icmp_rest_at: position(ICMP_REST_AT),
-            version_bit: Constant::new((ihl_bit + 4).into()),
-            ihl_bit: Constant::new(ihl_bit.into()),
-            fragment_offset_bit: Constant::new(fragment_bit.into()),
-            more_fragments_bit: Constant::new(
-                (fragment_bit + u64::from(ipv4::FLAG_MORE_FRAGMENTS.trailing_zeros())).into(),
-            ),
             icmp_type_code_bit: capture_bit(TRANSPORT, ICMP_AT..ICMP_AT + 2),
             udp_source_port_bit: capture_bit(TRANSPORT, udp_field(udp::field::SOURCE_PORT)),
             udp_destination_port_bit: capture_bit(
@@ -394,16 +353,11 @@ impl FrameParser {
             beat_index: Default::default(),
             at_first: Default::default(),
             at_source: Default::default(),
-            at_header_bytes: Default::default(),
             at_total: Default::default(),
             at_total_length_end: Default::default(),
             at_ip_header_last: Default::default(),
-            at_arp_sender_mac: Default::default(),
             at_ip_protocol: Default::default(),
             at_ip_source: Default::default(),
-            at_arp_sender_ip: Default::default(),
-            at_ip_destination: Default::default(),
-            at_arp_target_ip: Default::default(),
             at_transport: Default::default(),
             at_ip_header: Default::default(),
             at_pseudo_header: Default::default(),
@@ -413,13 +367,11 @@ impl FrameParser {
             transport_word: Default::default(),
             index_in: Default::default(),
             word_in: Default::default(),
-            header: Default::default(),
             total_length: Default::default(),
             protocol: Default::default(),
             is_udp: Default::default(),
             source_mac: Default::default(),
             source_ip: Default::default(),
-            target_ip: Default::default(),
             transport: Default::default(),
             ip_left: Default::default(),
             in_ip: Default::default(),
@@ -427,6 +379,14 @@ impl FrameParser {
             payload_length: Default::default(),
             header_sum: Default::default(),
             ethernet: EthernetDemux::new(link.box_mac),
+            arp: ArpReceiver::new(link.box_ip),
+            version_ihl: FieldCapture::of(shifted(
+                ipv4::field::VERSION_IHL..ipv4::field::VERSION_IHL + 1,
+                IPV4_AT,
+            )),
+            flags_fragment: FieldCapture::of(shifted(ipv4::field::FLAGS_FRAGMENT_OFFSET, IPV4_AT)),
+            ip_destination: FieldMatch::of(IP_DESTINATION, &link.box_ip),
+            more_fragments_bit: constant(u64::from(ipv4::FLAG_MORE_FRAGMENTS.trailing_zeros())),
             command: Default::default(),
             rules: Default::default(),
             transport_sum: Default::default(),
@@ -439,8 +399,6 @@ impl FrameParser {
             p2: Default::default(),
             s1_length_error: Default::default(),
             s1_error: Default::default(),
-            s1_arp_request: Default::default(),
-            s1_target_box: Default::default(),
             s1_version_4: Default::default(),
             s1_ihl_below_5: Default::default(),
             s1_ihl_above_5: Default::default(),
@@ -488,16 +446,11 @@ impl Logic for FrameParser {
             beat_index,
             at_first,
             at_source,
-            at_header_bytes,
             at_total,
             at_total_length_end,
             at_ip_header_last,
-            at_arp_sender_mac,
             at_ip_protocol,
             at_ip_source,
-            at_arp_sender_ip,
-            at_ip_destination,
-            at_arp_target_ip,
             at_transport,
             at_ip_header,
             at_pseudo_header,
@@ -505,13 +458,11 @@ impl Logic for FrameParser {
             at_from_icmp_rest,
             beat_word,
             transport_word,
-            header,
             total_length,
             protocol,
             is_udp,
             source_mac,
             source_ip,
-            target_ip,
             transport,
             ip_left,
             in_ip,
@@ -525,8 +476,6 @@ impl Logic for FrameParser {
             p2,
             s1_length_error,
             s1_error,
-            s1_arp_request,
-            s1_target_box,
             s1_version_4,
             s1_ihl_below_5,
             s1_ihl_above_5,
@@ -568,36 +517,16 @@ impl Logic for FrameParser {
                 | (self.at_source.q.val()
                     & (self.index_in.val() != self.ethertype_at.val())
                     & self.in_frame.q.val());
-            self.at_header_bytes.d.next = (self.index_in.val() == self.ipv4_at.val())
-                | (self.at_header_bytes.q.val()
-                    & (self.index_in.val() != self.header_bytes_end.val())
-                    & self.in_frame.q.val());
             self.at_total.d.next = (self.index_in.val() == self.ip_total_len_at.val())
                 | (self.at_total.q.val()
                     & (self.index_in.val() != self.ip_total_len_end.val())
                     & self.in_frame.q.val());
             self.at_total_length_end.d.next = self.index_in.val() == self.ip_total_len_end.val();
             self.at_ip_header_last.d.next = self.index_in.val() == self.ip_header_last.val();
-            self.at_arp_sender_mac.d.next = (self.index_in.val() == self.arp_sender_mac_at.val())
-                | (self.at_arp_sender_mac.q.val()
-                    & (self.index_in.val() != self.arp_sender_ip_at.val())
-                    & self.in_frame.q.val());
             self.at_ip_protocol.d.next = self.index_in.val() == self.ip_protocol_at.val();
             self.at_ip_source.d.next = (self.index_in.val() == self.ip_source_at.val())
                 | (self.at_ip_source.q.val()
-                    & (self.index_in.val() != self.ip_destination_at.val())
-                    & self.in_frame.q.val());
-            self.at_arp_sender_ip.d.next = (self.index_in.val() == self.arp_sender_ip_at.val())
-                | (self.at_arp_sender_ip.q.val()
-                    & (self.index_in.val() != self.arp_sender_ip_end.val())
-                    & self.in_frame.q.val());
-            self.at_ip_destination.d.next = (self.index_in.val() == self.ip_destination_at.val())
-                | (self.at_ip_destination.q.val()
-                    & (self.index_in.val() != self.transport_at.val())
-                    & self.in_frame.q.val());
-            self.at_arp_target_ip.d.next = (self.index_in.val() == self.arp_target_ip_at.val())
-                | (self.at_arp_target_ip.q.val()
-                    & (self.index_in.val() != self.arp_target_ip_end.val())
+                    & (self.index_in.val() != self.ip_source_end.val())
                     & self.in_frame.q.val());
             self.at_transport.d.next = (self.index_in.val() == self.transport_at.val())
                 | (self.at_transport.q.val()
@@ -668,6 +597,30 @@ impl Logic for FrameParser {
         self.ethernet.beats.beat_valid.next = self.beat_valid.q.val();
         self.ethernet.beats.beat_data.next = self.beat_data.q.val();
         self.ethernet.beat_first.next = self.at_first.q.val();
+        self.arp.clock.next = self.clock.val();
+        self.arp.beats.next_valid.next = self.frame.valid.val();
+        self.arp.beats.next_index.next = self.index_in.val();
+        self.arp.beats.in_frame.next = self.in_frame.q.val();
+        self.arp.beats.beat_valid.next = self.beat_valid.q.val();
+        self.arp.beats.beat_data.next = self.beat_data.q.val();
+        self.version_ihl.clock.next = self.clock.val();
+        self.version_ihl.beats.next_valid.next = self.frame.valid.val();
+        self.version_ihl.beats.next_index.next = self.index_in.val();
+        self.version_ihl.beats.in_frame.next = self.in_frame.q.val();
+        self.version_ihl.beats.beat_valid.next = self.beat_valid.q.val();
+        self.version_ihl.beats.beat_data.next = self.beat_data.q.val();
+        self.flags_fragment.clock.next = self.clock.val();
+        self.flags_fragment.beats.next_valid.next = self.frame.valid.val();
+        self.flags_fragment.beats.next_index.next = self.index_in.val();
+        self.flags_fragment.beats.in_frame.next = self.in_frame.q.val();
+        self.flags_fragment.beats.beat_valid.next = self.beat_valid.q.val();
+        self.flags_fragment.beats.beat_data.next = self.beat_data.q.val();
+        self.ip_destination.clock.next = self.clock.val();
+        self.ip_destination.beats.next_valid.next = self.frame.valid.val();
+        self.ip_destination.beats.next_index.next = self.index_in.val();
+        self.ip_destination.beats.in_frame.next = self.in_frame.q.val();
+        self.ip_destination.beats.beat_valid.next = self.beat_valid.q.val();
+        self.ip_destination.beats.beat_data.next = self.beat_data.q.val();
         self.command.clock.next = self.clock.val();
         self.command.beats.next_valid.next = self.frame.valid.val();
         self.command.beats.next_index.next = self.index_in.val();
@@ -703,15 +656,9 @@ impl Logic for FrameParser {
         }
 
         if self.beat_valid.q.val() {
-            if (self.at_source.q.val())
-                | (self.ethernet.is_arp.val() & self.at_arp_sender_mac.q.val())
-            {
+            if self.at_source.q.val() {
                 self.source_mac.d.next =
                     (self.source_mac.q.val() << 8) | bit_cast::<48, 8>(self.beat_data.q.val());
-            }
-            if self.at_header_bytes.q.val() {
-                self.header.d.next =
-                    (self.header.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
             }
             if self.at_total.q.val() {
                 self.total_length.d.next =
@@ -721,17 +668,9 @@ impl Logic for FrameParser {
                 self.protocol.d.next = self.beat_data.q.val();
                 self.is_udp.d.next = self.beat_data.q.val() == self.protocol_udp.val();
             }
-            if (!self.ethernet.is_arp.val() & self.at_ip_source.q.val())
-                | (self.ethernet.is_arp.val() & self.at_arp_sender_ip.q.val())
-            {
+            if self.at_ip_source.q.val() {
                 self.source_ip.d.next =
                     (self.source_ip.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
-            }
-            if (!self.ethernet.is_arp.val() & self.at_ip_destination.q.val())
-                | (self.ethernet.is_arp.val() & self.at_arp_target_ip.q.val())
-            {
-                self.target_ip.d.next =
-                    (self.target_ip.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
             }
             if self.at_transport.q.val() {
                 self.transport.d.next =
@@ -771,45 +710,22 @@ impl Logic for FrameParser {
         self.p2.d.next = self.p1.q.val();
         self.s1_length_error.d.next = self.end_length_error.q.val();
         self.s1_error.d.next = self.end_error.q.val();
-        self.s1_arp_request.d.next = self.header.q.val() == self.arp_request_header.val();
-        self.s1_target_box.d.next = self.target_ip.q.val() == self.box_ip.val();
-        self.s1_version_4.d.next = self
-            .header
-            .q
-            .val()
-            .get_bits::<4>(self.version_bit.val().index())
-            == 4;
-        self.s1_ihl_below_5.d.next = self
-            .header
-            .q
-            .val()
-            .get_bits::<4>(self.ihl_bit.val().index())
-            < 5;
-        self.s1_ihl_above_5.d.next = self
-            .header
-            .q
-            .val()
-            .get_bits::<4>(self.ihl_bit.val().index())
-            > 5;
-        // a folded sum of 0xFFFF: sum + carry == 0xFFFF
+        self.s1_version_4.d.next = self.version_ihl.value.val().get_bits::<4>(4) == 4;
+        self.s1_ihl_below_5.d.next = self.version_ihl.value.val().get_bits::<4>(0) < 5;
+        self.s1_ihl_above_5.d.next = self.version_ihl.value.val().get_bits::<4>(0) > 5;
         self.s1_header_sum_ok.d.next = self.header_sum.verifies.val();
         self.s1_total_from_20.d.next = self.total_length.q.val() >= self.ip_header_len.val();
         self.s1_total_from_28.d.next =
             self.total_length.q.val() >= self.ip_and_transport_header_len.val();
         self.s1_total_from_52.d.next = self.total_length.q.val() >= self.ip_to_arguments_len.val();
         self.s1_fits.d.next = self.end_fits.q.val();
-        // flags and fragment offset: MF (bit 13) or an offset
+        // flags and fragment offset: MF or an offset
         self.s1_fragment.d.next = self
-            .header
-            .q
+            .flags_fragment
+            .value
             .val()
             .get_bit(self.more_fragments_bit.val().index())
-            | (self
-                .header
-                .q
-                .val()
-                .get_bits::<13>(self.fragment_offset_bit.val().index())
-                != 0);
+            | (self.flags_fragment.value.val().get_bits::<13>(0) != 0);
         self.s1_icmp.d.next = self.protocol.q.val() == self.protocol_icmp.val();
         self.s1_udp.d.next = self.is_udp.q.val();
         self.s1_echo_request.d.next = self
@@ -848,14 +764,14 @@ impl Logic for FrameParser {
         self.rules.bad_fcs.next = self.s1_error.q.val();
         self.rules.not_to_box.next = !(self.ethernet.to_box.val() | self.ethernet.broadcast.val());
         self.rules.arp.next = self.ethernet.is_arp.val();
-        self.rules.arp_for_box.next = self.s1_arp_request.q.val() & self.s1_target_box.q.val();
+        self.rules.arp_for_box.next = self.arp.request_for_box.val();
         self.rules.ipv4.next = self.ethernet.ipv4.val() & !self.ethernet.broadcast.val();
         self.rules.bad_version.next = !self.s1_version_4.q.val() | self.s1_ihl_below_5.q.val();
         self.rules.options.next = self.s1_ihl_above_5.q.val();
         self.rules.bad_header.next =
             !self.s1_header_sum_ok.q.val() | !self.s1_total_from_20.q.val() | !self.s1_fits.q.val();
         self.rules.fragment.next = self.s1_fragment.q.val();
-        self.rules.ip_not_to_box.next = !self.s1_target_box.q.val();
+        self.rules.ip_not_to_box.next = !self.ip_destination.equals.val();
         self.rules.icmp.next = self.s1_icmp.q.val();
         self.rules.icmp_bad.next =
             !self.s1_total_from_28.q.val() | !self.s1_transport_sum_ok.q.val();
@@ -1279,15 +1195,15 @@ mod tests {
         let expected: Vec<(usize, u8)> = frame.iter().copied().enumerate().collect();
         assert_eq!(seen.writes, expected, "{what}: buffer writes");
         assert_eq!(seen.receive_tick, seen.last_tick, "{what}: receive tick");
-        let arp = frame.len() > 14 && frame[12..14] == [8, 6];
         if frame.len() >= 64 {
-            let (mac, ip) = if arp {
-                (&frame[22..28], &frame[28..32])
-            } else {
-                (&frame[6..12], &frame[26..30])
-            };
-            assert_eq!(seen.peer_mac, be_u64(mac), "{what}: peer MAC");
-            assert_eq!(u64::from(seen.peer_ip), be_u64(ip), "{what}: peer IP");
+            // the sender as the command unit reads it (an ARP reply takes the sender's
+            // addresses from the request in the buffer)
+            assert_eq!(seen.peer_mac, be_u64(&frame[6..12]), "{what}: peer MAC");
+            assert_eq!(
+                u64::from(seen.peer_ip),
+                be_u64(&frame[26..30]),
+                "{what}: peer IP"
+            );
             assert_eq!(
                 u64::from(seen.total_length),
                 be_u64(&frame[16..18]),
@@ -1407,8 +1323,6 @@ mod tests {
         ] {
             let seen = run(&mut h, &frame, false, what);
             assert_eq!(seen.action, action, "{what}");
-            assert_eq!(seen.peer_mac, 0x0211_2233_4455, "{what}");
-            assert_eq!(seen.peer_ip, 0xC000_0263, "{what}");
         }
         // an ARP header with another hardware type is not for us
         let mut f = arp([0xFF; 6], 1, requester, LINK.box_ip);

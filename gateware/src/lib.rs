@@ -27,6 +27,7 @@
 //! The downlink to the cells: [`cell_downlink::CellDownlink`] queues cell command packets
 //! per port and sends them on every port's pin in one shared bit time and frame.
 
+pub mod arp_receiver;
 pub mod async_fifo;
 pub mod block_ram;
 pub mod board;
