@@ -305,46 +305,9 @@ impl Logic for CommandDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{Bench, TestRng};
+    use crate::testbench::{send_frame_beats, Bench, TestRng};
     use skinbox_protocol::command::{Command, CommandRepr, Request};
     use skinbox_protocol::link::IPV4_HEADER_LEN;
-
-    /// Drives one frame's beats (random idle clocks between them) as the parser does:
-    /// `beat_in_packet` from byte 34 up to the IPv4 packet's end.
-    fn send(bench: &mut Bench<CommandDecoder>, rng: &mut TestRng, frame: &[u8], packet_end: usize) {
-        let mut registered: Option<usize> = None;
-        let drive_registered = |u: &mut CommandDecoder, r: Option<usize>| {
-            u.beats.beat_valid.next = r.is_some();
-            let i = r.unwrap_or(0);
-            u.beats.beat_data.next = u64::from(frame[i]).into();
-            u.beat_first.next = r == Some(0);
-            u.beat_in_packet.next = r.is_some() && (34..packet_end).contains(&i);
-        };
-        for i in 0..frame.len() {
-            while rng.chance(0.2) {
-                let u = &mut bench.uut;
-                u.beats.next_valid.next = false;
-                drive_registered(u, registered);
-                bench.cycle();
-                registered = None;
-            }
-            let u = &mut bench.uut;
-            u.beats.next_valid.next = true;
-            u.beats.next_index.next = (i as u64).into();
-            u.beats.in_frame.next = i > 0;
-            drive_registered(u, registered);
-            bench.cycle();
-            registered = Some(i);
-        }
-        let u = &mut bench.uut;
-        u.beats.next_valid.next = false;
-        u.beats.next_index.next = 0.into();
-        u.beats.in_frame.next = false;
-        drive_registered(u, registered);
-        bench.cycle();
-        drive_registered(&mut bench.uut, None);
-        bench.cycles(3);
-    }
 
     /// Random command frames, good and with a header byte, the argument length or the IPv4
     /// length changed: `well_formed` is the protocol's `Command::new_checked` of the UDP
@@ -381,7 +344,17 @@ mod tests {
             frame.extend((0..4 + rng.next_u64() % 8).map(|_| rng.next_u64() as u8));
             let packet_end = IPV4_AT + total;
             bench.uut.payload_length.next = ((total - IPV4_HEADER_LEN) as u64).into();
-            send(&mut bench, &mut rng, &frame, packet_end);
+            send_frame_beats(
+                &mut bench,
+                &mut rng,
+                &frame,
+                0.2,
+                |u| &mut u.beats,
+                |u, r| {
+                    u.beat_first.next = r == Some(0);
+                    u.beat_in_packet.next = r.is_some_and(|i| (34..packet_end).contains(&i));
+                },
+            );
 
             let udp_payload = &frame[PAYLOAD_AT..packet_end.min(frame.len())];
             let expected = Command::new_checked(udp_payload).is_ok();

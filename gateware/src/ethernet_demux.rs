@@ -110,7 +110,7 @@ impl Logic for EthernetDemux {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{Bench, TestRng};
+    use crate::testbench::{send_frame_beats, Bench, TestRng};
     use skinbox_protocol::link::LinkConfig;
     use skinbox_protocol::wire::ethernet::EthernetRepr;
 
@@ -148,35 +148,16 @@ mod tests {
             for b in frame.iter_mut().skip(14) {
                 *b = rng.next_u64() as u8;
             }
-            let mut registered: Option<usize> = None;
-            let drive = |u: &mut EthernetDemux, r: Option<usize>| {
-                u.beats.beat_valid.next = r.is_some();
-                u.beats.beat_data.next = u64::from(frame[r.unwrap_or(0)]).into();
-                u.beat_first.next = r == Some(0);
-            };
-            for i in 0..frame.len() {
-                while rng.chance(0.2) {
-                    bench.uut.beats.next_valid.next = false;
-                    drive(&mut bench.uut, registered);
-                    bench.cycle();
-                    registered = None;
-                }
-                let u = &mut bench.uut;
-                u.beats.next_valid.next = true;
-                u.beats.next_index.next = (i as u64).into();
-                u.beats.in_frame.next = i > 0;
-                drive(u, registered);
-                bench.cycle();
-                registered = Some(i);
-            }
-            let u = &mut bench.uut;
-            u.beats.next_valid.next = false;
-            u.beats.next_index.next = 0.into();
-            u.beats.in_frame.next = false;
-            drive(u, registered);
-            bench.cycle();
-            drive(&mut bench.uut, None);
-            bench.cycles(2);
+            send_frame_beats(
+                &mut bench,
+                &mut rng,
+                &frame,
+                0.2,
+                |u| &mut u.beats,
+                |u, r| {
+                    u.beat_first.next = r == Some(0);
+                },
+            );
             let repr = EthernetRepr::parse(&frame).unwrap();
             let u = &bench.uut;
             assert_eq!(u.to_box.val(), repr.destination == box_mac, "case {case}");

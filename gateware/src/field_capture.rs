@@ -70,7 +70,7 @@ impl<const W: usize> Logic for FieldCapture<W> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{Bench, TestRng};
+    use crate::testbench::{send_frame_beats, Bench, TestRng};
 
     /// Random frames of random lengths (some ending inside the field), beats with random
     /// idle clocks between them: after each frame the capture holds the field's bytes as
@@ -84,34 +84,14 @@ mod tests {
         for case in 0..200 {
             let len = 1 + rng.next_u64() as usize % 14;
             let frame: Vec<u8> = (0..len).map(|_| rng.next_u64() as u8).collect();
-            let mut registered: Option<u8> = None;
-            for (i, &b) in frame.iter().enumerate() {
-                while rng.chance(0.3) {
-                    let u = &mut bench.uut;
-                    u.beats.next_valid.next = false;
-                    u.beats.beat_valid.next = registered.is_some();
-                    u.beats.beat_data.next = u64::from(registered.unwrap_or(0)).into();
-                    bench.cycle();
-                    registered = None;
-                }
-                let u = &mut bench.uut;
-                u.beats.next_valid.next = true;
-                u.beats.next_index.next = (i as u64).into();
-                u.beats.in_frame.next = i > 0;
-                u.beats.beat_valid.next = registered.is_some();
-                u.beats.beat_data.next = u64::from(registered.unwrap_or(0)).into();
-                bench.cycle();
-                registered = Some(b);
-            }
-            let u = &mut bench.uut;
-            u.beats.next_valid.next = false;
-            u.beats.next_index.next = 0.into();
-            u.beats.in_frame.next = false;
-            u.beats.beat_valid.next = true;
-            u.beats.beat_data.next = u64::from(registered.unwrap()).into();
-            bench.cycle();
-            bench.uut.beats.beat_valid.next = false;
-            bench.cycle();
+            send_frame_beats(
+                &mut bench,
+                &mut rng,
+                &frame,
+                0.3,
+                |u| &mut u.beats,
+                |_, _| {},
+            );
             for &b in frame.iter().take(FIELD.end).skip(FIELD.start) {
                 expected = expected << 8 | u32::from(b);
             }

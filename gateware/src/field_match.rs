@@ -96,7 +96,7 @@ impl Logic for FieldMatch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{Bench, TestRng};
+    use crate::testbench::{send_frame_beats, Bench, TestRng};
 
     /// Random frames whose field is the constant, or differs in one byte, or is cut short,
     /// with idle clocks between beats: `equals` is the comparison of the bytes the frame
@@ -121,34 +121,14 @@ mod tests {
                     1 => frame.truncate(field.start + rng.next_u64() as usize % (bytes.len() + 1)),
                     _ => {}
                 }
-                let mut registered: Option<usize> = None;
-                let drive = |u: &mut FieldMatch, r: Option<usize>| {
-                    u.beats.beat_valid.next = r.is_some();
-                    u.beats.beat_data.next = u64::from(frame[r.unwrap_or(0)]).into();
-                };
-                for i in 0..frame.len() {
-                    while rng.chance(0.2) {
-                        bench.uut.beats.next_valid.next = false;
-                        drive(&mut bench.uut, registered);
-                        bench.cycle();
-                        registered = None;
-                    }
-                    let u = &mut bench.uut;
-                    u.beats.next_valid.next = true;
-                    u.beats.next_index.next = (i as u64).into();
-                    u.beats.in_frame.next = i > 0;
-                    drive(u, registered);
-                    bench.cycle();
-                    registered = Some(i);
-                }
-                let u = &mut bench.uut;
-                u.beats.next_valid.next = false;
-                u.beats.next_index.next = 0.into();
-                u.beats.in_frame.next = false;
-                drive(u, registered);
-                bench.cycle();
-                drive(&mut bench.uut, None);
-                bench.cycle();
+                send_frame_beats(
+                    &mut bench,
+                    &mut rng,
+                    &frame,
+                    0.2,
+                    |u| &mut u.beats,
+                    |_, _| {},
+                );
                 let held = &frame[field.start.min(frame.len())..field.end.min(frame.len())];
                 let expected = held == &bytes[..held.len()];
                 assert_eq!(bench.uut.equals.val(), expected, "case {case}: {frame:?}");

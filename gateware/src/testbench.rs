@@ -205,3 +205,48 @@ impl TestRng {
         (self.next_u64() >> 56) as u8
     }
 }
+
+/// Sends one frame to a block listening on [`crate::stream::FrameBeats`], as the frame
+/// parser does: each byte arrives with its frame position (with a random idle clock before
+/// it at chance `idle`) and is the registered beat a clock later, when `registered` sets
+/// the block's other inputs for it (its position, or `None` for no registered beat). Ends
+/// three clocks after the last byte was registered.
+pub fn send_frame_beats<B: Block>(
+    bench: &mut Bench<B>,
+    rng: &mut TestRng,
+    frame: &[u8],
+    idle: f64,
+    beats: fn(&mut B) -> &mut crate::stream::FrameBeats,
+    registered: impl Fn(&mut B, Option<usize>),
+) {
+    let drive = |u: &mut B, r: Option<usize>| {
+        let b = beats(u);
+        b.beat_valid.next = r.is_some();
+        b.beat_data.next = u64::from(r.map_or(0, |i| frame[i])).into();
+        registered(u, r);
+    };
+    let mut last: Option<usize> = None;
+    for i in 0..frame.len() {
+        while rng.chance(idle) {
+            beats(&mut bench.uut).next_valid.next = false;
+            drive(&mut bench.uut, last);
+            bench.cycle();
+            last = None;
+        }
+        let b = beats(&mut bench.uut);
+        b.next_valid.next = true;
+        b.next_index.next = (i as u64).into();
+        b.in_frame.next = i > 0;
+        drive(&mut bench.uut, last);
+        bench.cycle();
+        last = Some(i);
+    }
+    let b = beats(&mut bench.uut);
+    b.next_valid.next = false;
+    b.next_index.next = 0.into();
+    b.in_frame.next = false;
+    drive(&mut bench.uut, last);
+    bench.cycle();
+    drive(&mut bench.uut, None);
+    bench.cycles(3);
+}
