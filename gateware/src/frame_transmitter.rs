@@ -354,6 +354,12 @@ pub struct FrameTransmitter {
     frame_goes_on: Signal<Local, Bit>,
     udp_checksum_held: DFF<Bits<16>>,
     header_byte: Signal<Local, Bits<8>>,
+    // the steady sources and the destination of the next clock's byte, ORed a clock ahead
+    // (see the kernel), the sources they are chosen by, and the destination's next byte
+    header_early: DFF<Bits<8>>,
+    early_sources: Signal<Local, Bits<SOURCE_BITS>>,
+    early_byte: Signal<Local, Bits<8>>,
+    destination_next_byte: Signal<Local, Bits<8>>,
     tx_byte: Signal<Local, Bits<8>>,
     ip_sum: Signal<Local, Bits<32>>,
     // the IPv4 header sum folded once, a register (the checksum's second fold a clock later)
@@ -468,6 +474,10 @@ impl FrameTransmitter {
             frame_goes_on: Default::default(),
             udp_checksum_held: Default::default(),
             header_byte: Default::default(),
+            header_early: Default::default(),
+            early_sources: Default::default(),
+            early_byte: Default::default(),
+            destination_next_byte: Default::default(),
             tx_byte: Default::default(),
             ip_sum: Default::default(),
             ip_fold: Default::default(),
@@ -542,7 +552,8 @@ impl Logic for FrameTransmitter {
             destination_ip_sum,
             destination_sum,
             ip_variable,
-            term_is_destination
+            term_is_destination,
+            header_early
         );
         // Frame geometry: registered at the start from the body length (lengths), two clocks
         // later the IPv4 checksum (needed from byte 32 on), through its first fold.
@@ -647,51 +658,64 @@ impl Logic for FrameTransmitter {
         }
         // (final long before byte 48: the sum is done by byte 21)
         self.udp_checksum_held.d.next = self.udp_checksum.val();
-        // the header's sources ORed (each is 0 unless chosen), the body beside them (it is
-        // alone: its data passes one multiplexer, not the header's OR)
-        self.header_byte.next = 0.into();
+        // The header's sources are ORed (each is 0 unless chosen), the body beside them (it
+        // is alone: its data passes one multiplexer, not the header's OR). The sources
+        // that are steady through the header (lengths, checksums, kind) and the destination
+        // are ORed a clock ahead into `header_early`, from the table's sources of the next
+        // byte (those `byte_source` takes) and the destination byte that is on top after
+        // this clock's shift: only the template byte (a block RAM output) and the field
+        // byte (stepped each clock) pass the OR in the byte's own clock.
+        self.destination_next_byte.next = self.destination_high.q.val().get_bits::<8>(56);
+        if self.sending.q.val() & self.byte_source.q.val().get_bit(12) {
+            self.destination_next_byte.next = self.destination_high.q.val().get_bits::<8>(48);
+        }
+        self.early_sources.next = 0.into();
+        if self.header_ahead.q.val() {
+            self.early_sources.next = self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
+        }
+        self.early_byte.next = 0.into();
+        if self.early_sources.val().get_bit(1) {
+            self.early_byte.next = self.total_len.q.val().get_bits::<8>(8);
+        }
+        if self.early_sources.val().get_bit(2) {
+            self.early_byte.next = self.early_byte.val() | self.total_len.q.val().get_bits::<8>(0);
+        }
+        if self.early_sources.val().get_bit(3) {
+            self.early_byte.next =
+                self.early_byte.val() | self.ip_checksum.q.val().get_bits::<8>(8);
+        }
+        if self.early_sources.val().get_bit(4) {
+            self.early_byte.next =
+                self.early_byte.val() | self.ip_checksum.q.val().get_bits::<8>(0);
+        }
+        if self.early_sources.val().get_bit(5) {
+            self.early_byte.next = self.early_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
+        }
+        if self.early_sources.val().get_bit(6) {
+            self.early_byte.next = self.early_byte.val() | self.udp_len.q.val().get_bits::<8>(0);
+        }
+        if self.early_sources.val().get_bit(7) {
+            self.early_byte.next =
+                self.early_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(8);
+        }
+        if self.early_sources.val().get_bit(8) {
+            self.early_byte.next =
+                self.early_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(0);
+        }
+        if self.early_sources.val().get_bit(9) {
+            self.early_byte.next = self.early_byte.val() | self.kind_held.q.val();
+        }
+        if self.early_sources.val().get_bit(12) {
+            self.early_byte.next = self.early_byte.val() | self.destination_next_byte.val();
+        }
+        self.header_early.d.next = self.early_byte.val();
+        self.header_byte.next = self.header_early.q.val();
         if self.byte_source.q.val().get_bit(0) {
-            self.header_byte.next = self.template.read_data.val().get_bits::<8>(0);
-        }
-        if self.byte_source.q.val().get_bit(1) {
             self.header_byte.next =
-                self.header_byte.val() | self.total_len.q.val().get_bits::<8>(8);
-        }
-        if self.byte_source.q.val().get_bit(2) {
-            self.header_byte.next =
-                self.header_byte.val() | self.total_len.q.val().get_bits::<8>(0);
-        }
-        if self.byte_source.q.val().get_bit(3) {
-            self.header_byte.next =
-                self.header_byte.val() | self.ip_checksum.q.val().get_bits::<8>(8);
-        }
-        if self.byte_source.q.val().get_bit(4) {
-            self.header_byte.next =
-                self.header_byte.val() | self.ip_checksum.q.val().get_bits::<8>(0);
-        }
-        if self.byte_source.q.val().get_bit(5) {
-            self.header_byte.next = self.header_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
-        }
-        if self.byte_source.q.val().get_bit(6) {
-            self.header_byte.next = self.header_byte.val() | self.udp_len.q.val().get_bits::<8>(0);
-        }
-        if self.byte_source.q.val().get_bit(7) {
-            self.header_byte.next =
-                self.header_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(8);
-        }
-        if self.byte_source.q.val().get_bit(8) {
-            self.header_byte.next =
-                self.header_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(0);
-        }
-        if self.byte_source.q.val().get_bit(9) {
-            self.header_byte.next = self.header_byte.val() | self.kind_held.q.val();
+                self.header_byte.val() | self.template.read_data.val().get_bits::<8>(0);
         }
         if self.byte_source.q.val().get_bit(10) {
             self.header_byte.next = self.header_byte.val() | self.field_byte.q.val();
-        }
-        if self.byte_source.q.val().get_bit(12) {
-            self.header_byte.next =
-                self.header_byte.val() | self.destination_high.q.val().get_bits::<8>(56);
         }
         self.tx_byte.next = self.header_byte.val();
         if self.byte_source.q.val().get_bit(11) {

@@ -716,7 +716,12 @@ pub struct ReplyBuilder {
     body_len: DFF<Bits<BODY_ADDRESS_BITS>>,
     // echo: the request's end (padding from there), the body length a clock later
     frame_end: DFF<Bits<BODY_ADDRESS_BITS>>,
+    // the clock after a start, and the reply it started (the body length is set then)
+    sizing: DFF<Bit>,
     sizing_echo: DFF<Bit>,
+    start_was_arp: DFF<Bit>,
+    start_was_stream_to: DFF<Bit>,
+    start_was_status_now: DFF<Bit>,
     // the echo request's frame is below the minimum (tested at the start, from the total
     // length, so no compare sits between `frame_end` and `body_len`)
     echo_short: DFF<Bit>,
@@ -836,7 +841,11 @@ impl ReplyBuilder {
             locked_now: Default::default(),
             body_len: Default::default(),
             frame_end: Default::default(),
+            sizing: Default::default(),
             sizing_echo: Default::default(),
+            start_was_arp: Default::default(),
+            start_was_stream_to: Default::default(),
+            start_was_status_now: Default::default(),
             echo_short: Default::default(),
             took: Default::default(),
             send_tick: Default::default(),
@@ -907,7 +916,11 @@ impl Logic for ReplyBuilder {
             locked_now,
             body_len,
             frame_end,
+            sizing,
             sizing_echo,
+            start_was_arp,
+            start_was_stream_to,
+            start_was_status_now,
             echo_short,
             took,
             send_tick,
@@ -1165,6 +1178,7 @@ impl Logic for ReplyBuilder {
 
         // Starts: only when no reply is under way.
         self.sizing_echo.d.next = false;
+        self.sizing.d.next = false;
         self.idle.next = !self.running.q.val()
             & !self.read_2.q.val()
             & !self.offering.q.val()
@@ -1175,33 +1189,45 @@ impl Logic for ReplyBuilder {
             self.udp_sum.d.next = 0.into();
             self.counter_address.d.next = 0.into();
             self.is_ack.d.next = self.start_ack.val();
+            self.sizing.d.next = true;
             self.sizing_echo.d.next = self.start_echo.val();
             self.frame_end.d.next = self.ip_total_length.val().get_bits::<BODY_ADDRESS_BITS>(0)
                 + self.ethernet_header_len.val();
             // (the parser's total length is within its frame, at most 1,504: the sum above
             // does not wrap)
             self.echo_short.d.next = self.ip_total_length.val() < self.min_ip_total_len.val();
+            self.start_was_arp.d.next = self.start_arp.val();
+            self.start_was_stream_to.d.next = self.accepted_stream_to.val();
+            self.start_was_status_now.d.next = self.accepted_status_now.val();
             if self.start_arp.val() {
                 self.step.d.next = self.arp_start.val();
-                self.body_len.d.next = self.arp_len.val();
             } else if self.start_echo.val() {
                 self.step.d.next = self.echo_start.val();
             } else if self.accepted_stream_to.val() {
                 self.step.d.next = self.ack_destination_start.val();
-                self.body_len.d.next = self.ack_destination_len.val();
             } else if self.accepted_status_now.val() {
                 self.step.d.next = self.ack_counters_start.val();
-                self.body_len.d.next = self.ack_counters_len.val();
             } else {
                 self.step.d.next = self.ack_none_start.val();
-                self.body_len.d.next = self.ack_none_len.val();
             }
         }
-        // an echo reply is the request's length, at least the minimum frame
-        if self.sizing_echo.q.val() {
-            self.body_len.d.next = self.frame_end.q.val();
-            if self.echo_short.q.val() {
-                self.body_len.d.next = self.min_frame_len.val();
+        // The body length a clock after the start, from the registered kind (no path from
+        // the start's decision into the length register): an echo reply is the request's
+        // length, at least the minimum frame.
+        if self.sizing.q.val() {
+            if self.start_was_arp.q.val() {
+                self.body_len.d.next = self.arp_len.val();
+            } else if self.sizing_echo.q.val() {
+                self.body_len.d.next = self.frame_end.q.val();
+                if self.echo_short.q.val() {
+                    self.body_len.d.next = self.min_frame_len.val();
+                }
+            } else if self.start_was_stream_to.q.val() {
+                self.body_len.d.next = self.ack_destination_len.val();
+            } else if self.start_was_status_now.q.val() {
+                self.body_len.d.next = self.ack_counters_len.val();
+            } else {
+                self.body_len.d.next = self.ack_none_len.val();
             }
         }
 
@@ -1265,6 +1291,7 @@ impl Logic for ReplyBuilder {
             self.locked_now.d.next = false;
             self.took.d.next = false;
             self.sizing_echo.d.next = false;
+            self.sizing.d.next = false;
             self.s3_write.d.next = false;
             self.s4_write.d.next = false;
             self.s4_sum_ip.d.next = false;
