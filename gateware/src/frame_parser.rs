@@ -11,19 +11,18 @@
 //!
 //! - the layers that listen to the same beats ([`crate::stream::FrameBeats`]): the
 //!   Ethernet layer ([`EthernetDemux`]: destination MAC and EtherType, steps 3-5), the ARP
-//!   layer ([`ArpReceiver`]: a request for the box's address, step 4) and the command
-//!   layer ([`CommandDecoder`]: the command header's fields, the first argument bytes and
-//!   the header's form for step 16);
-//! - the IPv4 header's fields: version and IHL, flags and fragment offset, total length
-//!   and protocol captured, the destination compared with the box's address as it passes
-//!   ([`FieldMatch`]); the sender's MAC and IPv4 address (Ethernet and IPv4 source, for
-//!   the command unit) and the transport header (bytes 34..42) captured;
-//! - three ones'-complement sums, one byte per clock with an end-around carry: the IPv4
-//!   header (bytes 14..34), the transport message (ICMP, or UDP with its pseudo header) and
-//!   the ICMP message from its byte 4 (the echo reply's checksum is its complement). The
-//!   transport sums stop at the IPv4 total length (a down-counter): later bytes are
-//!   Ethernet padding or the FCS, and a packet longer than the frame is found by whether
-//!   the first FCS byte was still inside it.
+//!   layer ([`ArpReceiver`]: a request for the box's address, step 4), the IPv4 layer
+//!   ([`Ipv4Receiver`]: version, header checksum, total length, fragments, destination,
+//!   protocol and the sender's subnet, steps 6-10 and 15, and the payload's extent) and
+//!   the command layer ([`CommandDecoder`]: the command header's fields, the first
+//!   argument bytes and the header's form for step 16);
+//! - the sender's MAC (Ethernet source, for the command unit) and the transport header
+//!   (bytes 34..42) captured;
+//! - two ones'-complement sums, one byte per clock with an end-around carry: the transport
+//!   message (ICMP, or UDP with its pseudo header) and the ICMP message from its byte 4
+//!   (the echo reply's checksum is its complement). They stop at the IPv4 payload's end
+//!   (the IPv4 layer's `in_payload`): later bytes are Ethernet padding or the FCS, and a
+//!   packet longer than the frame is found by whether the first FCS byte was still inside.
 //!
 //! After the last beat the captured fields are compared with the build-time constants (one
 //! clock), and the rule table ([`ReceiveRules`]) applies the checks in the model's order
@@ -46,15 +45,14 @@
 use crate::arp_receiver::ArpReceiver;
 use crate::command_decoder::CommandDecoder;
 use crate::ethernet_demux::EthernetDemux;
-use crate::field_capture::FieldCapture;
-use crate::field_match::FieldMatch;
 use crate::hdl::*;
+use crate::ipv4_receiver::Ipv4Receiver;
 use crate::ones_complement_sum::OnesComplementSum;
 use crate::receive_rules::{ReceiveRules, RULES_LATENCY};
 use crate::stream::ByteStreamSink;
 use skinbox_protocol::link::{
-    LinkConfig, ARGUMENTS_AT, ARP_AT, ICMP_AT, ICMP_ECHO_REQUEST, IPV4_AT, IPV4_HEADER_LEN,
-    IP_PROTOCOL_ICMP, IP_PROTOCOL_UDP, MIN_FRAME_LEN, PAYLOAD_AT, UDP_AT,
+    LinkConfig, ARGUMENTS_AT, ARP_AT, ICMP_AT, ICMP_ECHO_REQUEST, IPV4_AT, IP_PROTOCOL_UDP,
+    MIN_FRAME_LEN, PAYLOAD_AT, UDP_AT,
 };
 use skinbox_protocol::wire::{arp, ethernet, icmp, ipv4, udp};
 use skinbox_protocol::Field;
@@ -68,10 +66,8 @@ pub const DECISION_LATENCY: u64 = 3 + RULES_LATENCY;
 const fn shifted(field: Field, by: usize) -> Field {
     field.start + by..field.end + by
 }
-const IP_TOTAL_LEN: Field = shifted(ipv4::field::TOTAL_LEN, IPV4_AT);
 const IP_PROTOCOL: usize = IPV4_AT + ipv4::field::PROTOCOL;
 const IP_CHECKSUM: Field = shifted(ipv4::field::CHECKSUM, IPV4_AT);
-const IP_SOURCE: Field = shifted(ipv4::field::SOURCE, IPV4_AT);
 const IP_DESTINATION: Field = shifted(ipv4::field::DESTINATION, IPV4_AT);
 /// Captured in `transport`: the ICMP or UDP header.
 const TRANSPORT: Field = UDP_AT..PAYLOAD_AT;
@@ -80,7 +76,7 @@ const ICMP_REST_AT: usize = ICMP_AT + icmp::field::IDENTIFIER.start;
 // one decode ends a capture and starts the next where the fields are adjacent
 const _: () = assert!(ethernet::field::ETHERTYPE.end == IPV4_AT && IPV4_AT == ARP_AT);
 const _: () = assert!(ICMP_AT == UDP_AT && TRANSPORT.end == ICMP_AT + icmp::HEADER_LEN);
-const _: () = assert!(IP_SOURCE.end == IP_DESTINATION.start && IP_DESTINATION.end == UDP_AT);
+const _: () = assert!(IP_DESTINATION.end == UDP_AT);
 // the beat tests that skip the index's choice need positions above 0
 const _: () = assert!(IP_CHECKSUM.start > 0);
 // the ARP body ends inside the 60 bytes every frame has
@@ -157,23 +153,14 @@ pub struct FrameParser {
 
     // build-time constants
     box_port: Constant<Bits<16>>,
-    host_subnet: Constant<Bits<32>>,
-    host_mask: Constant<Bits<32>>,
-    protocol_icmp: Constant<Bits<8>>,
     protocol_udp: Constant<Bits<8>>,
     icmp_echo_request: Constant<Bits<16>>,
     // frame positions
     source_mac_at: Constant<Bits<11>>,
     ethertype_at: Constant<Bits<11>>,
-    ipv4_at: Constant<Bits<11>>,
-    ip_total_len_at: Constant<Bits<11>>,
-    ip_total_len_end: Constant<Bits<11>>,
     ip_protocol_at: Constant<Bits<11>>,
     ip_checksum_at: Constant<Bits<11>>,
     ip_checksum_low_at: Constant<Bits<11>>,
-    ip_source_at: Constant<Bits<11>>,
-    ip_source_end: Constant<Bits<11>>,
-    ip_header_last: Constant<Bits<11>>,
     transport_at: Constant<Bits<11>>,
     transport_end: Constant<Bits<11>>,
     icmp_rest_at: Constant<Bits<11>>,
@@ -184,7 +171,6 @@ pub struct FrameParser {
     udp_length_bit: Constant<Bits<6>>,
     udp_checksum_bit: Constant<Bits<6>>,
     // lengths
-    ip_header_len: Constant<Bits<16>>,
     ip_and_transport_header_len: Constant<Bits<16>>,
     ip_to_arguments_len: Constant<Bits<16>>,
 
@@ -202,13 +188,8 @@ pub struct FrameParser {
     // where the registered beat is in the frame
     at_first: DFF<Bit>,
     at_source: DFF<Bit>,
-    at_total: DFF<Bit>,
-    at_total_length_end: DFF<Bit>,
-    at_ip_header_last: DFF<Bit>,
     at_ip_protocol: DFF<Bit>,
-    at_ip_source: DFF<Bit>,
     at_transport: DFF<Bit>,
-    at_ip_header: DFF<Bit>,
     at_pseudo_header: DFF<Bit>,
     at_from_transport: DFF<Bit>,
     at_from_icmp_rest: DFF<Bit>,
@@ -217,30 +198,18 @@ pub struct FrameParser {
     index_in: Signal<Local, Bits<11>>,
     word_in: Signal<Local, Bits<16>>,
     // captures
-    total_length: DFF<Bits<16>>,
-    protocol: DFF<Bits<8>>,
-    is_udp: DFF<Bit>,
     source_mac: DFF<Bits<48>>,
-    source_ip: DFF<Bits<32>>,
     transport: DFF<Bits<64>>,
     // the IPv4 payload's bytes after the current one, and whether the current one (from
     // byte 34) is in it
-    ip_left: DFF<Bits<16>>,
-    in_ip: DFF<Bit>,
-    in_ip_history: DFF<Bits<3>>,
-    payload_length: DFF<Bits<16>>,
     // the sums: the IPv4 header, the transport message (with the UDP pseudo header), and
     // the ICMP message from its identifier
-    header_sum: OnesComplementSum,
     transport_sum: OnesComplementSum,
     rest_sum: OnesComplementSum,
     // the layers, and the IPv4 header's fields
     ethernet: EthernetDemux,
     arp: ArpReceiver,
-    version_ihl: FieldCapture<8>,
-    flags_fragment: FieldCapture<16>,
-    ip_destination: FieldMatch,
-    more_fragments_bit: Constant<Bits<4>>,
+    ipv4: Ipv4Receiver,
     command: CommandDecoder,
     // the rule table
     rules: ReceiveRules,
@@ -254,23 +223,14 @@ pub struct FrameParser {
     p2: DFF<Bit>,
     s1_length_error: DFF<Bit>,
     s1_error: DFF<Bit>,
-    s1_version_4: DFF<Bit>,
-    s1_ihl_below_5: DFF<Bit>,
-    s1_ihl_above_5: DFF<Bit>,
-    s1_header_sum_ok: DFF<Bit>,
-    s1_total_from_20: DFF<Bit>,
     s1_total_from_28: DFF<Bit>,
     s1_total_from_52: DFF<Bit>,
     s1_fits: DFF<Bit>,
-    s1_fragment: DFF<Bit>,
-    s1_icmp: DFF<Bit>,
-    s1_udp: DFF<Bit>,
     s1_echo_request: DFF<Bit>,
     s1_transport_sum_ok: DFF<Bit>,
     s1_udp_length_ok: DFF<Bit>,
     s1_udp_no_checksum: DFF<Bit>,
     s1_port_box: DFF<Bit>,
-    s1_in_subnet: DFF<Bit>,
     // stage 2: the checks
     // stage 3: the Ethernet level and the IPv4 level resolved
     // outputs
@@ -283,9 +243,6 @@ impl FrameParser {
     /// A parser for the box at `link`'s MAC, IP and port, taking commands from its host
     /// subnet.
     pub fn new(link: &LinkConfig) -> Self {
-        let prefix = u32::from(link.host_subnet_prefix_len.min(32));
-        let mask = u32::MAX.checked_shl(32 - prefix).unwrap_or(0);
-        let subnet = u32::from_be_bytes(link.host_subnet) & mask;
         let udp_field = |f: Field| shifted(f, UDP_AT);
         Self {
             clock: Default::default(),
@@ -312,22 +269,13 @@ impl FrameParser {
             command_argument_length: Default::default(),
             command_arguments: Default::default(),
             box_port: Constant::new(u64::from(link.box_port).into()),
-            host_subnet: Constant::new(u64::from(subnet).into()),
-            host_mask: Constant::new(u64::from(mask).into()),
-            protocol_icmp: Constant::new(u64::from(IP_PROTOCOL_ICMP).into()),
             protocol_udp: Constant::new(u64::from(IP_PROTOCOL_UDP).into()),
             icmp_echo_request: Constant::new(big_endian(&[ICMP_ECHO_REQUEST, 0]).into()),
             source_mac_at: position(ethernet::field::SOURCE.start),
             ethertype_at: position(ethernet::field::ETHERTYPE.start),
-            ipv4_at: position(IPV4_AT),
-            ip_total_len_at: position(IP_TOTAL_LEN.start),
-            ip_total_len_end: position(IP_TOTAL_LEN.end),
             ip_protocol_at: position(IP_PROTOCOL),
             ip_checksum_at: position(IP_CHECKSUM.start),
             ip_checksum_low_at: position(IP_CHECKSUM.start + 1),
-            ip_source_at: position(IP_SOURCE.start),
-            ip_source_end: position(IP_SOURCE.end),
-            ip_header_last: position(UDP_AT - 1),
             transport_at: position(TRANSPORT.start),
             transport_end: position(TRANSPORT.end),
             icmp_rest_at: position(ICMP_REST_AT),
@@ -339,7 +287,6 @@ impl FrameParser {
             ),
             udp_length_bit: capture_bit(TRANSPORT, udp_field(udp::field::LENGTH)),
             udp_checksum_bit: capture_bit(TRANSPORT, udp_field(udp::field::CHECKSUM)),
-            ip_header_len: length(IPV4_HEADER_LEN),
             ip_and_transport_header_len: length(PAYLOAD_AT - IPV4_AT),
             ip_to_arguments_len: length(ARGUMENTS_AT - IPV4_AT),
             in_frame: Default::default(),
@@ -353,13 +300,8 @@ impl FrameParser {
             beat_index: Default::default(),
             at_first: Default::default(),
             at_source: Default::default(),
-            at_total: Default::default(),
-            at_total_length_end: Default::default(),
-            at_ip_header_last: Default::default(),
             at_ip_protocol: Default::default(),
-            at_ip_source: Default::default(),
             at_transport: Default::default(),
-            at_ip_header: Default::default(),
             at_pseudo_header: Default::default(),
             at_from_transport: Default::default(),
             at_from_icmp_rest: Default::default(),
@@ -367,26 +309,11 @@ impl FrameParser {
             transport_word: Default::default(),
             index_in: Default::default(),
             word_in: Default::default(),
-            total_length: Default::default(),
-            protocol: Default::default(),
-            is_udp: Default::default(),
             source_mac: Default::default(),
-            source_ip: Default::default(),
             transport: Default::default(),
-            ip_left: Default::default(),
-            in_ip: Default::default(),
-            in_ip_history: Default::default(),
-            payload_length: Default::default(),
-            header_sum: Default::default(),
             ethernet: EthernetDemux::new(link.box_mac),
             arp: ArpReceiver::new(link.box_ip),
-            version_ihl: FieldCapture::of(shifted(
-                ipv4::field::VERSION_IHL..ipv4::field::VERSION_IHL + 1,
-                IPV4_AT,
-            )),
-            flags_fragment: FieldCapture::of(shifted(ipv4::field::FLAGS_FRAGMENT_OFFSET, IPV4_AT)),
-            ip_destination: FieldMatch::of(IP_DESTINATION, &link.box_ip),
-            more_fragments_bit: constant(u64::from(ipv4::FLAG_MORE_FRAGMENTS.trailing_zeros())),
+            ipv4: Ipv4Receiver::new(link.box_ip, link.host_subnet, link.host_subnet_prefix_len),
             command: Default::default(),
             rules: Default::default(),
             transport_sum: Default::default(),
@@ -399,23 +326,14 @@ impl FrameParser {
             p2: Default::default(),
             s1_length_error: Default::default(),
             s1_error: Default::default(),
-            s1_version_4: Default::default(),
-            s1_ihl_below_5: Default::default(),
-            s1_ihl_above_5: Default::default(),
-            s1_header_sum_ok: Default::default(),
-            s1_total_from_20: Default::default(),
             s1_total_from_28: Default::default(),
             s1_total_from_52: Default::default(),
             s1_fits: Default::default(),
-            s1_fragment: Default::default(),
-            s1_icmp: Default::default(),
-            s1_udp: Default::default(),
             s1_echo_request: Default::default(),
             s1_transport_sum_ok: Default::default(),
             s1_udp_length_ok: Default::default(),
             s1_udp_no_checksum: Default::default(),
             s1_port_box: Default::default(),
-            s1_in_subnet: Default::default(),
             held_receive_tick: Default::default(),
             held_total_length: Default::default(),
             held_rest_sum: Default::default(),
@@ -446,28 +364,15 @@ impl Logic for FrameParser {
             beat_index,
             at_first,
             at_source,
-            at_total,
-            at_total_length_end,
-            at_ip_header_last,
             at_ip_protocol,
-            at_ip_source,
             at_transport,
-            at_ip_header,
             at_pseudo_header,
             at_from_transport,
             at_from_icmp_rest,
             beat_word,
             transport_word,
-            total_length,
-            protocol,
-            is_udp,
             source_mac,
-            source_ip,
             transport,
-            ip_left,
-            in_ip,
-            in_ip_history,
-            payload_length,
             end_length_error,
             end_error,
             end_stored,
@@ -476,23 +381,14 @@ impl Logic for FrameParser {
             p2,
             s1_length_error,
             s1_error,
-            s1_version_4,
-            s1_ihl_below_5,
-            s1_ihl_above_5,
-            s1_header_sum_ok,
-            s1_total_from_20,
             s1_total_from_28,
             s1_total_from_52,
             s1_fits,
-            s1_fragment,
-            s1_icmp,
-            s1_udp,
             s1_echo_request,
             s1_transport_sum_ok,
             s1_udp_length_ok,
             s1_udp_no_checksum,
             s1_port_box,
-            s1_in_subnet,
             held_receive_tick,
             held_total_length,
             held_rest_sum
@@ -517,24 +413,10 @@ impl Logic for FrameParser {
                 | (self.at_source.q.val()
                     & (self.index_in.val() != self.ethertype_at.val())
                     & self.in_frame.q.val());
-            self.at_total.d.next = (self.index_in.val() == self.ip_total_len_at.val())
-                | (self.at_total.q.val()
-                    & (self.index_in.val() != self.ip_total_len_end.val())
-                    & self.in_frame.q.val());
-            self.at_total_length_end.d.next = self.index_in.val() == self.ip_total_len_end.val();
-            self.at_ip_header_last.d.next = self.index_in.val() == self.ip_header_last.val();
             self.at_ip_protocol.d.next = self.index_in.val() == self.ip_protocol_at.val();
-            self.at_ip_source.d.next = (self.index_in.val() == self.ip_source_at.val())
-                | (self.at_ip_source.q.val()
-                    & (self.index_in.val() != self.ip_source_end.val())
-                    & self.in_frame.q.val());
             self.at_transport.d.next = (self.index_in.val() == self.transport_at.val())
                 | (self.at_transport.q.val()
                     & (self.index_in.val() != self.transport_end.val())
-                    & self.in_frame.q.val());
-            self.at_ip_header.d.next = (self.index_in.val() == self.ipv4_at.val())
-                | (self.at_ip_header.q.val()
-                    & (self.index_in.val() != self.transport_at.val())
                     & self.in_frame.q.val());
             self.at_pseudo_header.d.next = (self.index_in.val() == self.ip_checksum_at.val())
                 | (self.at_pseudo_header.q.val()
@@ -557,7 +439,7 @@ impl Logic for FrameParser {
         // 24, nothing in that of byte 25 (the IPv4 checksum), then the addresses
         self.transport_word.d.next = self.word_in.val();
         if self.in_frame.q.val() & (self.next_index.q.val() == self.ip_checksum_at.val()) {
-            self.transport_word.d.next = self.payload_length.q.val();
+            self.transport_word.d.next = self.ipv4.payload_length.val();
         }
         if self.in_frame.q.val() & (self.next_index.q.val() == self.ip_checksum_low_at.val()) {
             self.transport_word.d.next = 0.into();
@@ -603,24 +485,14 @@ impl Logic for FrameParser {
         self.arp.beats.in_frame.next = self.in_frame.q.val();
         self.arp.beats.beat_valid.next = self.beat_valid.q.val();
         self.arp.beats.beat_data.next = self.beat_data.q.val();
-        self.version_ihl.clock.next = self.clock.val();
-        self.version_ihl.beats.next_valid.next = self.frame.valid.val();
-        self.version_ihl.beats.next_index.next = self.index_in.val();
-        self.version_ihl.beats.in_frame.next = self.in_frame.q.val();
-        self.version_ihl.beats.beat_valid.next = self.beat_valid.q.val();
-        self.version_ihl.beats.beat_data.next = self.beat_data.q.val();
-        self.flags_fragment.clock.next = self.clock.val();
-        self.flags_fragment.beats.next_valid.next = self.frame.valid.val();
-        self.flags_fragment.beats.next_index.next = self.index_in.val();
-        self.flags_fragment.beats.in_frame.next = self.in_frame.q.val();
-        self.flags_fragment.beats.beat_valid.next = self.beat_valid.q.val();
-        self.flags_fragment.beats.beat_data.next = self.beat_data.q.val();
-        self.ip_destination.clock.next = self.clock.val();
-        self.ip_destination.beats.next_valid.next = self.frame.valid.val();
-        self.ip_destination.beats.next_index.next = self.index_in.val();
-        self.ip_destination.beats.in_frame.next = self.in_frame.q.val();
-        self.ip_destination.beats.beat_valid.next = self.beat_valid.q.val();
-        self.ip_destination.beats.beat_data.next = self.beat_data.q.val();
+        self.ipv4.clock.next = self.clock.val();
+        self.ipv4.beats.next_valid.next = self.frame.valid.val();
+        self.ipv4.beats.next_index.next = self.index_in.val();
+        self.ipv4.beats.in_frame.next = self.in_frame.q.val();
+        self.ipv4.beats.beat_valid.next = self.beat_valid.q.val();
+        self.ipv4.beats.beat_data.next = self.beat_data.q.val();
+        self.ipv4.beat_first.next = self.at_first.q.val();
+        self.ipv4.beat_word.next = self.beat_word.q.val();
         self.command.clock.next = self.clock.val();
         self.command.beats.next_valid.next = self.frame.valid.val();
         self.command.beats.next_index.next = self.index_in.val();
@@ -628,27 +500,22 @@ impl Logic for FrameParser {
         self.command.beats.beat_valid.next = self.beat_valid.q.val();
         self.command.beats.beat_data.next = self.beat_data.q.val();
         self.command.beat_first.next = self.at_first.q.val();
-        self.command.beat_in_packet.next = self.in_ip.q.val();
-        self.command.payload_length.next = self.payload_length.q.val();
+        self.command.beat_in_packet.next = self.ipv4.in_payload.val();
+        self.command.payload_length.next = self.ipv4.payload_length.val();
         // the sums add a word a clock (the beat's, or the transport's with the pseudo
         // header) while the beat is in their range; they restart at a frame's first beat
         // (the transport's at the IPv4 protocol, with UDP's pseudo-header protocol word)
-        self.header_sum.clock.next = self.clock.val();
-        self.header_sum.word.next = self.beat_word.q.val();
-        self.header_sum.add.next = self.beat_valid.q.val() & self.at_ip_header.q.val();
-        self.header_sum.restart.next = self.beat_valid.q.val() & self.at_first.q.val();
-        self.header_sum.start.next = 0.into();
         self.rest_sum.clock.next = self.clock.val();
         self.rest_sum.word.next = self.beat_word.q.val();
         self.rest_sum.add.next =
-            self.beat_valid.q.val() & self.in_ip.q.val() & self.at_from_icmp_rest.q.val();
+            self.beat_valid.q.val() & self.ipv4.in_payload.val() & self.at_from_icmp_rest.q.val();
         self.rest_sum.restart.next = self.beat_valid.q.val() & self.at_first.q.val();
         self.rest_sum.start.next = 0.into();
         self.transport_sum.clock.next = self.clock.val();
         self.transport_sum.word.next = self.transport_word.q.val();
         self.transport_sum.add.next = self.beat_valid.q.val()
-            & ((self.is_udp.q.val() & self.at_pseudo_header.q.val())
-                | (self.in_ip.q.val() & self.at_from_transport.q.val()));
+            & ((self.ipv4.carries_udp.val() & self.at_pseudo_header.q.val())
+                | (self.ipv4.in_payload.val() & self.at_from_transport.q.val()));
         self.transport_sum.restart.next = self.beat_valid.q.val() & self.at_ip_protocol.q.val();
         self.transport_sum.start.next = 0.into();
         if self.beat_data.q.val() == self.protocol_udp.val() {
@@ -660,47 +527,15 @@ impl Logic for FrameParser {
                 self.source_mac.d.next =
                     (self.source_mac.q.val() << 8) | bit_cast::<48, 8>(self.beat_data.q.val());
             }
-            if self.at_total.q.val() {
-                self.total_length.d.next =
-                    (self.total_length.q.val() << 8) | bit_cast::<16, 8>(self.beat_data.q.val());
-            }
-            if self.at_ip_protocol.q.val() {
-                self.protocol.d.next = self.beat_data.q.val();
-                self.is_udp.d.next = self.beat_data.q.val() == self.protocol_udp.val();
-            }
-            if self.at_ip_source.q.val() {
-                self.source_ip.d.next =
-                    (self.source_ip.q.val() << 8) | bit_cast::<32, 8>(self.beat_data.q.val());
-            }
             if self.at_transport.q.val() {
                 self.transport.d.next =
                     (self.transport.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
-            }
-            // the IPv4 payload's extent: whether the beat (from byte 34) is inside it
-            self.in_ip_history.d.next =
-                (self.in_ip_history.q.val() << 1) | bit_cast::<3, 1>(self.in_ip.q.val().into());
-            if self.in_ip.q.val() {
-                self.ip_left.d.next = self.ip_left.q.val() - 1;
-                self.in_ip.d.next = self.ip_left.q.val() != 1;
-            }
-            if self.at_total_length_end.q.val() {
-                self.payload_length.d.next = self.total_length.q.val() - self.ip_header_len.val();
-            }
-            if self.at_ip_header_last.q.val() {
-                // the IPv4 payload's bytes from 34 on
-                self.ip_left.d.next = self.payload_length.q.val();
-                self.in_ip.d.next = self.payload_length.q.val() != 0;
-            }
-            if self.at_first.q.val() {
-                self.is_udp.d.next = false;
-                self.in_ip.d.next = false;
             }
             if self.beat_last.q.val() {
                 self.end_length_error.d.next = self.beat_length_error.q.val();
                 self.end_error.d.next = self.beat_error.q.val();
                 self.end_stored.d.next = self.stored.q.val();
-                // the first FCS byte (3 beats ago) was outside the IPv4 packet
-                self.end_fits.d.next = !self.in_ip_history.q.val().get_bit(2);
+                self.end_fits.d.next = self.ipv4.fits.val();
             }
         }
 
@@ -710,24 +545,11 @@ impl Logic for FrameParser {
         self.p2.d.next = self.p1.q.val();
         self.s1_length_error.d.next = self.end_length_error.q.val();
         self.s1_error.d.next = self.end_error.q.val();
-        self.s1_version_4.d.next = self.version_ihl.value.val().get_bits::<4>(4) == 4;
-        self.s1_ihl_below_5.d.next = self.version_ihl.value.val().get_bits::<4>(0) < 5;
-        self.s1_ihl_above_5.d.next = self.version_ihl.value.val().get_bits::<4>(0) > 5;
-        self.s1_header_sum_ok.d.next = self.header_sum.verifies.val();
-        self.s1_total_from_20.d.next = self.total_length.q.val() >= self.ip_header_len.val();
         self.s1_total_from_28.d.next =
-            self.total_length.q.val() >= self.ip_and_transport_header_len.val();
-        self.s1_total_from_52.d.next = self.total_length.q.val() >= self.ip_to_arguments_len.val();
+            self.ipv4.total_length.val() >= self.ip_and_transport_header_len.val();
+        self.s1_total_from_52.d.next =
+            self.ipv4.total_length.val() >= self.ip_to_arguments_len.val();
         self.s1_fits.d.next = self.end_fits.q.val();
-        // flags and fragment offset: MF or an offset
-        self.s1_fragment.d.next = self
-            .flags_fragment
-            .value
-            .val()
-            .get_bit(self.more_fragments_bit.val().index())
-            | (self.flags_fragment.value.val().get_bits::<13>(0) != 0);
-        self.s1_icmp.d.next = self.protocol.q.val() == self.protocol_icmp.val();
-        self.s1_udp.d.next = self.is_udp.q.val();
         self.s1_echo_request.d.next = self
             .transport
             .q
@@ -740,7 +562,7 @@ impl Logic for FrameParser {
             .q
             .val()
             .get_bits::<16>(self.udp_length_bit.val().index())
-            == self.payload_length.q.val();
+            == self.ipv4.payload_length.val();
         self.s1_udp_no_checksum.d.next = self
             .transport
             .q
@@ -753,8 +575,6 @@ impl Logic for FrameParser {
             .val()
             .get_bits::<16>(self.udp_destination_port_bit.val().index())
             == self.box_port.val();
-        self.s1_in_subnet.d.next =
-            (self.source_ip.q.val() & self.host_mask.val()) == self.host_subnet.val();
 
         // ---- the rule table (steps 1-16a) over the checks ----
         self.rules.clock.next = self.clock.val();
@@ -766,34 +586,33 @@ impl Logic for FrameParser {
         self.rules.arp.next = self.ethernet.is_arp.val();
         self.rules.arp_for_box.next = self.arp.request_for_box.val();
         self.rules.ipv4.next = self.ethernet.ipv4.val() & !self.ethernet.broadcast.val();
-        self.rules.bad_version.next = !self.s1_version_4.q.val() | self.s1_ihl_below_5.q.val();
-        self.rules.options.next = self.s1_ihl_above_5.q.val();
-        self.rules.bad_header.next =
-            !self.s1_header_sum_ok.q.val() | !self.s1_total_from_20.q.val() | !self.s1_fits.q.val();
-        self.rules.fragment.next = self.s1_fragment.q.val();
-        self.rules.ip_not_to_box.next = !self.ip_destination.equals.val();
-        self.rules.icmp.next = self.s1_icmp.q.val();
+        self.rules.bad_version.next = self.ipv4.bad_version.val();
+        self.rules.options.next = self.ipv4.options.val();
+        self.rules.bad_header.next = self.ipv4.bad_header.val() | !self.s1_fits.q.val();
+        self.rules.fragment.next = self.ipv4.fragment.val();
+        self.rules.ip_not_to_box.next = !self.ipv4.to_box.val();
+        self.rules.icmp.next = self.ipv4.icmp.val();
         self.rules.icmp_bad.next =
             !self.s1_total_from_28.q.val() | !self.s1_transport_sum_ok.q.val();
         self.rules.echo_request.next = self.s1_echo_request.q.val();
-        self.rules.udp.next = self.s1_udp.q.val();
+        self.rules.udp.next = self.ipv4.udp.val();
         self.rules.udp_bad.next = !self.s1_total_from_28.q.val()
             | !self.s1_udp_length_ok.q.val()
             | (!self.s1_udp_no_checksum.q.val() & !self.s1_transport_sum_ok.q.val());
         self.rules.other_port.next = !self.s1_port_box.q.val();
-        self.rules.foreign.next = !self.s1_in_subnet.q.val();
+        self.rules.foreign.next = !self.ipv4.from_subnet.val();
         self.rules.malformed.next =
             !(self.s1_total_from_52.q.val() & self.command.well_formed.val());
         self.rules.stored.next = self.end_stored.q.val();
         if self.rules.deciding.val() & self.end_stored.q.val() {
-            self.held_total_length.d.next = self.total_length.q.val();
+            self.held_total_length.d.next = self.ipv4.total_length.val();
             self.held_rest_sum.d.next = self.rest_sum.folded.val();
         }
         self.decided.next = self.rules.decided.val();
         self.action.next = self.rules.action.val();
         self.fate.next = self.rules.fate.val();
         self.peer_mac.next = self.source_mac.q.val();
-        self.peer_ip.next = self.source_ip.q.val();
+        self.peer_ip.next = self.ipv4.source.val();
         self.peer_port.next = self
             .transport
             .q

@@ -55,6 +55,7 @@ pub mod frame_transmitter;
 pub mod geometry;
 pub mod hdl;
 pub mod interface_box;
+pub mod ipv4_receiver;
 pub mod mac_receiver;
 pub mod mdio;
 pub mod ones_complement_sum;
