@@ -47,51 +47,26 @@ use crate::command_decoder::CommandDecoder;
 use crate::ethernet_demux::EthernetDemux;
 use crate::hdl::*;
 use crate::ipv4_receiver::Ipv4Receiver;
-use crate::ones_complement_sum::OnesComplementSum;
 use crate::receive_rules::{ReceiveRules, RULES_LATENCY};
 use crate::stream::ByteStreamSink;
+use crate::transport_receiver::TransportReceiver;
 use skinbox_protocol::link::{
-    LinkConfig, ARGUMENTS_AT, ARP_AT, ICMP_AT, ICMP_ECHO_REQUEST, IPV4_AT, IP_PROTOCOL_UDP,
-    MIN_FRAME_LEN, PAYLOAD_AT, UDP_AT,
+    LinkConfig, ARGUMENTS_AT, ARP_AT, IPV4_AT, MIN_FRAME_LEN, PAYLOAD_AT,
 };
-use skinbox_protocol::wire::{arp, ethernet, icmp, ipv4, udp};
-use skinbox_protocol::Field;
+use skinbox_protocol::wire::{arp, ethernet};
 
 /// Clocks from the last beat on `frame` (clock `c`) to `decided` (high in clock `c +
 /// DECISION_LATENCY`).
 pub const DECISION_LATENCY: u64 = 3 + RULES_LATENCY;
 
-// Frame positions of the captured fields: an Ethernet II frame carrying ARP, or IPv4
-// without options, then ICMP or UDP, then a command.
-const fn shifted(field: Field, by: usize) -> Field {
-    field.start + by..field.end + by
-}
-const IP_PROTOCOL: usize = IPV4_AT + ipv4::field::PROTOCOL;
-const IP_CHECKSUM: Field = shifted(ipv4::field::CHECKSUM, IPV4_AT);
-const IP_DESTINATION: Field = shifted(ipv4::field::DESTINATION, IPV4_AT);
-/// Captured in `transport`: the ICMP or UDP header.
-const TRANSPORT: Field = UDP_AT..PAYLOAD_AT;
-/// The ICMP message from its identifier: what the echo reply's checksum sums.
-const ICMP_REST_AT: usize = ICMP_AT + icmp::field::IDENTIFIER.start;
 // one decode ends a capture and starts the next where the fields are adjacent
 const _: () = assert!(ethernet::field::ETHERTYPE.end == IPV4_AT && IPV4_AT == ARP_AT);
-const _: () = assert!(ICMP_AT == UDP_AT && TRANSPORT.end == ICMP_AT + icmp::HEADER_LEN);
-const _: () = assert!(IP_DESTINATION.end == UDP_AT);
-// the beat tests that skip the index's choice need positions above 0
-const _: () = assert!(IP_CHECKSUM.start > 0);
 // the ARP body ends inside the 60 bytes every frame has
 const _: () = assert!(ARP_AT + arp::PACKET_LEN <= MIN_FRAME_LEN);
 
 /// A frame position as a kernel constant (compared with the 11-bit beat index).
 fn position(at: usize) -> Constant<Bits<11>> {
     constant(at as u64)
-}
-
-/// The lowest bit of the frame bytes `field` in a shift register that captured `capture`
-/// (the last captured byte is the low byte).
-fn capture_bit(capture: Field, field: Field) -> Constant<Bits<6>> {
-    assert!(capture.start <= field.start && field.end <= capture.end && capture.len() <= 8);
-    Constant::new(((8 * (capture.end - field.end)) as u64).into())
 }
 
 /// A length as a kernel constant (compared with 16-bit lengths).
@@ -152,24 +127,10 @@ pub struct FrameParser {
     pub command_arguments: Signal<Out, Bits<96>>,
 
     // build-time constants
-    box_port: Constant<Bits<16>>,
-    protocol_udp: Constant<Bits<8>>,
-    icmp_echo_request: Constant<Bits<16>>,
     // frame positions
     source_mac_at: Constant<Bits<11>>,
     ethertype_at: Constant<Bits<11>>,
-    ip_protocol_at: Constant<Bits<11>>,
-    ip_checksum_at: Constant<Bits<11>>,
-    ip_checksum_low_at: Constant<Bits<11>>,
-    transport_at: Constant<Bits<11>>,
-    transport_end: Constant<Bits<11>>,
-    icmp_rest_at: Constant<Bits<11>>,
     // field positions in the captures
-    icmp_type_code_bit: Constant<Bits<6>>,
-    udp_source_port_bit: Constant<Bits<6>>,
-    udp_destination_port_bit: Constant<Bits<6>>,
-    udp_length_bit: Constant<Bits<6>>,
-    udp_checksum_bit: Constant<Bits<6>>,
     // lengths
     ip_and_transport_header_len: Constant<Bits<16>>,
     ip_to_arguments_len: Constant<Bits<16>>,
@@ -188,28 +149,20 @@ pub struct FrameParser {
     // where the registered beat is in the frame
     at_first: DFF<Bit>,
     at_source: DFF<Bit>,
-    at_ip_protocol: DFF<Bit>,
-    at_transport: DFF<Bit>,
-    at_pseudo_header: DFF<Bit>,
-    at_from_transport: DFF<Bit>,
-    at_from_icmp_rest: DFF<Bit>,
     beat_word: DFF<Bits<16>>,
-    transport_word: DFF<Bits<16>>,
     index_in: Signal<Local, Bits<11>>,
     word_in: Signal<Local, Bits<16>>,
     // captures
     source_mac: DFF<Bits<48>>,
-    transport: DFF<Bits<64>>,
     // the IPv4 payload's bytes after the current one, and whether the current one (from
     // byte 34) is in it
     // the sums: the IPv4 header, the transport message (with the UDP pseudo header), and
     // the ICMP message from its identifier
-    transport_sum: OnesComplementSum,
-    rest_sum: OnesComplementSum,
     // the layers, and the IPv4 header's fields
     ethernet: EthernetDemux,
     arp: ArpReceiver,
     ipv4: Ipv4Receiver,
+    transport: TransportReceiver,
     command: CommandDecoder,
     // the rule table
     rules: ReceiveRules,
@@ -226,11 +179,6 @@ pub struct FrameParser {
     s1_total_from_28: DFF<Bit>,
     s1_total_from_52: DFF<Bit>,
     s1_fits: DFF<Bit>,
-    s1_echo_request: DFF<Bit>,
-    s1_transport_sum_ok: DFF<Bit>,
-    s1_udp_length_ok: DFF<Bit>,
-    s1_udp_no_checksum: DFF<Bit>,
-    s1_port_box: DFF<Bit>,
     // stage 2: the checks
     // stage 3: the Ethernet level and the IPv4 level resolved
     // outputs
@@ -243,7 +191,6 @@ impl FrameParser {
     /// A parser for the box at `link`'s MAC, IP and port, taking commands from its host
     /// subnet.
     pub fn new(link: &LinkConfig) -> Self {
-        let udp_field = |f: Field| shifted(f, UDP_AT);
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -268,25 +215,8 @@ impl FrameParser {
             command_sequence: Default::default(),
             command_argument_length: Default::default(),
             command_arguments: Default::default(),
-            box_port: Constant::new(u64::from(link.box_port).into()),
-            protocol_udp: Constant::new(u64::from(IP_PROTOCOL_UDP).into()),
-            icmp_echo_request: Constant::new(big_endian(&[ICMP_ECHO_REQUEST, 0]).into()),
             source_mac_at: position(ethernet::field::SOURCE.start),
             ethertype_at: position(ethernet::field::ETHERTYPE.start),
-            ip_protocol_at: position(IP_PROTOCOL),
-            ip_checksum_at: position(IP_CHECKSUM.start),
-            ip_checksum_low_at: position(IP_CHECKSUM.start + 1),
-            transport_at: position(TRANSPORT.start),
-            transport_end: position(TRANSPORT.end),
-            icmp_rest_at: position(ICMP_REST_AT),
-            icmp_type_code_bit: capture_bit(TRANSPORT, ICMP_AT..ICMP_AT + 2),
-            udp_source_port_bit: capture_bit(TRANSPORT, udp_field(udp::field::SOURCE_PORT)),
-            udp_destination_port_bit: capture_bit(
-                TRANSPORT,
-                udp_field(udp::field::DESTINATION_PORT),
-            ),
-            udp_length_bit: capture_bit(TRANSPORT, udp_field(udp::field::LENGTH)),
-            udp_checksum_bit: capture_bit(TRANSPORT, udp_field(udp::field::CHECKSUM)),
             ip_and_transport_header_len: length(PAYLOAD_AT - IPV4_AT),
             ip_to_arguments_len: length(ARGUMENTS_AT - IPV4_AT),
             in_frame: Default::default(),
@@ -300,24 +230,16 @@ impl FrameParser {
             beat_index: Default::default(),
             at_first: Default::default(),
             at_source: Default::default(),
-            at_ip_protocol: Default::default(),
-            at_transport: Default::default(),
-            at_pseudo_header: Default::default(),
-            at_from_transport: Default::default(),
-            at_from_icmp_rest: Default::default(),
             beat_word: Default::default(),
-            transport_word: Default::default(),
             index_in: Default::default(),
             word_in: Default::default(),
             source_mac: Default::default(),
-            transport: Default::default(),
             ethernet: EthernetDemux::new(link.box_mac),
             arp: ArpReceiver::new(link.box_ip),
             ipv4: Ipv4Receiver::new(link.box_ip, link.host_subnet, link.host_subnet_prefix_len),
+            transport: TransportReceiver::new(link.box_port),
             command: Default::default(),
             rules: Default::default(),
-            transport_sum: Default::default(),
-            rest_sum: Default::default(),
             end_length_error: Default::default(),
             end_error: Default::default(),
             end_stored: Default::default(),
@@ -329,11 +251,6 @@ impl FrameParser {
             s1_total_from_28: Default::default(),
             s1_total_from_52: Default::default(),
             s1_fits: Default::default(),
-            s1_echo_request: Default::default(),
-            s1_transport_sum_ok: Default::default(),
-            s1_udp_length_ok: Default::default(),
-            s1_udp_no_checksum: Default::default(),
-            s1_port_box: Default::default(),
             held_receive_tick: Default::default(),
             held_total_length: Default::default(),
             held_rest_sum: Default::default(),
@@ -364,15 +281,8 @@ impl Logic for FrameParser {
             beat_index,
             at_first,
             at_source,
-            at_ip_protocol,
-            at_transport,
-            at_pseudo_header,
-            at_from_transport,
-            at_from_icmp_rest,
             beat_word,
-            transport_word,
             source_mac,
-            transport,
             end_length_error,
             end_error,
             end_stored,
@@ -384,11 +294,6 @@ impl Logic for FrameParser {
             s1_total_from_28,
             s1_total_from_52,
             s1_fits,
-            s1_echo_request,
-            s1_transport_sum_ok,
-            s1_udp_length_ok,
-            s1_udp_no_checksum,
-            s1_port_box,
             held_receive_tick,
             held_total_length,
             held_rest_sum
@@ -413,19 +318,6 @@ impl Logic for FrameParser {
                 | (self.at_source.q.val()
                     & (self.index_in.val() != self.ethertype_at.val())
                     & self.in_frame.q.val());
-            self.at_ip_protocol.d.next = self.index_in.val() == self.ip_protocol_at.val();
-            self.at_transport.d.next = (self.index_in.val() == self.transport_at.val())
-                | (self.at_transport.q.val()
-                    & (self.index_in.val() != self.transport_end.val())
-                    & self.in_frame.q.val());
-            self.at_pseudo_header.d.next = (self.index_in.val() == self.ip_checksum_at.val())
-                | (self.at_pseudo_header.q.val()
-                    & (self.index_in.val() != self.transport_at.val())
-                    & self.in_frame.q.val());
-            self.at_from_transport.d.next = (self.index_in.val() == self.transport_at.val())
-                | (self.at_from_transport.q.val() & self.in_frame.q.val());
-            self.at_from_icmp_rest.d.next = (self.index_in.val() == self.icmp_rest_at.val())
-                | (self.at_from_icmp_rest.q.val() & self.in_frame.q.val());
         }
         // the byte as a 16-bit word: even frame positions are high bytes
         self.word_in.next = bit_cast::<16, 8>(self.frame.data.val()) << 8;
@@ -435,15 +327,6 @@ impl Logic for FrameParser {
             self.word_in.next = bit_cast::<16, 8>(self.frame.data.val());
         }
         self.beat_word.d.next = self.word_in.val();
-        // UDP pseudo header: the UDP length (the IPv4 payload length) in the clock of byte
-        // 24, nothing in that of byte 25 (the IPv4 checksum), then the addresses
-        self.transport_word.d.next = self.word_in.val();
-        if self.in_frame.q.val() & (self.next_index.q.val() == self.ip_checksum_at.val()) {
-            self.transport_word.d.next = self.ipv4.payload_length.val();
-        }
-        if self.in_frame.q.val() & (self.next_index.q.val() == self.ip_checksum_low_at.val()) {
-            self.transport_word.d.next = 0.into();
-        }
         if self.frame.valid.val() {
             if self.in_frame.q.val() {
                 self.beat_index.d.next = self.next_index.q.val();
@@ -502,34 +385,22 @@ impl Logic for FrameParser {
         self.command.beat_first.next = self.at_first.q.val();
         self.command.beat_in_packet.next = self.ipv4.in_payload.val();
         self.command.payload_length.next = self.ipv4.payload_length.val();
-        // the sums add a word a clock (the beat's, or the transport's with the pseudo
-        // header) while the beat is in their range; they restart at a frame's first beat
-        // (the transport's at the IPv4 protocol, with UDP's pseudo-header protocol word)
-        self.rest_sum.clock.next = self.clock.val();
-        self.rest_sum.word.next = self.beat_word.q.val();
-        self.rest_sum.add.next =
-            self.beat_valid.q.val() & self.ipv4.in_payload.val() & self.at_from_icmp_rest.q.val();
-        self.rest_sum.restart.next = self.beat_valid.q.val() & self.at_first.q.val();
-        self.rest_sum.start.next = 0.into();
-        self.transport_sum.clock.next = self.clock.val();
-        self.transport_sum.word.next = self.transport_word.q.val();
-        self.transport_sum.add.next = self.beat_valid.q.val()
-            & ((self.ipv4.carries_udp.val() & self.at_pseudo_header.q.val())
-                | (self.ipv4.in_payload.val() & self.at_from_transport.q.val()));
-        self.transport_sum.restart.next = self.beat_valid.q.val() & self.at_ip_protocol.q.val();
-        self.transport_sum.start.next = 0.into();
-        if self.beat_data.q.val() == self.protocol_udp.val() {
-            self.transport_sum.start.next = bit_cast::<16, 8>(self.protocol_udp.val());
-        }
+        self.transport.clock.next = self.clock.val();
+        self.transport.beats.next_valid.next = self.frame.valid.val();
+        self.transport.beats.next_index.next = self.index_in.val();
+        self.transport.beats.in_frame.next = self.in_frame.q.val();
+        self.transport.beats.beat_valid.next = self.beat_valid.q.val();
+        self.transport.beats.beat_data.next = self.beat_data.q.val();
+        self.transport.beat_first.next = self.at_first.q.val();
+        self.transport.next_word.next = self.word_in.val();
+        self.transport.carries_udp.next = self.ipv4.carries_udp.val();
+        self.transport.in_payload.next = self.ipv4.in_payload.val();
+        self.transport.payload_length.next = self.ipv4.payload_length.val();
 
         if self.beat_valid.q.val() {
             if self.at_source.q.val() {
                 self.source_mac.d.next =
                     (self.source_mac.q.val() << 8) | bit_cast::<48, 8>(self.beat_data.q.val());
-            }
-            if self.at_transport.q.val() {
-                self.transport.d.next =
-                    (self.transport.q.val() << 8) | bit_cast::<64, 8>(self.beat_data.q.val());
             }
             if self.beat_last.q.val() {
                 self.end_length_error.d.next = self.beat_length_error.q.val();
@@ -550,31 +421,6 @@ impl Logic for FrameParser {
         self.s1_total_from_52.d.next =
             self.ipv4.total_length.val() >= self.ip_to_arguments_len.val();
         self.s1_fits.d.next = self.end_fits.q.val();
-        self.s1_echo_request.d.next = self
-            .transport
-            .q
-            .val()
-            .get_bits::<16>(self.icmp_type_code_bit.val().index())
-            == self.icmp_echo_request.val();
-        self.s1_transport_sum_ok.d.next = self.transport_sum.verifies.val();
-        self.s1_udp_length_ok.d.next = self
-            .transport
-            .q
-            .val()
-            .get_bits::<16>(self.udp_length_bit.val().index())
-            == self.ipv4.payload_length.val();
-        self.s1_udp_no_checksum.d.next = self
-            .transport
-            .q
-            .val()
-            .get_bits::<16>(self.udp_checksum_bit.val().index())
-            == 0;
-        self.s1_port_box.d.next = self
-            .transport
-            .q
-            .val()
-            .get_bits::<16>(self.udp_destination_port_bit.val().index())
-            == self.box_port.val();
 
         // ---- the rule table (steps 1-16a) over the checks ----
         self.rules.clock.next = self.clock.val();
@@ -592,32 +438,27 @@ impl Logic for FrameParser {
         self.rules.fragment.next = self.ipv4.fragment.val();
         self.rules.ip_not_to_box.next = !self.ipv4.to_box.val();
         self.rules.icmp.next = self.ipv4.icmp.val();
-        self.rules.icmp_bad.next =
-            !self.s1_total_from_28.q.val() | !self.s1_transport_sum_ok.q.val();
-        self.rules.echo_request.next = self.s1_echo_request.q.val();
+        self.rules.icmp_bad.next = !self.s1_total_from_28.q.val() | !self.transport.sum_ok.val();
+        self.rules.echo_request.next = self.transport.echo_request.val();
         self.rules.udp.next = self.ipv4.udp.val();
         self.rules.udp_bad.next = !self.s1_total_from_28.q.val()
-            | !self.s1_udp_length_ok.q.val()
-            | (!self.s1_udp_no_checksum.q.val() & !self.s1_transport_sum_ok.q.val());
-        self.rules.other_port.next = !self.s1_port_box.q.val();
+            | !self.transport.udp_length_ok.val()
+            | (!self.transport.udp_no_checksum.val() & !self.transport.sum_ok.val());
+        self.rules.other_port.next = !self.transport.to_box_port.val();
         self.rules.foreign.next = !self.ipv4.from_subnet.val();
         self.rules.malformed.next =
             !(self.s1_total_from_52.q.val() & self.command.well_formed.val());
         self.rules.stored.next = self.end_stored.q.val();
         if self.rules.deciding.val() & self.end_stored.q.val() {
             self.held_total_length.d.next = self.ipv4.total_length.val();
-            self.held_rest_sum.d.next = self.rest_sum.folded.val();
+            self.held_rest_sum.d.next = self.transport.icmp_rest_sum.val();
         }
         self.decided.next = self.rules.decided.val();
         self.action.next = self.rules.action.val();
         self.fate.next = self.rules.fate.val();
         self.peer_mac.next = self.source_mac.q.val();
         self.peer_ip.next = self.ipv4.source.val();
-        self.peer_port.next = self
-            .transport
-            .q
-            .val()
-            .get_bits::<16>(self.udp_source_port_bit.val().index());
+        self.peer_port.next = self.transport.source_port.val();
         self.receive_tick.next = self.held_receive_tick.q.val();
         self.ip_total_length.next = self.held_total_length.q.val();
         self.icmp_rest_sum.next = self.held_rest_sum.q.val();

@@ -71,6 +71,7 @@ pub mod status_reporter;
 pub mod stream;
 pub mod stream_fifo;
 pub mod timestamp;
+pub mod transport_receiver;
 pub mod uart_rx;
 pub mod verilog;
 
