@@ -28,10 +28,12 @@
 //! its beats ready by then (a [`crate::body_reader::BodyReader`] has them three clocks
 //! after its start). A body beat missing when due is sent as it is with `gmii_tx_er` set,
 //! so the PHY corrupts the frame and the host counts it lost instead of reading garbage.
-//! Output: the selected byte goes into a register, the CRC is computed from that register,
-//! and the output register takes the byte or, at the end, the FCS: `gmii_txd`/`gmii_tx_en`
-//! follow the byte counter by two clocks, and no path runs from byte selection through the
-//! CRC. The frame geometry (lengths, IPv4 checksum) is computed from the body length held
+//! The header's steady sources (lengths, checksums, kind) and the destination byte are ORed
+//! a clock ahead into a register, so only the template and field bytes pass the OR in the
+//! byte's own clock. Output: the selected byte goes into a register, the CRC is computed
+//! from that register, and the output register takes the byte or, at the end, the FCS:
+//! `gmii_txd`/`gmii_tx_en` follow the byte counter by two clocks, and no path runs from
+//! byte selection through the CRC. The frame geometry (lengths, IPv4 checksum) is computed from the body length held
 //! at the start, a clock later (no adder after the descriptor).
 
 use crate::block_ram::BlockRam;
