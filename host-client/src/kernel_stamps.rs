@@ -82,6 +82,9 @@ pub enum Fallback {
     NoReceiveStamp,
     /// Send and receive stamps of no common clock (one software only, one hardware only).
     NoCommonClock,
+    /// The send stamp lies outside the `send_to` call that sent it (a numbering out of
+    /// step, or a clock step): not taken.
+    SendStampOutOfRange,
 }
 
 impl Fallback {
@@ -92,6 +95,7 @@ impl Fallback {
             Fallback::NoSendStamp => "no_send_stamp",
             Fallback::NoReceiveStamp => "no_receive_stamp",
             Fallback::NoCommonClock => "no_common_clock",
+            Fallback::SendStampOutOfRange => "send_stamp_out_of_range",
         }
     }
 }
@@ -296,6 +300,62 @@ impl SendStamps {
     }
 }
 
+/// Most entries [`CommandSendStamps`] keeps before the oldest go.
+pub const MAX_COMMAND_SEND_STAMPS: usize = 256;
+
+/// Kernel send stamps of commands, by the host time each command carries (which its
+/// acknowledgement echoes), handed from the thread that sends them to the one that takes
+/// their acknowledgements (`skinbox capture --claim`: [`crate::live::send_read_ticks`] to
+/// [`crate::timing::Timing`]). Each entry is the software send stamp (CLOCK_REALTIME, ns)
+/// or why there is none.
+#[derive(Debug, Clone, Default)]
+pub struct CommandSendStamps(std::sync::Arc<std::sync::Mutex<CommandStampQueue>>);
+
+/// Commands' host times and send stamps, oldest first.
+type CommandStampQueue = std::collections::VecDeque<(u64, Result<u64, Fallback>)>;
+
+impl CommandSendStamps {
+    /// None yet.
+    pub fn new() -> CommandSendStamps {
+        CommandSendStamps::default()
+    }
+
+    /// The command of host time `host_time` was sent at `stamp` (or why not known).
+    pub fn record(&self, host_time: u64, stamp: Result<u64, Fallback>) {
+        let mut q = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        q.push_back((host_time, stamp));
+        while q.len() > MAX_COMMAND_SEND_STAMPS {
+            q.pop_front();
+        }
+    }
+
+    /// The send stamp of the command of host time `host_time`, taken out; `None` when none
+    /// was recorded (not yet, or long ago).
+    pub fn take(&self, host_time: u64) -> Option<Result<u64, Fallback>> {
+        let mut q = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let at = q.iter().position(|(t, _)| *t == host_time)?;
+        q.remove(at).map(|(_, stamp)| stamp)
+    }
+}
+
+/// The software send stamp of a datagram whose `send_to` call ran from `before_ns` to
+/// `after_ns` (CLOCK_REALTIME), if it lies in that call or up to `late_ns` after (a NIC
+/// queue may hold it); else why it is not taken.
+pub fn checked_send_stamp(
+    stamp: Option<KernelStamp>,
+    before_ns: u64,
+    after_ns: u64,
+    late_ns: u64,
+) -> Result<u64, Fallback> {
+    let ns = stamp
+        .and_then(|s| s.software_ns)
+        .ok_or(Fallback::NoSendStamp)?;
+    if ns < before_ns || ns > after_ns.saturating_add(late_ns) {
+        return Err(Fallback::SendStampOutOfRange);
+    }
+    Ok(ns)
+}
+
 /// Waits up to `wait` for `socket`'s error queue; whether something is there.
 fn wait_for_error_queue(socket: &UdpSocket, wait: Duration) -> bool {
     #[cfg(target_os = "linux")]
@@ -488,6 +548,42 @@ mod tests {
             assert_eq!((p.send_ns, p.receive_ns), (5, 25));
             assert_eq!((p.source, p.fallback), (StampSource::UserSpace, Some(why)));
         }
+    }
+
+    #[test]
+    fn command_send_stamps_are_taken_once_by_host_time_and_checked_against_the_send() {
+        let stamps = CommandSendStamps::new();
+        let sender = stamps.clone();
+        sender.record(100, Ok(105));
+        sender.record(200, Err(Fallback::NoSendStamp));
+        assert_eq!(stamps.take(200), Some(Err(Fallback::NoSendStamp)));
+        assert_eq!(stamps.take(100), Some(Ok(105)));
+        assert_eq!(stamps.take(100), None);
+        for t in 0..MAX_COMMAND_SEND_STAMPS as u64 + 1 {
+            sender.record(t, Ok(t));
+        }
+        assert_eq!(stamps.take(0), None, "the oldest went");
+        assert_eq!(stamps.take(1), Some(Ok(1)));
+        let sw = |ns| {
+            Some(KernelStamp {
+                software_ns: Some(ns),
+                hardware_ns: None,
+            })
+        };
+        assert_eq!(checked_send_stamp(sw(15), 10, 20, 5), Ok(15));
+        assert_eq!(checked_send_stamp(sw(25), 10, 20, 5), Ok(25));
+        assert_eq!(
+            checked_send_stamp(sw(26), 10, 20, 5),
+            Err(Fallback::SendStampOutOfRange)
+        );
+        assert_eq!(
+            checked_send_stamp(sw(9), 10, 20, 5),
+            Err(Fallback::SendStampOutOfRange)
+        );
+        assert_eq!(
+            checked_send_stamp(None, 10, 20, 5),
+            Err(Fallback::NoSendStamp)
+        );
     }
 
     #[cfg(target_os = "linux")]
