@@ -8,7 +8,9 @@
 //! `send_to` and `recv` ([`ExchangeStamping::UserSpace`], as before `SO_TIMESTAMPING`), or
 //! with the kernel's stamps ([`ExchangeStamping::Kernel`], [`crate::kernel_stamps`]); after
 //! each exchange it maps the tick of that moment and compares it with the responder's true
-//! clock. Every host time is CLOCK_REALTIME, the clock of the kernel's software stamps.
+//! clock. Every host time is CLOCK_REALTIME, the clock of the kernel's software stamps, fed
+//! to the map less a base time of the run (an f64 holds a CLOCK_REALTIME time only to
+//! 256 ns).
 
 use crate::clock_map::{host_clock::realtime_ns, ClockMap, TimeExchange};
 use crate::kernel_stamps::{self, ExchangeStamps, Fallback, SendStamps, StampSource};
@@ -44,16 +46,20 @@ impl BoxClock {
         (host_ns.saturating_sub(self.reset_ns) as f64 * (1.0 + self.drift_ppm * 1e-6) / 8.0) as u64
     }
 
-    /// The true host time of box tick `tick`, ns.
-    pub fn host_of(&self, tick: u64) -> f64 {
-        self.reset_ns as f64 + tick as f64 * 8.0 / (1.0 + self.drift_ppm * 1e-6)
+    /// The true host time of box tick `tick`, ns since host time `base_ns` (at most its
+    /// reset: a CLOCK_REALTIME time itself, near 2^61 ns, has a resolution of 256 ns in an
+    /// f64).
+    pub fn host_since(&self, base_ns: u64, tick: u64) -> f64 {
+        self.reset_ns.saturating_sub(base_ns) as f64
+            + tick as f64 * 8.0 / (1.0 + self.drift_ppm * 1e-6)
     }
 }
 
 /// One exchange and the mapping right after it.
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct ClockMapSample {
-    /// The exchange as fed to the map.
+    /// The exchange as fed to the map: host times in ns since the run's base time (a
+    /// second before the box's reset), so the map's f64 keeps them to the ns.
     #[serde(skip)]
     pub exchange: TimeExchange,
     /// Where its host send and receive times came from.
@@ -74,7 +80,8 @@ pub struct ClockMapRun {
     pub samples: Vec<ClockMapSample>,
     /// Exchanges that fell back to user-space stamps, by reason ([`Fallback::name`]).
     pub fallbacks: BTreeMap<&'static str, u64>,
-    /// Warm-up exchanges before the counted ones (until the kernel stamped a reply).
+    /// Warm-up exchanges before the counted ones (until the kernel stamped the responder's
+    /// request and, with kernel stamps, a reply).
     pub warm_up_exchanges: u32,
     /// Why the socket has no kernel stamps, if it has none.
     pub not_enabled: Option<String>,
@@ -156,9 +163,20 @@ impl Default for ClockMapBenchConfig {
     }
 }
 
+/// Busy-waits until CLOCK_REALTIME reaches `ns`.
+fn spin_until(ns: u64) {
+    while realtime_ns() < ns {
+        std::hint::spin_loop();
+    }
+}
+
 /// Answers requests until an empty datagram or 5 s of silence: 8 bytes of sequence in,
-/// sequence, receive and send ticks out, with a random delay of up to `delay_in_ns` before
-/// the receive tick and up to `delay_out_ns` after the send tick.
+/// sequence, receive and send ticks out, and 1 when the arrival was the kernel's stamp.
+/// Like the box, which stamps at its pin, it takes a
+/// request's arrival from the kernel's receive stamp (its thread's wake-up is no part of
+/// the path; its own clock where the kernel gave none), plus a random delay of up to
+/// `delay_in_ns`; its send tick at least 2 us later, then a random delay of up to
+/// `delay_out_ns` before the answer goes.
 fn respond(socket: UdpSocket, clock: BoxClock, delay_in_ns: u64, delay_out_ns: u64) {
     let mut x = 0x0DDB_1A5E_5BAD_5EEDu64;
     let mut rand = move || {
@@ -168,23 +186,27 @@ fn respond(socket: UdpSocket, clock: BoxClock, delay_in_ns: u64, delay_out_ns: u
         x >> 11
     };
     let _ = socket.set_read_timeout(Some(Duration::from_secs(5)));
+    let _ = kernel_stamps::enable_receive(&socket);
     let mut buf = [0u8; 64];
     loop {
-        let Ok((n, peer)) = socket.recv_from(&mut buf) else {
+        let Ok((n, Some(peer), arrival)) = kernel_stamps::recv(&socket, &mut buf) else {
             return;
         };
         if n == 0 {
             return;
         }
-        spin(rand() % delay_in_ns.saturating_add(1));
-        let receive = clock.tick_at(realtime_ns());
-        spin(2_000);
+        let arrived_ns = arrival.software_ns.unwrap_or_else(realtime_ns);
+        let stamped_ns = arrived_ns + rand() % delay_in_ns.saturating_add(1);
+        spin_until(stamped_ns);
+        let receive = clock.tick_at(stamped_ns);
+        spin_until(stamped_ns + 2_000);
         let send = clock.tick_at(realtime_ns());
         spin(rand() % delay_out_ns.saturating_add(1));
-        let mut reply = [0u8; 24];
+        let mut reply = [0u8; 25];
         reply[..8].copy_from_slice(&buf[..8.min(n)]);
         reply[8..16].copy_from_slice(&receive.to_le_bytes());
         reply[16..24].copy_from_slice(&send.to_le_bytes());
+        reply[24] = u8::from(arrival.software_ns.is_some());
         if socket.send_to(&reply, peer).is_err() {
             return;
         }
@@ -215,6 +237,7 @@ pub fn clock_map_loopback(
         reset_ns: realtime_ns().saturating_sub(3_000_000_000),
         drift_ppm,
     };
+    let base_ns = clock.reset_ns.saturating_sub(1_000_000_000);
     let box_socket = UdpSocket::bind("127.0.0.1:0")?;
     let box_addr = box_socket.local_addr()?;
     let responder = std::thread::Builder::new()
@@ -232,17 +255,20 @@ pub fn clock_map_loopback(
     let mut send_stamps = SendStamps::new();
     let mut sent = 0u32;
     let mut buf = [0u8; 64];
-    let mut exchange = |seq: u64| -> io::Result<(TimeExchange, StampSource, Option<Fallback>)> {
+    // the exchange, its stamps' source and fallback, and whether the responder had the
+    // kernel's arrival stamp
+    type Stamped = (TimeExchange, StampSource, Option<Fallback>, bool);
+    let mut exchange = |seq: u64| -> io::Result<Stamped> {
         let user_send_ns = realtime_ns();
         host.send_to(&seq.to_le_bytes(), box_addr)?;
         let id = sent;
         sent = sent.wrapping_add(1);
         let (n, _, receive_stamp) = kernel_stamps::recv(&host, &mut buf)?;
         let user_receive_ns = realtime_ns();
-        if n != 24 || buf[..8] != seq.to_le_bytes() {
+        if n != 25 || buf[..8] != seq.to_le_bytes() {
             return Err(io::Error::new(
                 io::ErrorKind::InvalidData,
-                format!("exchange {seq}: the responder's reply is {n} bytes, not 24 echoing it"),
+                format!("exchange {seq}: the responder's reply is {n} bytes, not 25 echoing it"),
             ));
         }
         let stamps = if kernel {
@@ -264,22 +290,26 @@ pub fn clock_map_loopback(
         let tick = |at: usize| u64::from_le_bytes(buf[at..at + 8].try_into().unwrap_or([0; 8]));
         Ok((
             TimeExchange {
-                host_send_ns: stamps.send_ns,
+                host_send_ns: stamps.send_ns.saturating_sub(base_ns),
                 box_receive_tick: tick(8),
                 box_send_tick: tick(16),
-                host_receive_ns: stamps.receive_ns,
+                host_receive_ns: stamps.receive_ns.saturating_sub(base_ns),
             },
             stamps.source,
             stamps.fallback,
+            buf[24] == 1,
         ))
     };
     let mut seq = 0u64;
     let mut warm_up_exchanges = 0;
     while warm_up_exchanges < MAX_WARM_UP {
-        let (_, source, _) = exchange(seq)?;
+        let (_, source, _, responder_stamped) = exchange(seq)?;
         seq += 1;
         warm_up_exchanges += 1;
-        if warm_up_exchanges >= MIN_WARM_UP && (!kernel || source != StampSource::UserSpace) {
+        if warm_up_exchanges >= MIN_WARM_UP
+            && responder_stamped
+            && (!kernel || source != StampSource::UserSpace)
+        {
             break;
         }
         std::thread::sleep(interval);
@@ -289,7 +319,7 @@ pub fn clock_map_loopback(
     let mut fallbacks = BTreeMap::new();
     for _ in 0..exchanges {
         std::thread::sleep(interval);
-        let (e, source, fallback) = exchange(seq)?;
+        let (e, source, fallback, _) = exchange(seq)?;
         seq += 1;
         if let Some(f) = fallback {
             *fallbacks.entry(f.name()).or_insert(0) += 1;
@@ -304,7 +334,7 @@ pub fn clock_map_loopback(
         samples.push(ClockMapSample {
             exchange: e,
             source,
-            error_ns: (mapped.host_ns - clock.host_of(tick)).abs(),
+            error_ns: (mapped.host_ns - clock.host_since(base_ns, tick)).abs(),
             bound_ns: mapped.error_bound_ns.unwrap_or(f64::INFINITY),
         });
     }

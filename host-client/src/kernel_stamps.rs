@@ -181,14 +181,46 @@ pub const FLAGS: u32 = libc::SOF_TIMESTAMPING_TX_SOFTWARE
     | libc::SOF_TIMESTAMPING_OPT_ID
     | libc::SOF_TIMESTAMPING_OPT_TSONLY;
 
+/// [`FLAGS`] without the send stamps: for a socket whose error queue nobody reads (its
+/// stamps would fill it, and it shares the receive buffer with the datagrams).
+#[cfg(target_os = "linux")]
+pub const RECEIVE_FLAGS: u32 = libc::SOF_TIMESTAMPING_RX_SOFTWARE
+    | libc::SOF_TIMESTAMPING_SOFTWARE
+    | libc::SOF_TIMESTAMPING_RX_HARDWARE
+    | libc::SOF_TIMESTAMPING_RAW_HARDWARE;
+
 /// Turns on the kernel's send and receive stamps of `socket` ([`FLAGS`]). The sends'
-/// numbering starts at 0 with the first datagram sent after the first call. An error where
-/// the system has no `SO_TIMESTAMPING`.
+/// numbering starts at 0 with the first datagram sent after the first call. Every send
+/// then queues a stamp on the error queue: read them ([`SendStamps`]). An error where the
+/// system has no `SO_TIMESTAMPING`.
 pub fn enable(socket: &UdpSocket) -> io::Result<()> {
     #[cfg(target_os = "linux")]
+    return set_flags(socket, FLAGS);
+    #[cfg(not(target_os = "linux"))]
+    unsupported(socket)
+}
+
+/// Turns on the kernel's receive stamps of `socket` only ([`RECEIVE_FLAGS`]).
+pub fn enable_receive(socket: &UdpSocket) -> io::Result<()> {
+    #[cfg(target_os = "linux")]
+    return set_flags(socket, RECEIVE_FLAGS);
+    #[cfg(not(target_os = "linux"))]
+    unsupported(socket)
+}
+
+#[cfg(not(target_os = "linux"))]
+fn unsupported(_socket: &UdpSocket) -> io::Result<()> {
+    Err(io::Error::new(
+        io::ErrorKind::Unsupported,
+        "no SO_TIMESTAMPING on this system",
+    ))
+}
+
+#[cfg(target_os = "linux")]
+fn set_flags(socket: &UdpSocket, flags: u32) -> io::Result<()> {
     {
         use std::os::fd::AsRawFd;
-        let flags = FLAGS as libc::c_int;
+        let flags = flags as libc::c_int;
         // SAFETY: setsockopt reads one c_int through a valid pointer of the given length.
         let rc = unsafe {
             libc::setsockopt(
@@ -204,14 +236,6 @@ pub fn enable(socket: &UdpSocket) -> io::Result<()> {
         } else {
             Err(io::Error::last_os_error())
         }
-    }
-    #[cfg(not(target_os = "linux"))]
-    {
-        let _ = socket;
-        Err(io::Error::new(
-            io::ErrorKind::Unsupported,
-            "no SO_TIMESTAMPING on this system",
-        ))
     }
 }
 
