@@ -333,10 +333,14 @@ pub const MAX_COMMAND_SEND_STAMPS: usize = 256;
 /// [`crate::timing::Timing`]). Each entry is the software send stamp (CLOCK_REALTIME, ns)
 /// or why there is none.
 #[derive(Debug, Clone, Default)]
-pub struct CommandSendStamps(std::sync::Arc<std::sync::Mutex<CommandStampQueue>>);
+pub struct CommandSendStamps(std::sync::Arc<CommandStampQueue>);
 
-/// Commands' host times and send stamps, oldest first.
-type CommandStampQueue = std::collections::VecDeque<(u64, Result<u64, Fallback>)>;
+/// Commands' host times and send stamps, oldest first, and a signal for each new one.
+#[derive(Debug, Default)]
+struct CommandStampQueue {
+    entries: std::sync::Mutex<std::collections::VecDeque<(u64, Result<u64, Fallback>)>>,
+    recorded: std::sync::Condvar,
+}
 
 impl CommandSendStamps {
     /// None yet.
@@ -346,19 +350,40 @@ impl CommandSendStamps {
 
     /// The command of host time `host_time` was sent at `stamp` (or why not known).
     pub fn record(&self, host_time: u64, stamp: Result<u64, Fallback>) {
-        let mut q = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let mut q = self.0.entries.lock().unwrap_or_else(|e| e.into_inner());
         q.push_back((host_time, stamp));
         while q.len() > MAX_COMMAND_SEND_STAMPS {
             q.pop_front();
         }
+        self.0.recorded.notify_all();
     }
 
     /// The send stamp of the command of host time `host_time`, taken out; `None` when none
     /// was recorded (not yet, or long ago).
     pub fn take(&self, host_time: u64) -> Option<Result<u64, Fallback>> {
-        let mut q = self.0.lock().unwrap_or_else(|e| e.into_inner());
-        let at = q.iter().position(|(t, _)| *t == host_time)?;
-        q.remove(at).map(|(_, stamp)| stamp)
+        self.take_waiting(host_time, Duration::ZERO)
+    }
+
+    /// [`CommandSendStamps::take`], waiting up to `wait` for it to be recorded (an
+    /// acknowledgement may come before the sending thread has read its command's stamp).
+    pub fn take_waiting(&self, host_time: u64, wait: Duration) -> Option<Result<u64, Fallback>> {
+        let deadline = std::time::Instant::now() + wait;
+        let mut q = self.0.entries.lock().unwrap_or_else(|e| e.into_inner());
+        loop {
+            if let Some(at) = q.iter().position(|(t, _)| *t == host_time) {
+                return q.remove(at).map(|(_, stamp)| stamp);
+            }
+            let now = std::time::Instant::now();
+            if now >= deadline {
+                return None;
+            }
+            q = self
+                .0
+                .recorded
+                .wait_timeout(q, deadline - now)
+                .map(|(q, _)| q)
+                .unwrap_or_else(|e| e.into_inner().0);
+        }
     }
 }
 
@@ -588,6 +613,17 @@ mod tests {
         }
         assert_eq!(stamps.take(0), None, "the oldest went");
         assert_eq!(stamps.take(1), Some(Ok(1)));
+        // a stamp recorded while the taker waits
+        let late = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(20));
+            sender.record(7_000, Ok(7_001));
+        });
+        assert_eq!(
+            stamps.take_waiting(7_000, Duration::from_secs(5)),
+            Some(Ok(7_001))
+        );
+        late.join().unwrap();
+        assert_eq!(stamps.take_waiting(8_000, Duration::from_millis(5)), None);
         let sw = |ns| {
             Some(KernelStamp {
                 software_ns: Some(ns),

@@ -76,6 +76,11 @@ pub struct BoxTimeSummary {
     pub restarts: u64,
 }
 
+/// How long an acknowledgement waits for its command's send stamp to be recorded
+/// ([`Timing::with_send_stamps`]; it comes microseconds after the send, but the sending
+/// thread may be preempted).
+pub const SEND_STAMP_WAIT: Duration = Duration::from_millis(2);
+
 /// How the exchanges' host send times were stamped (their receive times are the
 /// datagrams' receive stamps: the kernel's for a live capture).
 #[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
@@ -88,7 +93,8 @@ pub struct ExchangeStampCounts {
     pub user_space: u64,
     /// Why exchanges fell back to the user-space send time although kernel stamps were
     /// asked for, by reason ([`crate::kernel_stamps::Fallback::name`]; `not_recorded`:
-    /// the acknowledgement came before the sender had read its stamp).
+    /// the sender had not read its stamp within [`SEND_STAMP_WAIT`] of the
+    /// acknowledgement).
     pub fallbacks: std::collections::BTreeMap<&'static str, u64>,
 }
 
@@ -153,7 +159,8 @@ impl Timing {
     /// The same timing with the kernel's send stamps of the read-tick commands
     /// ([`crate::live::send_read_ticks_stamped`]): an acknowledgement's exchange takes its
     /// command's send stamp as host send time, else (counted in
-    /// [`Timing::exchange_stamps`]) the host time the command carries.
+    /// [`Timing::exchange_stamps`]) the host time the command carries. An acknowledgement
+    /// waits up to [`SEND_STAMP_WAIT`] for its stamp.
     pub fn with_send_stamps(mut self, stamps: crate::kernel_stamps::CommandSendStamps) -> Timing {
         self.send_stamps = Some(stamps);
         self
@@ -242,7 +249,11 @@ impl Timing {
             self.exchanges_unused += 1;
             return;
         };
-        let host_send_ns = match self.send_stamps.as_ref().map(|s| s.take(ack.host_time)) {
+        let host_send_ns = match self
+            .send_stamps
+            .as_ref()
+            .map(|s| s.take_waiting(ack.host_time, SEND_STAMP_WAIT))
+        {
             Some(Some(Ok(stamp))) => {
                 self.exchange_stamps.kernel += 1;
                 stamp
