@@ -405,6 +405,40 @@ pub fn checked_send_stamp(
     Ok(ns)
 }
 
+/// What a network interface can stamp, as the kernel reports it (`SIOCETHTOOL`
+/// `ETHTOOL_GET_TS_INFO`, what `ethtool -T` prints).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct InterfaceStamping {
+    /// Software send stamps (`SOF_TIMESTAMPING_TX_SOFTWARE`).
+    pub software_send: bool,
+    /// Software receive stamps (`SOF_TIMESTAMPING_RX_SOFTWARE`).
+    pub software_receive: bool,
+    /// Hardware send stamps (`SOF_TIMESTAMPING_TX_HARDWARE`): the NIC can, once told to
+    /// (`SIOCSHWTSTAMP`).
+    pub hardware_send: bool,
+    /// Hardware receive stamps (`SOF_TIMESTAMPING_RX_HARDWARE`).
+    pub hardware_receive: bool,
+    /// The NIC's PTP hardware clock (`/dev/ptpN`), if it has one.
+    pub phc_index: Option<u32>,
+}
+
+/// What the interface `name` (e.g. `eth0`, `lo`) can stamp; an error when there is no such
+/// interface or the system cannot say.
+pub fn interface_stamping(name: &str) -> io::Result<InterfaceStamping> {
+    #[cfg(target_os = "linux")]
+    {
+        linux::interface_stamping(name)
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = name;
+        Err(io::Error::new(
+            io::ErrorKind::Unsupported,
+            "no SIOCETHTOOL on this system",
+        ))
+    }
+}
+
 /// Waits up to `wait` for `socket`'s error queue; whether something is there.
 fn wait_for_error_queue(socket: &UdpSocket, wait: Duration) -> bool {
     #[cfg(target_os = "linux")]
@@ -442,6 +476,68 @@ mod linux {
 
     /// `ee_info` of a send stamp (`SCM_TSTAMP_SND` in linux/errqueue.h).
     const SCM_TSTAMP_SND: u32 = 0;
+
+    /// `struct ethtool_ts_info` (linux/ethtool.h).
+    #[repr(C)]
+    #[derive(Default)]
+    struct EthtoolTsInfo {
+        cmd: u32,
+        so_timestamping: u32,
+        phc_index: i32,
+        tx_types: u32,
+        tx_reserved: [u32; 3],
+        rx_filters: u32,
+        rx_reserved: [u32; 3],
+    }
+
+    /// `ETHTOOL_GET_TS_INFO` (linux/ethtool.h).
+    const ETHTOOL_GET_TS_INFO: u32 = 0x41;
+
+    pub(super) fn interface_stamping(name: &str) -> io::Result<super::InterfaceStamping> {
+        use std::os::fd::AsRawFd;
+        let bytes = name.as_bytes();
+        if bytes.is_empty() || bytes.len() >= libc::IFNAMSIZ || bytes.contains(&0) {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("{name:?} is no interface name (1 to 15 bytes, no NUL)"),
+            ));
+        }
+        let socket = std::net::UdpSocket::bind("0.0.0.0:0")?;
+        let mut info = EthtoolTsInfo {
+            cmd: ETHTOOL_GET_TS_INFO,
+            ..EthtoolTsInfo::default()
+        };
+        // SAFETY: all-zero bytes are a valid ifreq (a name and a union of plain fields).
+        let mut request: libc::ifreq = unsafe { std::mem::zeroed() };
+        for (to, from) in request.ifr_name.iter_mut().zip(bytes) {
+            *to = *from as libc::c_char;
+        }
+        request.ifr_ifru.ifru_data = (&mut info as *mut EthtoolTsInfo).cast();
+        // SAFETY: SIOCETHTOOL reads the NUL-terminated name and writes one ethtool_ts_info
+        // through ifru_data, which points at `info`, alive for the call.
+        let rc = unsafe {
+            libc::ioctl(
+                socket.as_raw_fd(),
+                libc::SIOCETHTOOL as _,
+                &mut request as *mut libc::ifreq,
+            )
+        };
+        if rc != 0 {
+            let e = io::Error::last_os_error();
+            return Err(io::Error::new(
+                e.kind(),
+                format!("{name}: ETHTOOL_GET_TS_INFO: {e}"),
+            ));
+        }
+        let has = |flag: u32| info.so_timestamping & flag != 0;
+        Ok(super::InterfaceStamping {
+            software_send: has(libc::SOF_TIMESTAMPING_TX_SOFTWARE),
+            software_receive: has(libc::SOF_TIMESTAMPING_RX_SOFTWARE),
+            hardware_send: has(libc::SOF_TIMESTAMPING_TX_HARDWARE),
+            hardware_receive: has(libc::SOF_TIMESTAMPING_RX_HARDWARE),
+            phc_index: u32::try_from(info.phc_index).ok(),
+        })
+    }
 
     pub(super) struct Received {
         pub len: usize,
@@ -644,6 +740,23 @@ mod tests {
             checked_send_stamp(None, 10, 20, 5),
             Err(Fallback::NoSendStamp)
         );
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn loopback_stamps_in_software_only_and_bad_names_are_errors() {
+        let lo = interface_stamping("lo").unwrap();
+        assert!(lo.software_send && lo.software_receive, "{lo:?}");
+        assert!(!lo.hardware_send && !lo.hardware_receive, "{lo:?}");
+        assert_eq!(lo.phc_index, None);
+        let e = interface_stamping("no-such-if0").unwrap_err();
+        assert!(e.to_string().contains("no-such-if0"), "{e}");
+        for bad in ["", "a-name-longer-than-15", "l\0o"] {
+            assert_eq!(
+                interface_stamping(bad).unwrap_err().kind(),
+                io::ErrorKind::InvalidInput
+            );
+        }
     }
 
     #[cfg(target_os = "linux")]
