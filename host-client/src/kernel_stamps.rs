@@ -598,7 +598,7 @@ mod linux {
             let mut c = libc::CMSG_FIRSTHDR(h);
             while !c.is_null() {
                 let data = libc::CMSG_DATA(c);
-                let len = (*c).cmsg_len as usize - (data as usize - c as usize);
+                let len = ((*c).cmsg_len as usize).saturating_sub(data as usize - c as usize);
                 let (level, kind) = ((*c).cmsg_level, (*c).cmsg_type);
                 if level == libc::SOL_SOCKET
                     && kind == libc::SCM_TIMESTAMPING
