@@ -305,6 +305,19 @@ fn a_claiming_capture_maps_box_time_by_read_tick_exchanges() {
     let v = json(&out);
     let sent = v["read_ticks_sent"].as_u64().unwrap();
     assert!((15..=40).contains(&sent), "{v}");
+    // the exchanges' send times are the kernel's send stamps; any that fell back to the
+    // host's clock is counted with its reason
+    let stamps = &v["exchange_stamps"];
+    let kernel = stamps["kernel"].as_u64().unwrap();
+    let user_space = stamps["user_space"].as_u64().unwrap();
+    assert!(kernel > 0 && kernel >= user_space, "{stamps}");
+    let fallbacks: u64 = stamps["fallbacks"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|n| n.as_u64().unwrap())
+        .sum();
+    assert_eq!(fallbacks, user_space, "{stamps}");
     let times = &v["host_times"][0];
     assert_eq!(times["source"], "exchanges", "{v}");
     assert_eq!(times["restarts"], 0);

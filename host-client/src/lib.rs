@@ -26,11 +26,13 @@
 pub mod bad_input;
 pub mod bench;
 mod box_map;
+pub mod clock_bench;
 pub mod clock_map;
 pub mod control;
 pub mod convert;
 pub mod decoder;
 pub mod frame;
+pub mod kernel_stamps;
 pub mod live;
 pub mod other_traffic;
 pub mod output;

@@ -293,8 +293,10 @@ mod linux {
     use std::os::fd::RawFd;
     use std::time::Duration;
 
-    /// Control buffer of one message, aligned for `cmsghdr`: room for a timespec.
-    type Control = [u64; 8];
+    /// Control buffer of one message, aligned for `cmsghdr`: room for the SO_TIMESTAMPNS
+    /// timespec (32 bytes) and, on a socket that also asks for SO_TIMESTAMPING (a capture
+    /// sending read-tick commands), its scm_timestamping (64 bytes).
+    type Control = [u64; 16];
 
     pub(super) struct MmsgBuffers {
         headers: Vec<libc::mmsghdr>,
@@ -318,7 +320,7 @@ mod linux {
                 ],
                 // SAFETY: as above.
                 names: (0..batch).map(|_| unsafe { std::mem::zeroed() }).collect(),
-                controls: vec![[0; 8]; batch],
+                controls: vec![[0; 16]; batch],
             }
         }
 
@@ -386,7 +388,7 @@ mod linux {
         };
         // SAFETY: all-zero bytes are valid values of these plain C structs.
         let mut name: libc::sockaddr_storage = unsafe { std::mem::zeroed() };
-        let mut control: Control = [0; 8];
+        let mut control: Control = [0; 16];
         // SAFETY: as above.
         let mut h: libc::msghdr = unsafe { std::mem::zeroed() };
         h.msg_name = (&mut name as *mut libc::sockaddr_storage).cast();
@@ -645,14 +647,37 @@ pub fn send_read_ticks(
     every: Duration,
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
 ) -> std::thread::JoinHandle<u64> {
+    send_read_ticks_stamped(socket, to, box_id, every, stop, None)
+}
+
+/// How long the read-tick sender waits for a command's send stamp on the error queue.
+pub const SEND_STAMP_WAIT: Duration = Duration::from_millis(5);
+
+/// [`send_read_ticks`], and with `send_stamps` the kernel's send stamp of every command
+/// ([`crate::kernel_stamps`]: SO_TIMESTAMPING turned on for `socket`, which the capture's
+/// socket shares): each command's stamp, or why it has none, goes to `send_stamps` under
+/// the command's host time, for the [`crate::timing::Timing`] that takes the
+/// acknowledgements ([`crate::timing::Timing::with_send_stamps`]).
+pub fn send_read_ticks_stamped(
+    socket: std::net::UdpSocket,
+    to: SocketAddr,
+    box_id: u16,
+    every: Duration,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    send_stamps: Option<crate::kernel_stamps::CommandSendStamps>,
+) -> std::thread::JoinHandle<u64> {
+    use crate::kernel_stamps::{self, Fallback, SendStamps};
     std::thread::spawn(move || {
+        let stamped = send_stamps
+            .as_ref()
+            .map(|_| kernel_stamps::enable(&socket).is_ok());
+        let mut from_error_queue = SendStamps::new();
+        // the kernel numbers the datagrams sent after the option was set, from 0
+        let mut send_id = 0u32;
         let mut sent = 0u64;
         let mut last_sequence = 0u32;
         while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-            let now_ns = SystemTime::now()
-                .duration_since(SystemTime::UNIX_EPOCH)
-                .unwrap_or_default()
-                .as_nanos() as u64;
+            let now_ns = crate::clock_map::host_clock::realtime_ns();
             let sequence = ((now_ns / 1_000) as u32).max(last_sequence.wrapping_add(1));
             last_sequence = sequence;
             let command = skinbox_protocol::command::CommandRepr {
@@ -663,6 +688,22 @@ pub fn send_read_ticks(
             };
             if socket.send_to(&command.to_bytes(), to).is_ok() {
                 sent += 1;
+                let after_ns = crate::clock_map::host_clock::realtime_ns();
+                if let (Some(stamps), Some(enabled)) = (&send_stamps, stamped) {
+                    let stamp = if enabled {
+                        let stamp = from_error_queue.take(&socket, send_id, SEND_STAMP_WAIT);
+                        send_id = send_id.wrapping_add(1);
+                        kernel_stamps::checked_send_stamp(
+                            stamp,
+                            now_ns,
+                            after_ns,
+                            SEND_STAMP_WAIT.as_nanos() as u64,
+                        )
+                    } else {
+                        Err(Fallback::NotEnabled)
+                    };
+                    stamps.record(now_ns, stamp);
+                }
             }
             std::thread::sleep(every);
         }

@@ -76,6 +76,41 @@ pub struct BoxTimeSummary {
     pub restarts: u64,
 }
 
+/// How long an acknowledgement waits for its command's send stamp to be recorded
+/// ([`Timing::with_send_stamps`]; it comes microseconds after the send, but the sending
+/// thread may be preempted).
+pub const SEND_STAMP_WAIT: Duration = Duration::from_millis(2);
+
+/// How the exchanges' host send times were stamped (their receive times are the
+/// datagrams' receive stamps: the kernel's for a live capture).
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ExchangeStampCounts {
+    /// Exchanges whose send time is the kernel's software send stamp of the command
+    /// (SO_TIMESTAMPING, [`crate::kernel_stamps`]).
+    pub kernel: u64,
+    /// Exchanges whose send time is the host time the command carries, read in user
+    /// space just before it was sent.
+    pub user_space: u64,
+    /// Why exchanges fell back to the user-space send time although kernel stamps were
+    /// asked for, by reason ([`crate::kernel_stamps::Fallback::name`]; `not_recorded`:
+    /// the sender had not read its stamp within [`SEND_STAMP_WAIT`] of the
+    /// acknowledgement).
+    pub fallbacks: std::collections::BTreeMap<&'static str, u64>,
+}
+
+impl ExchangeStampCounts {
+    /// Which send stamps the exchanges used: `kernel`, `user_space`, `mixed`, or `none`
+    /// (no exchange yet).
+    pub fn name(&self) -> &'static str {
+        match (self.kernel, self.user_space) {
+            (0, 0) => "none",
+            (_, 0) => "kernel",
+            (0, _) => "user_space",
+            _ => "mixed",
+        }
+    }
+}
+
 /// Sample times and host times of every record, per box (box id and source address: two
 /// boxes of one id from two addresses are two boxes with two maps).
 #[derive(Debug, Clone)]
@@ -88,6 +123,10 @@ pub struct Timing {
     /// Read-tick acknowledgements that could not be used: no boot id seen yet, or an
     /// exchange that cannot be true.
     exchanges_unused: u64,
+    /// The kernel's send stamps of the read-tick commands, where asked for.
+    send_stamps: Option<crate::kernel_stamps::CommandSendStamps>,
+    /// How the exchanges' send times were stamped.
+    exchange_stamps: ExchangeStampCounts,
 }
 
 impl Timing {
@@ -112,7 +151,24 @@ impl Timing {
             receive: BoxMap::default(),
             boot_ids: HashMap::new(),
             exchanges_unused: 0,
+            send_stamps: None,
+            exchange_stamps: ExchangeStampCounts::default(),
         }
+    }
+
+    /// The same timing with the kernel's send stamps of the read-tick commands
+    /// ([`crate::live::send_read_ticks_stamped`]): an acknowledgement's exchange takes its
+    /// command's send stamp as host send time, else (counted in
+    /// [`Timing::exchange_stamps`]) the host time the command carries. An acknowledgement
+    /// waits up to [`SEND_STAMP_WAIT`] for its stamp.
+    pub fn with_send_stamps(mut self, stamps: crate::kernel_stamps::CommandSendStamps) -> Timing {
+        self.send_stamps = Some(stamps);
+        self
+    }
+
+    /// How the exchanges' host send times were stamped.
+    pub fn exchange_stamps(&self) -> &ExchangeStampCounts {
+        &self.exchange_stamps
     }
 
     /// The next datagram, `payload`, from `source` (where known), was received at
@@ -193,8 +249,30 @@ impl Timing {
             self.exchanges_unused += 1;
             return;
         };
+        let host_send_ns = match self
+            .send_stamps
+            .as_ref()
+            .map(|s| s.take_waiting(ack.host_time, SEND_STAMP_WAIT))
+        {
+            Some(Some(Ok(stamp))) => {
+                self.exchange_stamps.kernel += 1;
+                stamp
+            }
+            fell_back => {
+                self.exchange_stamps.user_space += 1;
+                let why = match fell_back {
+                    Some(Some(Err(why))) => Some(why.name()),
+                    Some(None) => Some("not_recorded"),
+                    _ => None,
+                };
+                if let Some(why) = why {
+                    *self.exchange_stamps.fallbacks.entry(why).or_insert(0) += 1;
+                }
+                ack.host_time
+            }
+        };
         let exchange = TimeExchange {
-            host_send_ns: ack.host_time,
+            host_send_ns,
             box_receive_tick: ack.receive_tick,
             box_send_tick: ack.send_tick,
             host_receive_ns: receive.as_nanos() as u64,
@@ -505,5 +583,41 @@ pub(crate) mod tests {
         let before = t.exchanges_unused();
         t.datagram_received(at(6_020_000), None, &other);
         assert_eq!(t.exchanges_unused(), before);
+    }
+
+    #[test]
+    fn an_exchange_takes_its_commands_kernel_send_stamp_or_counts_why_not() {
+        use crate::kernel_stamps::{CommandSendStamps, Fallback};
+        let stamps = CommandSendStamps::new();
+        let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown))
+            .with_send_stamps(stamps.clone());
+        let at = |ns: u64| Some(Duration::from_nanos(ns));
+        t.datagram_received(at(2_500_000), None, &status(3, 9));
+        // the command carried 3.000 ms; the kernel sent it at 3.004 ms: the exchange's
+        // round trip is 16.8 us less, its offset 2 us later
+        stamps.record(3_000_000, Ok(3_004_000));
+        t.datagram_received(at(3_020_800), None, &read_tick_ack(3, 3_000_000, 20_000));
+        assert_eq!(t.exchange_stamps().kernel, 1);
+        assert_eq!(t.exchange_stamps().name(), "kernel");
+        let bound = t.summary()[0].error_bound_ns.unwrap();
+        assert!(
+            (bound - 8_000.0).abs() <= 1.0,
+            "half of 16.8 - 0.8 us: {bound}"
+        );
+        // no stamp recorded, and one that says why: the user-space send time, counted
+        stamps.record(4_000_000, Err(Fallback::NoSendStamp));
+        t.datagram_received(at(4_020_800), None, &read_tick_ack(3, 4_000_000, 145_000));
+        t.datagram_received(at(5_020_800), None, &read_tick_ack(3, 5_000_000, 270_000));
+        let counts = t.exchange_stamps();
+        assert_eq!((counts.kernel, counts.user_space), (1, 2));
+        assert_eq!(counts.name(), "mixed");
+        assert_eq!(counts.fallbacks.get("no_send_stamp"), Some(&1));
+        assert_eq!(counts.fallbacks.get("not_recorded"), Some(&1));
+        // without send stamps asked for, nothing is a fallback
+        let mut plain = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
+        plain.datagram_received(at(2_500_000), None, &status(3, 9));
+        plain.datagram_received(at(3_020_800), None, &read_tick_ack(3, 3_000_000, 20_000));
+        assert_eq!(plain.exchange_stamps().user_space, 1);
+        assert!(plain.exchange_stamps().fallbacks.is_empty());
     }
 }

@@ -147,3 +147,71 @@ fn a_box_reset_restarts_the_mapping() {
     let mapped = map.to_host(1_000).unwrap();
     assert!((mapped.host_ns - 20_000_050_000.0).abs() <= mapped.error_bound_ns.unwrap());
 }
+
+/// The same loopback responder twice in one run: the exchanges stamped in user space
+/// around `send_to` and `recv`, then by the kernel (`SO_TIMESTAMPING`). Both mappings stay
+/// within their bound at every exchange; the kernel's stamps are in order and bracket each
+/// reply. The figures are printed, not asserted (shared machines are noisy).
+#[cfg(target_os = "linux")]
+#[test]
+fn kernel_stamped_exchanges_map_within_their_bound_beside_user_space_ones() {
+    use skinbox_host::clock_bench::{clock_map_loopback, ClockMapBenchConfig, ExchangeStamping};
+    use skinbox_host::kernel_stamps::StampSource;
+    // 300 exchanges 2 ms apart, an 80 ppm fast box, 0-60 us of delay in, 0-20 us out
+    let config = ClockMapBenchConfig::default();
+    const EXCHANGES: usize = 300;
+    assert_eq!(config.exchanges, EXCHANGES);
+    let user = clock_map_loopback(ExchangeStamping::UserSpace, &config).unwrap();
+    let kernel = clock_map_loopback(ExchangeStamping::Kernel, &config).unwrap();
+    for run in [&user, &kernel] {
+        assert_eq!(run.samples.len(), EXCHANGES, "{:?}", run.stamping);
+        for (i, s) in run.samples.iter().enumerate() {
+            assert!(
+                s.error_ns <= s.bound_ns + 8.0,
+                "{:?} exchange {i}: error {:.0} ns beyond the bound {:.0} ns",
+                run.stamping,
+                s.error_ns,
+                s.bound_ns
+            );
+        }
+        let (drift, bound) = (run.drift_ppm.unwrap(), run.drift_bound_ppm.unwrap());
+        assert!(
+            (drift + 80.0).abs() <= bound,
+            "drift {drift} +- {bound} ppm"
+        );
+        let e = run.error_us();
+        eprintln!(
+            "{:?}: mapping error p50 {:.2} us, p99 {:.2} us, max {:.2} us; stamps {:?}, fallbacks {:?}, warm-up {}",
+            run.stamping, e.p50, e.p99, e.max, run.sources(), run.fallbacks, run.warm_up_exchanges
+        );
+    }
+    assert!(user
+        .samples
+        .iter()
+        .all(|s| s.source == StampSource::UserSpace));
+    assert_eq!(kernel.not_enabled, None);
+    // loopback always has software stamps once they are on: a fallback is counted, and
+    // rare
+    let stamped: Vec<_> = kernel
+        .samples
+        .iter()
+        .filter(|s| s.source == StampSource::KernelSoftware)
+        .collect();
+    assert!(
+        stamped.len() >= EXCHANGES * 9 / 10,
+        "{} of {EXCHANGES} kernel-stamped, fallbacks {:?}",
+        stamped.len(),
+        kernel.fallbacks
+    );
+    let fell_back: u64 = kernel.fallbacks.values().sum();
+    assert_eq!(fell_back as usize, EXCHANGES - stamped.len());
+    let mut last_receive = 0;
+    for s in &stamped {
+        let e = s.exchange;
+        assert!(e.host_send_ns <= e.host_receive_ns, "{e:?}");
+        // the box's turnaround lies inside the stamps
+        assert!(e.check().is_ok(), "{e:?}");
+        assert!(last_receive < e.host_send_ns, "stamps in order: {e:?}");
+        last_receive = e.host_receive_ns;
+    }
+}

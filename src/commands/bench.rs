@@ -16,6 +16,31 @@ pub enum BenchCommand {
     /// Verilator co-simulation: the harness against the bare model loop and the reference
     /// model.
     Sim(SimBenchArgs),
+    /// Box time to host time on loopback: the same responder twice, the exchanges stamped
+    /// in user space and by the kernel (SO_TIMESTAMPING); prints each one's mapping error
+    /// p50/p99/max side by side.
+    ClockMap(ClockMapBenchArgs),
+}
+
+/// Arguments of `skinbox bench clock-map`.
+#[derive(Debug, Args)]
+pub struct ClockMapBenchArgs {
+    /// Exchanges of each method (after a warm-up of at least 10).
+    #[arg(long, default_value_t = 1000)]
+    pub exchanges: usize,
+    /// Wait between exchanges, ms.
+    #[arg(long, default_value_t = 2)]
+    pub interval_ms: u64,
+    /// How much faster the responder's box clock runs, ppm.
+    #[arg(long, default_value_t = 80.0)]
+    pub drift_ppm: f64,
+    /// Most random delay the responder adds before it stamps a request, us (a path
+    /// asymmetry the host cannot see; 0: none).
+    #[arg(long, default_value_t = 60)]
+    pub delay_in_us: u64,
+    /// Most random delay it adds after it stamps its answer, us.
+    #[arg(long, default_value_t = 20)]
+    pub delay_out_us: u64,
 }
 
 /// Arguments of `skinbox bench sim`.
@@ -204,6 +229,80 @@ pub fn run(what: BenchCommand, json: bool) -> anyhow::Result<()> {
                     r.files_identical,
                     "the pipelined recording differs from the one-thread recording"
                 );
+            }
+            Ok(())
+        }
+        BenchCommand::ClockMap(a) => {
+            use skinbox_host::clock_bench::{
+                clock_map_loopback, ClockMapBenchConfig, ExchangeStamping,
+            };
+            anyhow::ensure!(a.exchanges >= 1, "--exchanges must be at least 1");
+            let config = ClockMapBenchConfig {
+                exchanges: a.exchanges,
+                interval: std::time::Duration::from_millis(a.interval_ms),
+                drift_ppm: a.drift_ppm,
+                max_delay_in_ns: a.delay_in_us * 1_000,
+                max_delay_out_ns: a.delay_out_us * 1_000,
+            };
+            let runs = [ExchangeStamping::UserSpace, ExchangeStamping::Kernel]
+                .into_iter()
+                .map(|stamping| clock_map_loopback(stamping, &config))
+                .collect::<Result<Vec<_>, _>>()?;
+            let beyond_bound = |r: &skinbox_host::clock_bench::ClockMapRun| {
+                r.samples
+                    .iter()
+                    .filter(|s| s.error_ns > s.bound_ns + 8.0)
+                    .count()
+            };
+            if json {
+                let methods: Vec<_> = runs
+                    .iter()
+                    .map(|r| {
+                        serde_json::json!({
+                            "stamping": r.stamping,
+                            "error_us": r.error_us(),
+                            "stamps": r.sources(),
+                            "fallbacks": r.fallbacks,
+                            "not_enabled": r.not_enabled,
+                            "warm_up_exchanges": r.warm_up_exchanges,
+                            "beyond_bound": beyond_bound(r),
+                            "drift_ppm": r.drift_ppm,
+                            "drift_bound_ppm": r.drift_bound_ppm,
+                        })
+                    })
+                    .collect();
+                return super::print_json(&serde_json::json!({
+                    "config": config,
+                    "methods": methods,
+                    "goal_p99_us": 5.0,
+                }));
+            }
+            println!(
+                "box time to host time on loopback: {} exchanges {} ms apart, box {} ppm fast, 0-{} us delay in, 0-{} us out",
+                a.exchanges, a.interval_ms, a.drift_ppm, a.delay_in_us, a.delay_out_us
+            );
+            println!(
+                "{:<12} {:>9} {:>9} {:>9}  stamps, fallbacks, beyond bound",
+                "method", "p50 us", "p99 us", "max us"
+            );
+            for r in &runs {
+                let e = r.error_us();
+                let name = match r.stamping {
+                    ExchangeStamping::UserSpace => "user space",
+                    ExchangeStamping::Kernel => "kernel",
+                };
+                println!(
+                    "{name:<12} {:>9.2} {:>9.2} {:>9.2}  {:?}, {:?}, {}",
+                    e.p50,
+                    e.p99,
+                    e.max,
+                    r.sources(),
+                    r.fallbacks,
+                    beyond_bound(r)
+                );
+                if let Some(why) = &r.not_enabled {
+                    println!("  no kernel stamps: {why}");
+                }
             }
             Ok(())
         }

@@ -51,6 +51,12 @@ pub struct CaptureArgs {
     /// host times then come with an error bound). 0: none.
     #[arg(long, default_value_t = 100, requires = "claim")]
     pub exchange_ms: u64,
+    /// With --claim: take each exchange's host send time from the host's own clock just
+    /// before the command is sent, not from the kernel's send stamp (SO_TIMESTAMPING, the
+    /// default; an exchange without one falls back to the host's clock, counted in
+    /// `exchange_stamps`).
+    #[arg(long, requires = "claim")]
+    pub user_space_stamps: bool,
     /// Write every record as a CSV row to this file (`-`: stdout), with its sample time in
     /// box time and in host time (CLOCK_REALTIME, from the kernel's receive timestamps).
     #[arg(long)]
@@ -86,6 +92,9 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             live::usable_recv_buffer(granted)
         );
         let stop_read_ticks = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        // the kernel's send stamps of the read-tick commands, for the exchanges
+        let send_stamps = (args.claim.is_some() && args.exchange_ms > 0 && !args.user_space_stamps)
+            .then(skinbox_host::kernel_stamps::CommandSendStamps::new);
         let (socket, claimed, read_ticks) = match &args.claim {
             Some(box_addr) => {
                 let live::Claimed {
@@ -96,12 +105,13 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 } = live::claim(socket, box_addr).map_err(|e| anyhow::anyhow!("--claim {e}"))?;
                 eprintln!("claimed the stream: {}", exchange.ack);
                 let read_ticks = (args.exchange_ms > 0).then(|| {
-                    live::send_read_ticks(
+                    live::send_read_ticks_stamped(
                         sender,
                         to,
                         exchange.ack.box_id,
                         Duration::from_millis(args.exchange_ms),
                         stop_read_ticks.clone(),
+                        send_stamps.clone(),
                     )
                 });
                 (socket, Some(exchange), read_ticks)
@@ -122,6 +132,13 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         let rate_hz = args
             .sample_rate_hz
             .unwrap_or(skinbox_host::decoder::ASSUMED_SAMPLE_RATE_HZ);
+        let timing = |rate_hz| -> anyhow::Result<skinbox_host::timing::Timing> {
+            let t = args.timing.timing(rate_hz)?;
+            Ok(match &send_stamps {
+                Some(s) => t.with_send_stamps(s.clone()),
+                None => t,
+            })
+        };
         let mut rows = match &args.rows {
             Some(path) => {
                 let out: Box<dyn Write> = if path.as_os_str() == "-" {
@@ -139,7 +156,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 };
                 Some(
                     RowWriter::new(std::io::BufWriter::new(out), RowFormat::Csv, kind)
-                        .with_timing(args.timing.timing(rate_hz)?),
+                        .with_timing(timing(rate_hz)?),
                 )
             }
             None => None,
@@ -193,7 +210,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 eprintln!("ROS 2 topics over DDS in domain {}", dds.domain());
                 outputs.push(Box::new(DdsReport(dds)));
             }
-            let timing = args.timing.timing(rate_hz)?;
+            let timing = timing(rate_hz)?;
             let settings = args.ros.settings()?;
             if args.ros.foxglove.is_none() && !args.ros.ros2 {
                 // A recording only: the messages and the file on a thread of their own,
@@ -250,6 +267,13 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             .and_then(|w| w.timing())
             .or(ros.as_ref().map(|r| r.timing()))
             .map(|t| t.summary());
+        // which stamps the exchanges' send times are (with --claim and a timing)
+        let exchange_stamps = rows
+            .as_ref()
+            .and_then(|w| w.timing())
+            .or(ros.as_ref().map(|r| r.timing()))
+            .filter(|_| read_ticks_sent.is_some())
+            .map(|t| t.exchange_stamps().clone());
         let published = match ros {
             Some(r) => Some(r.finish()?),
             None => None,
@@ -290,12 +314,26 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 "host_times": host_times,
                 "read_ticks_sent": read_ticks_sent,
                 "exchanges_unused": exchanges_unused,
+                "exchange_stamps": exchange_stamps,
                 "ros": published,
             }))
         } else {
             print!("{}", report.summary());
             if let Some(times) = &host_times {
                 println!("host times: {}", super::host_time_line(times));
+            }
+            if let Some(s) = &exchange_stamps {
+                println!(
+                    "exchange send stamps: {} ({} kernel, {} user space{})",
+                    s.name(),
+                    s.kernel,
+                    s.user_space,
+                    if s.fallbacks.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; fell back: {:?}", s.fallbacks)
+                    }
+                );
             }
             if let Some(p) = &published {
                 println!(
