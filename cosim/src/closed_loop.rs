@@ -376,13 +376,13 @@ fn run_rtl(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<ClosedLoopRun, CosimError> {
     let sim = &spec.sim;
+    let mut cells = Cells::new(spec)?;
     let model = Model::build(&sim.config, sim.vcd.is_some(), &default_cache_dir())?;
     let mut dut = Dut::new(&model, sim.vcd.as_deref())?;
     for f in &sim.host_frames {
         dut.queue_rx_frame(f.edge, &f.wire())
             .map_err(CosimError::HostFrames)?;
     }
-    let mut cells = Cells::new(spec)?;
     let cycles = cycles(sim);
     // no command from the host: nothing comes down, the cells run as generated
     let step = match sim.host_frames.is_empty() {
