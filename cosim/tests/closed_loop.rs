@@ -214,3 +214,35 @@ fn a_bit_flipped_on_the_way_down_makes_the_cells_miss_the_command() {
     // bus 1 stays at 8 ms; the rest as the commands say
     assert_commands_applied(&run, false);
 }
+
+#[test]
+fn a_command_heard_after_the_pins_it_changes_were_driven_is_refused() {
+    use skinbox_cosim::closed_loop::Cells;
+    use skinbox_cosim::error::CosimError;
+    use skinbox_model::cell_uart::ReceivedPacket;
+    use skinbox_protocol::cell_command::ALL_CELLS;
+    let spec = spec();
+    let event_mode = ReceivedPacket {
+        port: 1,
+        tick: 20 * MS,
+        bytes: CellCommandRepr {
+            cell_id: ALL_CELLS,
+            command: CellCommand::Mode(CellMode::Event),
+        }
+        .to_bytes(),
+    };
+    // heard in time (the step ends as the packet is whole): bus 1 changes, bus 0 does not
+    let mut cells = Cells::new(&spec).unwrap();
+    let before: Vec<_> = (0..2).map(|p| cells.transitions(p).to_vec()).collect();
+    let whole = skinbox_cosim::run::TICK_ZERO_CYCLE + 20 * MS + 200 * 125 / 4;
+    assert_eq!(cells.receive(&[event_mode], whole).unwrap(), vec![1]);
+    assert_eq!(cells.transitions(0), &before[0][..]);
+    assert_ne!(cells.transitions(1), &before[1][..]);
+    // heard 10 ms late: bus 1's cells would have changed packets already on the pin
+    let mut cells = Cells::new(&spec).unwrap();
+    let late = whole + 10 * MS;
+    assert!(matches!(
+        cells.receive(&[event_mode], late),
+        Err(CosimError::ClosedLoop(_))
+    ));
+}
