@@ -325,15 +325,26 @@ fn time_sync_through_the_rtl_downlink_puts_every_cell_within_20_us() {
     std::fs::create_dir_all(&dir).unwrap();
     let pcap = dir.join("sync.pcap");
     let r = sim_json(
-        &["synced_bus", "--from-ms", "1050", "--duration-ms", "120"],
+        &[
+            "synced_bus",
+            "--from-ms",
+            "1050",
+            "--duration-ms",
+            "120",
+            "--check-plan",
+        ],
         &pcap,
     );
     let d = &r["downlink"];
     // the sync at 1100 ms is inside the window (the earlier ones reached the cells at
-    // their own time)
+    // their own time); the cells' receiver heard it on the pin and the cells were generated
+    // again with it
     assert_eq!(d["commands_sent"], 1, "{d}");
     assert_eq!(d["commands_accepted"], 1, "{d}");
     assert_eq!(d["packets_on_pins"], 1, "{d}");
+    assert_eq!(d["cells_received"]["packets"], 1, "{d}");
+    assert_eq!(d["cells_received"]["framing_errors"], 0, "{d}");
+    assert_eq!(d["cell_generations"], 2, "{d}");
     let (c, a) = (
         &r["synced_sample_time_error_us"],
         &r["arrival_stamp_error_us"],

@@ -46,6 +46,9 @@ pub enum CosimError {
     /// A scene has more or fewer buses than a box has ports.
     #[error("the scene has {0} buses; the box has 1 to 64 ports")]
     Ports(usize),
+    /// A closed-loop run's cells could not follow the box's downlink.
+    #[error("closed loop: {0}")]
+    ClosedLoop(String),
     /// The shared library could not be loaded.
     #[error("loading {path}: {message}")]
     Load { path: PathBuf, message: String },

@@ -12,7 +12,8 @@
 //!
 //! [`harness`] plays pin lines ([`line`](mod@line)) into it; [`run`] and [`sim`] run a
 //! spec on the RTL or on the reference model and check every frame with
-//! `skinbox_frame_check`. The box's behaviour models (reference, control, downlink,
+//! `skinbox_frame_check`; [`closed_loop`] runs a scene whose cells hear the box's transmit
+//! pins. The box's behaviour models (reference, control, downlink,
 //! emulator core) and their timing contract with the gateware are the `skinbox_model`
 //! crate's; [`reference`](mod@reference) runs its reference model on a spec.
 //!
@@ -21,6 +22,7 @@
 pub mod bench;
 mod binding;
 pub mod cache_lock;
+pub mod closed_loop;
 pub mod dut;
 pub mod error;
 pub mod frames;

@@ -119,19 +119,23 @@ pub fn lines(spec: &SimSpec) -> (Vec<Vec<Transition>>, Vec<Vec<f64>>) {
     spec.ports
         .iter()
         .enumerate()
-        .map(|(port, packets)| {
-            let bytes: Vec<UartByte> = packets
-                .iter()
-                .flat_map(|p| back_to_back(&p.bytes, p.start_ns, p.bit_ns))
-                .collect();
-            let jitter = Jitter {
-                seed: spec.jitter.seed.wrapping_add(port as u64),
-                ..spec.jitter
-            };
-            let (line, starts) = jittered_transitions(&bytes, &jitter);
-            (line, starts.iter().step_by(PACKET_LEN).copied().collect())
-        })
+        .map(|(port, packets)| line(packets, &spec.jitter, port))
         .unzip()
+}
+
+/// Port `port`'s pin transitions for `packets` with the spec's `jitter` (seeded for the
+/// port) and the true, jittered start edge of every packet, ns.
+pub fn line(packets: &[SentPacket], jitter: &Jitter, port: usize) -> (Vec<Transition>, Vec<f64>) {
+    let bytes: Vec<UartByte> = packets
+        .iter()
+        .flat_map(|p| back_to_back(&p.bytes, p.start_ns, p.bit_ns))
+        .collect();
+    let jitter = Jitter {
+        seed: jitter.seed.wrapping_add(port as u64),
+        ..*jitter
+    };
+    let (line, starts) = jittered_transitions(&bytes, &jitter);
+    (line, starts.iter().step_by(PACKET_LEN).copied().collect())
 }
 
 /// Clock cycles a spec runs for.

@@ -3,7 +3,7 @@
 use crate::line::Jitter;
 use crate::run::{HostFrame, SentPacket, SimSpec, TICK_ZERO_CYCLE};
 use skinbox_cells::bus::DOWNLINK_PACKET_NS;
-use skinbox_cells::scene::{BusDownlink, GenerateOptions, Generated, Scene};
+use skinbox_cells::scene::{BusDownlink, BusStream, GenerateOptions, Generated, Scene};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_model::control::{udp_frame, BoxControl, ControlConfig};
 use skinbox_model::downlink::{PacketStart, PinChange};
@@ -35,30 +35,13 @@ pub const PORTS_READY_NS: u64 = crate::run::PORTS_READY_CYCLE * TICK_NS;
 /// counts every packet.
 pub fn spec(generated: &Generated, config: BoxConfig, from_ns: u64, duration_ns: u64) -> SimSpec {
     assert_eq!(config.ports, generated.buses.len(), "one port per bus");
-    let lead_ns = PORTS_READY_NS as f64;
     let ports = generated
         .buses
         .iter()
-        .map(|bus| {
-            bus.packets
-                .iter()
-                .filter(|p| p.pin_edge_ps >= from_ns * 1000)
-                .filter(|p| p.pin_end_ps() / 1000 <= from_ns + duration_ns)
-                .map(|p| SentPacket {
-                    bytes: p.bytes,
-                    start_ns: p.pin_edge_ps as f64 / 1000.0 - from_ns as f64 + lead_ns,
-                    bit_ns: f64::from(p.bit_period_ps) / 1000.0,
-                })
-                .collect()
-        })
+        .map(|bus| sent_packets(bus, from_ns, duration_ns))
         .collect();
     SimSpec {
-        duration_ns: (PORTS_READY_NS
-            + duration_ns
-            + config.status_period_ticks * TICK_NS
-            + DRAIN_NS)
-            .div_ceil(TICK_NS)
-            * TICK_NS,
+        duration_ns: sim_duration_ns(&config, duration_ns),
         config,
         ports,
         pcap: None,
@@ -66,6 +49,30 @@ pub fn spec(generated: &Generated, config: BoxConfig, from_ns: u64, duration_ns:
         jitter: Jitter::NONE,
         host_frames: vec![],
     }
+}
+
+/// The simulated time of a window of `duration_ns` on a box of `config`: the ports' reset
+/// before it, one status period and [`DRAIN_NS`] after it, in whole ticks.
+pub fn sim_duration_ns(config: &BoxConfig, duration_ns: u64) -> u64 {
+    (PORTS_READY_NS + duration_ns + config.status_period_ticks * TICK_NS + DRAIN_NS)
+        .div_ceil(TICK_NS)
+        * TICK_NS
+}
+
+/// The packets of `bus` on its box pin in a simulation of the window from scene time
+/// `from_ns` for `duration_ns` (as [`spec`] takes them).
+pub fn sent_packets(bus: &BusStream, from_ns: u64, duration_ns: u64) -> Vec<SentPacket> {
+    let lead_ns = PORTS_READY_NS as f64;
+    bus.packets
+        .iter()
+        .filter(|p| p.pin_edge_ps >= from_ns * 1000)
+        .filter(|p| p.pin_end_ps() / 1000 <= from_ns + duration_ns)
+        .map(|p| SentPacket {
+            bytes: p.bytes,
+            start_ns: p.pin_edge_ps as f64 / 1000.0 - from_ns as f64 + lead_ns,
+            bit_ns: f64::from(p.bit_period_ps) / 1000.0,
+        })
+        .collect()
 }
 
 /// Generates `scene` for `duration_s` (overriding its own duration) and keeps the packets.
@@ -135,6 +142,28 @@ pub fn scene_ns_of_tick(tick: u64, from_ns: u64) -> u64 {
     ((tick + TICK_ZERO_CYCLE) * TICK_NS + from_ns).saturating_sub(PORTS_READY_NS)
 }
 
+/// Per bus, `scene`'s cell commands before the window from scene time `from_ns` (when no
+/// box is simulated yet): each at its own time, one after the other on each bus, a time
+/// sync carrying scene time (the simulated box starts counting at the window: the cells take
+/// its time base from its first sync on).
+pub fn downlink_before(scene: &Scene, ports: usize, from_ns: u64) -> Vec<BusDownlink> {
+    let mut per_bus: Vec<BusDownlink> = vec![vec![]; ports];
+    for &(time_ns, port, bytes, sync) in scene.command_packets().iter().filter(|c| c.0 < from_ns) {
+        for (bus, list) in per_bus.iter_mut().enumerate() {
+            if port.is_none_or(|p| p == bus) {
+                let free = list.last().map_or(0, |l| l.0 + DOWNLINK_PACKET_NS);
+                let leave_ns = time_ns.max(free);
+                let mut bytes = bytes;
+                if sync {
+                    set_sync_tick(&mut bytes, leave_ns / TICK_NS);
+                }
+                list.push((leave_ns, bytes));
+            }
+        }
+    }
+    per_bus
+}
+
 /// Plans `scene`'s cell commands through a box of `config` simulated from scene time
 /// `from_ns` for `duration_ns`: each command inside the window becomes a command frame
 /// from the host (the link's host address, sequence numbers from 1) at its time on GMII
@@ -150,23 +179,7 @@ pub fn plan_downlink(
 ) -> DownlinkPlan {
     let commands = scene.command_packets();
     let ports = config.ports;
-    let mut per_bus: Vec<BusDownlink> = vec![vec![]; ports];
-    // before the window: at their own time, one after the other on each bus, a time sync
-    // carrying scene time (the simulated box starts counting at the window: the cells
-    // take its time base from its first sync on)
-    for &(time_ns, port, bytes, sync) in commands.iter().filter(|c| c.0 < from_ns) {
-        for (bus, list) in per_bus.iter_mut().enumerate() {
-            if port.is_none_or(|p| p == bus) {
-                let free = list.last().map_or(0, |l| l.0 + DOWNLINK_PACKET_NS);
-                let leave_ns = time_ns.max(free);
-                let mut bytes = bytes;
-                if sync {
-                    set_sync_tick(&mut bytes, leave_ns / TICK_NS);
-                }
-                list.push((leave_ns, bytes));
-            }
-        }
-    }
+    let mut per_bus = downlink_before(scene, ports, from_ns);
     let window: Vec<_> = commands
         .iter()
         .filter(|c| (from_ns..from_ns + duration_ns).contains(&c.0))

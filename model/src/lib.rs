@@ -6,7 +6,8 @@
 //!   the receive path playing [`control`] at the gateware's clocks.
 //! - [`control`]: what the box does with every frame it receives (ARP, ping, commands,
 //!   counters).
-//! - [`downlink`]: the cell commands on the UART transmit pins.
+//! - [`downlink`]: the cell commands on the UART transmit pins; [`cell_uart`]: the cells'
+//!   UART receivers that decode them from the pins.
 //! - [`emulator`]: the uplink and control models played together in time slices, free of
 //!   I/O, for a box emulated on a UDP socket.
 //! - [`timing`]: the contract between the gateware and every model here, each latency the
@@ -17,6 +18,7 @@
 //! configuration, and its constants, which [`timing`]'s tests compare); not on the
 //! co-simulation, the host client or the independent frame checker.
 
+pub mod cell_uart;
 pub mod control;
 pub mod downlink;
 pub mod emulator;

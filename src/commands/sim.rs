@@ -5,7 +5,8 @@ use anyhow::Context;
 use serde::Serialize;
 use skinbox_cells::scene::Scene;
 use skinbox_cells::Mode;
-use skinbox_cosim::sim::{run_with_progress, Fidelity, SimReport};
+use skinbox_cosim::closed_loop::{run_closed_loop, ClosedLoopRun, ClosedLoopSpec};
+use skinbox_cosim::sim::{Fidelity, SimReport};
 use skinbox_gateware::interface_box::BoxConfig;
 use std::path::PathBuf;
 
@@ -64,6 +65,10 @@ pub struct Args {
     /// of the next (from the window's start), instead of at their timestamps.
     #[arg(long, requires = "host_frames")]
     host_frames_gap_us: Option<f64>,
+    /// Check the box's transmit pins against the plan of the scene's commands (the control
+    /// model's downlink, predicted before the run); the cells hear the pins either way.
+    #[arg(long, conflicts_with = "host_frames")]
+    check_plan: bool,
 }
 
 /// `--mode` values.
@@ -129,9 +134,9 @@ struct Output {
     /// The same for (c), the grid point of the box's time the cells sample on, when the
     /// scene's cells are time-synced through the box (`[time_sync]` or sync commands).
     synced_sample_time_error_us: Option<SampleTimeError>,
-    /// The scene's cell commands through the box (none with --host-frames: the cells
-    /// were not driven with what the host's own frames may have sent down).
-    downlink: Option<DownlinkOutput>,
+    /// The scene's cell commands through the box and what the cells heard of the
+    /// downlink (with --host-frames, of what the host's own frames sent down).
+    downlink: DownlinkOutput,
     /// The frames of --host-frames and what the box answered.
     host_frames: Option<HostFramesOutput>,
 }
@@ -166,20 +171,24 @@ struct HostFramesOutput {
     uart_tx_pin_changes: usize,
 }
 
-/// The scene's `[[commands]]` in the window, sent by the host to the box, and what the box
-/// sent down its UART pins.
+/// The scene's `[[commands]]` in the window, sent by the host to the box, what the box
+/// sent down its UART pins and what the cells heard there.
 #[derive(Serialize)]
 struct DownlinkOutput {
     /// Command frames the host sent.
     commands_sent: usize,
     /// Queued by the box (ack `ok`).
     commands_accepted: usize,
-    /// Refused by the box (`downlink_full`).
+    /// Refused by the box (ack `downlink_full`).
     commands_refused: usize,
-    /// Cell command packets that left the box's pins in the window.
+    /// Cell command packets the cells' UART receivers took from the box's pins.
     packets_on_pins: usize,
-    /// Transmit pin changes in the window, checked equal to the plan the cells were
-    /// driven with.
+    /// What the cells' receivers took and rejected.
+    cells_received: skinbox_model::cell_uart::ReceiverCounts,
+    /// Times the cells were generated (once ahead, then once for every step in which they
+    /// received a command).
+    cell_generations: usize,
+    /// Transmit pin changes in the window.
     pin_changes: usize,
 }
 
@@ -207,8 +216,8 @@ impl SampleTimeError {
     }
 }
 
-/// Runs the scene.
-pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
+/// The scene of `args` with its overrides, the fidelity and the box (one port per bus).
+fn scene_and_box(args: &Args) -> anyhow::Result<(Scene, Fidelity, BoxConfig)> {
     let mut scene = load_scene(args.scene.as_deref())?;
     if let Some(cells) = args.cells {
         scene.config.scene.cells = cells;
@@ -256,75 +265,64 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         status_period_ticks: (args.status_period_ms * 125_000.0).round() as u64,
         ..BoxConfig::default()
     };
-    // the scene's cell commands go from the host through the box's downlink to the cells
+    Ok((scene, fidelity, config))
+}
+
+/// Runs the scene.
+pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
+    let (scene, fidelity, config) = scene_and_box(args)?;
+    let buses = config.ports;
+    // the scene's cell commands go from the host through the box's downlink to the cells,
+    // which hear its transmit pins
     let window_ns = ((args.from_ms * 1e6) as u64, (args.duration_ms * 1e6) as u64);
-    let plan = skinbox_cosim::scene::plan_downlink(&scene, &config, window_ns.0, window_ns.1);
-    let generated = skinbox_cosim::scene::generate_with(
-        &scene,
-        (args.from_ms + args.duration_ms) * 1e-3,
-        &skinbox_cells::GenerateOptions {
-            downlink: Some(plan.per_bus.clone()),
-            ..Default::default()
-        },
-    )?;
     let pcap = args
         .pcap
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{}.pcap", scene.name())));
-    let mut spec = skinbox_cosim::scene::spec(
-        &generated,
-        config,
-        (args.from_ms * 1e6) as u64,
-        (args.duration_ms * 1e6) as u64,
-    );
-    spec.pcap = Some(pcap.clone());
-    spec.vcd = args.vcd.clone();
-    spec.host_frames = plan.host_frames.clone();
+    let mut closed = ClosedLoopSpec::new(&scene, config, window_ns.0, window_ns.1);
+    let scene_commands = closed.sim.host_frames.len();
+    closed.sim.pcap = Some(pcap.clone());
+    closed.sim.vcd = args.vcd.clone();
     if let Some(file) = &args.host_frames {
         anyhow::ensure!(
-            plan.host_frames.is_empty(),
-            "--host-frames: the scene sends {} cell commands of its own in the window ([[commands]]); use a scene without",
-            plan.host_frames.len()
+            scene_commands == 0,
+            "--host-frames: the scene sends {scene_commands} cell commands of its own in the window ([[commands]]); use a scene without"
         );
-        spec.host_frames = host_frames(file, args.host_frames_gap_us, window_ns.1)?;
+        closed.sim.host_frames = host_frames(file, args.host_frames_gap_us, window_ns.1)?;
     }
     anyhow::ensure!(
         (0.0..=50.0).contains(&args.jitter_ns),
         "--jitter-ns {} must be 0 to 50 (a fifth of a bit)",
         args.jitter_ns
     );
-    spec.jitter = skinbox_cosim::line::Jitter {
+    closed.sim.jitter = skinbox_cosim::line::Jitter {
         peak_ns: args.jitter_ns,
         seed: scene.config.scene.seed,
     };
-
-    let bar = indicatif::ProgressBar::new(spec.duration_ns / 8);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{msg} [{bar:40}] {percent}% {elapsed} (ETA {eta})",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    bar.set_message("building the model");
     anyhow::ensure!(
         fidelity == Fidelity::Rtl || args.vcd.is_none(),
         "--vcd traces the RTL; it needs --fidelity rtl"
     );
-    let run = run_with_progress(&spec, fidelity, &mut |done, _| {
+    let bar = progress_bar(closed.sim.duration_ns / 8);
+    let done = run_closed_loop(&closed, fidelity, &mut |done, _| {
         bar.set_message("simulating");
         bar.set_position(done);
     })?;
     bar.finish_and_clear();
-    let downlink = match args.host_frames {
-        None => Some(check_downlink(&plan, &run.uart_tx, &spec)?),
-        Some(_) => None,
-    };
+    let (run, spec, generated) = (&done.run, &done.spec, &done.generated);
+    let downlink = downlink_output(&done, scene_commands)?;
+    if args.check_plan {
+        check_plan(
+            &skinbox_cosim::scene::plan_downlink(&scene, &spec.config, window_ns.0, window_ns.1),
+            &run.uart_tx,
+            spec,
+        )?;
+    }
     let host_frames_output = args
         .host_frames
         .as_ref()
-        .map(|file| host_frames_output(file, &spec, &run));
-    let report = run.report;
+        .map(|file| host_frames_output(file, spec, run));
+    let report = run.report.clone();
 
     // the host told the scene's true sample rate and cell count, so its "% of data mode"
     // and per-cell rates are over the whole skin
@@ -341,37 +339,23 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     let host = decoded.report;
     let from_ns = (args.from_ms * 1e6) as u64;
     let (arrival_stamp_error_us, sample_time_error_us) = sample_time_errors(
-        &generated,
+        generated,
         &decoded.records,
         &scene,
         from_ns,
         args.duration_ms,
     );
-    let synced_sample_time_error_us = plan.starts.iter().any(|s| is_sync(&s.bytes)).then(|| {
+    let synced_sample_time_error_us = done.received.iter().any(|p| is_sync(&p.bytes)).then(|| {
         synced_sample_time_error(
-            &generated,
+            generated,
             &decoded.records,
             &scene,
             (from_ns, args.duration_ms),
-            &plan,
+            &done.received,
         )
     });
-    let dropped: u64 = generated.buses.iter().map(|b| b.stats.dropped).sum();
-    let dropped_window: u64 = generated
-        .buses
-        .iter()
-        .map(|b| b.dropped_from(from_ns))
-        .sum();
-    let bus_root_loss_warning = (dropped_window > 0).then(|| {
-        let offered = report.packets_sent + dropped_window;
-        format!(
-            "{dropped_window} packets sampled in the window were dropped at the bus roots (FIFO full), against {} that reached the box pins ({:.1} % lost): the buses are overloaded at {} cells on {buses} buses, {} Hz; use more buses or a lower sample rate",
-            report.packets_sent,
-            100.0 * dropped_window as f64 / offered.max(1) as f64,
-            scene.config.scene.cells,
-            scene.config.scene.sample_rate_hz
-        )
-    });
+    let (dropped, dropped_window, bus_root_loss_warning) =
+        bus_root_losses(generated, from_ns, report.packets_sent, &scene);
     let out = Output {
         scene: scene.name().to_string(),
         cells: scene.config.scene.cells,
@@ -399,6 +383,33 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     }
     print_summary(&out);
     Ok(())
+}
+
+/// Packets dropped at the bus roots since the scene start and in the window from `from_ns`
+/// (against `sent` on the pins there), and a warning when the window lost any.
+fn bus_root_losses(
+    generated: &skinbox_cells::Generated,
+    from_ns: u64,
+    sent: u64,
+    scene: &Scene,
+) -> (u64, u64, Option<String>) {
+    let dropped: u64 = generated.buses.iter().map(|b| b.stats.dropped).sum();
+    let dropped_window: u64 = generated
+        .buses
+        .iter()
+        .map(|b| b.dropped_from(from_ns))
+        .sum();
+    let warning = (dropped_window > 0).then(|| {
+        let offered = sent + dropped_window;
+        format!(
+            "{dropped_window} packets sampled in the window were dropped at the bus roots (FIFO full), against {sent} that reached the box pins ({:.1} % lost): the buses are overloaded at {} cells on {} buses, {} Hz; use more buses or a lower sample rate",
+            100.0 * dropped_window as f64 / offered.max(1) as f64,
+            scene.config.scene.cells,
+            scene.config.scene.buses,
+            scene.config.scene.sample_rate_hz
+        )
+    });
+    (dropped, dropped_window, warning)
 }
 
 /// The frames of `file` on the box's GMII receive from the window's start (the edge the
@@ -546,7 +557,7 @@ fn synced_sample_time_error(
     records: &[skinbox_host::DecodedRecord],
     scene: &Scene,
     (from_ns, duration_ms): (u64, f64),
-    plan: &skinbox_cosim::scene::DownlinkPlan,
+    received: &[skinbox_model::cell_uart::ReceivedPacket],
 ) -> SampleTimeError {
     use skinbox::studies::sample_time::{errors, matched, Method};
     use skinbox_protocol::TICK_NS;
@@ -556,7 +567,7 @@ fn synced_sample_time_error(
     let b = &scene.config.bus;
     let cells_per_bus = scene.config.scene.cells.div_ceil(buses.len().max(1)) as u64;
     let settled_ns = |port: usize| {
-        plan.starts
+        received
             .iter()
             .find(|s| s.port == port && is_sync(&s.bytes))
             .map_or(u64::MAX, |s| {
@@ -609,12 +620,38 @@ fn is_sync(bytes: &[u8; skinbox_protocol::cell::PACKET_LEN]) -> bool {
     )
 }
 
-/// The box's transmit pins must be as planned: the cells were driven with the plan.
-fn check_downlink(
+/// What the scene's commands did on the way down: the acknowledgements of the `commands`
+/// command frames the host sent, and what the cells' receivers heard.
+fn downlink_output(done: &ClosedLoopRun, commands: usize) -> anyhow::Result<DownlinkOutput> {
+    use skinbox_protocol::command::{AckRepr, AckResult};
+    let acks: Vec<AckResult> = done
+        .run
+        .replies
+        .iter()
+        .filter_map(|f| AckRepr::parse(f.bytes.get(8 + 42..f.bytes.len().checked_sub(4)?)?).ok())
+        .map(|a| a.result)
+        .collect();
+    Ok(DownlinkOutput {
+        commands_sent: commands,
+        commands_accepted: acks.iter().filter(|r| **r == AckResult::Ok).count(),
+        commands_refused: acks
+            .iter()
+            .filter(|r| **r == AckResult::DownlinkFull)
+            .count(),
+        packets_on_pins: done.received.len(),
+        cells_received: done.receiver,
+        cell_generations: done.generations,
+        pin_changes: done.run.uart_tx.len(),
+    })
+}
+
+/// `--check-plan`: the box's transmit pins must be as the plan of the scene's commands
+/// predicted them.
+fn check_plan(
     plan: &skinbox_cosim::scene::DownlinkPlan,
     pins: &[skinbox_model::downlink::PinChange],
     spec: &skinbox_cosim::run::SimSpec,
-) -> anyhow::Result<DownlinkOutput> {
+) -> anyhow::Result<()> {
     let last_tick = skinbox_cosim::run::cycles(spec) - skinbox_cosim::run::TICK_ZERO_CYCLE;
     let planned: Vec<_> = plan
         .pin_changes
@@ -624,18 +661,26 @@ fn check_downlink(
         .collect();
     if let Some(i) = (0..planned.len().max(pins.len())).find(|&i| planned.get(i) != pins.get(i)) {
         anyhow::bail!(
-            "the box's downlink differs from the plan the cells were driven with at pin change              {i}: box {:?}, plan {:?}",
+            "the box's downlink differs from the plan at pin change {i}: box {:?}, plan {:?}",
             pins.get(i),
             planned.get(i)
         );
     }
-    Ok(DownlinkOutput {
-        commands_sent: plan.host_frames.len(),
-        commands_accepted: plan.accepted,
-        commands_refused: plan.refused,
-        packets_on_pins: plan.starts.iter().filter(|s| s.tick <= last_tick).count(),
-        pin_changes: pins.len(),
-    })
+    Ok(())
+}
+
+/// The progress bar of a run of `len` cycles.
+fn progress_bar(len: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{msg} [{bar:40}] {percent}% {elapsed} (ETA {eta})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_message("building the model");
+    bar
 }
 
 /// The sample time errors of the arrival stamp and of the host's estimate over the
@@ -721,10 +766,10 @@ fn print_summary(o: &Output) {
         "        timestamps: stamp - true start edge {:.3} ticks max, {:.3} mean (8 ns ticks)",
         s.ts_error_max_ticks, s.ts_error_mean_ticks
     );
-    if let Some(d) = o.downlink.as_ref().filter(|d| d.commands_sent > 0) {
+    if let Some(d) = Some(&o.downlink).filter(|d| d.commands_sent > 0) {
         println!(
-            "        downlink: {} cell commands from the host, {} queued, {} refused (downlink_full); {} packets on the UART transmit pins, every pin change as the cells were driven",
-            d.commands_sent, d.commands_accepted, d.commands_refused, d.packets_on_pins
+            "        downlink: {} cell commands from the host, {} queued, {} refused (downlink_full); {} packets heard by the cells on the UART transmit pins ({} rejected), the cells generated {} times",
+            d.commands_sent, d.commands_accepted, d.commands_refused, d.packets_on_pins, d.cells_received.packets_discarded, d.cell_generations
         );
     }
     if let Some(f) = &o.host_frames {

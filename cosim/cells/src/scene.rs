@@ -860,17 +860,35 @@ impl Scene {
                 if let Some((w, angle, _)) = wander {
                     synced = synced.map(|clock| clock.with_wander(w, angle));
                 }
+                // A cell obeying the box's sync commands runs free until the first one
+                // reaches it (then its sample `synced_k` is the grid's first).
+                let mut free_until_s = match options.time_sync {
+                    None => synced.as_ref().map(|clock| clock.first_sync_arrival_s()),
+                    Some(_) => None,
+                };
+                let mut synced_k = 0;
                 let mut k = 0u64;
                 loop {
-                    let t_s = match (&mut synced, &mut wander) {
-                        (Some(clock), _) => clock.sample_time_s(k),
-                        (None, Some((w, angle, next_s))) => {
-                            let t = *next_s;
-                            *next_s += nominal_period_s
-                                / (1.0 + w.drift_ppm(clock.drift_ppm, *angle, t) * 1e-6);
-                            t
+                    let t_s = if let (Some(clock), None) = (&mut synced, free_until_s) {
+                        clock.sample_time_s(k - synced_k)
+                    } else {
+                        let t = match &mut wander {
+                            Some((w, angle, next_s)) => {
+                                let t = *next_s;
+                                *next_s += nominal_period_s
+                                    / (1.0 + w.drift_ppm(clock.drift_ppm, *angle, t) * 1e-6);
+                                t
+                            }
+                            None => segment_start_s + (k - segment_k) as f64 * cell_period_s,
+                        };
+                        match (&mut synced, free_until_s) {
+                            (Some(clock), Some(until)) if t >= until => {
+                                free_until_s = None;
+                                synced_k = k;
+                                clock.sample_time_s(0)
+                            }
+                            _ => t,
                         }
-                        (None, None) => segment_start_s + (k - segment_k) as f64 * cell_period_s,
                     };
                     if t_s >= s.duration_s {
                         break;

@@ -217,6 +217,12 @@ impl SyncedClock {
         }
     }
 
+    /// The true time the first sync the cell takes reaches it, s (a cell runs free until
+    /// then).
+    pub fn first_sync_arrival_s(&self) -> f64 {
+        self.arrival_s(self.current.unwrap_or(0))
+    }
+
     /// The grid point (box time, s) of the cell's sample `n` (0 = its first).
     pub fn grid_s(&self, n: u64) -> f64 {
         (self.first_grid + n as i64) as f64 * self.period_s
