@@ -72,6 +72,270 @@ pub struct CaptureArgs {
     pub ros: super::ros::RosArgs,
 }
 
+/// The sample times the rows and the ROS 2 outputs carry.
+type Timing = skinbox_host::timing::Timing;
+
+/// The `--rows` writer.
+type Rows = RowWriter<std::io::BufWriter<Box<dyn Write>>>;
+
+/// With `--claim`: the claimed stream's socket, its exchange and the read-tick sender.
+#[allow(clippy::type_complexity)]
+fn claim_stream(
+    args: &CaptureArgs,
+    socket: tokio::net::UdpSocket,
+    stop_read_ticks: &std::sync::Arc<std::sync::atomic::AtomicBool>,
+    send_stamps: &Option<skinbox_host::kernel_stamps::CommandSendStamps>,
+) -> anyhow::Result<(
+    tokio::net::UdpSocket,
+    Option<skinbox_host::control::Exchange>,
+    Option<std::thread::JoinHandle<u64>>,
+)> {
+    Ok(match &args.claim {
+        Some(box_addr) => {
+            let live::Claimed {
+                socket,
+                exchange,
+                box_addr: to,
+                sender,
+            } = live::claim(socket, box_addr).map_err(|e| anyhow::anyhow!("--claim {e}"))?;
+            eprintln!("claimed the stream: {}", exchange.ack);
+            let read_ticks = (args.exchange_ms > 0).then(|| {
+                live::send_read_ticks_stamped(
+                    sender,
+                    to,
+                    exchange.ack.box_id,
+                    Duration::from_millis(args.exchange_ms),
+                    stop_read_ticks.clone(),
+                    send_stamps.clone(),
+                )
+            });
+            (socket, Some(exchange), read_ticks)
+        }
+        None => (socket, None, None),
+    })
+}
+
+/// The `--pcap` recorder, when asked for.
+fn open_pcap(
+    args: &CaptureArgs,
+) -> anyhow::Result<Option<PcapFrameWriter<std::io::BufWriter<std::fs::File>>>> {
+    Ok(match &args.pcap {
+        Some(path) => Some(PcapFrameWriter::new(std::io::BufWriter::new(
+            std::fs::File::create(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
+        ))?),
+        None => None,
+    })
+}
+
+/// The `--rows` writer, when asked for, with the sample times of `timing`.
+fn open_rows(
+    args: &CaptureArgs,
+    timing: impl FnOnce() -> anyhow::Result<Timing>,
+) -> anyhow::Result<Option<Rows>> {
+    Ok(match &args.rows {
+        Some(path) => {
+            let out: Box<dyn Write> = if path.as_os_str() == "-" {
+                Box::new(std::io::stdout())
+            } else {
+                Box::new(
+                    std::fs::File::create(path)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
+                )
+            };
+            let kind = if args.samples {
+                RowKind::Samples
+            } else {
+                RowKind::Packets
+            };
+            Some(
+                RowWriter::new(std::io::BufWriter::new(out), RowFormat::Csv, kind)
+                    .with_timing(timing()?),
+            )
+        }
+        None => None,
+    })
+}
+
+/// The ROS 2 outputs, when any is asked for, with the sample times of `timing`.
+fn open_ros(
+    args: &CaptureArgs,
+    timing: impl FnOnce() -> anyhow::Result<Timing>,
+) -> anyhow::Result<Option<skinbox_ros::sink::RosSink>> {
+    if !args.ros.any() {
+        return Ok(None);
+    }
+    let mut outputs: Vec<Box<dyn skinbox_ros::sink::Output + Send>> = Vec::new();
+    if let Some(path) = &args.ros.mcap {
+        outputs.push(Box::new(skinbox_ros::mcap_out::McapOutput::create(path)?));
+    }
+    if let Some(addr) = args.ros.foxglove {
+        let server = skinbox_ros::foxglove::FoxgloveServer::start(addr)?;
+        eprintln!("foxglove live view on ws://{}", server.local_addr());
+        outputs.push(Box::new(server));
+    }
+    if args.ros.ros2 {
+        let dds = skinbox_ros::dds::DdsOutput::create(
+            skinbox_ros::dds::ros_domain_id()?,
+            skinbox_ros::dds::DdsSettings {
+                samples_best_effort: args.ros.ros2_best_effort,
+            },
+        )?;
+        eprintln!("ROS 2 topics over DDS in domain {}", dds.domain());
+        outputs.push(Box::new(DdsReport(dds)));
+    }
+    let timing = timing()?;
+    let settings = args.ros.settings()?;
+    if args.ros.foxglove.is_none() && !args.ros.ros2 {
+        // A recording only: the messages and the file on a thread of their own,
+        // off the receiving thread.
+        Ok(Some(skinbox_ros::sink::RosSink::pipelined(
+            timing, settings, outputs,
+        )?))
+    } else {
+        // Live outputs: each message out as its datagram is decoded.
+        Ok(Some(skinbox_ros::sink::RosSink::new(
+            timing, settings, outputs,
+        )))
+    }
+}
+
+/// Resolves after `duration_ms`, or at Ctrl-C.
+async fn shutdown(duration_ms: Option<u64>) {
+    match duration_ms {
+        Some(ms) => {
+            tokio::select! {
+                _ = tokio::time::sleep(Duration::from_millis(ms)) => {}
+                _ = tokio::signal::ctrl_c() => {}
+            }
+        }
+        None => {
+            let _ = tokio::signal::ctrl_c().await;
+        }
+    }
+}
+
+/// The summary line printed every second on stderr.
+fn progress_line(s: &live::CaptureStats, d: &Decoder) {
+    // Cheap getters: no report (and no rate learning) on the receive thread.
+    eprintln!(
+        "{:7.1} s: {} datagrams, {} records, {} missing, {} bad, {} other, {:.1} % CPU",
+        s.wall_s,
+        s.datagrams,
+        d.records(),
+        d.datagrams_missing(),
+        d.bad_input_total(),
+        d.other_traffic().total,
+        100.0 * s.cpu_s / s.wall_s.max(1e-9)
+    );
+}
+
+/// What a capture ends with, for its report.
+struct Outcome {
+    stats: live::CaptureStats,
+    granted: usize,
+    recv_buffer_warning: Option<String>,
+    claimed: Option<skinbox_host::control::Exchange>,
+    passed_over: u64,
+    report: skinbox_host::Report,
+    host_times: Option<Vec<skinbox_host::timing::BoxTimeSummary>>,
+    read_ticks_sent: Option<u64>,
+    exchanges_unused: Option<u64>,
+    exchange_stamps: Option<skinbox_host::timing::ExchangeStampCounts>,
+    published: Option<skinbox_ros::sink::Published>,
+}
+
+/// The timing's outcome, the ROS 2 messages published; closes the row and ROS outputs.
+#[allow(clippy::type_complexity)]
+fn finish_outputs(
+    rows: Option<Rows>,
+    ros: Option<skinbox_ros::sink::RosSink>,
+    read_ticks_sent: Option<u64>,
+) -> anyhow::Result<(
+    Option<Vec<skinbox_host::timing::BoxTimeSummary>>,
+    Option<skinbox_host::timing::ExchangeStampCounts>,
+    Option<skinbox_ros::sink::Published>,
+    Option<u64>,
+)> {
+    let host_times = rows
+        .as_ref()
+        .and_then(|w| w.timing())
+        .or(ros.as_ref().map(|r| r.timing()))
+        .map(|t| t.summary());
+    // which stamps the exchanges' send times are (with --claim and a timing)
+    let exchange_stamps = rows
+        .as_ref()
+        .and_then(|w| w.timing())
+        .or(ros.as_ref().map(|r| r.timing()))
+        .filter(|_| read_ticks_sent.is_some())
+        .map(|t| t.exchange_stamps().clone());
+    let published = match ros {
+        Some(r) => Some(r.finish()?),
+        None => None,
+    };
+    let exchanges_unused = rows
+        .as_ref()
+        .and_then(|w| w.timing())
+        .map(|t| t.exchanges_unused());
+    if let Some(w) = rows {
+        match w.finish() {
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
+            Err(e) => return Err(e.into()),
+        }
+    }
+    Ok((host_times, exchange_stamps, published, exchanges_unused))
+}
+
+impl Outcome {
+    /// Prints the report: JSON, or the summary and its host time lines.
+    fn print(&self, json: bool) -> anyhow::Result<()> {
+        if json {
+            return super::print_json(&serde_json::json!({
+                "capture": self.stats,
+                "recv_buffer_bytes": live::usable_recv_buffer(self.granted),
+                "recv_buffer_warning": self.recv_buffer_warning,
+                "claim": self.claimed.as_ref().map(|e| serde_json::json!({
+                    "result": e.ack.result.name(),
+                    "attempts": e.attempts,
+                    "rtt_us": e.rtt_ns as f64 / 1000.0,
+                    "datagrams_before_capture": self.passed_over,
+                    "datagrams_dropped": e.dropped,
+                })),
+                "report": self.report,
+                "host_times": self.host_times,
+                "read_ticks_sent": self.read_ticks_sent,
+                "exchanges_unused": self.exchanges_unused,
+                "exchange_stamps": self.exchange_stamps,
+                "ros": self.published,
+            }));
+        }
+        print!("{}", self.report.summary());
+        if let Some(times) = &self.host_times {
+            println!("host times: {}", super::host_time_line(times));
+        }
+        if let Some(s) = &self.exchange_stamps {
+            println!(
+                "exchange send stamps: {} ({} kernel, {} user space{})",
+                s.name(),
+                s.kernel,
+                s.user_space,
+                if s.fallbacks.is_empty() {
+                    String::new()
+                } else {
+                    format!("; fell back: {:?}", s.fallbacks)
+                }
+            );
+        }
+        if let Some(p) = &self.published {
+            println!(
+                "ROS 2: {} samples in {} messages on /skinbox/samples, {} on /skinbox/status, {} on /skinbox/activity",
+                p.samples, p.samples_messages, p.status_messages, p.activity_messages
+            );
+        }
+        Ok(())
+    }
+}
+
 /// Runs the capture on a single-threaded tokio runtime until the duration, the count or
 /// Ctrl-C; prints a summary line every second on stderr and the report at the end.
 pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
@@ -95,72 +359,24 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         // the kernel's send stamps of the read-tick commands, for the exchanges
         let send_stamps = (args.claim.is_some() && args.exchange_ms > 0 && !args.user_space_stamps)
             .then(skinbox_host::kernel_stamps::CommandSendStamps::new);
-        let (socket, claimed, read_ticks) = match &args.claim {
-            Some(box_addr) => {
-                let live::Claimed {
-                    socket,
-                    exchange,
-                    box_addr: to,
-                    sender,
-                } = live::claim(socket, box_addr).map_err(|e| anyhow::anyhow!("--claim {e}"))?;
-                eprintln!("claimed the stream: {}", exchange.ack);
-                let read_ticks = (args.exchange_ms > 0).then(|| {
-                    live::send_read_ticks_stamped(
-                        sender,
-                        to,
-                        exchange.ack.box_id,
-                        Duration::from_millis(args.exchange_ms),
-                        stop_read_ticks.clone(),
-                        send_stamps.clone(),
-                    )
-                });
-                (socket, Some(exchange), read_ticks)
-            }
-            None => (socket, None, None),
-        };
+        let (socket, claimed, read_ticks) =
+            claim_stream(&args, socket, &stop_read_ticks, &send_stamps)?;
         let recv_buffer_warning = live::recv_buffer_warning(args.recv_buffer, granted);
         if let Some(w) = &recv_buffer_warning {
             eprintln!("{w}");
         }
-        let mut recorder = match &args.pcap {
-            Some(path) => Some(PcapFrameWriter::new(std::io::BufWriter::new(
-                std::fs::File::create(path)
-                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
-            ))?),
-            None => None,
-        };
+        let mut recorder = open_pcap(&args)?;
         let rate_hz = args
             .sample_rate_hz
             .unwrap_or(skinbox_host::decoder::ASSUMED_SAMPLE_RATE_HZ);
-        let timing = |rate_hz| -> anyhow::Result<skinbox_host::timing::Timing> {
+        let timing = || -> anyhow::Result<Timing> {
             let t = args.timing.timing(rate_hz)?;
             Ok(match &send_stamps {
                 Some(s) => t.with_send_stamps(s.clone()),
                 None => t,
             })
         };
-        let mut rows = match &args.rows {
-            Some(path) => {
-                let out: Box<dyn Write> = if path.as_os_str() == "-" {
-                    Box::new(std::io::stdout())
-                } else {
-                    Box::new(
-                        std::fs::File::create(path)
-                            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
-                    )
-                };
-                let kind = if args.samples {
-                    RowKind::Samples
-                } else {
-                    RowKind::Packets
-                };
-                Some(
-                    RowWriter::new(std::io::BufWriter::new(out), RowFormat::Csv, kind)
-                        .with_timing(timing(rate_hz)?),
-                )
-            }
-            None => None,
-        };
+        let mut rows = open_rows(&args, timing)?;
         let mut decoder = Decoder::new(DecoderConfig {
             sample_rate_hz: args.sample_rate_hz,
             ..DecoderConfig::default()
@@ -172,59 +388,12 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 decoder.push_datagram_from(Some(*from), payload, &mut ());
             }
         }
-        let duration = args.duration_ms;
-        let shutdown = async move {
-            match duration {
-                Some(ms) => {
-                    tokio::select! {
-                        _ = tokio::time::sleep(Duration::from_millis(ms)) => {}
-                        _ = tokio::signal::ctrl_c() => {}
-                    }
-                }
-                None => {
-                    let _ = tokio::signal::ctrl_c().await;
-                }
-            }
-        };
+        let shutdown = shutdown(args.duration_ms);
         anyhow::ensure!(
             rows.is_none() || !args.ros.any(),
             "--rows and the ROS 2 outputs (--mcap, --foxglove, --ros2) are one or the other"
         );
-        let mut ros = if args.ros.any() {
-            let mut outputs: Vec<Box<dyn skinbox_ros::sink::Output + Send>> = Vec::new();
-            if let Some(path) = &args.ros.mcap {
-                outputs.push(Box::new(skinbox_ros::mcap_out::McapOutput::create(path)?));
-            }
-            if let Some(addr) = args.ros.foxglove {
-                let server = skinbox_ros::foxglove::FoxgloveServer::start(addr)?;
-                eprintln!("foxglove live view on ws://{}", server.local_addr());
-                outputs.push(Box::new(server));
-            }
-            if args.ros.ros2 {
-                let dds = skinbox_ros::dds::DdsOutput::create(
-                    skinbox_ros::dds::ros_domain_id()?,
-                    skinbox_ros::dds::DdsSettings {
-                        samples_best_effort: args.ros.ros2_best_effort,
-                    },
-                )?;
-                eprintln!("ROS 2 topics over DDS in domain {}", dds.domain());
-                outputs.push(Box::new(DdsReport(dds)));
-            }
-            let timing = timing(rate_hz)?;
-            let settings = args.ros.settings()?;
-            if args.ros.foxglove.is_none() && !args.ros.ros2 {
-                // A recording only: the messages and the file on a thread of their own,
-                // off the receiving thread.
-                Some(skinbox_ros::sink::RosSink::pipelined(
-                    timing, settings, outputs,
-                )?)
-            } else {
-                // Live outputs: each message out as its datagram is decoded.
-                Some(skinbox_ros::sink::RosSink::new(timing, settings, outputs))
-            }
-        } else {
-            None
-        };
+        let mut ros = open_ros(&args, timing)?;
         let sink: &mut dyn skinbox_host::RecordSink = match (&mut rows, &mut ros) {
             (Some(w), _) => w,
             (None, Some(r)) => r,
@@ -242,19 +411,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
                 coalesce: Duration::from_micros(args.coalesce_us),
             },
             shutdown,
-            &mut |s, d| {
-                // Cheap getters: no report (and no rate learning) on the receive thread.
-                eprintln!(
-                    "{:7.1} s: {} datagrams, {} records, {} missing, {} bad, {} other, {:.1} % CPU",
-                    s.wall_s,
-                    s.datagrams,
-                    d.records(),
-                    d.datagrams_missing(),
-                    d.bad_input_total(),
-                    d.other_traffic().total,
-                    100.0 * s.cpu_s / s.wall_s.max(1e-9)
-                );
-            },
+            &mut progress_line,
         )
         .await?;
         stop_read_ticks.store(true, std::sync::atomic::Ordering::Relaxed);
@@ -262,33 +419,8 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         if let Some(w) = recorder {
             w.finish()?.flush()?;
         }
-        let host_times = rows
-            .as_ref()
-            .and_then(|w| w.timing())
-            .or(ros.as_ref().map(|r| r.timing()))
-            .map(|t| t.summary());
-        // which stamps the exchanges' send times are (with --claim and a timing)
-        let exchange_stamps = rows
-            .as_ref()
-            .and_then(|w| w.timing())
-            .or(ros.as_ref().map(|r| r.timing()))
-            .filter(|_| read_ticks_sent.is_some())
-            .map(|t| t.exchange_stamps().clone());
-        let published = match ros {
-            Some(r) => Some(r.finish()?),
-            None => None,
-        };
-        let exchanges_unused = rows
-            .as_ref()
-            .and_then(|w| w.timing())
-            .map(|t| t.exchanges_unused());
-        if let Some(w) = rows {
-            match w.finish() {
-                Ok(_) => {}
-                Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
-                Err(e) => return Err(e.into()),
-            }
-        }
+        let (host_times, exchange_stamps, published, exchanges_unused) =
+            finish_outputs(rows, ros, read_ticks_sent)?;
         let mut report = decoder.report();
         report.frames.frames = stats.datagrams + passed_over;
         report.frames.udp_payloads = stats.datagrams + passed_over;
@@ -298,51 +430,20 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             wall_s: stats.wall_s,
             cpu_ns_per_packet: stats.cpu_ns_per_record(),
         });
-        if json {
-            super::print_json(&serde_json::json!({
-                "capture": stats,
-                "recv_buffer_bytes": live::usable_recv_buffer(granted),
-                "recv_buffer_warning": recv_buffer_warning,
-                "claim": claimed.as_ref().map(|e| serde_json::json!({
-                    "result": e.ack.result.name(),
-                    "attempts": e.attempts,
-                    "rtt_us": e.rtt_ns as f64 / 1000.0,
-                    "datagrams_before_capture": passed_over,
-                    "datagrams_dropped": e.dropped,
-                })),
-                "report": report,
-                "host_times": host_times,
-                "read_ticks_sent": read_ticks_sent,
-                "exchanges_unused": exchanges_unused,
-                "exchange_stamps": exchange_stamps,
-                "ros": published,
-            }))
-        } else {
-            print!("{}", report.summary());
-            if let Some(times) = &host_times {
-                println!("host times: {}", super::host_time_line(times));
-            }
-            if let Some(s) = &exchange_stamps {
-                println!(
-                    "exchange send stamps: {} ({} kernel, {} user space{})",
-                    s.name(),
-                    s.kernel,
-                    s.user_space,
-                    if s.fallbacks.is_empty() {
-                        String::new()
-                    } else {
-                        format!("; fell back: {:?}", s.fallbacks)
-                    }
-                );
-            }
-            if let Some(p) = &published {
-                println!(
-                    "ROS 2: {} samples in {} messages on /skinbox/samples, {} on /skinbox/status, {} on /skinbox/activity",
-                    p.samples, p.samples_messages, p.status_messages, p.activity_messages
-                );
-            }
-            Ok(())
+        Outcome {
+            stats,
+            granted,
+            recv_buffer_warning,
+            claimed,
+            passed_over,
+            report,
+            host_times,
+            read_ticks_sent,
+            exchanges_unused,
+            exchange_stamps,
+            published,
         }
+        .print(json)
     })
 }
 

@@ -71,8 +71,11 @@ fn build_dir() -> PathBuf {
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("build"))
 }
 
-/// Runs the flow; fails after printing the report when the box clock is not met.
-pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
+/// The flow's options from the arguments, refused before any tool runs; the shards to merge.
+fn flow_options(
+    args: &Args,
+    build: &Path,
+) -> anyhow::Result<(FlowOptions, Vec<(PathBuf, SeedShard)>)> {
     let config = BoxConfig {
         ports: args.ports,
         ..BoxConfig::default()
@@ -85,8 +88,6 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             args.sim_window_ms
         );
     }
-    let build = build_dir();
-    let toolchain = Toolchain::at(args.venv.clone().unwrap_or(build.join("synth-venv")));
     let default_out =
         |board: &str, ports: usize| build.join("synth").join(format!("{board}-{ports}p"));
     let shards = if args.merge.is_empty() {
@@ -116,13 +117,105 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
             );
         }
     }
+    Ok((options, shards))
+}
 
+/// The spinner that shows the flow's stage and its latest tool line.
+fn spinner() -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new_spinner();
     bar.set_style(
         indicatif::ProgressStyle::with_template("{spinner} {prefix} [{elapsed}] {wide_msg}")
             .expect("valid template"),
     );
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    bar
+}
+
+/// With `--sim`: the netlist of the report simulated against the RTL.
+fn simulate_netlist(
+    args: &Args,
+    toolchain: &Toolchain,
+    report: &SynthReport,
+) -> anyhow::Result<Option<skinbox_synth::netlist_sim::NetlistSimReport>> {
+    if !args.sim {
+        return Ok(None);
+    }
+    let board = Board::from_name(&report.board)
+        .ok_or_else(|| anyhow::anyhow!("unknown board {}", report.board))?;
+    let config = BoxConfig {
+        ports: report.ports,
+        ..BoxConfig::default()
+    };
+    let spec =
+        skinbox_synth::netlist_sim::scene_spec(config, (args.sim_window_ms * 1e6).round() as u64)?;
+    eprintln!(
+        "skinbox synth: simulating the netlist (Verilator build, then {:.1} ms of PHY reset and scene) and the RTL",
+        (skinbox_gateware::board::PHY_RESET_CLOCKS as f64 * 8e-6) + spec.duration_ns as f64 * 1e-6
+    );
+    Ok(Some(skinbox_synth::netlist_sim::simulate(
+        toolchain,
+        board,
+        &spec,
+        &report.out_dir,
+    )?))
+}
+
+/// Prints the report (and the netlist simulation); fails when the netlist or the clock does
+/// not hold.
+fn finish(
+    report: &SynthReport,
+    netlist_sim: Option<&skinbox_synth::netlist_sim::NetlistSimReport>,
+    json: bool,
+) -> anyhow::Result<()> {
+    if json {
+        let mut value = serde_json::to_value(report)?;
+        if let Some(sim) = netlist_sim {
+            value["netlist_matches_rtl"] = sim.netlist_matches_rtl.into();
+            value["frames_compared"] = sim.frames_compared.into();
+            value["simulated_ms"] = sim.simulated_ms.into();
+            value["netlist_sim"] = serde_json::to_value(sim)?;
+        }
+        super::print_json(&value)?;
+    } else {
+        print_report(report);
+        if let Some(sim) = netlist_sim {
+            print_netlist_sim(sim);
+        }
+    }
+    if let Some(sim) = netlist_sim {
+        if !sim.netlist_matches_rtl {
+            anyhow::bail!(
+                "the netlist does not behave as the RTL: {} of {} frames differ ({}); PHY reset {}, LED {}, MDIO {} (files in {})",
+                sim.frames_differing,
+                sim.frames_compared,
+                sim.first_difference.as_deref().unwrap_or("frames equal"),
+                ok(sim.phy_reset_ok),
+                ok(sim.led_ok),
+                ok(sim.mdio_ok),
+                sim.dir.display()
+            );
+        }
+    }
+    if !report.timing_met {
+        anyhow::bail!(
+            "timing not met: the {} MHz box clock reaches {:.1} MHz, the PHY receive clock \
+             {:?} MHz after place and route (bitstream written anyway; critical paths in {})",
+            report.target_mhz,
+            report.fmax_mhz,
+            report.rx_clock_fmax_mhz,
+            report.out_dir.join("report.json").display()
+        );
+    }
+    Ok(())
+}
+
+/// Runs the flow; fails after printing the report when the box clock is not met.
+pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
+    let build = build_dir();
+    let (options, shards) = flow_options(args, &build)?;
+    let toolchain = Toolchain::at(args.venv.clone().unwrap_or(build.join("synth-venv")));
+
+    let bar = spinner();
     let mut stage_started = Instant::now();
     let mut progress = |event: Event<'_>| match event {
         Event::Stage(stage) => {
@@ -174,72 +267,8 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
     };
     bar.finish_and_clear();
     let report = report.map_err(anyhow::Error::new)?;
-
-    let netlist_sim = if args.sim {
-        let board = Board::from_name(&report.board)
-            .ok_or_else(|| anyhow::anyhow!("unknown board {}", report.board))?;
-        let config = BoxConfig {
-            ports: report.ports,
-            ..BoxConfig::default()
-        };
-        let spec = skinbox_synth::netlist_sim::scene_spec(
-            config,
-            (args.sim_window_ms * 1e6).round() as u64,
-        )?;
-        eprintln!(
-            "skinbox synth: simulating the netlist (Verilator build, then {:.1} ms of PHY reset and scene) and the RTL",
-            (skinbox_gateware::board::PHY_RESET_CLOCKS as f64 * 8e-6) + spec.duration_ns as f64 * 1e-6
-        );
-        Some(skinbox_synth::netlist_sim::simulate(
-            &toolchain,
-            board,
-            &spec,
-            &report.out_dir,
-        )?)
-    } else {
-        None
-    };
-
-    if json {
-        let mut value = serde_json::to_value(&report)?;
-        if let Some(sim) = &netlist_sim {
-            value["netlist_matches_rtl"] = sim.netlist_matches_rtl.into();
-            value["frames_compared"] = sim.frames_compared.into();
-            value["simulated_ms"] = sim.simulated_ms.into();
-            value["netlist_sim"] = serde_json::to_value(sim)?;
-        }
-        super::print_json(&value)?;
-    } else {
-        print_report(&report);
-        if let Some(sim) = &netlist_sim {
-            print_netlist_sim(sim);
-        }
-    }
-    if let Some(sim) = &netlist_sim {
-        if !sim.netlist_matches_rtl {
-            anyhow::bail!(
-                "the netlist does not behave as the RTL: {} of {} frames differ ({}); PHY reset {}, LED {}, MDIO {} (files in {})",
-                sim.frames_differing,
-                sim.frames_compared,
-                sim.first_difference.as_deref().unwrap_or("frames equal"),
-                ok(sim.phy_reset_ok),
-                ok(sim.led_ok),
-                ok(sim.mdio_ok),
-                sim.dir.display()
-            );
-        }
-    }
-    if !report.timing_met {
-        anyhow::bail!(
-            "timing not met: the {} MHz box clock reaches {:.1} MHz, the PHY receive clock \
-             {:?} MHz after place and route (bitstream written anyway; critical paths in {})",
-            report.target_mhz,
-            report.fmax_mhz,
-            report.rx_clock_fmax_mhz,
-            report.out_dir.join("report.json").display()
-        );
-    }
-    Ok(())
+    let netlist_sim = simulate_netlist(args, &toolchain, &report)?;
+    finish(&report, netlist_sim.as_ref(), json)
 }
 
 fn print_shard(shard: &SeedShard, dir: &Path, json: bool) -> anyhow::Result<()> {

@@ -255,6 +255,78 @@ fn cells_250(records_per_s: f64) -> f64 {
     records_per_s / 250.0
 }
 
+/// One row of the table: a load through one box at one flush timeout.
+fn outcome_row(table: &mut Table, load: &str, what: &str, t: &str, o: &Outcome) {
+    table.row(vec![
+        load.to_string(),
+        what.to_string(),
+        t.to_string(),
+        format!("{:.0}", o.records_per_s),
+        format!("{:.2}", o.records_per_datagram),
+        format!("{:.0}", o.datagrams_per_s),
+        format!("{:.2}", o.latency_us[0]),
+        format!("{:.2}", o.latency_us[1]),
+        format!("{:.2}", o.latency_us[2]),
+        format!("{:.0}", o.capacity_cells),
+        o.lost.to_string(),
+    ]);
+}
+
+/// The chart of latency against link capacity, one curve per load, the original box marked.
+fn latency_capacity_chart(curves: &[Vec<[f64; 4]>], original: &[[f64; 3]]) -> chart::Chart {
+    let heavy = &curves[1];
+    let light = &curves[0];
+    let series = |label: &str, c: &[[f64; 4]], k: usize, color| chart::Series {
+        label: label.to_string(),
+        points: c.iter().map(|p| (p[0], p[k])).collect(),
+        style: chart::Style::Line,
+        color,
+    };
+    let all_latencies = curves.iter().flatten().flat_map(|p| [p[1], p[3]]);
+    let y_max = all_latencies.fold(1.0f64, f64::max) * 2.0;
+    let seed_cells = 5_742.0;
+    chart::Chart {
+        name: "c3_batching".into(),
+        title: "C3 Batching: latency added by the box against link capacity".into(),
+        x_label: "link capacity at the packing reached (cells at 250 Hz per Gigabit link)".into(),
+        y_label: "latency added by the box (us)".into(),
+        x_log: false,
+        y_log: true,
+        x_range: (0.0, 18_000.0),
+        y_range: (0.1, y_max),
+        series: vec![
+            series("humanoid (315 k records/s): p50", heavy, 1, 0),
+            series("humanoid: p99", heavy, 2, 1),
+            series("humanoid: max", heavy, 3, 2),
+            series("260 cells stroking (event): p99", light, 2, 3),
+        ],
+        marks: vec![chart::Mark {
+            at: (seed_cells, original[1][1].max(0.1)),
+            text: "original box, 5,742 cells (seed)".into(),
+        }],
+        legend: chart::Legend::UpperLeft,
+    }
+}
+
+/// The section's text: what was measured and how.
+fn study_text(quick: bool) -> String {
+    format!(
+        "Latency the box adds to a record (end of its packet at the pin to the end of its \
+         frame on the wire), from the reference model of the box (cycle-exact, held byte for \
+         byte to the RTL) fed with the cell models' packets, against the link capacity the datagram packing reached at that \
+         load (cells at 250 Hz per Gigabit link; the framer's own ceiling of {:.0} cells caps it). \
+         Each point of a curve is one flush timeout ({} us). The original box sends one packet \
+         per 86-byte frame: {:.0} cells by our wire arithmetic, 5,742 in the papers.",
+        cells_250(super::rate_model::framer_records_per_s()),
+        timeouts_us(quick)
+            .iter()
+            .map(|t| chart::tick_label(*t))
+            .collect::<Vec<_>>()
+            .join(", "),
+        cells_250(original_capacity_records_per_s()),
+    )
+}
+
 /// The study: per load and flush timeout, latency quantiles and the capacity at the
 /// packing reached.
 pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
@@ -281,21 +353,6 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         "packets lost",
     ]);
     let mut curves: Vec<Vec<[f64; 4]>> = vec![Vec::new(); LOAD_NAMES.len()];
-    let add_row = |table: &mut Table, load: &str, what: &str, t: &str, o: &Outcome| {
-        table.row(vec![
-            load.to_string(),
-            what.to_string(),
-            t.to_string(),
-            format!("{:.0}", o.records_per_s),
-            format!("{:.2}", o.records_per_datagram),
-            format!("{:.0}", o.datagrams_per_s),
-            format!("{:.2}", o.latency_us[0]),
-            format!("{:.2}", o.latency_us[1]),
-            format!("{:.2}", o.latency_us[2]),
-            format!("{:.0}", o.capacity_cells),
-            o.lost.to_string(),
-        ]);
-    };
     for t_us in timeouts_us(quick) {
         progress.step(&format!("C3: flush timeout {t_us} us"));
         let ticks = flush_timeout_ticks(t_us);
@@ -310,7 +367,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             })
         })?;
         for (l, o) in outcomes.iter().enumerate() {
-            add_row(
+            outcome_row(
                 &mut table,
                 LOAD_NAMES[l],
                 "batching",
@@ -331,7 +388,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
     })?;
     let mut original = Vec::new();
     for (l, o) in originals.iter().enumerate() {
-        add_row(
+        outcome_row(
             &mut table,
             LOAD_NAMES[l],
             "original (one packet per datagram)",
@@ -340,53 +397,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         );
         original.push(o.latency_us);
     }
-    let heavy = &curves[1];
-    let light = &curves[0];
-    let series = |label: &str, c: &[[f64; 4]], k: usize, color| chart::Series {
-        label: label.to_string(),
-        points: c.iter().map(|p| (p[0], p[k])).collect(),
-        style: chart::Style::Line,
-        color,
-    };
-    let all_latencies = curves.iter().flatten().flat_map(|p| [p[1], p[3]]);
-    let y_max = all_latencies.fold(1.0f64, f64::max) * 2.0;
-    let seed_cells = 5_742.0;
-    let chart = chart::Chart {
-        name: "c3_batching".into(),
-        title: "C3 Batching: latency added by the box against link capacity".into(),
-        x_label: "link capacity at the packing reached (cells at 250 Hz per Gigabit link)".into(),
-        y_label: "latency added by the box (us)".into(),
-        x_log: false,
-        y_log: true,
-        x_range: (0.0, 18_000.0),
-        y_range: (0.1, y_max),
-        series: vec![
-            series("humanoid (315 k records/s): p50", heavy, 1, 0),
-            series("humanoid: p99", heavy, 2, 1),
-            series("humanoid: max", heavy, 3, 2),
-            series("260 cells stroking (event): p99", light, 2, 3),
-        ],
-        marks: vec![chart::Mark {
-            at: (seed_cells, original[1][1].max(0.1)),
-            text: "original box, 5,742 cells (seed)".into(),
-        }],
-        legend: chart::Legend::UpperLeft,
-    };
-    let text = format!(
-        "Latency the box adds to a record (end of its packet at the pin to the end of its \
-         frame on the wire), from the reference model of the box (cycle-exact, held byte for \
-         byte to the RTL) fed with the cell models' packets, against the link capacity the datagram packing reached at that \
-         load (cells at 250 Hz per Gigabit link; the framer's own ceiling of {:.0} cells caps it). \
-         Each point of a curve is one flush timeout ({} us). The original box sends one packet \
-         per 86-byte frame: {:.0} cells by our wire arithmetic, 5,742 in the papers.",
-        cells_250(super::rate_model::framer_records_per_s()),
-        timeouts_us(quick)
-            .iter()
-            .map(|t| chart::tick_label(*t))
-            .collect::<Vec<_>>()
-            .join(", "),
-        cells_250(original_capacity_records_per_s()),
-    );
+    let chart = latency_capacity_chart(&curves, &original);
+    let text = study_text(quick);
     Ok(Section {
         id: "C3",
         title: "Batching: flush timeout, latency and link capacity".into(),

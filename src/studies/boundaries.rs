@@ -441,84 +441,97 @@ fn loss_run(base: &Scene, quick: bool, loss: f64, refresh_s: f64) -> anyhow::Res
     Ok((mean_error_pct(&g.stats), g.stats.packet_rate_pct()))
 }
 
-fn loss(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
-    let mut table = Table::new(&[
-        "scene",
-        "full refresh every (s)",
-        "packet loss (%)",
-        "RMS error, mean of 8 channels (% FS)",
-        "packets (% of data mode)",
-    ]);
-    let mut series = Vec::new();
-    // per refresh: (worst error over the scenes at each loss, extra packets)
-    let mut per_refresh: Vec<(f64, Vec<f64>, f64)> = Vec::new();
-    let losses = losses(quick);
-    for (r, &refresh) in refreshes(quick).iter().enumerate() {
-        let mut worst = vec![0.0f64; losses.len()];
-        let mut extra = 0.0f64;
-        for (s, name) in LOSS_SCENES.iter().enumerate() {
-            let base = scene(name)?;
-            progress.step(&format!("C4d: {name}, refresh {refresh} s, no loss"));
-            let (lossless, rate) = grid.run(format!("C4d/{name}/{refresh}/0"), || {
-                loss_run(&base, quick, 0.0, refresh)
+/// The event loss sweep: its table and chart series, filled scene by scene.
+struct LossSweep<'a, 'p> {
+    quick: bool,
+    losses: &'a [f64],
+    table: Table,
+    series: Vec<chart::Series>,
+    progress: &'a mut Progress<'p>,
+    grid: &'a mut Points,
+}
+
+impl LossSweep<'_, '_> {
+    /// Sweeps the losses on scene `s` at one refresh (the `r`th), raising `worst` at each
+    /// loss; the extra packets the refresh costs the scene (None: no refresh).
+    fn scene(
+        &mut self,
+        s: usize,
+        name: &str,
+        r: usize,
+        refresh: f64,
+        worst: &mut [f64],
+    ) -> anyhow::Result<Option<f64>> {
+        let quick = self.quick;
+        let base = scene(name)?;
+        self.progress
+            .step(&format!("C4d: {name}, refresh {refresh} s, no loss"));
+        let (lossless, rate) = self.grid.run(format!("C4d/{name}/{refresh}/0"), || {
+            loss_run(&base, quick, 0.0, refresh)
+        })?;
+        let refresh_label = if refresh > 0.0 {
+            format!("{refresh}")
+        } else {
+            "never".into()
+        };
+        self.table.row(vec![
+            name.to_string(),
+            refresh_label.clone(),
+            "0".into(),
+            format!("{lossless:.4}"),
+            format!("{rate:.2}"),
+        ]);
+        let mut extra = None;
+        if refresh > 0.0 {
+            let (_, without) = self
+                .grid
+                .run(format!("C4d/{name}/{refresh}/0 without refresh"), || {
+                    loss_run(&base, quick, 0.0, 0.0)
+                })?;
+            extra = Some(rate - without);
+        }
+        let mut points = Vec::new();
+        for (k, &loss) in self.losses.iter().enumerate() {
+            self.progress
+                .step(&format!("C4d: {name}, refresh {refresh} s, loss {loss}"));
+            let (error, rate) = self.grid.run(format!("C4d/{name}/{refresh}/{loss}"), || {
+                loss_run(&base, quick, loss, refresh)
             })?;
-            let refresh_label = if refresh > 0.0 {
-                format!("{refresh}")
-            } else {
-                "never".into()
-            };
-            table.row(vec![
+            self.table.row(vec![
                 name.to_string(),
                 refresh_label.clone(),
-                "0".into(),
-                format!("{lossless:.4}"),
+                format!("{}", 100.0 * loss),
+                format!("{error:.4}"),
                 format!("{rate:.2}"),
             ]);
-            if refresh > 0.0 {
-                let (_, without) = grid
-                    .run(format!("C4d/{name}/{refresh}/0 without refresh"), || {
-                        loss_run(&base, quick, 0.0, 0.0)
-                    })?;
-                extra = extra.max(rate - without);
-            }
-            let mut points = Vec::new();
-            for (k, &loss) in losses.iter().enumerate() {
-                progress.step(&format!("C4d: {name}, refresh {refresh} s, loss {loss}"));
-                let (error, rate) = grid.run(format!("C4d/{name}/{refresh}/{loss}"), || {
-                    loss_run(&base, quick, loss, refresh)
-                })?;
-                table.row(vec![
-                    name.to_string(),
-                    refresh_label.clone(),
-                    format!("{}", 100.0 * loss),
-                    format!("{error:.4}"),
-                    format!("{rate:.2}"),
-                ]);
-                worst[k] = worst[k].max(error);
-                points.push((100.0 * loss, error));
-            }
-            series.push(chart::Series {
-                label: format!(
-                    "{}{}, {}",
-                    name.replace('_', " "),
-                    if s == 0 { "" } else { " (dashed)" },
-                    if refresh > 0.0 {
-                        format!("refresh every {refresh} s")
-                    } else {
-                        "no refresh".into()
-                    }
-                ),
-                points,
-                style: if s == 0 {
-                    chart::Style::Line
-                } else {
-                    chart::Style::Dashed
-                },
-                color: r,
-            });
+            worst[k] = worst[k].max(error);
+            points.push((100.0 * loss, error));
         }
-        per_refresh.push((refresh, worst, extra));
+        self.series.push(chart::Series {
+            label: format!(
+                "{}{}, {}",
+                name.replace('_', " "),
+                if s == 0 { "" } else { " (dashed)" },
+                if refresh > 0.0 {
+                    format!("refresh every {refresh} s")
+                } else {
+                    "no refresh".into()
+                }
+            ),
+            points,
+            style: if s == 0 {
+                chart::Style::Line
+            } else {
+                chart::Style::Dashed
+            },
+            color: r,
+        });
+        Ok(extra)
     }
+}
+
+/// Where each refresh's worst error passes the bound, and the refresh policy chosen.
+fn loss_findings(losses: &[f64], per_refresh: &[(f64, Vec<f64>, f64)]) -> Vec<(String, String)> {
     // The policy: the cheapest refresh (fewest extra packets) that keeps the error inside
     // the papers' 0.5 % at every loss up to 10 %.
     let tolerable = |worst: &[f64]| {
@@ -538,7 +551,7 @@ fn loss(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Resu
             .map_or("beyond the sweep".into(), |x| format!("{x:.2} % loss"))
     };
     let mut findings = Vec::new();
-    for (refresh, worst, extra) in &per_refresh {
+    for (refresh, worst, extra) in per_refresh {
         findings.push((
             if *refresh > 0.0 {
                 format!("refresh every {refresh} s: error passes 0.5 % at (worst scene)")
@@ -561,6 +574,39 @@ fn loss(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Resu
             format!("a full refresh every {r} s ({extra:.2} points of data mode)")
         }),
     ));
+    findings
+}
+
+fn loss(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
+    let losses = losses(quick);
+    let mut sweep = LossSweep {
+        quick,
+        losses: &losses,
+        table: Table::new(&[
+            "scene",
+            "full refresh every (s)",
+            "packet loss (%)",
+            "RMS error, mean of 8 channels (% FS)",
+            "packets (% of data mode)",
+        ]),
+        series: Vec::new(),
+        progress,
+        grid,
+    };
+    // per refresh: (worst error over the scenes at each loss, extra packets)
+    let mut per_refresh: Vec<(f64, Vec<f64>, f64)> = Vec::new();
+    for (r, &refresh) in refreshes(quick).iter().enumerate() {
+        let mut worst = vec![0.0f64; losses.len()];
+        let mut extra = 0.0f64;
+        for (s, name) in LOSS_SCENES.iter().enumerate() {
+            if let Some(e) = sweep.scene(s, name, r, refresh, &mut worst)? {
+                extra = extra.max(e);
+            }
+        }
+        per_refresh.push((refresh, worst, extra));
+    }
+    let (table, mut series) = (sweep.table, sweep.series);
+    let findings = loss_findings(&losses, &per_refresh);
     let (x0, x1) = (100.0 * losses[0], 100.0 * losses.last().expect("swept"));
     series.push(chart::Series {
         label: "0.5 % (the papers' error)".into(),

@@ -142,51 +142,64 @@ fn rate_model_wall_s(buses: usize) -> f64 {
     started.elapsed().as_secs_f64() / f64::from(reps)
 }
 
-/// The study.
-pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
-    let base = scene(SCENE)?;
-    let window = window_s(quick);
+/// One RTL co-simulation of the stroking skin and the reference model on the same input.
+fn rtl_and_reference(
+    base: &skinbox_cells::Scene,
+    buses: usize,
+    window: f64,
+) -> anyhow::Result<(RtlPoint, ReferencePoint)> {
+    let (spec, generate_per_sim_s) = skin_spec(base, buses, window)?;
+    let run = run_rtl(&spec)?;
+    let r = &run.report;
+    anyhow::ensure!(
+        r.records_corrupted == 0 && r.packets_delivered == r.packets_sent,
+        "the RTL lost or corrupted packets of the stroking scene: {r:?}"
+    );
+    let rtl = RtlPoint {
+        buses,
+        wall_per_sim_s: r.wall_seconds / r.sim_seconds,
+        generate_per_sim_s,
+        records: r.records,
+        datagrams: r.frames,
+        sim_s: r.sim_seconds,
+        ts_max_ticks: r.ts_error_max_ticks,
+    };
+    let m = run_reference(&spec)?;
+    let differing = run
+        .frames
+        .iter()
+        .zip(&m.frames)
+        .filter(|(a, b)| a != b)
+        .count()
+        + run.frames.len().abs_diff(m.frames.len());
+    let reference = ReferencePoint {
+        buses,
+        wall_per_sim_s: m.report.wall_seconds / m.report.sim_seconds,
+        records: m.report.records,
+        datagrams: m.report.frames,
+        frames_differing: Some(differing),
+        ts_max_ticks: m.report.ts_error_max_ticks,
+    };
+    Ok((rtl, reference))
+}
+
+/// The RTL runs (each with its reference run), then the reference model alone on larger skins.
+fn measure(
+    quick: bool,
+    base: &skinbox_cells::Scene,
+    window: f64,
+    progress: &mut Progress,
+    grid: &mut Points,
+) -> anyhow::Result<(Vec<RtlPoint>, Vec<ReferencePoint>)> {
     let mut rtl = Vec::new();
     let mut reference = Vec::new();
     for buses in rtl_buses(quick) {
         progress.step(&format!(
             "C2: RTL co-simulation and reference model, {buses} buses"
         ));
-        let (rtl_point, reference_point) =
-            grid.run(format!("C2/RTL and reference/{buses}"), || {
-                let (spec, generate_per_sim_s) = skin_spec(&base, buses, window)?;
-                let run = run_rtl(&spec)?;
-                let r = &run.report;
-                anyhow::ensure!(
-                    r.records_corrupted == 0 && r.packets_delivered == r.packets_sent,
-                    "the RTL lost or corrupted packets of the stroking scene: {r:?}"
-                );
-                let rtl = RtlPoint {
-                    buses,
-                    wall_per_sim_s: r.wall_seconds / r.sim_seconds,
-                    generate_per_sim_s,
-                    records: r.records,
-                    datagrams: r.frames,
-                    sim_s: r.sim_seconds,
-                    ts_max_ticks: r.ts_error_max_ticks,
-                };
-                let m = run_reference(&spec)?;
-                let differing = run
-                    .frames
-                    .iter()
-                    .zip(&m.frames)
-                    .filter(|(a, b)| a != b)
-                    .count()
-                    + run.frames.len().abs_diff(m.frames.len());
-                let reference = ReferencePoint {
-                    buses,
-                    wall_per_sim_s: m.report.wall_seconds / m.report.sim_seconds,
-                    records: m.report.records,
-                    datagrams: m.report.frames,
-                    frames_differing: Some(differing),
-                    ts_max_ticks: m.report.ts_error_max_ticks,
-                };
-                Ok((rtl, reference))
+        let (rtl_point, reference_point) = grid
+            .run(format!("C2/RTL and reference/{buses}"), || {
+                rtl_and_reference(base, buses, window)
             })?;
         rtl.push(rtl_point);
         reference.push(reference_point);
@@ -194,7 +207,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
     for buses in reference_only_buses(quick) {
         progress.step(&format!("C2: reference model, {buses} buses"));
         reference.push(grid.run(format!("C2/reference/{buses}"), || {
-            let (spec, _) = skin_spec(&base, buses, window)?;
+            let (spec, _) = skin_spec(base, buses, window)?;
             let m = run_reference(&spec)?;
             Ok(ReferencePoint {
                 buses,
@@ -206,241 +219,288 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             })
         })?);
     }
+    Ok((rtl, reference))
+}
+
+/// The table, findings and chart points of the three levels, filled level by level.
+struct Tally {
+    table: Table,
+    findings: Vec<(String, String)>,
+    error_points_rtl: Vec<(f64, f64)>,
+    error_points_reference: Vec<(f64, f64)>,
+    error_points_rate: Vec<(f64, f64)>,
+    speed_rtl: Vec<(f64, f64)>,
+    speed_cells: Vec<(f64, f64)>,
+    speed_reference: Vec<(f64, f64)>,
+    speed_rate: Vec<(f64, f64)>,
+}
+
+impl Tally {
+    /// An empty table with its header.
+    fn new() -> Tally {
+        Tally {
+            table: Table::new(&[
+                "level",
+                "buses",
+                "cells",
+                "wall time per simulated s (s)",
+                "records in the window",
+                "datagrams",
+                "records error vs RTL (%)",
+                "datagrams error vs RTL (%)",
+                "stamp - true edge, max (ticks)",
+            ]),
+            findings: Vec::new(),
+            error_points_rtl: Vec::new(),
+            error_points_reference: Vec::new(),
+            error_points_rate: Vec::new(),
+            speed_rtl: Vec::new(),
+            speed_cells: Vec::new(),
+            speed_reference: Vec::new(),
+            speed_rate: Vec::new(),
+        }
+    }
+
+    /// The RTL's rows and those of the cell models that fed it.
+    fn rtl(&mut self, rtl: &[RtlPoint]) {
+        for p in rtl {
+            self.table.row(vec![
+                "RTL (Verilator)".into(),
+                p.buses.to_string(),
+                (p.buses * CELLS_PER_BUS).to_string(),
+                format!("{:.3}", p.wall_per_sim_s),
+                p.records.to_string(),
+                p.datagrams.to_string(),
+                "0".into(),
+                "0".into(),
+                format!("{:.3}", p.ts_max_ticks),
+            ]);
+            self.table.row(vec![
+                "cell models (the RTL's input)".into(),
+                p.buses.to_string(),
+                (p.buses * CELLS_PER_BUS).to_string(),
+                format!("{:.4}", p.generate_per_sim_s),
+                "-".into(),
+                "-".into(),
+                "-".into(),
+                "-".into(),
+                "-".into(),
+            ]);
+            self.error_points_rtl.push((p.wall_per_sim_s, 0.0));
+            self.speed_rtl
+                .push(((p.buses * CELLS_PER_BUS) as f64, p.wall_per_sim_s));
+            self.speed_cells
+                .push(((p.buses * CELLS_PER_BUS) as f64, p.generate_per_sim_s));
+        }
+    }
+
+    /// The reference model's rows, compared with the RTL where it ran.
+    fn reference(&mut self, reference: &[ReferencePoint], rtl: &[RtlPoint]) {
+        for p in reference {
+            let frames = match p.frames_differing {
+                Some(d) => {
+                    let pct = 100.0 * d as f64 / p.datagrams.max(1) as f64;
+                    self.error_points_reference.push((p.wall_per_sim_s, pct));
+                    self.findings.push((
+                        format!("reference model against RTL, {} buses", p.buses),
+                        format!(
+                            "{d} of {} frames differ; {:.0} x faster",
+                            p.datagrams,
+                            rtl.iter()
+                                .find(|r| r.buses == p.buses)
+                                .map_or(0.0, |r| r.wall_per_sim_s / p.wall_per_sim_s)
+                        ),
+                    ));
+                    (format!("{pct:.1}"), format!("{pct:.1}"))
+                }
+                None => ("no RTL run".into(), "no RTL run".into()),
+            };
+            self.speed_reference
+                .push(((p.buses * CELLS_PER_BUS) as f64, p.wall_per_sim_s));
+            self.table.row(vec![
+                "reference model (packet level)".into(),
+                p.buses.to_string(),
+                (p.buses * CELLS_PER_BUS).to_string(),
+                format!("{:.4}", p.wall_per_sim_s),
+                p.records.to_string(),
+                p.datagrams.to_string(),
+                frames.0,
+                frames.1,
+                format!("{:.3}", p.ts_max_ticks),
+            ]);
+        }
+        if let Some(p) = reference.iter().max_by_key(|p| p.buses) {
+            self.findings.push((
+                format!(
+                    "reference model wall time per simulated s, {} buses ({} cells)",
+                    p.buses,
+                    p.buses * CELLS_PER_BUS
+                ),
+                format!("{:.3} s", p.wall_per_sim_s),
+            ));
+        }
+    }
+
+    /// The rate model's rows, timed, compared with the RTL where it ran.
+    fn rate(&mut self, window: f64, rtl: &[RtlPoint], grid: &mut Points) -> anyhow::Result<()> {
+        for buses in sizes() {
+            let wall: f64 = grid.run(format!("C2/rate model wall time/{buses}"), || {
+                Ok(rate_model_wall_s(buses))
+            })?;
+            let pred = predict(&rate_inputs(buses));
+            let cells = buses * CELLS_PER_BUS;
+            self.speed_rate.push((cells as f64, wall));
+            let against = rtl.iter().find(|p| p.buses == buses);
+            let (records, datagrams, e_rec, e_dg) = match against {
+                Some(p) => {
+                    let records = pred.delivered_per_s * window;
+                    let record_datagrams = records / pred.records_per_datagram;
+                    let status = (p.sim_s / (STATUS_TICKS as f64 * 8e-9)).floor()
+                        * buses.div_ceil(skinbox_protocol::datagram::MAX_STATUS_PORTS) as f64;
+                    let datagrams = record_datagrams + status;
+                    let e_rec = 100.0 * (records - p.records as f64) / p.records as f64;
+                    let e_dg = 100.0 * (datagrams - p.datagrams as f64) / p.datagrams as f64;
+                    self.error_points_rate
+                        .push((wall, e_rec.abs().max(e_dg.abs())));
+                    self.findings.push((
+                        format!("rate model against RTL, {buses} buses"),
+                        format!("records {e_rec:+.1} %, datagrams {e_dg:+.1} %"),
+                    ));
+                    (
+                        format!("{records:.0}"),
+                        format!("{datagrams:.0}"),
+                        format!("{e_rec:+.1}"),
+                        format!("{e_dg:+.1}"),
+                    )
+                }
+                None => (
+                    format!("{:.0}", pred.delivered_per_s * window),
+                    format!("{:.0}", pred.datagrams_per_s * window),
+                    "no RTL run".into(),
+                    "no RTL run".into(),
+                ),
+            };
+            self.table.row(vec![
+                "rate model (closed form)".into(),
+                buses.to_string(),
+                cells.to_string(),
+                format!("{wall:.2e}"),
+                records,
+                datagrams,
+                e_rec,
+                e_dg,
+                "-".into(),
+            ]);
+        }
+        Ok(())
+    }
+
+    /// The RTL's wall time at its largest run, and extrapolated to the largest skin.
+    fn rtl_findings(&mut self, rtl: &[RtlPoint]) {
+        if let Some(p) = rtl.iter().max_by_key(|p| p.buses) {
+            self.findings.push((
+                format!("RTL wall time per simulated s, {} buses", p.buses),
+                format!("{:.2} s", p.wall_per_sim_s),
+            ));
+            // Every port adds its UART receiver and deframer to each clock: the per-port cost
+            // scales the RTL to the largest skin.
+            let per_bus = p.wall_per_sim_s / p.buses as f64;
+            self.findings.push((
+                "RTL at 5,742 cells (87 buses), extrapolated per bus".into(),
+                format!("about {:.0} s per simulated s (not run)", per_bus * 87.0),
+            ));
+        }
+    }
+
+    /// The two charts: error against speed, and speed by skin size.
+    fn charts(
+        error_points_rtl: Vec<(f64, f64)>,
+        error_points_reference: Vec<(f64, f64)>,
+        error_points_rate: Vec<(f64, f64)>,
+        speed: [Vec<(f64, f64)>; 4],
+    ) -> Vec<chart::Chart> {
+        let [speed_rtl, speed_cells, speed_reference, speed_rate] = speed;
+        let rtl_label = "RTL (Verilator), every clock";
+        let rate_label = "rate model (closed form)";
+        let reference_label = "reference model (packet level)";
+        let cells_label = "cell models (packets for RTL)";
+        let all_walls = speed_rtl
+            .iter()
+            .chain(&speed_rate)
+            .chain(&speed_reference)
+            .chain(&speed_cells)
+            .map(|p| p.1);
+        let (w_min, w_max) = all_walls.fold((f64::MAX, 0.0f64), |(a, b), w| (a.min(w), b.max(w)));
+        let err_max = error_points_rate
+            .iter()
+            .map(|p| p.1)
+            .fold(10.0f64, f64::max);
+        let series = |label: &str, points: Vec<(f64, f64)>, style: chart::Style, color: usize| {
+            chart::Series {
+                label: label.into(),
+                points,
+                style,
+                color,
+            }
+        };
+        let (dot, line) = (chart::Style::Points, chart::Style::Line);
+        vec![
+            chart::Chart {
+                name: "c2_fidelity".into(),
+                title: "C2 Fidelity: speed against error relative to RTL".into(),
+                x_label: "wall time per simulated second (s)".into(),
+                y_label: "largest error vs RTL: records, datagrams (%)".into(),
+                x_log: true,
+                y_log: false,
+                x_range: (w_min / 3.0, w_max * 3.0),
+                y_range: (-1.0, err_max * 1.3),
+                series: vec![
+                    series(rtl_label, error_points_rtl, dot, 0),
+                    series(reference_label, error_points_reference, dot, 3),
+                    series(rate_label, error_points_rate, dot, 2),
+                ],
+                marks: Vec::new(),
+                legend: chart::Legend::UpperRight,
+            },
+            chart::Chart {
+                name: "c2_speed".into(),
+                title: "C2 Fidelity: wall time per simulated second by skin size".into(),
+                x_label: "cells (66 a bus)".into(),
+                y_label: "wall time per simulated second (s)".into(),
+                x_log: true,
+                y_log: true,
+                x_range: (40.0, 10_000.0),
+                y_range: (w_min / 3.0, w_max * 3.0),
+                series: vec![
+                    series(rtl_label, speed_rtl, line, 0),
+                    series(cells_label, speed_cells, line, 1),
+                    series(reference_label, speed_reference, line, 3),
+                    series(rate_label, speed_rate, line, 2),
+                ],
+                marks: Vec::new(),
+                legend: chart::Legend::UpperRight,
+            },
+        ]
+    }
+}
+
+/// The study.
+pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
+    let base = scene(SCENE)?;
+    let window = window_s(quick);
+    let (rtl, reference) = measure(quick, &base, window, progress, grid)?;
     progress.step("C2: rate model");
-    let mut table = Table::new(&[
-        "level",
-        "buses",
-        "cells",
-        "wall time per simulated s (s)",
-        "records in the window",
-        "datagrams",
-        "records error vs RTL (%)",
-        "datagrams error vs RTL (%)",
-        "stamp - true edge, max (ticks)",
-    ]);
-    let mut error_points_rate = Vec::new();
-    let mut error_points_rtl = Vec::new();
-    let (mut speed_rtl, mut speed_rate, mut speed_cells) = (Vec::new(), Vec::new(), Vec::new());
-    for p in &rtl {
-        table.row(vec![
-            "RTL (Verilator)".into(),
-            p.buses.to_string(),
-            (p.buses * CELLS_PER_BUS).to_string(),
-            format!("{:.3}", p.wall_per_sim_s),
-            p.records.to_string(),
-            p.datagrams.to_string(),
-            "0".into(),
-            "0".into(),
-            format!("{:.3}", p.ts_max_ticks),
-        ]);
-        table.row(vec![
-            "cell models (the RTL's input)".into(),
-            p.buses.to_string(),
-            (p.buses * CELLS_PER_BUS).to_string(),
-            format!("{:.4}", p.generate_per_sim_s),
-            "-".into(),
-            "-".into(),
-            "-".into(),
-            "-".into(),
-            "-".into(),
-        ]);
-        error_points_rtl.push((p.wall_per_sim_s, 0.0));
-        speed_rtl.push(((p.buses * CELLS_PER_BUS) as f64, p.wall_per_sim_s));
-        speed_cells.push(((p.buses * CELLS_PER_BUS) as f64, p.generate_per_sim_s));
-    }
-    let mut error_points_reference = Vec::new();
-    let mut speed_reference = Vec::new();
-    let mut findings = Vec::new();
-    for p in &reference {
-        let frames = match p.frames_differing {
-            Some(d) => {
-                let pct = 100.0 * d as f64 / p.datagrams.max(1) as f64;
-                error_points_reference.push((p.wall_per_sim_s, pct));
-                findings.push((
-                    format!("reference model against RTL, {} buses", p.buses),
-                    format!(
-                        "{d} of {} frames differ; {:.0} x faster",
-                        p.datagrams,
-                        rtl.iter()
-                            .find(|r| r.buses == p.buses)
-                            .map_or(0.0, |r| r.wall_per_sim_s / p.wall_per_sim_s)
-                    ),
-                ));
-                (format!("{pct:.1}"), format!("{pct:.1}"))
-            }
-            None => ("no RTL run".into(), "no RTL run".into()),
-        };
-        speed_reference.push(((p.buses * CELLS_PER_BUS) as f64, p.wall_per_sim_s));
-        table.row(vec![
-            "reference model (packet level)".into(),
-            p.buses.to_string(),
-            (p.buses * CELLS_PER_BUS).to_string(),
-            format!("{:.4}", p.wall_per_sim_s),
-            p.records.to_string(),
-            p.datagrams.to_string(),
-            frames.0,
-            frames.1,
-            format!("{:.3}", p.ts_max_ticks),
-        ]);
-    }
-    if let Some(p) = reference.iter().max_by_key(|p| p.buses) {
-        findings.push((
-            format!(
-                "reference model wall time per simulated s, {} buses ({} cells)",
-                p.buses,
-                p.buses * CELLS_PER_BUS
-            ),
-            format!("{:.3} s", p.wall_per_sim_s),
-        ));
-    }
-    for buses in sizes() {
-        let wall: f64 = grid.run(format!("C2/rate model wall time/{buses}"), || {
-            Ok(rate_model_wall_s(buses))
-        })?;
-        let pred = predict(&rate_inputs(buses));
-        let cells = buses * CELLS_PER_BUS;
-        speed_rate.push((cells as f64, wall));
-        let against = rtl.iter().find(|p| p.buses == buses);
-        let (records, datagrams, e_rec, e_dg) = match against {
-            Some(p) => {
-                let records = pred.delivered_per_s * window;
-                let record_datagrams = records / pred.records_per_datagram;
-                let status = (p.sim_s / (STATUS_TICKS as f64 * 8e-9)).floor()
-                    * buses.div_ceil(skinbox_protocol::datagram::MAX_STATUS_PORTS) as f64;
-                let datagrams = record_datagrams + status;
-                let e_rec = 100.0 * (records - p.records as f64) / p.records as f64;
-                let e_dg = 100.0 * (datagrams - p.datagrams as f64) / p.datagrams as f64;
-                error_points_rate.push((wall, e_rec.abs().max(e_dg.abs())));
-                findings.push((
-                    format!("rate model against RTL, {buses} buses"),
-                    format!("records {e_rec:+.1} %, datagrams {e_dg:+.1} %"),
-                ));
-                (
-                    format!("{records:.0}"),
-                    format!("{datagrams:.0}"),
-                    format!("{e_rec:+.1}"),
-                    format!("{e_dg:+.1}"),
-                )
-            }
-            None => (
-                format!("{:.0}", pred.delivered_per_s * window),
-                format!("{:.0}", pred.datagrams_per_s * window),
-                "no RTL run".into(),
-                "no RTL run".into(),
-            ),
-        };
-        table.row(vec![
-            "rate model (closed form)".into(),
-            buses.to_string(),
-            cells.to_string(),
-            format!("{wall:.2e}"),
-            records,
-            datagrams,
-            e_rec,
-            e_dg,
-            "-".into(),
-        ]);
-    }
-    if let Some(p) = rtl.iter().max_by_key(|p| p.buses) {
-        findings.push((
-            format!("RTL wall time per simulated s, {} buses", p.buses),
-            format!("{:.2} s", p.wall_per_sim_s),
-        ));
-        // Every port adds its UART receiver and deframer to each clock: the per-port cost
-        // scales the RTL to the largest skin.
-        let per_bus = p.wall_per_sim_s / p.buses as f64;
-        findings.push((
-            "RTL at 5,742 cells (87 buses), extrapolated per bus".into(),
-            format!("about {:.0} s per simulated s (not run)", per_bus * 87.0),
-        ));
-    }
-    let rtl_label = "RTL (Verilator), every clock";
-    let rate_label = "rate model (closed form)";
-    let reference_label = "reference model (packet level)";
-    let cells_label = "cell models (packets for RTL)";
-    let all_walls = speed_rtl
-        .iter()
-        .chain(&speed_rate)
-        .chain(&speed_reference)
-        .chain(&speed_cells)
-        .map(|p| p.1);
-    let (w_min, w_max) = all_walls.fold((f64::MAX, 0.0f64), |(a, b), w| (a.min(w), b.max(w)));
-    let err_max = error_points_rate
-        .iter()
-        .map(|p| p.1)
-        .fold(10.0f64, f64::max);
-    let charts = vec![
-        chart::Chart {
-            name: "c2_fidelity".into(),
-            title: "C2 Fidelity: speed against error relative to RTL".into(),
-            x_label: "wall time per simulated second (s)".into(),
-            y_label: "largest error vs RTL: records, datagrams (%)".into(),
-            x_log: true,
-            y_log: false,
-            x_range: (w_min / 3.0, w_max * 3.0),
-            y_range: (-1.0, err_max * 1.3),
-            series: vec![
-                chart::Series {
-                    label: rtl_label.into(),
-                    points: error_points_rtl,
-                    style: chart::Style::Points,
-                    color: 0,
-                },
-                chart::Series {
-                    label: reference_label.into(),
-                    points: error_points_reference,
-                    style: chart::Style::Points,
-                    color: 3,
-                },
-                chart::Series {
-                    label: rate_label.into(),
-                    points: error_points_rate,
-                    style: chart::Style::Points,
-                    color: 2,
-                },
-            ],
-            marks: Vec::new(),
-            legend: chart::Legend::UpperRight,
-        },
-        chart::Chart {
-            name: "c2_speed".into(),
-            title: "C2 Fidelity: wall time per simulated second by skin size".into(),
-            x_label: "cells (66 a bus)".into(),
-            y_label: "wall time per simulated second (s)".into(),
-            x_log: true,
-            y_log: true,
-            x_range: (40.0, 10_000.0),
-            y_range: (w_min / 3.0, w_max * 3.0),
-            series: vec![
-                chart::Series {
-                    label: rtl_label.into(),
-                    points: speed_rtl,
-                    style: chart::Style::Line,
-                    color: 0,
-                },
-                chart::Series {
-                    label: cells_label.into(),
-                    points: speed_cells,
-                    style: chart::Style::Line,
-                    color: 1,
-                },
-                chart::Series {
-                    label: reference_label.into(),
-                    points: speed_reference,
-                    style: chart::Style::Line,
-                    color: 3,
-                },
-                chart::Series {
-                    label: rate_label.into(),
-                    points: speed_rate,
-                    style: chart::Style::Line,
-                    color: 2,
-                },
-            ],
-            marks: Vec::new(),
-            legend: chart::Legend::UpperRight,
-        },
-    ];
+    let mut t = Tally::new();
+    t.rtl(&rtl);
+    t.reference(&reference, &rtl);
+    t.rate(window, &rtl, grid)?;
+    t.rtl_findings(&rtl);
+    let charts = Tally::charts(
+        t.error_points_rtl,
+        t.error_points_reference,
+        t.error_points_rate,
+        [t.speed_rtl, t.speed_cells, t.speed_reference, t.speed_rate],
+    );
     Ok(Section {
         id: "C2",
         title: "Simulation fidelity: wall time against error relative to the RTL".into(),
@@ -460,8 +520,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
              reference model; loads and capacities of whole skins, the rate model.",
             window * 1e3
         ),
-        findings,
-        tables: vec![table],
+        findings: t.findings,
+        tables: vec![t.table],
         charts,
     })
 }

@@ -6,7 +6,7 @@
 //! at the host, and the host's CPU for decoding them (measured), beside the papers' curves.
 
 use super::{chart, Points, Progress, Section, Table};
-use skinbox_cells::calibration::FIG11_FITS;
+use skinbox_cells::calibration::{RateFit, FIG11_FITS};
 use skinbox_cells::scene::{CommandConfig, Scene};
 use skinbox_cells::{GenerateOptions, Mode};
 use skinbox_cosim::reference::run_reference;
@@ -211,17 +211,19 @@ pub fn driver_cpu_pct(mode: usize, packets_per_s: f64) -> f64 {
     a * (b * packets_per_s + 1.0).ln()
 }
 
-/// The study.
-pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
-    progress.step("C7: the mode and rate experiment through the box");
-    let mut result: Vec<Segment> = grid.run("C7/mode_rate", || run(quick))?;
-    // (a shard that does not own the point has none: its section is not written)
-    result.resize(segments().len(), Segment::default());
+/// Measured packets, host CPU and the papers' driver CPU by sample rate, one per mode.
+#[derive(Default)]
+struct ModeSeries {
+    packets: [Vec<(f64, f64)>; 2],
+    cpu: [Vec<(f64, f64)>; 2],
+    driver: [Vec<(f64, f64)>; 2],
+    /// The largest ratio of this host's CPU to the papers' driver's.
+    ratio_max: f64,
+}
+
+/// The table of every segment beside the papers' figures, and the series for the charts.
+fn tabulate(result: &[Segment], fit: &RateFit) -> (Table, ModeSeries) {
     let cells = 260.0;
-    let fit = FIG11_FITS
-        .iter()
-        .find(|f| f.scene == SCENE)
-        .expect("the scene has a Fig. 11 fit");
     let mut table = Table::new(&[
         "mode",
         "sample rate (Hz)",
@@ -231,11 +233,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         "host CPU (% of a core)",
         "papers' driver CPU (%) at this packet rate",
     ]);
-    let mut packet_series = [Vec::new(), Vec::new()];
-    let mut cpu_series = [Vec::new(), Vec::new()];
-    let mut driver_series = [Vec::new(), Vec::new()];
-    let mut ratio_max = 0.0f64;
-    for ((mode, rate), s) in segments().into_iter().zip(&result) {
+    let mut s_out = ModeSeries::default();
+    for ((mode, rate), s) in segments().into_iter().zip(result) {
         let m = usize::from(mode == Mode::Event);
         let papers = match mode {
             Mode::Data => DATA_MODE_MEASURED * rate,
@@ -243,7 +242,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         };
         let driver = driver_cpu_pct(m, s.packets_per_cell_s * cells);
         if driver > 0.0 {
-            ratio_max = ratio_max.max(s.host_cpu_pct / driver);
+            s_out.ratio_max = s_out.ratio_max.max(s.host_cpu_pct / driver);
         }
         table.row(vec![
             format!("{mode:?}").to_lowercase(),
@@ -254,10 +253,15 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             format!("{:.3}", s.host_cpu_pct),
             format!("{driver:.1}"),
         ]);
-        packet_series[m].push((rate, s.packets_per_cell_s));
-        cpu_series[m].push((rate, s.host_cpu_pct));
-        driver_series[m].push((rate, driver));
+        s_out.packets[m].push((rate, s.packets_per_cell_s));
+        s_out.cpu[m].push((rate, s.host_cpu_pct));
+        s_out.driver[m].push((rate, driver));
     }
+    (table, s_out)
+}
+
+/// The chart of packets per cell through the box against the papers' data and event rates.
+fn packets_chart(packet_series: &[Vec<(f64, f64)>; 2], fit: &RateFit) -> chart::Chart {
     let (lo, hi) = (RATES_HZ[0], RATES_HZ[RATES_HZ.len() - 1]);
     let curve = |f: &dyn Fn(f64) -> f64| -> Vec<(f64, f64)> {
         (0..=50)
@@ -267,11 +271,10 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             })
             .collect()
     };
-    let names = ["data mode", "event mode"];
     let mut series = Vec::new();
-    for m in 0..2 {
+    for (m, name) in MODE_NAMES.iter().enumerate() {
         series.push(chart::Series {
-            label: format!("{} through the box", names[m]),
+            label: format!("{} through the box", name),
             points: packet_series[m].clone(),
             style: chart::Style::Points,
             color: m,
@@ -294,7 +297,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         .flatten()
         .map(|p| p.1)
         .fold(hi, f64::max);
-    let packets_chart = chart::Chart {
+    chart::Chart {
         name: "c7_mode_rate_packets".into(),
         title: "C7 One skin switched by host commands: packets per cell".into(),
         x_label: "sample rate (Hz)".into(),
@@ -306,18 +309,23 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         series,
         marks: Vec::new(),
         legend: chart::Legend::UpperLeft,
-    };
+    }
+}
+
+/// The chart of this host decoder's CPU against the papers' driver's, both modes.
+fn cpu_chart(s: &ModeSeries) -> chart::Chart {
+    let hi = RATES_HZ[RATES_HZ.len() - 1];
     let mut series = Vec::new();
-    for m in 0..2 {
+    for (m, name) in MODE_NAMES.iter().enumerate() {
         series.push(chart::Series {
-            label: format!("{}: this host decoder (measured)", names[m]),
-            points: cpu_series[m].clone(),
+            label: format!("{}: this host decoder (measured)", name),
+            points: s.cpu[m].clone(),
             style: chart::Style::Points,
             color: m,
         });
         series.push(chart::Series {
-            label: format!("{}: the papers' driver, a ln(bx + 1) (dashed)", names[m]),
-            points: driver_series[m].clone(),
+            label: format!("{}: the papers' driver, a ln(bx + 1) (dashed)", name),
+            points: s.driver[m].clone(),
             style: chart::Style::Dashed,
             color: m,
         });
@@ -330,7 +338,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         all.iter().copied().fold(f64::INFINITY, f64::min).max(1e-4),
         all.iter().copied().fold(0.0, f64::max),
     );
-    let cpu_chart = chart::Chart {
+    chart::Chart {
         name: "c7_mode_rate_cpu".into(),
         title: "C7 Host CPU against sample rate, both modes".into(),
         x_label: "sample rate (Hz)".into(),
@@ -342,7 +350,26 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
         series,
         marks: Vec::new(),
         legend: chart::Legend::UpperLeft,
-    };
+    }
+}
+
+/// The chart labels of data (`0`) and event (`1`) mode.
+const MODE_NAMES: [&str; 2] = ["data mode", "event mode"];
+
+/// The study.
+pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
+    progress.step("C7: the mode and rate experiment through the box");
+    let mut result: Vec<Segment> = grid.run("C7/mode_rate", || run(quick))?;
+    // (a shard that does not own the point has none: its section is not written)
+    result.resize(segments().len(), Segment::default());
+    let fit = FIG11_FITS
+        .iter()
+        .find(|f| f.scene == SCENE)
+        .expect("the scene has a Fig. 11 fit");
+    let (table, series) = tabulate(&result, fit);
+    let packets_chart = packets_chart(&series.packets, fit);
+    let cpu_chart = cpu_chart(&series);
+    let ratio_max = series.ratio_max;
     let data_500 = result[3].packets_per_cell_s;
     let event_500 = result[7].packets_per_cell_s;
     let findings = vec![

@@ -559,171 +559,201 @@ fn mode_name(mode: Mode) -> &'static str {
     }
 }
 
-/// The study: the grid of scenes and rates, then each boundary.
-pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
-    let d = duration_s(quick);
-    let mut main = Table::new(&[
-        "scene",
-        "mode",
-        "rate (Hz)",
-        "bus load (%)",
-        "method",
-        "packets",
-        "p50 (us)",
-        "p99 (us)",
-        "max (us)",
-        "worst cell p99 (us)",
-        "host CPU (ns/packet)",
-    ]);
-    let mut worst: HashMap<&'static str, (f64, String)> = HashMap::new();
-    let mut by_hops_chart = Vec::new();
-    let mut positions = Table::new(&[
-        "scene",
-        "mode",
-        "rate (Hz)",
-        "method",
-        "p99 at 0 hops (us)",
-        "1-16",
-        "17-32",
-        "33-48",
-        "49-65",
-    ]);
-    let mut cpu_sum = [0.0f64; 3];
-    let mut runs = 0.0;
-    for (name, mode) in scenes() {
-        for rate in RATES_HZ {
-            progress.step(&format!("C5: {name} {} at {rate} Hz", mode_name(mode)));
-            let setup = Setup::bus66(name, mode, rate, d);
-            let r: RunResult = grid.run(format!("C5/{name}/{}/{rate}", mode_name(mode)), || {
-                run(&setup)
-            })?;
-            runs += 1.0;
-            for (i, m) in Method::ALL.iter().enumerate() {
-                let e = r.of(*m);
-                main.row(vec![
-                    name.to_string(),
-                    mode_name(mode).to_string(),
-                    format!("{rate}"),
-                    format!("{:.0}", r.load_pct),
-                    m.name().to_string(),
-                    e.packets.to_string(),
-                    us(e.p50_us),
-                    us(e.p99_us),
-                    us(e.max_us),
-                    us(e.worst_cell_p99_us),
-                    format!("{:.0}", e.cpu_ns_per_packet),
-                ]);
-                let w = worst.entry(m.name()).or_insert((0.0, String::new()));
-                if e.worst_cell_p99_us >= w.0 {
-                    *w = (
-                        e.worst_cell_p99_us,
-                        format!("{name} {} {rate} Hz", mode_name(mode)),
-                    );
-                }
-                cpu_sum[i] += e.cpu_ns_per_packet;
-                // the worst p99 of the cells in each stretch of the chain
-                let stretch = |from: usize, to: usize| {
-                    us(e.p99_by_hops_us
-                        .iter()
-                        .skip(from)
-                        .take(to + 1 - from)
-                        .fold(0.0, |a: f64, &b| a.max(b)))
-                };
-                positions.row(vec![
-                    name.to_string(),
-                    mode_name(mode).to_string(),
-                    format!("{rate}"),
-                    m.name().to_string(),
-                    stretch(0, 0),
-                    stretch(1, 16),
-                    stretch(17, 32),
-                    stretch(33, 48),
-                    stretch(49, 65),
-                ]);
-                if name == "idle" && mode == Mode::Data && rate == 250.0 {
-                    by_hops_chart.push(chart::Series {
-                        label: m.name().to_string(),
-                        points: e
-                            .p99_by_hops_us
-                            .iter()
-                            .enumerate()
-                            .map(|(h, &v)| (h as f64, v.max(1e-3)))
-                            .collect(),
-                        style: chart::Style::Line,
-                        color: i,
-                    });
+/// The grid of scenes, modes and rates: its tables, the worst cells and the per-hop chart.
+struct GridRuns {
+    main: Table,
+    positions: Table,
+    worst: HashMap<&'static str, (f64, String)>,
+    by_hops_chart: Vec<chart::Series>,
+    cpu_sum: [f64; 3],
+    runs: f64,
+}
+
+impl GridRuns {
+    /// Empty tables with their headers.
+    fn new() -> GridRuns {
+        GridRuns {
+            main: Table::new(&[
+                "scene",
+                "mode",
+                "rate (Hz)",
+                "bus load (%)",
+                "method",
+                "packets",
+                "p50 (us)",
+                "p99 (us)",
+                "max (us)",
+                "worst cell p99 (us)",
+                "host CPU (ns/packet)",
+            ]),
+            positions: Table::new(&[
+                "scene",
+                "mode",
+                "rate (Hz)",
+                "method",
+                "p99 at 0 hops (us)",
+                "1-16",
+                "17-32",
+                "33-48",
+                "49-65",
+            ]),
+            worst: HashMap::new(),
+            by_hops_chart: Vec::new(),
+            cpu_sum: [0.0f64; 3],
+            runs: 0.0,
+        }
+    }
+
+    /// Runs every scene, mode and rate of the grid and records each method's errors.
+    fn measure(d: f64, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<GridRuns> {
+        let mut g = GridRuns::new();
+        for (name, mode) in scenes() {
+            for rate in RATES_HZ {
+                progress.step(&format!("C5: {name} {} at {rate} Hz", mode_name(mode)));
+                let setup = Setup::bus66(name, mode, rate, d);
+                let r: RunResult = grid
+                    .run(format!("C5/{name}/{}/{rate}", mode_name(mode)), || {
+                        run(&setup)
+                    })?;
+                g.runs += 1.0;
+                for (i, m) in Method::ALL.iter().enumerate() {
+                    g.record(name, mode, rate, &r, i, *m);
                 }
             }
         }
+        g.by_hops_chart.push(goal_line(0.0, 65.0));
+        Ok(g)
     }
-    by_hops_chart.push(goal_line(0.0, 65.0));
 
-    // Costs of each method: extra bus packets, link bytes, host CPU.
-    let (bus_c, link_c) = sync_cost(66, 0.1);
-    let mut costs = Table::new(&[
-        "method",
-        "extra packets per s on a 66-cell bus",
-        "extra bytes per s on the link",
-        "host CPU (ns/packet, mean)",
-        "worst cell p99 over the grid (us)",
-        "where",
-    ]);
-    let mut cost_chart = Vec::new();
-    for (i, m) in Method::ALL.iter().enumerate() {
-        let (bus, link) = if *m == Method::Synced {
-            (bus_c, link_c)
-        } else {
-            (0.0, 0.0)
-        };
-        let (w, at) = worst.get(m.name()).cloned().unwrap_or_default();
-        let cpu = cpu_sum[i] / runs;
-        costs.row(vec![
+    /// Adds one method's errors in one run to the tables, the worst cells and the chart.
+    fn record(&mut self, name: &str, mode: Mode, rate: f64, r: &RunResult, i: usize, m: Method) {
+        let e = r.of(m);
+        self.main.row(vec![
+            name.to_string(),
+            mode_name(mode).to_string(),
+            format!("{rate}"),
+            format!("{:.0}", r.load_pct),
             m.name().to_string(),
-            format!("{bus:.1}"),
-            format!("{link:.0}"),
-            format!("{cpu:.0}"),
-            us(w),
-            at,
+            e.packets.to_string(),
+            us(e.p50_us),
+            us(e.p99_us),
+            us(e.max_us),
+            us(e.worst_cell_p99_us),
+            format!("{:.0}", e.cpu_ns_per_packet),
         ]);
-        cost_chart.push(chart::Series {
-            label: format!(
-                "{}: {bus:.0} extra bus packets/s, {link:.0} link bytes/s",
-                m.name()
-            ),
-            points: vec![(cpu.max(0.5), w.max(1e-3))],
-            style: chart::Style::Points,
-            color: i,
-        });
+        let w = self.worst.entry(m.name()).or_insert((0.0, String::new()));
+        if e.worst_cell_p99_us >= w.0 {
+            *w = (
+                e.worst_cell_p99_us,
+                format!("{name} {} {rate} Hz", mode_name(mode)),
+            );
+        }
+        self.cpu_sum[i] += e.cpu_ns_per_packet;
+        // the worst p99 of the cells in each stretch of the chain
+        let stretch = |from: usize, to: usize| {
+            us(e.p99_by_hops_us
+                .iter()
+                .skip(from)
+                .take(to + 1 - from)
+                .fold(0.0, |a: f64, &b| a.max(b)))
+        };
+        self.positions.row(vec![
+            name.to_string(),
+            mode_name(mode).to_string(),
+            format!("{rate}"),
+            m.name().to_string(),
+            stretch(0, 0),
+            stretch(1, 16),
+            stretch(17, 32),
+            stretch(33, 48),
+            stretch(49, 65),
+        ]);
+        if name == "idle" && mode == Mode::Data && rate == 250.0 {
+            self.by_hops_chart.push(chart::Series {
+                label: m.name().to_string(),
+                points: e
+                    .p99_by_hops_us
+                    .iter()
+                    .enumerate()
+                    .map(|(h, &v)| (h as f64, v.max(1e-3)))
+                    .collect(),
+                style: chart::Style::Line,
+                color: i,
+            });
+        }
     }
 
-    // Boundaries.
-    let mut boundary = Table::new(&[
-        "boundary",
-        "method",
-        "setting",
-        "judged by",
-        "value (us)",
-        "worst cell p99 (us)",
-        "max (us)",
-        "bus load (%)",
-    ]);
-    let mut b_series = Vec::new();
-    let mut findings = Vec::new();
-    let mut sweep = |label: &str,
-                     key: &str,
-                     method: Method,
-                     judge: Judge,
-                     settings: Vec<(String, f64, Setup)>,
-                     progress: &mut Progress,
-                     grid: &mut Points|
-     -> anyhow::Result<Vec<(f64, f64)>> {
+    /// The worst cell p99 of a method over the grid and where it was.
+    fn worst_of(&self, m: Method) -> (f64, String) {
+        self.worst.get(m.name()).cloned().unwrap_or_default()
+    }
+
+    /// Costs of each method: extra bus packets, link bytes, host CPU; the table and its chart.
+    fn costs(&self) -> (Table, Vec<chart::Series>) {
+        let (bus_c, link_c) = sync_cost(66, 0.1);
+        let mut costs = Table::new(&[
+            "method",
+            "extra packets per s on a 66-cell bus",
+            "extra bytes per s on the link",
+            "host CPU (ns/packet, mean)",
+            "worst cell p99 over the grid (us)",
+            "where",
+        ]);
+        let mut cost_chart = Vec::new();
+        for (i, m) in Method::ALL.iter().enumerate() {
+            let (bus, link) = if *m == Method::Synced {
+                (bus_c, link_c)
+            } else {
+                (0.0, 0.0)
+            };
+            let (w, at) = self.worst_of(*m);
+            let cpu = self.cpu_sum[i] / self.runs;
+            costs.row(vec![
+                m.name().to_string(),
+                format!("{bus:.1}"),
+                format!("{link:.0}"),
+                format!("{cpu:.0}"),
+                us(w),
+                at,
+            ]);
+            cost_chart.push(chart::Series {
+                label: format!(
+                    "{}: {bus:.0} extra bus packets/s, {link:.0} link bytes/s",
+                    m.name()
+                ),
+                points: vec![(cpu.max(0.5), w.max(1e-3))],
+                style: chart::Style::Points,
+                color: i,
+            });
+        }
+        (costs, cost_chart)
+    }
+}
+
+/// The boundary sweeps: the table of every setting run, filled as the sweeps go.
+struct Sweeper<'a, 'p> {
+    boundary: Table,
+    progress: &'a mut Progress<'p>,
+    grid: &'a mut Points,
+}
+
+impl Sweeper<'_, '_> {
+    /// Runs one boundary's settings; the (setting, judged value) points, one per setting.
+    fn sweep(
+        &mut self,
+        label: &str,
+        key: &str,
+        method: Method,
+        judge: Judge,
+        settings: Vec<(String, f64, Setup)>,
+    ) -> anyhow::Result<Vec<(f64, f64)>> {
         let mut points = Vec::new();
         for (text, x, setup) in settings {
-            progress.step(&format!("C5: {label} {text}"));
-            let r: RunResult = grid.run(format!("C5/{key}/{text}"), || run(&setup))?;
+            self.progress.step(&format!("C5: {label} {text}"));
+            let r: RunResult = self.grid.run(format!("C5/{key}/{text}"), || run(&setup))?;
             let e = r.of(method);
             let value = judge.of(e);
-            boundary.row(vec![
+            self.boundary.row(vec![
                 label.to_string(),
                 method.name().to_string(),
                 text,
@@ -736,9 +766,158 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             points.push((x, value));
         }
         Ok(points)
-    };
-    let base = Setup::bus66("idle", Mode::Data, 250.0, d);
-    let hop = sweep(
+    }
+
+    /// The drift wander sweep of one method from one base setup.
+    fn wander(
+        &mut self,
+        quick: bool,
+        method: Method,
+        base: Setup,
+    ) -> anyhow::Result<Vec<(f64, f64)>> {
+        let key = format!(
+            "wander_{}",
+            if method == Method::Synced { "c" } else { "b" }
+        );
+        self.sweep(
+            "drift wander over 10 s, amplitude",
+            &key,
+            method,
+            Judge::WorstCellP99,
+            wanders_ppm(quick)
+                .into_iter()
+                .map(|a| {
+                    (
+                        format!("{a} ppm"),
+                        a,
+                        Setup {
+                            wander_ppm: a,
+                            ..base.clone()
+                        },
+                    )
+                })
+                .collect(),
+        )
+    }
+}
+
+/// The judged points of each boundary sweep, and the table of their runs.
+struct Boundaries {
+    boundary: Table,
+    hop: Vec<(f64, f64)>,
+    interval: Vec<(f64, f64)>,
+    lost: Vec<(f64, f64)>,
+    asym: Vec<(f64, f64)>,
+    wander_b: Vec<(f64, f64)>,
+    wander_c: Vec<(f64, f64)>,
+    load: [Vec<(f64, f64)>; 2],
+}
+
+impl Boundaries {
+    /// Runs every boundary sweep in turn.
+    fn measure(
+        quick: bool,
+        d: f64,
+        progress: &mut Progress,
+        grid: &mut Points,
+    ) -> anyhow::Result<Boundaries> {
+        let mut s = Sweeper {
+            boundary: Table::new(&[
+                "boundary",
+                "method",
+                "setting",
+                "judged by",
+                "value (us)",
+                "worst cell p99 (us)",
+                "max (us)",
+                "bus load (%)",
+            ]),
+            progress,
+            grid,
+        };
+        let base = Setup::bus66("idle", Mode::Data, 250.0, d);
+        let (hop, interval, lost, asym) = sync_sweeps(quick, &base, &mut s)?;
+        let wander_b = s.wander(quick, Method::Estimated, few())?;
+        let wander_c = s.wander(quick, Method::Synced, base.clone())?;
+        let load = load_sweeps(quick, d, &base, &mut s)?;
+        Ok(Boundaries {
+            boundary: s.boundary,
+            hop,
+            interval,
+            lost,
+            asym,
+            wander_b,
+            wander_c,
+            load,
+        })
+    }
+
+    /// What each boundary found: where the goal holds and where not.
+    fn findings(&self) -> Vec<(String, String)> {
+        let within = |points: &[(f64, f64)]| {
+            let ok: Vec<f64> = points
+                .iter()
+                .filter(|p| p.1 <= GOAL_P99_US)
+                .map(|p| p.0)
+                .collect();
+            let bad: Vec<f64> = points
+                .iter()
+                .filter(|p| p.1 > GOAL_P99_US)
+                .map(|p| p.0)
+                .collect();
+            format!(
+                "within {GOAL_P99_US} us at {}; beyond at {}",
+                list(&ok),
+                list(&bad)
+            )
+        };
+        vec![
+            (
+                "(b) hop latency short by (us per hop), median at 65 hops".to_string(),
+                within(&self.hop),
+            ),
+            ("(c) sync interval (s)".to_string(), within(&self.interval)),
+            (
+                "(c) sync commands lost at 0.05 s (fraction)".to_string(),
+                within(&self.lost),
+            ),
+            (
+                "(c) downlink slower per hop by (us)".to_string(),
+                within(&self.asym),
+            ),
+            (
+                "(b) drift wander over 10 s, 4 cells without collisions (ppm)".to_string(),
+                within(&self.wander_b),
+            ),
+            (
+                "(c) drift wander over 10 s, sync every 0.1 s (ppm)".to_string(),
+                within(&self.wander_c),
+            ),
+            (
+                "(b) bus load, 250 Hz data (% of the UART)".to_string(),
+                within(&self.load[0]),
+            ),
+            (
+                "(c) bus load, 66 cells in data mode (% of the UART)".to_string(),
+                within(&self.load[1]),
+            ),
+        ]
+    }
+}
+
+/// The sweeps of (b)'s hop latency and (c)'s sync interval, sync loss and link asymmetry.
+#[allow(clippy::type_complexity)]
+fn sync_sweeps(
+    quick: bool,
+    base: &Setup,
+    s: &mut Sweeper,
+) -> anyhow::Result<(
+    Vec<(f64, f64)>,
+    Vec<(f64, f64)>,
+    Vec<(f64, f64)>,
+    Vec<(f64, f64)>,
+)> {
+    let hop = s.sweep(
         "hop latency the host believes, short by",
         "hop",
         Method::Estimated,
@@ -756,10 +935,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
                 )
             })
             .collect(),
-        progress,
-        grid,
     )?;
-    let interval = sweep(
+    let interval = s.sweep(
         "sync interval (100 ppm drift)",
         "interval",
         Method::Synced,
@@ -777,10 +954,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
                 )
             })
             .collect(),
-        progress,
-        grid,
     )?;
-    let lost = sweep(
+    let lost = s.sweep(
         "sync commands lost (0.05 s interval)",
         "sync_loss",
         Method::Synced,
@@ -799,10 +974,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
                 )
             })
             .collect(),
-        progress,
-        grid,
     )?;
-    let asym = sweep(
+    let asym = s.sweep(
         "downlink slower per hop than the uplink by",
         "asymmetry",
         Method::Synced,
@@ -820,39 +993,18 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
                 )
             })
             .collect(),
-        progress,
-        grid,
     )?;
-    let mut wander = |method: Method, base: Setup, progress: &mut Progress, grid: &mut Points| {
-        let key = format!(
-            "wander_{}",
-            if method == Method::Synced { "c" } else { "b" }
-        );
-        sweep(
-            "drift wander over 10 s, amplitude",
-            &key,
-            method,
-            Judge::WorstCellP99,
-            wanders_ppm(quick)
-                .into_iter()
-                .map(|a| {
-                    (
-                        format!("{a} ppm"),
-                        a,
-                        Setup {
-                            wander_ppm: a,
-                            ..base.clone()
-                        },
-                    )
-                })
-                .collect(),
-            progress,
-            grid,
-        )
-    };
-    let wander_b = wander(Method::Estimated, few(), progress, grid)?;
-    let wander_c = wander(Method::Synced, base.clone(), progress, grid)?;
-    let load_b = sweep(
+    Ok((hop, interval, lost, asym))
+}
+
+/// The bus load sweeps: (b) by cells at 250 Hz, (c) by the rate of 66 cells.
+fn load_sweeps(
+    quick: bool,
+    d: f64,
+    base: &Setup,
+    s: &mut Sweeper,
+) -> anyhow::Result<[Vec<(f64, f64)>; 2]> {
+    let load_b = s.sweep(
         "cells on a 250 Hz data bus",
         "load_b",
         Method::Estimated,
@@ -870,10 +1022,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
                 )
             })
             .collect(),
-        progress,
-        grid,
     )?;
-    let load_c = sweep(
+    let load_c = s.sweep(
         "sample rate of a 66-cell data bus",
         "load_c",
         Method::Synced,
@@ -888,58 +1038,128 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
                 )
             })
             .collect(),
-        progress,
-        grid,
     )?;
-    let load = [load_b, load_c];
-    let within = |points: &[(f64, f64)]| {
-        let ok: Vec<f64> = points
-            .iter()
-            .filter(|p| p.1 <= GOAL_P99_US)
-            .map(|p| p.0)
-            .collect();
-        let bad: Vec<f64> = points
-            .iter()
-            .filter(|p| p.1 > GOAL_P99_US)
-            .map(|p| p.0)
-            .collect();
-        format!(
-            "within {GOAL_P99_US} us at {}; beyond at {}",
-            list(&ok),
-            list(&bad)
-        )
-    };
-    findings.push((
-        "(b) hop latency short by (us per hop), median at 65 hops".to_string(),
-        within(&hop),
-    ));
-    findings.push(("(c) sync interval (s)".to_string(), within(&interval)));
-    findings.push((
-        "(c) sync commands lost at 0.05 s (fraction)".to_string(),
-        within(&lost),
-    ));
-    findings.push((
-        "(c) downlink slower per hop by (us)".to_string(),
-        within(&asym),
-    ));
-    findings.push((
-        "(b) drift wander over 10 s, 4 cells without collisions (ppm)".to_string(),
-        within(&wander_b),
-    ));
-    findings.push((
-        "(c) drift wander over 10 s, sync every 0.1 s (ppm)".to_string(),
-        within(&wander_c),
-    ));
-    findings.push((
-        "(b) bus load, 250 Hz data (% of the UART)".to_string(),
-        within(&load[0]),
-    ));
-    findings.push((
-        "(c) bus load, 66 cells in data mode (% of the UART)".to_string(),
-        within(&load[1]),
-    ));
+    Ok([load_b, load_c])
+}
+
+/// A chart of sample time error (log scale) against one setting.
+fn error_chart(
+    name: &str,
+    title: &str,
+    x_label: &str,
+    series: Vec<chart::Series>,
+    x: (f64, f64),
+) -> chart::Chart {
+    chart::Chart {
+        name: name.into(),
+        title: title.into(),
+        x_label: x_label.into(),
+        y_label: "sample time error, worst cell p99 (us)".into(),
+        x_log: false,
+        y_log: true,
+        x_range: x,
+        y_range: (1e-3, 1e4),
+        series,
+        marks: Vec::new(),
+        legend: chart::Legend::UpperLeft,
+    }
+}
+
+/// A line of judged points, the errors floored at 1 ns for the log scale.
+fn error_line(label: &str, points: Vec<(f64, f64)>, color: usize) -> chart::Series {
+    chart::Series {
+        label: label.into(),
+        points: points.into_iter().map(|(x, y)| (x, y.max(1e-3))).collect(),
+        style: chart::Style::Line,
+        color,
+    }
+}
+
+/// The largest setting of some points, with 5 % room.
+fn x_max(p: &[(f64, f64)]) -> f64 {
+    p.iter().map(|q| q.0).fold(0.0, f64::max) * 1.05
+}
+
+/// The four charts: by hop, against cost, the boundaries and the bus load.
+fn charts(
+    by_hops_chart: Vec<chart::Series>,
+    cost_chart: Vec<chart::Series>,
+    b: &Boundaries,
+) -> Vec<chart::Chart> {
+    let x10 =
+        |p: &[(f64, f64)]| -> Vec<(f64, f64)> { p.iter().map(|&(x, y)| (x * 10.0, y)).collect() };
+    let mut b_series = vec![
+        error_line(
+            "(b) hop latency short by (us per hop, x10; median at 65 hops)",
+            x10(&b.hop),
+            1,
+        ),
+        error_line("(c) sync interval (s, x10)", x10(&b.interval), 2),
+        error_line("(c) sync commands lost (fraction, x10)", x10(&b.lost), 3),
+        error_line("(c) downlink slower (us per hop, x10)", x10(&b.asym), 4),
+    ];
+    let b_x = b_series
+        .iter()
+        .map(|s| x_max(&s.points))
+        .fold(0.0, f64::max);
+    b_series.push(goal_line(0.0, b_x));
+    let load_x = x_max(&b.load[0]).max(x_max(&b.load[1]));
+    let load_series = vec![
+        error_line("(b) host estimate (cells at 250 Hz)", b.load[0].clone(), 1),
+        error_line(
+            "(c) time sync (66 cells, 250-1500 Hz)",
+            b.load[1].clone(),
+            2,
+        ),
+        goal_line(0.0, load_x),
+    ];
+    vec![
+        error_chart(
+            "c5a_sample_time_by_hop",
+            "C5a Sample time error along a 66-cell bus (data mode, 250 Hz)",
+            "hops between the cell and the bus root",
+            by_hops_chart,
+            (0.0, 66.0),
+        ),
+        chart::Chart {
+            x_log: true,
+            ..error_chart(
+                "c5b_sample_time_cost",
+                "C5b Sample time error against cost, worst cell over the grid",
+                "host CPU per packet (ns); bus and link costs in the legend",
+                cost_chart,
+                (0.3, 1e4),
+            )
+        },
+        error_chart(
+            "c5c_sample_time_boundaries",
+            "C5c Where (b) and (c) fail (66-cell bus)",
+            "setting, scaled x10 (see the legend)",
+            b_series,
+            (0.0, b_x),
+        ),
+        chart::Chart {
+            legend: chart::Legend::LowerRight,
+            ..error_chart(
+                "c5d_sample_time_bus_load",
+                "C5d Sample time error against bus load (data mode)",
+                "packets offered per s on the bus, % of the UART's 20,000",
+                load_series,
+                (0.0, load_x),
+            )
+        },
+    ]
+}
+
+/// The study: the grid of scenes and rates, then each boundary.
+pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
+    let d = duration_s(quick);
+    let g = GridRuns::measure(d, progress, grid)?;
+    let (costs, cost_chart) = g.costs();
+    let b = Boundaries::measure(quick, d, progress, grid)?;
+    let mut findings = b.findings();
     for m in Method::ALL {
-        let (w, at) = worst.get(m.name()).cloned().unwrap_or_default();
+        let (w, at) = g.worst_of(m);
         findings.insert(
             0,
             (
@@ -951,95 +1171,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             ),
         );
     }
-    let mk = |name: &str, title: &str, x_label: &str, series: Vec<chart::Series>, x: (f64, f64)| {
-        chart::Chart {
-            name: name.into(),
-            title: title.into(),
-            x_label: x_label.into(),
-            y_label: "sample time error, worst cell p99 (us)".into(),
-            x_log: false,
-            y_log: true,
-            x_range: x,
-            y_range: (1e-3, 1e4),
-            series,
-            marks: Vec::new(),
-            legend: chart::Legend::UpperLeft,
-        }
-    };
-    let line = |label: &str, points: Vec<(f64, f64)>, color: usize| chart::Series {
-        label: label.into(),
-        points: points.into_iter().map(|(x, y)| (x, y.max(1e-3))).collect(),
-        style: chart::Style::Line,
-        color,
-    };
-    let x_max = |p: &[(f64, f64)]| p.iter().map(|q| q.0).fold(0.0, f64::max) * 1.05;
-    b_series.push(line(
-        "(b) hop latency short by (us per hop, x10; median at 65 hops)",
-        hop.iter().map(|&(x, y)| (x * 10.0, y)).collect(),
-        1,
-    ));
-    b_series.push(line(
-        "(c) sync interval (s, x10)",
-        interval.iter().map(|&(x, y)| (x * 10.0, y)).collect(),
-        2,
-    ));
-    b_series.push(line(
-        "(c) sync commands lost (fraction, x10)",
-        lost.iter().map(|&(x, y)| (x * 10.0, y)).collect(),
-        3,
-    ));
-    b_series.push(line(
-        "(c) downlink slower (us per hop, x10)",
-        asym.iter().map(|&(x, y)| (x * 10.0, y)).collect(),
-        4,
-    ));
-    let b_x = b_series
-        .iter()
-        .map(|s| x_max(&s.points))
-        .fold(0.0, f64::max);
-    b_series.push(goal_line(0.0, b_x));
-    let load_x = x_max(&load[0]).max(x_max(&load[1]));
-    let load_series = vec![
-        line("(b) host estimate (cells at 250 Hz)", load[0].clone(), 1),
-        line("(c) time sync (66 cells, 250-1500 Hz)", load[1].clone(), 2),
-        goal_line(0.0, load_x),
-    ];
-    let charts = vec![
-        mk(
-            "c5a_sample_time_by_hop",
-            "C5a Sample time error along a 66-cell bus (data mode, 250 Hz)",
-            "hops between the cell and the bus root",
-            by_hops_chart,
-            (0.0, 66.0),
-        ),
-        chart::Chart {
-            x_log: true,
-            ..mk(
-                "c5b_sample_time_cost",
-                "C5b Sample time error against cost, worst cell over the grid",
-                "host CPU per packet (ns); bus and link costs in the legend",
-                cost_chart,
-                (0.3, 1e4),
-            )
-        },
-        mk(
-            "c5c_sample_time_boundaries",
-            "C5c Where (b) and (c) fail (66-cell bus)",
-            "setting, scaled x10 (see the legend)",
-            b_series,
-            (0.0, b_x),
-        ),
-        chart::Chart {
-            legend: chart::Legend::LowerRight,
-            ..mk(
-                "c5d_sample_time_bus_load",
-                "C5d Sample time error against bus load (data mode)",
-                "packets offered per s on the bus, % of the UART's 20,000",
-                load_series,
-                (0.0, load_x),
-            )
-        },
-    ];
+    let charts = charts(g.by_hops_chart, cost_chart, &b);
     Ok(Section {
         id: "C5",
         title: "When was it sampled: sample time error of three methods".into(),
@@ -1059,7 +1191,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             d - 1.0
         ),
         findings,
-        tables: vec![main, positions, costs, boundary],
+        tables: vec![g.main, g.positions, costs, b.boundary],
         charts,
     })
 }

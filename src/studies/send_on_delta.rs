@@ -29,6 +29,55 @@ pub fn steps(quick: bool) -> u64 {
     SEED_TABLE.len() as u64 * (scales(quick).len() as u64 + 1)
 }
 
+/// The chart of packet rate against error, one curve per scene, Table I marked.
+fn rate_error_chart(
+    series: Vec<chart::Series>,
+    marks: Vec<chart::Mark>,
+    y_max: f64,
+) -> chart::Chart {
+    let x_max = series
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.0))
+        .fold(0.0f64, f64::max);
+    chart::Chart {
+        name: "c1_send_on_delta".into(),
+        title: "C1 Send-on-delta: packet rate against reconstruction error".into(),
+        x_label: "RMS reconstruction error, mean of 8 channels (% of full range)".into(),
+        y_label: "packets (% of data mode)".into(),
+        x_log: false,
+        y_log: false,
+        x_range: (0.0, x_max * 1.1),
+        y_range: (0.0, y_max * 1.05),
+        series,
+        marks,
+        legend: chart::Legend::UpperRight,
+    }
+}
+
+/// Packets (% of data mode), the mean error, then the error per modality (% FS) of one run.
+fn rate_and_errors(sc: &skinbox_cells::Scene) -> [f64; 6] {
+    let g = sc.generate(&GenerateOptions {
+        keep_packets: false,
+        ..Default::default()
+    });
+    let st = &g.stats;
+    let modality_error = |m: Modality| {
+        let chans: Vec<_> = Channel::ALL[..8]
+            .iter()
+            .filter(|c| c.modality() == m)
+            .collect();
+        chans.iter().map(|&&c| st.rms_error_pct(c)).sum::<f64>() / chans.len() as f64
+    };
+    [
+        st.packet_rate_pct(),
+        mean_error_pct(st),
+        modality_error(Modality::Acceleration),
+        modality_error(Modality::Force),
+        modality_error(Modality::Proximity),
+        modality_error(Modality::Temperature),
+    ]
+}
+
 /// The study.
 pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow::Result<Section> {
     let (cells, duration_s) = size(quick);
@@ -72,28 +121,8 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
                 scale.map_or("data mode".to_string(), |s| s.to_string())
             );
             // rate, mean error, then the error per modality
-            let [rate, error, accel, force, prox, temp]: [f64; 6] = grid.run(key, || {
-                let g = sc.generate(&GenerateOptions {
-                    keep_packets: false,
-                    ..Default::default()
-                });
-                let st = &g.stats;
-                let modality_error = |m: Modality| {
-                    let chans: Vec<_> = Channel::ALL[..8]
-                        .iter()
-                        .filter(|c| c.modality() == m)
-                        .collect();
-                    chans.iter().map(|&&c| st.rms_error_pct(c)).sum::<f64>() / chans.len() as f64
-                };
-                Ok([
-                    st.packet_rate_pct(),
-                    mean_error_pct(st),
-                    modality_error(Modality::Acceleration),
-                    modality_error(Modality::Force),
-                    modality_error(Modality::Proximity),
-                    modality_error(Modality::Temperature),
-                ])
-            })?;
+            let [rate, error, accel, force, prox, temp]: [f64; 6] =
+                grid.run(key, || Ok(rate_and_errors(&sc)))?;
             let raw = sc.thresholds().raw;
             y_max = y_max.max(rate);
             table.row(vec![
@@ -132,23 +161,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
             color: i,
         });
     }
-    let x_max = series
-        .iter()
-        .flat_map(|s| s.points.iter().map(|p| p.0))
-        .fold(0.0f64, f64::max);
-    let chart = chart::Chart {
-        name: "c1_send_on_delta".into(),
-        title: "C1 Send-on-delta: packet rate against reconstruction error".into(),
-        x_label: "RMS reconstruction error, mean of 8 channels (% of full range)".into(),
-        y_label: "packets (% of data mode)".into(),
-        x_log: false,
-        y_log: false,
-        x_range: (0.0, x_max * 1.1),
-        y_range: (0.0, y_max * 1.05),
-        series,
-        marks,
-        legend: chart::Legend::UpperRight,
-    };
+    let chart = rate_error_chart(series, marks, y_max);
     Ok(Section {
         id: "C1",
         title: "Send-on-delta: packet rate against reconstruction error".into(),
