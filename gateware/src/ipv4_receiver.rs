@@ -319,6 +319,7 @@ mod tests {
             |u| &mut u.clock,
         );
         let (mut good, mut bad) = (0, 0);
+        let (mut fitting, mut overlong) = (0, 0);
         for case in 0..400 {
             let payload_len = rng.next_u64() as usize % 40;
             let mut destination = link.box_ip;
@@ -395,10 +396,16 @@ mod tests {
                 u.source.val().to_u64(),
                 u64::from(u32::from_be_bytes(packet.source()))
             );
-            // the packet fits the frame when it ends before the FCS
-            let fits = total >= IPV4_HEADER_LEN && IPV4_AT + total <= frame.len() - 4;
+            // the packet fits the frame when it ends before the FCS (a total length below
+            // the header's leaves no payload to count down)
             if total >= IPV4_HEADER_LEN {
+                let fits = IPV4_AT + total <= frame.len() - 4;
                 assert_eq!(u.fits.val(), fits, "case {case}: total length {total}");
+                if fits {
+                    fitting += 1;
+                } else {
+                    overlong += 1;
+                }
             }
             if Ipv4Repr::parse(&frame[IPV4_AT..frame.len() - 4]).is_ok() {
                 good += 1;
@@ -407,6 +414,10 @@ mod tests {
             }
         }
         assert!(good > 100 && bad > 100, "{good} good headers, {bad} bad");
+        assert!(
+            fitting > 100 && overlong > 5,
+            "{fitting} packets fit their frames, {overlong} longer"
+        );
     }
 
     /// `in_payload` marks exactly the payload's bytes (from the byte after the header up
