@@ -143,6 +143,9 @@ pub fn cycles(spec: &SimSpec) -> u64 {
     spec.duration_ns / TICK_NS
 }
 
+/// The pcap writer of a run.
+type Pcap = skinbox_protocol::pcap::PcapFrameWriter<std::fs::File>;
+
 /// Checks every frame, writes the pcap and measures what the frames delivered.
 pub(crate) fn analyse(
     spec: &SimSpec,
@@ -160,47 +163,25 @@ pub(crate) fn analyse(
         cycles_per_second: cycles as f64 / wall.max(1e-9),
         ..Default::default()
     };
-    let mut pcap = match &spec.pcap {
-        Some(path) => Some(
-            skinbox_protocol::pcap::PcapFrameWriter::new(std::fs::File::create(path).map_err(
-                |source| CosimError::Io {
-                    path: path.clone(),
-                    source,
-                },
-            )?)
-            .map_err(pcap_error)?,
-        ),
-        None => None,
-    };
-    // each port's packets with their true start edges, to be matched in order
-    let mut pending: Vec<VecDeque<(&SentPacket, f64)>> = spec
-        .ports
-        .iter()
-        .zip(true_starts)
-        .map(|(p, t)| p.iter().zip(t.iter().copied()).collect())
-        .collect();
-    let mut last_status: Vec<PortCounters> = vec![PortCounters::default(); spec.config.ports];
-    let (mut error_sum, mut error_count) = (0.0, 0u64);
+    let mut pcap = open_pcap(spec)?;
+    let mut tally = Tally::new(spec, true_starts);
     let mut datagrams = Vec::with_capacity(frames.len());
     let mut replies = vec![];
     // the host's frames go into the pcap beside the box's, by the cycle of their first byte
     let mut host_frames = spec.host_frames.iter().peekable();
-    let mut write_host_frames =
-        |until: u64,
-         pcap: &mut Option<skinbox_protocol::pcap::PcapFrameWriter<std::fs::File>>|
-         -> Result<(), CosimError> {
-            while let Some(f) = host_frames.next_if(|f| f.edge <= until) {
-                if let Some(pcap) = pcap {
-                    let ethernet = &f.frame[..f
-                        .frame
-                        .len()
-                        .saturating_sub(skinbox_protocol::link::FCS_LEN)];
-                    pcap.write_frame(Duration::from_nanos(f.edge * TICK_NS), ethernet)
-                        .map_err(pcap_error)?;
-                }
+    let mut write_host_frames = |until: u64, pcap: &mut Option<Pcap>| -> Result<(), CosimError> {
+        while let Some(f) = host_frames.next_if(|f| f.edge <= until) {
+            if let Some(pcap) = pcap {
+                let ethernet = &f.frame[..f
+                    .frame
+                    .len()
+                    .saturating_sub(skinbox_protocol::link::FCS_LEN)];
+                pcap.write_frame(Duration::from_nanos(f.edge * TICK_NS), ethernet)
+                    .map_err(pcap_error)?;
             }
-            Ok(())
-        };
+        }
+        Ok(())
+    };
     for frame in frames {
         write_host_frames(frame.first_cycle, &mut pcap)?;
         if is_reply(&frame.bytes) {
@@ -232,13 +213,78 @@ pub(crate) fn analyse(
                 .map_err(pcap_error)?;
         }
         let datagram = DatagramRepr::parse(payload)?;
+        tally.datagram(&mut report, &datagram, spec.config.ports)?;
+        datagrams.push(datagram);
+    }
+    write_host_frames(u64::MAX, &mut pcap)?;
+    if let Some(pcap) = pcap {
+        pcap.finish().map_err(pcap_error)?;
+    }
+    tally.finish(&mut report);
+    Ok(SimRun {
+        report,
+        datagrams,
+        frames: frames.to_vec(),
+        replies,
+        uart_tx: Vec::new(),
+    })
+}
+
+/// The spec's pcap writer, if it asks for one.
+fn open_pcap(spec: &SimSpec) -> Result<Option<Pcap>, CosimError> {
+    Ok(match &spec.pcap {
+        Some(path) => Some(
+            skinbox_protocol::pcap::PcapFrameWriter::new(std::fs::File::create(path).map_err(
+                |source| CosimError::Io {
+                    path: path.clone(),
+                    source,
+                },
+            )?)
+            .map_err(pcap_error)?,
+        ),
+        None => None,
+    })
+}
+
+/// What the datagrams delivered, matched against the packets sent.
+struct Tally<'a> {
+    /// Each port's packets with their true start edges, to be matched in order.
+    pending: Vec<VecDeque<(&'a SentPacket, f64)>>,
+    /// Each port's counters in the last status report.
+    last_status: Vec<PortCounters>,
+    error_sum: f64,
+    error_count: u64,
+}
+
+impl<'a> Tally<'a> {
+    fn new(spec: &'a SimSpec, true_starts: &[Vec<f64>]) -> Self {
+        Tally {
+            pending: spec
+                .ports
+                .iter()
+                .zip(true_starts)
+                .map(|(p, t)| p.iter().zip(t.iter().copied()).collect())
+                .collect(),
+            last_status: vec![PortCounters::default(); spec.config.ports],
+            error_sum: 0.0,
+            error_count: 0,
+        }
+    }
+
+    /// Counts one datagram of a `ports`-port box.
+    fn datagram(
+        &mut self,
+        report: &mut SimReport,
+        datagram: &DatagramRepr,
+        ports: usize,
+    ) -> Result<(), CosimError> {
         match &datagram.body {
             DatagramBody::Records(records) => {
                 report.record_datagrams += 1;
                 for r in records {
                     report.records += 1;
                     // a port the box does not have matches no packet sent
-                    let Some(queue) = pending.get_mut(usize::from(r.port)) else {
+                    let Some(queue) = self.pending.get_mut(usize::from(r.port)) else {
                         report.records_corrupted += 1;
                         continue;
                     };
@@ -255,8 +301,8 @@ pub(crate) fn analyse(
                                 report.records_mistimed += 1;
                             }
                             report.ts_error_max_ticks = report.ts_error_max_ticks.max(error);
-                            error_sum += error;
-                            error_count += 1;
+                            self.error_sum += error;
+                            self.error_count += 1;
                         }
                         None => report.records_corrupted += 1,
                     }
@@ -266,49 +312,43 @@ pub(crate) fn analyse(
                 report.status_datagrams += 1;
                 for (i, counters) in status.ports.iter().enumerate() {
                     let port = usize::from(status.first_port) + i;
-                    let slot = last_status
-                        .get_mut(port)
-                        .ok_or(CosimError::BoxOutput(format!(
-                            "status counters for port {port} of a {}-port box",
-                            spec.config.ports
-                        )))?;
+                    let slot =
+                        self.last_status
+                            .get_mut(port)
+                            .ok_or(CosimError::BoxOutput(format!(
+                                "status counters for port {port} of a {ports}-port box",
+                            )))?;
                     *slot = *counters;
                 }
             }
         }
-        datagrams.push(datagram);
+        Ok(())
     }
-    write_host_frames(u64::MAX, &mut pcap)?;
-    if let Some(pcap) = pcap {
-        pcap.finish().map_err(pcap_error)?;
+
+    /// The report's totals: timing error, losses, the box's own counts.
+    fn finish(self, report: &mut SimReport) {
+        report.ts_error_mean_ticks = if self.error_count > 0 {
+            self.error_sum / self.error_count as f64
+        } else {
+            0.0
+        };
+        report.dropped = report.packets_sent - report.packets_delivered;
+        report.box_packets_good = self
+            .last_status
+            .iter()
+            .map(|p| u64::from(p.get(PortCounter::PacketsGood)))
+            .sum();
+        report.losses_by_cause = PortCounter::ALL
+            .iter()
+            .filter(|c| c.is_packet_loss() || **c == PortCounter::GarbageBytes)
+            .map(|c| {
+                (
+                    c.name().to_string(),
+                    self.last_status.iter().map(|p| u64::from(p.get(*c))).sum(),
+                )
+            })
+            .collect();
     }
-    report.ts_error_mean_ticks = if error_count > 0 {
-        error_sum / error_count as f64
-    } else {
-        0.0
-    };
-    report.dropped = report.packets_sent - report.packets_delivered;
-    report.box_packets_good = last_status
-        .iter()
-        .map(|p| u64::from(p.get(PortCounter::PacketsGood)))
-        .sum();
-    report.losses_by_cause = PortCounter::ALL
-        .iter()
-        .filter(|c| c.is_packet_loss() || **c == PortCounter::GarbageBytes)
-        .map(|c| {
-            (
-                c.name().to_string(),
-                last_status.iter().map(|p| u64::from(p.get(*c))).sum(),
-            )
-        })
-        .collect();
-    Ok(SimRun {
-        report,
-        datagrams,
-        frames: frames.to_vec(),
-        replies,
-        uart_tx: Vec::new(),
-    })
 }
 
 fn pcap_error(e: impl std::fmt::Display) -> CosimError {

@@ -169,113 +169,19 @@ fn step(rng: &mut Rng, channel: Channel, v: i32, scale: i32) -> i32 {
 pub fn generate(config: &SyntheticConfig) -> Result<SynthCapture, CosimError> {
     let mut rng = Rng::new(config.seed);
     let ports = config.ports.max(1);
-    let mut cells: Vec<CellSim> = (1..=config.cells)
-        .map(|id| {
-            let value = [
-                rng.range(-8, 8),
-                rng.range(-8, 8),
-                256 + rng.range(-8, 8),
-                rng.range(0, 2),
-                rng.range(0, 2),
-                rng.range(0, 2),
-                rng.range(0, 450),
-                rng.range(58, 64),
-                0,
-            ];
-            CellSim {
-                id,
-                port: (id % u16::from(ports)) as u8,
-                event_mode: config.event_every > 0 && id % config.event_every == 0,
-                value,
-                last_sent: value,
-                sequence: rng.next_u64() as u16,
-            }
-        })
-        .collect();
-    let period_ticks = (TICKS_PER_SECOND as f64 / config.sample_rate_hz) as u64;
-    let box_config = BoxConfig {
-        ports: usize::from(ports),
-        box_id: config.box_id,
-        // the box's boot id counts the reset its run starts with
-        boot_seed: config.boot_id.wrapping_sub(1),
-        // with no status datagrams asked for, the box reports at its default period and
-        // the reports are removed below
-        status_period_ticks: match config.status_period_ticks {
-            0 => BoxConfig::default().status_period_ticks,
-            ticks => ticks,
-        },
-        flush_timeout_ticks: config.flush_timeout_ticks,
-        ..BoxConfig::default()
-    };
-    let bit_ns = 1e9 / box_config.baud as f64;
-    let packet_ns = UART_BITS_PER_PACKET as f64 * bit_ns;
-    // a port's packets back to back at best, the first when the ports see their pins
-    let mut free_ns = vec![(PORTS_READY_CYCLE * TICK_NS) as f64; usize::from(ports)];
-    let mut pins: Vec<Vec<SentPacket>> = vec![Vec::new(); usize::from(ports)];
-    let mut send = |tick: u64, port: u8, bytes: [u8; 20]| {
-        let free = &mut free_ns[usize::from(port)];
-        let start_ns = ((tick + TICK_ZERO_CYCLE) * TICK_NS) as f64;
-        let start_ns = start_ns.max(*free);
-        *free = start_ns + packet_ns;
-        pins[usize::from(port)].push(SentPacket {
-            bytes,
-            start_ns,
-            bit_ns,
-        });
-    };
-    let (mut data_packets, mut event_packets) = (0, 0);
-    // Cells of one port send back to back: 50 us per 20-byte packet at 4 Mbit/s 8N1.
-    let packet_ticks = 6_250;
-    for k in 0..u64::from(config.samples_per_cell) {
-        let t0 = config.start_tick + k * period_ticks;
-        for (i, cell) in cells.iter_mut().enumerate() {
-            for c in Channel::ALL {
-                cell.value[c.index()] = step(&mut rng, c, cell.value[c.index()], config.walk_scale);
-            }
-            let slot = (i / usize::from(ports)) as u64;
-            let tick = t0 + slot * packet_ticks % period_ticks.max(1);
-            if !cell.event_mode {
-                if let Ok(d) = DataRepr::from_raw(cell.id, cell.value) {
-                    send(tick, cell.port, d.to_bytes());
-                    data_packets += 1;
-                }
-                continue;
-            }
-            let events: Vec<(Channel, i32)> = Channel::ALL
-                .into_iter()
-                .filter(|c| {
-                    let i = c.index();
-                    (cell.value[i] - cell.last_sent[i]).abs() > i32::from(c.table_i_threshold_raw())
-                })
-                .map(|c| (c, cell.value[c.index()]))
-                .collect();
-            if events.is_empty() {
-                continue;
-            }
-            for (c, v) in &events {
-                cell.last_sent[c.index()] = *v;
-            }
-            if let Ok((first, second)) = EventRepr::split(cell.id, cell.sequence, &events) {
-                send(tick, cell.port, first.to_bytes());
-                event_packets += 1;
-                cell.sequence = cell.sequence.wrapping_add(1);
-                if let Some(second) = second {
-                    send(tick + packet_ticks, cell.port, second.to_bytes());
-                    event_packets += 1;
-                    cell.sequence = cell.sequence.wrapping_add(1);
-                }
-            }
-        }
-    }
+    let mut cells = new_cells(config, &mut rng, ports);
+    let box_config = synthetic_box(config, ports);
+    let mut pins = Pins::new(&box_config, ports);
+    let (data_packets, event_packets) = play(config, &mut rng, &mut cells, &mut pins, ports);
     // the box runs until the last packet has left in a datagram and the status report
     // after it has counted it
-    let last_ns = free_ns.iter().copied().fold(0.0, f64::max) as u64;
+    let last_ns = pins.free_ns.iter().copied().fold(0.0, f64::max) as u64;
     let drain_ns = (box_config.flush_timeout_ticks + box_config.status_period_ticks) * TICK_NS
         + crate::scene::DRAIN_NS;
     let spec = SimSpec {
         duration_ns: (last_ns + drain_ns).div_ceil(TICK_NS) * TICK_NS,
         config: box_config,
-        ports: pins,
+        ports: pins.pins,
         pcap: None,
         vcd: None,
         jitter: Jitter::NONE,
@@ -312,6 +218,141 @@ pub fn generate(config: &SyntheticConfig) -> Result<SynthCapture, CosimError> {
         capture.datagrams.push(datagram);
     }
     Ok(capture)
+}
+
+/// The cells, ids 1..=cells, with random starting values and event sequence numbers.
+fn new_cells(config: &SyntheticConfig, rng: &mut Rng, ports: u8) -> Vec<CellSim> {
+    (1..=config.cells)
+        .map(|id| {
+            let value = [
+                rng.range(-8, 8),
+                rng.range(-8, 8),
+                256 + rng.range(-8, 8),
+                rng.range(0, 2),
+                rng.range(0, 2),
+                rng.range(0, 2),
+                rng.range(0, 450),
+                rng.range(58, 64),
+                0,
+            ];
+            CellSim {
+                id,
+                port: (id % u16::from(ports)) as u8,
+                event_mode: config.event_every > 0 && id % config.event_every == 0,
+                value,
+                last_sent: value,
+                sequence: rng.next_u64() as u16,
+            }
+        })
+        .collect()
+}
+
+/// The box the capture comes from.
+fn synthetic_box(config: &SyntheticConfig, ports: u8) -> BoxConfig {
+    BoxConfig {
+        ports: usize::from(ports),
+        box_id: config.box_id,
+        // the box's boot id counts the reset its run starts with
+        boot_seed: config.boot_id.wrapping_sub(1),
+        // with no status datagrams asked for, the box reports at its default period and
+        // the reports are removed below
+        status_period_ticks: match config.status_period_ticks {
+            0 => BoxConfig::default().status_period_ticks,
+            ticks => ticks,
+        },
+        flush_timeout_ticks: config.flush_timeout_ticks,
+        ..BoxConfig::default()
+    }
+}
+
+/// The packets on the box's pins: a port's packets back to back at best, the first when
+/// the ports see their pins.
+struct Pins {
+    free_ns: Vec<f64>,
+    pins: Vec<Vec<SentPacket>>,
+    bit_ns: f64,
+    packet_ns: f64,
+}
+
+impl Pins {
+    fn new(box_config: &BoxConfig, ports: u8) -> Self {
+        let bit_ns = 1e9 / box_config.baud as f64;
+        Pins {
+            free_ns: vec![(PORTS_READY_CYCLE * TICK_NS) as f64; usize::from(ports)],
+            pins: vec![Vec::new(); usize::from(ports)],
+            bit_ns,
+            packet_ns: UART_BITS_PER_PACKET as f64 * bit_ns,
+        }
+    }
+
+    /// Sends a packet due at box tick `tick` on `port`.
+    fn send(&mut self, tick: u64, port: u8, bytes: [u8; 20]) {
+        let free = &mut self.free_ns[usize::from(port)];
+        let start_ns = ((tick + TICK_ZERO_CYCLE) * TICK_NS) as f64;
+        let start_ns = start_ns.max(*free);
+        *free = start_ns + self.packet_ns;
+        self.pins[usize::from(port)].push(SentPacket {
+            bytes,
+            start_ns,
+            bit_ns: self.bit_ns,
+        });
+    }
+}
+
+/// Every cell's samples onto the pins; returns the data and event packets sent.
+fn play(
+    config: &SyntheticConfig,
+    rng: &mut Rng,
+    cells: &mut [CellSim],
+    pins: &mut Pins,
+    ports: u8,
+) -> (u64, u64) {
+    let period_ticks = (TICKS_PER_SECOND as f64 / config.sample_rate_hz) as u64;
+    let (mut data_packets, mut event_packets) = (0, 0);
+    // Cells of one port send back to back: 50 us per 20-byte packet at 4 Mbit/s 8N1.
+    let packet_ticks = 6_250;
+    for k in 0..u64::from(config.samples_per_cell) {
+        let t0 = config.start_tick + k * period_ticks;
+        for (i, cell) in cells.iter_mut().enumerate() {
+            for c in Channel::ALL {
+                cell.value[c.index()] = step(rng, c, cell.value[c.index()], config.walk_scale);
+            }
+            let slot = (i / usize::from(ports)) as u64;
+            let tick = t0 + slot * packet_ticks % period_ticks.max(1);
+            if !cell.event_mode {
+                if let Ok(d) = DataRepr::from_raw(cell.id, cell.value) {
+                    pins.send(tick, cell.port, d.to_bytes());
+                    data_packets += 1;
+                }
+                continue;
+            }
+            let events: Vec<(Channel, i32)> = Channel::ALL
+                .into_iter()
+                .filter(|c| {
+                    let i = c.index();
+                    (cell.value[i] - cell.last_sent[i]).abs() > i32::from(c.table_i_threshold_raw())
+                })
+                .map(|c| (c, cell.value[c.index()]))
+                .collect();
+            if events.is_empty() {
+                continue;
+            }
+            for (c, v) in &events {
+                cell.last_sent[c.index()] = *v;
+            }
+            if let Ok((first, second)) = EventRepr::split(cell.id, cell.sequence, &events) {
+                pins.send(tick, cell.port, first.to_bytes());
+                event_packets += 1;
+                cell.sequence = cell.sequence.wrapping_add(1);
+                if let Some(second) = second {
+                    pins.send(tick + packet_ticks, cell.port, second.to_bytes());
+                    event_packets += 1;
+                    cell.sequence = cell.sequence.wrapping_add(1);
+                }
+            }
+        }
+    }
+    (data_packets, event_packets)
 }
 
 /// A capture of at least `min_packets` cell packets for the host benchmarks (their

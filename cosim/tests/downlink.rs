@@ -13,51 +13,11 @@ use skinbox_cosim::run::{HostFrame, SimSpec, TICK_ZERO_CYCLE};
 use skinbox_cosim::sim::run_rtl;
 use skinbox_gateware::interface_box::{BoxConfig, RECEIVE_TICK_LAG};
 use skinbox_model::control::{BoxControl, ControlConfig};
-use skinbox_model::downlink::{DownlinkModel, PinChange};
+use skinbox_model::downlink::PinChange;
 use skinbox_model::timing::DOWNLINK_OFFER_AFTER_RECEIVE_TICK;
 use skinbox_protocol::box_counters::BoxCounter;
-use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::{AckRepr, AckResult, Request, ALL_PORTS};
-use skinbox_protocol::TICKS_PER_SECOND;
 use support::*;
-
-/// Ticks per bit at 4 Mbit/s.
-const BIT_TICKS: f64 = TICKS_PER_SECOND as f64 / 4_000_000.0;
-
-/// The bytes on each port's pin: a start bit is a fall from high; each bit is sampled in
-/// its middle, the stop bit must be high.
-fn decode_pins(changes: &[PinChange], ports: usize) -> Vec<Vec<(u64, u8)>> {
-    (0..ports)
-        .map(|port| {
-            let mine: Vec<&PinChange> = changes.iter().filter(|c| c.port == port).collect();
-            let level_at = |t: f64| {
-                let t = t as u64;
-                mine.iter()
-                    .take_while(|c| c.tick <= t)
-                    .last()
-                    .is_none_or(|c| c.level)
-            };
-            let mut out = vec![];
-            let mut free_from = 0.0;
-            for c in &mine {
-                if c.level || (c.tick as f64) < free_from {
-                    continue;
-                }
-                let start = c.tick as f64;
-                let byte = (0..8).fold(0u8, |b, i| {
-                    b | u8::from(level_at(start + (1.5 + i as f64) * BIT_TICKS)) << i
-                });
-                assert!(
-                    level_at(start + 9.5 * BIT_TICKS),
-                    "port {port}: stop bit low at {start}"
-                );
-                out.push((c.tick, byte));
-                free_from = start + 9.5 * BIT_TICKS;
-            }
-            out
-        })
-        .collect()
-}
 
 #[test]
 fn cell_commands_leave_on_the_uart_pins_as_the_reference_says_while_the_uplink_runs_at_line_rate() {
@@ -170,78 +130,6 @@ fn cell_commands_leave_on_the_uart_pins_as_the_reference_says_while_the_uplink_r
         (r.packets_sent, 0, 0),
         "no record lost while commands went down: {r:?}"
     );
-}
-
-#[test]
-fn a_command_flood_to_one_port_is_refused_and_counted_not_queued() {
-    // the model of the downlink the RTL test holds to the gateware: 2,000 commands to one
-    // port, one every 0.8 us, for 1.6 ms; the port carries one every 50 us
-    let config = config();
-    let mut m = BoxControl::new(config);
-    let mut results = [0u32; 2];
-    let mut tick = 1_000;
-    for i in 0..2_000u32 {
-        let frame = command(
-            HOST_IP,
-            i + 1,
-            Request::CellCommand {
-                port: 5,
-                packet: cell_packet(i as u8),
-            },
-        );
-        let out = m.receive(&frame, tick);
-        match out.fate {
-            BoxCounter::CommandsAccepted => results[0] += 1,
-            BoxCounter::RefusedDownlinkFull => results[1] += 1,
-            f => panic!("command {i}: {f:?}"),
-        }
-        tick += 100;
-    }
-    let end = m.downlink.drain();
-    // two queued at once, then one each time a packet's last byte has been read
-    let line_ticks = (200.0 * BIT_TICKS) as u64;
-    let carried = 2 + (tick - 1_000) / line_ticks;
-    assert!(
-        (i64::from(results[0]) - carried as i64).abs() <= 1,
-        "accepted {}, the line carries {carried}",
-        results[0]
-    );
-    assert_eq!(results[0] + results[1], 2_000);
-    assert_eq!(m.counters.get(BoxCounter::RefusedDownlinkFull), results[1]);
-    // all of them went out, back to back, and nothing else
-    let decoded = decode_pins(m.downlink.changes(), 8);
-    assert_eq!(decoded[5].len(), results[0] as usize * PACKET_LEN);
-    assert!(decoded
-        .iter()
-        .enumerate()
-        .all(|(p, d)| p == 5 || d.is_empty()));
-    assert!(end < tick + 3 * line_ticks);
-}
-
-#[test]
-fn the_downlink_model_is_idle_cheap_and_starts_each_packet_in_the_next_frame() {
-    // a packet offered on an idle 64-port downlink (11-bit frames) is committed after its
-    // copy (the offer register and 20 clocks); the first refill scan that visits its port
-    // after that (one port a clock from the clock after a frame's last data bit went to
-    // the pins) loads its first byte, whose start bit opens the next frame
-    let (clock_hz, baud) = (125_000_000, 4_000_000);
-    let frame = skinbox_gateware::cell_downlink::frame_bits(64);
-    assert_eq!(frame, 11);
-    let bit = |b: u64| skinbox_gateware::cell_downlink::bit_start(clock_hz, baud, b);
-    for port in [0u8, 17, 63] {
-        let mut d = DownlinkModel::new(64, clock_hz, baud);
-        let offer = 1_000_000_007;
-        assert!(d.offer(offer, port, cell_packet(1)));
-        d.drain();
-        let first = d.changes()[0];
-        assert_eq!(first.port, usize::from(port));
-        assert!(!first.level);
-        let counted = offer + 1 + 20 + 1;
-        let f = (0..)
-            .find(|f| bit(f * frame + 8) + u64::from(port) >= counted)
-            .unwrap();
-        assert_eq!(first.tick, bit((f + 1) * frame), "port {port}");
-    }
 }
 
 #[test]

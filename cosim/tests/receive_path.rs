@@ -2,7 +2,7 @@
 //! on the verilated box's GMII receive while its ports carry cell traffic, and every answer
 //! it sends (ARP reply, echo reply, acknowledgement) must equal, byte for byte, what the
 //! control model (`skinbox_model::control`, itself held to independent oracles in
-//! tests/control.rs) answers to the same frames; the box counters in its status-now
+//! model/tests/control.rs) answers to the same frames; the box counters in its status-now
 //! acknowledgements must equal the model's. The uplink meanwhile loses nothing.
 
 mod support;

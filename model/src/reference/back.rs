@@ -114,6 +114,16 @@ struct Buffer {
     flag_of_writing: bool,
 }
 
+/// The store reader's next register values, computed in one clock.
+struct ReaderStep {
+    /// The slot freed in this clock.
+    read_done: Option<usize>,
+    next_reading: Option<usize>,
+    next_hit: bool,
+    /// The record beat issued to the read pipeline.
+    issued: Option<RecordBeat>,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Report {
     Wait,
@@ -470,11 +480,52 @@ impl<'a> Back<'a> {
 
     /// One clock cycle of every block, as the gateware computes it.
     fn step(&mut self, c: u64) {
-        let n = self.t.ports;
         let tick = self.tick(c);
         let idle = c >= self.idle_from;
 
         // the receive side: frames decided, the configuration changing in this clock
+        self.step_receive(c);
+
+        // framer input control
+        let closing = self.close_now(c);
+        let accept = self.offset_left == 0 && !self.close_due();
+
+        // store reader: scan, grant, issue (on the registers as they are)
+        let reader = self.step_reader();
+
+        // framer: one beat from the store's FIFO or one offset byte per clock
+        let (framer_takes, next_deadline) = self.step_framer(tick, accept);
+        // the read pipeline (two clocks of block RAM) and the FIFO
+        if framer_takes {
+            self.fifo.pop_front();
+        }
+        if let Some(arrived) = self.read2.take() {
+            self.fifo.push_back(arrived);
+        }
+        self.read2 = self.read1.take();
+        self.read1 = reader.issued;
+        self.reading = reader.next_reading;
+        self.hit = reader.next_hit;
+        if let Some(p) = reader.read_done {
+            self.buffers[p].slots.pop_front();
+        }
+        let next_deadline_passed = (tick as u32).wrapping_sub(self.deadline) as i32 >= 0;
+        self.deadline = next_deadline;
+
+        // arbiter and transmitter
+        self.step_transmitter(c, tick, idle);
+        if closing {
+            self.close_datagram();
+        }
+
+        // store write side: the engine's steps on packets this cycle
+        self.step_writer(c, reader.read_done);
+
+        self.deadline_passed = next_deadline_passed;
+    }
+
+    /// The receive side's clock: frames decided, the configuration changing in this clock.
+    fn step_receive(&mut self, c: u64) {
         let effects = self.receive.as_mut().map_or(vec![], |r| r.step(c));
         for effect in effects {
             match effect {
@@ -484,12 +535,12 @@ impl<'a> Back<'a> {
                 Effect::StatusNow => self.due = true,
             }
         }
+    }
 
-        // framer input control
-        let closing = self.close_now(c);
-        let accept = self.offset_left == 0 && !self.close_due();
-
-        // store reader: scan, grant, issue (on the registers as they are)
+    /// The store reader's clock on the registers as they are: scan, grant, issue. Updates
+    /// the scan, issue index and freed slot; returns the registers' next values.
+    fn step_reader(&mut self) -> ReaderStep {
+        let n = self.t.ports;
         let in_flight = usize::from(self.read1.is_some()) + usize::from(self.read2.is_some());
         let issue = self.reading.is_some() && self.fifo.len() + in_flight < STORE_FIFO_DEPTH;
         // the slot freed this cycle (registered: the record's last issue was a clock ago)
@@ -521,8 +572,17 @@ impl<'a> Back<'a> {
             self.hit_port = self.scan;
             self.scan = (self.scan + 1) % n;
         }
+        ReaderStep {
+            read_done,
+            next_reading,
+            next_hit,
+            issued,
+        }
+    }
 
-        // framer: one beat from the store's FIFO or one offset byte per clock
+    /// The framer's clock: one beat from the store's FIFO or one offset byte. Returns
+    /// whether it takes the FIFO's front beat, and the flush deadline's next value.
+    fn step_framer(&mut self, tick: u64, accept: bool) -> (bool, u32) {
         let mut next_deadline = self.deadline;
         let framer_takes = self.offset_left == 0 && accept && !self.fifo.is_empty();
         if self.offset_left != 0 {
@@ -557,26 +617,13 @@ impl<'a> Back<'a> {
                 self.beat + 1
             };
         }
-        // the read pipeline (two clocks of block RAM) and the FIFO
-        if framer_takes {
-            self.fifo.pop_front();
-        }
-        if let Some(arrived) = self.read2.take() {
-            self.fifo.push_back(arrived);
-        }
-        self.read2 = self.read1.take();
-        self.read1 = issued;
-        self.reading = next_reading;
-        self.hit = next_hit;
-        if let Some(p) = read_done {
-            self.buffers[p].slots.pop_front();
-        }
-        let next_deadline_passed = (tick as u32).wrapping_sub(self.deadline) as i32 >= 0;
-        self.deadline = next_deadline;
+        (framer_takes, next_deadline)
+    }
 
-        // arbiter and transmitter: the idle transmitter takes the offered datagram; the
-        // arbiter chooses the next offer from the sources waiting now (a datagram closing
-        // now waits a clock to be chosen, and a clock more to be offered)
+    /// Arbiter and transmitter: the idle transmitter takes the offered datagram; the
+    /// arbiter chooses the next offer from the sources waiting now (a datagram closing
+    /// now waits a clock to be chosen, and a clock more to be offered).
+    fn step_transmitter(&mut self, c: u64, tick: u64, idle: bool) {
         let grant = self.offer.filter(|_| idle);
         let next_offer = if grant.is_some() {
             None
@@ -630,24 +677,29 @@ impl<'a> Back<'a> {
             self.last_grant = grant;
         }
         self.offer = next_offer;
-        if closing {
-            let records = std::mem::take(&mut self.fill);
-            let flags = if records.len() == MAX_RECORDS {
-                0
-            } else {
-                FLAG_FLUSH_TIMEOUT
-            };
-            self.pending = Some(DatagramRepr {
-                box_id: self.t.box_id,
-                port_count: self.t.ports as u8,
-                flags,
-                sequence: 0,
-                base_tick: self.base_tick,
-                body: DatagramBody::Records(records),
-            });
-        }
+    }
 
-        // store write side: the engine's steps on packets this cycle
+    /// Closes the filling datagram: it waits for the arbiter.
+    fn close_datagram(&mut self) {
+        let records = std::mem::take(&mut self.fill);
+        let flags = if records.len() == MAX_RECORDS {
+            0
+        } else {
+            FLAG_FLUSH_TIMEOUT
+        };
+        self.pending = Some(DatagramRepr {
+            box_id: self.t.box_id,
+            port_count: self.t.ports as u8,
+            flags,
+            sequence: 0,
+            base_tick: self.base_tick,
+            body: DatagramBody::Records(records),
+        });
+    }
+
+    /// The store's write side: the engine's steps on packets in cycle `c` (`read_done` is
+    /// the slot the reader frees in this cycle).
+    fn step_writer(&mut self, c: u64, read_done: Option<usize>) {
         let counted_now: Vec<(usize, Stored)> = self
             .buffers
             .iter_mut()
@@ -684,8 +736,6 @@ impl<'a> Back<'a> {
         for (port, stored) in counted_now {
             self.buffers[port].slots.push_back(stored);
         }
-
-        self.deadline_passed = next_deadline_passed;
     }
 
     /// Starts a frame in cycle `c`; returns the first cycle after its body's last byte was
