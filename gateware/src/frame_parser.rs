@@ -135,7 +135,7 @@ pub struct FrameParser {
     ip_and_transport_header_len: Constant<Bits<16>>,
     ip_to_arguments_len: Constant<Bits<16>>,
 
-    // input side: the beat index and the stored flag
+    // input side: the next beat's position (0 between frames) and the stored flag
     in_frame: DFF<Bit>,
     next_index: DFF<Bits<11>>,
     stored: DFF<Bit>,
@@ -306,10 +306,10 @@ impl Logic for FrameParser {
         self.beat_error.d.next = self.frame.error.val();
         self.beat_length_error.d.next = self.length_error.val();
         self.beat_data.d.next = self.frame.data.val();
-        self.index_in.next = 0.into();
-        if self.in_frame.q.val() {
-            self.index_in.next = self.next_index.q.val();
-        }
+        // the arriving beat's position: `next_index` is 0 between frames (a frame's last
+        // beat and the reset set it back), so the listeners' decodes take it straight
+        // from the register, with no choice in front of their fan-out
+        self.index_in.next = self.next_index.q.val();
         // position flags of the next registered beat: equality decodes only (a range
         // starts at its first byte and ends at the byte after it or at a frame's start)
         if self.frame.valid.val() {
@@ -321,19 +321,17 @@ impl Logic for FrameParser {
         }
         // the byte as a 16-bit word: even frame positions are high bytes
         self.word_in.next = bit_cast::<16, 8>(self.frame.data.val()) << 8;
-        // (the index is 0 out of a frame: its tests against positions other than 0 need
-        // `next_index` only, in parallel with `in_frame`, not through the choice)
-        if self.in_frame.q.val() & self.next_index.q.val().get_bit(0) {
+        if self.next_index.q.val().get_bit(0) {
             self.word_in.next = bit_cast::<16, 8>(self.frame.data.val());
         }
         self.beat_word.d.next = self.word_in.val();
         if self.frame.valid.val() {
-            if self.in_frame.q.val() {
-                self.beat_index.d.next = self.next_index.q.val();
-                self.next_index.d.next = self.next_index.q.val() + 1;
-            } else {
-                self.beat_index.d.next = 0.into();
-                self.next_index.d.next = 1.into();
+            self.beat_index.d.next = self.next_index.q.val();
+            self.next_index.d.next = self.next_index.q.val() + 1;
+            if self.frame.last.val() {
+                self.next_index.d.next = 0.into();
+            }
+            if !self.in_frame.q.val() {
                 self.stored.d.next = !self.buffer_locked.val();
             }
             self.in_frame.d.next = !self.frame.last.val();
@@ -470,6 +468,7 @@ impl Logic for FrameParser {
 
         if self.reset.val() {
             self.in_frame.d.next = false;
+            self.next_index.d.next = 0.into();
             self.beat_valid.d.next = false;
             self.beat_last.d.next = false;
             self.p1.d.next = false;
