@@ -285,7 +285,7 @@ impl Batch {
 }
 
 #[cfg(target_os = "linux")]
-mod linux {
+pub(crate) mod linux {
     //! `recvmmsg` with the sender's address and the SO_TIMESTAMPNS control message.
     use super::{Received, SLOT_BYTES};
     use std::io;
@@ -411,7 +411,8 @@ mod linux {
         ))
     }
 
-    fn peer(name: &libc::sockaddr_storage, len: libc::socklen_t) -> Option<SocketAddr> {
+    /// The address the kernel wrote into `name` (`len` bytes), if it is IPv4 or IPv6.
+    pub(crate) fn peer(name: &libc::sockaddr_storage, len: libc::socklen_t) -> Option<SocketAddr> {
         let len = len as usize;
         match i32::from(name.ss_family) {
             libc::AF_INET if len >= std::mem::size_of::<libc::sockaddr_in>() => {
