@@ -279,7 +279,7 @@ impl Logic for Ipv4Receiver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{send_frame_beats, Bench, TestRng};
+    use crate::testbench::{frame_word, send_frame_beats, Bench, TestRng};
     use skinbox_protocol::link::LinkConfig;
     use skinbox_protocol::wire::ipv4::{Ipv4Packet, Ipv4Repr};
 
@@ -293,16 +293,6 @@ mod tests {
             identification: 0x1234,
             dont_fragment: true,
             ttl: 64,
-        }
-    }
-
-    /// The frame's 16-bit word at registered position `i` (even positions high bytes).
-    fn word(frame: &[u8], i: usize) -> u64 {
-        let b = u64::from(frame[i]);
-        if i.is_multiple_of(2) {
-            b << 8
-        } else {
-            b
         }
     }
 
@@ -358,7 +348,7 @@ mod tests {
                 |u| &mut u.beats,
                 |u, r| {
                     u.beat_first.next = r == Some(0);
-                    u.beat_word.next = r.map_or(0, |i| word(&frame, i)).into();
+                    u.beat_word.next = r.map_or(0, |i| frame_word(&frame, i)).into();
                 },
             );
             let packet = Ipv4Packet::new_unchecked(&frame[IPV4_AT..]);
@@ -449,7 +439,7 @@ mod tests {
                 |u| &mut u.beats,
                 |u, r| {
                     u.beat_first.next = r == Some(0);
-                    u.beat_word.next = r.map_or(0, |i| word(&frame, i)).into();
+                    u.beat_word.next = r.map_or(0, |i| frame_word(&frame, i)).into();
                     if let Some(i) = r {
                         seen.borrow_mut().push((i, u.in_payload.val()));
                     }

@@ -206,6 +206,16 @@ impl TestRng {
     }
 }
 
+/// The 16-bit checksum word a frame's byte `i` contributes: even positions are high bytes.
+pub fn frame_word(frame: &[u8], i: usize) -> u64 {
+    let b = u64::from(frame[i]);
+    if i.is_multiple_of(2) {
+        b << 8
+    } else {
+        b
+    }
+}
+
 /// Sends one frame to a block listening on [`crate::stream::FrameBeats`], as the frame
 /// parser does: each byte arrives with its frame position (with a random idle clock before
 /// it at chance `idle`) and is the registered beat a clock later, when `registered` sets

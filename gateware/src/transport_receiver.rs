@@ -258,22 +258,12 @@ impl Logic for TransportReceiver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{send_frame_beats, Bench, TestRng};
+    use crate::testbench::{frame_word, send_frame_beats, Bench, TestRng};
     use skinbox_protocol::link::LinkConfig;
     use skinbox_protocol::wire::checksum::{checksum, ipv4_pseudo_header};
     use skinbox_protocol::wire::icmp::{EchoMessage, IcmpEchoRepr};
     use skinbox_protocol::wire::ipv4::Ipv4Repr;
     use skinbox_protocol::wire::udp::{UdpPacket, UdpRepr};
-
-    /// The frame's 16-bit word at position `i` (even positions high bytes).
-    fn word(frame: &[u8], i: usize) -> u64 {
-        let b = u64::from(frame[i]);
-        if i.is_multiple_of(2) {
-            b << 8
-        } else {
-            b
-        }
-    }
 
     /// A random ICMP echo or UDP datagram in an IPv4 packet behind an Ethernet header,
     /// with random padding and an FCS; sometimes a transport byte or the UDP length
@@ -356,7 +346,7 @@ mod tests {
             u.carries_udp.next = protocol == ipv4::PROTOCOL_UDP;
             u.payload_length.next = (payload_len as u64).into();
             // the arriving beat's word: the next index's
-            let words: Vec<u64> = (0..f.len()).map(|i| word(&f, i)).collect();
+            let words: Vec<u64> = (0..f.len()).map(|i| frame_word(&f, i)).collect();
             let next = std::cell::Cell::new(0usize);
             send_frame_beats(
                 &mut bench,
