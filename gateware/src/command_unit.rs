@@ -15,35 +15,32 @@
 //! are in the clock before `done`, else offered to it (`downlink_offer` in that clock,
 //! with `downlink_port`); everything else is carried out.
 //!
-//! The work is a pipeline of registers, one stage per clock, after the host table's
-//! address compares with `peer_ip` in the clock before `command`: the host match and the
-//! argument checks; the matched host's last sequence, the oldest slot and the result of
-//! the arguments; the serial-number test (newer or not, registered); the decision. `done`
+//! The hosts are a [`HostTable`], which looks `peer_ip` up while the frame arrives. The
+//! work is a pipeline of registers, one stage per clock: the argument checks; the result of
+//! the arguments; the serial-number test against the table's answer (newer or not,
+//! registered); the decision. `done`
 //! is high in the clock [`COMMAND_LATENCY`] clocks after `command`, with `fate`, `result`
 //! and `last_accepted` (held until the next `done`). The configuration registers change at
 //! the same edge: in the `done` clock they already hold the new values, and
-//! `status_period_set` / `status_now` are high in that clock only. The table is written a
-//! clock later, from registers (its write enables reach about 270 flip-flops: no logic in
-//! front of them). Commands must come at least `COMMAND_LATENCY` + 2 clocks apart (the
-//! compares see the table one clock before `command`; a frame takes at least 72), and the
-//! parser's fields must stay steady from the clock before `command` to `done` (they are
-//! its captures of the frame, which the next frame reaches no earlier than 13 clocks after
-//! the last beat: see `frame_parser`).
+//! `status_period_set` / `status_now` are high in that clock only. The table takes the
+//! sequence number a clock later, from a register. `peer_ip` must be steady for
+//! [`LOOKUP_CLOCKS`] clocks before `command` and commands must come at least
+//! `COMMAND_LATENCY` + 1 + `LOOKUP_CLOCKS` clocks apart (the parser's sender address is
+//! steady from the frame's IPv4 header on, and a frame takes at least 72 clocks), and the
+//! parser's fields must stay steady from then to `done` (they are its captures of the
+//! frame, which the next frame reaches no earlier than 13 clocks after the last beat: see
+//! `frame_parser`).
 //!
 //! `last_accepted` is the sequence number the table holds for the sender after the
 //! command: the command's own when it was taken, else the one it holds (0 for a host
 //! not in the table, which only a command for another box can leave there).
 
-use crate::command_decoder::HELD_ARGUMENT_BYTES;
+use crate::command_checks::CommandChecks;
 use crate::hdl::*;
+use crate::host_table::HostTable;
 use skinbox_protocol::box_counters::BoxCounter;
-use skinbox_protocol::command::{
-    cell_command_field, destination_field, ticks_field, AckResult, Opcode, ALL_PORTS, ANY_BOX,
-    CELL_COMMAND_LEN, DESTINATION_LEN, HOST_SLOTS, MAX_FLUSH_TIMEOUT_TICKS,
-    MIN_STATUS_PERIOD_TICKS, TICKS_LEN,
-};
+use skinbox_protocol::command::AckResult;
 use skinbox_protocol::link::LinkConfig;
-use skinbox_protocol::Field;
 
 /// Clocks from `command` to `done`.
 pub const COMMAND_LATENCY: u64 = 4;
@@ -66,16 +63,6 @@ pub struct CommandUnitConfig {
     pub status_period_ticks: u32,
 }
 
-/// The lowest bit in `command_arguments` of the argument bytes `field` (the first
-/// argument byte is the top byte).
-fn argument_bit(field: Field) -> Constant<Bits<7>> {
-    assert!(
-        field.end <= HELD_ARGUMENT_BYTES,
-        "argument bytes {field:?} not held"
-    );
-    constant((8 * (HELD_ARGUMENT_BYTES - field.end)) as u64)
-}
-
 /// The decision of steps 17-22 and the run-time configuration.
 #[derive(LogicBlock)]
 pub struct CommandUnit {
@@ -87,8 +74,8 @@ pub struct CommandUnit {
     pub command: Signal<In, Bit>,
     /// The sender's MAC (the Ethernet source).
     pub peer_mac: Signal<In, Bits<48>>,
-    /// The sender's IPv4 address, from the clock before `command` on: the host table is
-    /// matched a clock ahead.
+    /// The sender's IPv4 address, steady from [`LOOKUP_CLOCKS`] clocks before `command` on:
+    /// the host table looks it up while the frame arrives.
     pub peer_ip: Signal<In, Bits<32>>,
     /// The sender's UDP port.
     pub peer_port: Signal<In, Bits<16>>,
@@ -140,85 +127,27 @@ pub struct CommandUnit {
     /// acknowledgement carries the box counters).
     pub accepted_status_now: Signal<Out, Bit>,
     // build-time values
-    box_id: Constant<Bits<16>>,
-    any_box: Constant<Bits<16>>,
-    all_ports: Constant<Bits<8>>,
-    port_count: Constant<Bits<8>>,
-    max_flush_timeout: Constant<Bits<32>>,
-    min_status_period: Constant<Bits<32>>,
-    destination_length: Constant<Bits<16>>,
-    value_length: Constant<Bits<16>>,
-    cell_command_length: Constant<Bits<16>>,
-    opcode_stream_to: Constant<Bits<8>>,
-    opcode_set_flush_timeout: Constant<Bits<8>>,
-    opcode_set_status_period: Constant<Bits<8>>,
-    opcode_status_now: Constant<Bits<8>>,
-    opcode_read_tick: Constant<Bits<8>>,
-    opcode_cell_command: Constant<Bits<8>>,
-    fate_accepted: Constant<Bits<5>>,
     fate_replay: Constant<Bits<5>>,
     fate_other_box: Constant<Bits<5>>,
-    fate_unknown_opcode: Constant<Bits<5>>,
-    fate_bad_argument: Constant<Bits<5>>,
     fate_downlink_full: Constant<Bits<5>>,
-    result_ok: Constant<Bits<8>>,
     result_replay: Constant<Bits<8>>,
     result_other_box: Constant<Bits<8>>,
-    result_unknown_opcode: Constant<Bits<8>>,
-    result_bad_argument: Constant<Bits<8>>,
     result_downlink_full: Constant<Bits<8>>,
     // argument positions in `command_arguments`
-    destination_mac_bit: Constant<Bits<7>>,
-    destination_ip_bit: Constant<Bits<7>>,
-    destination_port_bit: Constant<Bits<7>>,
-    ticks_bit: Constant<Bits<7>>,
-    cell_port_bit: Constant<Bits<7>>,
-    cell_reserved_bit: Constant<Bits<7>>,
     default_mac: Constant<Bits<48>>,
     default_ip: Constant<Bits<32>>,
     default_port: Constant<Bits<16>>,
     default_flush_timeout: Constant<Bits<32>>,
     default_status_period: Constant<Bits<32>>,
-    // the host table: slot i is valid, its IPv4 address, its last accepted sequence
-    // number, and its age rank (0: accepted last, HOST_SLOTS - 1: accepted longest ago;
-    // the empty slots are always the oldest)
-    slot_valid: Vec<DFF<Bit>>,
-    slot_ip: Vec<DFF<Bits<32>>>,
-    slot_sequence: Vec<DFF<Bits<32>>>,
-    slot_rank: Vec<DFF<Bits<2>>>,
-    slot_initial_rank: Vec<Constant<Bits<2>>>,
-    oldest_rank: Constant<Bits<2>>,
-    // slot i's address is `peer_ip` (the match's compares, a clock before stage 1)
-    ip_match: Vec<DFF<Bit>>,
+    // the box id, opcode and argument checks (stages 1 and 2)
+    checks: CommandChecks,
+    // the hosts and their last accepted sequence numbers, looked up while the frame arrives
+    hosts: HostTable,
     // stage 1: host match and argument checks
     stage_1: DFF<Bit>,
-    matched: Vec<DFF<Bit>>,
-    box_ok: DFF<Bit>,
-    is_stream_to: DFF<Bit>,
-    is_set_flush_timeout: DFF<Bit>,
-    is_set_status_period: DFF<Bit>,
-    is_status_now: DFF<Bit>,
-    is_read_tick: DFF<Bit>,
-    is_cell_command: DFF<Bit>,
-    length_0: DFF<Bit>,
-    length_value: DFF<Bit>,
-    length_destination: DFF<Bit>,
-    length_cell_command: DFF<Bit>,
-    destination_ok: DFF<Bit>,
-    flush_timeout_ok: DFF<Bit>,
-    status_period_ok: DFF<Bit>,
-    cell_port_ok: DFF<Bit>,
-    reserved_zero: DFF<Bit>,
     // a cell command's target ports, one bit each (every bit for `ALL_PORTS`)
-    target_ports: DFF<Bits<64>>,
     // stage 2: the matched host's sequence, the oldest slot, the arguments' verdict
     stage_2: DFF<Bit>,
-    hit: DFF<Bit>,
-    hit_sequence: DFF<Bits<32>>,
-    oldest: Vec<DFF<Bit>>,
-    arguments_ok: DFF<Bit>,
-    arguments_fate: DFF<Bits<5>>,
-    arguments_result: DFF<Bits<8>>,
     // stage 3: the matched host's sequence is not older than the command's
     stage_3: DFF<Bit>,
     not_newer: DFF<Bit>,
@@ -229,11 +158,8 @@ pub struct CommandUnit {
     apply_status_period: DFF<Bit>,
     apply_status_now: DFF<Bit>,
     apply_cell_command: DFF<Bit>,
-    // stage 5: the table write a clock after the decision: the slot (one-hot) and the rank
-    // it had
+    // stage 5: the table's take a clock after the decision
     write_table: DFF<Bit>,
-    write_target: Vec<DFF<Bit>>,
-    write_rank: DFF<Bits<2>>,
     // stage 4: outputs
     done_out: DFF<Bit>,
     fate_out: DFF<Bits<5>>,
@@ -249,26 +175,17 @@ pub struct CommandUnit {
     accepted_stream_to_out: DFF<Bit>,
     accepted_status_now_out: DFF<Bit>,
     // decision signals
-    sequence_term: Signal<Local, Bits<32>>,
-    any_match: Signal<Local, Bit>,
     difference: Signal<Local, Bits<32>>,
     taken: Signal<Local, Bit>,
     newer: Signal<Local, Bit>,
-    target: Vec<Signal<Local, Bit>>,
-    target_rank: Signal<Local, Bits<2>>,
-    value: Signal<Local, Bits<32>>,
-    arguments_good: Signal<Local, Bit>,
-    opcode_known: Signal<Local, Bit>,
     cell_command_taken: Signal<Local, Bit>,
     downlink_room: Signal<Local, Bit>,
-    cell_port: Signal<Local, Bits<8>>,
 }
 
 impl CommandUnit {
     /// A command unit with the build-time values of `config`.
     pub fn new(config: CommandUnitConfig) -> Self {
         let link = config.link;
-        let slots = HOST_SLOTS;
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -298,79 +215,21 @@ impl CommandUnit {
             status_now: Default::default(),
             accepted_stream_to: Default::default(),
             accepted_status_now: Default::default(),
-            box_id: constant(config.box_id.into()),
-            any_box: constant(ANY_BOX.into()),
-            all_ports: constant(ALL_PORTS.into()),
-            port_count: constant(config.port_count.into()),
-            max_flush_timeout: constant(MAX_FLUSH_TIMEOUT_TICKS.into()),
-            min_status_period: constant(MIN_STATUS_PERIOD_TICKS.into()),
-            destination_length: constant(DESTINATION_LEN as u64),
-            value_length: constant(TICKS_LEN as u64),
-            cell_command_length: constant(CELL_COMMAND_LEN as u64),
-            opcode_stream_to: constant(Opcode::StreamTo as u64),
-            opcode_set_flush_timeout: constant(Opcode::SetFlushTimeout as u64),
-            opcode_set_status_period: constant(Opcode::SetStatusPeriod as u64),
-            opcode_status_now: constant(Opcode::StatusNow as u64),
-            opcode_read_tick: constant(Opcode::ReadTick as u64),
-            opcode_cell_command: constant(Opcode::CellCommand as u64),
-            fate_accepted: constant(BoxCounter::CommandsAccepted as u64),
             fate_replay: constant(BoxCounter::RefusedReplay as u64),
             fate_other_box: constant(BoxCounter::RefusedOtherBox as u64),
-            fate_unknown_opcode: constant(BoxCounter::RefusedUnknownOpcode as u64),
-            fate_bad_argument: constant(BoxCounter::RefusedBadArgument as u64),
             fate_downlink_full: constant(BoxCounter::RefusedDownlinkFull as u64),
-            result_ok: constant(AckResult::Ok as u64),
             result_replay: constant(AckResult::Replay as u64),
             result_other_box: constant(AckResult::OtherBox as u64),
-            result_unknown_opcode: constant(AckResult::UnknownOpcode as u64),
-            result_bad_argument: constant(AckResult::BadArgument as u64),
             result_downlink_full: constant(AckResult::DownlinkFull as u64),
-            destination_mac_bit: argument_bit(destination_field::MAC),
-            destination_ip_bit: argument_bit(destination_field::IP),
-            destination_port_bit: argument_bit(destination_field::PORT),
-            ticks_bit: argument_bit(ticks_field::TICKS),
-            cell_port_bit: argument_bit(cell_command_field::PORT..cell_command_field::PORT + 1),
-            cell_reserved_bit: argument_bit(cell_command_field::RESERVED),
             default_mac: constant(big_endian(&link.host_mac)),
             default_ip: constant(u32::from_be_bytes(link.host_ip).into()),
             default_port: constant(link.host_port.into()),
             default_flush_timeout: constant(config.flush_timeout_ticks.into()),
             default_status_period: constant(config.status_period_ticks.into()),
-            slot_valid: each(slots),
-            slot_ip: each(slots),
-            slot_sequence: each(slots),
-            slot_rank: each(slots),
-            slot_initial_rank: (0..slots)
-                .map(|i| constant((slots - 1 - i) as u64))
-                .collect(),
-            oldest_rank: constant(slots as u64 - 1),
+            checks: CommandChecks::new(config.box_id, config.port_count),
+            hosts: Default::default(),
             stage_1: Default::default(),
-            ip_match: each(slots),
-            matched: each(slots),
-            box_ok: Default::default(),
-            is_stream_to: Default::default(),
-            is_set_flush_timeout: Default::default(),
-            is_set_status_period: Default::default(),
-            is_status_now: Default::default(),
-            is_read_tick: Default::default(),
-            is_cell_command: Default::default(),
-            length_0: Default::default(),
-            length_value: Default::default(),
-            length_destination: Default::default(),
-            length_cell_command: Default::default(),
-            destination_ok: Default::default(),
-            flush_timeout_ok: Default::default(),
-            status_period_ok: Default::default(),
-            cell_port_ok: Default::default(),
-            reserved_zero: Default::default(),
-            target_ports: Default::default(),
             stage_2: Default::default(),
-            hit: Default::default(),
-            hit_sequence: Default::default(),
-            oldest: each(slots),
-            arguments_ok: Default::default(),
-            arguments_fate: Default::default(),
-            arguments_result: Default::default(),
             stage_3: Default::default(),
             not_newer: Default::default(),
             apply_stream_to: Default::default(),
@@ -379,8 +238,6 @@ impl CommandUnit {
             apply_status_now: Default::default(),
             apply_cell_command: Default::default(),
             write_table: Default::default(),
-            write_target: (0..slots).map(|_| Default::default()).collect(),
-            write_rank: Default::default(),
             done_out: Default::default(),
             fate_out: Default::default(),
             result_out: Default::default(),
@@ -394,19 +251,11 @@ impl CommandUnit {
             status_now_out: Default::default(),
             accepted_stream_to_out: Default::default(),
             accepted_status_now_out: Default::default(),
-            sequence_term: Default::default(),
-            any_match: Default::default(),
             difference: Default::default(),
             taken: Default::default(),
             newer: Default::default(),
-            target: each(slots),
-            target_rank: Default::default(),
-            value: Default::default(),
-            arguments_good: Default::default(),
-            opcode_known: Default::default(),
             cell_command_taken: Default::default(),
             downlink_room: Default::default(),
-            cell_port: Default::default(),
         }
     }
 }
@@ -418,29 +267,7 @@ impl Logic for CommandUnit {
             self,
             clock,
             stage_1,
-            box_ok,
-            is_stream_to,
-            is_set_flush_timeout,
-            is_set_status_period,
-            is_status_now,
-            is_read_tick,
-            is_cell_command,
-            length_0,
-            length_value,
-            length_destination,
-            length_cell_command,
-            destination_ok,
-            flush_timeout_ok,
-            status_period_ok,
-            cell_port_ok,
-            reserved_zero,
-            target_ports,
             stage_2,
-            hit,
-            hit_sequence,
-            arguments_ok,
-            arguments_fate,
-            arguments_result,
             stage_3,
             not_newer,
             apply_stream_to,
@@ -449,7 +276,6 @@ impl Logic for CommandUnit {
             apply_status_now,
             apply_cell_command,
             write_table,
-            write_rank,
             done_out,
             fate_out,
             result_out,
@@ -464,186 +290,69 @@ impl Logic for CommandUnit {
             accepted_stream_to_out,
             accepted_status_now_out
         );
-        for i in 0..self.slot_valid.len() {
-            self.slot_valid[i].clock.next = self.clock.val();
-            self.slot_ip[i].clock.next = self.clock.val();
-            self.slot_sequence[i].clock.next = self.clock.val();
-            self.slot_rank[i].clock.next = self.clock.val();
-            self.matched[i].clock.next = self.clock.val();
-            self.ip_match[i].clock.next = self.clock.val();
-            self.oldest[i].clock.next = self.clock.val();
-            self.write_target[i].clock.next = self.clock.val();
-            self.slot_valid[i].d.next = self.slot_valid[i].q.val();
-            self.slot_ip[i].d.next = self.slot_ip[i].q.val();
-            self.slot_sequence[i].d.next = self.slot_sequence[i].q.val();
-            self.slot_rank[i].d.next = self.slot_rank[i].q.val();
-        }
+        self.hosts.clock.next = self.clock.val();
+        self.hosts.reset.next = self.reset.val();
+        self.hosts.peer_ip.next = self.peer_ip.val();
 
-        // Stage 1: the sender against every slot, the arguments against the rules (the
-        // parser holds the fields, so these registers are steady from the clock after
-        // `command` on).
+        // Stages 1 and 2: the box id, opcode and arguments (the parser holds the fields, so
+        // the checks are steady from the clock after `command` on).
         self.stage_1.d.next = self.command.val();
-        for i in 0..self.matched.len() {
-            self.ip_match[i].d.next = self.slot_ip[i].q.val() == self.peer_ip.val();
-            self.matched[i].d.next = self.slot_valid[i].q.val() & self.ip_match[i].q.val();
-        }
-        self.box_ok.d.next = (self.command_box_id.val() == self.box_id.val())
-            | (self.command_box_id.val() == self.any_box.val());
-        self.is_stream_to.d.next = self.command_opcode.val() == self.opcode_stream_to.val();
-        self.is_set_flush_timeout.d.next =
-            self.command_opcode.val() == self.opcode_set_flush_timeout.val();
-        self.is_set_status_period.d.next =
-            self.command_opcode.val() == self.opcode_set_status_period.val();
-        self.is_status_now.d.next = self.command_opcode.val() == self.opcode_status_now.val();
-        self.is_read_tick.d.next = self.command_opcode.val() == self.opcode_read_tick.val();
-        self.is_cell_command.d.next = self.command_opcode.val() == self.opcode_cell_command.val();
-        self.length_0.d.next = self.command_argument_length.val() == 0;
-        self.length_value.d.next = self.command_argument_length.val() == self.value_length.val();
-        self.length_destination.d.next =
-            self.command_argument_length.val() == self.destination_length.val();
-        self.length_cell_command.d.next =
-            self.command_argument_length.val() == self.cell_command_length.val();
-        // stream-to: MAC in bytes 0..6, IP 6..10, port 10..12
-        self.destination_ok.d.next = (self
-            .command_arguments
-            .val()
-            .get_bits::<32>(self.destination_ip_bit.val().index())
-            != 0)
-            & (self
-                .command_arguments
-                .val()
-                .get_bits::<16>(self.destination_port_bit.val().index())
-                != 0);
-        // set-flush-timeout and set-status-period: a u32 in bytes 0..4
-        self.value.next = self
-            .command_arguments
-            .val()
-            .get_bits::<32>(self.ticks_bit.val().index());
-        self.flush_timeout_ok.d.next =
-            (self.value.val() != 0) & (self.value.val() <= self.max_flush_timeout.val());
-        self.status_period_ok.d.next = self.value.val() >= self.min_status_period.val();
-        // cell command: the port in byte 0, three reserved bytes
-        self.cell_port.next = self
-            .command_arguments
-            .val()
-            .get_bits::<8>(self.cell_port_bit.val().index());
-        self.cell_port_ok.d.next = (self.cell_port.val() == self.all_ports.val())
-            | (self.cell_port.val() < self.port_count.val());
-        // (ports from 64 on target nothing, as a cell command's port never is one)
-        self.target_ports.d.next = 0.into();
-        if self.cell_port.val().get_bits::<2>(6) == 0 {
-            self.target_ports.d.next = bit_cast::<64, 1>(true.into())
-                << bit_cast::<64, 6>(self.cell_port.val().get_bits::<6>(0));
-        }
-        if self.cell_port.val() == self.all_ports.val() {
-            self.target_ports.d.next = 0xFFFF_FFFF_FFFF_FFFF_u64.into();
-        }
-        self.reserved_zero.d.next = self
-            .command_arguments
-            .val()
-            .get_bits::<24>(self.cell_reserved_bit.val().index())
-            == 0;
-
-        // Stage 2: the matched slot's sequence number, the oldest slot, the arguments'
-        // verdict.
         self.stage_2.d.next = self.stage_1.q.val();
-        self.any_match.next = false;
-        self.sequence_term.next = 0.into();
-        for i in 0..self.matched.len() {
-            if self.matched[i].q.val() {
-                self.any_match.next = true;
-                self.sequence_term.next = self.sequence_term.val() | self.slot_sequence[i].q.val();
-            }
-            self.oldest[i].d.next = self.slot_rank[i].q.val() == self.oldest_rank.val();
-        }
-        self.hit.d.next = self.any_match.val();
-        self.hit_sequence.d.next = self.sequence_term.val();
-        self.arguments_good.next = false;
-        // (the opcode flags are exclusive: the verdict is an OR of one term per opcode)
-        self.arguments_good.next = (self.is_stream_to.q.val()
-            & (self.length_0.q.val()
-                | (self.length_destination.q.val() & self.destination_ok.q.val())))
-            | (self.is_set_flush_timeout.q.val()
-                & self.length_value.q.val()
-                & self.flush_timeout_ok.q.val())
-            | (self.is_set_status_period.q.val()
-                & self.length_value.q.val()
-                & self.status_period_ok.q.val())
-            | ((self.is_status_now.q.val() | self.is_read_tick.q.val()) & self.length_0.q.val())
-            | (self.is_cell_command.q.val()
-                & self.length_cell_command.q.val()
-                & self.cell_port_ok.q.val()
-                & self.reserved_zero.q.val());
-        self.opcode_known.next = self.is_stream_to.q.val()
-            | self.is_set_flush_timeout.q.val()
-            | self.is_set_status_period.q.val()
-            | self.is_status_now.q.val()
-            | self.is_read_tick.q.val()
-            | self.is_cell_command.q.val();
-        self.arguments_fate.d.next = self.fate_unknown_opcode.val();
-        self.arguments_result.d.next = self.result_unknown_opcode.val();
-        if self.opcode_known.val() {
-            self.arguments_fate.d.next = self.fate_bad_argument.val();
-            self.arguments_result.d.next = self.result_bad_argument.val();
-        }
-        if self.arguments_good.val() {
-            self.arguments_fate.d.next = self.fate_accepted.val();
-            self.arguments_result.d.next = self.result_ok.val();
-        }
-        self.arguments_ok.d.next = self.arguments_good.val();
+        self.checks.clock.next = self.clock.val();
+        self.checks.command_box_id.next = self.command_box_id.val();
+        self.checks.command_opcode.next = self.command_opcode.val();
+        self.checks.command_argument_length.next = self.command_argument_length.val();
+        self.checks.command_arguments.next = self.command_arguments.val();
 
         // Stage 3: the serial-number difference to the host's last accepted sequence.
         self.stage_3.d.next = self.stage_2.q.val();
-        self.difference.next = self.command_sequence.val() - self.hit_sequence.q.val();
-        self.not_newer.d.next = self.hit.q.val()
-            & ((self.command_sequence.val() == self.hit_sequence.q.val())
+        // (the host table looked the sender up while the frame arrived; it holds the answer
+        // until the take)
+        self.difference.next = self.command_sequence.val() - self.hosts.last_sequence.val();
+        self.not_newer.d.next = self.hosts.known.val()
+            & ((self.command_sequence.val() == self.hosts.last_sequence.val())
                 | self.difference.val().get_bit(31));
-        self.apply_stream_to.d.next =
-            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_stream_to.q.val();
-        self.apply_flush_timeout.d.next =
-            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_set_flush_timeout.q.val();
-        self.apply_status_period.d.next =
-            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_set_status_period.q.val();
-        self.apply_status_now.d.next =
-            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_status_now.q.val();
-        self.apply_cell_command.d.next =
-            self.box_ok.q.val() & self.arguments_ok.q.val() & self.is_cell_command.q.val();
+        self.apply_stream_to.d.next = self.checks.box_ok.val()
+            & self.checks.arguments_ok.val()
+            & self.checks.is_stream_to.val();
+        self.apply_flush_timeout.d.next = self.checks.box_ok.val()
+            & self.checks.arguments_ok.val()
+            & self.checks.is_set_flush_timeout.val();
+        self.apply_status_period.d.next = self.checks.box_ok.val()
+            & self.checks.arguments_ok.val()
+            & self.checks.is_set_status_period.val();
+        self.apply_status_now.d.next = self.checks.box_ok.val()
+            & self.checks.arguments_ok.val()
+            & self.checks.is_status_now.val();
+        self.apply_cell_command.d.next = self.checks.box_ok.val()
+            & self.checks.arguments_ok.val()
+            & self.checks.is_cell_command.val();
 
         // Stage 4: the decision, the table and the configuration.
         self.done_out.d.next = self.stage_3.q.val();
         self.status_period_set_out.d.next = false;
         self.status_now_out.d.next = false;
         self.newer.next = self.stage_3.q.val() & !self.not_newer.q.val();
-        self.taken.next = self.newer.val() & self.box_ok.q.val();
-        self.target_rank.next = 0.into();
-        for i in 0..self.target.len() {
-            self.target[i].next = self.oldest[i].q.val();
-            if self.hit.q.val() {
-                self.target[i].next = self.matched[i].q.val();
-            }
-            if self.target[i].val() {
-                self.target_rank.next = self.target_rank.val() | self.slot_rank[i].q.val();
-            }
-        }
+        self.taken.next = self.newer.val() & self.checks.box_ok.val();
         self.cell_command_taken.next = self.newer.val() & self.apply_cell_command.q.val();
-        self.downlink_port.next = self.cell_port.val();
+        self.downlink_port.next = self.checks.cell_port.val();
         self.downlink_room.next = !self.downlink_busy.val()
-            & ((self.downlink_full_ports.val() & self.target_ports.q.val()) == 0);
+            & ((self.downlink_full_ports.val() & self.checks.target_ports.val()) == 0);
         self.downlink_offer.next = self.cell_command_taken.val() & self.downlink_room.val();
         if self.stage_3.q.val() {
             self.accepted_stream_to_out.d.next = self.newer.val() & self.apply_stream_to.q.val();
             self.accepted_status_now_out.d.next = self.newer.val() & self.apply_status_now.q.val();
-            if !self.box_ok.q.val() {
+            if !self.checks.box_ok.val() {
                 self.fate_out.d.next = self.fate_other_box.val();
                 self.result_out.d.next = self.result_other_box.val();
-                self.last_accepted_out.d.next = self.hit_sequence.q.val();
+                self.last_accepted_out.d.next = self.hosts.last_sequence.val();
             } else if self.not_newer.q.val() {
                 self.fate_out.d.next = self.fate_replay.val();
                 self.result_out.d.next = self.result_replay.val();
-                self.last_accepted_out.d.next = self.hit_sequence.q.val();
+                self.last_accepted_out.d.next = self.hosts.last_sequence.val();
             } else {
-                self.fate_out.d.next = self.arguments_fate.q.val();
-                self.result_out.d.next = self.arguments_result.q.val();
+                self.fate_out.d.next = self.checks.fate.val();
+                self.result_out.d.next = self.checks.result.val();
                 self.last_accepted_out.d.next = self.command_sequence.val();
                 if self.cell_command_taken.val() & !self.downlink_room.val() {
                     self.fate_out.d.next = self.fate_downlink_full.val();
@@ -651,51 +360,28 @@ impl Logic for CommandUnit {
                 }
             }
         }
-        // Stage 5: the table, from the registered decision (the parser still holds the
-        // sender and the sequence number)
+        // Stage 5: the table's take, from the registered decision (the parser still holds
+        // the sender and the sequence number)
         self.write_table.d.next = self.taken.val();
-        self.write_rank.d.next = self.target_rank.val();
-        for i in 0..self.target.len() {
-            self.write_target[i].d.next = self.target[i].val();
-        }
-        if self.write_table.q.val() {
-            for i in 0..self.target.len() {
-                if self.write_target[i].q.val() {
-                    self.slot_valid[i].d.next = true;
-                    self.slot_ip[i].d.next = self.peer_ip.val();
-                    self.slot_sequence[i].d.next = self.command_sequence.val();
-                    self.slot_rank[i].d.next = 0.into();
-                } else if self.slot_rank[i].q.val() < self.write_rank.q.val() {
-                    self.slot_rank[i].d.next = self.slot_rank[i].q.val() + 1;
-                }
-            }
-        }
+        self.hosts.take.next = self.write_table.q.val();
+        self.hosts.take_sequence.next = self.command_sequence.val();
         if self.newer.val() {
             if self.apply_stream_to.q.val() {
-                if self.length_0.q.val() {
+                if self.checks.no_arguments.val() {
                     self.destination_mac_out.d.next = self.peer_mac.val();
                     self.destination_ip_out.d.next = self.peer_ip.val();
                     self.destination_port_out.d.next = self.peer_port.val();
                 } else {
-                    self.destination_mac_out.d.next = self
-                        .command_arguments
-                        .val()
-                        .get_bits::<48>(self.destination_mac_bit.val().index());
-                    self.destination_ip_out.d.next = self
-                        .command_arguments
-                        .val()
-                        .get_bits::<32>(self.destination_ip_bit.val().index());
-                    self.destination_port_out.d.next = self
-                        .command_arguments
-                        .val()
-                        .get_bits::<16>(self.destination_port_bit.val().index());
+                    self.destination_mac_out.d.next = self.checks.argument_mac.val();
+                    self.destination_ip_out.d.next = self.checks.argument_ip.val();
+                    self.destination_port_out.d.next = self.checks.argument_port.val();
                 }
             }
             if self.apply_flush_timeout.q.val() {
-                self.flush_timeout_out.d.next = self.value.val();
+                self.flush_timeout_out.d.next = self.checks.value.val();
             }
             if self.apply_status_period.q.val() {
-                self.status_period_out.d.next = self.value.val();
+                self.status_period_out.d.next = self.checks.value.val();
                 self.status_period_set_out.d.next = true;
             }
             if self.apply_status_now.q.val() {
@@ -718,12 +404,6 @@ impl Logic for CommandUnit {
         self.accepted_status_now.next = self.accepted_status_now_out.q.val();
 
         if self.reset.val() {
-            for i in 0..self.slot_valid.len() {
-                self.slot_valid[i].d.next = false;
-                self.slot_ip[i].d.next = 0.into();
-                self.slot_sequence[i].d.next = 0.into();
-                self.slot_rank[i].d.next = self.slot_initial_rank[i].val();
-            }
             self.stage_1.d.next = false;
             self.stage_2.d.next = false;
             self.stage_3.d.next = false;
@@ -748,8 +428,9 @@ impl Logic for CommandUnit {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::host_table::LOOKUP_CLOCKS;
     use crate::testbench::{Bench, TestRng};
-    use skinbox_protocol::command::Request;
+    use skinbox_protocol::command::*;
     use skinbox_protocol::Error;
 
     const BOX_ID: u16 = 0x0102;
@@ -1006,7 +687,9 @@ mod tests {
                 }
                 _ => 0.into(),
             };
-            self.bench.cycle();
+            // the sender is steady for the table's lookup, as the parser holds it from the
+            // frame's IPv4 header on
+            self.bench.cycles(LOOKUP_CLOCKS);
             self.bench.uut.command.next = true;
             self.bench.cycle();
             self.bench.uut.command.next = false;

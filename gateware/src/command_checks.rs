@@ -1,0 +1,462 @@
+//! CommandChecks: the command unit's checks of a command's box id, opcode and arguments
+//! (docs/control.md, steps 17, 20 and 21), as `skinbox_protocol::command::Request::parse`
+//! judges them.
+//!
+//! Two register stages on the parser's held fields, every clock: the first registers the box
+//! id's test, one flag per opcode, the argument length's tests, each argument's rule and a
+//! cell command's target ports; the second the verdict, as a fate (a `BoxCounter` index) and
+//! an acknowledgement result. The argument fields the accepted commands use are wires from
+//! the held bytes.
+
+use crate::command_decoder::HELD_ARGUMENT_BYTES;
+use crate::hdl::*;
+use skinbox_protocol::box_counters::BoxCounter;
+use skinbox_protocol::command::{
+    cell_command_field, destination_field, ticks_field, AckResult, Opcode, ALL_PORTS, ANY_BOX,
+    CELL_COMMAND_LEN, DESTINATION_LEN, MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS, TICKS_LEN,
+};
+use skinbox_protocol::Field;
+
+/// Clocks from steady fields to the verdict (`arguments_ok`, `fate`, `result`); the opcode
+/// flags, `box_ok`, `no_arguments` and `target_ports` are a clock earlier.
+pub const CHECK_CLOCKS: u64 = 2;
+
+/// The lowest bit in `command_arguments` of the argument bytes `field` (the first
+/// argument byte is the top byte).
+fn argument_bit(field: Field) -> Constant<Bits<7>> {
+    assert!(
+        field.end <= HELD_ARGUMENT_BYTES,
+        "argument bytes {field:?} not held"
+    );
+    constant((8 * (HELD_ARGUMENT_BYTES - field.end)) as u64)
+}
+
+/// The box id, opcode and argument checks.
+#[derive(LogicBlock)]
+pub struct CommandChecks {
+    /// The box clock.
+    pub clock: Signal<In, Clock>,
+    /// The command's box id.
+    pub command_box_id: Signal<In, Bits<16>>,
+    /// The command's opcode.
+    pub command_opcode: Signal<In, Bits<8>>,
+    /// The command's argument length, bytes.
+    pub command_argument_length: Signal<In, Bits<16>>,
+    /// The first 12 argument bytes, the first in bits 95..88, bytes past the arguments 0.
+    pub command_arguments: Signal<In, Bits<96>>,
+    /// The box id is the box's or `ANY_BOX`.
+    pub box_ok: Signal<Out, Bit>,
+    /// The opcode is stream-to.
+    pub is_stream_to: Signal<Out, Bit>,
+    /// The opcode is set-flush-timeout.
+    pub is_set_flush_timeout: Signal<Out, Bit>,
+    /// The opcode is set-status-period.
+    pub is_set_status_period: Signal<Out, Bit>,
+    /// The opcode is status-now.
+    pub is_status_now: Signal<Out, Bit>,
+    /// The opcode is cell-command.
+    pub is_cell_command: Signal<Out, Bit>,
+    /// The command has no argument bytes.
+    pub no_arguments: Signal<Out, Bit>,
+    /// A cell command's target ports, one bit each (every bit for `ALL_PORTS`).
+    pub target_ports: Signal<Out, Bits<64>>,
+    /// The opcode is known and its arguments are right.
+    pub arguments_ok: Signal<Out, Bit>,
+    /// The fate by opcode and arguments alone: accepted, unknown opcode or bad argument.
+    pub fate: Signal<Out, Bits<5>>,
+    /// The acknowledgement result that goes with `fate`.
+    pub result: Signal<Out, Bits<8>>,
+    /// Set-flush-timeout's and set-status-period's value (wires from the arguments).
+    pub value: Signal<Out, Bits<32>>,
+    /// A cell command's port (wires from the arguments).
+    pub cell_port: Signal<Out, Bits<8>>,
+    /// Stream-to's destination MAC, IPv4 address and UDP port (wires from the arguments).
+    pub argument_mac: Signal<Out, Bits<48>>,
+    /// See `argument_mac`.
+    pub argument_ip: Signal<Out, Bits<32>>,
+    /// See `argument_mac`.
+    pub argument_port: Signal<Out, Bits<16>>,
+    box_id: Constant<Bits<16>>,
+    any_box: Constant<Bits<16>>,
+    all_ports: Constant<Bits<8>>,
+    port_count: Constant<Bits<8>>,
+    max_flush_timeout: Constant<Bits<32>>,
+    min_status_period: Constant<Bits<32>>,
+    destination_length: Constant<Bits<16>>,
+    value_length: Constant<Bits<16>>,
+    cell_command_length: Constant<Bits<16>>,
+    opcode_stream_to: Constant<Bits<8>>,
+    opcode_set_flush_timeout: Constant<Bits<8>>,
+    opcode_set_status_period: Constant<Bits<8>>,
+    opcode_status_now: Constant<Bits<8>>,
+    opcode_read_tick: Constant<Bits<8>>,
+    opcode_cell_command: Constant<Bits<8>>,
+    fate_accepted: Constant<Bits<5>>,
+    fate_unknown_opcode: Constant<Bits<5>>,
+    fate_bad_argument: Constant<Bits<5>>,
+    result_ok: Constant<Bits<8>>,
+    result_unknown_opcode: Constant<Bits<8>>,
+    result_bad_argument: Constant<Bits<8>>,
+    // argument positions in `command_arguments`
+    destination_mac_bit: Constant<Bits<7>>,
+    destination_ip_bit: Constant<Bits<7>>,
+    destination_port_bit: Constant<Bits<7>>,
+    ticks_bit: Constant<Bits<7>>,
+    cell_port_bit: Constant<Bits<7>>,
+    cell_reserved_bit: Constant<Bits<7>>,
+    // stage 1
+    box_ok_flag: DFF<Bit>,
+    stream_to_flag: DFF<Bit>,
+    set_flush_timeout_flag: DFF<Bit>,
+    set_status_period_flag: DFF<Bit>,
+    status_now_flag: DFF<Bit>,
+    read_tick_flag: DFF<Bit>,
+    cell_command_flag: DFF<Bit>,
+    length_0: DFF<Bit>,
+    length_value: DFF<Bit>,
+    length_destination: DFF<Bit>,
+    length_cell_command: DFF<Bit>,
+    destination_ok: DFF<Bit>,
+    flush_timeout_ok: DFF<Bit>,
+    status_period_ok: DFF<Bit>,
+    cell_port_ok: DFF<Bit>,
+    reserved_zero: DFF<Bit>,
+    target_ports_held: DFF<Bits<64>>,
+    // stage 2
+    arguments_ok_held: DFF<Bit>,
+    arguments_fate: DFF<Bits<5>>,
+    arguments_result: DFF<Bits<8>>,
+    value_field: Signal<Local, Bits<32>>,
+    cell_port_field: Signal<Local, Bits<8>>,
+    arguments_good: Signal<Local, Bit>,
+    opcode_known: Signal<Local, Bit>,
+}
+
+impl CommandChecks {
+    /// The checks of a box with this id and port count.
+    pub fn new(box_id: u16, port_count: u8) -> Self {
+        Self {
+            clock: Default::default(),
+            command_box_id: Default::default(),
+            command_opcode: Default::default(),
+            command_argument_length: Default::default(),
+            command_arguments: Default::default(),
+            box_ok: Default::default(),
+            is_stream_to: Default::default(),
+            is_set_flush_timeout: Default::default(),
+            is_set_status_period: Default::default(),
+            is_status_now: Default::default(),
+            is_cell_command: Default::default(),
+            no_arguments: Default::default(),
+            target_ports: Default::default(),
+            arguments_ok: Default::default(),
+            fate: Default::default(),
+            result: Default::default(),
+            value: Default::default(),
+            cell_port: Default::default(),
+            argument_mac: Default::default(),
+            argument_ip: Default::default(),
+            argument_port: Default::default(),
+            box_id: constant(box_id.into()),
+            any_box: constant(ANY_BOX.into()),
+            all_ports: constant(ALL_PORTS.into()),
+            port_count: constant(port_count.into()),
+            max_flush_timeout: constant(MAX_FLUSH_TIMEOUT_TICKS.into()),
+            min_status_period: constant(MIN_STATUS_PERIOD_TICKS.into()),
+            destination_length: constant(DESTINATION_LEN as u64),
+            value_length: constant(TICKS_LEN as u64),
+            cell_command_length: constant(CELL_COMMAND_LEN as u64),
+            opcode_stream_to: constant(Opcode::StreamTo as u64),
+            opcode_set_flush_timeout: constant(Opcode::SetFlushTimeout as u64),
+            opcode_set_status_period: constant(Opcode::SetStatusPeriod as u64),
+            opcode_status_now: constant(Opcode::StatusNow as u64),
+            opcode_read_tick: constant(Opcode::ReadTick as u64),
+            opcode_cell_command: constant(Opcode::CellCommand as u64),
+            fate_accepted: constant(BoxCounter::CommandsAccepted as u64),
+            fate_unknown_opcode: constant(BoxCounter::RefusedUnknownOpcode as u64),
+            fate_bad_argument: constant(BoxCounter::RefusedBadArgument as u64),
+            result_ok: constant(AckResult::Ok as u64),
+            result_unknown_opcode: constant(AckResult::UnknownOpcode as u64),
+            result_bad_argument: constant(AckResult::BadArgument as u64),
+            destination_mac_bit: argument_bit(destination_field::MAC),
+            destination_ip_bit: argument_bit(destination_field::IP),
+            destination_port_bit: argument_bit(destination_field::PORT),
+            ticks_bit: argument_bit(ticks_field::TICKS),
+            cell_port_bit: argument_bit(cell_command_field::PORT..cell_command_field::PORT + 1),
+            cell_reserved_bit: argument_bit(cell_command_field::RESERVED),
+            box_ok_flag: Default::default(),
+            stream_to_flag: Default::default(),
+            set_flush_timeout_flag: Default::default(),
+            set_status_period_flag: Default::default(),
+            status_now_flag: Default::default(),
+            read_tick_flag: Default::default(),
+            cell_command_flag: Default::default(),
+            length_0: Default::default(),
+            length_value: Default::default(),
+            length_destination: Default::default(),
+            length_cell_command: Default::default(),
+            destination_ok: Default::default(),
+            flush_timeout_ok: Default::default(),
+            status_period_ok: Default::default(),
+            cell_port_ok: Default::default(),
+            reserved_zero: Default::default(),
+            target_ports_held: Default::default(),
+            arguments_ok_held: Default::default(),
+            arguments_fate: Default::default(),
+            arguments_result: Default::default(),
+            value_field: Default::default(),
+            cell_port_field: Default::default(),
+            arguments_good: Default::default(),
+            opcode_known: Default::default(),
+        }
+    }
+}
+
+impl Logic for CommandChecks {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(
+            self,
+            clock,
+            box_ok_flag,
+            stream_to_flag,
+            set_flush_timeout_flag,
+            set_status_period_flag,
+            status_now_flag,
+            read_tick_flag,
+            cell_command_flag,
+            length_0,
+            length_value,
+            length_destination,
+            length_cell_command,
+            destination_ok,
+            flush_timeout_ok,
+            status_period_ok,
+            cell_port_ok,
+            reserved_zero,
+            target_ports_held,
+            arguments_ok_held,
+            arguments_fate,
+            arguments_result
+        );
+        // Stage 1: the box id, the opcode and the arguments against the rules.
+        self.box_ok_flag.d.next = (self.command_box_id.val() == self.box_id.val())
+            | (self.command_box_id.val() == self.any_box.val());
+        self.stream_to_flag.d.next = self.command_opcode.val() == self.opcode_stream_to.val();
+        self.set_flush_timeout_flag.d.next =
+            self.command_opcode.val() == self.opcode_set_flush_timeout.val();
+        self.set_status_period_flag.d.next =
+            self.command_opcode.val() == self.opcode_set_status_period.val();
+        self.status_now_flag.d.next = self.command_opcode.val() == self.opcode_status_now.val();
+        self.read_tick_flag.d.next = self.command_opcode.val() == self.opcode_read_tick.val();
+        self.cell_command_flag.d.next = self.command_opcode.val() == self.opcode_cell_command.val();
+        self.length_0.d.next = self.command_argument_length.val() == 0;
+        self.length_value.d.next = self.command_argument_length.val() == self.value_length.val();
+        self.length_destination.d.next =
+            self.command_argument_length.val() == self.destination_length.val();
+        self.length_cell_command.d.next =
+            self.command_argument_length.val() == self.cell_command_length.val();
+        // stream-to: MAC in bytes 0..6, IP 6..10, port 10..12
+        self.destination_ok.d.next = (self
+            .command_arguments
+            .val()
+            .get_bits::<32>(self.destination_ip_bit.val().index())
+            != 0)
+            & (self
+                .command_arguments
+                .val()
+                .get_bits::<16>(self.destination_port_bit.val().index())
+                != 0);
+        // set-flush-timeout and set-status-period: a u32 in bytes 0..4
+        self.value_field.next = self
+            .command_arguments
+            .val()
+            .get_bits::<32>(self.ticks_bit.val().index());
+        self.flush_timeout_ok.d.next = (self.value_field.val() != 0)
+            & (self.value_field.val() <= self.max_flush_timeout.val());
+        self.status_period_ok.d.next = self.value_field.val() >= self.min_status_period.val();
+        // cell command: the port in byte 0, three reserved bytes
+        self.cell_port_field.next = self
+            .command_arguments
+            .val()
+            .get_bits::<8>(self.cell_port_bit.val().index());
+        self.cell_port_ok.d.next = (self.cell_port_field.val() == self.all_ports.val())
+            | (self.cell_port_field.val() < self.port_count.val());
+        // (ports from 64 on target nothing, as a cell command's port never is one)
+        self.target_ports_held.d.next = 0.into();
+        if self.cell_port_field.val().get_bits::<2>(6) == 0 {
+            self.target_ports_held.d.next = bit_cast::<64, 1>(true.into())
+                << bit_cast::<64, 6>(self.cell_port_field.val().get_bits::<6>(0));
+        }
+        if self.cell_port_field.val() == self.all_ports.val() {
+            self.target_ports_held.d.next = 0xFFFF_FFFF_FFFF_FFFF_u64.into();
+        }
+        self.reserved_zero.d.next = self
+            .command_arguments
+            .val()
+            .get_bits::<24>(self.cell_reserved_bit.val().index())
+            == 0;
+
+        // Stage 2: the arguments' verdict.
+        self.arguments_good.next = false;
+        // (the opcode flags are exclusive: the verdict is an OR of one term per opcode)
+        self.arguments_good.next = (self.stream_to_flag.q.val()
+            & (self.length_0.q.val()
+                | (self.length_destination.q.val() & self.destination_ok.q.val())))
+            | (self.set_flush_timeout_flag.q.val()
+                & self.length_value.q.val()
+                & self.flush_timeout_ok.q.val())
+            | (self.set_status_period_flag.q.val()
+                & self.length_value.q.val()
+                & self.status_period_ok.q.val())
+            | ((self.status_now_flag.q.val() | self.read_tick_flag.q.val())
+                & self.length_0.q.val())
+            | (self.cell_command_flag.q.val()
+                & self.length_cell_command.q.val()
+                & self.cell_port_ok.q.val()
+                & self.reserved_zero.q.val());
+        self.opcode_known.next = self.stream_to_flag.q.val()
+            | self.set_flush_timeout_flag.q.val()
+            | self.set_status_period_flag.q.val()
+            | self.status_now_flag.q.val()
+            | self.read_tick_flag.q.val()
+            | self.cell_command_flag.q.val();
+        self.arguments_fate.d.next = self.fate_unknown_opcode.val();
+        self.arguments_result.d.next = self.result_unknown_opcode.val();
+        if self.opcode_known.val() {
+            self.arguments_fate.d.next = self.fate_bad_argument.val();
+            self.arguments_result.d.next = self.result_bad_argument.val();
+        }
+        if self.arguments_good.val() {
+            self.arguments_fate.d.next = self.fate_accepted.val();
+            self.arguments_result.d.next = self.result_ok.val();
+        }
+        self.arguments_ok_held.d.next = self.arguments_good.val();
+        self.box_ok.next = self.box_ok_flag.q.val();
+        self.is_stream_to.next = self.stream_to_flag.q.val();
+        self.is_set_flush_timeout.next = self.set_flush_timeout_flag.q.val();
+        self.is_set_status_period.next = self.set_status_period_flag.q.val();
+        self.is_status_now.next = self.status_now_flag.q.val();
+        self.is_cell_command.next = self.cell_command_flag.q.val();
+        self.no_arguments.next = self.length_0.q.val();
+        self.target_ports.next = self.target_ports_held.q.val();
+        self.arguments_ok.next = self.arguments_ok_held.q.val();
+        self.fate.next = self.arguments_fate.q.val();
+        self.result.next = self.arguments_result.q.val();
+        self.value.next = self.value_field.val();
+        self.cell_port.next = self.cell_port_field.val();
+        self.argument_mac.next = self
+            .command_arguments
+            .val()
+            .get_bits::<48>(self.destination_mac_bit.val().index());
+        self.argument_ip.next = self
+            .command_arguments
+            .val()
+            .get_bits::<32>(self.destination_ip_bit.val().index());
+        self.argument_port.next = self
+            .command_arguments
+            .val()
+            .get_bits::<16>(self.destination_port_bit.val().index());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::{Bench, TestRng};
+    use skinbox_protocol::command::Request;
+    use skinbox_protocol::Error;
+
+    const BOX_ID: u16 = 0x0102;
+    const PORTS: u8 = 8;
+
+    /// The verdict `Request::parse` gives: (arguments right, fate, result, target ports).
+    fn verdict(opcode: u8, args: &[u8]) -> (bool, BoxCounter, AckResult, u64) {
+        match Request::parse(opcode, args, PORTS) {
+            Ok(request) => {
+                let ports = match request {
+                    Request::CellCommand { port, .. } if port == ALL_PORTS => u64::MAX,
+                    Request::CellCommand { port, .. } => 1 << port,
+                    _ => 0,
+                };
+                (true, BoxCounter::CommandsAccepted, AckResult::Ok, ports)
+            }
+            Err(Error::UnknownOpcode { .. }) => (
+                false,
+                BoxCounter::RefusedUnknownOpcode,
+                AckResult::UnknownOpcode,
+                0,
+            ),
+            Err(_) => (
+                false,
+                BoxCounter::RefusedBadArgument,
+                AckResult::BadArgument,
+                0,
+            ),
+        }
+    }
+
+    #[test]
+    fn random_commands_are_judged_as_the_protocol_parses_them() {
+        let mut bench = Bench::new(CommandChecks::new(BOX_ID, PORTS), |b| &mut b.clock);
+        let mut rng = TestRng::new(0xC4EC);
+        let mut verdicts = std::collections::HashMap::new();
+        for _ in 0..3000 {
+            let r = rng.next_u64();
+            let opcode = match r % 9 {
+                0 => (r >> 8) as u8,
+                k => (k % 7) as u8,
+            };
+            let length = match (r >> 16) % 6 {
+                0 => (r >> 24) as usize % 14,
+                1 => 0,
+                2 => TICKS_LEN,
+                3 => DESTINATION_LEN,
+                _ => CELL_COMMAND_LEN,
+            };
+            let mut args: Vec<u8> = (0..length).map(|_| rng.byte()).collect();
+            match (r >> 32) % 5 {
+                // a port in range, past it, or every port, with the reserved bytes 0
+                0 | 1 if length >= 4 => {
+                    args[0] = [0, PORTS - 1, PORTS, ALL_PORTS][(r >> 40) as usize % 4];
+                    args[1..4].fill(0);
+                }
+                // a value at or around the limits
+                2 if length >= 4 => args[..4].copy_from_slice(
+                    &[0, 1, MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS - 1]
+                        [(r >> 40) as usize % 4]
+                        .to_be_bytes(),
+                ),
+                // a destination without an address or a port
+                3 if length >= 12 => args[6 + (r >> 40) as usize % 6..].fill(0),
+                _ => {}
+            }
+            let box_id = [BOX_ID, ANY_BOX, BOX_ID ^ 0x10][(r >> 48) as usize % 3];
+            let mut held = [0u8; HELD_ARGUMENT_BYTES];
+            let n = args.len().min(HELD_ARGUMENT_BYTES);
+            held[..n].copy_from_slice(&args[..n]);
+            let high: Bits<96> = u64::from_be_bytes(held[..8].try_into().unwrap()).into();
+            let low: Bits<96> = u64::from(u32::from_be_bytes(held[8..].try_into().unwrap())).into();
+            let u = &mut bench.uut;
+            u.command_box_id.next = u64::from(box_id).into();
+            u.command_opcode.next = u64::from(opcode).into();
+            u.command_argument_length.next = (args.len() as u64).into();
+            u.command_arguments.next = (high << 32) | low;
+            bench.cycles(CHECK_CLOCKS);
+            let (ok, fate, result, ports) = verdict(opcode, &args);
+            let u = &bench.uut;
+            let at = format!("opcode {opcode}, arguments {args:02x?}");
+            assert_eq!(u.arguments_ok.val(), ok, "{at}");
+            assert_eq!(u.fate.val().to_u64(), fate as u64, "{at}");
+            assert_eq!(u.result.val().to_u64(), result as u64, "{at}");
+            assert_eq!(u.box_ok.val(), box_id != BOX_ID ^ 0x10, "{at}");
+            if ok && opcode == Opcode::CellCommand as u8 {
+                assert_eq!(u.target_ports.val().to_u64(), ports, "{at}");
+            }
+            assert_eq!(u.no_arguments.val(), args.is_empty(), "{at}");
+            *verdicts.entry(result as u8).or_insert(0) += 1;
+        }
+        assert_eq!(verdicts.len(), 3, "every verdict came up: {verdicts:?}");
+        assert!(verdicts.values().all(|&n| n >= 100), "{verdicts:?}");
+    }
+}
