@@ -93,6 +93,22 @@ pub fn speed_of_aux_status(aux: u16) -> u64 {
     }
 }
 
+/// The master's transaction: the three writes once after reset, then the two reads in
+/// every poll.
+#[derive(Copy, Clone, Debug, PartialEq, LogicState)]
+enum MdioStep {
+    /// Register 4, the advertisement (the first variant is the reset state).
+    WriteAdvertise,
+    /// Register 9, 1000BASE-T control.
+    WriteGigabit,
+    /// Register 0, control: auto-negotiation restarted.
+    WriteControl,
+    /// Register 1, status: the link bit.
+    ReadStatus,
+    /// Register 19h, auxiliary status: the negotiated speed.
+    ReadAux,
+}
+
 /// Clock-divided clause 22 master: configures the PHY for Gigabit only, then polls its
 /// link status.
 #[derive(LogicBlock)]
@@ -132,7 +148,7 @@ pub struct MdioMaster {
     bit_from_31: DFF<Bit>,
     bit_from_45: DFF<Bit>,
     bit_from_48: DFF<Bit>,
-    step: DFF<Bits<3>>,
+    step: DFF<MdioStep>,
     /// MDC periods left to wait, minus one: the wait is over when it has gone below zero
     /// (bit 19 set), so no comparison with zero sits in front of the decisions.
     countdown: DFF<Bits<20>>,
@@ -246,8 +262,8 @@ impl Logic for MdioMaster {
         );
         self.divider.d.next = self.divider.q.val() + 1;
         self.sampled.d.next = self.mdio_in.val();
-        // steps 3 and 4 are the reads
-        self.reading.next = self.step.q.val() >= 3;
+        self.reading.next =
+            (self.step.q.val() == MdioStep::ReadStatus) | (self.step.q.val() == MdioStep::ReadAux);
         self.next_bit.next = self.bit_index.q.val() + 1;
         self.bit_is_47.d.next = self.bit_index.q.val() == 47;
         self.bit_is_63.d.next = self.bit_index.q.val() == 63;
@@ -286,13 +302,18 @@ impl Logic for MdioMaster {
                     self.busy.d.next = false;
                     self.oe.d.next = false;
                     self.out.d.next = true;
-                    self.step.d.next = self.step.q.val() + 1;
-                    if self.step.q.val() == 3 {
-                        self.status_link.d.next = self.data.q.val().get_bit(2);
-                        self.status_answered.d.next = self.turnaround_low.q.val();
+                    match self.step.q.val() {
+                        MdioStep::WriteAdvertise => self.step.d.next = MdioStep::WriteGigabit,
+                        MdioStep::WriteGigabit => self.step.d.next = MdioStep::WriteControl,
+                        MdioStep::WriteControl => self.step.d.next = MdioStep::ReadStatus,
+                        MdioStep::ReadStatus => {
+                            self.step.d.next = MdioStep::ReadAux;
+                            self.status_link.d.next = self.data.q.val().get_bit(2);
+                            self.status_answered.d.next = self.turnaround_low.q.val();
+                        }
+                        MdioStep::ReadAux => self.step.d.next = MdioStep::ReadStatus,
                     }
-                    if self.step.q.val() == 4 {
-                        self.step.d.next = 3.into();
+                    if self.step.q.val() == MdioStep::ReadAux {
                         self.countdown.d.next = self.poll_periods.val();
                         self.link_up_out.d.next = self.status_link.q.val()
                             & self.status_answered.q.val()
@@ -322,15 +343,12 @@ impl Logic for MdioMaster {
                 self.oe.d.next = true;
                 self.data.d.next = 0.into();
                 self.turnaround_low.d.next = false;
-                self.shift.d.next = self.word_aux.val();
-                if self.step.q.val() == 0 {
-                    self.shift.d.next = self.word_advertise.val();
-                } else if self.step.q.val() == 1 {
-                    self.shift.d.next = self.word_gigabit.val();
-                } else if self.step.q.val() == 2 {
-                    self.shift.d.next = self.word_control.val();
-                } else if self.step.q.val() == 3 {
-                    self.shift.d.next = self.word_status.val();
+                match self.step.q.val() {
+                    MdioStep::WriteAdvertise => self.shift.d.next = self.word_advertise.val(),
+                    MdioStep::WriteGigabit => self.shift.d.next = self.word_gigabit.val(),
+                    MdioStep::WriteControl => self.shift.d.next = self.word_control.val(),
+                    MdioStep::ReadStatus => self.shift.d.next = self.word_status.val(),
+                    MdioStep::ReadAux => self.shift.d.next = self.word_aux.val(),
                 }
             }
         }
@@ -339,7 +357,7 @@ impl Logic for MdioMaster {
             self.busy.d.next = false;
             self.oe.d.next = false;
             self.out.d.next = true;
-            self.step.d.next = 0.into();
+            self.step.d.next = MdioStep::WriteAdvertise;
             self.countdown.d.next = self.startup_periods.val();
             self.at_fall.d.next = false;
             self.at_sample.d.next = false;
