@@ -14,7 +14,8 @@
 //! not ready and records wait upstream, none is lost here.
 
 use crate::block_ram::BlockRam;
-use crate::body_reader::BodyReader;
+use crate::datagram_offer::DatagramOffer;
+use crate::flush_deadline::FlushDeadline;
 use crate::hdl::*;
 use crate::stream::{ByteStreamSink, DatagramSource};
 use skinbox_protocol::datagram::{DatagramKind, FLAG_FLUSH_TIMEOUT, MAX_RECORDS};
@@ -43,31 +44,24 @@ pub struct RecordBatcher {
     pub datagrams_sent: Signal<Out, Bits<32>>,
     /// Records taken since reset.
     pub records_sent: Signal<Out, Bits<32>>,
-    reader: BodyReader,
+    // the closed datagram: its descriptor until taken, then its body
+    offer: DatagramOffer,
     memory: BlockRam<8, 12>,
     records_kind: Constant<Bits<8>>,
     flush_timeout_flag: Constant<Bits<8>>,
     last_tick_beat_less_one: Constant<Bits<5>>,
     record_last_beat_less_one: Constant<Bits<5>>,
     last_fill_less_one: Constant<Bits<6>>,
-    // the flush timeout less two, registered from the input
-    flush_timeout_less_two: DFF<Bits<32>>,
-    // a timeout of 1 or 2 ticks has passed a clock after the deadline is set (registered)
-    short_timeout: DFF<Bit>,
     fill_buffer: DFF<Bit>,
     fill_count: DFF<Bits<6>>,
     fill_offset: DFF<Bits<11>>,
     fill_sum: DFF<Bits<32>>,
-    fill_base_tick: DFF<Bits<64>>,
-    // the flush deadline less one (low 32 bits of the tick)
-    fill_deadline_less_one: DFF<Bits<32>>,
+    // the base tick and the flush deadline of the filling datagram
+    deadline: FlushDeadline,
     // the first record's age (now - its tick, low 32 bits), for the base tick and the
     // deadline, which are set a clock later (off the accept path)
     first_age: DFF<Bits<32>>,
     first_seen: DFF<Bit>,
-    // the next clock's tick is at or past the deadline: the deadline test a clock ahead
-    // (the tick counts one per clock), so `close_due` takes no carry chain
-    deadline_passed_next: DFF<Bit>,
     // beat == 0, offset_left == 0, fill_count == max and != 0, kept in registers
     beat_zero: DFF<Bit>,
     // the beat is the record's last tick byte, set and cleared as the beat moves
@@ -82,16 +76,6 @@ pub struct RecordBatcher {
     tick_low: DFF<Bits<32>>,
     offset_bytes: DFF<Bits<32>>,
     offset_left: DFF<Bits<3>>,
-    pending: DFF<Bit>,
-    pending_count: DFF<Bits<6>>,
-    pending_len: DFF<Bits<11>>,
-    pending_sum: DFF<Bits<32>>,
-    pending_base_tick: DFF<Bits<64>>,
-    pending_flags: DFF<Bits<8>>,
-    // the descriptor was taken a clock ago
-    counting: DFF<Bit>,
-    datagram_count: DFF<Bits<32>>,
-    record_count: DFF<Bits<32>>,
     record_tick: Signal<Local, Bits<32>>,
     write: Signal<Local, Bit>,
     // the payload memory's write port, a clock after the decision (off the accept path)
@@ -105,8 +89,6 @@ pub struct RecordBatcher {
     close_due: DFF<Bit>,
     can_close: Signal<Local, Bit>,
     accept: Signal<Local, Bit>,
-    taken: Signal<Local, Bit>,
-    deadline_delta: Signal<Local, Bits<32>>,
 }
 
 impl Default for RecordBatcher {
@@ -128,24 +110,20 @@ impl RecordBatcher {
             datagrams: Default::default(),
             datagrams_sent: Default::default(),
             records_sent: Default::default(),
-            reader: Default::default(),
+            offer: Default::default(),
+            deadline: Default::default(),
             memory: Default::default(),
             records_kind: Constant::new((DatagramKind::Records as u64).into()),
             flush_timeout_flag: Constant::new(u64::from(FLAG_FLUSH_TIMEOUT).into()),
             last_tick_beat_less_one: Constant::new((LAST_TICK_BEAT as u64 - 1).into()),
             record_last_beat_less_one: Constant::new((RECORD_LEN as u64 - 2).into()),
             last_fill_less_one: Constant::new((MAX_RECORDS as u64 - 2).into()),
-            flush_timeout_less_two: Default::default(),
-            short_timeout: Default::default(),
             fill_buffer: Default::default(),
             fill_count: Default::default(),
             fill_offset: Default::default(),
             fill_sum: Default::default(),
-            fill_base_tick: Default::default(),
-            fill_deadline_less_one: Default::default(),
             first_age: Default::default(),
             first_seen: Default::default(),
-            deadline_passed_next: Default::default(),
             beat_zero: Default::default(),
             beat_at_last_tick: Default::default(),
             beat_last: Default::default(),
@@ -157,15 +135,6 @@ impl RecordBatcher {
             tick_low: Default::default(),
             offset_bytes: Default::default(),
             offset_left: Default::default(),
-            pending: Default::default(),
-            pending_count: Default::default(),
-            pending_len: Default::default(),
-            pending_sum: Default::default(),
-            pending_base_tick: Default::default(),
-            pending_flags: Default::default(),
-            counting: Default::default(),
-            datagram_count: Default::default(),
-            record_count: Default::default(),
             record_tick: Default::default(),
             write: Default::default(),
             memory_write: Default::default(),
@@ -176,8 +145,6 @@ impl RecordBatcher {
             close_due: Default::default(),
             can_close: Default::default(),
             accept: Default::default(),
-            taken: Default::default(),
-            deadline_delta: Default::default(),
         }
     }
 }
@@ -195,11 +162,8 @@ impl Logic for RecordBatcher {
             fill_count,
             fill_offset,
             fill_sum,
-            fill_base_tick,
-            fill_deadline_less_one,
             first_age,
             first_seen,
-            deadline_passed_next,
             beat_zero,
             beat_at_last_tick,
             beat_last,
@@ -211,48 +175,25 @@ impl Logic for RecordBatcher {
             tick_low,
             offset_bytes,
             offset_left,
-            pending,
-            pending_count,
-            pending_len,
-            pending_sum,
-            pending_base_tick,
-            pending_flags,
-            counting,
-            datagram_count,
-            record_count,
             memory_write,
             memory_write_address,
-            memory_write_data,
-            flush_timeout_less_two,
-            short_timeout
+            memory_write_data
         );
-        self.flush_timeout_less_two.d.next = self.flush_timeout_ticks.val() - 2;
-        self.short_timeout.d.next = self.flush_timeout_ticks.val() <= 2;
-        self.reader.clock.next = self.clock.val();
-        self.reader.reset.next = self.reset.val();
+        self.offer.clock.next = self.clock.val();
+        self.offer.reset.next = self.reset.val();
         self.memory.clock.next = self.clock.val();
 
-        // The flush deadline passed: a registered, wrap-safe 32-bit test (the timeout is far
-        // below 2^31 ticks), taken a clock ahead: the next tick (now + 1) against the
-        // deadline is now against the deadline less one.
-        // (a bit of an expression is not Verilog: the difference gets its own signal)
-        // The first record's base tick and deadline, a clock after its tick was complete:
-        // base = (now - 1) - age = now + !age (sign-extended), deadline = now + timeout - 1.
-        self.deadline_delta.next =
-            self.tick.val().get_bits::<32>(0) - self.fill_deadline_less_one.q.val();
-        self.deadline_passed_next.d.next = !self.deadline_delta.val().get_bit(31);
-        if self.first_seen.q.val() {
-            self.fill_base_tick.d.next = self.tick.val()
-                + (bit_cast::<64, 32>(!self.first_age.q.val()) | 0xFFFF_FFFF_0000_0000_u64);
-            self.fill_deadline_less_one.d.next =
-                self.tick.val().get_bits::<32>(0) + self.flush_timeout_less_two.q.val();
-            // (the next tick is now + 1: the deadline has passed if timeout - 1 <= 1)
-            self.deadline_passed_next.d.next = self.short_timeout.q.val();
-        }
+        // The first record's base tick and its flush deadline, a clock after its tick was
+        // complete.
+        self.deadline.clock.next = self.clock.val();
+        self.deadline.tick.next = self.tick.val();
+        self.deadline.flush_timeout_ticks.next = self.flush_timeout_ticks.val();
+        self.deadline.first_seen.next = self.first_seen.q.val();
+        self.deadline.first_age.next = self.first_age.q.val();
         // Close the filling datagram at a record boundary when full or due (`close_due`,
         // set at the end from the tests of beat, offset_left, fill_count and the deadline,
         // each set and cleared by the events that change what it tests, below).
-        self.can_close.next = !self.pending.q.val() & !self.reader.busy.val();
+        self.can_close.next = self.offer.free.val();
         // No beat moves while a datagram is due to close: in the clock it closes (the beat
         // would land in the old buffer) and while it waits for the other buffer (a full one
         // and one whose time is up alike). Whether the other buffer is free stays off the
@@ -316,7 +257,7 @@ impl Logic for RecordBatcher {
                 self.first_age.d.next = self.tick.val().get_bits::<32>(0) - self.record_tick.val();
             } else {
                 self.offset_bytes.d.next =
-                    self.record_tick.val() - self.fill_base_tick.q.val().get_bits::<32>(0);
+                    self.record_tick.val() - self.deadline.base_tick.val().get_bits::<32>(0);
             }
         }
         // the transmitter reads a buffer only after it closed, many clocks after its last
@@ -347,16 +288,17 @@ impl Logic for RecordBatcher {
         self.fill_sum.d.next = self.fill_sum_next.val();
 
         // Hand the full buffer over, start filling the other.
+        self.offer.close.next = self.close_due.q.val() & self.can_close.val();
+        self.offer.kind.next = self.records_kind.val();
+        self.offer.close_entry_count.next = bit_cast::<16, 6>(self.fill_count.q.val());
+        self.offer.close_body_len.next = self.fill_offset.q.val();
+        self.offer.close_body_sum.next = self.fill_sum_next.val();
+        self.offer.close_base_tick.next = self.deadline.base_tick.val();
+        self.offer.close_flags.next = 0.into();
+        if !self.fill_full.q.val() {
+            self.offer.close_flags.next = self.flush_timeout_flag.val();
+        }
         if self.close_due.q.val() & self.can_close.val() {
-            self.pending.d.next = true;
-            self.pending_count.d.next = self.fill_count.q.val();
-            self.pending_len.d.next = self.fill_offset.q.val();
-            self.pending_sum.d.next = self.fill_sum_next.val();
-            self.pending_base_tick.d.next = self.fill_base_tick.q.val();
-            self.pending_flags.d.next = 0.into();
-            if !self.fill_full.q.val() {
-                self.pending_flags.d.next = self.flush_timeout_flag.val();
-            }
             self.fill_buffer.d.next = !self.fill_buffer.q.val();
             self.fill_count.d.next = 0.into();
             self.fill_full.d.next = false;
@@ -366,38 +308,12 @@ impl Logic for RecordBatcher {
             self.fill_sum.d.next = 0.into();
         }
 
-        // The closed datagram: its descriptor until taken, then its body from the buffer
-        // that is not filling.
-        self.datagrams.valid.next = self.pending.q.val();
-        self.datagrams.kind.next = self.records_kind.val();
-        self.datagrams.flags.next = self.pending_flags.q.val();
-        self.datagrams.entry_count.next = bit_cast::<16, 6>(self.pending_count.q.val());
-        self.datagrams.base_tick.next = self.pending_base_tick.q.val();
-        self.datagrams.body_len.next = self.pending_len.q.val();
-        self.datagrams.body_sum.next = self.pending_sum.q.val();
-        self.taken.next = self.pending.q.val() & self.datagrams.ready.val();
-        self.reader.start.next = self.taken.val();
-        self.reader.length.next = self.pending_len.q.val();
-        if self.taken.val() {
-            self.pending.d.next = false;
-        }
-        // counted a clock after the take (`pending_count` holds: no datagram closes while
-        // the reader is busy), so the counters' enable comes from a register
-        self.counting.d.next = self.taken.val();
-        if self.counting.q.val() {
-            self.datagram_count.d.next = self.datagram_count.q.val() + 1;
-            self.record_count.d.next =
-                self.record_count.q.val() + bit_cast::<32, 6>(self.pending_count.q.val());
-        }
+        // The closed datagram, read from the buffer that is not filling.
+        DatagramSource::link(&mut self.datagrams, &mut self.offer.datagrams);
         self.memory.read_address.next = (bit_cast::<12, 1>((!self.fill_buffer.q.val()).into())
             << 11)
-            | bit_cast::<12, 11>(self.reader.read_address.val());
-        self.reader.read_data.next = self.memory.read_data.val();
-        self.datagrams.body.valid.next = self.reader.body.valid.val();
-        self.datagrams.body.data.next = self.reader.body.data.val();
-        self.datagrams.body.last.next = self.reader.body.last.val();
-        self.datagrams.body.error.next = self.reader.body.error.val();
-        self.reader.body.ready.next = self.datagrams.body.ready.val();
+            | bit_cast::<12, 11>(self.offer.read_address.val());
+        self.offer.read_data.next = self.memory.read_data.val();
 
         if self.reset.val() {
             self.memory_write.d.next = false;
@@ -414,10 +330,6 @@ impl Logic for RecordBatcher {
             self.beat_at_last_tick.d.next = false;
             self.beat_last.d.next = false;
             self.offset_left.d.next = 0.into();
-            self.pending.d.next = false;
-            self.counting.d.next = false;
-            self.datagram_count.d.next = 0.into();
-            self.record_count.d.next = 0.into();
         }
         // The next value of `close_due`, from registers: a datagram due to close stays due
         // until it closes (nothing moves meanwhile); otherwise it is due at the next record
@@ -429,18 +341,18 @@ impl Logic for RecordBatcher {
         } else if self.records.valid.val() {
             self.close_due.d.next = self.offset_idle.q.val()
                 & self.beat_last.q.val()
-                & (self.fill_at_last.q.val() | self.deadline_passed_next.q.val());
+                & (self.fill_at_last.q.val() | self.deadline.passed_next.val());
         } else {
             self.close_due.d.next = self.offset_idle.q.val()
                 & self.beat_zero.q.val()
                 & (self.fill_full.q.val()
-                    | (self.fill_nonzero.q.val() & self.deadline_passed_next.q.val()));
+                    | (self.fill_nonzero.q.val() & self.deadline.passed_next.val()));
         }
         if self.reset.val() {
             self.close_due.d.next = false;
         }
-        self.datagrams_sent.next = self.datagram_count.q.val();
-        self.records_sent.next = self.record_count.q.val();
+        self.datagrams_sent.next = self.offer.datagrams_sent.val();
+        self.records_sent.next = self.offer.entries_sent.val();
     }
 }
 
