@@ -35,6 +35,7 @@
 //! command: the command's own when it was taken, else the one it holds (0 for a host
 //! not in the table, which only a command for another box can leave there).
 
+use crate::box_configuration::BoxConfiguration;
 use crate::command_checks::CommandChecks;
 use crate::hdl::*;
 use crate::host_table::HostTable;
@@ -134,11 +135,8 @@ pub struct CommandUnit {
     result_other_box: Constant<Bits<8>>,
     result_downlink_full: Constant<Bits<8>>,
     // argument positions in `command_arguments`
-    default_mac: Constant<Bits<48>>,
-    default_ip: Constant<Bits<32>>,
-    default_port: Constant<Bits<16>>,
-    default_flush_timeout: Constant<Bits<32>>,
-    default_status_period: Constant<Bits<32>>,
+    // the run-time configuration the accepted commands set
+    configuration: BoxConfiguration,
     // the box id, opcode and argument checks (stages 1 and 2)
     checks: CommandChecks,
     // the hosts and their last accepted sequence numbers, looked up while the frame arrives
@@ -165,13 +163,6 @@ pub struct CommandUnit {
     fate_out: DFF<Bits<5>>,
     result_out: DFF<Bits<8>>,
     last_accepted_out: DFF<Bits<32>>,
-    destination_mac_out: DFF<Bits<48>>,
-    destination_ip_out: DFF<Bits<32>>,
-    destination_port_out: DFF<Bits<16>>,
-    flush_timeout_out: DFF<Bits<32>>,
-    status_period_out: DFF<Bits<32>>,
-    status_period_set_out: DFF<Bit>,
-    status_now_out: DFF<Bit>,
     accepted_stream_to_out: DFF<Bit>,
     accepted_status_now_out: DFF<Bit>,
     // decision signals
@@ -221,11 +212,11 @@ impl CommandUnit {
             result_replay: constant(AckResult::Replay as u64),
             result_other_box: constant(AckResult::OtherBox as u64),
             result_downlink_full: constant(AckResult::DownlinkFull as u64),
-            default_mac: constant(big_endian(&link.host_mac)),
-            default_ip: constant(u32::from_be_bytes(link.host_ip).into()),
-            default_port: constant(link.host_port.into()),
-            default_flush_timeout: constant(config.flush_timeout_ticks.into()),
-            default_status_period: constant(config.status_period_ticks.into()),
+            configuration: BoxConfiguration::new(
+                &link,
+                config.flush_timeout_ticks,
+                config.status_period_ticks,
+            ),
             checks: CommandChecks::new(config.box_id, config.port_count),
             hosts: Default::default(),
             stage_1: Default::default(),
@@ -242,13 +233,6 @@ impl CommandUnit {
             fate_out: Default::default(),
             result_out: Default::default(),
             last_accepted_out: Default::default(),
-            destination_mac_out: Default::default(),
-            destination_ip_out: Default::default(),
-            destination_port_out: Default::default(),
-            flush_timeout_out: Default::default(),
-            status_period_out: Default::default(),
-            status_period_set_out: Default::default(),
-            status_now_out: Default::default(),
             accepted_stream_to_out: Default::default(),
             accepted_status_now_out: Default::default(),
             difference: Default::default(),
@@ -280,13 +264,6 @@ impl Logic for CommandUnit {
             fate_out,
             result_out,
             last_accepted_out,
-            destination_mac_out,
-            destination_ip_out,
-            destination_port_out,
-            flush_timeout_out,
-            status_period_out,
-            status_period_set_out,
-            status_now_out,
             accepted_stream_to_out,
             accepted_status_now_out
         );
@@ -330,8 +307,6 @@ impl Logic for CommandUnit {
 
         // Stage 4: the decision, the table and the configuration.
         self.done_out.d.next = self.stage_3.q.val();
-        self.status_period_set_out.d.next = false;
-        self.status_now_out.d.next = false;
         self.newer.next = self.stage_3.q.val() & !self.not_newer.q.val();
         self.taken.next = self.newer.val() & self.checks.box_ok.val();
         self.cell_command_taken.next = self.newer.val() & self.apply_cell_command.q.val();
@@ -365,41 +340,35 @@ impl Logic for CommandUnit {
         self.write_table.d.next = self.taken.val();
         self.hosts.take.next = self.write_table.q.val();
         self.hosts.take_sequence.next = self.command_sequence.val();
-        if self.newer.val() {
-            if self.apply_stream_to.q.val() {
-                if self.checks.no_arguments.val() {
-                    self.destination_mac_out.d.next = self.peer_mac.val();
-                    self.destination_ip_out.d.next = self.peer_ip.val();
-                    self.destination_port_out.d.next = self.peer_port.val();
-                } else {
-                    self.destination_mac_out.d.next = self.checks.argument_mac.val();
-                    self.destination_ip_out.d.next = self.checks.argument_ip.val();
-                    self.destination_port_out.d.next = self.checks.argument_port.val();
-                }
-            }
-            if self.apply_flush_timeout.q.val() {
-                self.flush_timeout_out.d.next = self.checks.value.val();
-            }
-            if self.apply_status_period.q.val() {
-                self.status_period_out.d.next = self.checks.value.val();
-                self.status_period_set_out.d.next = true;
-            }
-            if self.apply_status_now.q.val() {
-                self.status_now_out.d.next = true;
-            }
-        }
+        // the configuration, at the same edge as `done`
+        self.configuration.clock.next = self.clock.val();
+        self.configuration.reset.next = self.reset.val();
+        self.configuration.apply_stream_to.next = self.newer.val() & self.apply_stream_to.q.val();
+        self.configuration.to_sender.next = self.checks.no_arguments.val();
+        self.configuration.peer_mac.next = self.peer_mac.val();
+        self.configuration.peer_ip.next = self.peer_ip.val();
+        self.configuration.peer_port.next = self.peer_port.val();
+        self.configuration.argument_mac.next = self.checks.argument_mac.val();
+        self.configuration.argument_ip.next = self.checks.argument_ip.val();
+        self.configuration.argument_port.next = self.checks.argument_port.val();
+        self.configuration.apply_flush_timeout.next =
+            self.newer.val() & self.apply_flush_timeout.q.val();
+        self.configuration.apply_status_period.next =
+            self.newer.val() & self.apply_status_period.q.val();
+        self.configuration.apply_status_now.next = self.newer.val() & self.apply_status_now.q.val();
+        self.configuration.value.next = self.checks.value.val();
 
         self.done.next = self.done_out.q.val();
         self.fate.next = self.fate_out.q.val();
         self.result.next = self.result_out.q.val();
         self.last_accepted.next = self.last_accepted_out.q.val();
-        self.destination_mac.next = self.destination_mac_out.q.val();
-        self.destination_ip.next = self.destination_ip_out.q.val();
-        self.destination_port.next = self.destination_port_out.q.val();
-        self.flush_timeout_ticks.next = self.flush_timeout_out.q.val();
-        self.status_period_ticks.next = self.status_period_out.q.val();
-        self.status_period_set.next = self.status_period_set_out.q.val();
-        self.status_now.next = self.status_now_out.q.val();
+        self.destination_mac.next = self.configuration.destination_mac.val();
+        self.destination_ip.next = self.configuration.destination_ip.val();
+        self.destination_port.next = self.configuration.destination_port.val();
+        self.flush_timeout_ticks.next = self.configuration.flush_timeout_ticks.val();
+        self.status_period_ticks.next = self.configuration.status_period_ticks.val();
+        self.status_period_set.next = self.configuration.status_period_set.val();
+        self.status_now.next = self.configuration.status_now.val();
         self.accepted_stream_to.next = self.accepted_stream_to_out.q.val();
         self.accepted_status_now.next = self.accepted_status_now_out.q.val();
 
@@ -412,13 +381,6 @@ impl Logic for CommandUnit {
             self.fate_out.d.next = 0.into();
             self.result_out.d.next = 0.into();
             self.last_accepted_out.d.next = 0.into();
-            self.destination_mac_out.d.next = self.default_mac.val();
-            self.destination_ip_out.d.next = self.default_ip.val();
-            self.destination_port_out.d.next = self.default_port.val();
-            self.flush_timeout_out.d.next = self.default_flush_timeout.val();
-            self.status_period_out.d.next = self.default_status_period.val();
-            self.status_period_set_out.d.next = false;
-            self.status_now_out.d.next = false;
             self.accepted_stream_to_out.d.next = false;
             self.accepted_status_now_out.d.next = false;
         }

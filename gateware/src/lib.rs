@@ -32,6 +32,7 @@ pub mod async_fifo;
 pub mod block_ram;
 pub mod board;
 pub mod body_reader;
+pub mod box_configuration;
 pub mod box_counter_file;
 pub mod cell_deframer;
 pub mod cell_downlink;
