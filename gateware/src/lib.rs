@@ -72,6 +72,8 @@ pub mod record_arbiter;
 pub mod record_batcher;
 pub mod replica_register;
 pub mod reply_builder;
+pub mod reply_checksums;
+pub mod reply_field_bytes;
 pub mod rx_clock_crossing;
 pub mod status_reporter;
 pub mod stream;

@@ -53,6 +53,8 @@ use crate::block_ram::{BlockRam, READ_LATENCY};
 use crate::body_reader::{BodyReader, BODY_ADDRESS_BITS};
 use crate::frame_transmitter::TAKE_TO_FIRST_BYTE;
 use crate::hdl::*;
+use crate::reply_checksums::{ReplyChecksums, CHECKSUM_CLOCKS, UDP_SUM_BYTES};
+use crate::reply_field_bytes::{field_byte, ReplyFieldBytes};
 use crate::stream::{DatagramSource, RAW_FRAME_KIND};
 use skinbox_protocol::box_counters::{self, BoxCounter, BOX_COUNTERS_LEN};
 use skinbox_protocol::command::{
@@ -86,24 +88,7 @@ const START_TO_STEP: u64 = 1 + READ_LATENCY;
 /// Steps from the last step summed into a checksum to a step that writes it: the byte is
 /// summed after stage 5, folded twice and complemented; the checksum byte is taken in
 /// stage 4.
-const CHECKSUM_DISTANCE: usize = 6;
-
-/// Byte positions of the held fields in the field multiplexer (five 64-bit words, most
-/// significant byte first). The request's own fields (addresses, port, sequence number,
-/// host time, opcode) are not among them: the builder copies them in the buffer or leaves
-/// them where they are.
-mod field_byte {
-    pub const DESTINATION_MAC: u8 = 0;
-    pub const DESTINATION_PORT: u8 = 6;
-    pub const DESTINATION_IP: u8 = 8;
-    pub const LAST_ACCEPTED: u8 = 12;
-    pub const RECEIVE_TICK: u8 = 16;
-    pub const SEND_TICK: u8 = 24;
-    pub const ICMP_CHECKSUM: u8 = 32;
-    pub const RESULT: u8 = 34;
-    pub const LINK_UP: u8 = 35;
-    pub const LINK_SPEED: u8 = 36;
-}
+const CHECKSUM_DISTANCE: usize = CHECKSUM_CLOCKS as usize + 1;
 
 /// Where a step's byte comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -686,6 +671,10 @@ pub struct ReplyBuilder {
     pub replies: DatagramSource,
     buffer: BlockRam<8, BODY_ADDRESS_BITS>,
     reader: BodyReader,
+    // the held fields' byte multiplexer
+    fields: ReplyFieldBytes,
+    // the IPv4 and UDP checksums of the written bytes
+    checksums: ReplyChecksums,
     rom: BlockRam<STEP_BITS, ROM_ADDRESS_BITS>,
     arp_start: Constant<Bits<ROM_ADDRESS_BITS>>,
     echo_start: Constant<Bits<ROM_ADDRESS_BITS>>,
@@ -738,9 +727,6 @@ pub struct ReplyBuilder {
     s3_sum_ip: DFF<Bit>,
     s3_sum_udp: DFF<Bit>,
     s3_read: DFF<Bits<8>>,
-    s6_summand: DFF<Bits<16>>,
-    s6_sum_ip: DFF<Bit>,
-    s6_sum_udp: DFF<Bit>,
     s4_write: DFF<Bit>,
     s4_address: DFF<Bits<8>>,
     s4_value: DFF<Bits<8>>,
@@ -757,26 +743,10 @@ pub struct ReplyBuilder {
     written: Signal<Local, Bits<8>>,
     s5_sum_ip: DFF<Bit>,
     s5_sum_udp: DFF<Bit>,
-    ip_sum: DFF<Bits<20>>,
-    udp_sum: DFF<Bits<24>>,
-    ip_fold: DFF<Bits<17>>,
-    ip_folded: DFF<Bits<16>>,
-    udp_fold: DFF<Bits<17>>,
-    udp_folded: DFF<Bits<16>>,
-    ip_checksum: DFF<Bits<16>>,
-    udp_checksum: DFF<Bits<16>>,
     idle: Signal<Local, Bit>,
     take: Signal<Local, Bit>,
-    icmp_checksum: Signal<Local, Bits<16>>,
-    field_byte_index: Signal<Local, Bits<3>>,
-    word_bytes_0: DFF<Bits<8>>,
-    word_bytes_1: DFF<Bits<8>>,
-    word_bytes_2: DFF<Bits<8>>,
-    word_bytes_3: DFF<Bits<8>>,
-    word_bytes_4: DFF<Bits<8>>,
     reply_byte: Signal<Local, Bits<8>>,
     counter_word_shifted: Signal<Local, Bits<32>>,
-    summand: Signal<Local, Bits<16>>,
 }
 
 impl ReplyBuilder {
@@ -785,6 +755,9 @@ impl ReplyBuilder {
     pub fn new(link: &LinkConfig, box_id: u16, port_count: u8) -> Self {
         let rom_contents = rom(link, box_id, port_count);
         let [ack_none, ack_destination, ack_counters] = rom_contents.ack;
+        // the longest reply's UDP part (header and acknowledgement with the counters) and
+        // the pseudo header's 12 bytes fit the checksum's UDP sum
+        assert!(AckReplyKind::Counters.frame_len() - UDP_AT + 12 <= UDP_SUM_BYTES);
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -814,6 +787,8 @@ impl ReplyBuilder {
             replies: Default::default(),
             buffer: Default::default(),
             reader: Default::default(),
+            fields: Default::default(),
+            checksums: Default::default(),
             rom: BlockRam::with_contents(&rom_contents.words),
             arp_start: constant(rom_contents.arp as u64),
             echo_start: constant(rom_contents.echo as u64),
@@ -858,9 +833,6 @@ impl ReplyBuilder {
             s3_sum_ip: Default::default(),
             s3_sum_udp: Default::default(),
             s3_read: Default::default(),
-            s6_summand: Default::default(),
-            s6_sum_ip: Default::default(),
-            s6_sum_udp: Default::default(),
             s4_write: Default::default(),
             s4_address: Default::default(),
             s4_value: Default::default(),
@@ -876,26 +848,10 @@ impl ReplyBuilder {
             written: Default::default(),
             s5_sum_ip: Default::default(),
             s5_sum_udp: Default::default(),
-            ip_sum: Default::default(),
-            udp_sum: Default::default(),
-            ip_fold: Default::default(),
-            ip_folded: Default::default(),
-            udp_fold: Default::default(),
-            udp_folded: Default::default(),
-            ip_checksum: Default::default(),
-            udp_checksum: Default::default(),
             idle: Default::default(),
             take: Default::default(),
-            icmp_checksum: Default::default(),
-            field_byte_index: Default::default(),
-            word_bytes_0: Default::default(),
-            word_bytes_1: Default::default(),
-            word_bytes_2: Default::default(),
-            word_bytes_3: Default::default(),
-            word_bytes_4: Default::default(),
             reply_byte: Default::default(),
             counter_word_shifted: Default::default(),
-            summand: Default::default(),
         }
     }
 }
@@ -933,9 +889,6 @@ impl Logic for ReplyBuilder {
             s3_sum_ip,
             s3_sum_udp,
             s3_read,
-            s6_summand,
-            s6_sum_ip,
-            s6_sum_udp,
             s4_write,
             s4_address,
             s4_value,
@@ -943,26 +896,13 @@ impl Logic for ReplyBuilder {
             s4_sum_ip,
             s4_sum_udp,
             s4_from_buffer,
-            word_bytes_0,
-            word_bytes_1,
-            word_bytes_2,
-            word_bytes_3,
-            word_bytes_4,
             s5_write,
             s5_address,
             s5_byte,
             s3_from_buffer,
             s5_from_buffer,
             s5_sum_ip,
-            s5_sum_udp,
-            ip_sum,
-            udp_sum,
-            ip_fold,
-            ip_folded,
-            udp_fold,
-            udp_folded,
-            ip_checksum,
-            udp_checksum
+            s5_sum_udp
         );
         self.buffer.clock.next = self.clock.val();
         self.rom.clock.next = self.clock.val();
@@ -1010,71 +950,20 @@ impl Logic for ReplyBuilder {
 
         // Stage 3 -> 4: the byte in each of the five words of held fields; the counter
         // loaded at its byte 0 (the next counter's read starts).
-        // (byte in the word first, then the word: balanced trees of two-way multiplexers,
-        // which map onto the LUTs and the slices' PFUMX/L6MUX)
-        self.icmp_checksum.next = !self.icmp_rest_sum.val();
-        self.field_byte_index.next = self.s3_value.q.val().get_bits::<3>(0);
-        if self.field_byte_index.val().get_bit(2) {
-            if self.field_byte_index.val().get_bit(1) {
-                if self.field_byte_index.val().get_bit(0) {
-                    self.word_bytes_0.d.next = self.destination_port.val().get_bits::<8>(0);
-                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(0);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(0);
-                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(0);
-                    self.word_bytes_4.d.next = 0.into();
-                } else {
-                    self.word_bytes_0.d.next = self.destination_port.val().get_bits::<8>(8);
-                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(8);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(8);
-                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(8);
-                    self.word_bytes_4.d.next = 0.into();
-                }
-            } else {
-                if self.field_byte_index.val().get_bit(0) {
-                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(0);
-                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(16);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(16);
-                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(16);
-                    self.word_bytes_4.d.next = 0.into();
-                } else {
-                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(8);
-                    self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(24);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(24);
-                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(24);
-                    self.word_bytes_4.d.next = bit_cast::<8, 2>(self.link_speed.val());
-                }
-            }
-        } else {
-            if self.field_byte_index.val().get_bit(1) {
-                if self.field_byte_index.val().get_bit(0) {
-                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(16);
-                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(0);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(32);
-                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(32);
-                    self.word_bytes_4.d.next = bit_cast::<8, 1>(self.link_up.val().into());
-                } else {
-                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(24);
-                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(8);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(40);
-                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(40);
-                    self.word_bytes_4.d.next = self.result.val();
-                }
-            } else {
-                if self.field_byte_index.val().get_bit(0) {
-                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(32);
-                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(16);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(48);
-                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(48);
-                    self.word_bytes_4.d.next = self.icmp_checksum.val().get_bits::<8>(0);
-                } else {
-                    self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(40);
-                    self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(24);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(56);
-                    self.word_bytes_3.d.next = self.send_tick.q.val().get_bits::<8>(56);
-                    self.word_bytes_4.d.next = self.icmp_checksum.val().get_bits::<8>(8);
-                }
-            }
-        }
+        // (the held fields' byte: each word's byte now, the word in the next stage)
+        self.fields.clock.next = self.clock.val();
+        self.fields.byte_index.next = self.s3_value.q.val().get_bits::<3>(0);
+        self.fields.word_index.next = self.s4_value.q.val().get_bits::<3>(3);
+        self.fields.destination_mac.next = self.destination_mac.val();
+        self.fields.destination_port.next = self.destination_port.val();
+        self.fields.destination_ip.next = self.destination_ip.val();
+        self.fields.last_accepted.next = self.last_accepted.val();
+        self.fields.receive_tick.next = self.receive_tick.val();
+        self.fields.send_tick.next = self.send_tick.q.val();
+        self.fields.icmp_rest_sum.next = self.icmp_rest_sum.val();
+        self.fields.result.next = self.result.val();
+        self.fields.link_up.next = self.link_up.val();
+        self.fields.link_speed.next = self.link_speed.val();
         self.s4_write.d.next = self.s3_write.q.val();
         self.s4_address.d.next = self.s3_address.q.val();
         self.s4_value.d.next = self.s3_value.q.val();
@@ -1096,31 +985,18 @@ impl Logic for ReplyBuilder {
         self.counter_word_shifted.next = self.counter_word.q.val()
             << (bit_cast::<32, 2>(self.s4_value.q.val().get_bits::<2>(0)) << 3);
         if self.s4_source.q.val() == 1 {
-            // (words 5 to 7 do not exist)
-            if self.s4_value.q.val().get_bit(5) {
-                self.reply_byte.next = self.word_bytes_4.q.val();
-            } else if self.s4_value.q.val().get_bit(4) {
-                if self.s4_value.q.val().get_bit(3) {
-                    self.reply_byte.next = self.word_bytes_3.q.val();
-                } else {
-                    self.reply_byte.next = self.word_bytes_2.q.val();
-                }
-            } else if self.s4_value.q.val().get_bit(3) {
-                self.reply_byte.next = self.word_bytes_1.q.val();
-            } else {
-                self.reply_byte.next = self.word_bytes_0.q.val();
-            }
+            self.reply_byte.next = self.fields.field_byte.val();
         } else if self.s4_source.q.val() == 2 {
             self.reply_byte.next = self.counter_word_shifted.val().get_bits::<8>(24);
         } else if self.s4_source.q.val() == 3 {
             if self.s4_value.q.val().get_bits::<2>(0) == 0 {
-                self.reply_byte.next = self.ip_checksum.q.val().get_bits::<8>(8);
+                self.reply_byte.next = self.checksums.ip_checksum.val().get_bits::<8>(8);
             } else if self.s4_value.q.val().get_bits::<2>(0) == 1 {
-                self.reply_byte.next = self.ip_checksum.q.val().get_bits::<8>(0);
+                self.reply_byte.next = self.checksums.ip_checksum.val().get_bits::<8>(0);
             } else if self.s4_value.q.val().get_bits::<2>(0) == 2 {
-                self.reply_byte.next = self.udp_checksum.q.val().get_bits::<8>(8);
+                self.reply_byte.next = self.checksums.udp_checksum.val().get_bits::<8>(8);
             } else {
-                self.reply_byte.next = self.udp_checksum.q.val().get_bits::<8>(0);
+                self.reply_byte.next = self.checksums.udp_checksum.val().get_bits::<8>(0);
             }
         }
         self.s5_byte.d.next = self.reply_byte.val();
@@ -1136,36 +1012,12 @@ impl Logic for ReplyBuilder {
         if self.s5_from_buffer.q.val() {
             self.written.next = self.buffer.read_data.val();
         }
-        self.summand.next = bit_cast::<16, 8>(self.written.val());
-        if !self.s5_address.q.val().get_bit(0) {
-            self.summand.next = bit_cast::<16, 8>(self.written.val()) << 8;
-        }
-        // (summed a clock later, from a register: the buffer's output feeds no adder)
-        self.s6_summand.d.next = self.summand.val();
-        self.s6_sum_ip.d.next = self.s5_sum_ip.q.val();
-        self.s6_sum_udp.d.next = self.s5_sum_udp.q.val();
-        if self.s6_sum_ip.q.val() {
-            self.ip_sum.d.next = self.ip_sum.q.val() + bit_cast::<20, 16>(self.s6_summand.q.val());
-        }
-        if self.s6_sum_udp.q.val() {
-            self.udp_sum.d.next =
-                self.udp_sum.q.val() + bit_cast::<24, 16>(self.s6_summand.q.val());
-        }
-        self.ip_fold.d.next = bit_cast::<17, 16>(self.ip_sum.q.val().get_bits::<16>(0))
-            + bit_cast::<17, 4>(self.ip_sum.q.val().get_bits::<4>(16));
-        // (at most 0x1000E: adding its carry bit cannot carry again)
-        self.ip_folded.d.next = self.ip_fold.q.val().get_bits::<16>(0)
-            + bit_cast::<16, 1>(self.ip_fold.q.val().get_bits::<1>(16));
-        self.ip_checksum.d.next = !self.ip_folded.q.val();
-        self.udp_fold.d.next = bit_cast::<17, 16>(self.udp_sum.q.val().get_bits::<16>(0))
-            + bit_cast::<17, 8>(self.udp_sum.q.val().get_bits::<8>(16));
-        self.udp_folded.d.next = self.udp_fold.q.val().get_bits::<16>(0)
-            + bit_cast::<16, 1>(self.udp_fold.q.val().get_bits::<1>(16));
-        self.udp_checksum.d.next = !self.udp_folded.q.val();
-        if self.udp_folded.q.val() == 0xFFFF {
-            // a computed 0 is sent as 0xFFFF (RFC 768)
-            self.udp_checksum.d.next = 0xFFFF.into();
-        }
+        self.checksums.clock.next = self.clock.val();
+        self.checksums.reset.next = self.reset.val();
+        self.checksums.written.next = self.written.val();
+        self.checksums.low_byte.next = self.s5_address.q.val().get_bit(0);
+        self.checksums.sum_ip.next = self.s5_sum_ip.q.val();
+        self.checksums.sum_udp.next = self.s5_sum_udp.q.val();
         self.buffer.write_enable.next = self.receive_write_enable.val() & !self.locked_now.q.val();
         self.buffer.write_address.next = self.receive_write_address.val();
         self.buffer.write_data.next = self.receive_write_data.val();
@@ -1183,10 +1035,10 @@ impl Logic for ReplyBuilder {
             & !self.read_2.q.val()
             & !self.offering.q.val()
             & !self.reader.busy.val();
+        self.checksums.restart.next =
+            self.idle.val() & (self.start_arp.val() | self.start_echo.val() | self.start_ack.val());
         if self.idle.val() & (self.start_arp.val() | self.start_echo.val() | self.start_ack.val()) {
             self.running.d.next = true;
-            self.ip_sum.d.next = 0.into();
-            self.udp_sum.d.next = 0.into();
             self.counter_address.d.next = 0.into();
             self.is_ack.d.next = self.start_ack.val();
             self.sizing.d.next = true;
@@ -1297,8 +1149,6 @@ impl Logic for ReplyBuilder {
             self.s4_sum_ip.d.next = false;
             self.s4_sum_udp.d.next = false;
             self.s5_write.d.next = false;
-            self.s6_sum_ip.d.next = false;
-            self.s6_sum_udp.d.next = false;
             self.s3_sum_ip.d.next = false;
             self.s3_sum_udp.d.next = false;
         }
