@@ -37,8 +37,10 @@
 //! at the start, a clock later (no adder after the descriptor).
 
 use crate::block_ram::BlockRam;
-use crate::crc32::Crc32Byte;
+use crate::datagram_checksum::DatagramChecksum;
+use crate::fcs_output::FcsOutput;
 use crate::hdl::*;
+use crate::header_sums::HeaderSums;
 use crate::stream::{DatagramSink, RAW_FRAME_KIND};
 use skinbox_protocol::datagram::{self, field, HEADER_LEN};
 use skinbox_protocol::link::*;
@@ -231,7 +233,6 @@ pub struct FrameTransmitter {
     // the UDP checksum's constant words with the UDP length's constant part (the UDP and
     // datagram headers), counted twice like the length
     udp_term_constant: Constant<Bits<32>>,
-    ip_constant_sum: Constant<Bits<32>>,
     // Frame positions from the format constants. The byte at `index` is chosen two clocks
     // ahead (see the kernel), so the positions the byte-source tests name are "ahead": two
     // lower than the bytes.
@@ -259,7 +260,12 @@ pub struct FrameTransmitter {
     // the byte sources, one bit each (see `byte_source`)
     source_template: Constant<Bits<SOURCE_BITS>>,
     source_body: Constant<Bits<SOURCE_BITS>>,
-    crc: Crc32Byte,
+    // the IPv4 header checksum and the destination's sum
+    header_sums: HeaderSums,
+    // the UDP checksum (final long before byte 48: the sum is done by byte 21)
+    udp_sum: DatagramChecksum,
+    // the output stage with the FCS
+    fcs_stage: FcsOutput,
     sending: DFF<Bit>,
     index: DFF<Bits<11>>,
     gap: DFF<Bits<4>>,
@@ -276,13 +282,6 @@ pub struct FrameTransmitter {
     // take and shifted a byte up as each goes out (cut in two like the fields)
     destination_high: DFF<Bits<64>>,
     destination_low: DFF<Bits<32>>,
-    // the destination IP and port held for the checksums, their words' sums (the IP's, then
-    // with the port), and the IPv4 header's variable words (total length, destination)
-    destination_ip_held: DFF<Bits<32>>,
-    destination_port_held: DFF<Bits<16>>,
-    destination_ip_sum: DFF<Bits<17>>,
-    destination_sum: DFF<Bits<18>>,
-    ip_variable: DFF<Bits<18>>,
     // the checksum's term is the destination's sum (index 18), registered like `term_is_kind`
     term_is_destination: DFF<Bit>,
     // the body's first byte and the frame's end over the body, of the held kind
@@ -300,18 +299,11 @@ pub struct FrameTransmitter {
     field_word: Signal<Local, Bits<64>>,
     field_word_shifted: Signal<Local, Bits<64>>,
     field_byte: DFF<Bits<8>>,
-    checksum: DFF<Bits<32>>,
-    crc_register: DFF<Bits<32>>,
     next_sequence: DFF<Bits<32>>,
-    txd: DFF<Bits<8>>,
-    tx_en: DFF<Bit>,
     body_end: DFF<Bits<11>>,
     body_end_less_one: DFF<Bits<11>>,
     // the byte at `index` is a body byte: the body stream's `ready`
     in_body: DFF<Bit>,
-    // a body beat was missing: the byte in the output stage, then at the output
-    stage_error: DFF<Bit>,
-    tx_er: DFF<Bit>,
     // the index before the frame's last one (its last FCS byte), set with the descriptor
     end_minus_one: DFF<Bits<11>>,
     // registered index tests, true at index 7 (the CRC starts) and at the last index
@@ -323,16 +315,10 @@ pub struct FrameTransmitter {
     // 2..18 and 57..72)
     term_from_fields: DFF<Bit>,
     checksum_adds: DFF<Bit>,
-    // the checksum's carries folded in, twice, a clock each (the sum is complete at byte
-    // 19, its folded value is sent at byte 48)
-    checksum_fold: DFF<Bits<17>>,
-    checksum_folded: DFF<Bits<16>>,
     next_field_steps: DFF<Bit>,
     header_index: Signal<Local, Bits<7>>,
     total_len: DFF<Bits<16>>,
     udp_len: DFF<Bits<16>>,
-    ip_checksum: DFF<Bits<16>>,
-    checksum_term: DFF<Bits<32>>,
     // the checksum's term at this index: the kind (index 0), the UDP length words with the
     // constant words (index 1), registered a clock ahead like `term_from_fields`
     term_is_kind: DFF<Bit>,
@@ -340,10 +326,6 @@ pub struct FrameTransmitter {
     // the UDP length term (twice the UDP length plus the constant words), from the held
     // body length like `udp_len`
     udp_term: DFF<Bits<32>>,
-    stage_byte: DFF<Bits<8>>,
-    stage_valid: DFF<Bit>,
-    stage_crc: DFF<Bit>,
-    stage_fcs: DFF<Bit>,
     // where the byte at `index` comes from (`SOURCE_*`), chosen a clock ahead from the
     // header table's sources and the two flags below
     byte_source: DFF<Bits<SOURCE_BITS>>,
@@ -354,7 +336,6 @@ pub struct FrameTransmitter {
     body_follows: Signal<Local, Bit>,
     // sending, and the next index is this one + 1 (otherwise it is 0)
     frame_goes_on: Signal<Local, Bit>,
-    udp_checksum_held: DFF<Bits<16>>,
     header_byte: Signal<Local, Bits<8>>,
     // the steady sources and the destination of the next clock's byte, ORed a clock ahead
     // (see the kernel), the sources they are chosen by, and the destination's next byte
@@ -363,11 +344,6 @@ pub struct FrameTransmitter {
     early_byte: Signal<Local, Bits<8>>,
     destination_next_byte: Signal<Local, Bits<8>>,
     tx_byte: Signal<Local, Bits<8>>,
-    ip_sum: Signal<Local, Bits<32>>,
-    // the IPv4 header sum folded once, a register (the checksum's second fold a clock later)
-    ip_fold: DFF<Bits<32>>,
-    udp_checksum: Signal<Local, Bits<16>>,
-    checksum_word: Signal<Local, Bits<32>>,
 }
 
 impl FrameTransmitter {
@@ -398,7 +374,6 @@ impl FrameTransmitter {
             udp_term_constant: Constant::new(
                 (udp_constant + 2 * (BODY_START - UDP_AT_ON_WIRE) as u64).into(),
             ),
-            ip_constant_sum: Constant::new(ip_constant.into()),
             sfd_ahead: position(PREAMBLE_LEN - 2),
             crc_from: position(PREAMBLE_LEN),
             body_start: position(BODY_START),
@@ -414,7 +389,9 @@ impl FrameTransmitter {
             template_idle: position(TEMPLATE_IDLE),
             source_template: Constant::new(SOURCE_TEMPLATE.into()),
             source_body: Constant::new(SOURCE_BODY.into()),
-            crc: Default::default(),
+            header_sums: HeaderSums::new(ip_constant),
+            udp_sum: Default::default(),
+            fcs_stage: Default::default(),
             sending: Default::default(),
             index: Default::default(),
             gap: Default::default(),
@@ -425,11 +402,6 @@ impl FrameTransmitter {
             raw_held: Default::default(),
             destination_high: Default::default(),
             destination_low: Default::default(),
-            destination_ip_held: Default::default(),
-            destination_port_held: Default::default(),
-            destination_ip_sum: Default::default(),
-            destination_sum: Default::default(),
-            ip_variable: Default::default(),
             term_is_destination: Default::default(),
             geometry_start: Default::default(),
             geometry_end_over_body: Default::default(),
@@ -439,52 +411,33 @@ impl FrameTransmitter {
             field_word: Default::default(),
             field_word_shifted: Default::default(),
             field_byte: Default::default(),
-            checksum: Default::default(),
-            crc_register: Default::default(),
             next_sequence: Default::default(),
-            txd: Default::default(),
-            tx_en: Default::default(),
             body_end: Default::default(),
             body_end_less_one: Default::default(),
             in_body: Default::default(),
-            stage_error: Default::default(),
-            tx_er: Default::default(),
             end_minus_one: Default::default(),
             crc_starts: Default::default(),
             term_from_fields: Default::default(),
             checksum_adds: Default::default(),
-            checksum_fold: Default::default(),
-            checksum_folded: Default::default(),
             next_field_steps: Default::default(),
             header_index: Default::default(),
             frame_ends: Default::default(),
             total_len: Default::default(),
             udp_len: Default::default(),
-            ip_checksum: Default::default(),
-            checksum_term: Default::default(),
             term_is_kind: Default::default(),
             term_is_udp_len: Default::default(),
             udp_term: Default::default(),
-            stage_byte: Default::default(),
-            stage_valid: Default::default(),
-            stage_crc: Default::default(),
-            stage_fcs: Default::default(),
             byte_source: Default::default(),
             header_ahead: Default::default(),
             body_ahead: Default::default(),
             body_follows: Default::default(),
             frame_goes_on: Default::default(),
-            udp_checksum_held: Default::default(),
             header_byte: Default::default(),
             header_early: Default::default(),
             early_sources: Default::default(),
             early_byte: Default::default(),
             destination_next_byte: Default::default(),
             tx_byte: Default::default(),
-            ip_sum: Default::default(),
-            ip_fold: Default::default(),
-            udp_checksum: Default::default(),
-            checksum_word: Default::default(),
         }
     }
 }
@@ -512,76 +465,38 @@ impl Logic for FrameTransmitter {
             fields_low,
             next_field_position,
             field_byte,
-            checksum,
-            crc_register,
             next_sequence,
-            txd,
-            tx_en,
             body_end,
             body_end_less_one,
             in_body,
-            stage_error,
-            tx_er,
             end_minus_one,
             crc_starts,
             term_from_fields,
             checksum_adds,
-            checksum_fold,
-            checksum_folded,
             next_field_steps,
             frame_ends,
             total_len,
             udp_len,
-            ip_checksum,
-            checksum_term,
-            stage_byte,
-            stage_valid,
-            stage_crc,
-            stage_fcs,
             byte_source,
             header_ahead,
             body_ahead,
-            udp_checksum_held,
             term_is_kind,
             term_is_udp_len,
             udp_term,
-            ip_fold,
             raw_held,
             destination_high,
             destination_low,
-            destination_ip_held,
-            destination_port_held,
-            destination_ip_sum,
-            destination_sum,
-            ip_variable,
             term_is_destination,
             header_early
         );
         // Frame geometry: registered at the start from the body length (lengths), two clocks
         // later the IPv4 checksum (needed from byte 32 on), through its first fold.
         // (the destination's words a clock after the take, with the total length a clock later)
-        self.destination_ip_sum.d.next =
-            bit_cast::<17, 16>(self.destination_ip_held.q.val().get_bits::<16>(16))
-                + bit_cast::<17, 16>(self.destination_ip_held.q.val().get_bits::<16>(0));
-        self.destination_sum.d.next = bit_cast::<18, 17>(self.destination_ip_sum.q.val())
-            + bit_cast::<18, 16>(self.destination_port_held.q.val());
-        self.ip_variable.d.next = bit_cast::<18, 16>(self.total_len.q.val())
-            + bit_cast::<18, 17>(self.destination_ip_sum.q.val());
-        self.ip_sum.next =
-            self.ip_constant_sum.val() + bit_cast::<32, 18>(self.ip_variable.q.val());
-        self.ip_fold.d.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
-        self.ip_checksum.d.next =
-            !bit_cast::<16, 32>((self.ip_fold.q.val() & 0xFFFF) + (self.ip_fold.q.val() >> 16));
-        self.checksum_fold.d.next = bit_cast::<17, 16>(self.checksum.q.val().get_bits::<16>(0))
-            + bit_cast::<17, 16>(self.checksum.q.val().get_bits::<16>(16));
-        // (at most 0x1FFFE: adding its carry bit cannot carry again)
-        self.checksum_folded.d.next = self.checksum_fold.q.val().get_bits::<16>(0)
-            + bit_cast::<16, 1>(self.checksum_fold.q.val().get_bits::<1>(16));
-        self.udp_checksum.next = !self.checksum_folded.q.val();
-        if self.checksum_folded.q.val() == 0xFFFF {
-            // a computed 0 is sent as 0xFFFF (RFC 768)
-            self.udp_checksum.next = 0xFFFF.into();
-        }
+        self.header_sums.clock.next = self.clock.val();
+        self.header_sums.load.next = !self.sending.q.val();
+        self.header_sums.destination_ip.next = self.destination_ip.val();
+        self.header_sums.destination_port.next = self.destination_port.val();
+        self.header_sums.total_len.next = self.total_len.q.val();
 
         // The variable words of the UDP checksum, one per clock from byte 0: the kind, the
         // UDP length (counted twice: header and pseudo header; valid from byte 1) with the
@@ -598,28 +513,20 @@ impl Logic for FrameTransmitter {
         self.field_word_shifted.next = self.field_word.val()
             << (bit_cast::<64, 3>(self.next_field_position.q.val().get_bits::<3>(0)) << 3);
         self.field_byte.d.next = self.field_word_shifted.val().get_bits::<8>(56);
-        // (the three selects are registers and exclusive: the terms are ORed)
-        self.checksum_word.next = 0.into();
-        if self.term_is_kind.q.val() {
-            self.checksum_word.next = bit_cast::<32, 8>(self.kind_held.q.val());
-        }
-        if self.term_is_udp_len.q.val() {
-            self.checksum_word.next = self.checksum_word.val() | self.udp_term.q.val();
-        }
-        if self.term_is_destination.q.val() {
-            self.checksum_word.next =
-                self.checksum_word.val() | bit_cast::<32, 18>(self.destination_sum.q.val());
-        }
-        if self.term_from_fields.q.val() {
-            if self.index.q.val().get_bit(0) {
-                self.checksum_word.next =
-                    self.checksum_word.val() | (bit_cast::<32, 8>(self.field_byte.q.val()) << 8);
-            } else {
-                self.checksum_word.next =
-                    self.checksum_word.val() | bit_cast::<32, 8>(self.field_byte.q.val());
-            }
-        }
-        self.checksum_term.d.next = self.checksum_word.val();
+        self.udp_sum.clock.next = self.clock.val();
+        self.udp_sum.load.next = !self.sending.q.val();
+        self.udp_sum.body_sum.next = self.datagrams.body_sum.val();
+        // the word chosen at byte i is added at byte i + 1 (from a register)
+        self.udp_sum.add.next = self.sending.q.val() & self.checksum_adds.q.val();
+        self.udp_sum.term_is_kind.next = self.term_is_kind.q.val();
+        self.udp_sum.term_is_udp_len.next = self.term_is_udp_len.q.val();
+        self.udp_sum.term_is_destination.next = self.term_is_destination.q.val();
+        self.udp_sum.term_from_fields.next = self.term_from_fields.q.val();
+        self.udp_sum.high_byte.next = self.index.q.val().get_bit(0);
+        self.udp_sum.kind.next = self.kind_held.q.val();
+        self.udp_sum.udp_term.next = self.udp_term.q.val();
+        self.udp_sum.destination_sum.next = self.header_sums.destination_sum.val();
+        self.udp_sum.field_byte.next = self.field_byte.q.val();
 
         // The byte at `index`, from a multiplexer whose select is a register
         // (`byte_source`); the template byte and the sources come from the header table,
@@ -658,8 +565,6 @@ impl Logic for FrameTransmitter {
             self.byte_source.d.next = self.source_template.val()
                 | self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
         }
-        // (final long before byte 48: the sum is done by byte 21)
-        self.udp_checksum_held.d.next = self.udp_checksum.val();
         // The header's sources are ORed (each is 0 unless chosen), the body beside them (it
         // is alone: its data passes one multiplexer, not the header's OR). The sources
         // that are steady through the header (lengths, checksums, kind) and the destination
@@ -684,11 +589,11 @@ impl Logic for FrameTransmitter {
         }
         if self.early_sources.val().get_bit(3) {
             self.early_byte.next =
-                self.early_byte.val() | self.ip_checksum.q.val().get_bits::<8>(8);
+                self.early_byte.val() | self.header_sums.ip_checksum.val().get_bits::<8>(8);
         }
         if self.early_sources.val().get_bit(4) {
             self.early_byte.next =
-                self.early_byte.val() | self.ip_checksum.q.val().get_bits::<8>(0);
+                self.early_byte.val() | self.header_sums.ip_checksum.val().get_bits::<8>(0);
         }
         if self.early_sources.val().get_bit(5) {
             self.early_byte.next = self.early_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
@@ -698,11 +603,11 @@ impl Logic for FrameTransmitter {
         }
         if self.early_sources.val().get_bit(7) {
             self.early_byte.next =
-                self.early_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(8);
+                self.early_byte.val() | self.udp_sum.udp_checksum.val().get_bits::<8>(8);
         }
         if self.early_sources.val().get_bit(8) {
             self.early_byte.next =
-                self.early_byte.val() | self.udp_checksum_held.q.val().get_bits::<8>(0);
+                self.early_byte.val() | self.udp_sum.udp_checksum.val().get_bits::<8>(0);
         }
         if self.early_sources.val().get_bit(9) {
             self.early_byte.next = self.early_byte.val() | self.kind_held.q.val();
@@ -729,27 +634,19 @@ impl Logic for FrameTransmitter {
         self.in_body.d.next = self.frame_goes_on.val()
             & self.body_ahead.q.val()
             & (self.index.q.val() < self.body_end_less_one.q.val());
-        self.stage_error.d.next = self.in_body.q.val() & !self.datagrams.body.valid.val();
-        self.tx_er.d.next = self.stage_valid.q.val() & self.stage_error.q.val();
 
-        // Output stage: the byte goes through a register, the CRC is computed from that
-        // register, and the FCS is put in at the output, so no path runs from the byte
-        // selection through the CRC.
-        self.stage_valid.d.next = self.sending.q.val();
-        self.stage_byte.d.next = self.tx_byte.val();
-        self.stage_crc.d.next = (self.index.q.val() >= self.crc_from.val())
+        // Output stage: the byte through a register, the CRC from that register, the FCS
+        // at the output (`FcsOutput`).
+        self.fcs_stage.clock.next = self.clock.val();
+        self.fcs_stage.reset.next = self.reset.val();
+        self.fcs_stage.valid.next = self.sending.q.val();
+        self.fcs_stage.data.next = self.tx_byte.val();
+        self.fcs_stage.covered.next = (self.index.q.val() >= self.crc_from.val())
             & (self.index.q.val() < self.body_end.q.val());
-        self.stage_fcs.d.next = self.index.q.val() >= self.body_end.q.val();
-        self.crc.register.next = self.crc_register.q.val();
-        self.crc.data.next = self.stage_byte.q.val();
-        self.tx_en.d.next = self.stage_valid.q.val();
-        self.txd.d.next = self.stage_byte.q.val();
-        if self.stage_valid.q.val() & self.stage_crc.q.val() {
-            self.crc_register.d.next = self.crc.updated.val();
-        } else if self.stage_valid.q.val() & self.stage_fcs.q.val() {
-            self.txd.d.next = !self.crc_register.q.val().get_bits::<8>(0);
-            self.crc_register.d.next = self.crc_register.q.val() >> 8;
-        }
+        self.fcs_stage.fcs.next = self.index.q.val() >= self.body_end.q.val();
+        self.fcs_stage.beat_missing.next = self.in_body.q.val() & !self.datagrams.body.valid.val();
+        // index 7: the SFD is in the output stage now: the CRC starts with the next byte
+        self.fcs_stage.crc_start.next = self.sending.q.val() & self.crc_starts.q.val();
 
         // the index tests of the next clock, from this clock's index (it counts up by one
         // while sending)
@@ -780,14 +677,6 @@ impl Logic for FrameTransmitter {
             self.sending.q.val() & (self.index.q.val() == self.end_minus_one.q.val());
         if self.sending.q.val() {
             self.index.d.next = self.index.q.val() + 1;
-            // the word chosen at byte i is added at byte i + 1 (from a register)
-            if self.checksum_adds.q.val() {
-                self.checksum.d.next = self.checksum.q.val() + self.checksum_term.q.val();
-            }
-            if self.crc_starts.q.val() {
-                // index 7: the SFD is in the output stage now: the CRC starts with the next byte
-                self.crc_register.d.next = 0xFFFF_FFFF_u64.into();
-            }
             // the frame's last clock: the index is back at 0 for the next frame and the
             // sequence steps (the next descriptor is taken with it), so `start` only sets
             // `sending`
@@ -835,9 +724,6 @@ impl Logic for FrameTransmitter {
             self.destination_low.d.next =
                 (bit_cast::<32, 16>(self.destination_ip.val().get_bits::<16>(0)) << 16)
                     | bit_cast::<32, 16>(self.destination_port.val());
-            self.destination_ip_held.d.next = self.destination_ip.val();
-            self.destination_port_held.d.next = self.destination_port.val();
-            self.checksum.d.next = self.datagrams.body_sum.val();
             self.fields_high.d.next = (bit_cast::<64, 8>(self.datagrams.flags.val()) << 56)
                 | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
                 | bit_cast::<64, 24>(self.datagrams.base_tick.val().get_bits::<24>(40));
@@ -865,7 +751,6 @@ impl Logic for FrameTransmitter {
             self.idle.d.next = true;
             self.term_is_destination.d.next = false;
             self.sending.d.next = false;
-            self.stage_valid.d.next = false;
             self.crc_starts.d.next = false;
             self.frame_ends.d.next = false;
             self.term_from_fields.d.next = false;
@@ -874,7 +759,6 @@ impl Logic for FrameTransmitter {
             self.next_field_position.d.next = 0.into();
             self.gap.d.next = 0.into();
             self.gap_done.d.next = true;
-            self.tx_en.d.next = false;
             self.next_sequence.d.next = 0.into();
             self.index.d.next = 0.into();
             self.term_is_kind.d.next = true;
@@ -882,12 +766,11 @@ impl Logic for FrameTransmitter {
             self.header_ahead.d.next = false;
             self.body_ahead.d.next = false;
             self.in_body.d.next = false;
-            self.tx_er.d.next = false;
         }
         self.datagrams.ready.next = self.idle.q.val();
-        self.gmii_txd.next = self.txd.q.val();
-        self.gmii_tx_en.next = self.tx_en.q.val();
-        self.gmii_tx_er.next = self.tx_er.q.val();
+        self.gmii_txd.next = self.fcs_stage.gmii_txd.val();
+        self.gmii_tx_en.next = self.fcs_stage.gmii_tx_en.val();
+        self.gmii_tx_er.next = self.fcs_stage.gmii_tx_er.val();
     }
 }
 
