@@ -33,7 +33,7 @@ use crate::run::{analyse, cycles, line, SentPacket, SimRun, SimSpec, RESET_CYCLE
 use crate::scene::{
     downlink_before, generate_with, plan_downlink, scene_ns_of_tick, sent_packets, sim_duration_ns,
 };
-use crate::sim::Fidelity;
+use crate::sim::{uart_tx_changes, Fidelity};
 use crate::Dut;
 use skinbox_cells::bus::DOWNLINK_PACKET_NS;
 use skinbox_cells::scene::{BusDownlink, GenerateOptions, Generated, Scene};
@@ -400,17 +400,7 @@ fn run_rtl(
     while player.cycle() < cycles {
         let to = (player.cycle() + step).min(cycles);
         out.extend(player.run_to(to));
-        let changes: Vec<PinChange> = player
-            .dut()
-            .take_uart_tx_edges()
-            .into_iter()
-            .filter(|e| e.edge >= TICK_ZERO_CYCLE)
-            .map(|e| PinChange {
-                tick: e.edge - TICK_ZERO_CYCLE,
-                port: e.port,
-                level: e.level,
-            })
-            .collect();
+        let changes = uart_tx_changes(player.dut());
         let packets = receivers.take(&changes, to + 1 - TICK_ZERO_CYCLE);
         uart_tx.extend(changes);
         for port in cells.receive(&packets, to)? {
