@@ -1,7 +1,14 @@
 //! A box without a board on a real UDP socket (`skinbox emulate`): a scene's cells on the
 //! pins of the box's models ([`skinbox_model::emulator::EmulatedBox`]), played in real
 //! time; commands from the socket are decided at their kernel receive timestamps.
+//!
+//! The loop is closed as in `skinbox sim` ([`skinbox_cosim::closed_loop`]): the cells are
+//! generated ahead while no cell command is in flight; each cell command packet their
+//! receivers decode from the emulated box's transmit pins joins their bus's downlink, they
+//! are generated again (checked causal), and the ports whose packets changed read the new
+//! ones from the uplink's cycle on.
 
+use skinbox_cosim::closed_loop::{Cells, ClosedLoopSpec};
 use skinbox_cosim::CosimError;
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_model::emulator::{EmulatedBox, EmulatorStats, Outgoing};
@@ -52,6 +59,7 @@ impl Default for EmulatorSettings {
 /// A scene played through the reference model, ready for [`serve`].
 pub struct PreparedEmulator {
     prepared: PreparedReference,
+    cells: Cells,
     /// The box's configuration (its address is the listening address).
     pub config: BoxConfig,
     /// The scene's name.
@@ -73,9 +81,7 @@ pub fn prepare(
         scene.config.scene.cells = c;
     }
     scene.check()?;
-    let generated =
-        skinbox_cosim::scene::generate(&scene, (settings.from_ms + settings.duration_ms) * 1e-3)?;
-    let ports = generated.buses.len();
+    let ports = scene.config.scene.buses;
     if !(1..=64).contains(&ports) {
         return Err(CosimError::Ports(ports));
     }
@@ -95,17 +101,22 @@ pub fn prepare(
         ..BoxConfig::default()
     };
     config.validate()?;
-    let spec = skinbox_cosim::scene::spec(
-        &generated,
+    // the host is the socket's: the scene's own commands reach the cells before the window
+    // only
+    let mut spec = ClosedLoopSpec::new(
+        &scene,
         config.clone(),
         (settings.from_ms * 1e6) as u64,
         (settings.duration_ms * 1e6) as u64,
     );
-    let (lines, _) = skinbox_cosim::run::lines(&spec);
+    spec.sim.host_frames.clear();
+    let cells = Cells::new(&spec)?;
+    let lines: Vec<_> = (0..ports).map(|p| cells.transitions(p).to_vec()).collect();
     let prepared =
-        skinbox_model::reference::prepare(&config, &lines, skinbox_cosim::run::cycles(&spec))?;
+        skinbox_model::reference::prepare(&config, &lines, skinbox_cosim::run::cycles(&spec.sim))?;
     Ok(PreparedEmulator {
         prepared,
+        cells,
         config,
         scene: scene.name().to_string(),
         ports,
@@ -117,6 +128,24 @@ impl PreparedEmulator {
     pub fn start(&self) -> EmulatedBox<'_> {
         EmulatedBox::new(&self.prepared, &self.config)
     }
+
+    /// The scene's cells as generated before any command from the socket.
+    pub fn cells(&self) -> &Cells {
+        &self.cells
+    }
+}
+
+/// The cells act on the cell command packets their receivers decoded from `emulated`'s
+/// transmit pins: generated again with them, and every port whose packets changed carries
+/// the new ones from the uplink's cycle on. Fails when that is not causal.
+pub fn obey(emulated: &mut EmulatedBox, cells: &mut Cells) -> Result<(), CosimError> {
+    let packets = emulated.take_received();
+    for port in cells.receive(&packets, emulated.cycle())? {
+        emulated
+            .replace_port(port, cells.transitions(port))
+            .map_err(CosimError::ClosedLoop)?;
+    }
+    Ok(())
 }
 
 /// What [`serve`] did.
@@ -161,6 +190,7 @@ pub fn serve(
     // Without kernel stamps each command is decided when it is read.
     let stamped = skinbox_host::live::enable_receive_timestamps(socket).is_ok();
     let mut emulated = prepared.start();
+    let mut cells = prepared.cells.clone();
     // the start on both clocks: the loop's (monotonic) and the kernel's receive stamps'
     // (the wall clock), read close together (a read between two wall clock reads at most
     // 5 us apart, taken at their middle)
@@ -231,6 +261,7 @@ pub fn serve(
                 }) {
                     send_errors += send(socket, &ack);
                 }
+                obey(&mut emulated, &mut cells).map_err(std::io::Error::other)?;
             }
             // IPv6 senders cannot reach an IPv4 box
             Ok(_) => draining = true,

@@ -11,8 +11,18 @@
 //! where the datagrams go, set-flush-timeout and set-status-period change the uplink's timing, status-now starts a report. Until a
 //! stream-to claims the stream, the datagrams are counted but sent nowhere (the build-time
 //! destination of a real box is a documentation address).
+//!
+//! A cell command the control model queues goes out on the downlink model's transmit pins,
+//! where the cells' UART receivers ([`crate::cell_uart`]) decode it
+//! ([`EmulatedBox::take_received`]). The downlink's pins depend on the host's commands
+//! alone, so a packet's bits are known once it is queued: the receivers take them at the
+//! command, ahead of the box's time, and whoever plays the cells has them before the cells
+//! can act on them; a port whose cells then send otherwise is given its new pin
+//! ([`EmulatedBox::replace_port`]).
 
+use crate::cell_uart::{CellUartReceiver, ReceivedPacket};
 use crate::control::{BoxControl, ControlConfig, Effect, Outcome, Reply};
+use crate::pins::Transition;
 use crate::reference::{PreparedReference, SlicedReference};
 use crate::timing::TICK_ZERO_CYCLE;
 use skinbox_gateware::interface_box::BoxConfig;
@@ -41,6 +51,8 @@ pub struct EmulatorStats {
     pub commands_received: u64,
     /// Acknowledgements sent.
     pub acks_sent: u64,
+    /// Cell command packets the cells' receivers decoded from the transmit pins.
+    pub cell_commands_heard: u64,
 }
 
 /// A UDP payload to send, and where.
@@ -61,6 +73,10 @@ pub struct EmulatedBox<'a> {
     reference: SlicedReference<'a>,
     control: BoxControl,
     claimed: bool,
+    receivers: CellUartReceiver,
+    /// Per port, the tick up to which the receivers have the pin (exclusive).
+    heard_until: Vec<u64>,
+    received: Vec<ReceivedPacket>,
     /// What it did so far.
     pub stats: EmulatorStats,
 }
@@ -80,6 +96,9 @@ impl<'a> EmulatedBox<'a> {
             reference: prepared.start(),
             control,
             claimed: false,
+            receivers: CellUartReceiver::new(config.ports, config.clock_hz, config.baud),
+            heard_until: vec![0; config.ports],
+            received: Vec::new(),
             stats: EmulatorStats::default(),
         }
     }
@@ -119,6 +138,41 @@ impl<'a> EmulatedBox<'a> {
         out
     }
 
+    /// The cycle the uplink has run to.
+    pub fn cycle(&self) -> u64 {
+        self.reference.cycle()
+    }
+
+    /// The cell command packets the cells' receivers decoded since the last call, in port
+    /// order, each port's in order (each with the tick its first start bit leaves the box).
+    pub fn take_received(&mut self) -> Vec<ReceivedPacket> {
+        std::mem::take(&mut self.received)
+    }
+
+    /// Port `port`'s pin carries `transitions` from [`EmulatedBox::cycle`] on (the cells'
+    /// packets after they acted on a command); fails when they differ before it.
+    pub fn replace_port(&mut self, port: usize, transitions: &[Transition]) -> Result<(), String> {
+        self.reference.replace_port(port, transitions)
+    }
+
+    /// The receivers take the transmit pins of every packet queued so far (a copy of the
+    /// downlink runs them out: later commands only queue behind).
+    fn hear_downlink(&mut self) {
+        let mut ahead = self.control.downlink.clone();
+        let end = ahead.drain();
+        for c in ahead.changes() {
+            if c.tick >= self.heard_until[c.port] {
+                self.receivers.push(c);
+                self.heard_until[c.port] = c.tick + 1;
+            }
+        }
+        let packets = self.receivers.advance_to(end);
+        self.stats.cell_commands_heard += packets.len() as u64;
+        self.received.extend(packets);
+        // (a long-running box keeps memory bounded)
+        self.control.downlink.take_changes();
+    }
+
     /// Takes a UDP payload from `from` at box tick `tick` (run the box there first with
     /// [`EmulatedBox::advance`]): the acknowledgement, with `send_tick()` as its send tick,
     /// if the control model answers.
@@ -131,8 +185,7 @@ impl<'a> EmulatedBox<'a> {
     ) -> Option<Outgoing> {
         self.stats.commands_received += 1;
         let outcome = deliver(&mut self.control, from, payload, tick);
-        // the pins of an emulated box go nowhere
-        self.control.downlink.take_changes();
+        self.hear_downlink();
         match outcome.effect {
             Some(Effect::StreamTo(_)) => self.claimed = true,
             Some(Effect::SetFlushTimeout(t)) => self.reference.set_flush_timeout_ticks(t.into()),
