@@ -8,9 +8,11 @@
 //! are generated again (checked causal), and the ports whose packets changed read the new
 //! ones from the uplink's cycle on.
 
+use skinbox_cells::bus::DOWNLINK_PACKET_NS;
 use skinbox_cosim::closed_loop::{Cells, ClosedLoopSpec};
 use skinbox_cosim::CosimError;
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_model::cell_uart::ReceivedPacket;
 use skinbox_model::emulator::{EmulatedBox, EmulatorStats, Outgoing};
 use skinbox_model::reference::PreparedReference;
 use skinbox_protocol::link::LinkConfig;
@@ -135,17 +137,79 @@ impl PreparedEmulator {
     }
 }
 
-/// The cells act on the cell command packets their receivers decoded from `emulated`'s
-/// transmit pins: generated again with them, and every port whose packets changed carries
-/// the new ones from the uplink's cycle on. Fails when that is not causal.
-pub fn obey(emulated: &mut EmulatedBox, cells: &mut Cells) -> Result<(), CosimError> {
-    let packets = emulated.take_received();
-    for port in cells.receive(&packets, emulated.cycle())? {
-        emulated
-            .replace_port(port, cells.transitions(port))
-            .map_err(CosimError::ClosedLoop)?;
+/// What a worker returns: the cells and the ports whose packets changed.
+type Generation = (Cells, Result<Vec<usize>, CosimError>);
+
+/// The cells beside the serving loop: the cell command packets their receivers decoded
+/// from the emulated box's transmit pins go to a worker thread that generates the cells
+/// again with them, while the loop goes on answering commands; the uplink waits at the
+/// earliest tick such a packet can change what the cells send ([`Obeying::hold`]) until
+/// the worker is done and the ports whose packets changed carry the new ones.
+pub struct Obeying {
+    idle: Option<Cells>,
+    worker: Option<std::thread::JoinHandle<Generation>>,
+    /// The packets the worker has, and those waiting for it.
+    working: Vec<ReceivedPacket>,
+    waiting: Vec<ReceivedPacket>,
+}
+
+impl Obeying {
+    /// `cells` obeying.
+    pub fn new(cells: Cells) -> Obeying {
+        Obeying {
+            idle: Some(cells),
+            worker: None,
+            working: vec![],
+            waiting: vec![],
+        }
     }
-    Ok(())
+
+    /// The box tick the uplink may run to: the earliest at which a packet in flight can
+    /// change the cells' packets on the pins (`u64::MAX` with none).
+    pub fn hold(&self) -> u64 {
+        self.working
+            .iter()
+            .chain(&self.waiting)
+            .map(|p| p.tick + DOWNLINK_PACKET_NS / skinbox_protocol::TICK_NS)
+            .min()
+            .unwrap_or(u64::MAX)
+    }
+
+    /// Takes the packets `emulated`'s receivers decoded; the worker's cells, once it is
+    /// done, go on `emulated`'s pins; the packets waiting go to the worker. With `wait`,
+    /// waits for the worker. Fails when regeneration is not causal.
+    pub fn step(&mut self, emulated: &mut EmulatedBox, wait: bool) -> Result<(), CosimError> {
+        self.waiting.extend(emulated.take_received());
+        if self
+            .worker
+            .as_ref()
+            .is_some_and(|w| wait || w.is_finished())
+        {
+            let (cells, changed) = self.worker.take().expect("checked").join().map_err(|_| {
+                CosimError::ClosedLoop("the cells' generation panicked".to_string())
+            })?;
+            for port in changed? {
+                emulated
+                    .replace_port(port, cells.transitions(port))
+                    .map_err(CosimError::ClosedLoop)?;
+            }
+            self.idle = Some(cells);
+            self.working.clear();
+        }
+        if self.worker.is_none() && !self.waiting.is_empty() {
+            let mut cells = self.idle.take().expect("no worker: the cells are idle");
+            self.working = std::mem::take(&mut self.waiting);
+            let (packets, cycle) = (self.working.clone(), emulated.cycle());
+            self.worker = Some(std::thread::spawn(move || {
+                let changed = cells.receive(&packets, cycle);
+                (cells, changed)
+            }));
+            if wait {
+                return self.step(emulated, true);
+            }
+        }
+        Ok(())
+    }
 }
 
 /// What [`serve`] did.
@@ -190,7 +254,7 @@ pub fn serve(
     // Without kernel stamps each command is decided when it is read.
     let stamped = skinbox_host::live::enable_receive_timestamps(socket).is_ok();
     let mut emulated = prepared.start();
-    let mut cells = prepared.cells.clone();
+    let mut cells = Obeying::new(prepared.cells.clone());
     // the start on both clocks: the loop's (monotonic) and the kernel's receive stamps'
     // (the wall clock), read close together (a read between two wall clock reads at most
     // 5 us apart, taken at their middle)
@@ -232,8 +296,11 @@ pub fn serve(
         if deadline.is_some_and(|d| now >= d) || stop.load(std::sync::atomic::Ordering::Relaxed) {
             break;
         }
+        cells
+            .step(&mut emulated, false)
+            .map_err(std::io::Error::other)?;
         if !draining {
-            for o in emulated.advance(tick_now(now)) {
+            for o in emulated.advance(tick_now(now).min(cells.hold())) {
                 send_errors += send(socket, &o);
             }
         }
@@ -253,7 +320,7 @@ pub fn serve(
                     .unwrap_or(read)
                     .max(last_command);
                 last_command = arrival;
-                for o in emulated.advance(arrival) {
+                for o in emulated.advance(arrival.min(cells.hold())) {
                     send_errors += send(socket, &o);
                 }
                 if let Some(ack) = emulated.command(from, &buf[..n], arrival, || {
@@ -261,7 +328,9 @@ pub fn serve(
                 }) {
                     send_errors += send(socket, &ack);
                 }
-                obey(&mut emulated, &mut cells).map_err(std::io::Error::other)?;
+                cells
+                    .step(&mut emulated, false)
+                    .map_err(std::io::Error::other)?;
             }
             // IPv6 senders cannot reach an IPv4 box
             Ok(_) => draining = true,

@@ -72,7 +72,10 @@ fn socket_of(d: &Destination) -> SocketAddrV4 {
 pub struct EmulatedBox<'a> {
     reference: SlicedReference<'a>,
     control: BoxControl,
-    claimed: bool,
+    /// Where the datagrams go, once a stream-to claimed them.
+    claimed: Option<Destination>,
+    /// Effects on the uplink not yet applied, with the ticks they apply at, in order.
+    effects: std::collections::VecDeque<(u64, Effect)>,
     receivers: CellUartReceiver,
     /// Per port, the tick up to which the receivers have the pin (exclusive).
     heard_until: Vec<u64>,
@@ -95,7 +98,8 @@ impl<'a> EmulatedBox<'a> {
         EmulatedBox {
             reference: prepared.start(),
             control,
-            claimed: false,
+            claimed: None,
+            effects: Default::default(),
             receivers: CellUartReceiver::new(config.ports, config.clock_hz, config.baud),
             heard_until: vec![0; config.ports],
             received: Vec::new(),
@@ -108,16 +112,31 @@ impl<'a> EmulatedBox<'a> {
         &self.control
     }
 
-    /// Runs the box up to box tick `tick`; returns the datagrams it sent meanwhile, to the
-    /// claimed destination (none before a claim; they are counted).
+    /// Runs the box up to box tick `tick`, applying the commands' effects on the uplink at
+    /// their ticks; returns the datagrams it sent meanwhile, to the claimed destination
+    /// (none before a claim; they are counted).
     pub fn advance(&mut self, tick: u64) -> Vec<Outgoing> {
-        let sent = self.reference.run_until(TICK_ZERO_CYCLE + tick);
-        let mut out = Vec::with_capacity(sent.len());
-        for s in sent {
-            if !self.claimed {
+        let mut out = Vec::new();
+        while let Some(&(at, effect)) = self.effects.front().filter(|e| e.0 <= tick) {
+            self.run_to(at, &mut out);
+            self.effects.pop_front();
+            match effect {
+                Effect::StreamTo(to) => self.claimed = Some(to),
+                Effect::SetFlushTimeout(t) => self.reference.set_flush_timeout_ticks(t.into()),
+                Effect::SetStatusPeriod(t) => self.reference.set_status_period_ticks(t.into()),
+                Effect::StatusNow => self.reference.request_status(),
+            }
+        }
+        self.run_to(tick, &mut out);
+        out
+    }
+
+    fn run_to(&mut self, tick: u64, out: &mut Vec<Outgoing>) {
+        for s in self.reference.run_until(TICK_ZERO_CYCLE + tick) {
+            let Some(to) = self.claimed else {
                 self.stats.datagrams_unclaimed += 1;
                 continue;
-            }
+            };
             let payload = match &s.datagram.body {
                 DatagramBody::Status(_) => {
                     self.stats.status_datagrams_sent += 1;
@@ -132,10 +151,9 @@ impl<'a> EmulatedBox<'a> {
             };
             out.push(Outgoing {
                 payload,
-                to: socket_of(&self.control.destination),
+                to: socket_of(&to),
             });
         }
-        out
     }
 
     /// The cycle the uplink has run to.
@@ -173,9 +191,10 @@ impl<'a> EmulatedBox<'a> {
         self.control.downlink.take_changes();
     }
 
-    /// Takes a UDP payload from `from` at box tick `tick` (run the box there first with
-    /// [`EmulatedBox::advance`]): the acknowledgement, with `send_tick()` as its send tick,
-    /// if the control model answers.
+    /// Takes a UDP payload from `from` at box tick `tick` (ticks never go back): the
+    /// acknowledgement, with `send_tick()` as its send tick, if the control model answers.
+    /// Its effect on the uplink applies when [`EmulatedBox::advance`] reaches the later of
+    /// `tick` and the tick the uplink had reached.
     pub fn command(
         &mut self,
         from: SocketAddrV4,
@@ -186,12 +205,8 @@ impl<'a> EmulatedBox<'a> {
         self.stats.commands_received += 1;
         let outcome = deliver(&mut self.control, from, payload, tick);
         self.hear_downlink();
-        match outcome.effect {
-            Some(Effect::StreamTo(_)) => self.claimed = true,
-            Some(Effect::SetFlushTimeout(t)) => self.reference.set_flush_timeout_ticks(t.into()),
-            Some(Effect::SetStatusPeriod(t)) => self.reference.set_status_period_ticks(t.into()),
-            Some(Effect::StatusNow) => self.reference.request_status(),
-            None => {}
+        if let Some(effect) = outcome.effect {
+            self.effects.push_back((tick, effect));
         }
         match outcome.reply {
             Some(reply @ Reply::Ack { .. }) => {
