@@ -231,6 +231,30 @@ pub struct ServeSummary {
     pub send_errors: u64,
 }
 
+/// The start on both clocks: the loop's (monotonic) and the kernel's receive stamps' (the
+/// wall clock, since the Unix epoch), read close together (a read between two wall clock
+/// reads at most 5 us apart, taken at their middle).
+fn start_on_both_clocks() -> (std::time::Instant, std::time::Duration) {
+    use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+    let wall = || {
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap_or_default()
+    };
+    let mut best = None;
+    for _ in 0..20 {
+        let (before, at, after) = (wall(), Instant::now(), wall());
+        let spread = after.saturating_sub(before);
+        if best.is_none_or(|(s, _, _)| spread < s) {
+            best = Some((spread, at, before + spread / 2));
+        }
+        if spread < Duration::from_micros(5) {
+            break;
+        }
+    }
+    best.map_or_else(|| (Instant::now(), wall()), |(_, at, w)| (at, w))
+}
+
 /// Runs the box of `prepared` on `socket` in real time (`speed`: scene time per wall-clock
 /// time) until `stop` is set or `deadline`: it sends its datagrams once a stream-to claims
 /// them and answers every command. `progress` sees the box's counts after each step.
@@ -250,33 +274,12 @@ pub fn serve(
     progress: &mut dyn FnMut(&EmulatorStats),
 ) -> std::io::Result<ServeSummary> {
     use std::net::SocketAddr;
-    use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+    use std::time::{Duration, Instant};
     // Without kernel stamps each command is decided when it is read.
     let stamped = skinbox_host::live::enable_receive_timestamps(socket).is_ok();
     let mut emulated = prepared.start();
     let mut cells = Obeying::new(prepared.cells.clone());
-    // the start on both clocks: the loop's (monotonic) and the kernel's receive stamps'
-    // (the wall clock), read close together (a read between two wall clock reads at most
-    // 5 us apart, taken at their middle)
-    let wall = || {
-        SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .unwrap_or_default()
-    };
-    let (started, started_realtime) = {
-        let mut best = None;
-        for _ in 0..20 {
-            let (before, at, after) = (wall(), Instant::now(), wall());
-            let spread = after.saturating_sub(before);
-            if best.is_none_or(|(s, _, _)| spread < s) {
-                best = Some((spread, at, before + spread / 2));
-            }
-            if spread < Duration::from_micros(5) {
-                break;
-            }
-        }
-        best.map_or_else(|| (Instant::now(), wall()), |(_, at, w)| (at, w))
-    };
+    let (started, started_realtime) = start_on_both_clocks();
     let ticks = |elapsed: Duration| -> u64 {
         (elapsed.as_secs_f64() * speed * skinbox_protocol::TICKS_PER_SECOND as f64) as u64
     };
