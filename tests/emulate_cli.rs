@@ -436,3 +436,211 @@ fn cells_commands_build_cell_command_packets_the_box_queues() {
         cases.len() + 1
     );
 }
+
+/// A record the box sent: the tick its cell packet's first start bit reached the box, and
+/// the packet.
+struct Heard {
+    tick: i64,
+    cell: u16,
+    packet: skinbox_protocol::CellRepr,
+}
+
+/// Reads the box's records datagrams on `socket` until `stop` is set.
+fn hear_records(
+    socket: UdpSocket,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> Vec<Heard> {
+    use skinbox_protocol::{CellFraming, CellRepr};
+    socket
+        .set_read_timeout(Some(Duration::from_millis(20)))
+        .unwrap();
+    let mut heard = vec![];
+    let mut buf = [0u8; 2048];
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+        let Ok(n) = socket.recv(&mut buf) else {
+            continue;
+        };
+        let d = DatagramRepr::parse(&buf[..n]).expect("every datagram parses");
+        if let DatagramBody::Records(records) = d.body {
+            for r in records {
+                let packet = CellRepr::parse(&r.cell_packet, &CellFraming::DEFAULT)
+                    .expect("the cells send valid packets");
+                heard.push(Heard {
+                    tick: d.base_tick as i64 + i64::from(r.tick_offset),
+                    cell: packet.cell_id(),
+                    packet,
+                });
+            }
+        }
+    }
+    heard
+}
+
+/// Per cell, the median tick spacing of its consecutive records.
+fn median_spacing(records: &[&Heard]) -> Vec<i64> {
+    let mut cells: std::collections::BTreeMap<u16, Vec<i64>> = Default::default();
+    for r in records {
+        cells.entry(r.cell).or_default().push(r.tick);
+    }
+    cells
+        .values()
+        .map(|ticks| {
+            let mut d: Vec<i64> = ticks.windows(2).map(|w| w[1] - w[0]).collect();
+            d.sort();
+            d[d.len() / 2]
+        })
+        .collect()
+}
+
+/// Every cell command kind sent with `skinbox ctl` to `skinbox emulate` goes through the box's
+/// control and downlink models to the transmit pins, the cells' receivers decode it there,
+/// and the stream the box sends changes as the command says from the cells' next sample on.
+#[test]
+fn emulated_cells_obey_the_cell_commands_the_box_sends_them() {
+    use skinbox_protocol::{CellRepr, Channel};
+    // 8 cells on 2 buses of the idle scene: event mode, 125 samples/s, noise only
+    const CELLS: usize = 8;
+    const PHASE: Duration = Duration::from_millis(300);
+    let emulator = Emulator::start(&["idle", "--cells", "8", "--buses", "2"], 3500);
+    let started = std::time::Instant::now();
+    let addr = emulator.addr.clone();
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let to = socket.local_addr().unwrap().to_string();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let reader = {
+        let stop = stop.clone();
+        std::thread::spawn(move || hear_records(socket, stop))
+    };
+    assert_eq!(
+        json(&ctl(&addr, &["stream-to", "--to", &to]))["result"],
+        "ok"
+    );
+    std::thread::sleep(PHASE);
+    let commands: [&[&str]; 6] = [
+        &["cells", "thresholds", "--accel-g", "0.001"],
+        &["cells", "enable", "accel_x"],
+        &["cells", "mode", "data"],
+        &["cells", "rate", "250"],
+        &["cells", "rate", "125"],
+        &["cells", "sync", "0"],
+    ];
+    // the box tick each command arrived at
+    let mut at = vec![];
+    for args in commands {
+        let v = json(&ctl(&addr, args));
+        assert_eq!(v["result"], "ok", "{args:?}: {v}");
+        at.push(v["box_receive_tick"].as_i64().unwrap());
+        std::thread::sleep(PHASE);
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let heard = reader.join().unwrap();
+    eprintln!("commands sent in {:.2} s", started.elapsed().as_secs_f64());
+    let summary = emulator.summary();
+    // one packet per command per bus reached the cells' receivers
+    assert_eq!(
+        summary["cell_commands_heard"],
+        2 * commands.len(),
+        "{summary}"
+    );
+    // phase i: from the command before it (and every cell's next sample, 12 ms) to the next
+    let settle = 1_500_000;
+    let bounds: Vec<(i64, i64)> = std::iter::once(0)
+        .chain(at.iter().map(|t| t + settle))
+        .zip(at.iter().copied().chain([i64::MAX]))
+        .collect();
+    let phases: Vec<Vec<&Heard>> = bounds
+        .iter()
+        .map(|&(from, to)| {
+            heard
+                .iter()
+                .filter(|h| (from..to).contains(&h.tick))
+                .collect()
+        })
+        .collect();
+    let seconds = |(from, to): (i64, i64), p: &[&Heard]| {
+        let to = if to == i64::MAX {
+            p.last().map_or(from, |h| h.tick)
+        } else {
+            to
+        };
+        (to - from) as f64 / 125e6
+    };
+    let events_of = |p: &[&Heard], channel: Channel| {
+        p.iter()
+            .filter(|h| match &h.packet {
+                CellRepr::Event(e) => e.events().any(|(c, _)| c == channel),
+                CellRepr::Data(_) => false,
+            })
+            .count() as f64
+    };
+    let per_cell_s = |i: usize, channel: Channel| {
+        events_of(&phases[i], channel) / seconds(bounds[i], &phases[i]) / CELLS as f64
+    };
+    // thresholds: acceleration events from about 1 per cell and second (the scene's noise
+    // against 0.02 g) to nearly every sample (against 0.001 g)
+    let (before, after) = (
+        per_cell_s(0, Channel::AccelY),
+        per_cell_s(1, Channel::AccelY),
+    );
+    eprintln!("accel_y events per cell and s: {before:.1} -> {after:.1}");
+    assert!(before < 10.0 && after > 60.0);
+    // enable: from then on no event of another channel
+    let others = |i: usize| {
+        phases[i]
+            .iter()
+            .filter(|h| match &h.packet {
+                CellRepr::Event(e) => e.events().any(|(c, _)| c != Channel::AccelX),
+                CellRepr::Data(_) => true,
+            })
+            .count()
+    };
+    assert!(others(1) > 100, "{}", others(1));
+    assert_eq!(others(2), 0);
+    assert!(per_cell_s(2, Channel::AccelX) > 60.0);
+    // mode data: every cell sends a data packet per sample (125 per s)
+    let is_data = |h: &&&Heard| matches!(h.packet, CellRepr::Data(_));
+    assert_eq!(phases[2].iter().filter(is_data).count(), 0);
+    assert!(phases[3].iter().all(|h| is_data(&h)));
+    let rate = phases[3].len() as f64 / seconds(bounds[3], &phases[3]) / CELLS as f64;
+    assert!(
+        (115.0..=135.0).contains(&rate),
+        "{rate} data packets/cell/s"
+    );
+    // rate: the spacing of each cell's records, 8 ms, then 4 ms, then 8 ms again (the
+    // clocks' drift is at most 100 ppm; the bus adds a few us of queueing)
+    for (i, ticks) in [(3, 1_000_000), (4, 500_000), (5, 1_000_000)] {
+        let spacing = median_spacing(&phases[i]);
+        assert_eq!(spacing.len(), CELLS, "phase {i}");
+        for s in spacing {
+            assert!(
+                (s - ticks).abs() < ticks / 200,
+                "phase {i}: {s} ticks, not {ticks}"
+            );
+        }
+    }
+    // sync 0: from then on the cells sample when the box's tick is a multiple of the
+    // 8 ms period, counted from the tick the packet left the box (a few us after it
+    // arrived): every record within 500 us after such a grid point (the root's processing,
+    // the hops and the queue on the bus); before it, the cells sampled on their own phases
+    let sync = at[5];
+    let on_grid = |p: &[&Heard]| {
+        p.iter()
+            .filter(|h| (h.tick - sync).rem_euclid(1_000_000) < 62_500)
+            .count()
+    };
+    assert!(phases[6].len() > 100, "{}", phases[6].len());
+    assert_eq!(on_grid(&phases[6]), phases[6].len());
+    eprintln!(
+        "records within 500 us after the grid: {} of {} before sync 0, {} of {} after",
+        on_grid(&phases[5]),
+        phases[5].len(),
+        on_grid(&phases[6]),
+        phases[6].len()
+    );
+    assert!(
+        on_grid(&phases[5]) < phases[5].len() / 2,
+        "{} of {} on the grid before",
+        on_grid(&phases[5]),
+        phases[5].len()
+    );
+}

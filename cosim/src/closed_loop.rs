@@ -33,7 +33,7 @@ use crate::run::{analyse, cycles, line, SentPacket, SimRun, SimSpec, RESET_CYCLE
 use crate::scene::{
     downlink_before, generate_with, plan_downlink, scene_ns_of_tick, sent_packets, sim_duration_ns,
 };
-use crate::sim::Fidelity;
+use crate::sim::{uart_tx_changes, Fidelity};
 use crate::Dut;
 use skinbox_cells::bus::DOWNLINK_PACKET_NS;
 use skinbox_cells::scene::{BusDownlink, GenerateOptions, Generated, Scene};
@@ -106,8 +106,9 @@ pub struct ClosedLoopRun {
 }
 
 /// The cells of a closed-loop run: their downlink so far and what they send.
-pub struct Cells<'a> {
-    spec: &'a ClosedLoopSpec,
+#[derive(Clone)]
+pub struct Cells {
+    spec: ClosedLoopSpec,
     downlink: Vec<BusDownlink>,
     generated: Generated,
     /// Per port, the packets on the pin and the pin's transitions and true start edges.
@@ -117,13 +118,13 @@ pub struct Cells<'a> {
     generations: usize,
 }
 
-impl<'a> Cells<'a> {
+impl Cells {
     /// The cells with the commands sent before the window only.
-    pub fn new(spec: &'a ClosedLoopSpec) -> Result<Cells<'a>, CosimError> {
+    pub fn new(spec: &ClosedLoopSpec) -> Result<Cells, CosimError> {
         let ports = spec.sim.config.ports;
         let downlink = downlink_before(&spec.scene, ports, spec.from_ns);
         let mut cells = Cells {
-            spec,
+            spec: spec.clone(),
             generated: generate(spec, &downlink)?,
             downlink,
             ports: vec![],
@@ -137,7 +138,7 @@ impl<'a> Cells<'a> {
     }
 
     fn sent(&self, ports: std::ops::Range<usize>) -> Vec<Vec<SentPacket>> {
-        let s = self.spec;
+        let s = &self.spec;
         self.generated.buses[ports]
             .iter()
             .map(|bus| sent_packets(bus, s.from_ns, s.duration_ns))
@@ -171,7 +172,7 @@ impl<'a> Cells<'a> {
             self.downlink[p.port].push((leave_ns, p.bytes));
         }
         self.received.extend_from_slice(packets);
-        self.generated = generate(self.spec, &self.downlink)?;
+        self.generated = generate(&self.spec, &self.downlink)?;
         self.generations += 1;
         let mut changed = vec![];
         for port in 0..self.ports.len() {
@@ -400,17 +401,7 @@ fn run_rtl(
     while player.cycle() < cycles {
         let to = (player.cycle() + step).min(cycles);
         out.extend(player.run_to(to));
-        let changes: Vec<PinChange> = player
-            .dut()
-            .take_uart_tx_edges()
-            .into_iter()
-            .filter(|e| e.edge >= TICK_ZERO_CYCLE)
-            .map(|e| PinChange {
-                tick: e.edge - TICK_ZERO_CYCLE,
-                port: e.port,
-                level: e.level,
-            })
-            .collect();
+        let changes = uart_tx_changes(player.dut());
         let packets = receivers.take(&changes, to + 1 - TICK_ZERO_CYCLE);
         uart_tx.extend(changes);
         for port in cells.receive(&packets, to)? {

@@ -85,7 +85,9 @@ pub fn generate(
     generate_with(scene, duration_s, &GenerateOptions::default())
 }
 
-/// As [`generate`], with `options` (a box's downlink, say).
+/// As [`generate`], with `options` (a box's downlink, say). The scene's `[[commands]]` at
+/// or after `duration_s` are left out: the cells would act on them after the end of what
+/// is generated (`skinbox sim mode_switch`'s window ends at 1.1 s, its command is at 1.5 s).
 pub fn generate_with(
     scene: &Scene,
     duration_s: f64,
@@ -93,6 +95,7 @@ pub fn generate_with(
 ) -> Result<Generated, skinbox_cells::scene::SceneError> {
     let mut scene = scene.clone();
     scene.config.scene.duration_s = duration_s;
+    scene.config.commands.retain(|c| c.time_s < duration_s);
     scene.config.scene.warmup_s = 0.0;
     scene.check()?;
     Ok(scene.generate(options))
@@ -299,4 +302,39 @@ fn command_frames(
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene generated shorter than its file says, its command past the end: the
+    /// packets are the first part of the whole scene's (the command has not happened yet).
+    #[test]
+    fn a_scene_generated_before_its_commands_is_the_start_of_the_whole_scene() {
+        let mut scene = Scene::find(Some("mode_switch")).unwrap();
+        scene.config.scene.cells = 12;
+        assert_eq!(scene.config.commands.len(), 1);
+        assert!(scene.config.commands[0].time_s > 1.1);
+        let short = generate(&scene, 1.1).unwrap();
+        let whole = generate(&scene, scene.config.scene.duration_s).unwrap();
+        let end_ps = 1_100_000_000_000;
+        for (s, w) in short.buses.iter().zip(&whole.buses) {
+            let early: Vec<_> = w
+                .packets
+                .iter()
+                .filter(|p| p.pin_end_ps() <= end_ps)
+                .collect();
+            let short_packets: Vec<_> = s
+                .packets
+                .iter()
+                .filter(|p| p.pin_end_ps() <= end_ps)
+                .collect();
+            assert!(early.len() > 100, "{}", early.len());
+            assert_eq!(short_packets.len(), early.len());
+            for (a, b) in short_packets.iter().zip(&early) {
+                assert_eq!((a.bytes, a.pin_edge_ps), (b.bytes, b.pin_edge_ps));
+            }
+        }
+    }
 }

@@ -68,7 +68,7 @@ pub fn run_rtl_with_progress(
 
 /// The box's transmit pin changes as box ticks (the pins going high at reset left out),
 /// in tick order, ties by port.
-fn uart_tx_changes(dut: &mut Dut) -> Vec<PinChange> {
+pub(crate) fn uart_tx_changes(dut: &mut Dut) -> Vec<PinChange> {
     let mut changes: Vec<PinChange> = dut
         .take_uart_tx_edges()
         .into_iter()

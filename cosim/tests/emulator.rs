@@ -200,3 +200,53 @@ fn commands_change_the_stream_from_their_tick() {
         );
     }
 }
+
+/// A port whose cells send otherwise from some cycle on (the emulator's cells obeying a
+/// command): given its new transitions mid-run, the sliced reference sends from then on
+/// what a run on the new transitions from the start sends; new transitions that differ
+/// before the cycle reached are refused.
+#[test]
+fn a_port_given_new_transitions_mid_run_sends_what_a_run_on_them_sends() {
+    use skinbox_cosim::run::line;
+    let spec = spec();
+    let (old, _) = lines(&spec);
+    let end = cycles(&spec);
+    let cut = TICK_ZERO_CYCLE + 15 * MS;
+    let cut_ns = (cut * 8) as f64;
+    // port 1: its own packets before the cut, port 2's from 20 us after it on
+    let before = spec.ports[1].iter().filter(|p| p.start_ns < cut_ns);
+    let after = spec.ports[2]
+        .iter()
+        .filter(|p| p.start_ns > cut_ns + 20_000.0);
+    let packets: Vec<_> = before.chain(after).cloned().collect();
+    let mut new = old.clone();
+    new[1] = line(&packets, &spec.jitter, 1).0;
+    assert_eq!(
+        old[1].iter().filter(|t| t.edge < cut).count(),
+        new[1].iter().filter(|t| t.edge < cut).count()
+    );
+    assert_ne!(old[1], new[1]);
+    let run = |prepared: &skinbox_model::reference::PreparedReference, swap_at: Option<u64>| {
+        let mut sliced = prepared.start();
+        let mut sent = vec![];
+        if let Some(at) = swap_at {
+            sent.extend(sliced.run_until(at));
+            sliced.replace_port(1, &new[1]).unwrap();
+        }
+        sent.extend(sliced.run_until(end));
+        sent.iter()
+            .map(|d| (d.first_cycle, d.payload()))
+            .collect::<Vec<_>>()
+    };
+    let swapped = run(&prepare(&spec.config, &old, end).unwrap(), Some(cut));
+    let fresh = run(&prepare(&spec.config, &new, end).unwrap(), None);
+    let unchanged = run(&prepare(&spec.config, &old, end).unwrap(), None);
+    assert!(fresh.len() > 100, "{}", fresh.len());
+    assert_eq!(swapped, fresh);
+    assert_ne!(swapped, unchanged);
+    // a pin that changed before the cycle reached is refused
+    let prepared = prepare(&spec.config, &old, end).unwrap();
+    let mut sliced = prepared.start();
+    sliced.run_until(cut + 5 * MS);
+    assert!(sliced.replace_port(1, &new[1]).is_err());
+}

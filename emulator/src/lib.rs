@@ -1,9 +1,18 @@
 //! A box without a board on a real UDP socket (`skinbox emulate`): a scene's cells on the
 //! pins of the box's models ([`skinbox_model::emulator::EmulatedBox`]), played in real
 //! time; commands from the socket are decided at their kernel receive timestamps.
+//!
+//! The loop is closed as in `skinbox sim` ([`skinbox_cosim::closed_loop`]): the cells are
+//! generated ahead while no cell command is in flight; each cell command packet their
+//! receivers decode from the emulated box's transmit pins joins their bus's downlink, they
+//! are generated again (checked causal), and the ports whose packets changed read the new
+//! ones from the uplink's cycle on.
 
+use skinbox_cells::bus::DOWNLINK_PACKET_NS;
+use skinbox_cosim::closed_loop::{Cells, ClosedLoopSpec};
 use skinbox_cosim::CosimError;
 use skinbox_gateware::interface_box::BoxConfig;
+use skinbox_model::cell_uart::ReceivedPacket;
 use skinbox_model::emulator::{EmulatedBox, EmulatorStats, Outgoing};
 use skinbox_model::reference::PreparedReference;
 use skinbox_protocol::link::LinkConfig;
@@ -52,6 +61,7 @@ impl Default for EmulatorSettings {
 /// A scene played through the reference model, ready for [`serve`].
 pub struct PreparedEmulator {
     prepared: PreparedReference,
+    cells: Cells,
     /// The box's configuration (its address is the listening address).
     pub config: BoxConfig,
     /// The scene's name.
@@ -73,9 +83,7 @@ pub fn prepare(
         scene.config.scene.cells = c;
     }
     scene.check()?;
-    let generated =
-        skinbox_cosim::scene::generate(&scene, (settings.from_ms + settings.duration_ms) * 1e-3)?;
-    let ports = generated.buses.len();
+    let ports = scene.config.scene.buses;
     if !(1..=64).contains(&ports) {
         return Err(CosimError::Ports(ports));
     }
@@ -95,17 +103,22 @@ pub fn prepare(
         ..BoxConfig::default()
     };
     config.validate()?;
-    let spec = skinbox_cosim::scene::spec(
-        &generated,
+    // the host is the socket's: the scene's own commands reach the cells before the window
+    // only
+    let mut spec = ClosedLoopSpec::new(
+        &scene,
         config.clone(),
         (settings.from_ms * 1e6) as u64,
         (settings.duration_ms * 1e6) as u64,
     );
-    let (lines, _) = skinbox_cosim::run::lines(&spec);
+    spec.sim.host_frames.clear();
+    let cells = Cells::new(&spec)?;
+    let lines: Vec<_> = (0..ports).map(|p| cells.transitions(p).to_vec()).collect();
     let prepared =
-        skinbox_model::reference::prepare(&config, &lines, skinbox_cosim::run::cycles(&spec))?;
+        skinbox_model::reference::prepare(&config, &lines, skinbox_cosim::run::cycles(&spec.sim))?;
     Ok(PreparedEmulator {
         prepared,
+        cells,
         config,
         scene: scene.name().to_string(),
         ports,
@@ -116,6 +129,86 @@ impl PreparedEmulator {
     /// The box leaving reset, its pins as the scene has them.
     pub fn start(&self) -> EmulatedBox<'_> {
         EmulatedBox::new(&self.prepared, &self.config)
+    }
+
+    /// The scene's cells as generated before any command from the socket.
+    pub fn cells(&self) -> &Cells {
+        &self.cells
+    }
+}
+
+/// What a worker returns: the cells and the ports whose packets changed.
+type Generation = (Cells, Result<Vec<usize>, CosimError>);
+
+/// The cells beside the serving loop: the cell command packets their receivers decoded
+/// from the emulated box's transmit pins go to a worker thread that generates the cells
+/// again with them, while the loop goes on answering commands; the uplink waits at the
+/// earliest tick such a packet can change what the cells send ([`Obeying::hold`]) until
+/// the worker is done and the ports whose packets changed carry the new ones.
+pub struct Obeying {
+    idle: Option<Cells>,
+    worker: Option<std::thread::JoinHandle<Generation>>,
+    /// The packets the worker has, and those waiting for it.
+    working: Vec<ReceivedPacket>,
+    waiting: Vec<ReceivedPacket>,
+}
+
+impl Obeying {
+    /// `cells` obeying.
+    pub fn new(cells: Cells) -> Obeying {
+        Obeying {
+            idle: Some(cells),
+            worker: None,
+            working: vec![],
+            waiting: vec![],
+        }
+    }
+
+    /// The box tick the uplink may run to: the earliest at which a packet in flight can
+    /// change the cells' packets on the pins (`u64::MAX` with none).
+    pub fn hold(&self) -> u64 {
+        self.working
+            .iter()
+            .chain(&self.waiting)
+            .map(|p| p.tick + DOWNLINK_PACKET_NS / skinbox_protocol::TICK_NS)
+            .min()
+            .unwrap_or(u64::MAX)
+    }
+
+    /// Takes the packets `emulated`'s receivers decoded; the worker's cells, once it is
+    /// done, go on `emulated`'s pins; the packets waiting go to the worker. With `wait`,
+    /// waits for the worker. Fails when regeneration is not causal.
+    pub fn step(&mut self, emulated: &mut EmulatedBox, wait: bool) -> Result<(), CosimError> {
+        self.waiting.extend(emulated.take_received());
+        if self
+            .worker
+            .as_ref()
+            .is_some_and(|w| wait || w.is_finished())
+        {
+            let (cells, changed) = self.worker.take().expect("checked").join().map_err(|_| {
+                CosimError::ClosedLoop("the cells' generation panicked".to_string())
+            })?;
+            for port in changed? {
+                emulated
+                    .replace_port(port, cells.transitions(port))
+                    .map_err(CosimError::ClosedLoop)?;
+            }
+            self.idle = Some(cells);
+            self.working.clear();
+        }
+        if self.worker.is_none() && !self.waiting.is_empty() {
+            let mut cells = self.idle.take().expect("no worker: the cells are idle");
+            self.working = std::mem::take(&mut self.waiting);
+            let (packets, cycle) = (self.working.clone(), emulated.cycle());
+            self.worker = Some(std::thread::spawn(move || {
+                let changed = cells.receive(&packets, cycle);
+                (cells, changed)
+            }));
+            if wait {
+                return self.step(emulated, true);
+            }
+        }
+        Ok(())
     }
 }
 
@@ -138,6 +231,30 @@ pub struct ServeSummary {
     pub send_errors: u64,
 }
 
+/// The start on both clocks: the loop's (monotonic) and the kernel's receive stamps' (the
+/// wall clock, since the Unix epoch), read close together (a read between two wall clock
+/// reads at most 5 us apart, taken at their middle).
+fn start_on_both_clocks() -> (std::time::Instant, std::time::Duration) {
+    use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+    let wall = || {
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap_or_default()
+    };
+    let mut best = None;
+    for _ in 0..20 {
+        let (before, at, after) = (wall(), Instant::now(), wall());
+        let spread = after.saturating_sub(before);
+        if best.is_none_or(|(s, _, _)| spread < s) {
+            best = Some((spread, at, before + spread / 2));
+        }
+        if spread < Duration::from_micros(5) {
+            break;
+        }
+    }
+    best.map_or_else(|| (Instant::now(), wall()), |(_, at, w)| (at, w))
+}
+
 /// Runs the box of `prepared` on `socket` in real time (`speed`: scene time per wall-clock
 /// time) until `stop` is set or `deadline`: it sends its datagrams once a stream-to claims
 /// them and answers every command. `progress` sees the box's counts after each step.
@@ -157,32 +274,12 @@ pub fn serve(
     progress: &mut dyn FnMut(&EmulatorStats),
 ) -> std::io::Result<ServeSummary> {
     use std::net::SocketAddr;
-    use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+    use std::time::{Duration, Instant};
     // Without kernel stamps each command is decided when it is read.
     let stamped = skinbox_host::live::enable_receive_timestamps(socket).is_ok();
     let mut emulated = prepared.start();
-    // the start on both clocks: the loop's (monotonic) and the kernel's receive stamps'
-    // (the wall clock), read close together (a read between two wall clock reads at most
-    // 5 us apart, taken at their middle)
-    let wall = || {
-        SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .unwrap_or_default()
-    };
-    let (started, started_realtime) = {
-        let mut best = None;
-        for _ in 0..20 {
-            let (before, at, after) = (wall(), Instant::now(), wall());
-            let spread = after.saturating_sub(before);
-            if best.is_none_or(|(s, _, _)| spread < s) {
-                best = Some((spread, at, before + spread / 2));
-            }
-            if spread < Duration::from_micros(5) {
-                break;
-            }
-        }
-        best.map_or_else(|| (Instant::now(), wall()), |(_, at, w)| (at, w))
-    };
+    let mut cells = Obeying::new(prepared.cells.clone());
+    let (started, started_realtime) = start_on_both_clocks();
     let ticks = |elapsed: Duration| -> u64 {
         (elapsed.as_secs_f64() * speed * skinbox_protocol::TICKS_PER_SECOND as f64) as u64
     };
@@ -202,8 +299,11 @@ pub fn serve(
         if deadline.is_some_and(|d| now >= d) || stop.load(std::sync::atomic::Ordering::Relaxed) {
             break;
         }
+        cells
+            .step(&mut emulated, false)
+            .map_err(std::io::Error::other)?;
         if !draining {
-            for o in emulated.advance(tick_now(now)) {
+            for o in emulated.advance(tick_now(now).min(cells.hold())) {
                 send_errors += send(socket, &o);
             }
         }
@@ -223,7 +323,7 @@ pub fn serve(
                     .unwrap_or(read)
                     .max(last_command);
                 last_command = arrival;
-                for o in emulated.advance(arrival) {
+                for o in emulated.advance(arrival.min(cells.hold())) {
                     send_errors += send(socket, &o);
                 }
                 if let Some(ack) = emulated.command(from, &buf[..n], arrival, || {
@@ -231,6 +331,9 @@ pub fn serve(
                 }) {
                     send_errors += send(socket, &ack);
                 }
+                cells
+                    .step(&mut emulated, false)
+                    .map_err(std::io::Error::other)?;
             }
             // IPv6 senders cannot reach an IPv4 box
             Ok(_) => draining = true,

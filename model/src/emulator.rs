@@ -11,8 +11,18 @@
 //! where the datagrams go, set-flush-timeout and set-status-period change the uplink's timing, status-now starts a report. Until a
 //! stream-to claims the stream, the datagrams are counted but sent nowhere (the build-time
 //! destination of a real box is a documentation address).
+//!
+//! A cell command the control model queues goes out on the downlink model's transmit pins,
+//! where the cells' UART receivers ([`crate::cell_uart`]) decode it
+//! ([`EmulatedBox::take_received`]). The downlink's pins depend on the host's commands
+//! alone, so a packet's bits are known once it is queued: the receivers take them at the
+//! command, ahead of the box's time, and whoever plays the cells has them before the cells
+//! can act on them; a port whose cells then send otherwise is given its new pin
+//! ([`EmulatedBox::replace_port`]).
 
+use crate::cell_uart::{CellUartReceiver, ReceivedPacket};
 use crate::control::{BoxControl, ControlConfig, Effect, Outcome, Reply};
+use crate::pins::Transition;
 use crate::reference::{PreparedReference, SlicedReference};
 use crate::timing::TICK_ZERO_CYCLE;
 use skinbox_gateware::interface_box::BoxConfig;
@@ -41,6 +51,8 @@ pub struct EmulatorStats {
     pub commands_received: u64,
     /// Acknowledgements sent.
     pub acks_sent: u64,
+    /// Cell command packets the cells' receivers decoded from the transmit pins.
+    pub cell_commands_heard: u64,
 }
 
 /// A UDP payload to send, and where.
@@ -60,7 +72,14 @@ fn socket_of(d: &Destination) -> SocketAddrV4 {
 pub struct EmulatedBox<'a> {
     reference: SlicedReference<'a>,
     control: BoxControl,
-    claimed: bool,
+    /// Where the datagrams go, once a stream-to claimed them.
+    claimed: Option<Destination>,
+    /// Effects on the uplink not yet applied, with the ticks they apply at, in order.
+    effects: std::collections::VecDeque<(u64, Effect)>,
+    receivers: CellUartReceiver,
+    /// Per port, the tick up to which the receivers have the pin (exclusive).
+    heard_until: Vec<u64>,
+    received: Vec<ReceivedPacket>,
     /// What it did so far.
     pub stats: EmulatorStats,
 }
@@ -79,7 +98,11 @@ impl<'a> EmulatedBox<'a> {
         EmulatedBox {
             reference: prepared.start(),
             control,
-            claimed: false,
+            claimed: None,
+            effects: Default::default(),
+            receivers: CellUartReceiver::new(config.ports, config.clock_hz, config.baud),
+            heard_until: vec![0; config.ports],
+            received: Vec::new(),
             stats: EmulatorStats::default(),
         }
     }
@@ -89,16 +112,31 @@ impl<'a> EmulatedBox<'a> {
         &self.control
     }
 
-    /// Runs the box up to box tick `tick`; returns the datagrams it sent meanwhile, to the
-    /// claimed destination (none before a claim; they are counted).
+    /// Runs the box up to box tick `tick`, applying the commands' effects on the uplink at
+    /// their ticks; returns the datagrams it sent meanwhile, to the claimed destination
+    /// (none before a claim; they are counted).
     pub fn advance(&mut self, tick: u64) -> Vec<Outgoing> {
-        let sent = self.reference.run_until(TICK_ZERO_CYCLE + tick);
-        let mut out = Vec::with_capacity(sent.len());
-        for s in sent {
-            if !self.claimed {
+        let mut out = Vec::new();
+        while let Some(&(at, effect)) = self.effects.front().filter(|e| e.0 <= tick) {
+            self.run_to(at, &mut out);
+            self.effects.pop_front();
+            match effect {
+                Effect::StreamTo(to) => self.claimed = Some(to),
+                Effect::SetFlushTimeout(t) => self.reference.set_flush_timeout_ticks(t.into()),
+                Effect::SetStatusPeriod(t) => self.reference.set_status_period_ticks(t.into()),
+                Effect::StatusNow => self.reference.request_status(),
+            }
+        }
+        self.run_to(tick, &mut out);
+        out
+    }
+
+    fn run_to(&mut self, tick: u64, out: &mut Vec<Outgoing>) {
+        for s in self.reference.run_until(TICK_ZERO_CYCLE + tick) {
+            let Some(to) = self.claimed else {
                 self.stats.datagrams_unclaimed += 1;
                 continue;
-            }
+            };
             let payload = match &s.datagram.body {
                 DatagramBody::Status(_) => {
                     self.stats.status_datagrams_sent += 1;
@@ -113,15 +151,50 @@ impl<'a> EmulatedBox<'a> {
             };
             out.push(Outgoing {
                 payload,
-                to: socket_of(&self.control.destination),
+                to: socket_of(&to),
             });
         }
-        out
     }
 
-    /// Takes a UDP payload from `from` at box tick `tick` (run the box there first with
-    /// [`EmulatedBox::advance`]): the acknowledgement, with `send_tick()` as its send tick,
-    /// if the control model answers.
+    /// The cycle the uplink has run to.
+    pub fn cycle(&self) -> u64 {
+        self.reference.cycle()
+    }
+
+    /// The cell command packets the cells' receivers decoded since the last call, in port
+    /// order, each port's in order (each with the tick its first start bit leaves the box).
+    pub fn take_received(&mut self) -> Vec<ReceivedPacket> {
+        std::mem::take(&mut self.received)
+    }
+
+    /// Port `port`'s pin carries `transitions` from [`EmulatedBox::cycle`] on (the cells'
+    /// packets after they acted on a command); fails when they differ before it.
+    pub fn replace_port(&mut self, port: usize, transitions: &[Transition]) -> Result<(), String> {
+        self.reference.replace_port(port, transitions)
+    }
+
+    /// The receivers take the transmit pins of every packet queued so far (a copy of the
+    /// downlink runs them out: later commands only queue behind).
+    fn hear_downlink(&mut self) {
+        let mut ahead = self.control.downlink.clone();
+        let end = ahead.drain();
+        for c in ahead.changes() {
+            if c.tick >= self.heard_until[c.port] {
+                self.receivers.push(c);
+                self.heard_until[c.port] = c.tick + 1;
+            }
+        }
+        let packets = self.receivers.advance_to(end);
+        self.stats.cell_commands_heard += packets.len() as u64;
+        self.received.extend(packets);
+        // (a long-running box keeps memory bounded)
+        self.control.downlink.take_changes();
+    }
+
+    /// Takes a UDP payload from `from` at box tick `tick` (ticks never go back): the
+    /// acknowledgement, with `send_tick()` as its send tick, if the control model answers.
+    /// Its effect on the uplink applies when [`EmulatedBox::advance`] reaches the later of
+    /// `tick` and the tick the uplink had reached.
     pub fn command(
         &mut self,
         from: SocketAddrV4,
@@ -131,14 +204,9 @@ impl<'a> EmulatedBox<'a> {
     ) -> Option<Outgoing> {
         self.stats.commands_received += 1;
         let outcome = deliver(&mut self.control, from, payload, tick);
-        // the pins of an emulated box go nowhere
-        self.control.downlink.take_changes();
-        match outcome.effect {
-            Some(Effect::StreamTo(_)) => self.claimed = true,
-            Some(Effect::SetFlushTimeout(t)) => self.reference.set_flush_timeout_ticks(t.into()),
-            Some(Effect::SetStatusPeriod(t)) => self.reference.set_status_period_ticks(t.into()),
-            Some(Effect::StatusNow) => self.reference.request_status(),
-            None => {}
+        self.hear_downlink();
+        if let Some(effect) = outcome.effect {
+            self.effects.push_back((tick, effect));
         }
         match outcome.reply {
             Some(reply @ Reply::Ack { .. }) => {

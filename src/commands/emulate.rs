@@ -1,5 +1,6 @@
 //! `skinbox emulate`: a box on a UDP socket, without a board: the box's reference model
-//! playing a scene in real time and its control model answering commands.
+//! playing a scene in real time, its control model answering commands, and the scene's
+//! cells obeying the cell commands its downlink sends them.
 
 use anyhow::Context;
 use skinbox_emulator::{self as emulator, EmulatorSettings, ServeSummary};

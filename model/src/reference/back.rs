@@ -20,6 +20,7 @@ use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, HEADER_LEN, M
 use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::{DatagramRepr, PortCounters, RecordRepr, StatusRepr};
+use std::borrow::Cow;
 use std::collections::VecDeque;
 
 // `offer` is the arbiter's one offer register
@@ -168,10 +169,28 @@ struct FrontBeat {
     step: Step,
 }
 
+/// The engine's steps on port `port`'s packets (unsorted).
+fn beats_of(port: usize, front: &PortFront) -> impl Iterator<Item = FrontBeat> + '_ {
+    front.packets.iter().enumerate().flat_map(move |(i, p)| {
+        [
+            (p.check, Step::Check),
+            (p.start, Step::Start),
+            (p.end, Step::End),
+        ]
+        .map(|(cycle, step)| FrontBeat {
+            cycle,
+            port,
+            packet: i,
+            step,
+        })
+    })
+}
+
 /// The back end's state: the registers of the gateware that matter to the frames.
 pub(super) struct Back<'a> {
     t: BackTiming,
-    fronts: &'a [PortFront],
+    /// Borrowed from the prepared reference until a port's front end is replaced.
+    fronts: Cow<'a, [PortFront]>,
     beats: Vec<FrontBeat>,
     next_beat: usize,
     buffers: Vec<Buffer>,
@@ -242,21 +261,7 @@ impl<'a> Back<'a> {
         let mut beats: Vec<FrontBeat> = fronts
             .iter()
             .enumerate()
-            .flat_map(|(port, f)| {
-                f.packets.iter().enumerate().flat_map(move |(i, p)| {
-                    [
-                        (p.check, Step::Check),
-                        (p.start, Step::Start),
-                        (p.end, Step::End),
-                    ]
-                    .map(|(cycle, step)| FrontBeat {
-                        cycle,
-                        port,
-                        packet: i,
-                        step,
-                    })
-                })
-            })
+            .flat_map(|(port, f)| beats_of(port, f))
             .collect();
         beats.sort_by_key(|b| (b.cycle, b.step, b.port));
         let counting = fronts
@@ -271,7 +276,7 @@ impl<'a> Back<'a> {
             buffers: (0..t.ports).map(|_| Buffer::default()).collect(),
             counting,
             t,
-            fronts,
+            fronts: Cow::Borrowed(fronts),
             beats,
             next_beat: 0,
             scan: 0,
@@ -315,6 +320,67 @@ impl<'a> Back<'a> {
 
     fn tick(&self, c: u64) -> u64 {
         c - self.t.tick_offset
+    }
+
+    /// Port `port`'s front end becomes `front` from cycle `done` on (the cycles before it
+    /// have run): its steps and counter events from `done` on replace the old ones. Fails
+    /// when `front` differs from the old one before `done` (the pin changed in the past).
+    pub(super) fn replace_front(
+        &mut self,
+        port: usize,
+        front: PortFront,
+        done: u64,
+    ) -> Result<(), String> {
+        let old = &self.fronts[port];
+        let settled = |f: &PortFront| {
+            let packets: Vec<_> = f
+                .packets
+                .iter()
+                .take_while(|p| p.check < done)
+                .map(|p| {
+                    (
+                        p.check,
+                        p.start,
+                        p.stamp,
+                        (p.end < done).then_some((p.end, p.good, p.bytes)),
+                    )
+                })
+                .collect();
+            let events: Vec<_> = f
+                .events
+                .iter()
+                .take_while(|e| e.0 < done)
+                .copied()
+                .collect();
+            (packets, events)
+        };
+        if settled(old) != settled(&front) {
+            return Err(format!(
+                "port {port}: the front end changed before cycle {done}, which has run"
+            ));
+        }
+        let counting = &mut self.counting[port];
+        let keep = counting
+            .events
+            .partition_point(|e| e.0 < done)
+            .max(counting.next_event);
+        let after = keep
+            .checked_sub(1)
+            .map_or(done, |k| (counting.events[k].0 + 1).max(done));
+        counting.events.truncate(keep);
+        counting
+            .events
+            .extend(front.events.iter().filter(|e| e.0 >= after));
+        let mut rest: Vec<FrontBeat> = self
+            .beats
+            .drain(self.next_beat..)
+            .filter(|b| b.port != port)
+            .collect();
+        rest.extend(beats_of(port, &front).filter(|b| b.cycle >= done));
+        rest.sort_by_key(|b| (b.cycle, b.step, b.port));
+        self.beats.extend(rest);
+        self.fronts.to_mut()[port] = front;
+        Ok(())
     }
 
     /// Run-time configuration (the box's commands): flush timeout, status period, and a

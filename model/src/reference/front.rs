@@ -61,7 +61,7 @@ pub(super) struct StartedPacket {
 }
 
 /// One port's front-end output.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub(super) struct PortFront {
     /// Packets in order.
     pub packets: Vec<StartedPacket>,

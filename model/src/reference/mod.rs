@@ -79,6 +79,8 @@ fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
 /// changes the run-time configuration between slices).
 pub struct PreparedReference {
     fronts: Vec<PortFront>,
+    front_timing: FrontTiming,
+    end: u64,
     back_timing: BackTiming,
     destination: Destination,
 }
@@ -101,6 +103,8 @@ pub fn prepare(
     let link = &config.link;
     Ok(PreparedReference {
         fronts,
+        front_timing,
+        end,
         back_timing,
         destination: Destination {
             mac: link.host_mac,
@@ -122,6 +126,8 @@ impl PreparedReference {
             ),
             done: TICK_ZERO_CYCLE,
             taken: 0,
+            front_timing: self.front_timing,
+            end: self.end,
         }
     }
 }
@@ -149,6 +155,8 @@ pub struct SlicedReference<'a> {
     back: Back<'a>,
     done: u64,
     taken: usize,
+    front_timing: FrontTiming,
+    end: u64,
 }
 
 impl SlicedReference<'_> {
@@ -197,6 +205,14 @@ impl SlicedReference<'_> {
     /// A status report as soon as the reporter is idle.
     pub fn request_status(&mut self) {
         self.back.request_status();
+    }
+
+    /// Port `port`'s pin carries `transitions` (up to the prepared end) from now on: the
+    /// cycles run so far stay as they were. Fails when the new transitions change what the
+    /// port's receiver had decided before now.
+    pub fn replace_port(&mut self, port: usize, transitions: &[Transition]) -> Result<(), String> {
+        let front = port_front(transitions, port, &self.front_timing, self.end);
+        self.back.replace_front(port, front, self.done)
     }
 }
 
