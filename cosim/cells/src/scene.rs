@@ -502,9 +502,17 @@ impl Scene {
     }
 
     fn problems(&self) -> Vec<Problem> {
+        let mut p = Vec::new();
+        self.scene_problems(&mut p);
+        self.bus_and_channel_problems(&mut p);
+        self.signal_problems(&mut p);
+        p
+    }
+
+    /// The problems of `[time_sync]` and `[scene]`.
+    fn scene_problems(&self, p: &mut Vec<Problem>) {
         let c = &self.config;
         let s = &c.scene;
-        let mut p = Vec::new();
         if let Some(t) = &c.time_sync {
             if !(t.interval_s.is_finite() && t.interval_s >= 0.001) {
                 p.push((
@@ -524,7 +532,7 @@ impl Scene {
                 ));
             }
         }
-        positive("scene", "duration_s", s.duration_s, &mut p);
+        positive("scene", "duration_s", s.duration_s, p);
         if s.duration_s > 3_600.0 {
             p.push((
                 "scene",
@@ -532,7 +540,7 @@ impl Scene {
                 format!("`duration_s` must be at most 3600, found {}", s.duration_s),
             ));
         }
-        non_negative("scene", "warmup_s", s.warmup_s, &mut p);
+        non_negative("scene", "warmup_s", s.warmup_s, p);
         if s.warmup_s >= s.duration_s {
             p.push((
                 "scene",
@@ -543,7 +551,7 @@ impl Scene {
                 ),
             ));
         }
-        positive("scene", "sample_rate_hz", s.sample_rate_hz, &mut p);
+        positive("scene", "sample_rate_hz", s.sample_rate_hz, p);
         if s.sample_rate_hz > 10_000.0 {
             p.push((
                 "scene",
@@ -586,7 +594,12 @@ impl Scene {
                 "`columns` must be at least 1".to_string(),
             ));
         }
-        positive("scene", "cell_pitch_m", s.cell_pitch_m, &mut p);
+        positive("scene", "cell_pitch_m", s.cell_pitch_m, p);
+    }
+
+    /// The problems of `[bus]`, `[thresholds]`, `[noise]` and `[temperature]`.
+    fn bus_and_channel_problems(&self, p: &mut Vec<Problem>) {
+        let c = &self.config;
         if c.bus.fifo_packets == 0 {
             p.push((
                 "bus",
@@ -616,11 +629,11 @@ impl Scene {
             ));
         }
         let t = &c.thresholds;
-        non_negative("thresholds", "accel_g", t.accel_g, &mut p);
-        non_negative("thresholds", "force", t.force, &mut p);
-        non_negative("thresholds", "proximity", t.proximity, &mut p);
-        non_negative("thresholds", "temperature_c", t.temperature_c, &mut p);
-        non_negative("thresholds", "refresh_s", t.refresh_s, &mut p);
+        non_negative("thresholds", "accel_g", t.accel_g, p);
+        non_negative("thresholds", "force", t.force, p);
+        non_negative("thresholds", "proximity", t.proximity, p);
+        non_negative("thresholds", "temperature_c", t.temperature_c, p);
+        non_negative("thresholds", "refresh_s", t.refresh_s, p);
         for name in &t.enabled {
             if !Channel::ALL.iter().any(|ch| ch.name() == name) {
                 p.push((
@@ -634,28 +647,33 @@ impl Scene {
             }
         }
         let n = &c.noise;
-        non_negative("noise", "accel_g", n.accel_g, &mut p);
-        non_negative("noise", "force", n.force, &mut p);
-        non_negative("noise", "proximity", n.proximity, &mut p);
-        non_negative("noise", "temperature_c", n.temperature_c, &mut p);
+        non_negative("noise", "accel_g", n.accel_g, p);
+        non_negative("noise", "force", n.force, p);
+        non_negative("noise", "proximity", n.proximity, p);
+        non_negative("noise", "temperature_c", n.temperature_c, p);
         if let Some(t) = &c.temperature {
-            non_negative("temperature", "drift_c", t.drift_c, &mut p);
-            positive("temperature", "drift_period_s", t.drift_period_s, &mut p);
+            non_negative("temperature", "drift_c", t.drift_c, p);
+            positive("temperature", "drift_period_s", t.drift_period_s, p);
         }
+    }
+
+    /// The problems of the signal sections: motion, hammer, stroke, crosstalk, force stand.
+    fn signal_problems(&self, p: &mut Vec<Problem>) {
+        let c = &self.config;
         if let Some(m) = &c.motion {
-            region("motion", m.region, &mut p);
-            non_negative("motion", "accel_g", m.accel_g, &mut p);
-            positive("motion", "move_s", m.move_s, &mut p);
-            non_negative("motion", "rest_s", m.rest_s, &mut p);
-            non_negative("motion", "vibration_g", m.vibration_g, &mut p);
+            region("motion", m.region, p);
+            non_negative("motion", "accel_g", m.accel_g, p);
+            positive("motion", "move_s", m.move_s, p);
+            non_negative("motion", "rest_s", m.rest_s, p);
+            non_negative("motion", "vibration_g", m.vibration_g, p);
         }
         if let Some(h) = &c.hammer {
-            non_negative("hammer", "blows_per_s", h.blows_per_s, &mut p);
-            non_negative("hammer", "peak_g", h.peak_g, &mut p);
-            positive("hammer", "decay_s", h.decay_s, &mut p);
-            non_negative("hammer", "attenuation_per_m", h.attenuation_per_m, &mut p);
-            non_negative("hammer", "proximity", h.proximity, &mut p);
-            non_negative("hammer", "force", h.force, &mut p);
+            non_negative("hammer", "blows_per_s", h.blows_per_s, p);
+            non_negative("hammer", "peak_g", h.peak_g, p);
+            positive("hammer", "decay_s", h.decay_s, p);
+            non_negative("hammer", "attenuation_per_m", h.attenuation_per_m, p);
+            non_negative("hammer", "proximity", h.proximity, p);
+            non_negative("hammer", "force", h.force, p);
             if !(h.ring_hz[0] > 0.0 && h.ring_hz[0] <= h.ring_hz[1] && h.ring_hz[1].is_finite()) {
                 p.push((
                     "hammer",
@@ -668,7 +686,7 @@ impl Scene {
             }
         }
         if let Some(st) = &c.stroke {
-            region("stroke", st.region, &mut p);
+            region("stroke", st.region, p);
             if st.hands == 0 || st.hands > 16 {
                 p.push((
                     "stroke",
@@ -686,34 +704,28 @@ impl Scene {
                     ),
                 ));
             }
-            positive(
-                "stroke",
-                "return_speed_factor",
-                st.return_speed_factor,
-                &mut p,
-            );
-            positive("stroke", "lower_s", st.lower_s, &mut p);
-            non_negative("stroke", "lift_height_m", st.lift_height_m, &mut p);
-            positive("stroke", "hand_radius_m", st.hand_radius_m, &mut p);
-            non_negative("stroke", "force", st.force, &mut p);
-            non_negative("stroke", "proximity", st.proximity, &mut p);
-            positive("stroke", "proximity_range_m", st.proximity_range_m, &mut p);
-            non_negative("stroke", "vibration_g", st.vibration_g, &mut p);
-            non_negative("stroke", "pause_s", st.pause_s, &mut p);
-            non_negative("stroke", "pressure_hz", st.pressure_hz, &mut p);
+            positive("stroke", "return_speed_factor", st.return_speed_factor, p);
+            positive("stroke", "lower_s", st.lower_s, p);
+            non_negative("stroke", "lift_height_m", st.lift_height_m, p);
+            positive("stroke", "hand_radius_m", st.hand_radius_m, p);
+            non_negative("stroke", "force", st.force, p);
+            non_negative("stroke", "proximity", st.proximity, p);
+            positive("stroke", "proximity_range_m", st.proximity_range_m, p);
+            non_negative("stroke", "vibration_g", st.vibration_g, p);
+            non_negative("stroke", "pause_s", st.pause_s, p);
+            non_negative("stroke", "pressure_hz", st.pressure_hz, p);
         }
         if let Some(x) = &c.crosstalk {
-            non_negative("crosstalk", "force_per_g", x.force_per_g, &mut p);
-            non_negative("crosstalk", "proximity_per_g", x.proximity_per_g, &mut p);
+            non_negative("crosstalk", "force_per_g", x.force_per_g, p);
+            non_negative("crosstalk", "proximity_per_g", x.proximity_per_g, p);
         }
         if let Some(f) = &c.force_stand {
-            region("force_stand", f.region, &mut p);
-            non_negative("force_stand", "amplitude_n", f.amplitude_n, &mut p);
-            positive("force_stand", "frequency_hz", f.frequency_hz, &mut p);
-            non_negative("force_stand", "force_per_n", f.force_per_n, &mut p);
-            non_negative("force_stand", "proximity", f.proximity, &mut p);
+            region("force_stand", f.region, p);
+            non_negative("force_stand", "amplitude_n", f.amplitude_n, p);
+            positive("force_stand", "frequency_hz", f.frequency_hz, p);
+            non_negative("force_stand", "force_per_n", f.force_per_n, p);
+            non_negative("force_stand", "proximity", f.proximity, p);
         }
-        p
     }
 
     /// The send-on-delta thresholds in raw units.
