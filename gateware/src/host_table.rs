@@ -5,7 +5,7 @@
 //! word per slot), a valid bit and an age rank in registers (rank 0: taken last,
 //! `HOST_SLOTS - 1`: taken longest ago; the empty slots are always the oldest). The table
 //! looks `peer_ip` up by scanning its slots, one per clock, all the time: a slot's word is
-//! read, its address halves compared with `peer_ip` into registers, and a clock later the
+//! read, its address's bytes compared with `peer_ip`'s into registers, and a clock later the
 //! slot's match bit is set or cleared and a match's sequence number taken. So `known`,
 //! `last_sequence` and the slot a take would write (`peer_ip`'s slot if known, else the
 //! oldest) are right [`LOOKUP_CLOCKS`] clocks after `peer_ip` last changed or the table was
@@ -60,8 +60,12 @@ pub struct HostTable {
     // the slot read now, and (one-hot) the one whose compares are in the registers below
     scan: DFF<Bits<SLOT_BITS>>,
     compared: DFF<Bits<HOST_SLOTS>>,
-    high_equal: DFF<Bit>,
-    low_equal: DFF<Bit>,
+    // the compared address's bytes each equal `peer_ip`'s (a byte's compare is one level
+    // of LUTs after the RAM's read)
+    byte_3_equal: DFF<Bit>,
+    byte_2_equal: DFF<Bit>,
+    byte_1_equal: DFF<Bit>,
+    byte_0_equal: DFF<Bit>,
     compared_sequence: DFF<Bits<32>>,
     // slot i holds `peer_ip`
     holds_peer: DFF<Bits<HOST_SLOTS>>,
@@ -97,8 +101,10 @@ impl Default for HostTable {
             slot_bit: (0..HOST_SLOTS).map(|i| constant(1 << i)).collect(),
             scan: Default::default(),
             compared: Default::default(),
-            high_equal: Default::default(),
-            low_equal: Default::default(),
+            byte_3_equal: Default::default(),
+            byte_2_equal: Default::default(),
+            byte_1_equal: Default::default(),
+            byte_0_equal: Default::default(),
             compared_sequence: Default::default(),
             holds_peer: Default::default(),
             peer_sequence: Default::default(),
@@ -122,8 +128,10 @@ impl Logic for HostTable {
             valid,
             scan,
             compared,
-            high_equal,
-            low_equal,
+            byte_3_equal,
+            byte_2_equal,
+            byte_1_equal,
+            byte_0_equal,
             compared_sequence,
             holds_peer,
             peer_sequence,
@@ -145,13 +153,19 @@ impl Logic for HostTable {
                 self.compared.d.next = self.slot_bit[i].val();
             }
         }
-        self.high_equal.d.next = self.entries.read_data.val().get_bits::<16>(48)
-            == self.peer_ip.val().get_bits::<16>(16);
-        self.low_equal.d.next =
-            self.entries.read_data.val().get_bits::<16>(32) == self.peer_ip.val().get_bits::<16>(0);
+        self.byte_3_equal.d.next =
+            self.entries.read_data.val().get_bits::<8>(56) == self.peer_ip.val().get_bits::<8>(24);
+        self.byte_2_equal.d.next =
+            self.entries.read_data.val().get_bits::<8>(48) == self.peer_ip.val().get_bits::<8>(16);
+        self.byte_1_equal.d.next =
+            self.entries.read_data.val().get_bits::<8>(40) == self.peer_ip.val().get_bits::<8>(8);
+        self.byte_0_equal.d.next =
+            self.entries.read_data.val().get_bits::<8>(32) == self.peer_ip.val().get_bits::<8>(0);
         self.compared_sequence.d.next = self.entries.read_data.val().get_bits::<32>(0);
-        self.compared_matches.next = self.high_equal.q.val()
-            & self.low_equal.q.val()
+        self.compared_matches.next = self.byte_3_equal.q.val()
+            & self.byte_2_equal.q.val()
+            & self.byte_1_equal.q.val()
+            & self.byte_0_equal.q.val()
             & ((self.valid.q.val() & self.compared.q.val()) != 0);
         if self.compared_matches.val() {
             self.holds_peer.d.next = self.holds_peer.q.val() | self.compared.q.val();
