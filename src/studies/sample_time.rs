@@ -139,6 +139,7 @@ impl Setup {
             interval_s: self.sync_interval_s,
             loss: self.sync_loss,
             downlink_hop_latency_ns: self.downlink_hop_latency_ns,
+            rate: false,
         }
     }
 }
