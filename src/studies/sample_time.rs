@@ -84,6 +84,10 @@ pub struct Setup {
     pub wander_ppm: f64,
     /// Period of that wander, s.
     pub wander_period_s: f64,
+    /// (c) with the rate servo: the cells discipline their rate as well as their phase.
+    pub sync_rate: bool,
+    /// The cells' oscillators' random walk and temperature steps (`None`: none).
+    pub oscillator: Option<skinbox_cells::OscillatorNoise>,
 }
 
 /// The bus model's relay delay per cell, ns.
@@ -107,6 +111,8 @@ impl Setup {
             downlink_hop_latency_ns: HOP_NS,
             wander_ppm: 0.0,
             wander_period_s: 10.0,
+            sync_rate: false,
+            oscillator: None,
         }
     }
 
@@ -126,6 +132,13 @@ impl Setup {
         s.sample_rate_hz = self.rate_hz;
         s.duration_s = self.duration_s;
         s.warmup_s = 1.0;
+        sc.config.oscillator = self
+            .oscillator
+            .map(|n| skinbox_cells::config::OscillatorConfig {
+                random_walk_ppm: Some(n.random_walk_ppm),
+                step_ppm: Some(n.step_ppm),
+                step_interval_s: Some(n.step_interval_s),
+            });
         let b = &mut sc.config.bus;
         b.clock_drift_ppm = self.clock_drift_ppm;
         b.hop_latency_ns = self.hop_latency_ns;
@@ -139,7 +152,7 @@ impl Setup {
             interval_s: self.sync_interval_s,
             loss: self.sync_loss,
             downlink_hop_latency_ns: self.downlink_hop_latency_ns,
-            rate: false,
+            rate: self.sync_rate,
         }
     }
 }
