@@ -636,4 +636,51 @@ mod servo_tests {
         let phase = worst_us(false, realistic, 500.0, 10_000);
         assert!(phase > 9.7 && phase < 10.2, "{phase}");
     }
+
+    /// Syncs every 0.1 s at 100 ppm, with the servo or phase only; the fifth carries a box time moved by
+    /// `jump_s` (a box reset). The worst error against the new base from then on.
+    fn after_reset_us(rate: bool, jump_s: f64) -> f64 {
+        let b = BusConfig::default();
+        let sync = TimeSync {
+            rate,
+            ..TimeSync::every(0.1, &b)
+        };
+        let schedule: Vec<(f64, f64)> = (0..20)
+            .map(|j| {
+                let t = j as f64 * 0.1;
+                (t, if j >= 5 { t + jump_s } else { t })
+            })
+            .collect();
+        let mut clock = SyncedClock::scheduled(&sync, &b, 0, (100.0, 125.0), (1, 0), schedule)
+            .expect("syncs reach the cell");
+        let down = b.processing_ns as f64 * 1e-9;
+        let mut worst = 0.0f64;
+        for n in 0..220 {
+            let t = clock.sample_time_s(n);
+            if t > 0.5 + down && t < 1.9 {
+                // box time at true time t is t + jump_s; the sample's grid point is box time
+                let box_s = t + jump_s;
+                let off = (box_s * 125.0 - (box_s * 125.0).round()) / 125.0;
+                worst = worst.max(off.abs() * 1e6);
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn the_servo_keeps_its_rate_across_a_box_reset_unless_the_jump_is_under_1_in_1024() {
+        // A new time base seconds away (or 0.2 ms, over 1/1024 of the 0.1 s stretch) is
+        // no rate: the servo keeps its 100 ppm and the samples fall on the new grid within
+        // nanoseconds. A jump of 30 us over 0.1 s passes for a rate 300 ppm off, which
+        // the stretch after it turns into up to 30 us, until the next sync learns again.
+        assert!(after_reset_us(true, 3.0537) < 0.01);
+        assert!(after_reset_us(true, 0.0002) < 0.01);
+        let small = after_reset_us(true, 30e-6);
+        assert!(small > 20.0 && small < 31.0, "{small}");
+        // phase only takes every jump at the next sync and keeps its 100 ppm x 0.1 s
+        for jump in [3.0537, 0.0002, 30e-6] {
+            let phase = after_reset_us(false, jump);
+            assert!(phase > 9.0 && phase <= 10.0, "{jump}: {phase}");
+        }
+    }
 }
