@@ -315,7 +315,7 @@ impl SyncedClock {
 }
 
 /// The frequency half of a PTP-like servo, as a cell's firmware runs it (docs/time.md,
-/// "The rate servo"): integers only, 16 bytes of state, one 64/32 division per sync and
+/// "The rate servo"): integers only, 12 bytes of state, one 64/32 division per sync and
 /// one 32 x 32 multiplication per sample.
 ///
 /// At each sync the cell takes its counter `L` at the sync's arrival and the box time `B`
