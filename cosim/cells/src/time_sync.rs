@@ -12,7 +12,10 @@
 //! clock running from the previous one.
 //!
 //! So a cell's sample for grid point `g` falls at `g + e`, `e` being the half-round-trip
-//! error plus the drift accumulated since the last sync it received. Box time is scene time
+//! error plus the drift accumulated since the last sync it received. With
+//! [`TimeSync::rate`] the cell also learns its rate from successive syncs ([`RateServo`]),
+//! and what is left is how much its oscillator wanders ([`OscillatorNoise`]) over an
+//! interval. Box time is scene time
 //! here (the box's oscillator is the reference; the host maps it to its own clock, see
 //! `skinbox_host::clock_map`).
 
