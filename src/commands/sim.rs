@@ -69,6 +69,23 @@ pub struct Args {
     /// model's downlink, predicted before the run); the cells hear the pins either way.
     #[arg(long, conflicts_with = "host_frames")]
     check_plan: bool,
+    /// How the cells obey the scene's time syncs (overrides `[time_sync] rate`): set the
+    /// phase only, or the phase and the rate (docs/time.md, the rate servo).
+    #[arg(long, value_enum)]
+    sync_servo: Option<ServoArg>,
+    /// The cells' oscillators wander as real ones do (`[oscillator]` at its defaults, unless
+    /// the scene has one): a random walk and temperature steps.
+    #[arg(long)]
+    oscillator_wander: bool,
+}
+
+/// `--sync-servo` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ServoArg {
+    /// Each sync sets the cell's phase.
+    Phase,
+    /// Each sync sets the phase; successive ones the rate.
+    Rate,
 }
 
 /// `--mode` values.
@@ -233,6 +250,15 @@ fn scene_and_box(args: &Args) -> anyhow::Result<(Scene, Fidelity, BoxConfig)> {
             ModeArg::Data => Mode::Data,
             ModeArg::Event => Mode::Event,
         };
+    }
+    if let Some(servo) = args.sync_servo {
+        let sync = scene.config.time_sync.as_mut().ok_or_else(|| {
+            anyhow::anyhow!("--sync-servo needs a scene with a [time_sync] table")
+        })?;
+        sync.rate = servo == ServoArg::Rate;
+    }
+    if args.oscillator_wander && scene.config.oscillator.is_none() {
+        scene.config.oscillator = Some(Default::default());
     }
     scene.check()?;
     let fidelity = Fidelity::from(args.fidelity);

@@ -344,6 +344,34 @@ pub struct SceneConfig {
     /// `[time_sync]`: the box sends a time-sync command down every bus periodically and the
     /// cells sample on its time grid.
     pub time_sync: Option<TimeSyncConfig>,
+    /// `[oscillator]`: the cells' oscillators wander at random around their drift.
+    pub oscillator: Option<OscillatorConfig>,
+}
+
+/// `[oscillator]`: each cell's oscillator wanders at random
+/// ([`crate::time_sync::OscillatorNoise`]); a key left out takes the realistic default
+/// ([`crate::time_sync::OscillatorNoise::realistic`]).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OscillatorConfig {
+    /// Random walk of the frequency: its standard deviation over 1 s, ppm.
+    pub random_walk_ppm: Option<f64>,
+    /// Temperature steps of the frequency, ppm, either way.
+    pub step_ppm: Option<f64>,
+    /// Time between temperature steps, s (0: none).
+    pub step_interval_s: Option<f64>,
+}
+
+impl OscillatorConfig {
+    /// The wander this table asks for.
+    pub fn noise(&self) -> crate::time_sync::OscillatorNoise {
+        let d = crate::time_sync::OscillatorNoise::realistic();
+        crate::time_sync::OscillatorNoise {
+            random_walk_ppm: self.random_walk_ppm.unwrap_or(d.random_walk_ppm),
+            step_ppm: self.step_ppm.unwrap_or(d.step_ppm),
+            step_interval_s: self.step_interval_s.unwrap_or(d.step_interval_s),
+        }
+    }
 }
 
 /// `[time_sync]`: a time-sync command to every cell of every bus every `interval_s`, the
@@ -356,4 +384,8 @@ pub struct TimeSyncConfig {
     /// The first one, s from the scene start.
     #[serde(default)]
     pub start_s: f64,
+    /// The cells discipline their rate as well as their phase (the rate servo); `false`,
+    /// the default: phase only.
+    #[serde(default)]
+    pub rate: bool,
 }

@@ -47,7 +47,7 @@ pub use scene::{
     BusStream, CellClock, CellCommandCounts, CellTruth, ClockWander, GenerateOptions, Generated,
     Scene, SceneError, SceneStats,
 };
-pub use time_sync::TimeSync;
+pub use time_sync::{OscillatorNoise, RateServo, TimeSync};
 
 /// Directory of the scene files shipped with the project.
 pub fn scenes_dir() -> std::path::PathBuf {

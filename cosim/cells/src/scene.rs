@@ -854,7 +854,10 @@ impl Scene {
                         index as u64,
                     )),
                     None if !sync_schedule.is_empty() => SyncedClock::scheduled(
-                        &TimeSync::every(0.0, &c.bus),
+                        &TimeSync {
+                            rate: c.time_sync.as_ref().is_some_and(|t| t.rate),
+                            ..TimeSync::every(0.0, &c.bus)
+                        },
                         &c.bus,
                         position,
                         (clock.drift_ppm, s.sample_rate_hz),
@@ -871,6 +874,10 @@ impl Scene {
                 });
                 if let Some((w, angle, _)) = wander {
                     synced = synced.map(|clock| clock.with_wander(w, angle));
+                }
+                if let Some(o) = &c.oscillator {
+                    let noise = o.noise();
+                    synced = synced.map(|clock| clock.with_noise(noise, s.seed, index as u64));
                 }
                 // A cell obeying the box's sync commands runs free until the first one
                 // reaches it (then its sample `synced_k` is the grid's first).

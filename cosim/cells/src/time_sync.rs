@@ -12,7 +12,10 @@
 //! clock running from the previous one.
 //!
 //! So a cell's sample for grid point `g` falls at `g + e`, `e` being the half-round-trip
-//! error plus the drift accumulated since the last sync it received. Box time is scene time
+//! error plus the drift accumulated since the last sync it received. With
+//! [`TimeSync::rate`] the cell also learns its rate from successive syncs ([`RateServo`]),
+//! and what is left is how much its oscillator wanders ([`OscillatorNoise`]) over an
+//! interval. Box time is scene time
 //! here (the box's oscillator is the reference; the host maps it to its own clock, see
 //! `skinbox_host::clock_map`).
 
@@ -30,6 +33,9 @@ pub struct TimeSync {
     /// Relay delay per cell on the way down, ns; the uplink's is `[bus] hop_latency_ns`.
     /// Their difference halves into an error of the measured one-way latency per hop.
     pub downlink_hop_latency_ns: u64,
+    /// The cells discipline their rate as well as their phase ([`RateServo`]); `false`:
+    /// each sync only sets the phase.
+    pub rate: bool,
 }
 
 impl TimeSync {
@@ -39,6 +45,7 @@ impl TimeSync {
             interval_s,
             loss: 0.0,
             downlink_hop_latency_ns: bus.hop_latency_ns,
+            rate: false,
         }
     }
 }
@@ -67,6 +74,11 @@ pub struct SyncedClock {
     /// the box time it carries, s). `None`: every `interval_s` from scene time 0, box
     /// time being scene time.
     schedule: Option<Vec<(f64, f64)>>,
+    /// The rate servo (with [`TimeSync::rate`]) and, for the sync the clock runs from,
+    /// (its arrival on the cell's counter, ns; the box time it set, ns).
+    servo: Option<(RateServo, u64, i64)>,
+    /// The oscillator's random wander and temperature steps.
+    noise: Option<NoiseTrack>,
 }
 
 impl SyncedClock {
@@ -139,6 +151,8 @@ impl SyncedClock {
             first_grid: 0,
             wander: None,
             schedule,
+            servo: sync.rate.then_some((RateServo::default(), 0, 0)),
+            noise: None,
         };
         // The cell starts sampling on the grid after the first sync it receives.
         while clock.current.is_none() {
@@ -179,7 +193,55 @@ impl SyncedClock {
         self.next += 1;
         if !(self.loss > 0.0 && self.loss_rng.uniform() < self.loss) {
             self.current = Some(j);
+            if self.servo.is_some() {
+                let local = (self.local_s(self.arrival_s(j)) * 1e9).round() as u64;
+                let set_to = ((self.sent_box_s(j) + self.believed_down_s) * 1e9).round() as i64;
+                if let Some((servo, l, b)) = &mut self.servo {
+                    servo.on_sync(local, set_to);
+                    (*l, *b) = (local, set_to);
+                }
+            }
         }
+    }
+
+    /// The same clock with its oscillator wandering at random ([`OscillatorNoise`]);
+    /// `seed` and `stream` draw the wander.
+    pub fn with_noise(mut self, noise: OscillatorNoise, seed: u64, stream: u64) -> SyncedClock {
+        self.noise = Some(NoiseTrack::new(
+            noise,
+            Rng::for_stream(seed ^ 0x7E4F, stream),
+        ));
+        self
+    }
+
+    /// The cell's own counter (its oscillator's time) at true time `t_s`, s: steady drift,
+    /// the sinusoidal wander and the random one integrated from time 0.
+    fn local_s(&mut self, t_s: f64) -> f64 {
+        let mut ppm_s = self.drift * 1e6 * t_s;
+        if let Some((w, angle)) = self.wander {
+            let omega = std::f64::consts::TAU / w.period_s.max(1e-9);
+            ppm_s += w.amplitude_ppm * ((angle).cos() - (omega * t_s + angle).cos()) / omega;
+        }
+        if let Some(n) = &mut self.noise {
+            ppm_s += n.integral_ppm_s(t_s);
+        }
+        t_s + ppm_s * 1e-6
+    }
+
+    /// Under the rate servo: the true time the cell's counter reaches grid point
+    /// `grid_s` (box time), counted from the sync it runs from.
+    fn time_under_servo(&mut self, j: u64, grid_s: f64) -> f64 {
+        let Some((servo, local, set_to)) = self.servo else {
+            unreachable!("called with a servo")
+        };
+        let target = local as i64 + servo.local_elapsed_ns((grid_s * 1e9).round() as i64 - set_to);
+        let target_s = target as f64 * 1e-9;
+        // the counter runs at 1 + drift, drift well under 1e-3: each step gains three digits
+        let mut t = self.arrival_s(j) + (target - local as i64) as f64 * 1e-9;
+        for _ in 0..4 {
+            t -= self.local_s(t) - target_s;
+        }
+        t
     }
 
     fn arrival_s(&self, j: u64) -> f64 {
@@ -190,7 +252,10 @@ impl SyncedClock {
     }
 
     /// True time of the sample for grid point `first + n` under sync `j`.
-    fn time_under(&self, j: u64, grid_s: f64) -> f64 {
+    fn time_under(&mut self, j: u64, grid_s: f64) -> f64 {
+        if self.servo.is_some() {
+            return self.time_under_servo(j, grid_s);
+        }
         let set_to_s = self.sent_box_s(j) + self.believed_down_s;
         // A wandering drift, taken at the middle of the stretch since the sync (its mean
         // there, to second order).
@@ -200,7 +265,12 @@ impl SyncedClock {
             }
             None => self.drift,
         };
-        self.arrival_s(j) + (grid_s - set_to_s) / (1.0 + drift)
+        let a = self.arrival_s(j);
+        let noise = match &mut self.noise {
+            Some(n) => n.mean_ppm(a, grid_s.max(a)) * 1e-6,
+            None => 0.0,
+        };
+        a + (grid_s - set_to_s) / (1.0 + drift + noise)
     }
 
     /// After taking sync `new` (under `old` until then) before sample `n`: a clock set
@@ -244,6 +314,136 @@ impl SyncedClock {
             }
             return t;
         }
+    }
+}
+
+/// The frequency half of a PTP-like servo, as a cell's firmware runs it (docs/time.md,
+/// "The rate servo"): integers only, 12 bytes of state, one 64/32 division per sync and
+/// one 32 x 32 multiplication per sample.
+///
+/// At each sync the cell takes its counter `L` at the sync's arrival and the box time `B`
+/// the sync sets (its tick plus the path latency from the hop count). Over the stretch
+/// since the previous sync its counter ran `dl = L - L'` against the box's `db = B - B'`;
+/// its rate correction is `c = (dl - db) * 2^32 / db` (Q32: counter ticks gained per box
+/// tick). It then schedules the sample for grid point `g` at counter
+/// `L + (g - B) + ((g - B) * c >> 32)`. A stretch over 2^32 ns or off by more than
+/// 1/1024 (a box reset, a new time base) leaves `c` as it was.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RateServo {
+    /// The previous sync: (counter at its arrival, ns; the box time it set, ns).
+    last: Option<(u64, i64)>,
+    /// The rate correction, Q32.
+    correction_q32: i32,
+}
+
+impl RateServo {
+    /// Takes a sync that arrived at counter `local_ns` and set box time `box_ns`.
+    pub fn on_sync(&mut self, local_ns: u64, box_ns: i64) {
+        if let Some((l, b)) = self.last {
+            let dl = local_ns.wrapping_sub(l) as i64;
+            let db = box_ns - b;
+            if db > 0 && db < 1 << 32 && (dl - db).abs() * 1024 < db {
+                self.correction_q32 = (((dl - db) << 32) / db) as i32;
+            }
+        }
+        self.last = Some((local_ns, box_ns));
+    }
+
+    /// The rate correction, counter ticks gained per box tick.
+    pub fn correction(&self) -> f64 {
+        self.correction_q32 as f64 / (1u64 << 32) as f64
+    }
+
+    /// Counter ticks for `box_ns` of box time.
+    pub fn local_elapsed_ns(&self, box_ns: i64) -> i64 {
+        box_ns + ((box_ns as i128 * self.correction_q32 as i128) >> 32) as i64
+    }
+}
+
+/// A cell oscillator's random wander on top of its steady drift: a random walk of its
+/// frequency and temperature steps (docs/time.md, "The oscillator").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OscillatorNoise {
+    /// The random walk: standard deviation of the frequency's change over 1 s, ppm
+    /// (growing with the square root of time).
+    pub random_walk_ppm: f64,
+    /// A temperature step: the frequency moves by this much, ppm, either way at random.
+    pub step_ppm: f64,
+    /// Time between temperature steps, s (0: none).
+    pub step_interval_s: f64,
+}
+
+impl OscillatorNoise {
+    /// A crystal cell oscillator on a robot's skin (docs/time.md): 0.05 ppm over 1 s of
+    /// random walk, and a 1 ppm step (a few degrees C) every 2 s.
+    pub fn realistic() -> OscillatorNoise {
+        OscillatorNoise {
+            random_walk_ppm: 0.05,
+            step_ppm: 1.0,
+            step_interval_s: 2.0,
+        }
+    }
+}
+
+/// The drawn wander of one oscillator: its frequency offset at knots [`NoiseTrack::KNOT_S`]
+/// apart, linear in between (a step takes one knot), and the offset's integral.
+#[derive(Debug, Clone)]
+struct NoiseTrack {
+    noise: OscillatorNoise,
+    rng: Rng,
+    /// The offset at each knot, ppm, and its integral from time 0 there, ppm s.
+    offset_ppm: Vec<f64>,
+    integral: Vec<f64>,
+}
+
+impl NoiseTrack {
+    const KNOT_S: f64 = 0.01;
+
+    fn new(noise: OscillatorNoise, rng: Rng) -> NoiseTrack {
+        NoiseTrack {
+            noise,
+            rng,
+            offset_ppm: vec![0.0],
+            integral: vec![0.0],
+        }
+    }
+
+    fn extend_to(&mut self, k: usize) {
+        while self.offset_ppm.len() <= k + 1 {
+            let i = self.offset_ppm.len();
+            let mut next = self.offset_ppm[i - 1]
+                + self.noise.random_walk_ppm * Self::KNOT_S.sqrt() * self.rng.normal();
+            let every = self.noise.step_interval_s;
+            if every > 0.0
+                && ((i as f64 * Self::KNOT_S) / every).floor()
+                    > (((i - 1) as f64 * Self::KNOT_S) / every).floor()
+            {
+                next += if self.rng.uniform() < 0.5 { -1.0 } else { 1.0 } * self.noise.step_ppm;
+            }
+            let area = (self.offset_ppm[i - 1] + next) * 0.5 * Self::KNOT_S;
+            self.integral.push(self.integral[i - 1] + area);
+            self.offset_ppm.push(next);
+        }
+    }
+
+    /// The offset's integral from time 0 to `t_s`, ppm s.
+    fn integral_ppm_s(&mut self, t_s: f64) -> f64 {
+        let x = (t_s.max(0.0)) / Self::KNOT_S;
+        let k = x.floor() as usize;
+        self.extend_to(k);
+        let f = x - k as f64;
+        let (a, b) = (self.offset_ppm[k], self.offset_ppm[k + 1]);
+        self.integral[k] + (a * f + (b - a) * f * f * 0.5) * Self::KNOT_S
+    }
+
+    /// The mean offset over `[a_s, b_s]`, ppm.
+    fn mean_ppm(&mut self, a_s: f64, b_s: f64) -> f64 {
+        if b_s - a_s < 1e-9 {
+            let x = a_s.max(0.0) / Self::KNOT_S;
+            self.extend_to(x as usize);
+            return self.offset_ppm[x as usize];
+        }
+        (self.integral_ppm_s(b_s) - self.integral_ppm_s(a_s)) / (b_s - a_s)
     }
 }
 
@@ -360,5 +560,130 @@ mod scheduled_tests {
             );
         }
         assert!((after[1] - after[0] - 0.008).abs() < 1e-9);
+    }
+}
+
+#[cfg(test)]
+mod servo_tests {
+    use super::*;
+
+    #[test]
+    fn the_servo_learns_a_rate_in_q32_and_ignores_a_new_time_base() {
+        let mut servo = RateServo::default();
+        servo.on_sync(1_000, 0);
+        assert_eq!(
+            servo.local_elapsed_ns(8_000_000),
+            8_000_000,
+            "no rate before two syncs"
+        );
+        // 10 us gained over 0.1 s: 100 ppm, 429_496.7296 in Q32, truncated
+        servo.on_sync(1_000 + 100_010_000, 100_000_000);
+        assert_eq!(servo.correction_q32, 429_496);
+        // 8 ms of box time: 800 ns more counter, less the truncation (799.9998)
+        assert_eq!(servo.local_elapsed_ns(8_000_000), 8_000_799);
+        // a stretch 0.2 % off is a reset: the rate stays
+        servo.on_sync(1_000 + 200_010_000 + 200_000, 200_000_000);
+        assert_eq!(servo.correction_q32, 429_496);
+    }
+
+    fn worst_us(rate: bool, noise: Option<OscillatorNoise>, rate_hz: f64, n: u64) -> f64 {
+        let b = BusConfig::default();
+        let sync = TimeSync {
+            rate,
+            ..TimeSync::every(0.1, &b)
+        };
+        let mut clock = SyncedClock::new(&sync, &b, 65, 100.0, rate_hz, 3, 4);
+        if let Some(noise) = noise {
+            clock = clock.with_noise(noise, 3, 4);
+        }
+        // from the third sync on (the rate is learnt from the first two)
+        let from = (0.2 * rate_hz) as u64 + 1;
+        (from..n)
+            .map(|k| (clock.sample_time_s(k) - clock.grid_s(k)).abs() * 1e6)
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn a_steady_drift_is_learnt_to_the_nanosecond() {
+        // phase only: 100 ppm over the last sample's distance from its sync, within one
+        // 2 ms period of 0.1 s: 9.8 to 10 us; with the rate, what is left is the counter's
+        // 1 ns rounding over a stretch (1e-8) and Q32's truncation
+        let phase = worst_us(false, None, 500.0, 5_000);
+        assert!(phase > 9.8 - 1e-6 && phase <= 10.0, "{phase}");
+        let rate = worst_us(true, None, 500.0, 5_000);
+        assert!(rate < 0.005, "{rate}");
+    }
+
+    #[test]
+    fn a_temperature_step_costs_the_step_times_the_interval() {
+        // a 1 ppm step (and nothing else) every 2 s: within the stretch of the step the
+        // clock is off by at most 1 ppm x 0.1 s = 0.1 us, and the rate learnt across it is
+        // off by at most the step, so the next stretch as much again
+        let step = OscillatorNoise {
+            random_walk_ppm: 0.0,
+            step_ppm: 1.0,
+            step_interval_s: 2.0,
+        };
+        let rate = worst_us(true, Some(step), 125.0, 1_250);
+        assert!(rate > 0.02 && rate <= 0.1 + 0.005, "{rate}");
+    }
+
+    #[test]
+    fn with_a_realistic_oscillator_the_rate_servo_holds_a_microsecond() {
+        // the steps (1 ppm) bound the servo's error at 0.2 us (the test above); the random
+        // walk adds 0.05 ppm x sqrt(0.1 s) x 0.1 s, a nanosecond or two. Phase only keeps
+        // its 100 ppm x 0.1 s, give or take a step's 0.1 us.
+        let realistic = Some(OscillatorNoise::realistic());
+        let rate = worst_us(true, realistic, 500.0, 10_000);
+        assert!(rate < 0.25, "{rate}");
+        let phase = worst_us(false, realistic, 500.0, 10_000);
+        assert!(phase > 9.7 && phase < 10.2, "{phase}");
+    }
+
+    /// Syncs every 0.1 s at 100 ppm, with the servo or phase only; the fifth carries a box time moved by
+    /// `jump_s` (a box reset). The worst error against the new base from then on.
+    fn after_reset_us(rate: bool, jump_s: f64) -> f64 {
+        let b = BusConfig::default();
+        let sync = TimeSync {
+            rate,
+            ..TimeSync::every(0.1, &b)
+        };
+        let schedule: Vec<(f64, f64)> = (0..20)
+            .map(|j| {
+                let t = j as f64 * 0.1;
+                (t, if j >= 5 { t + jump_s } else { t })
+            })
+            .collect();
+        let mut clock = SyncedClock::scheduled(&sync, &b, 0, (100.0, 125.0), (1, 0), schedule)
+            .expect("syncs reach the cell");
+        let down = b.processing_ns as f64 * 1e-9;
+        let mut worst = 0.0f64;
+        for n in 0..220 {
+            let t = clock.sample_time_s(n);
+            if t > 0.5 + down && t < 1.9 {
+                // box time at true time t is t + jump_s; the sample's grid point is box time
+                let box_s = t + jump_s;
+                let off = (box_s * 125.0 - (box_s * 125.0).round()) / 125.0;
+                worst = worst.max(off.abs() * 1e6);
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn the_servo_keeps_its_rate_across_a_box_reset_unless_the_jump_is_under_1_in_1024() {
+        // A new time base seconds away (or 0.2 ms, over 1/1024 of the 0.1 s stretch) is
+        // no rate: the servo keeps its 100 ppm and the samples fall on the new grid within
+        // nanoseconds. A jump of 30 us over 0.1 s passes for a rate 300 ppm off, which
+        // the stretch after it turns into up to 30 us, until the next sync learns again.
+        assert!(after_reset_us(true, 3.0537) < 0.01);
+        assert!(after_reset_us(true, 0.0002) < 0.01);
+        let small = after_reset_us(true, 30e-6);
+        assert!(small > 20.0 && small < 31.0, "{small}");
+        // phase only takes every jump at the next sync and keeps its 100 ppm x 0.1 s
+        for jump in [3.0537, 0.0002, 30e-6] {
+            let phase = after_reset_us(false, jump);
+            assert!(phase > 9.0 && phase <= 10.0, "{jump}: {phase}");
+        }
     }
 }
