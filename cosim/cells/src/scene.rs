@@ -809,178 +809,29 @@ impl Scene {
                 .collect();
             let mut cell_commands = Vec::with_capacity(cells.len());
             for (position, index) in cells.clone().enumerate() {
-                let cell_id = (index + 1) as u16;
                 let clock = self.cell_clock(index);
                 if position == 0 {
                     root_error_ppm = clock.uart_error_ppm;
                 }
                 cell_uart_error_ppm.push(clock.uart_error_ppm);
-                let phase_s = clock.phase_s;
-                let mut nominal_period_s = period_s;
-                let mut cell_period_s = period_s / (1.0 + clock.drift_ppm * 1e-6);
-                // The free-running clock in closed form from the last rate change on.
-                let (mut segment_start_s, mut segment_k) = (phase_s, 0u64);
-                let mut counts = CellCommandCounts::default();
-                let mut next_command = 0;
-                let mut cell = Cell::new(CellConfig {
-                    cell_id,
-                    mode: s.mode,
+                let ctx = BusContext {
+                    model: &model,
                     thresholds,
                     enabled,
+                    period_s,
                     refresh_every_samples,
-                });
-                let mut signal = model.cell(index);
-                let keep_truth = options.truth_cells.contains(&cell_id);
-                let mut trace = CellTruth {
-                    cell_id,
-                    sample_time_ns: Vec::new(),
-                    truth: Vec::new(),
+                    options,
+                    downlink: &downlink,
+                    commands: &commands,
+                    sync_schedule: &sync_schedule,
                 };
-                // What a host holds of this cell (Algorithm 2): the values of every packet
-                // that was not lost on the way, read back from the packet bytes.
-                let mut held = [None; Channel::COUNT];
-                let mut loss_rng = Rng::for_stream(s.seed ^ 0x1055, index as u64);
-                let delay_ns = c.bus.processing_ns + position as u64 * c.bus.hop_latency_ns;
-                // Method c of docs/time.md: the cell samples on the box's grid instead: every
-                // `options.time_sync` interval, or as the sync commands on its bus say.
-                let mut synced = match &options.time_sync {
-                    Some(sync) => Some(SyncedClock::new(
-                        sync,
-                        &c.bus,
-                        position,
-                        clock.drift_ppm,
-                        s.sample_rate_hz,
-                        s.seed,
-                        index as u64,
-                    )),
-                    None if !sync_schedule.is_empty() => SyncedClock::scheduled(
-                        &TimeSync {
-                            rate: c.time_sync.as_ref().is_some_and(|t| t.rate),
-                            ..TimeSync::every(0.0, &c.bus)
-                        },
-                        &c.bus,
-                        position,
-                        (clock.drift_ppm, s.sample_rate_hz),
-                        (s.seed, index as u64),
-                        sync_schedule.clone(),
-                    ),
-                    None => None,
+                let mut out = BusOutput {
+                    stats: &mut stats,
+                    truth: &mut truth,
+                    pending: &mut pending,
+                    ready_ps: &mut ready_ps,
                 };
-                // A wandering clock (its drift changing over time) is stepped sample by
-                // sample; a steady one in closed form.
-                let mut wander = options.clock_wander.map(|w| {
-                    let mut rng = Rng::for_stream(s.seed ^ 0x3A4D, index as u64);
-                    (w, rng.range(0.0, std::f64::consts::TAU), phase_s)
-                });
-                if let Some((w, angle, _)) = wander {
-                    synced = synced.map(|clock| clock.with_wander(w, angle));
-                }
-                if let Some(o) = &c.oscillator {
-                    let noise = o.noise();
-                    synced = synced.map(|clock| clock.with_noise(noise, s.seed, index as u64));
-                }
-                // A cell obeying the box's sync commands runs free until the first one
-                // reaches it (then its sample `synced_k` is the grid's first).
-                let mut free_until_s = match options.time_sync {
-                    None => synced.as_ref().map(|clock| clock.first_sync_arrival_s()),
-                    Some(_) => None,
-                };
-                let mut synced_k = 0;
-                let mut k = 0u64;
-                loop {
-                    let t_s = if let (Some(clock), None) = (&mut synced, free_until_s) {
-                        clock.sample_time_s(k - synced_k)
-                    } else {
-                        let t = match &mut wander {
-                            Some((w, angle, next_s)) => {
-                                let t = *next_s;
-                                *next_s += nominal_period_s
-                                    / (1.0 + w.drift_ppm(clock.drift_ppm, *angle, t) * 1e-6);
-                                t
-                            }
-                            None => segment_start_s + (k - segment_k) as f64 * cell_period_s,
-                        };
-                        match (&mut synced, free_until_s) {
-                            (Some(clock), Some(until)) if t >= until => {
-                                free_until_s = None;
-                                synced_k = k;
-                                clock.sample_time_s(0)
-                            }
-                            _ => t,
-                        }
-                    };
-                    if t_s >= s.duration_s {
-                        break;
-                    }
-                    // Commands complete in this cell by now, at this sample boundary.
-                    let t_ns = (t_s * 1e9).round() as u64;
-                    while let Some(&(leave_ns, _)) = downlink.get(next_command) {
-                        if downlink_arrival_ns(leave_ns, position, c.bus.hop_latency_ns) > t_ns {
-                            break;
-                        }
-                        counts.received += 1;
-                        match &commands[next_command] {
-                            None => counts.malformed += 1,
-                            Some(repr) if repr.addresses(cell_id) => {
-                                counts.applied += 1;
-                                cell.apply(&repr.command);
-                                if let CellCommand::SampleRate(rate) = repr.command {
-                                    nominal_period_s = 1.0 / rate.hz();
-                                    cell_period_s =
-                                        nominal_period_s / (1.0 + clock.drift_ppm * 1e-6);
-                                    (segment_start_s, segment_k) = (t_s, k);
-                                    if let Some((w, angle, next_s)) = &mut wander {
-                                        *next_s = t_s
-                                            + nominal_period_s
-                                                / (1.0
-                                                    + w.drift_ppm(clock.drift_ppm, *angle, t_s)
-                                                        * 1e-6);
-                                    }
-                                }
-                            }
-                            Some(_) => {}
-                        }
-                        next_command += 1;
-                    }
-                    k += 1;
-                    let (value, noise) = model.sample(&mut signal, t_s);
-                    let mut measured = value;
-                    for (m, n) in measured.iter_mut().zip(noise) {
-                        *m += n;
-                    }
-                    let packets = cell.sample_units(&measured);
-                    let sample_time_ns = (t_s * 1e9).round() as u64;
-                    if keep_truth {
-                        trace.sample_time_ns.push(sample_time_ns);
-                        trace.truth.push(value);
-                    }
-                    let mut lost = 0;
-                    for bytes in packets.as_slice() {
-                        if options.packet_loss > 0.0 && loss_rng.uniform() < options.packet_loss {
-                            lost += 1;
-                        } else {
-                            hold(&mut held, bytes);
-                        }
-                    }
-                    if t_s >= s.warmup_s {
-                        stats.record(&packets, lost, &value, &held);
-                    }
-                    if options.keep_packets {
-                        for bytes in packets.as_slice() {
-                            ready_ps.push((sample_time_ns + delay_ns) * 1000);
-                            pending.push(Pending {
-                                cell_id,
-                                bytes: *bytes,
-                                sample_time_ns,
-                            });
-                        }
-                    } else {
-                        stats.offered += packets.as_slice().len() as u64;
-                    }
-                }
-                if keep_truth {
-                    truth.push(trace);
-                }
+                let counts = self.generate_cell(&ctx, &mut out, position, index, clock);
                 stats.commands.received += counts.received;
                 stats.commands.applied += counts.applied;
                 stats.commands.malformed += counts.malformed;
@@ -1020,6 +871,190 @@ impl Scene {
             stats,
             truth,
         }
+    }
+
+    /// One cell's samples and packets over the scene, obeying the bus's downlink; returns
+    /// what it did with the commands it heard.
+    fn generate_cell(
+        &self,
+        ctx: &BusContext,
+        out: &mut BusOutput,
+        position: usize,
+        index: usize,
+        clock: CellClock,
+    ) -> CellCommandCounts {
+        let c = &self.config;
+        let s = &c.scene;
+        let cell_id = (index + 1) as u16;
+        let mut counts = CellCommandCounts::default();
+        let mut next_command = 0;
+        let mut cell = Cell::new(CellConfig {
+            cell_id,
+            mode: s.mode,
+            thresholds: ctx.thresholds,
+            enabled: ctx.enabled,
+            refresh_every_samples: ctx.refresh_every_samples,
+        });
+        let mut signal = ctx.model.cell(index);
+        let keep_truth = ctx.options.truth_cells.contains(&cell_id);
+        let mut trace = CellTruth {
+            cell_id,
+            sample_time_ns: Vec::new(),
+            truth: Vec::new(),
+        };
+        // What a host holds of this cell (Algorithm 2): the values of every packet
+        // that was not lost on the way, read back from the packet bytes.
+        let mut held = [None; Channel::COUNT];
+        let mut loss_rng = Rng::for_stream(s.seed ^ 0x1055, index as u64);
+        let delay_ns = c.bus.processing_ns + position as u64 * c.bus.hop_latency_ns;
+        let (mut synced, wander, mut free_until_s) =
+            self.cell_timebase(ctx, position, index, &clock);
+        let mut free = FreeClock {
+            drift_ppm: clock.drift_ppm,
+            nominal_period_s: ctx.period_s,
+            period_s: ctx.period_s / (1.0 + clock.drift_ppm * 1e-6),
+            segment_start_s: clock.phase_s,
+            segment_k: 0,
+            wander,
+        };
+        let mut synced_k = 0;
+        let mut k = 0u64;
+        loop {
+            let t_s = if let (Some(clock), None) = (&mut synced, free_until_s) {
+                clock.sample_time_s(k - synced_k)
+            } else {
+                let t = free.sample_time_s(k);
+                match (&mut synced, free_until_s) {
+                    (Some(clock), Some(until)) if t >= until => {
+                        free_until_s = None;
+                        synced_k = k;
+                        clock.sample_time_s(0)
+                    }
+                    _ => t,
+                }
+            };
+            if t_s >= s.duration_s {
+                break;
+            }
+            // Commands complete in this cell by now, at this sample boundary.
+            let t_ns = (t_s * 1e9).round() as u64;
+            while let Some(&(leave_ns, _)) = ctx.downlink.get(next_command) {
+                if downlink_arrival_ns(leave_ns, position, c.bus.hop_latency_ns) > t_ns {
+                    break;
+                }
+                counts.received += 1;
+                match &ctx.commands[next_command] {
+                    None => counts.malformed += 1,
+                    Some(repr) if repr.addresses(cell_id) => {
+                        counts.applied += 1;
+                        cell.apply(&repr.command);
+                        if let CellCommand::SampleRate(rate) = repr.command {
+                            free.set_rate(rate.hz(), t_s, k);
+                        }
+                    }
+                    Some(_) => {}
+                }
+                next_command += 1;
+            }
+            k += 1;
+            let (value, noise) = ctx.model.sample(&mut signal, t_s);
+            let mut measured = value;
+            for (m, n) in measured.iter_mut().zip(noise) {
+                *m += n;
+            }
+            let packets = cell.sample_units(&measured);
+            let sample_time_ns = (t_s * 1e9).round() as u64;
+            if keep_truth {
+                trace.sample_time_ns.push(sample_time_ns);
+                trace.truth.push(value);
+            }
+            let mut lost = 0;
+            for bytes in packets.as_slice() {
+                if ctx.options.packet_loss > 0.0 && loss_rng.uniform() < ctx.options.packet_loss {
+                    lost += 1;
+                } else {
+                    hold(&mut held, bytes);
+                }
+            }
+            if t_s >= s.warmup_s {
+                out.stats.record(&packets, lost, &value, &held);
+            }
+            if ctx.options.keep_packets {
+                for bytes in packets.as_slice() {
+                    out.ready_ps.push((sample_time_ns + delay_ns) * 1000);
+                    out.pending.push(Pending {
+                        cell_id,
+                        bytes: *bytes,
+                        sample_time_ns,
+                    });
+                }
+            } else {
+                out.stats.offered += packets.as_slice().len() as u64;
+            }
+        }
+        if keep_truth {
+            out.truth.push(trace);
+        }
+        counts
+    }
+
+    /// A cell's time base: the synced clock it samples on (method c of docs/time.md), its
+    /// wandering free-running clock, and until when it runs free before its first sync.
+    fn cell_timebase(
+        &self,
+        ctx: &BusContext,
+        position: usize,
+        index: usize,
+        clock: &CellClock,
+    ) -> (Option<SyncedClock>, Option<Wandering>, Option<f64>) {
+        let c = &self.config;
+        let s = &c.scene;
+        let phase_s = clock.phase_s;
+        // Method c of docs/time.md: the cell samples on the box's grid instead: every
+        // `options.time_sync` interval, or as the sync commands on its bus say.
+        let mut synced = match &ctx.options.time_sync {
+            Some(sync) => Some(SyncedClock::new(
+                sync,
+                &c.bus,
+                position,
+                clock.drift_ppm,
+                s.sample_rate_hz,
+                s.seed,
+                index as u64,
+            )),
+            None if !ctx.sync_schedule.is_empty() => SyncedClock::scheduled(
+                &TimeSync {
+                    rate: c.time_sync.as_ref().is_some_and(|t| t.rate),
+                    ..TimeSync::every(0.0, &c.bus)
+                },
+                &c.bus,
+                position,
+                (clock.drift_ppm, s.sample_rate_hz),
+                (s.seed, index as u64),
+                ctx.sync_schedule.to_vec(),
+            ),
+            None => None,
+        };
+        // A wandering clock (its drift changing over time) is stepped sample by
+        // sample; a steady one in closed form.
+        let wander = ctx.options.clock_wander.map(|w| {
+            let mut rng = Rng::for_stream(s.seed ^ 0x3A4D, index as u64);
+            (w, rng.range(0.0, std::f64::consts::TAU), phase_s)
+        });
+        if let Some((w, angle, _)) = wander {
+            synced = synced.map(|clock| clock.with_wander(w, angle));
+        }
+        if let Some(o) = &c.oscillator {
+            let noise = o.noise();
+            synced = synced.map(|clock| clock.with_noise(noise, s.seed, index as u64));
+        }
+        // A cell obeying the box's sync commands runs free until the first one
+        // reaches it (then its sample `synced_k` is the grid's first).
+        let free_until_s = match ctx.options.time_sync {
+            None => synced.as_ref().map(|clock| clock.first_sync_arrival_s()),
+            Some(_) => None,
+        };
+        (synced, wander, free_until_s)
     }
 }
 
@@ -1095,6 +1130,67 @@ pub struct CellClock {
     pub drift_ppm: f64,
     /// UART clock error, ppm (uniform in +-`uart_error_ppm`; positive is fast).
     pub uart_error_ppm: f64,
+}
+
+/// A wandering clock's wander, its phase angle and its next sample time, s.
+type Wandering = (ClockWander, f64, f64);
+
+/// A cell's free-running sample clock: in closed form from its last rate change on, or
+/// stepped sample by sample while its drift wanders.
+struct FreeClock {
+    drift_ppm: f64,
+    nominal_period_s: f64,
+    period_s: f64,
+    segment_start_s: f64,
+    segment_k: u64,
+    wander: Option<Wandering>,
+}
+
+impl FreeClock {
+    /// The time of sample `k`, s (asked for k = 0, 1, 2, ... in turn).
+    fn sample_time_s(&mut self, k: u64) -> f64 {
+        match &mut self.wander {
+            Some((w, angle, next_s)) => {
+                let t = *next_s;
+                *next_s +=
+                    self.nominal_period_s / (1.0 + w.drift_ppm(self.drift_ppm, *angle, t) * 1e-6);
+                t
+            }
+            None => self.segment_start_s + (k - self.segment_k) as f64 * self.period_s,
+        }
+    }
+
+    /// A new sample rate from sample `k`, at `t_s`, on.
+    fn set_rate(&mut self, hz: f64, t_s: f64, k: u64) {
+        self.nominal_period_s = 1.0 / hz;
+        self.period_s = self.nominal_period_s / (1.0 + self.drift_ppm * 1e-6);
+        (self.segment_start_s, self.segment_k) = (t_s, k);
+        if let Some((w, angle, next_s)) = &mut self.wander {
+            *next_s = t_s
+                + self.nominal_period_s / (1.0 + w.drift_ppm(self.drift_ppm, *angle, t_s) * 1e-6);
+        }
+    }
+}
+
+/// What generating one bus's cells shares.
+struct BusContext<'a> {
+    model: &'a SignalModel,
+    thresholds: Thresholds,
+    enabled: ChannelMask,
+    period_s: f64,
+    refresh_every_samples: u32,
+    options: &'a GenerateOptions,
+    downlink: &'a BusDownlink,
+    commands: &'a [Option<CellCommandRepr>],
+    sync_schedule: &'a [(f64, f64)],
+}
+
+/// Where one bus's cells put what they generate.
+struct BusOutput<'a> {
+    stats: &'a mut SceneStats,
+    truth: &'a mut Vec<CellTruth>,
+    pending: &'a mut Vec<Pending>,
+    ready_ps: &'a mut Vec<u64>,
 }
 
 struct Pending {
