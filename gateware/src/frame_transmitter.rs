@@ -38,7 +38,7 @@
 
 use crate::block_ram::BlockRam;
 use crate::datagram_checksum::DatagramChecksum;
-use crate::fcs_output::FcsOutput;
+use crate::fcs_output::{FcsOutput, OUTPUT_LATENCY};
 use crate::hdl::*;
 use crate::header_sums::HeaderSums;
 use crate::stream::{DatagramSink, RAW_FRAME_KIND};
@@ -48,8 +48,8 @@ use skinbox_protocol::wire::{ethernet, ipv4, udp, EthernetRepr, UdpRepr};
 
 /// Clocks from the clock a descriptor is taken (`valid & ready` at its edge) to the clock
 /// the frame's first preamble byte is on `gmii_txd`: the transmitter registers `sending`,
-/// then the byte, then the output (with the FCS).
-pub const TAKE_TO_FIRST_BYTE: u64 = 3;
+/// then the output stage ([`FcsOutput`]) registers the byte and the output (with the FCS).
+pub const TAKE_TO_FIRST_BYTE: u64 = 1 + OUTPUT_LATENCY;
 
 /// Clocks from the clock a raw frame's descriptor is taken to the clock its first body
 /// beat is taken (`ready`): the body follows the preamble and the SFD, then one beat per
