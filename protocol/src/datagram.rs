@@ -7,7 +7,7 @@
 //! | 3 | kind: 1 records, 2 status |
 //! | 4-5 | box id |
 //! | 6 | port count of the box |
-//! | 7 | flags: bit 0 = records datagram sent by flush timeout (not full); bit 1 = status datagram carries the box counter block |
+//! | 7 | flags: bit 0 = records datagram sent by flush timeout (not full); bit 1 = status datagram carries the box counter block; bit 2 = status datagram of a box whose sync generator is on |
 //! | 8-11 | sequence number, +1 per datagram of either kind (u32, wraps) |
 //! | 12-19 | base tick (u64, 8 ns): first record's tick, or the status report's time |
 //! | 20-21 | entry count: records, or port counter blocks |
@@ -64,6 +64,10 @@ pub const MAX_PORTS: u8 = 64;
 pub const FLAG_FLUSH_TIMEOUT: u8 = 0x01;
 /// Header flag of a status datagram: the box counter block follows the port counter blocks.
 pub const FLAG_BOX_COUNTERS: u8 = 0x02;
+/// Header flag of a status datagram: the box's sync generator is on (it sends a time-sync
+/// cell command down every port each sync period, docs/time.md), so the cells sample on its
+/// tick grid.
+pub const FLAG_TIME_SYNCS: u8 = 0x04;
 /// Most port counter blocks in a status datagram that carries the box counter block.
 pub const MAX_STATUS_PORTS_WITH_BOX_COUNTERS: usize =
     (MAX_PAYLOAD_LEN - HEADER_LEN - STATUS_FIXED_LEN - BOX_COUNTERS_LEN) / PORT_COUNTERS_LEN;
@@ -209,7 +213,7 @@ impl<T: AsRef<[u8]>> Datagram<T> {
         let flags = d.flags();
         let defined = match kind {
             DatagramKind::Records => FLAG_FLUSH_TIMEOUT,
-            DatagramKind::Status => FLAG_FLUSH_TIMEOUT | FLAG_BOX_COUNTERS,
+            DatagramKind::Status => FLAG_FLUSH_TIMEOUT | FLAG_BOX_COUNTERS | FLAG_TIME_SYNCS,
         };
         if flags & !defined != 0 {
             return Err(Error::BadFlags {
@@ -350,7 +354,7 @@ pub struct DatagramRepr {
     pub box_id: u16,
     /// Number of ports of the box.
     pub port_count: u8,
-    /// Header flags ([`FLAG_FLUSH_TIMEOUT`]); [`FLAG_BOX_COUNTERS`] is not kept here: read
+    /// Header flags ([`FLAG_FLUSH_TIMEOUT`], [`FLAG_TIME_SYNCS`]); [`FLAG_BOX_COUNTERS`] is not kept here: read
     /// the block with [`DatagramRepr::parse_box_counters`], write it with
     /// [`DatagramRepr::to_bytes_with_box_counters`].
     pub flags: u8,

@@ -48,13 +48,46 @@ fn port_count_is_1_to_64() {
 #[test]
 fn datagram_flags_other_than_bit_0_are_refused() {
     assert!(DatagramRepr::parse(&records_datagram(4, 0x01, 0, 0)).is_ok());
-    for bad in [0x02, 0x80, 0x03] {
+    for bad in [0x02, 0x04, 0x80, 0x03] {
         assert_eq!(
             DatagramRepr::parse(&records_datagram(4, bad, 0, 0)),
             Err(Error::BadFlags {
                 format: Format::Datagram,
                 found: bad,
                 defined: 0x01
+            })
+        );
+    }
+}
+
+#[test]
+fn a_status_datagram_may_say_the_box_sends_time_syncs_and_no_more() {
+    let status = |flags: u8| {
+        DatagramRepr {
+            box_id: 1,
+            port_count: 4,
+            flags,
+            sequence: 1,
+            base_tick: 99,
+            body: DatagramBody::Status(StatusRepr {
+                boot_id: 7,
+                datagrams_sent: 0,
+                records_sent: 0,
+                first_port: 0,
+                ports: vec![],
+            }),
+        }
+        .to_bytes()
+    };
+    let parsed = DatagramRepr::parse(&status(datagram::FLAG_TIME_SYNCS)).unwrap();
+    assert_eq!(parsed.flags, 0x04);
+    for bad in [0x08, 0x80] {
+        assert_eq!(
+            DatagramRepr::parse(&status(bad)),
+            Err(Error::BadFlags {
+                format: Format::Datagram,
+                found: bad,
+                defined: 0x07
             })
         );
     }
