@@ -104,8 +104,9 @@ fn decode_writes_one_row_per_packet() {
         header.starts_with("time_s,tick,box_id,source,cell_id,"),
         "{header}"
     );
-    // 9 channels, then the sample's box time, host time, bound and the host time's source
-    assert_eq!(header.split(',').count(), 8 + 9 + 4);
+    // 9 channels, then the sample's box time, method and bound, its host time, that
+    // bound and the host time's source
+    assert_eq!(header.split(',').count(), 8 + 9 + 6);
     assert!(
         header.ends_with(skinbox_host::output::TIME_COLUMNS),
         "{header}"
@@ -120,6 +121,13 @@ fn decode_writes_one_row_per_packet() {
     for row in &rows {
         let cells: Vec<&str> = row.split(',').collect();
         assert_eq!(cells[cells.len() - 2], "", "{row}");
+        // a box that says nothing of time syncs: estimated, bounded by the bus's queueing
+        assert_eq!(cells[cells.len() - 5], "estimated", "{row}");
+        let sample_bound: f64 = cells[cells.len() - 4].parse().unwrap();
+        assert!(
+            (1.5e6..=1.7e6).contains(&sample_bound),
+            "sample time bound {sample_bound}: {row}"
+        );
         match cells[cells.len() - 1] {
             "receive_stamps" => {
                 let host_ns: f64 = cells[cells.len() - 3].parse().unwrap();

@@ -46,7 +46,7 @@ pub struct RowWriter<W: Write> {
 
 /// The columns [`RowWriter::with_timing`] appends to every CSV row.
 pub const TIME_COLUMNS: &str =
-    "sample_box_time_s,sample_host_time_ns,host_time_bound_ns,host_time_source";
+    "sample_box_time_s,sample_method,sample_time_bound_ns,sample_host_time_ns,host_time_bound_ns,host_time_source";
 
 impl<W: Write> RowWriter<W> {
     /// A writer of `kind` rows in `format`.
@@ -63,8 +63,9 @@ impl<W: Write> RowWriter<W> {
         }
     }
 
-    /// Also writes each row's sample time: estimated box time, host time, the host time's
-    /// error bound (empty where the mapping has none) and its source.
+    /// Also writes each row's sample time: its box time, how it was found and its error
+    /// bound, its host time, the host time's error bound (empty where the mapping has
+    /// none) and its source.
     pub fn with_timing(mut self, timing: Timing) -> Self {
         self.timing = Some(timing);
         self
@@ -87,8 +88,10 @@ impl<W: Write> RowWriter<W> {
         match self.last_times {
             Some(t) => write!(
                 self.out,
-                ",{:.9},{},{},{}",
+                ",{:.9},{},{:.0},{},{},{}",
                 t.sample_box_s,
+                t.method.name(),
+                t.sample_error_bound_ns,
                 t.sample_host_ns
                     .map(|v| format!("{v:.0}"))
                     .unwrap_or_default(),
@@ -97,7 +100,7 @@ impl<W: Write> RowWriter<W> {
                     .unwrap_or_default(),
                 t.source.name()
             ),
-            None => self.out.write_all(b",,,,none"),
+            None => self.out.write_all(b",,,,,,none"),
         }
     }
 
@@ -108,6 +111,11 @@ impl<W: Write> RowWriter<W> {
         if let (Some(t), Some(map)) = (self.last_times, row.as_object_mut()) {
             map.insert("sample_box_time_s".into(), t.sample_box_s.into());
             map.insert("sample_index".into(), t.sample_index.into());
+            map.insert("sample_method".into(), t.method.name().into());
+            map.insert(
+                "sample_time_bound_ns".into(),
+                t.sample_error_bound_ns.round().into(),
+            );
             map.insert(
                 "sample_host_time_ns".into(),
                 t.sample_host_ns.map(|v| v.round()).into(),

@@ -8,7 +8,7 @@
 
 use crate::convert::Sample;
 use crate::decoder::{DecodedRecord, RecordSink};
-use crate::timing::{HostTimeSource, RecordTimes, Timing};
+use crate::timing::{HostTimeSource, RecordTimes, SampleMethod, Timing};
 use core::mem::offset_of;
 use skinbox_protocol::{CellRepr, Channel, ChannelMask};
 use std::time::Duration;
@@ -326,6 +326,8 @@ pub const UNTIMED: RecordTimes = RecordTimes {
     sample_box_ns: f64::NAN,
     sample_index: -1,
     sample_host_ns: None,
+    method: SampleMethod::Estimated,
+    sample_error_bound_ns: f64::NAN,
     host_error_bound_ns: None,
     source: HostTimeSource::None,
 };

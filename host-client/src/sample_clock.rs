@@ -755,14 +755,7 @@ impl SampleTimer {
     pub fn push_for(&mut self, key: BoxKey, port: u8, cell_id: u16, stamp_ns: u64) -> SampleTime {
         let period = self.nominal_period_ns;
         if self.on_box_grid {
-            let latency = self.paths.latency_ns(cell_id);
-            let at = stamp_ns as f64 - latency as f64 + period / 8.0;
-            let index = (at / period).floor();
-            return SampleTime {
-                sample_time_ns: index * period,
-                index: index as i64,
-                period_learnt: false,
-            };
+            return self.grid_point(cell_id, stamp_ns);
         }
         let clocks = self.boxes.get_or_insert_with(key, BoxClocks::new);
         // The port's first packet: whether the line was idle before it is unknown.
@@ -792,6 +785,26 @@ impl SampleTimer {
             stamp_ns,
             unqueued,
         )
+    }
+
+    /// The sample time of a packet of `cell_id` stamped at `stamp_ns` from a cell on the
+    /// box's time grid ([`SampleTimer::on_box_grid`]): the grid point its stamp less the
+    /// path latency falls on, allowing queueing up to 7/8 of a period. Keeps no state.
+    pub fn grid_point(&self, cell_id: u16, stamp_ns: u64) -> SampleTime {
+        let period = self.nominal_period_ns;
+        let latency = self.paths.latency_ns(cell_id);
+        let at = stamp_ns as f64 - latency as f64 + period / 8.0;
+        let index = (at / period).floor();
+        SampleTime {
+            sample_time_ns: index * period,
+            index: index as i64,
+            period_learnt: false,
+        }
+    }
+
+    /// The cells' path latencies.
+    pub fn paths(&self) -> &PathModel {
+        &self.paths
     }
 
     /// Starts every cell and port of `box_id` over (the box was reset), whatever its

@@ -41,6 +41,61 @@ impl HostTimeSource {
     }
 }
 
+/// How a record's sample time was found (docs/time.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SampleMethod {
+    /// The box keeps its cells on its tick grid with time syncs (method c): the grid point
+    /// the stamp less the path latency falls on.
+    Synced,
+    /// Estimated from the cell's stamps (method b, [`crate::sample_clock`]).
+    Estimated,
+}
+
+impl SampleMethod {
+    /// Name in rows and reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            SampleMethod::Synced => "synced",
+            SampleMethod::Estimated => "estimated",
+        }
+    }
+}
+
+/// Which method [`Timing`] uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SampleTimeMode {
+    /// Synced for the records of a box whose latest status datagram said it sends time
+    /// syncs ([`skinbox_protocol::datagram::FLAG_TIME_SYNCS`]), estimated otherwise (before
+    /// its first status datagram too).
+    #[default]
+    Auto,
+    /// Synced for every record.
+    Synced,
+    /// Estimated for every record.
+    Estimated,
+}
+
+/// Error bound of a synced sample time, ns: the cells' rate servo holds every cell of a
+/// 66-cell bus within 0.1 us at p99 and its failure boundaries (5 ppm temperature steps,
+/// 1 ppm/s wander, 30 % of the syncs lost at 0.1 s) within 1 us (docs/time.md, "The rate
+/// servo"). A bound of the cells' specification, not measured by the host.
+pub const SYNCED_SAMPLE_BOUND_NS: f64 = 1_000.0;
+
+/// Longest a packet may wait in its bus before it leaves the root, ns: the root cell's
+/// FIFO (32 packets of 50 us, the bus model's `fifo_packets`). An estimated sample time
+/// is bounded by the stamp less the path latency and less this much more.
+pub const ROOT_QUEUE_BOUND_NS: f64 = 32.0 * 50_000.0;
+
+/// Records by how their sample times were found.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct SampleMethodCounts {
+    /// On the box's grid (method c).
+    pub synced: u64,
+    /// Estimated from stamps (method b).
+    pub estimated: u64,
+}
+
 /// The times of one record.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RecordTimes {
@@ -53,7 +108,14 @@ pub struct RecordTimes {
     pub sample_index: i64,
     /// The sample's host time, ns on the host clock, if mapped.
     pub sample_host_ns: Option<f64>,
-    /// The mapping's error bound, ns, where it has one.
+    /// How the sample time was found.
+    pub method: SampleMethod,
+    /// Error bound of the sample's box time, ns ([`SYNCED_SAMPLE_BOUND_NS`] when synced;
+    /// when estimated, the farther end of the interval the bus allows: the stamp less the
+    /// path latency, less up to [`ROOT_QUEUE_BOUND_NS`] of queueing).
+    pub sample_error_bound_ns: f64,
+    /// Error bound of the sample's host time, ns: the sample's bound plus the mapping's,
+    /// where the mapping has one (exchanges; receive timestamps give none).
     pub host_error_bound_ns: Option<f64>,
     /// Where the host time came from.
     pub source: HostTimeSource,
@@ -116,6 +178,12 @@ impl ExchangeStampCounts {
 #[derive(Debug, Clone)]
 pub struct Timing {
     samples: SampleTimer,
+    mode: SampleTimeMode,
+    /// Each box's latest status: whether it sends time syncs.
+    box_syncs: HashMap<BoxKey, bool>,
+    method_counts: SampleMethodCounts,
+    synced_bound_ns: f64,
+    queue_bound_ns: f64,
     exchanges: BoxMap<ClockMap>,
     receive: BoxMap<ReceiveStampMap>,
     /// Each box's boot id, from its latest status datagram.
@@ -130,10 +198,29 @@ pub struct Timing {
 }
 
 impl Timing {
-    /// The same timing for cells on the box's time grid ([`SampleTimer::on_box_grid`]).
-    pub fn on_box_grid(mut self) -> Timing {
-        self.samples = self.samples.on_box_grid();
+    /// The same timing for cells on the box's time grid ([`SampleTimer::on_box_grid`]),
+    /// whatever the boxes' status says ([`SampleTimeMode::Synced`]).
+    pub fn on_box_grid(self) -> Timing {
+        self.with_mode(SampleTimeMode::Synced)
+    }
+
+    /// The same timing with its method chosen by `mode`.
+    pub fn with_mode(mut self, mode: SampleTimeMode) -> Timing {
+        self.mode = mode;
         self
+    }
+
+    /// The same timing with other error bounds: a synced sample's `synced_ns`, and the
+    /// longest queueing of a packet in its bus, `queue_ns`, for estimated ones.
+    pub fn with_bounds(mut self, synced_ns: f64, queue_ns: f64) -> Timing {
+        self.synced_bound_ns = synced_ns;
+        self.queue_bound_ns = queue_ns;
+        self
+    }
+
+    /// Records timed so far by each method.
+    pub fn method_counts(&self) -> SampleMethodCounts {
+        self.method_counts
     }
 
     /// The same timing with every sample clock fit recomputed from all its points
@@ -147,6 +234,11 @@ impl Timing {
     pub fn new(sample_rate_hz: f64, paths: PathModel) -> Timing {
         Timing {
             samples: SampleTimer::new(sample_rate_hz, paths),
+            mode: SampleTimeMode::Auto,
+            box_syncs: HashMap::new(),
+            method_counts: SampleMethodCounts::default(),
+            synced_bound_ns: SYNCED_SAMPLE_BOUND_NS,
+            queue_bound_ns: ROOT_QUEUE_BOUND_NS,
             exchanges: BoxMap::default(),
             receive: BoxMap::default(),
             boot_ids: HashMap::new(),
@@ -200,6 +292,10 @@ impl Timing {
             source,
         };
         if d.kind() == DatagramKind::Status {
+            self.box_syncs.insert(
+                key,
+                d.flags() & skinbox_protocol::datagram::FLAG_TIME_SYNCS != 0,
+            );
             if let Ok(skinbox_protocol::DatagramRepr {
                 body: skinbox_protocol::datagram::DatagramBody::Status(status),
                 ..
@@ -364,9 +460,29 @@ impl Timing {
             box_id: record.box_id,
             source: record.source,
         };
-        let sample = self
-            .samples
-            .push_for(key, record.port, record.cell.cell_id(), stamp_ns);
+        let cell_id = record.cell.cell_id();
+        let synced = match self.mode {
+            SampleTimeMode::Synced => true,
+            SampleTimeMode::Estimated => false,
+            SampleTimeMode::Auto => self.box_syncs.get(&key) == Some(&true),
+        };
+        let (sample, method, sample_bound) = if synced {
+            self.method_counts.synced += 1;
+            let sample = self.samples.grid_point(cell_id, stamp_ns);
+            (sample, SampleMethod::Synced, self.synced_bound_ns)
+        } else {
+            self.method_counts.estimated += 1;
+            let sample = self.samples.push_for(key, record.port, cell_id, stamp_ns);
+            // the sample lies between the stamp less the path latency (no queue) and that
+            // less the longest queueing, and a tick before the stamp's rounding
+            let latest = (stamp_ns + skinbox_protocol::TICK_NS) as f64
+                - self.samples.paths().latency_ns(cell_id) as f64;
+            let earliest = latest - self.queue_bound_ns - skinbox_protocol::TICK_NS as f64;
+            let bound = (sample.sample_time_ns - earliest)
+                .abs()
+                .max((latest - sample.sample_time_ns).abs());
+            (sample, SampleMethod::Estimated, bound)
+        };
         let sample_box_ns = sample.sample_time_ns;
         let (host, source) = match self
             .exchanges
@@ -391,7 +507,11 @@ impl Timing {
             sample_box_ns,
             sample_index: sample.index,
             sample_host_ns: host.map(|h| h.host_ns),
-            host_error_bound_ns: host.and_then(|h| h.error_bound_ns),
+            method,
+            sample_error_bound_ns: sample_bound,
+            host_error_bound_ns: host
+                .and_then(|h| h.error_bound_ns)
+                .map(|b| b + sample_bound),
             source,
         }
     }
@@ -471,6 +591,51 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_box_that_says_it_sends_time_syncs_has_its_records_on_its_grid() {
+        use skinbox_protocol::datagram::FLAG_TIME_SYNCS;
+        let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
+        t.datagram_received(None, None, &status_with_flags(1, 7, FLAG_TIME_SYNCS));
+        t.datagram_received(None, None, &status_with_flags(2, 7, 0));
+        // sampled at 4 ms, 20 us of processing, 3 us in the root's queue
+        let true_ns = 4_000_000.0;
+        let stamp_tick = (4_000_000 + 20_000 + 3_000) / 8;
+        let synced = t.record(&record(1, 5, stamp_tick));
+        assert_eq!(synced.method, SampleMethod::Synced);
+        assert_eq!(synced.sample_box_ns, true_ns);
+        assert_eq!(synced.sample_error_bound_ns, SYNCED_SAMPLE_BOUND_NS);
+        // box 2 sends no syncs: an estimate, its bound the bus's queueing
+        let estimated = t.record(&record(2, 5, stamp_tick));
+        assert_eq!(estimated.method, SampleMethod::Estimated);
+        assert!((estimated.sample_box_ns - true_ns).abs() <= estimated.sample_error_bound_ns);
+        assert!(estimated.sample_error_bound_ns <= ROOT_QUEUE_BOUND_NS + 16.0);
+        assert!(estimated.sample_error_bound_ns >= ROOT_QUEUE_BOUND_NS - 3_000.0);
+        // box 1 stops sending syncs: its records are estimated from then on
+        t.datagram_received(None, None, &status_with_flags(1, 7, 0));
+        let after = t.record(&record(1, 5, stamp_tick + 500_000));
+        assert_eq!(after.method, SampleMethod::Estimated);
+        assert_eq!(
+            t.method_counts(),
+            SampleMethodCounts {
+                synced: 1,
+                estimated: 2
+            }
+        );
+        // forced either way, whatever the status says
+        let paths = || PathModel::bus_model(Positions::Unknown);
+        let mut forced = Timing::new(250.0, paths()).with_mode(SampleTimeMode::Estimated);
+        forced.datagram_received(None, None, &status_with_flags(1, 7, FLAG_TIME_SYNCS));
+        assert_eq!(
+            forced.record(&record(1, 5, stamp_tick)).method,
+            SampleMethod::Estimated
+        );
+        let mut forced = Timing::new(250.0, paths()).on_box_grid();
+        assert_eq!(
+            forced.record(&record(1, 5, stamp_tick)).method,
+            SampleMethod::Synced
+        );
+    }
+
+    #[test]
     fn exchanges_take_precedence_and_carry_their_bound() {
         let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
         t.exchange(
@@ -487,7 +652,12 @@ pub(crate) mod tests {
         t.datagram_received(None, None, &datagram(3, 1, &[10_000]));
         let times = t.record(&record(3, 1, 10_000));
         assert_eq!(times.source, HostTimeSource::Exchanges);
-        assert!(times.host_error_bound_ns.unwrap() >= 50_000.0);
+        // the mapping's bound (half the 100 us round trip and more) plus the sample's
+        let map_bound = t.summary()[0].error_bound_ns.unwrap();
+        assert!(map_bound >= 50_000.0);
+        assert!(
+            times.host_error_bound_ns.unwrap() >= map_bound + times.sample_error_bound_ns - 1.0
+        );
         assert_eq!(
             Timing::new(250.0, PathModel::bus_model(Positions::Unknown))
                 .record(&record(3, 1, 10_000))
@@ -497,12 +667,16 @@ pub(crate) mod tests {
     }
 
     fn status(box_id: u16, boot_id: u32) -> Vec<u8> {
+        status_with_flags(box_id, boot_id, 0)
+    }
+
+    fn status_with_flags(box_id: u16, boot_id: u32, flags: u8) -> Vec<u8> {
         use skinbox_protocol::datagram::DatagramBody;
         use skinbox_protocol::{DatagramRepr, StatusRepr};
         DatagramRepr {
             box_id,
             port_count: 1,
-            flags: 0,
+            flags,
             sequence: 0,
             base_tick: 0,
             body: DatagramBody::Status(StatusRepr {

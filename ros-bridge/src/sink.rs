@@ -254,6 +254,9 @@ impl TimedRecord {
             sample_box_ns: self.sample_box_ns,
             sample_index: 0,
             sample_host_ns: (self.has & HAS_HOST != 0).then_some(self.sample_host_ns),
+            // not read by `host_time`
+            method: skinbox_host::timing::SampleMethod::Estimated,
+            sample_error_bound_ns: f64::NAN,
             host_error_bound_ns: (self.has & HAS_BOUND != 0).then_some(self.host_error_bound_ns),
             source: self.source,
         })

@@ -238,6 +238,7 @@ struct Outcome {
     passed_over: u64,
     report: skinbox_host::Report,
     host_times: Option<Vec<skinbox_host::timing::BoxTimeSummary>>,
+    sample_methods: Option<skinbox_host::timing::SampleMethodCounts>,
     read_ticks_sent: Option<u64>,
     exchanges_unused: Option<u64>,
     exchange_stamps: Option<skinbox_host::timing::ExchangeStampCounts>,
@@ -252,6 +253,7 @@ fn finish_outputs(
     read_ticks_sent: Option<u64>,
 ) -> anyhow::Result<(
     Option<Vec<skinbox_host::timing::BoxTimeSummary>>,
+    Option<skinbox_host::timing::SampleMethodCounts>,
     Option<skinbox_host::timing::ExchangeStampCounts>,
     Option<skinbox_ros::sink::Published>,
     Option<u64>,
@@ -261,6 +263,11 @@ fn finish_outputs(
         .and_then(|w| w.timing())
         .or(ros.as_ref().map(|r| r.timing()))
         .map(|t| t.summary());
+    let sample_methods = rows
+        .as_ref()
+        .and_then(|w| w.timing())
+        .or(ros.as_ref().map(|r| r.timing()))
+        .map(|t| t.method_counts());
     // which stamps the exchanges' send times are (with --claim and a timing)
     let exchange_stamps = rows
         .as_ref()
@@ -283,7 +290,13 @@ fn finish_outputs(
             Err(e) => return Err(e.into()),
         }
     }
-    Ok((host_times, exchange_stamps, published, exchanges_unused))
+    Ok((
+        host_times,
+        sample_methods,
+        exchange_stamps,
+        published,
+        exchanges_unused,
+    ))
 }
 
 impl Outcome {
@@ -303,6 +316,7 @@ impl Outcome {
                 })),
                 "report": self.report,
                 "host_times": self.host_times,
+                "sample_methods": self.sample_methods,
                 "read_ticks_sent": self.read_ticks_sent,
                 "exchanges_unused": self.exchanges_unused,
                 "exchange_stamps": self.exchange_stamps,
@@ -310,6 +324,9 @@ impl Outcome {
             }));
         }
         print!("{}", self.report.summary());
+        if let Some(methods) = self.sample_methods {
+            println!("sample times: {}", super::sample_method_line(methods));
+        }
         if let Some(times) = &self.host_times {
             println!("host times: {}", super::host_time_line(times));
         }
@@ -419,7 +436,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
         if let Some(w) = recorder {
             w.finish()?.flush()?;
         }
-        let (host_times, exchange_stamps, published, exchanges_unused) =
+        let (host_times, sample_methods, exchange_stamps, published, exchanges_unused) =
             finish_outputs(rows, ros, read_ticks_sent)?;
         let mut report = decoder.report();
         report.frames.frames = stats.datagrams + passed_over;
@@ -438,6 +455,7 @@ pub fn run(args: CaptureArgs, json: bool) -> anyhow::Result<()> {
             passed_over,
             report,
             host_times,
+            sample_methods,
             read_ticks_sent,
             exchanges_unused,
             exchange_stamps,

@@ -92,10 +92,10 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
     if let Some(path) = &args.ros.mcap {
         return record_mcap(&bytes, &options, timing, &args, path, rate_hz, json);
     }
-    let (report, times, rows) = if args.by_host_time {
+    let (report, (times, methods), rows) = if args.by_host_time {
         let mut writer = RowWriter::new(Vec::new(), format, kind).with_timing(timing);
         let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
-        let times = writer.timing().map(|t| t.summary()).unwrap_or_default();
+        let times = timing_summary(&writer);
         let (rows, text) = writer.finish_into()?;
         let sorted = sort_by_host_time(&String::from_utf8_lossy(&text), format);
         let mut out = std::io::BufWriter::new(out);
@@ -109,7 +109,7 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         let mut writer =
             RowWriter::new(std::io::BufWriter::new(out), format, kind).with_timing(timing);
         let report = pcap::decode_pcap_with(&bytes, &options, &mut writer)?;
-        let times = writer.timing().map(|t| t.summary()).unwrap_or_default();
+        let times = timing_summary(&writer);
         let rows = match writer.finish() {
             Ok(rows) => rows,
             // The reader went away (`| head`): not an error of ours.
@@ -129,10 +129,25 @@ pub fn run(args: DecodeArgs, json: bool) -> anyhow::Result<()> {
         report.other_traffic
     );
     eprintln!(
-        "sample times at {rate_hz} Hz; host times: {}",
+        "sample times at {rate_hz} Hz: {}; host times: {}",
+        super::sample_method_line(methods),
         super::host_time_line(&times)
     );
     Ok(())
+}
+
+/// How the writer's records were timed: each box's host-time map, and the records by
+/// sample-time method.
+fn timing_summary<W: std::io::Write>(
+    writer: &RowWriter<W>,
+) -> (
+    Vec<skinbox_host::timing::BoxTimeSummary>,
+    skinbox_host::timing::SampleMethodCounts,
+) {
+    writer
+        .timing()
+        .map(|t| (t.summary(), t.method_counts()))
+        .unwrap_or_default()
 }
 
 /// `--mcap`: the skinbox_msgs topics to an MCAP recording; a summary on stderr (or JSON).

@@ -115,11 +115,16 @@ pub struct TimingArgs {
     /// A cell's processing before its packet leaves, ns (the bus model's 20 us).
     #[arg(long, default_value_t = skinbox_host::sample_clock::PROCESSING_NS)]
     pub processing_ns: u64,
-    /// The cells sample on the box's time grid (time-sync commands, docs/time.md method c):
-    /// a sample's time is the grid point its stamp less the path latency falls on, instead
-    /// of the estimate from each cell's stamps (method b).
-    #[arg(long)]
+    /// Take every cell as sampling on the box's time grid (docs/time.md method c): a
+    /// sample's time is the grid point its stamp less the path latency falls on. Without
+    /// it, or `--estimated`, a box's records are synced once its status datagrams say it
+    /// sends time syncs, and estimated from each cell's stamps (method b) otherwise.
+    #[arg(long, conflicts_with = "estimated")]
     pub synced: bool,
+    /// Estimate every sample time from the cells' stamps (method b), whatever the boxes
+    /// say.
+    #[arg(long)]
+    pub estimated: bool,
 }
 
 impl TimingArgs {
@@ -142,12 +147,32 @@ impl TimingArgs {
                 hops,
             },
         );
-        Ok(if self.synced {
-            timing.on_box_grid()
+        use skinbox_host::timing::SampleTimeMode;
+        Ok(timing.with_mode(if self.synced {
+            SampleTimeMode::Synced
+        } else if self.estimated {
+            SampleTimeMode::Estimated
         } else {
-            timing
-        })
+            SampleTimeMode::Auto
+        }))
     }
+}
+
+/// One line on how the records' sample times were found, with a note where a box's
+/// status did not say it sends time syncs (the estimate, method b, is the fallback).
+pub fn sample_method_line(counts: skinbox_host::timing::SampleMethodCounts) -> String {
+    let mut line = format!(
+        "{} synced to the box's grid (c, bound {:.1} us), {} estimated from stamps (b)",
+        counts.synced,
+        skinbox_host::timing::SYNCED_SAMPLE_BOUND_NS / 1e3,
+        counts.estimated
+    );
+    if counts.estimated > 0 {
+        line += "; note: estimated records are those of boxes that did not say they send time \
+                 syncs (or before their first status datagram): their bounds are the bus's \
+                 queueing, up to 1.6 ms";
+    }
+    line
 }
 
 /// One line on how each box's time was mapped to host time.
