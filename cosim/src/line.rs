@@ -8,6 +8,25 @@
 use skinbox_cells::rng::Rng;
 use skinbox_protocol::TICK_NS;
 
+/// The box of the UART clock-error sweeps (`cosim/tests/baud_mismatch.rs` and the report's
+/// C4a): one port, a 5,000-tick flush timeout and status reports every
+/// [`BAUD_SWEEP_STATUS_TICKS`], so one verilated model serves both.
+pub fn baud_sweep_config() -> skinbox_gateware::interface_box::BoxConfig {
+    skinbox_gateware::interface_box::BoxConfig {
+        ports: 1,
+        flush_timeout_ticks: 5_000,
+        status_period_ticks: BAUD_SWEEP_STATUS_TICKS,
+        ..Default::default()
+    }
+}
+
+/// The sweeps' status period, ticks (8.8 ms): the first periodic report comes after the
+/// last of 150 back-to-back packets on a line up to 8 % slow (8.2 ms) and counts them all.
+pub const BAUD_SWEEP_STATUS_TICKS: u64 = 1_100_000;
+
+/// Cycles a sweep runs: to its first periodic status report and that report's frame out.
+pub const BAUD_SWEEP_CYCLES: u64 = BAUD_SWEEP_STATUS_TICKS + 5_000;
+
 /// One byte on a line.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct UartByte {

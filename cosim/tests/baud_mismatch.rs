@@ -5,13 +5,14 @@
 
 use skinbox_cosim::frames::{assemble, check};
 use skinbox_cosim::harness::play;
-use skinbox_cosim::line::{back_to_back, transitions};
+use skinbox_cosim::line::{
+    back_to_back, baud_sweep_config, transitions, BAUD_SWEEP_CYCLES, BAUD_SWEEP_STATUS_TICKS,
+};
 use skinbox_cosim::reference::predict_frames;
 use skinbox_cosim::sim::RESET_CYCLES;
 use skinbox_cosim::sim::TICK_ZERO_CYCLE;
 use skinbox_cosim::traffic::random_data_packets;
 use skinbox_cosim::{Dut, Model};
-use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::cell::{PACKET_LEN, UART_BITS_PER_PACKET};
 use skinbox_protocol::datagram::DatagramBody;
 use skinbox_protocol::status::PortCounter;
@@ -34,19 +35,16 @@ struct Outcome {
 }
 
 fn run(error_percent: f64) -> Outcome {
-    let config = BoxConfig {
-        ports: 1,
-        flush_timeout_ticks: 5_000,
-        status_period_ticks: 2_000_000,
-        ..BoxConfig::default()
-    };
+    let config = baud_sweep_config();
     let model = Model::build(&config, false, &skinbox_cosim::model::default_cache_dir()).unwrap();
     let mut dut = Dut::new(&model, None).unwrap();
     let sent = random_data_packets(PACKETS);
     let bytes: Vec<u8> = sent.iter().flatten().copied().collect();
     let bit_ns = 250.0 / (1.0 + error_percent / 100.0);
     let line = transitions(&back_to_back(&bytes, 10_000.0, bit_ns));
-    let cycles = (10_000.0 + bytes.len() as f64 * 10.0 * bit_ns) as u64 / 8 + 2_000_100;
+    let end_tick = (10_000.0 + bytes.len() as f64 * 10.0 * bit_ns) as u64 / 8;
+    assert!(end_tick + 2 * 5_000 < BAUD_SWEEP_STATUS_TICKS);
+    let cycles = BAUD_SWEEP_CYCLES;
     let out = play(&mut dut, std::slice::from_ref(&line), RESET_CYCLES, cycles);
     let (frames, _) = assemble(&out);
     // the reference model predicts the same frames, failures included

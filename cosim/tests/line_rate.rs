@@ -1,10 +1,10 @@
 //! Every port busy at UART line rate (20,000 packets/s each, back to back), each line with
 //! its own clock error and +-10 ns of edge jitter: nothing is lost, nothing corrupted,
 //! every stamp lies within one tick after the true (jittered) start edge; the reference
-//! model predicts the same frames. Eight ports (the default box), 40 (both banks of the
-//! packet store), 45 (the board's largest box: busy, idle and edge-of-tolerance lines
-//! through the one deframing engine) and 64 (the largest box, whose receivers hold their
-//! bytes in hold registers) for 10 ms.
+//! model predicts the same frames. Eight ports (the default box), 45 (the board's largest
+//! box: both banks of the packet store; busy lines at clock errors up to +-3 %, idle and
+//! edge-of-tolerance lines through the one deframing engine) and 64 (the largest box, whose
+//! receivers hold their bytes in hold registers) for 10 ms.
 
 use skinbox_cosim::reference::run_reference;
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec};
@@ -15,13 +15,6 @@ use skinbox_protocol::{Channel, DataRepr, EventRepr};
 fn eight_ports_at_line_rate_lose_nothing() {
     // clock errors from -1 % to +1 %
     at_line_rate(8, 120, 0.01);
-}
-
-#[test]
-fn forty_ports_at_line_rate_lose_nothing() {
-    // clock errors from -3 % to +3 %: the fast cells' bytes come 303 clocks apart, the
-    // engine visits each port every 40 clocks
-    at_line_rate(40, 16, 0.03);
 }
 
 #[test]

@@ -13,7 +13,6 @@ use skinbox_cells::{GenerateOptions, Mode, Scene};
 use skinbox_cosim::line::Jitter;
 use skinbox_cosim::sim::{run_rtl, SentPacket, SimSpec};
 use skinbox_cosim::traffic::random_data_packets;
-use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_protocol::cell::PACKET_LEN;
 
 fn baud_errors_pct(quick: bool) -> Vec<f64> {
@@ -99,12 +98,7 @@ pub fn study(
 /// UART runs `error_pct` fast, through the verilated box.
 fn baud_point(error_pct: f64, packets: &[[u8; PACKET_LEN]]) -> anyhow::Result<[f64; 3]> {
     // The configuration of cosim/tests/baud_mismatch.rs: one verilated model serves both.
-    let config = BoxConfig {
-        ports: 1,
-        flush_timeout_ticks: 5_000,
-        status_period_ticks: 2_000_000,
-        ..BoxConfig::default()
-    };
+    let config = skinbox_cosim::line::baud_sweep_config();
     let bit_ns = 250.0 / (1.0 + error_pct / 100.0);
     let sent: Vec<SentPacket> = packets
         .iter()
@@ -116,8 +110,13 @@ fn baud_point(error_pct: f64, packets: &[[u8; PACKET_LEN]]) -> anyhow::Result<[f
         })
         .collect();
     let end_ns = 10_000.0 + packets.len() as f64 * 200.0 * bit_ns;
+    anyhow::ensure!(
+        (end_ns / 8.0) as u64 + 10_000 < skinbox_cosim::line::BAUD_SWEEP_STATUS_TICKS,
+        "{packets} packets at {error_pct} % do not end before the sweep's status report",
+        packets = packets.len()
+    );
     let spec = SimSpec {
-        duration_ns: (end_ns as u64 + 2_000_000 * 8 + 200_000).div_ceil(8) * 8,
+        duration_ns: skinbox_cosim::line::BAUD_SWEEP_CYCLES * 8,
         config,
         ports: vec![sent],
         pcap: None,
