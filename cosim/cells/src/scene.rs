@@ -950,6 +950,13 @@ impl Scene {
                         cell.apply(&repr.command);
                         if let CellCommand::SampleRate(rate) = repr.command {
                             free.set_rate(rate.hz(), t_s, k);
+                            match (&mut synced, free_until_s) {
+                                (Some(clock), None) => clock.set_rate(rate.hz(), k - synced_k),
+                                (Some(clock), Some(_)) => {
+                                    clock.set_rate_before_first_sync(rate.hz())
+                                }
+                                (None, _) => {}
+                            }
                         }
                     }
                     Some(_) => {}

@@ -68,6 +68,8 @@ pub struct SyncedClock {
     /// Grid point of the cell's sample 0 (the first after the first sync arrives; moved
     /// when a sync brings a new time base, a box reset).
     first_grid: i64,
+    /// Box time the cell believes at the first sync it takes, s.
+    first_box_s: f64,
     /// The clock's drift wander and this cell's angle of it.
     wander: Option<(ClockWander, f64)>,
     /// The sync commands as a box sent them: (scene time the command left the box, s;
@@ -149,6 +151,7 @@ impl SyncedClock {
             current: None,
             next: 0,
             first_grid: 0,
+            first_box_s: 0.0,
             wander: None,
             schedule,
             servo: sync.rate.then_some((RateServo::default(), 0, 0)),
@@ -170,6 +173,7 @@ impl SyncedClock {
             None => clock.arrival_s(first),
         };
         clock.first_grid = (first_box_s / period_s).ceil() as i64;
+        clock.first_box_s = first_box_s;
         Some(clock)
     }
 
@@ -285,6 +289,25 @@ impl SyncedClock {
         if (ran_to - set_to).abs() > self.period_s / 2.0 {
             self.first_grid = (set_to / self.period_s).ceil() as i64 - n as i64;
         }
+    }
+
+    /// A sample-rate command taken at sample `n` (the sample stays where it is): from the
+    /// next sample on the cell samples at `hz` on the box's grid, at the first grid point
+    /// of the new period after sample `n`'s.
+    pub fn set_rate(&mut self, hz: f64, n: u64) {
+        let at_s = self.grid_s(n);
+        self.period_s = 1.0 / hz;
+        // the grid point after `at_s` (a grid point of the new period too, to the ns, is not
+        // taken again)
+        let next = (at_s / self.period_s + 1e-6).floor() as i64 + 1;
+        self.first_grid = next - (n as i64 + 1);
+    }
+
+    /// A sample-rate command taken while the cell still runs free: it starts on the grid
+    /// of `hz`, at its first point after the first sync.
+    pub fn set_rate_before_first_sync(&mut self, hz: f64) {
+        self.period_s = 1.0 / hz;
+        self.first_grid = (self.first_box_s / self.period_s).ceil() as i64;
     }
 
     /// The true time the first sync the cell takes reaches it, s (a cell runs free until

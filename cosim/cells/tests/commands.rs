@@ -141,6 +141,59 @@ fn rate_sweep_changes_each_cells_period_at_its_sample_boundary() {
     }
 }
 
+#[test]
+fn a_cell_on_the_boxs_grid_takes_its_new_rate_at_its_sample_boundary_too() {
+    // rate_sweep (62.5 -> 125 -> 250 -> 500 Hz at 1, 2 and 3 s) with a sync every 0.1 s and
+    // the rate servo: every cell samples on the box's grid (box time is scene time here)
+    let scene = load("rate_sweep");
+    let sync = skinbox_cells::TimeSync {
+        rate: true,
+        ..skinbox_cells::TimeSync::every(0.1, &scene.config.bus)
+    };
+    let g = scene.generate(&GenerateOptions {
+        time_sync: Some(sync),
+        ..Default::default()
+    });
+    let steps = [
+        (0u64, 62.5),
+        (1_000_000_000, 125.0),
+        (2_000_000_000, 250.0),
+        (3_000_000_000, 500.0),
+    ];
+    // a sync sets the phase to about a microsecond once the rate is learnt; before that
+    // the drift since the last sync, up to 10 us
+    let tolerance_ns = 12_000.0;
+    let mut checked = 0;
+    for bus in &g.buses {
+        for (position, &id) in bus.cell_ids.iter().enumerate() {
+            let p = packets_of(&g, id);
+            // from the second sync's arrival on (the first takes the cell onto the grid)
+            let settled = arrival_ns(100_000_000, position);
+            for pair in p.windows(2).filter(|w| w[0].0 >= settled) {
+                let (t0, t1) = (pair[0].0, pair[1].0);
+                let step = steps
+                    .iter()
+                    .rposition(|&(leave, _)| leave == 0 || arrival_ns(leave, position) <= t0)
+                    .unwrap();
+                let period = 1e9 / steps[step].1;
+                assert!(
+                    ((t1 - t0) as f64 - period).abs() < tolerance_ns,
+                    "cell {id}: {t0} -> {t1}, {} Hz in force",
+                    steps[step].1
+                );
+                // on the grid of the rate in force
+                let off = (t1 as f64 / period).round() * period - t1 as f64;
+                assert!(
+                    off.abs() < tolerance_ns,
+                    "cell {id}: {t1} is {off} ns off the grid"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 40 * 900, "{checked}");
+}
+
 fn base(commands: &str) -> String {
     format!(
         "[scene]\nduration_s = 1.0\nwarmup_s = 0.1\nseed = 3\ncells = 10\nbuses = 2\n\
