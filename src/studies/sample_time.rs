@@ -37,13 +37,22 @@ pub enum Method {
     Arrival,
     /// (b) host-side estimate of each cell's sample clock.
     Estimated,
-    /// (c) time sync over the downlink; cells on the box's grid.
+    /// (c) time sync over the downlink; cells on the box's grid, setting their phase at
+    /// each sync (or their rate too, with [`Setup::sync_rate`]).
     Synced,
+    /// (c) with the cells' rate servo (phase and rate), beside [`Method::Synced`] where a
+    /// run compares them ([`Setup::compare_servo`]).
+    SyncedRate,
 }
 
 impl Method {
     /// Every method, in the order charted.
-    pub const ALL: [Method; 3] = [Method::Arrival, Method::Estimated, Method::Synced];
+    pub const ALL: [Method; 4] = [
+        Method::Arrival,
+        Method::Estimated,
+        Method::Synced,
+        Method::SyncedRate,
+    ];
 
     /// Name in tables and charts.
     pub fn name(self) -> &'static str {
@@ -51,6 +60,7 @@ impl Method {
             Method::Arrival => "(a) arrival stamp",
             Method::Estimated => "(b) host estimate",
             Method::Synced => "(c) time sync",
+            Method::SyncedRate => "(c) time sync, rate servo",
         }
     }
 }
@@ -88,6 +98,8 @@ pub struct Setup {
     pub sync_rate: bool,
     /// The cells' oscillators' random walk and temperature steps (`None`: none).
     pub oscillator: Option<skinbox_cells::OscillatorNoise>,
+    /// Also run (c) with the rate servo ([`Method::SyncedRate`]).
+    pub compare_servo: bool,
 }
 
 /// The bus model's relay delay per cell, ns.
@@ -113,6 +125,7 @@ impl Setup {
             wander_period_s: 10.0,
             sync_rate: false,
             oscillator: None,
+            compare_servo: false,
         }
     }
 
@@ -440,6 +453,30 @@ pub fn run(setup: &Setup) -> anyhow::Result<RunResult> {
         cpu_ns_per_packet: cpu,
         ..errors(bus_c, &c, from_ns)
     });
+    if setup.compare_servo {
+        let servo = sc.generate(&GenerateOptions {
+            time_sync: Some(TimeSync {
+                rate: true,
+                ..setup.time_sync()
+            }),
+            clock_wander: setup.clock_wander(),
+            ..Default::default()
+        });
+        let bus_s = &stamped(&servo)[0];
+        let (c, cpu) = timed(|| {
+            assign_synced(
+                bus_s,
+                setup.rate_hz,
+                sc.config.bus.processing_ns,
+                setup.hop_latency_ns,
+                setup.downlink_hop_latency_ns,
+            )
+        });
+        methods.push(Errors {
+            cpu_ns_per_packet: cpu,
+            ..errors(bus_s, &c, from_ns)
+        });
+    }
     let stats = &free.buses[0].stats;
     let capacity = (skinbox_cells::bus::UART_BAUD / skinbox_cells::bus::BITS_PER_PACKET) as f64;
     Ok(RunResult {
@@ -579,7 +616,7 @@ struct GridRuns {
     positions: Table,
     worst: HashMap<&'static str, (f64, String)>,
     by_hops_chart: Vec<chart::Series>,
-    cpu_sum: [f64; 3],
+    cpu_sum: [f64; 4],
     runs: f64,
 }
 
@@ -613,7 +650,7 @@ impl GridRuns {
             ]),
             worst: HashMap::new(),
             by_hops_chart: Vec::new(),
-            cpu_sum: [0.0f64; 3],
+            cpu_sum: [0.0f64; 4],
             runs: 0.0,
         }
     }
@@ -624,7 +661,10 @@ impl GridRuns {
         for (name, mode) in scenes() {
             for rate in RATES_HZ {
                 progress.step(&format!("C5: {name} {} at {rate} Hz", mode_name(mode)));
-                let setup = Setup::bus66(name, mode, rate, d);
+                let setup = Setup {
+                    compare_servo: true,
+                    ..Setup::bus66(name, mode, rate, d)
+                };
                 let r: RunResult = grid
                     .run(format!("C5/{name}/{}/{rate}", mode_name(mode)), || {
                         run(&setup)
@@ -715,7 +755,7 @@ impl GridRuns {
         ]);
         let mut cost_chart = Vec::new();
         for (i, m) in Method::ALL.iter().enumerate() {
-            let (bus, link) = if *m == Method::Synced {
+            let (bus, link) = if matches!(m, Method::Synced | Method::SyncedRate) {
                 (bus_c, link_c)
             } else {
                 (0.0, 0.0)
@@ -1188,7 +1228,7 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
     let charts = charts(g.by_hops_chart, cost_chart, &b);
     Ok(Section {
         id: "C5",
-        title: "When was it sampled: sample time error of three methods".into(),
+        title: "When was it sampled: sample time error of three methods, (c) with and without the rate servo".into(),
         text: format!(
             "One bus of 66 cells (the papers' longest chain), {:.0} s after a 1 s warm-up, cells \
              drifting up to 100 ppm, the bus model's latencies (20 us processing, 52 us per \
@@ -1198,8 +1238,9 @@ pub fn study(quick: bool, progress: &mut Progress, grid: &mut Points) -> anyhow:
              sample clock from its stamps and subtracts its position's path latency (no \
              firmware change); (c) models a time-sync command every 0.1 s (cells sample on \
              the box's grid; the host takes the grid point of stamp minus half the cell's \
-             round trip). The default is (b) today and (c) once the downlink exists \
-             (docs/time.md). Costs of (c): one sync command per bus per interval and \
+             round trip), the cells setting their phase at each sync, and with the rate \
+             servo their rate too (docs/time.md, \"The rate servo\"). The host uses (c) for \
+             a box that says it sends syncs, (b) otherwise (docs/time.md). Costs of (c): one sync command per bus per interval and \
              {ROUND_TRIPS} round trips per cell every {ROUND_TRIP_EVERY_S} s. The boundary \
              tests are in `src/studies/sample_time.rs`.",
             d - 1.0
