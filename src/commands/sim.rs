@@ -848,15 +848,22 @@ fn print_summary(o: &Output) {
         h.losses.datagrams_missing, h.losses.event_sequence_gaps, h.losses.event_packets_missing, h.losses.box_packets_lost
     );
     let (a, b) = (&o.arrival_stamp_error_us, &o.sample_time_error_us);
-    println!(
-        "        sample time - true sample time: {} p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} p50 {:.0} us, p99 {:.0} us)",
-        b.method, b.p50, b.p99, b.max, a.method, a.p50, a.p99
-    );
-    if let Some(c) = &o.synced_sample_time_error_us {
-        println!(
-            "        {} through the box's downlink: p50 {:.1} us, p99 {:.1} us, max {:.1} us, worst cell p99 {:.1} us",
-            c.method, c.p50, c.p99, c.max, c.worst_cell_p99
-        );
+    match &o.synced_sample_time_error_us {
+        // the box sent time syncs: the cells sample on its grid, and the host times them so
+        Some(c) => {
+            println!(
+                "        sample time - true sample time: {} (the box's syncs) p50 {:.2} us, p99 {:.2} us, max {:.2} us, worst cell p99 {:.2} us",
+                c.method, c.p50, c.p99, c.max, c.worst_cell_p99
+            );
+            println!(
+                "        the same records by {}: p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} p50 {:.0} us, p99 {:.0} us)",
+                b.method, b.p50, b.p99, b.max, a.method, a.p50, a.p99
+            );
+        }
+        None => println!(
+            "        sample time - true sample time: {} p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} p50 {:.0} us, p99 {:.0} us); the box sent no time syncs",
+            b.method, b.p50, b.p99, b.max, a.method, a.p50, a.p99
+        ),
     }
     println!(
         "speed:  {:.2} M cycles/s, {:.2} s wall for {:.1} ms simulated",
