@@ -297,6 +297,9 @@ fn a_claiming_capture_maps_box_time_by_read_tick_exchanges() {
             "50",
             "--sample-rate-hz",
             "125",
+            // the default scene's 65 cells a bus: each cell's path latency, so each bound
+            "--cells-per-bus",
+            "65",
         ])
         .arg("--rows")
         .arg(&rows)

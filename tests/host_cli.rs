@@ -93,7 +93,7 @@ fn decode_writes_one_row_per_packet() {
     assert_eq!(data["values"].as_object().unwrap().len(), 9);
 
     let out = skinbox()
-        .args(["decode", "--csv", "--samples"])
+        .args(["decode", "--csv", "--samples", "--cells-per-bus", "50"])
         .arg(&path)
         .output()
         .unwrap();
@@ -123,9 +123,10 @@ fn decode_writes_one_row_per_packet() {
         assert_eq!(cells[cells.len() - 2], "", "{row}");
         // a box that says nothing of time syncs: estimated, bounded by the bus's queueing
         assert_eq!(cells[cells.len() - 5], "estimated", "{row}");
+        // (at least half the root queue's 1.6 ms: the estimate lies somewhere in it)
         let sample_bound: f64 = cells[cells.len() - 4].parse().unwrap();
         assert!(
-            (1.5e6..=1.7e6).contains(&sample_bound),
+            sample_bound.is_finite() && sample_bound >= 0.8e6,
             "sample time bound {sample_bound}: {row}"
         );
         match cells[cells.len() - 1] {

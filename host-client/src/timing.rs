@@ -112,7 +112,9 @@ pub struct RecordTimes {
     pub method: SampleMethod,
     /// Error bound of the sample's box time, ns ([`SYNCED_SAMPLE_BOUND_NS`] when synced;
     /// when estimated, the farther end of the interval the bus allows: the stamp less the
-    /// path latency, less up to [`ROOT_QUEUE_BOUND_NS`] of queueing).
+    /// path latency, less up to [`ROOT_QUEUE_BOUND_NS`] of queueing). NaN where the cells'
+    /// positions on their chains are unknown ([`crate::sample_clock::Positions::Unknown`]):
+    /// then nothing bounds the path latency.
     pub sample_error_bound_ns: f64,
     /// Error bound of the sample's host time, ns: the sample's bound plus the mapping's,
     /// where the mapping has one (exchanges; receive timestamps give none).
@@ -466,10 +468,20 @@ impl Timing {
             SampleTimeMode::Estimated => false,
             SampleTimeMode::Auto => self.box_syncs.get(&key) == Some(&true),
         };
+        // bounds only where each cell's path latency is known (its hops to the root)
+        let positions_known = !matches!(
+            self.samples.paths().hops,
+            crate::sample_clock::Positions::Unknown
+        );
         let (sample, method, sample_bound) = if synced {
             self.method_counts.synced += 1;
             let sample = self.samples.grid_point(cell_id, stamp_ns);
-            (sample, SampleMethod::Synced, self.synced_bound_ns)
+            let bound = if positions_known {
+                self.synced_bound_ns
+            } else {
+                f64::NAN
+            };
+            (sample, SampleMethod::Synced, bound)
         } else {
             self.method_counts.estimated += 1;
             let sample = self.samples.push_for(key, record.port, cell_id, stamp_ns);
@@ -481,6 +493,7 @@ impl Timing {
             let bound = (sample.sample_time_ns - earliest)
                 .abs()
                 .max((latest - sample.sample_time_ns).abs());
+            let bound = if positions_known { bound } else { f64::NAN };
             (sample, SampleMethod::Estimated, bound)
         };
         let sample_box_ns = sample.sample_time_ns;
@@ -511,7 +524,8 @@ impl Timing {
             sample_error_bound_ns: sample_bound,
             host_error_bound_ns: host
                 .and_then(|h| h.error_bound_ns)
-                .map(|b| b + sample_bound),
+                .map(|b| b + sample_bound)
+                .filter(|b| !b.is_nan()),
             source,
         }
     }
@@ -593,7 +607,9 @@ pub(crate) mod tests {
     #[test]
     fn a_box_that_says_it_sends_time_syncs_has_its_records_on_its_grid() {
         use skinbox_protocol::datagram::FLAG_TIME_SYNCS;
-        let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
+        // one cell a bus: every cell is a root, its path latency the 20 us of processing
+        let roots = || PathModel::bus_model(Positions::Numbered { cells_per_bus: 1 });
+        let mut t = Timing::new(250.0, roots());
         t.datagram_received(None, None, &status_with_flags(1, 7, FLAG_TIME_SYNCS));
         t.datagram_received(None, None, &status_with_flags(2, 7, 0));
         // sampled at 4 ms, 20 us of processing, 3 us in the root's queue
@@ -621,23 +637,34 @@ pub(crate) mod tests {
             }
         );
         // forced either way, whatever the status says
-        let paths = || PathModel::bus_model(Positions::Unknown);
-        let mut forced = Timing::new(250.0, paths()).with_mode(SampleTimeMode::Estimated);
+        let mut forced = Timing::new(250.0, roots()).with_mode(SampleTimeMode::Estimated);
         forced.datagram_received(None, None, &status_with_flags(1, 7, FLAG_TIME_SYNCS));
         assert_eq!(
             forced.record(&record(1, 5, stamp_tick)).method,
             SampleMethod::Estimated
         );
-        let mut forced = Timing::new(250.0, paths()).on_box_grid();
+        let mut forced = Timing::new(250.0, roots()).on_box_grid();
         assert_eq!(
             forced.record(&record(1, 5, stamp_tick)).method,
             SampleMethod::Synced
         );
+        // where the cells' hops are unknown nothing bounds their path latency: no bounds
+        let unknown = || PathModel::bus_model(Positions::Unknown);
+        for mut t in [
+            Timing::new(250.0, unknown()),
+            Timing::new(250.0, unknown()).on_box_grid(),
+        ] {
+            assert!(t
+                .record(&record(1, 5, stamp_tick))
+                .sample_error_bound_ns
+                .is_nan());
+        }
     }
 
     #[test]
     fn exchanges_take_precedence_and_carry_their_bound() {
-        let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
+        let paths = PathModel::bus_model(Positions::Numbered { cells_per_bus: 1 });
+        let mut t = Timing::new(250.0, paths);
         t.exchange(
             3,
             9,
@@ -723,7 +750,10 @@ pub(crate) mod tests {
 
     #[test]
     fn read_tick_acknowledgements_are_exchanges_once_the_boot_id_is_known() {
-        let mut t = Timing::new(250.0, PathModel::bus_model(Positions::Unknown));
+        let mut t = Timing::new(
+            250.0,
+            PathModel::bus_model(Positions::Numbered { cells_per_bus: 1 }),
+        );
         let at = |ns: u64| Some(Duration::from_nanos(ns));
         // before any status datagram: no boot id, not used
         t.datagram_received(at(2_000_000), None, &read_tick_ack(3, 1_000_000, 1_000));

@@ -31,6 +31,8 @@ def test_a_claimed_capture_gets_every_record_the_box_sent(times):
             claim=emulated.address,
             batch_ms=20,
             exchange_ms=50,
+            # the scene's 65 cells a bus: each cell's path latency, so each time's bound
+            cells_per_bus=65,
             times=times,
         )
         batches = []

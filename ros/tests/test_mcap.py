@@ -189,7 +189,7 @@ def test_capture_records_what_it_received(skinbox_bin, emulated_box, typestore, 
     bag = tmp_path / "live"
     pcap = tmp_path / "live.pcap"
     out = run(skinbox_bin, "--json", "capture", "--listen", "127.0.0.1:0", "--claim", emulated_box,
-              "--duration-ms", "1500", "--mcap", str(bag), "--pcap", str(pcap))
+              "--duration-ms", "1500", "--cells-per-bus", "65", "--mcap", str(bag), "--pcap", str(pcap))
     report = json.loads(out)
     records = report["report"]["records"]
     assert records > 500
