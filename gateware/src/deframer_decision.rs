@@ -8,6 +8,8 @@
 //! new state (`state_write`), the slot write, the commit and one counter increment leave
 //! registers.
 
+use crate::decision_inputs::DecisionInputs;
+use crate::decision_outputs::DecisionOutputs;
 use crate::deframer_scan::SCAN_BITS;
 use crate::geometry::TICK_BEATS;
 use crate::hdl::*;
@@ -98,35 +100,12 @@ pub struct DeframerDecision {
     pub increment: Signal<Out, Bit>,
     /// The counter to increment.
     pub increment_address: Signal<Out, Bits<9>>,
-    data_header: Constant<Bits<8>>,
-    event_header: Constant<Bits<8>>,
-    end_of_packet: Constant<Bits<8>>,
     last_index: Constant<Bits<5>>,
     tick_words: Constant<Bits<5>>,
     // the decision's input registers (cycle t + 3)
-    a_port: DFF<Bits<6>>,
-    a_state: DFF<Bits<STATE_BITS>>,
-    a_tick: DFF<Bits<32>>,
-    a_sampled: DFF<Bits<SCAN_BITS>>,
-    a_truncate: DFF<Bit>,
-    a_header: DFF<Bit>,
-    a_end: DFF<Bit>,
-    a_deadline: DFF<Bits<12>>,
-    a_start_tick: DFF<Bits<32>>,
-    idle: Signal<Local, Bits<12>>,
-    // the decision's registers
-    state_write_out: DFF<Bit>,
-    state_port_out: DFF<Bits<6>>,
-    state_next: DFF<Bits<STATE_BITS>>,
-    tick_next: DFF<Bits<32>>,
-    write_out: DFF<Bit>,
-    write_port_out: DFF<Bits<6>>,
-    write_slot_out: DFF<Bit>,
-    write_word_out: DFF<Bits<5>>,
-    write_data_out: DFF<Bits<9>>,
-    commit_out: DFF<Bit>,
-    increment_out: DFF<Bit>,
-    increment_address_out: DFF<Bits<9>>,
+    visit: DecisionInputs,
+    // the decision's output registers (cycle t + 4)
+    decision_out: DecisionOutputs,
     // the decision
     state: Signal<Local, Bits<STATE_BITS>>,
     next: Signal<Local, Bits<STATE_BITS>>,
@@ -141,9 +120,6 @@ pub struct DeframerDecision {
     index: Signal<Local, Bits<5>>,
     ticks_left: Signal<Local, Bits<3>>,
     events: Signal<Local, Bits<8>>,
-    all_events: Signal<Local, Bits<8>>,
-    lowest: Signal<Local, Bits<3>>,
-    lowest_bit: Signal<Local, Bits<8>>,
     n_in_packet: Signal<Local, Bit>,
     n_index: Signal<Local, Bits<5>>,
     n_aligned: Signal<Local, Bit>,
@@ -194,33 +170,10 @@ impl DeframerDecision {
             commit: Default::default(),
             increment: Default::default(),
             increment_address: Default::default(),
-            data_header: Constant::new(u64::from(framing.data_header).into()),
-            event_header: Constant::new(u64::from(framing.event_header).into()),
-            end_of_packet: Constant::new(u64::from(framing.end_of_packet).into()),
             last_index: Constant::new((PACKET_LEN as u64 - 1).into()),
             tick_words: Constant::new((TICK_BEATS as u64).into()),
-            a_port: Default::default(),
-            a_state: Default::default(),
-            a_tick: Default::default(),
-            a_sampled: Default::default(),
-            a_truncate: Default::default(),
-            a_header: Default::default(),
-            a_end: Default::default(),
-            a_deadline: Default::default(),
-            a_start_tick: Default::default(),
-            idle: Default::default(),
-            state_write_out: Default::default(),
-            state_port_out: Default::default(),
-            state_next: Default::default(),
-            tick_next: Default::default(),
-            write_out: Default::default(),
-            write_port_out: Default::default(),
-            write_slot_out: Default::default(),
-            write_word_out: Default::default(),
-            write_data_out: Default::default(),
-            commit_out: Default::default(),
-            increment_out: Default::default(),
-            increment_address_out: Default::default(),
+            visit: DecisionInputs::new(framing),
+            decision_out: Default::default(),
             state: Default::default(),
             next: Default::default(),
             held_byte: Default::default(),
@@ -234,9 +187,6 @@ impl DeframerDecision {
             index: Default::default(),
             ticks_left: Default::default(),
             events: Default::default(),
-            all_events: Default::default(),
-            lowest: Default::default(),
-            lowest_bit: Default::default(),
             n_in_packet: Default::default(),
             n_index: Default::default(),
             n_aligned: Default::default(),
@@ -266,53 +216,24 @@ impl DeframerDecision {
 impl Logic for DeframerDecision {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(
-            self,
-            clock,
-            a_port,
-            a_state,
-            a_tick,
-            a_sampled,
-            a_truncate,
-            a_header,
-            a_end,
-            a_deadline,
-            a_start_tick,
-            state_write_out,
-            state_port_out,
-            state_next,
-            tick_next,
-            write_out,
-            write_port_out,
-            write_slot_out,
-            write_word_out,
-            write_data_out,
-            commit_out,
-            increment_out,
-            increment_address_out
-        );
-        // cycle t + 2: into the decision's input registers; idle: now (with a byte held,
-        // its strobe) - deadline, signed: one carry chain from the RAM's output register
-        self.idle.next = self.idle_end.val() - self.state_read.val().get_bits::<12>(14);
-        self.a_port.d.next = self.port.val();
-        self.a_state.d.next = self.state_read.val();
-        self.a_tick.d.next = self.tick_read.val();
-        self.a_sampled.d.next = self.sampled.val();
-        self.a_truncate.d.next = self.state_read.val().get_bit(0) & !self.idle.val().get_bit(11);
-        self.a_header.d.next = !self.sampled.val().get_bit(15)
-            & ((self.sampled.val().get_bits::<8>(0) == self.data_header.val())
-                | (self.sampled.val().get_bits::<8>(0) == self.event_header.val()));
-        self.a_end.d.next = self.sampled.val().get_bits::<8>(0) == self.end_of_packet.val();
-        self.a_deadline.d.next = self.deadline.val();
-        self.a_start_tick.d.next = self.start_tick.val();
+        // cycle t + 2: into the decision's input registers, with the truncation test (the
+        // one carry chain) and the header and end-of-packet tests
+        self.visit.clock.next = self.clock.val();
+        self.visit.port.next = self.port.val();
+        self.visit.sampled.next = self.sampled.val();
+        self.visit.idle_end.next = self.idle_end.val();
+        self.visit.deadline.next = self.deadline.val();
+        self.visit.start_tick.next = self.start_tick.val();
+        self.visit.state_read.next = self.state_read.val();
+        self.visit.tick_read.next = self.tick_read.val();
 
         // cycle t + 3: the decision, from registers only
-        self.state.next = self.a_state.q.val();
-        self.held_byte.next = self.a_sampled.q.val().get_bits::<8>(0);
-        self.held_now.next = self.a_sampled.q.val().get_bit(16);
-        self.byte_error.next = self.a_sampled.q.val().get_bit(15);
-        self.full.next = self.a_sampled.q.val().get_bit(17);
-        self.truncate.next = self.a_truncate.q.val();
+        self.state.next = self.visit.held_state.val();
+        self.held_byte.next = self.visit.held_sampled.val().get_bits::<8>(0);
+        self.held_now.next = self.visit.held_sampled.val().get_bit(16);
+        self.byte_error.next = self.visit.held_sampled.val().get_bit(15);
+        self.full.next = self.visit.held_sampled.val().get_bit(17);
+        self.truncate.next = self.visit.truncate.val();
         self.in_packet.next = self.state.val().get_bit(0) & !self.truncate.val();
         self.aligned.next = self.state.val().get_bit(6) & !self.truncate.val();
         self.loss.next = self.state.val().get_bit(8) | self.truncate.val();
@@ -328,7 +249,7 @@ impl Logic for DeframerDecision {
         self.n_dropping.next = self.state.val().get_bit(10);
         self.n_ticks_left.next = self.ticks_left.val();
         self.n_last.next = self.state.val().get_bits::<12>(14);
-        self.n_tick.next = self.a_tick.q.val();
+        self.n_tick.next = self.visit.held_tick.val();
         self.events.next = 0.into();
         self.word_write.next = false;
         self.word.next = bit_cast::<5, 3>(self.ticks_left.val());
@@ -338,18 +259,18 @@ impl Logic for DeframerDecision {
             self.events.next = self.truncated_event.val() | self.resync_event.val();
         }
         if self.held_now.val() {
-            self.n_last.next = self.a_deadline.q.val();
+            self.n_last.next = self.visit.held_deadline.val();
             if self.byte_error.val() {
                 self.events.next = self.events.val() | self.framing_error_event.val();
             }
             if !self.in_packet.val() {
-                if self.a_header.q.val() {
+                if self.visit.header.val() {
                     self.n_in_packet.next = true;
                     self.n_index.next = 1.into();
                     self.n_dropping.next = self.full.val();
                     self.n_flag.next = self.loss.val();
                     self.n_ticks_left.next = 4.into();
-                    self.n_tick.next = self.a_start_tick.q.val();
+                    self.n_tick.next = self.visit.held_start_tick.val();
                     self.word_write.next = !self.full.val();
                     self.word.next = 4.into();
                 } else {
@@ -371,7 +292,7 @@ impl Logic for DeframerDecision {
                         self.events.val() | self.framing_event.val() | self.resync_event.val();
                 } else if self.index.val() == self.last_index.val() {
                     self.n_in_packet.next = false;
-                    if self.a_end.q.val() {
+                    if self.visit.end_byte.val() {
                         self.n_aligned.next = true;
                         self.events.next = self.events.val() | self.good_event.val();
                         if self.state.val().get_bit(10) {
@@ -394,37 +315,9 @@ impl Logic for DeframerDecision {
             // a start tick byte, most significant first, at a visit without a byte
             self.word_write.next = true;
             self.word.next = self.tick_words.val() - bit_cast::<5, 3>(self.ticks_left.val());
-            self.word_data.next = self.a_tick.q.val().get_bits::<8>(24);
-            self.n_tick.next = self.a_tick.q.val() << 8;
+            self.word_data.next = self.visit.held_tick.val().get_bits::<8>(24);
+            self.n_tick.next = self.visit.held_tick.val() << 8;
             self.n_ticks_left.next = self.ticks_left.val() - 1;
-        }
-        // one pending event counted per visit: the lowest
-        self.all_events.next = self.state.val().get_bits::<8>(26) | self.events.val();
-        self.lowest.next = 0.into();
-        self.lowest_bit.next = 0.into();
-        if self.all_events.val().get_bit(0) {
-            self.lowest_bit.next = 1.into();
-        } else if self.all_events.val().get_bit(1) {
-            self.lowest.next = 1.into();
-            self.lowest_bit.next = 2.into();
-        } else if self.all_events.val().get_bit(2) {
-            self.lowest.next = 2.into();
-            self.lowest_bit.next = 4.into();
-        } else if self.all_events.val().get_bit(3) {
-            self.lowest.next = 3.into();
-            self.lowest_bit.next = 8.into();
-        } else if self.all_events.val().get_bit(4) {
-            self.lowest.next = 4.into();
-            self.lowest_bit.next = 16.into();
-        } else if self.all_events.val().get_bit(5) {
-            self.lowest.next = 5.into();
-            self.lowest_bit.next = 32.into();
-        } else if self.all_events.val().get_bit(6) {
-            self.lowest.next = 6.into();
-            self.lowest_bit.next = 64.into();
-        } else if self.all_events.val().get_bit(7) {
-            self.lowest.next = 7.into();
-            self.lowest_bit.next = 128.into();
         }
         self.next.next = bit_cast::<STATE_BITS, 1>(self.n_in_packet.val().into())
             | (bit_cast::<STATE_BITS, 5>(self.n_index.val()) << 1)
@@ -434,45 +327,35 @@ impl Logic for DeframerDecision {
             | (bit_cast::<STATE_BITS, 1>(self.n_flag.val().into()) << 9)
             | (bit_cast::<STATE_BITS, 1>(self.n_dropping.val().into()) << 10)
             | (bit_cast::<STATE_BITS, 3>(self.n_ticks_left.val()) << 11)
-            | (bit_cast::<STATE_BITS, 12>(self.n_last.val()) << 14)
-            | (bit_cast::<STATE_BITS, 8>(self.all_events.val() & !self.lowest_bit.val()) << 26);
+            | (bit_cast::<STATE_BITS, 12>(self.n_last.val()) << 14);
         // the decision's registers (the ports' reset clears each visited port's state)
-        self.state_write_out.d.next = true;
-        self.state_port_out.d.next = self.a_port.q.val();
-        self.state_next.d.next = self.next.val();
-        self.tick_next.d.next = self.n_tick.val();
-        self.write_out.d.next = self.word_write.val() & !self.port_reset.val();
-        self.write_port_out.d.next = self.a_port.q.val();
-        self.write_slot_out.d.next = self.state.val().get_bit(7);
-        self.write_word_out.d.next = self.word.val();
-        self.write_data_out.d.next = bit_cast::<9, 8>(self.word_data.val())
+        self.decision_out.clock.next = self.clock.val();
+        self.decision_out.reset.next = self.reset.val();
+        self.decision_out.port_reset.next = self.port_reset.val();
+        self.decision_out.port.next = self.visit.held_port.val();
+        self.decision_out.next_state.next = self.next.val();
+        self.decision_out.next_tick.next = self.n_tick.val();
+        self.decision_out.word_write.next = self.word_write.val();
+        self.decision_out.slot.next = self.state.val().get_bit(7);
+        self.decision_out.word.next = self.word.val();
+        self.decision_out.word_data.next = bit_cast::<9, 8>(self.word_data.val())
             | (bit_cast::<9, 1>(self.n_flag.val().into()) << 8);
-        self.commit_out.d.next = self.commit_now.val() & !self.port_reset.val();
-        self.increment_out.d.next = (self.all_events.val() != 0) & !self.port_reset.val();
-        self.increment_address_out.d.next =
-            (bit_cast::<9, 6>(self.a_port.q.val()) << 3) | bit_cast::<9, 3>(self.lowest.val());
-        if self.port_reset.val() {
-            self.state_next.d.next = 0.into();
-            self.tick_next.d.next = 0.into();
-        }
-        self.state_write.next = self.state_write_out.q.val();
-        self.state_port.next = self.state_port_out.q.val();
-        self.state_data.next = self.state_next.q.val();
-        self.tick_data.next = self.tick_next.q.val();
-        self.write.next = self.write_out.q.val();
-        self.write_port.next = self.write_port_out.q.val();
-        self.write_slot.next = self.write_slot_out.q.val();
-        self.write_word.next = self.write_word_out.q.val();
-        self.write_data.next = self.write_data_out.q.val();
-        self.commit.next = self.commit_out.q.val();
-        self.increment.next = self.increment_out.q.val();
-        self.increment_address.next = self.increment_address_out.q.val();
-        if self.reset.val() {
-            self.state_write_out.d.next = false;
-            self.write_out.d.next = false;
-            self.commit_out.d.next = false;
-            self.increment_out.d.next = false;
-        }
+        self.decision_out.commit_now.next = self.commit_now.val();
+        // one pending event counted per visit: the lowest (the others stay in the state)
+        self.decision_out.pending.next = self.state.val().get_bits::<8>(26);
+        self.decision_out.events.next = self.events.val();
+        self.state_write.next = self.decision_out.state_write.val();
+        self.state_port.next = self.decision_out.state_port.val();
+        self.state_data.next = self.decision_out.state_data.val();
+        self.tick_data.next = self.decision_out.tick_data.val();
+        self.write.next = self.decision_out.write.val();
+        self.write_port.next = self.decision_out.write_port.val();
+        self.write_slot.next = self.decision_out.write_slot.val();
+        self.write_word.next = self.decision_out.write_word.val();
+        self.write_data.next = self.decision_out.write_data.val();
+        self.commit.next = self.decision_out.commit.val();
+        self.increment.next = self.decision_out.increment.val();
+        self.increment_address.next = self.decision_out.increment_address.val();
     }
 }
 

@@ -45,14 +45,14 @@
 use crate::arp_receiver::ArpReceiver;
 use crate::command_decoder::CommandDecoder;
 use crate::ethernet_demux::EthernetDemux;
+use crate::frame_end_checks::FrameEndChecks;
 use crate::hdl::*;
 use crate::ipv4_receiver::Ipv4Receiver;
+use crate::parser_input::ParserInput;
 use crate::receive_rules::{ReceiveRules, RULES_LATENCY};
 use crate::stream::ByteStreamSink;
 use crate::transport_receiver::TransportReceiver;
-use skinbox_protocol::link::{
-    LinkConfig, ARGUMENTS_AT, ARP_AT, IPV4_AT, MIN_FRAME_LEN, PAYLOAD_AT,
-};
+use skinbox_protocol::link::{LinkConfig, ARP_AT, IPV4_AT, MIN_FRAME_LEN};
 use skinbox_protocol::wire::{arp, ethernet};
 
 /// Clocks from the last beat on `frame` (clock `c`) to `decided` (high in clock `c +
@@ -63,16 +63,6 @@ pub const DECISION_LATENCY: u64 = 3 + RULES_LATENCY;
 const _: () = assert!(ethernet::field::ETHERTYPE.end == IPV4_AT && IPV4_AT == ARP_AT);
 // the ARP body ends inside the 60 bytes every frame has
 const _: () = assert!(ARP_AT + arp::PACKET_LEN <= MIN_FRAME_LEN);
-
-/// A frame position as a kernel constant (compared with the 11-bit beat index).
-fn position(at: usize) -> Constant<Bits<11>> {
-    constant(at as u64)
-}
-
-/// A length as a kernel constant (compared with 16-bit lengths).
-fn length(len: usize) -> Constant<Bits<16>> {
-    constant(len as u64)
-}
 
 /// Checks received frames (steps 1-16 of docs/control.md) and writes them into the frame
 /// buffer; see the module documentation.
@@ -126,38 +116,9 @@ pub struct FrameParser {
     /// The first 12 argument bytes, the first in bits 95..88; bytes past the arguments 0.
     pub command_arguments: Signal<Out, Bits<96>>,
 
-    // build-time constants
-    // frame positions
-    source_mac_at: Constant<Bits<11>>,
-    ethertype_at: Constant<Bits<11>>,
-    // field positions in the captures
-    // lengths
-    ip_and_transport_header_len: Constant<Bits<16>>,
-    ip_to_arguments_len: Constant<Bits<16>>,
-
-    // input side: the next beat's position (0 between frames) and the stored flag
-    in_frame: DFF<Bit>,
-    next_index: DFF<Bits<11>>,
-    stored: DFF<Bit>,
-    // the registered beat
-    beat_valid: DFF<Bit>,
-    beat_last: DFF<Bit>,
-    beat_error: DFF<Bit>,
-    beat_length_error: DFF<Bit>,
-    beat_data: DFF<Bits<8>>,
-    beat_index: DFF<Bits<11>>,
-    // where the registered beat is in the frame
-    at_first: DFF<Bit>,
-    at_source: DFF<Bit>,
-    beat_word: DFF<Bits<16>>,
-    index_in: Signal<Local, Bits<11>>,
-    word_in: Signal<Local, Bits<16>>,
-    // captures
-    source_mac: DFF<Bits<48>>,
-    // the IPv4 payload's bytes after the current one, and whether the current one (from
-    // byte 34) is in it
-    // the sums: the IPv4 header, the transport message (with the UDP pseudo header), and
-    // the ICMP message from its identifier
+    // the registered beat, its position and flags, the stored flag, the sender's MAC and
+    // the stored frame's tick
+    beats_in: ParserInput,
     // the layers, and the IPv4 header's fields
     ethernet: EthernetDemux,
     arp: ArpReceiver,
@@ -166,23 +127,9 @@ pub struct FrameParser {
     command: CommandDecoder,
     // the rule table
     rules: ReceiveRules,
-    // end of frame
-    end_length_error: DFF<Bit>,
-    end_error: DFF<Bit>,
-    end_stored: DFF<Bit>,
-    end_fits: DFF<Bit>,
-    // stage 1: compares
-    p1: DFF<Bit>,
-    p2: DFF<Bit>,
-    s1_length_error: DFF<Bit>,
-    s1_error: DFF<Bit>,
-    s1_total_from_28: DFF<Bit>,
-    s1_total_from_52: DFF<Bit>,
-    s1_fits: DFF<Bit>,
-    // stage 2: the checks
-    // stage 3: the Ethernet level and the IPv4 level resolved
+    // the checks of the frame's end, staged for the rule table
+    end_checks: FrameEndChecks,
     // outputs
-    held_receive_tick: DFF<Bits<64>>,
     held_total_length: DFF<Bits<16>>,
     held_rest_sum: DFF<Bits<16>>,
 }
@@ -215,43 +162,14 @@ impl FrameParser {
             command_sequence: Default::default(),
             command_argument_length: Default::default(),
             command_arguments: Default::default(),
-            source_mac_at: position(ethernet::field::SOURCE.start),
-            ethertype_at: position(ethernet::field::ETHERTYPE.start),
-            ip_and_transport_header_len: length(PAYLOAD_AT - IPV4_AT),
-            ip_to_arguments_len: length(ARGUMENTS_AT - IPV4_AT),
-            in_frame: Default::default(),
-            next_index: Default::default(),
-            stored: Default::default(),
-            beat_valid: Default::default(),
-            beat_last: Default::default(),
-            beat_error: Default::default(),
-            beat_length_error: Default::default(),
-            beat_data: Default::default(),
-            beat_index: Default::default(),
-            at_first: Default::default(),
-            at_source: Default::default(),
-            beat_word: Default::default(),
-            index_in: Default::default(),
-            word_in: Default::default(),
-            source_mac: Default::default(),
+            beats_in: Default::default(),
             ethernet: EthernetDemux::new(link.box_mac),
             arp: ArpReceiver::new(link.box_ip),
             ipv4: Ipv4Receiver::new(link.box_ip, link.host_subnet, link.host_subnet_prefix_len),
             transport: TransportReceiver::new(link.box_port),
             command: Default::default(),
             rules: Default::default(),
-            end_length_error: Default::default(),
-            end_error: Default::default(),
-            end_stored: Default::default(),
-            end_fits: Default::default(),
-            p1: Default::default(),
-            p2: Default::default(),
-            s1_length_error: Default::default(),
-            s1_error: Default::default(),
-            s1_total_from_28: Default::default(),
-            s1_total_from_52: Default::default(),
-            s1_fits: Default::default(),
-            held_receive_tick: Default::default(),
+            end_checks: Default::default(),
             held_total_length: Default::default(),
             held_rest_sum: Default::default(),
         }
@@ -267,197 +185,121 @@ impl Default for FrameParser {
 impl Logic for FrameParser {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(
-            self,
-            clock,
-            in_frame,
-            next_index,
-            stored,
-            beat_valid,
-            beat_last,
-            beat_error,
-            beat_length_error,
-            beat_data,
-            beat_index,
-            at_first,
-            at_source,
-            beat_word,
-            source_mac,
-            end_length_error,
-            end_error,
-            end_stored,
-            end_fits,
-            p1,
-            p2,
-            s1_length_error,
-            s1_error,
-            s1_total_from_28,
-            s1_total_from_52,
-            s1_fits,
-            held_receive_tick,
-            held_total_length,
-            held_rest_sum
-        );
+        dff_setup!(self, clock, held_total_length, held_rest_sum);
         self.frame.ready.next = true;
 
-        // ---- input side: index the beat, sample the lock at the first beat ----
-        self.beat_valid.d.next = self.frame.valid.val();
-        self.beat_last.d.next = self.frame.valid.val() & self.frame.last.val();
-        self.beat_error.d.next = self.frame.error.val();
-        self.beat_length_error.d.next = self.length_error.val();
-        self.beat_data.d.next = self.frame.data.val();
-        // the arriving beat's position: `next_index` is 0 between frames (a frame's last
-        // beat and the reset set it back), so the listeners' decodes take it straight
-        // from the register, with no choice in front of their fan-out
-        self.index_in.next = self.next_index.q.val();
-        // position flags of the next registered beat: equality decodes only (a range
-        // starts at its first byte and ends at the byte after it or at a frame's start)
-        if self.frame.valid.val() {
-            self.at_first.d.next = self.index_in.val() == 0;
-            self.at_source.d.next = (self.index_in.val() == self.source_mac_at.val())
-                | (self.at_source.q.val()
-                    & (self.index_in.val() != self.ethertype_at.val())
-                    & self.in_frame.q.val());
-        }
-        // the byte as a 16-bit word: even frame positions are high bytes
-        self.word_in.next = bit_cast::<16, 8>(self.frame.data.val()) << 8;
-        if self.next_index.q.val().get_bit(0) {
-            self.word_in.next = bit_cast::<16, 8>(self.frame.data.val());
-        }
-        self.beat_word.d.next = self.word_in.val();
-        if self.frame.valid.val() {
-            self.beat_index.d.next = self.next_index.q.val();
-            self.next_index.d.next = self.next_index.q.val() + 1;
-            if self.frame.last.val() {
-                self.next_index.d.next = 0.into();
-            }
-            if !self.in_frame.q.val() {
-                self.stored.d.next = !self.buffer_locked.val();
-            }
-            self.in_frame.d.next = !self.frame.last.val();
-            // the tick of a stored frame's last beat, held until the next stored frame's
-            // (only a stored frame is answered, and none is stored while a reply holds the
-            // buffer)
-            if self.frame.last.val()
-                & ((self.in_frame.q.val() & self.stored.q.val())
-                    | (!self.in_frame.q.val() & !self.buffer_locked.val()))
-            {
-                self.held_receive_tick.d.next = self.tick.val();
-            }
-        }
+        // ---- input side: the beat registered with its position, the lock sampled at the
+        // first beat ----
+        self.beats_in.clock.next = self.clock.val();
+        self.beats_in.reset.next = self.reset.val();
+        self.beats_in.frame_valid.next = self.frame.valid.val();
+        self.beats_in.frame_last.next = self.frame.last.val();
+        self.beats_in.frame_error.next = self.frame.error.val();
+        self.beats_in.frame_data.next = self.frame.data.val();
+        self.beats_in.length_error.next = self.length_error.val();
+        self.beats_in.buffer_locked.next = self.buffer_locked.val();
+        self.beats_in.tick.next = self.tick.val();
 
         // ---- the registered beat: buffer write ----
-        self.buffer_write_enable.next = self.beat_valid.q.val() & self.stored.q.val();
-        self.buffer_write_address.next = self.beat_index.q.val();
-        self.buffer_write_data.next = self.beat_data.q.val();
+        self.buffer_write_enable.next = self.beats_in.beat_valid.val() & self.beats_in.stored.val();
+        self.buffer_write_address.next = self.beats_in.beat_index.val();
+        self.buffer_write_data.next = self.beats_in.beat_data.val();
 
         // ---- captures by byte position ----
         // the layers listen to the beats
         self.ethernet.clock.next = self.clock.val();
         self.ethernet.beats.next_valid.next = self.frame.valid.val();
-        self.ethernet.beats.next_index.next = self.index_in.val();
-        self.ethernet.beats.in_frame.next = self.in_frame.q.val();
-        self.ethernet.beats.beat_valid.next = self.beat_valid.q.val();
-        self.ethernet.beats.beat_data.next = self.beat_data.q.val();
-        self.ethernet.beat_first.next = self.at_first.q.val();
+        self.ethernet.beats.next_index.next = self.beats_in.index_in.val();
+        self.ethernet.beats.in_frame.next = self.beats_in.in_frame.val();
+        self.ethernet.beats.beat_valid.next = self.beats_in.beat_valid.val();
+        self.ethernet.beats.beat_data.next = self.beats_in.beat_data.val();
+        self.ethernet.beat_first.next = self.beats_in.beat_first.val();
         self.arp.clock.next = self.clock.val();
         self.arp.beats.next_valid.next = self.frame.valid.val();
-        self.arp.beats.next_index.next = self.index_in.val();
-        self.arp.beats.in_frame.next = self.in_frame.q.val();
-        self.arp.beats.beat_valid.next = self.beat_valid.q.val();
-        self.arp.beats.beat_data.next = self.beat_data.q.val();
+        self.arp.beats.next_index.next = self.beats_in.index_in.val();
+        self.arp.beats.in_frame.next = self.beats_in.in_frame.val();
+        self.arp.beats.beat_valid.next = self.beats_in.beat_valid.val();
+        self.arp.beats.beat_data.next = self.beats_in.beat_data.val();
         self.ipv4.clock.next = self.clock.val();
         self.ipv4.beats.next_valid.next = self.frame.valid.val();
-        self.ipv4.beats.next_index.next = self.index_in.val();
-        self.ipv4.beats.in_frame.next = self.in_frame.q.val();
-        self.ipv4.beats.beat_valid.next = self.beat_valid.q.val();
-        self.ipv4.beats.beat_data.next = self.beat_data.q.val();
-        self.ipv4.beat_first.next = self.at_first.q.val();
-        self.ipv4.beat_word.next = self.beat_word.q.val();
+        self.ipv4.beats.next_index.next = self.beats_in.index_in.val();
+        self.ipv4.beats.in_frame.next = self.beats_in.in_frame.val();
+        self.ipv4.beats.beat_valid.next = self.beats_in.beat_valid.val();
+        self.ipv4.beats.beat_data.next = self.beats_in.beat_data.val();
+        self.ipv4.beat_first.next = self.beats_in.beat_first.val();
+        self.ipv4.beat_word.next = self.beats_in.beat_word.val();
         self.command.clock.next = self.clock.val();
         self.command.beats.next_valid.next = self.frame.valid.val();
-        self.command.beats.next_index.next = self.index_in.val();
-        self.command.beats.in_frame.next = self.in_frame.q.val();
-        self.command.beats.beat_valid.next = self.beat_valid.q.val();
-        self.command.beats.beat_data.next = self.beat_data.q.val();
-        self.command.beat_first.next = self.at_first.q.val();
+        self.command.beats.next_index.next = self.beats_in.index_in.val();
+        self.command.beats.in_frame.next = self.beats_in.in_frame.val();
+        self.command.beats.beat_valid.next = self.beats_in.beat_valid.val();
+        self.command.beats.beat_data.next = self.beats_in.beat_data.val();
+        self.command.beat_first.next = self.beats_in.beat_first.val();
         self.command.beat_in_packet.next = self.ipv4.in_payload.val();
         self.command.payload_length.next = self.ipv4.payload_length.val();
         self.transport.clock.next = self.clock.val();
         self.transport.beats.next_valid.next = self.frame.valid.val();
-        self.transport.beats.next_index.next = self.index_in.val();
-        self.transport.beats.in_frame.next = self.in_frame.q.val();
-        self.transport.beats.beat_valid.next = self.beat_valid.q.val();
-        self.transport.beats.beat_data.next = self.beat_data.q.val();
-        self.transport.beat_first.next = self.at_first.q.val();
-        self.transport.next_word.next = self.word_in.val();
+        self.transport.beats.next_index.next = self.beats_in.index_in.val();
+        self.transport.beats.in_frame.next = self.beats_in.in_frame.val();
+        self.transport.beats.beat_valid.next = self.beats_in.beat_valid.val();
+        self.transport.beats.beat_data.next = self.beats_in.beat_data.val();
+        self.transport.beat_first.next = self.beats_in.beat_first.val();
+        self.transport.next_word.next = self.beats_in.word_in.val();
         self.transport.carries_udp.next = self.ipv4.carries_udp.val();
         self.transport.in_payload.next = self.ipv4.in_payload.val();
         self.transport.payload_length.next = self.ipv4.payload_length.val();
 
-        if self.beat_valid.q.val() {
-            if self.at_source.q.val() {
-                self.source_mac.d.next =
-                    (self.source_mac.q.val() << 8) | bit_cast::<48, 8>(self.beat_data.q.val());
-            }
-            if self.beat_last.q.val() {
-                self.end_length_error.d.next = self.beat_length_error.q.val();
-                self.end_error.d.next = self.beat_error.q.val();
-                self.end_stored.d.next = self.stored.q.val();
-                self.end_fits.d.next = self.ipv4.fits.val();
-            }
-        }
-
-        // ---- stage 1 (the clock after the last beat was registered): compares ----
-        self.p1.d.next = self.beat_valid.q.val() & self.beat_last.q.val();
-        // (the checks of the frame's end, `s1_fits` and the errors, stand a clock later)
-        self.p2.d.next = self.p1.q.val();
-        self.s1_length_error.d.next = self.end_length_error.q.val();
-        self.s1_error.d.next = self.end_error.q.val();
-        self.s1_total_from_28.d.next =
-            self.ipv4.total_length.val() >= self.ip_and_transport_header_len.val();
-        self.s1_total_from_52.d.next =
-            self.ipv4.total_length.val() >= self.ip_to_arguments_len.val();
-        self.s1_fits.d.next = self.end_fits.q.val();
+        // ---- the frame's end: its flags, then the total length's compares ----
+        self.end_checks.clock.next = self.clock.val();
+        self.end_checks.reset.next = self.reset.val();
+        self.end_checks.beat_valid.next = self.beats_in.beat_valid.val();
+        self.end_checks.beat_last.next = self.beats_in.beat_last.val();
+        self.end_checks.beat_error.next = self.beats_in.beat_error.val();
+        self.end_checks.beat_length_error.next = self.beats_in.beat_length_error.val();
+        self.end_checks.stored.next = self.beats_in.stored.val();
+        self.end_checks.fits.next = self.ipv4.fits.val();
+        self.end_checks.total_length.next = self.ipv4.total_length.val();
 
         // ---- the rule table (steps 1-16a) over the checks ----
         self.rules.clock.next = self.clock.val();
         self.rules.reset.next = self.reset.val();
-        self.rules.check.next = self.p2.q.val();
-        self.rules.bad_length.next = self.s1_length_error.q.val();
-        self.rules.bad_fcs.next = self.s1_error.q.val();
+        self.rules.check.next = self.end_checks.check.val();
+        self.rules.bad_length.next = self.end_checks.bad_length.val();
+        self.rules.bad_fcs.next = self.end_checks.bad_fcs.val();
         self.rules.not_to_box.next = !(self.ethernet.to_box.val() | self.ethernet.broadcast.val());
         self.rules.arp.next = self.ethernet.is_arp.val();
         self.rules.arp_for_box.next = self.arp.request_for_box.val();
         self.rules.ipv4.next = self.ethernet.ipv4.val() & !self.ethernet.broadcast.val();
         self.rules.bad_version.next = self.ipv4.bad_version.val();
         self.rules.options.next = self.ipv4.options.val();
-        self.rules.bad_header.next = self.ipv4.bad_header.val() | !self.s1_fits.q.val();
+        self.rules.bad_header.next =
+            self.ipv4.bad_header.val() | !self.end_checks.packet_fits.val();
         self.rules.fragment.next = self.ipv4.fragment.val();
         self.rules.ip_not_to_box.next = !self.ipv4.to_box.val();
         self.rules.icmp.next = self.ipv4.icmp.val();
-        self.rules.icmp_bad.next = !self.s1_total_from_28.q.val() | !self.transport.sum_ok.val();
+        self.rules.icmp_bad.next =
+            !self.end_checks.total_from_28.val() | !self.transport.sum_ok.val();
         self.rules.echo_request.next = self.transport.echo_request.val();
         self.rules.udp.next = self.ipv4.udp.val();
-        self.rules.udp_bad.next = !self.s1_total_from_28.q.val()
+        self.rules.udp_bad.next = !self.end_checks.total_from_28.val()
             | !self.transport.udp_length_ok.val()
             | (!self.transport.udp_no_checksum.val() & !self.transport.sum_ok.val());
         self.rules.other_port.next = !self.transport.to_box_port.val();
         self.rules.foreign.next = !self.ipv4.from_subnet.val();
         self.rules.malformed.next =
-            !(self.s1_total_from_52.q.val() & self.command.well_formed.val());
-        self.rules.stored.next = self.end_stored.q.val();
-        if self.rules.deciding.val() & self.end_stored.q.val() {
+            !(self.end_checks.total_from_52.val() & self.command.well_formed.val());
+        self.rules.stored.next = self.end_checks.end_stored.val();
+        if self.rules.deciding.val() & self.end_checks.end_stored.val() {
             self.held_total_length.d.next = self.ipv4.total_length.val();
             self.held_rest_sum.d.next = self.transport.icmp_rest_sum.val();
         }
         self.decided.next = self.rules.decided.val();
         self.action.next = self.rules.action.val();
         self.fate.next = self.rules.fate.val();
-        self.peer_mac.next = self.source_mac.q.val();
+        self.peer_mac.next = self.beats_in.source_mac.val();
         self.peer_ip.next = self.ipv4.source.val();
         self.peer_port.next = self.transport.source_port.val();
-        self.receive_tick.next = self.held_receive_tick.q.val();
+        self.receive_tick.next = self.beats_in.receive_tick.val();
         self.ip_total_length.next = self.held_total_length.q.val();
         self.icmp_rest_sum.next = self.held_rest_sum.q.val();
         self.command_box_id.next = self.command.box_id.val();
@@ -465,15 +307,6 @@ impl Logic for FrameParser {
         self.command_sequence.next = self.command.sequence_number.val();
         self.command_argument_length.next = self.command.argument_length.val();
         self.command_arguments.next = self.command.arguments.val();
-
-        if self.reset.val() {
-            self.in_frame.d.next = false;
-            self.next_index.d.next = 0.into();
-            self.beat_valid.d.next = false;
-            self.beat_last.d.next = false;
-            self.p1.d.next = false;
-            self.p2.d.next = false;
-        }
     }
 }
 

@@ -8,7 +8,7 @@
 //! 12 idle clocks. (The headers alone exceed the 60-byte minimum frame: no padding is
 //! needed.)
 //!
-//! A descriptor of kind [`RAW_FRAME_KIND`] is a raw frame: its body is the frame itself
+//! A descriptor of kind [`RAW_FRAME_KIND`](crate::stream::RAW_FRAME_KIND) is a raw frame: its body is the frame itself
 //! from the destination MAC on, sent right after the SFD (its source pads it to the 60-byte
 //! minimum; `body_len` 60..=1514), then the FCS and the gap; its other descriptor fields are
 //! ignored and the datagram sequence number does not advance.
@@ -36,12 +36,15 @@
 //! byte selection through the CRC. The frame geometry (lengths, IPv4 checksum) is computed from the body length held
 //! at the start, a clock later (no adder after the descriptor).
 
-use crate::block_ram::BlockRam;
 use crate::datagram_checksum::DatagramChecksum;
 use crate::fcs_output::{FcsOutput, OUTPUT_LATENCY};
 use crate::hdl::*;
 use crate::header_sums::HeaderSums;
-use crate::stream::{DatagramSink, RAW_FRAME_KIND};
+use crate::stream::DatagramSink;
+use crate::transmit_fields::TransmitFields;
+use crate::transmit_geometry::TransmitGeometry;
+use crate::transmit_sequence::TransmitSequence;
+use crate::transmit_source::TransmitSource;
 use skinbox_protocol::datagram::{self, field, HEADER_LEN};
 use skinbox_protocol::link::*;
 use skinbox_protocol::wire::{ethernet, ipv4, udp, EthernetRepr, UdpRepr};
@@ -64,28 +67,29 @@ pub const BODY_START: usize = PAYLOAD_AT_ON_WIRE + HEADER_LEN;
 const _: () = assert!(BODY_START >= PREAMBLE_LEN + MIN_FRAME_LEN);
 
 // Positions on the wire: the frame positions of `link` after the preamble and SFD.
-const IPV4_AT_ON_WIRE: usize = PREAMBLE_LEN + IPV4_AT;
-const UDP_AT_ON_WIRE: usize = PREAMBLE_LEN + UDP_AT;
-const PAYLOAD_AT_ON_WIRE: usize = PREAMBLE_LEN + PAYLOAD_AT;
-const IP_TOTAL_LEN_AT: usize = IPV4_AT_ON_WIRE + IPV4_TOTAL_LEN.start;
-const IP_CHECKSUM_AT: usize = IPV4_AT_ON_WIRE + IPV4_CHECKSUM.start;
-const UDP_LEN_AT: usize = UDP_AT_ON_WIRE + UDP_LEN.start;
-const UDP_CHECKSUM_AT: usize = UDP_AT_ON_WIRE + UDP_CHECKSUM.start;
-const KIND_AT: usize = PAYLOAD_AT_ON_WIRE + field::KIND;
+pub(crate) const IPV4_AT_ON_WIRE: usize = PREAMBLE_LEN + IPV4_AT;
+pub(crate) const UDP_AT_ON_WIRE: usize = PREAMBLE_LEN + UDP_AT;
+pub(crate) const PAYLOAD_AT_ON_WIRE: usize = PREAMBLE_LEN + PAYLOAD_AT;
+pub(crate) const IP_TOTAL_LEN_AT: usize = IPV4_AT_ON_WIRE + IPV4_TOTAL_LEN.start;
+pub(crate) const IP_CHECKSUM_AT: usize = IPV4_AT_ON_WIRE + IPV4_CHECKSUM.start;
+pub(crate) const UDP_LEN_AT: usize = UDP_AT_ON_WIRE + UDP_LEN.start;
+pub(crate) const UDP_CHECKSUM_AT: usize = UDP_AT_ON_WIRE + UDP_CHECKSUM.start;
+pub(crate) const KIND_AT: usize = PAYLOAD_AT_ON_WIRE + field::KIND;
 /// First of the header bytes sent from the `fields` shift registers: flags, sequence, base
 /// tick, entry count.
-const FIELDS_AT: usize = PAYLOAD_AT_ON_WIRE + field::FLAGS;
-const FIELDS_LEN: usize = field::ENTRY_COUNT.end - field::FLAGS;
+pub(crate) const FIELDS_AT: usize = PAYLOAD_AT_ON_WIRE + field::FLAGS;
+pub(crate) const FIELDS_LEN: usize = field::ENTRY_COUNT.end - field::FLAGS;
 
 // The destination's bytes: the destination MAC, the IPv4 destination address and the UDP
 // destination port, sent from the `destination` shift registers.
-const DESTINATION_MAC_AT: usize = PREAMBLE_LEN + ethernet::field::DESTINATION.start;
-const DESTINATION_IP_AT: usize = IPV4_AT_ON_WIRE + ipv4::field::DESTINATION.start;
-const DESTINATION_PORT_AT: usize = UDP_AT_ON_WIRE + udp::field::DESTINATION_PORT.start;
-const DESTINATION_MAC_LEN: usize =
+pub(crate) const DESTINATION_MAC_AT: usize = PREAMBLE_LEN + ethernet::field::DESTINATION.start;
+pub(crate) const DESTINATION_IP_AT: usize = IPV4_AT_ON_WIRE + ipv4::field::DESTINATION.start;
+pub(crate) const DESTINATION_PORT_AT: usize = UDP_AT_ON_WIRE + udp::field::DESTINATION_PORT.start;
+pub(crate) const DESTINATION_MAC_LEN: usize =
     ethernet::field::DESTINATION.end - ethernet::field::DESTINATION.start;
-const DESTINATION_IP_LEN: usize = ipv4::field::DESTINATION.end - ipv4::field::DESTINATION.start;
-const DESTINATION_PORT_LEN: usize =
+pub(crate) const DESTINATION_IP_LEN: usize =
+    ipv4::field::DESTINATION.end - ipv4::field::DESTINATION.start;
+pub(crate) const DESTINATION_PORT_LEN: usize =
     udp::field::DESTINATION_PORT.end - udp::field::DESTINATION_PORT.start;
 
 /// A frame position (or length) as a kernel constant; panics if it does not fit.
@@ -95,7 +99,7 @@ fn position<const N: usize>(at: usize) -> Constant<Bits<N>> {
 
 /// The constant bytes of a frame up to the body; variable fields (the destination's too)
 /// are 0 here.
-fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
+pub(crate) fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
     let mut t = vec![0x55; 7];
     t.push(0xD5);
     // Ethernet, IPv4 and UDP headers as the protocol writes them, destination 0
@@ -131,73 +135,6 @@ fn template(link: &LinkConfig, box_id: u16, port_count: u8) -> Vec<u8> {
     t
 }
 
-/// Address of the header table read between frames: it holds the first byte, which the
-/// first two bytes of a frame are (the preamble), read before the frame's own addresses.
-const TEMPLATE_IDLE: usize = 127;
-
-// Where a header byte comes from, one bit each (`byte_source`): the template is ORed in all
-// through the header (it is 0 at the other sources' bytes); the body is alone.
-const SOURCE_TEMPLATE: u64 = 1;
-const SOURCE_TOTAL_LEN: u64 = 1 << 1; // and 1 << 2, its low byte
-const SOURCE_IP_CHECKSUM: u64 = 1 << 3; // and 1 << 4
-const SOURCE_UDP_LEN: u64 = 1 << 5; // and 1 << 6
-const SOURCE_UDP_CHECKSUM: u64 = 1 << 7; // and 1 << 8
-const SOURCE_KIND: u64 = 1 << 9;
-const SOURCE_FIELDS: u64 = 1 << 10;
-const SOURCE_BODY: u64 = 1 << 11;
-const SOURCE_DESTINATION: u64 = 1 << 12;
-const SOURCE_BITS: usize = 13;
-/// Width of a header table entry: the template byte, then the byte sources.
-const HEADER_ENTRY_BITS: usize = 8 + SOURCE_BITS;
-
-/// The sources of header byte `at` other than the template (0 for the preamble and the
-/// bytes past the header).
-fn header_sources(at: usize) -> u64 {
-    let word = |first: usize, high: u64| {
-        if at == first {
-            high
-        } else if at == first + 1 {
-            high << 1
-        } else {
-            0
-        }
-    };
-    let within = |first: usize, len: usize| (first..first + len).contains(&at);
-    let mut sources = word(IP_TOTAL_LEN_AT, SOURCE_TOTAL_LEN)
-        | word(IP_CHECKSUM_AT, SOURCE_IP_CHECKSUM)
-        | word(UDP_LEN_AT, SOURCE_UDP_LEN)
-        | word(UDP_CHECKSUM_AT, SOURCE_UDP_CHECKSUM);
-    if at == KIND_AT {
-        sources |= SOURCE_KIND;
-    }
-    if within(FIELDS_AT, FIELDS_LEN) {
-        sources |= SOURCE_FIELDS;
-    }
-    if within(DESTINATION_MAC_AT, DESTINATION_MAC_LEN)
-        || within(DESTINATION_IP_AT, DESTINATION_IP_LEN)
-        || within(DESTINATION_PORT_AT, DESTINATION_PORT_LEN)
-    {
-        sources |= SOURCE_DESTINATION;
-    }
-    sources
-}
-
-/// The transmitter's header table, read two clocks ahead: at address i the template's byte
-/// i + 2 and, above it, the sources of byte i + 3 (registered once more before they choose
-/// the byte); at [`TEMPLATE_IDLE`] the first byte and the sources of byte 2.
-fn header_table(t: &[u8]) -> Vec<u64> {
-    assert_eq!(t[0], t[1], "the frame starts with two equal bytes");
-    assert!(
-        t.len() - 2 <= TEMPLATE_IDLE,
-        "the template fits below the idle address"
-    );
-    let mut table: Vec<u64> = (0..TEMPLATE_IDLE)
-        .map(|a| u64::from(*t.get(a + 2).unwrap_or(&0)) | header_sources(a + 3) << 8)
-        .collect();
-    table.push(u64::from(t[0]) | header_sources(2) << 8);
-    table
-}
-
 /// Sum of the big-endian 16-bit words of `bytes` (odd length padded with 0), not folded.
 pub fn word_sum(bytes: &[u8]) -> u64 {
     bytes
@@ -227,123 +164,40 @@ pub struct FrameTransmitter {
     pub destination_ip: Signal<In, Bits<32>>,
     /// Destination UDP port of the datagram frames, read like `destination_mac`.
     pub destination_port: Signal<In, Bits<16>>,
-    // the header table in block RAM (`header_table`): the template byte and, above it, the
-    // byte sources of the byte after it
-    template: BlockRam<HEADER_ENTRY_BITS, 7>,
-    // the UDP checksum's constant words with the UDP length's constant part (the UDP and
-    // datagram headers), counted twice like the length
-    udp_term_constant: Constant<Bits<32>>,
-    // Frame positions from the format constants. The byte at `index` is chosen two clocks
-    // ahead (see the kernel), so the positions the byte-source tests name are "ahead": two
-    // lower than the bytes.
-    // the SFD's position minus one (the CRC starts after it), and the first byte in the CRC
-    sfd_ahead: Constant<Bits<11>>,
-    crc_from: Constant<Bits<11>>,
-    // the body's first byte; the frame's last byte minus one, less the body length (from it
-    // `end_minus_one`); the body's first byte - 2 (the payload is read two clocks ahead);
-    // the same two for a raw frame (its body follows the SFD)
-    body_start: Constant<Bits<11>>,
-    frame_end_over_body: Constant<Bits<11>>,
-    raw_body_start: Constant<Bits<11>>,
-    raw_frame_end_over_body: Constant<Bits<11>>,
-    raw_kind: Constant<Bits<8>>,
-    // IPv4 total length and UDP length minus the body length
-    ip_len_over_body: Constant<Bits<16>>,
-    udp_len_over_body: Constant<Bits<16>>,
-    // clocks of the inter-frame gap after the frame's last clock
-    gap_clocks: Constant<Bits<4>>,
-    // the first field byte and the byte after the fields, each two lower (the field
-    // position steps there)
-    fields_ahead: Constant<Bits<7>>,
-    fields_end_ahead: Constant<Bits<7>>,
-    template_idle: Constant<Bits<7>>,
-    // the byte sources, one bit each (see `byte_source`)
-    source_template: Constant<Bits<SOURCE_BITS>>,
-    source_body: Constant<Bits<SOURCE_BITS>>,
+    // the phases (idle, sending, gap) and the byte index
+    frame_steps: TransmitSequence,
+    // the held descriptor (kind, body length, raw) and the frame's lengths and positions
+    geometry: TransmitGeometry,
+    // the header fields (flags, sequence, base tick, entry count) and the sequence number
+    header_fields: TransmitFields,
+    // the byte at each index: template, header fields, destination or body
+    source: TransmitSource,
     // the IPv4 header checksum and the destination's sum
     header_sums: HeaderSums,
     // the UDP checksum (final long before byte 48: the sum is done by byte 21)
     udp_sum: DatagramChecksum,
     // the output stage with the FCS
     fcs_stage: FcsOutput,
-    sending: DFF<Bit>,
-    index: DFF<Bits<11>>,
-    gap: DFF<Bits<4>>,
-    // gap == 0, kept in a register (`idle` is one gate from registers)
-    gap_done: DFF<Bit>,
-    // `!sending & gap_done`, the descriptor's `ready`, as a register of its own (no gate
-    // between it and the arbiter's handshake)
-    idle: DFF<Bit>,
-    kind_held: DFF<Bits<8>>,
-    body_len_held: DFF<Bits<11>>,
-    // the descriptor is a raw frame's (its kind is `RAW_FRAME_KIND`)
-    raw_held: DFF<Bit>,
-    // the destination's 12 bytes (MAC, IP, port), most significant first, loaded at the
-    // take and shifted a byte up as each goes out (cut in two like the fields)
-    destination_high: DFF<Bits<64>>,
-    destination_low: DFF<Bits<32>>,
-    // the checksum's term is the destination's sum (index 18), registered like `term_is_kind`
-    term_is_destination: DFF<Bit>,
-    // the body's first byte and the frame's end over the body, of the held kind
-    geometry_start: Signal<Local, Bits<11>>,
-    geometry_end_over_body: Signal<Local, Bits<11>>,
-    // the 15 header bytes (flags, sequence, base tick, entry count), most significant
-    // first, and a zero byte, held while the frame goes out (cut in two: no word over 64
-    // bits to simulate); `field_byte` steps through them, once to sum their words and
-    // once to send them
-    fields_high: DFF<Bits<64>>,
-    fields_low: DFF<Bits<64>>,
-    // the position of the next clock's field byte, and the field byte, a register read
-    // from the fields at that position (no multiplexer between the position and its use)
-    next_field_position: DFF<Bits<4>>,
-    field_word: Signal<Local, Bits<64>>,
-    field_word_shifted: Signal<Local, Bits<64>>,
-    field_byte: DFF<Bits<8>>,
-    next_sequence: DFF<Bits<32>>,
-    body_end: DFF<Bits<11>>,
-    body_end_less_one: DFF<Bits<11>>,
+    // the SFD's position minus one (the CRC starts after it), and the first byte in the CRC
+    sfd_ahead: Constant<Bits<11>>,
+    crc_from: Constant<Bits<11>>,
     // the byte at `index` is a body byte: the body stream's `ready`
     in_body: DFF<Bit>,
-    // the index before the frame's last one (its last FCS byte), set with the descriptor
-    end_minus_one: DFF<Bits<11>>,
-    // registered index tests, true at index 7 (the CRC starts) and at the last index
+    // registered index tests, true at index 7 (the CRC starts)
     crc_starts: DFF<Bit>,
-    frame_ends: DFF<Bit>,
     // registered index ranges, like `crc_starts`: the checksum's term is a field byte
-    // (2..18), the checksum adds its term (1..=18); registered two clocks ahead, the field
-    // position steps from the next clock's to the one after it (the field byte steps at
-    // 2..18 and 57..72)
+    // (2..18), the checksum adds its term (1..=18)
     term_from_fields: DFF<Bit>,
     checksum_adds: DFF<Bit>,
-    next_field_steps: DFF<Bit>,
-    header_index: Signal<Local, Bits<7>>,
-    total_len: DFF<Bits<16>>,
-    udp_len: DFF<Bits<16>>,
     // the checksum's term at this index: the kind (index 0), the UDP length words with the
-    // constant words (index 1), registered a clock ahead like `term_from_fields`
+    // constant words (index 1), the destination's sum (index 18), registered a clock ahead
+    // like `term_from_fields`
     term_is_kind: DFF<Bit>,
     term_is_udp_len: DFF<Bit>,
-    // the UDP length term (twice the UDP length plus the constant words), from the held
-    // body length like `udp_len`
-    udp_term: DFF<Bits<32>>,
-    // where the byte at `index` comes from (`SOURCE_*`), chosen a clock ahead from the
-    // header table's sources and the two flags below
-    byte_source: DFF<Bits<SOURCE_BITS>>,
-    // the byte after the next is a header byte (from the table's sources), or a body byte
-    header_ahead: DFF<Bit>,
-    body_ahead: DFF<Bit>,
-    // the index is 72 or more: the next index's following byte is in the body
-    body_follows: Signal<Local, Bit>,
-    // sending, and the next index is this one + 1 (otherwise it is 0)
-    frame_goes_on: Signal<Local, Bit>,
-    header_byte: Signal<Local, Bits<8>>,
-    // the steady sources and the destination of the next clock's byte, ORed a clock ahead
-    // (see the kernel), the sources they are chosen by, and the destination's next byte
-    header_early: DFF<Bits<8>>,
-    early_sources: Signal<Local, Bits<SOURCE_BITS>>,
-    early_byte: Signal<Local, Bits<8>>,
-    destination_next_byte: Signal<Local, Bits<8>>,
-    tx_byte: Signal<Local, Bits<8>>,
+    term_is_destination: DFF<Bit>,
+    // this clock's index, and a frame goes out
+    index: Signal<Local, Bits<11>>,
+    sending: Signal<Local, Bit>,
 }
 
 impl FrameTransmitter {
@@ -370,74 +224,24 @@ impl FrameTransmitter {
             destination_mac: Default::default(),
             destination_ip: Default::default(),
             destination_port: Default::default(),
-            template: BlockRam::with_contents(&header_table(&t)),
-            udp_term_constant: Constant::new(
-                (udp_constant + 2 * (BODY_START - UDP_AT_ON_WIRE) as u64).into(),
-            ),
-            sfd_ahead: position(PREAMBLE_LEN - 2),
-            crc_from: position(PREAMBLE_LEN),
-            body_start: position(BODY_START),
-            frame_end_over_body: position(BODY_START + FCS_LEN - 2),
-            raw_body_start: position(PREAMBLE_LEN),
-            raw_frame_end_over_body: position(PREAMBLE_LEN + FCS_LEN - 2),
-            raw_kind: Constant::new(u64::from(RAW_FRAME_KIND).into()),
-            ip_len_over_body: position(BODY_START - IPV4_AT_ON_WIRE),
-            udp_len_over_body: position(BODY_START - UDP_AT_ON_WIRE),
-            gap_clocks: position(INTER_FRAME_GAP - 1),
-            fields_ahead: position(FIELDS_AT - 2),
-            fields_end_ahead: position(FIELDS_AT + FIELDS_LEN - 2),
-            template_idle: position(TEMPLATE_IDLE),
-            source_template: Constant::new(SOURCE_TEMPLATE.into()),
-            source_body: Constant::new(SOURCE_BODY.into()),
+            frame_steps: TransmitSequence::new((INTER_FRAME_GAP - 1) as u64),
+            geometry: TransmitGeometry::new(udp_constant),
+            header_fields: Default::default(),
+            source: TransmitSource::new(&t),
             header_sums: HeaderSums::new(ip_constant),
             udp_sum: Default::default(),
             fcs_stage: Default::default(),
-            sending: Default::default(),
-            index: Default::default(),
-            gap: Default::default(),
-            gap_done: Default::default(),
-            idle: Default::default(),
-            kind_held: Default::default(),
-            body_len_held: Default::default(),
-            raw_held: Default::default(),
-            destination_high: Default::default(),
-            destination_low: Default::default(),
-            term_is_destination: Default::default(),
-            geometry_start: Default::default(),
-            geometry_end_over_body: Default::default(),
-            fields_high: Default::default(),
-            fields_low: Default::default(),
-            next_field_position: Default::default(),
-            field_word: Default::default(),
-            field_word_shifted: Default::default(),
-            field_byte: Default::default(),
-            next_sequence: Default::default(),
-            body_end: Default::default(),
-            body_end_less_one: Default::default(),
+            sfd_ahead: position(PREAMBLE_LEN - 2),
+            crc_from: position(PREAMBLE_LEN),
             in_body: Default::default(),
-            end_minus_one: Default::default(),
             crc_starts: Default::default(),
             term_from_fields: Default::default(),
             checksum_adds: Default::default(),
-            next_field_steps: Default::default(),
-            header_index: Default::default(),
-            frame_ends: Default::default(),
-            total_len: Default::default(),
-            udp_len: Default::default(),
             term_is_kind: Default::default(),
             term_is_udp_len: Default::default(),
-            udp_term: Default::default(),
-            byte_source: Default::default(),
-            header_ahead: Default::default(),
-            body_ahead: Default::default(),
-            body_follows: Default::default(),
-            frame_goes_on: Default::default(),
-            header_byte: Default::default(),
-            header_early: Default::default(),
-            early_sources: Default::default(),
-            early_byte: Default::default(),
-            destination_next_byte: Default::default(),
-            tx_byte: Default::default(),
+            term_is_destination: Default::default(),
+            index: Default::default(),
+            sending: Default::default(),
         }
     }
 }
@@ -454,320 +258,123 @@ impl Logic for FrameTransmitter {
         dff_setup!(
             self,
             clock,
-            sending,
-            index,
-            gap,
-            gap_done,
-            idle,
-            kind_held,
-            body_len_held,
-            fields_high,
-            fields_low,
-            next_field_position,
-            field_byte,
-            next_sequence,
-            body_end,
-            body_end_less_one,
             in_body,
-            end_minus_one,
             crc_starts,
             term_from_fields,
             checksum_adds,
-            next_field_steps,
-            frame_ends,
-            total_len,
-            udp_len,
-            byte_source,
-            header_ahead,
-            body_ahead,
             term_is_kind,
             term_is_udp_len,
-            udp_term,
-            raw_held,
-            destination_high,
-            destination_low,
-            term_is_destination,
-            header_early
+            term_is_destination
         );
-        // Frame geometry: registered at the start from the body length (lengths), two clocks
-        // later the IPv4 checksum (needed from byte 32 on), through its first fold.
-        // (the destination's words a clock after the take, with the total length a clock later)
+        // The phases: a descriptor is taken while `ready` (idle, the gap over); the index
+        // counts the frame's bytes up to its last one, then the gap follows.
+        self.frame_steps.clock.next = self.clock.val();
+        self.frame_steps.reset.next = self.reset.val();
+        self.frame_steps.valid.next = self.datagrams.valid.val();
+        self.frame_steps.end_minus_one.next = self.geometry.end_minus_one.val();
+        self.datagrams.ready.next = self.frame_steps.ready.val();
+        self.sending.next = self.frame_steps.sending.val();
+        self.index.next = self.frame_steps.index.val();
+
+        // The descriptor is taken in every clock without a frame going out, so taking it
+        // only has to set `sending`; the frame geometry follows the held body length a
+        // clock later (valid from index 1 on).
+        self.geometry.clock.next = self.clock.val();
+        self.geometry.load.next = !self.sending.val();
+        self.geometry.descriptor_kind.next = self.datagrams.kind.val();
+        self.geometry.body_len.next = self.datagrams.body_len.val();
+        self.header_fields.clock.next = self.clock.val();
+        self.header_fields.reset.next = self.reset.val();
+        self.header_fields.load.next = !self.sending.val();
+        self.header_fields.flags.next = self.datagrams.flags.val();
+        self.header_fields.base_tick.next = self.datagrams.base_tick.val();
+        self.header_fields.entry_count.next = self.datagrams.entry_count.val();
+        self.header_fields.frame_goes_on.next = self.frame_steps.frame_goes_on.val();
+        self.header_fields.index.next = self.index.val();
+        // the frame's last clock: the sequence steps (a raw frame is no datagram)
+        self.header_fields.advance.next =
+            self.frame_steps.frame_ends.val() & !self.geometry.raw.val();
+
+        // The IPv4 checksum from the total length and the destination (needed from byte 32
+        // on), the UDP checksum's variable words one per clock from byte 0: the kind, the
+        // UDP length term, the 16 field bytes, then the destination's sum.
         self.header_sums.clock.next = self.clock.val();
-        self.header_sums.load.next = !self.sending.q.val();
+        self.header_sums.load.next = !self.sending.val();
         self.header_sums.destination_ip.next = self.destination_ip.val();
         self.header_sums.destination_port.next = self.destination_port.val();
-        self.header_sums.total_len.next = self.total_len.q.val();
-
-        // The variable words of the UDP checksum, one per clock from byte 0: the kind, the
-        // UDP length (counted twice: header and pseudo header; valid from byte 1) with the
-        // constant words' sum (the checksum starts from the body's sum alone, no adder after
-        // the descriptor), then the 16 field bytes one per clock as the position steps,
-        // alternately the low and the high byte of a word (flags is the low byte of its
-        // word).
-        // the field byte of the next clock: byte 0 is the top byte of `fields_high` (the
-        // fields are held from index 0 on; the byte is read from index 2 on)
-        self.field_word.next = self.fields_high.q.val();
-        if self.next_field_position.q.val().get_bit(3) {
-            self.field_word.next = self.fields_low.q.val();
-        }
-        self.field_word_shifted.next = self.field_word.val()
-            << (bit_cast::<64, 3>(self.next_field_position.q.val().get_bits::<3>(0)) << 3);
-        self.field_byte.d.next = self.field_word_shifted.val().get_bits::<8>(56);
+        self.header_sums.total_len.next = self.geometry.total_len.val();
         self.udp_sum.clock.next = self.clock.val();
-        self.udp_sum.load.next = !self.sending.q.val();
+        self.udp_sum.load.next = !self.sending.val();
         self.udp_sum.body_sum.next = self.datagrams.body_sum.val();
         // the word chosen at byte i is added at byte i + 1 (from a register)
-        self.udp_sum.add.next = self.sending.q.val() & self.checksum_adds.q.val();
+        self.udp_sum.add.next = self.sending.val() & self.checksum_adds.q.val();
         self.udp_sum.term_is_kind.next = self.term_is_kind.q.val();
         self.udp_sum.term_is_udp_len.next = self.term_is_udp_len.q.val();
         self.udp_sum.term_is_destination.next = self.term_is_destination.q.val();
         self.udp_sum.term_from_fields.next = self.term_from_fields.q.val();
-        self.udp_sum.high_byte.next = self.index.q.val().get_bit(0);
-        self.udp_sum.kind.next = self.kind_held.q.val();
-        self.udp_sum.udp_term.next = self.udp_term.q.val();
+        self.udp_sum.high_byte.next = self.index.val().get_bit(0);
+        self.udp_sum.kind.next = self.geometry.kind.val();
+        self.udp_sum.udp_term.next = self.geometry.udp_term.val();
         self.udp_sum.destination_sum.next = self.header_sums.destination_sum.val();
-        self.udp_sum.field_byte.next = self.field_byte.q.val();
+        self.udp_sum.field_byte.next = self.header_fields.field_byte.val();
 
-        // The byte at `index`, from a multiplexer whose select is a register
-        // (`byte_source`); the template byte and the sources come from the header table,
-        // read two clocks ahead (127 is TEMPLATE_IDLE, read between frames).
-        self.template.clock.next = self.clock.val();
-        self.template.write_enable.next = false;
-        self.template.write_address.next = 0.into();
-        self.template.write_data.next = 0.into();
-        // (past the header only the body follows: the header's tests need the index's low
-        // seven bits only)
-        self.header_index.next = self.index.q.val().get_bits::<7>(0);
-        self.template.read_address.next = self.template_idle.val();
-        if self.sending.q.val() {
-            self.template.read_address.next = self.header_index.val();
-        }
-        // index >= 72, from its bits: 72 is 0b100_1000; for a raw frame index >= 6
-        self.body_follows.next = (self.index.q.val().get_bits::<4>(7) != 0)
-            | (self.header_index.val().get_bit(6)
-                & (self.header_index.val().get_bits::<3>(3) != 0));
-        if self.raw_held.q.val() {
-            self.body_follows.next = (self.index.q.val().get_bits::<8>(3) != 0)
-                | (self.index.q.val().get_bit(2) & self.index.q.val().get_bit(1));
-        }
-        // The byte's source: the table's sources of byte `index + 3` (read at `index - 1`
-        // for the next index, `index + 1` while the frame goes on: when it does not, the
-        // flags below choose the template alone) under the flags of this index's byte after
-        // the next.
-        self.frame_goes_on.next = self.sending.q.val() & !self.frame_ends.q.val();
-        self.header_ahead.d.next = self.frame_goes_on.val() & !self.body_follows.val();
-        self.body_ahead.d.next = self.frame_goes_on.val() & self.body_follows.val();
-        self.byte_source.d.next = self.source_template.val();
-        if self.body_ahead.q.val() {
-            // the body (the FCS replaces what follows it at the output)
-            self.byte_source.d.next = self.source_body.val();
-        } else if self.header_ahead.q.val() {
-            self.byte_source.d.next = self.source_template.val()
-                | self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
-        }
-        // The header's sources are ORed (each is 0 unless chosen), the body beside them (it
-        // is alone: its data passes one multiplexer, not the header's OR). The sources
-        // that are steady through the header (lengths, checksums, kind) and the destination
-        // are ORed a clock ahead into `header_early`, from the table's sources of the next
-        // byte (those `byte_source` takes) and the destination byte that is on top after
-        // this clock's shift: only the template byte (a block RAM output) and the field
-        // byte (stepped each clock) pass the OR in the byte's own clock.
-        self.destination_next_byte.next = self.destination_high.q.val().get_bits::<8>(56);
-        if self.sending.q.val() & self.byte_source.q.val().get_bit(12) {
-            self.destination_next_byte.next = self.destination_high.q.val().get_bits::<8>(48);
-        }
-        self.early_sources.next = 0.into();
-        if self.header_ahead.q.val() {
-            self.early_sources.next = self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
-        }
-        self.early_byte.next = 0.into();
-        if self.early_sources.val().get_bit(1) {
-            self.early_byte.next = self.total_len.q.val().get_bits::<8>(8);
-        }
-        if self.early_sources.val().get_bit(2) {
-            self.early_byte.next = self.early_byte.val() | self.total_len.q.val().get_bits::<8>(0);
-        }
-        if self.early_sources.val().get_bit(3) {
-            self.early_byte.next =
-                self.early_byte.val() | self.header_sums.ip_checksum.val().get_bits::<8>(8);
-        }
-        if self.early_sources.val().get_bit(4) {
-            self.early_byte.next =
-                self.early_byte.val() | self.header_sums.ip_checksum.val().get_bits::<8>(0);
-        }
-        if self.early_sources.val().get_bit(5) {
-            self.early_byte.next = self.early_byte.val() | self.udp_len.q.val().get_bits::<8>(8);
-        }
-        if self.early_sources.val().get_bit(6) {
-            self.early_byte.next = self.early_byte.val() | self.udp_len.q.val().get_bits::<8>(0);
-        }
-        if self.early_sources.val().get_bit(7) {
-            self.early_byte.next =
-                self.early_byte.val() | self.udp_sum.udp_checksum.val().get_bits::<8>(8);
-        }
-        if self.early_sources.val().get_bit(8) {
-            self.early_byte.next =
-                self.early_byte.val() | self.udp_sum.udp_checksum.val().get_bits::<8>(0);
-        }
-        if self.early_sources.val().get_bit(9) {
-            self.early_byte.next = self.early_byte.val() | self.kind_held.q.val();
-        }
-        if self.early_sources.val().get_bit(12) {
-            self.early_byte.next = self.early_byte.val() | self.destination_next_byte.val();
-        }
-        self.header_early.d.next = self.early_byte.val();
-        self.header_byte.next = self.header_early.q.val();
-        if self.byte_source.q.val().get_bit(0) {
-            self.header_byte.next =
-                self.header_byte.val() | self.template.read_data.val().get_bits::<8>(0);
-        }
-        if self.byte_source.q.val().get_bit(10) {
-            self.header_byte.next = self.header_byte.val() | self.field_byte.q.val();
-        }
-        self.tx_byte.next = self.header_byte.val();
-        if self.byte_source.q.val().get_bit(11) {
-            self.tx_byte.next = self.datagrams.body.data.val();
-        }
+        // The byte at `index`: template, header fields, destination or body.
+        self.source.clock.next = self.clock.val();
+        self.source.reset.next = self.reset.val();
+        self.source.sending.next = self.sending.val();
+        self.source.frame_goes_on.next = self.frame_steps.frame_goes_on.val();
+        self.source.raw.next = self.geometry.raw.val();
+        self.source.index.next = self.index.val();
+        self.source.total_len.next = self.geometry.total_len.val();
+        self.source.ip_checksum.next = self.header_sums.ip_checksum.val();
+        self.source.udp_len.next = self.geometry.udp_len.val();
+        self.source.udp_checksum.next = self.udp_sum.udp_checksum.val();
+        self.source.kind.next = self.geometry.kind.val();
+        self.source.field_byte.next = self.header_fields.field_byte.val();
+        self.source.body_data.next = self.datagrams.body.data.val();
+        self.source.destination_mac.next = self.destination_mac.val();
+        self.source.destination_ip.next = self.destination_ip.val();
+        self.source.destination_port.next = self.destination_port.val();
         // The body beat is taken at its index: `in_body` is set a clock ahead, from the
-        // flag of the next index's byte (`body_ahead`) and the body's end.
+        // flag of the next index's byte and the body's end.
         self.datagrams.body.ready.next = self.in_body.q.val();
-        self.in_body.d.next = self.frame_goes_on.val()
-            & self.body_ahead.q.val()
-            & (self.index.q.val() < self.body_end_less_one.q.val());
+        self.in_body.d.next = self.frame_steps.frame_goes_on.val()
+            & self.source.next_is_body.val()
+            & (self.index.val() < self.geometry.body_end_less_one.val());
 
         // Output stage: the byte through a register, the CRC from that register, the FCS
         // at the output (`FcsOutput`).
         self.fcs_stage.clock.next = self.clock.val();
         self.fcs_stage.reset.next = self.reset.val();
-        self.fcs_stage.valid.next = self.sending.q.val();
-        self.fcs_stage.data.next = self.tx_byte.val();
-        self.fcs_stage.covered.next = (self.index.q.val() >= self.crc_from.val())
-            & (self.index.q.val() < self.body_end.q.val());
-        self.fcs_stage.fcs.next = self.index.q.val() >= self.body_end.q.val();
+        self.fcs_stage.valid.next = self.sending.val();
+        self.fcs_stage.data.next = self.source.frame_byte.val();
+        self.fcs_stage.covered.next = (self.index.val() >= self.crc_from.val())
+            & (self.index.val() < self.geometry.body_end.val());
+        self.fcs_stage.fcs.next = self.index.val() >= self.geometry.body_end.val();
         self.fcs_stage.beat_missing.next = self.in_body.q.val() & !self.datagrams.body.valid.val();
         // index 7: the SFD is in the output stage now: the CRC starts with the next byte
-        self.fcs_stage.crc_start.next = self.sending.q.val() & self.crc_starts.q.val();
+        self.fcs_stage.crc_start.next = self.sending.val() & self.crc_starts.q.val();
 
         // the index tests of the next clock, from this clock's index (it counts up by one
         // while sending)
-        self.crc_starts.d.next =
-            self.sending.q.val() & (self.index.q.val() == self.sfd_ahead.val());
+        self.crc_starts.d.next = self.sending.val() & (self.index.val() == self.sfd_ahead.val());
         self.term_from_fields.d.next =
-            self.sending.q.val() & (self.index.q.val() >= 1) & (self.index.q.val() < 17);
-        self.term_is_destination.d.next = self.sending.q.val() & (self.index.q.val() == 17);
-        self.checksum_adds.d.next = self.sending.q.val() & (self.index.q.val() < 19);
+            self.sending.val() & (self.index.val() >= 1) & (self.index.val() < 17);
+        self.term_is_destination.d.next = self.sending.val() & (self.index.val() == 17);
+        self.checksum_adds.d.next = self.sending.val() & (self.index.val() < 19);
         // the next index is 0 unless the frame goes on, 1 after 0
-        self.term_is_kind.d.next = !self.frame_goes_on.val();
-        self.term_is_udp_len.d.next = self.frame_goes_on.val() & self.term_is_kind.q.val();
-        // (the index after the next is this one + 2 while the frame goes on)
-        self.next_field_steps.d.next = self.frame_goes_on.val()
-            & ((self.index.q.val() < 16)
-                | ((self.index.q.val() >= bit_cast::<11, 7>(self.fields_ahead.val()))
-                    & (self.index.q.val() < bit_cast::<11, 7>(self.fields_end_ahead.val()))));
-        // the position goes once round for the checksum (back at 0 after 16 bytes) and
-        // then through the first 15 bytes to send them; 0 between frames
-        self.next_field_position.d.next = 0.into();
-        if self.frame_goes_on.val() {
-            self.next_field_position.d.next = self.next_field_position.q.val();
-            if self.next_field_steps.q.val() {
-                self.next_field_position.d.next = self.next_field_position.q.val() + 1;
-            }
-        }
-        self.frame_ends.d.next =
-            self.sending.q.val() & (self.index.q.val() == self.end_minus_one.q.val());
-        if self.sending.q.val() {
-            self.index.d.next = self.index.q.val() + 1;
-            // the frame's last clock: the index is back at 0 for the next frame and the
-            // sequence steps (the next descriptor is taken with it), so `start` only sets
-            // `sending`
-            if self.frame_ends.q.val() {
-                self.sending.d.next = false;
-                self.index.d.next = 0.into();
-                if !self.raw_held.q.val() {
-                    // (a raw frame is no datagram: the sequence stays)
-                    self.next_sequence.d.next = self.next_sequence.q.val() + 1;
-                }
-                self.gap.d.next = self.gap_clocks.val();
-                self.gap_done.d.next = false;
-            }
-        } else if !self.gap_done.q.val() {
-            self.gap.d.next = self.gap.q.val() - 1;
-            self.gap_done.d.next = self.gap.q.val() == 1;
-        } else if self.datagrams.valid.val() {
-            self.sending.d.next = true;
-        }
-        // The frame geometry follows the held body length a clock later: it is valid from
-        // index 1 on (nothing reads it at index 0).
-        self.geometry_start.next = self.body_start.val();
-        self.geometry_end_over_body.next = self.frame_end_over_body.val();
-        if self.raw_held.q.val() {
-            self.geometry_start.next = self.raw_body_start.val();
-            self.geometry_end_over_body.next = self.raw_frame_end_over_body.val();
-        }
-        self.body_end.d.next = self.body_len_held.q.val() + self.geometry_start.val();
-        self.body_end_less_one.d.next = self.body_len_held.q.val() + self.geometry_start.val() - 1;
-        self.end_minus_one.d.next = self.body_len_held.q.val() + self.geometry_end_over_body.val();
-        self.total_len.d.next =
-            bit_cast::<16, 11>(self.body_len_held.q.val()) + self.ip_len_over_body.val();
-        self.udp_len.d.next =
-            bit_cast::<16, 11>(self.body_len_held.q.val()) + self.udp_len_over_body.val();
-        self.udp_term.d.next =
-            (bit_cast::<32, 11>(self.body_len_held.q.val()) << 1) + self.udp_term_constant.val();
-        // The descriptor is taken in every clock without a frame going out, so taking it
-        // only has to set `sending`.
-        if !self.sending.q.val() {
-            self.kind_held.d.next = self.datagrams.kind.val();
-            self.body_len_held.d.next = self.datagrams.body_len.val();
-            self.raw_held.d.next = self.datagrams.kind.val() == self.raw_kind.val();
-            self.destination_high.d.next = (bit_cast::<64, 48>(self.destination_mac.val()) << 16)
-                | bit_cast::<64, 16>(self.destination_ip.val().get_bits::<16>(16));
-            self.destination_low.d.next =
-                (bit_cast::<32, 16>(self.destination_ip.val().get_bits::<16>(0)) << 16)
-                    | bit_cast::<32, 16>(self.destination_port.val());
-            self.fields_high.d.next = (bit_cast::<64, 8>(self.datagrams.flags.val()) << 56)
-                | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
-                | bit_cast::<64, 24>(self.datagrams.base_tick.val().get_bits::<24>(40));
-            self.fields_low.d.next =
-                (bit_cast::<64, 40>(self.datagrams.base_tick.val().get_bits::<40>(0)) << 24)
-                    | (bit_cast::<64, 16>(self.datagrams.entry_count.val()) << 8);
-        }
-        // a destination byte leaves: the next one moves up
-        if self.sending.q.val() & self.byte_source.q.val().get_bit(12) {
-            self.destination_high.d.next = (self.destination_high.q.val() << 8)
-                | bit_cast::<64, 8>(self.destination_low.q.val().get_bits::<8>(24));
-            self.destination_low.d.next = self.destination_low.q.val() << 8;
-        }
-        // `!sending & gap_done` of the next clock: a frame goes on or ends (then the gap
-        // starts), the gap's last clock, or idle and no descriptor taken
-        self.idle.d.next = false;
-        if !self.sending.q.val() {
-            if self.gap_done.q.val() {
-                self.idle.d.next = !self.datagrams.valid.val();
-            } else {
-                self.idle.d.next = self.gap.q.val() == 1;
-            }
-        }
+        self.term_is_kind.d.next = !self.frame_steps.frame_goes_on.val();
+        self.term_is_udp_len.d.next =
+            self.frame_steps.frame_goes_on.val() & self.term_is_kind.q.val();
         if self.reset.val() {
-            self.idle.d.next = true;
             self.term_is_destination.d.next = false;
-            self.sending.d.next = false;
             self.crc_starts.d.next = false;
-            self.frame_ends.d.next = false;
             self.term_from_fields.d.next = false;
             self.checksum_adds.d.next = false;
-            self.next_field_steps.d.next = false;
-            self.next_field_position.d.next = 0.into();
-            self.gap.d.next = 0.into();
-            self.gap_done.d.next = true;
-            self.next_sequence.d.next = 0.into();
-            self.index.d.next = 0.into();
             self.term_is_kind.d.next = true;
             self.term_is_udp_len.d.next = false;
-            self.header_ahead.d.next = false;
-            self.body_ahead.d.next = false;
             self.in_body.d.next = false;
         }
-        self.datagrams.ready.next = self.idle.q.val();
         self.gmii_txd.next = self.fcs_stage.gmii_txd.val();
         self.gmii_tx_en.next = self.fcs_stage.gmii_tx_en.val();
         self.gmii_tx_er.next = self.fcs_stage.gmii_tx_er.val();
@@ -777,6 +384,7 @@ impl Logic for FrameTransmitter {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stream::RAW_FRAME_KIND;
     use crate::testbench::{check_frame, Bench, GmiiCapture, TestRng};
     use skinbox_protocol::datagram::DatagramBody;
     use skinbox_protocol::{DataRepr, DatagramRepr, PortCounters, RecordRepr, StatusRepr};

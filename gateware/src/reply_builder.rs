@@ -49,12 +49,15 @@
 //! a status-now acknowledgement the command must have been counted in the box counter
 //! file before `start_ack` (the block says "this command counted").
 
-use crate::block_ram::{BlockRam, READ_LATENCY};
+use crate::block_ram::BlockRam;
 use crate::body_reader::{BodyReader, BODY_ADDRESS_BITS};
 use crate::frame_transmitter::TAKE_TO_FIRST_BYTE;
 use crate::hdl::*;
-use crate::reply_checksums::{ReplyChecksums, CHECKSUM_CLOCKS, UDP_SUM_BYTES};
+use crate::reply_checksums::{CHECKSUM_CLOCKS, UDP_SUM_BYTES};
 use crate::reply_field_bytes::{field_byte, ReplyFieldBytes};
+use crate::reply_sequencer::{ProgramStarts, ReplySequencer, ROM_ADDRESS_BITS, START_TO_WORD};
+use crate::reply_sizing::ReplySizing;
+use crate::reply_stages::ReplyStages;
 use crate::stream::{DatagramSource, RAW_FRAME_KIND};
 use skinbox_protocol::box_counters::{self, BoxCounter, BOX_COUNTERS_LEN};
 use skinbox_protocol::command::{
@@ -83,7 +86,7 @@ const REPLY_AT: usize = ACK_BODY_AT + ACK_FIXED_LEN;
 
 /// Clocks from a `start_*` to the first step's ROM word (the step register, the ROM's
 /// two-clock read).
-const START_TO_STEP: u64 = 1 + READ_LATENCY;
+const START_TO_STEP: u64 = START_TO_WORD;
 
 /// Steps from the last step summed into a checksum to a step that writes it: the byte is
 /// summed after stage 5, folded twice and complemented; the checksum byte is taken in
@@ -122,9 +125,9 @@ struct Step {
     end: bool,
 }
 
-/// Bits of a ROM word: address 0..8, value 8..16, read 16..24, source 24..26, write 26,
-/// sum_ip 27, sum_udp 28, pad 29, end 30, from_buffer 31.
-const STEP_BITS: usize = 32;
+/// The parts of a ROM word (`reply_sequencer::STEP_BITS`, 32 bits): address 0..8, value
+/// 8..16, read 16..24, source 24..26, write 26, sum_ip 27, sum_udp 28, pad 29, end 30,
+/// from_buffer 31.
 const READ_AT: usize = 16;
 const SOURCE_AT: usize = 24;
 const WRITE_BIT: usize = 26;
@@ -133,9 +136,10 @@ const SUM_UDP_BIT: usize = 28;
 const PAD_BIT: usize = 29;
 const END_BIT: usize = 30;
 const FROM_BUFFER_BIT: usize = 31;
-// (the logic below spells these bit numbers out)
+// (the sequencer's and the stages' logic spells these bit numbers out)
 const _: () = assert!(
-    READ_AT == 16
+    crate::reply_sequencer::STEP_BITS == 32
+        && READ_AT == 16
         && SOURCE_AT == 24
         && WRITE_BIT == 26
         && SUM_IP_BIT == 27
@@ -144,7 +148,6 @@ const _: () = assert!(
         && END_BIT == 30
         && FROM_BUFFER_BIT == 31
 );
-const ROM_ADDRESS_BITS: usize = 10;
 
 impl Step {
     fn word(&self) -> u64 {
@@ -578,10 +581,7 @@ pub fn patch_margin_clocks() -> u64 {
 /// The ROM of every program, with the start address of each.
 struct Rom {
     words: Vec<u64>,
-    arp: usize,
-    echo: usize,
-    ack: [usize; 3],
-    patch: usize,
+    starts: ProgramStarts,
 }
 
 fn rom(link: &LinkConfig, box_id: u16, port_count: u8) -> Rom {
@@ -607,10 +607,12 @@ fn rom(link: &LinkConfig, box_id: u16, port_count: u8) -> Rom {
     );
     Rom {
         words,
-        arp,
-        echo,
-        ack,
-        patch,
+        starts: ProgramStarts {
+            arp,
+            echo,
+            ack,
+            patch,
+        },
     }
 }
 
@@ -671,82 +673,19 @@ pub struct ReplyBuilder {
     pub replies: DatagramSource,
     buffer: BlockRam<8, BODY_ADDRESS_BITS>,
     reader: BodyReader,
+    // the phases and the program ROM
+    sequencer: ReplySequencer,
+    // the reply's length
+    sizing: ReplySizing,
+    // the step pipeline: a ROM word's byte written and summed
+    stages: ReplyStages,
     // the held fields' byte multiplexer
     fields: ReplyFieldBytes,
-    // the IPv4 and UDP checksums of the written bytes
-    checksums: ReplyChecksums,
-    rom: BlockRam<STEP_BITS, ROM_ADDRESS_BITS>,
-    arp_start: Constant<Bits<ROM_ADDRESS_BITS>>,
-    echo_start: Constant<Bits<ROM_ADDRESS_BITS>>,
-    ack_none_start: Constant<Bits<ROM_ADDRESS_BITS>>,
-    ack_destination_start: Constant<Bits<ROM_ADDRESS_BITS>>,
-    ack_counters_start: Constant<Bits<ROM_ADDRESS_BITS>>,
-    patch_start: Constant<Bits<ROM_ADDRESS_BITS>>,
-    arp_len: Constant<Bits<BODY_ADDRESS_BITS>>,
-    ack_none_len: Constant<Bits<BODY_ADDRESS_BITS>>,
-    ack_destination_len: Constant<Bits<BODY_ADDRESS_BITS>>,
-    ack_counters_len: Constant<Bits<BODY_ADDRESS_BITS>>,
-    min_frame_len: Constant<Bits<BODY_ADDRESS_BITS>>,
-    ethernet_header_len: Constant<Bits<BODY_ADDRESS_BITS>>,
-    // an IPv4 total length below this makes a frame below the minimum
-    min_ip_total_len: Constant<Bits<16>>,
     send_tick_offset: Constant<Bits<64>>,
     raw_frame_kind: Constant<Bits<8>>,
-    // the sequencer: ROM address, a program is running, ROM words in flight
-    step: DFF<Bits<ROM_ADDRESS_BITS>>,
-    running: DFF<Bit>,
-    read_1: DFF<Bit>,
-    read_2: DFF<Bit>,
-    // the descriptor is offered; the reply is an acknowledgement (patch at the take)
-    offering: DFF<Bit>,
-    is_ack: DFF<Bit>,
-    patching: DFF<Bit>,
     locked_now: DFF<Bit>,
-    body_len: DFF<Bits<BODY_ADDRESS_BITS>>,
-    // echo: the request's end (padding from there), the body length a clock later
-    frame_end: DFF<Bits<BODY_ADDRESS_BITS>>,
-    // the clock after a start, and the reply it started (the body length is set then)
-    sizing: DFF<Bit>,
-    sizing_echo: DFF<Bit>,
-    start_was_arp: DFF<Bit>,
-    start_was_stream_to: DFF<Bit>,
-    start_was_status_now: DFF<Bit>,
-    // the echo request's frame is below the minimum (tested at the start, from the total
-    // length, so no compare sits between `frame_end` and `body_len`)
-    echo_short: DFF<Bit>,
-    // the take: tick then, the send tick a clock later
-    took: DFF<Bit>,
+    // the send tick, set a clock after the take
     send_tick: DFF<Bits<64>>,
-    counter_address: DFF<Bits<5>>,
-    counter_word: DFF<Bits<32>>,
-    // stage 3: the ROM word's parts and the field byte, registered
-    s3_write: DFF<Bit>,
-    s3_address: DFF<Bits<8>>,
-    s3_value: DFF<Bits<8>>,
-    s3_source: DFF<Bits<2>>,
-    s3_sum_ip: DFF<Bit>,
-    s3_sum_udp: DFF<Bit>,
-    s3_read: DFF<Bits<8>>,
-    s4_write: DFF<Bit>,
-    s4_address: DFF<Bits<8>>,
-    s4_value: DFF<Bits<8>>,
-    s4_source: DFF<Bits<2>>,
-    s4_sum_ip: DFF<Bit>,
-    s4_sum_udp: DFF<Bit>,
-    s4_from_buffer: DFF<Bit>,
-    // stage 4: the byte written and summed
-    s5_write: DFF<Bit>,
-    s5_address: DFF<Bits<8>>,
-    s5_byte: DFF<Bits<8>>,
-    s3_from_buffer: DFF<Bit>,
-    s5_from_buffer: DFF<Bit>,
-    written: Signal<Local, Bits<8>>,
-    s5_sum_ip: DFF<Bit>,
-    s5_sum_udp: DFF<Bit>,
-    idle: Signal<Local, Bit>,
-    take: Signal<Local, Bit>,
-    reply_byte: Signal<Local, Bits<8>>,
-    counter_word_shifted: Signal<Local, Bits<32>>,
 }
 
 impl ReplyBuilder {
@@ -754,7 +693,6 @@ impl ReplyBuilder {
     /// ports (both in acknowledgements).
     pub fn new(link: &LinkConfig, box_id: u16, port_count: u8) -> Self {
         let rom_contents = rom(link, box_id, port_count);
-        let [ack_none, ack_destination, ack_counters] = rom_contents.ack;
         // the longest reply's UDP part (header and acknowledgement with the counters) and
         // the pseudo header's 12 bytes fit the checksum's UDP sum
         assert!(AckReplyKind::Counters.frame_len() - UDP_AT + 12 <= UDP_SUM_BYTES);
@@ -787,71 +725,15 @@ impl ReplyBuilder {
             replies: Default::default(),
             buffer: Default::default(),
             reader: Default::default(),
+            sequencer: ReplySequencer::new(&rom_contents.words, rom_contents.starts),
+            sizing: Default::default(),
+            stages: Default::default(),
             fields: Default::default(),
-            checksums: Default::default(),
-            rom: BlockRam::with_contents(&rom_contents.words),
-            arp_start: constant(rom_contents.arp as u64),
-            echo_start: constant(rom_contents.echo as u64),
-            ack_none_start: constant(ack_none as u64),
-            ack_destination_start: constant(ack_destination as u64),
-            ack_counters_start: constant(ack_counters as u64),
-            patch_start: constant(rom_contents.patch as u64),
-            arp_len: constant(MIN_FRAME_LEN as u64),
-            ack_none_len: constant((AckReplyKind::None.frame_len()) as u64),
-            ack_destination_len: constant((AckReplyKind::Destination.frame_len()) as u64),
-            ack_counters_len: constant((AckReplyKind::Counters.frame_len()) as u64),
-            min_frame_len: constant(MIN_FRAME_LEN as u64),
-            ethernet_header_len: constant(ETHERNET_HEADER_LEN as u64),
-            min_ip_total_len: constant((MIN_FRAME_LEN - ETHERNET_HEADER_LEN) as u64),
             // (the tick of the clock after the take)
             send_tick_offset: constant((TAKE_TO_FIRST_BYTE as usize - 1) as u64),
             raw_frame_kind: constant((usize::from(RAW_FRAME_KIND)) as u64),
-            step: Default::default(),
-            running: Default::default(),
-            read_1: Default::default(),
-            read_2: Default::default(),
-            offering: Default::default(),
-            is_ack: Default::default(),
-            patching: Default::default(),
             locked_now: Default::default(),
-            body_len: Default::default(),
-            frame_end: Default::default(),
-            sizing: Default::default(),
-            sizing_echo: Default::default(),
-            start_was_arp: Default::default(),
-            start_was_stream_to: Default::default(),
-            start_was_status_now: Default::default(),
-            echo_short: Default::default(),
-            took: Default::default(),
             send_tick: Default::default(),
-            counter_address: Default::default(),
-            counter_word: Default::default(),
-            s3_write: Default::default(),
-            s3_address: Default::default(),
-            s3_value: Default::default(),
-            s3_source: Default::default(),
-            s3_sum_ip: Default::default(),
-            s3_sum_udp: Default::default(),
-            s3_read: Default::default(),
-            s4_write: Default::default(),
-            s4_address: Default::default(),
-            s4_value: Default::default(),
-            s4_source: Default::default(),
-            s4_sum_ip: Default::default(),
-            s4_sum_udp: Default::default(),
-            s4_from_buffer: Default::default(),
-            s5_write: Default::default(),
-            s5_address: Default::default(),
-            s5_byte: Default::default(),
-            s3_from_buffer: Default::default(),
-            s5_from_buffer: Default::default(),
-            written: Default::default(),
-            s5_sum_ip: Default::default(),
-            s5_sum_udp: Default::default(),
-            idle: Default::default(),
-            take: Default::default(),
-            reply_byte: Default::default(),
-            counter_word_shifted: Default::default(),
         }
     }
 }
@@ -859,101 +741,49 @@ impl ReplyBuilder {
 impl Logic for ReplyBuilder {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(
-            self,
-            clock,
-            step,
-            running,
-            read_1,
-            read_2,
-            offering,
-            is_ack,
-            patching,
-            locked_now,
-            body_len,
-            frame_end,
-            sizing,
-            sizing_echo,
-            start_was_arp,
-            start_was_stream_to,
-            start_was_status_now,
-            echo_short,
-            took,
-            send_tick,
-            counter_address,
-            counter_word,
-            s3_write,
-            s3_address,
-            s3_value,
-            s3_source,
-            s3_sum_ip,
-            s3_sum_udp,
-            s3_read,
-            s4_write,
-            s4_address,
-            s4_value,
-            s4_source,
-            s4_sum_ip,
-            s4_sum_udp,
-            s4_from_buffer,
-            s5_write,
-            s5_address,
-            s5_byte,
-            s3_from_buffer,
-            s5_from_buffer,
-            s5_sum_ip,
-            s5_sum_udp
-        );
+        dff_setup!(self, clock, locked_now, send_tick);
         self.buffer.clock.next = self.clock.val();
-        self.rom.clock.next = self.clock.val();
         self.reader.clock.next = self.clock.val();
         self.reader.reset.next = self.reset.val();
-        self.rom.write_enable.next = false;
-        self.rom.write_address.next = 0.into();
-        self.rom.write_data.next = 0.into();
 
-        // The sequencer: one ROM word per clock from `step`; a word is valid two clocks
-        // after its address (`read_2`); the end marker stops the program and drops the
-        // two words read after it.
-        self.rom.read_address.next = self.step.q.val();
-        self.read_1.d.next = self.running.q.val();
-        self.read_2.d.next = self.read_1.q.val();
-        if self.running.q.val() {
-            self.step.d.next = self.step.q.val() + 1;
-        }
-        if self.read_2.q.val() & self.rom.read_data.val().get_bit(30) {
-            self.running.d.next = false;
-            self.read_1.d.next = false;
-            self.read_2.d.next = false;
-            // a build ends with the descriptor, the patch with nothing
-            if self.patching.q.val() {
-                self.patching.d.next = false;
-            } else {
-                self.offering.d.next = true;
-            }
-        }
+        // The phases: a start (only when no reply is under way) runs its program, one ROM
+        // word per clock; then the descriptor is offered; at its take an acknowledgement's
+        // patch runs.
+        self.sequencer.clock.next = self.clock.val();
+        self.sequencer.reset.next = self.reset.val();
+        self.sequencer.start_arp.next = self.start_arp.val();
+        self.sequencer.start_echo.next = self.start_echo.val();
+        self.sequencer.start_ack.next = self.start_ack.val();
+        self.sequencer.accepted_stream_to.next = self.accepted_stream_to.val();
+        self.sequencer.accepted_status_now.next = self.accepted_status_now.val();
+        self.sequencer.reader_busy.next = self.reader.busy.val();
+        self.sequencer.ready.next = self.replies.ready.val();
+        // The reply's length, a clock after the start from its registered kind.
+        self.sizing.clock.next = self.clock.val();
+        self.sizing.reset.next = self.reset.val();
+        self.sizing.start.next = self.sequencer.starting.val();
+        self.sizing.start_arp.next = self.start_arp.val();
+        self.sizing.start_echo.next = self.start_echo.val();
+        self.sizing.accepted_stream_to.next = self.accepted_stream_to.val();
+        self.sizing.accepted_status_now.next = self.accepted_status_now.val();
+        self.sizing.ip_total_length.next = self.ip_total_length.val();
 
-        // Stage 2 -> 3: the ROM word's parts, registered (the buffer read of a copy is
-        // issued from them: its byte is there in stage 5).
-        self.s3_write.d.next = self.read_2.q.val()
-            & self.rom.read_data.val().get_bit(26)
-            & (!self.rom.read_data.val().get_bit(29)
-                | (bit_cast::<BODY_ADDRESS_BITS, 8>(self.rom.read_data.val().get_bits::<8>(0))
-                    >= self.frame_end.q.val()));
-        self.s3_sum_ip.d.next = self.read_2.q.val() & self.rom.read_data.val().get_bit(27);
-        self.s3_sum_udp.d.next = self.read_2.q.val() & self.rom.read_data.val().get_bit(28);
-        self.s3_from_buffer.d.next = self.rom.read_data.val().get_bit(31);
-        self.s3_address.d.next = self.rom.read_data.val().get_bits::<8>(0);
-        self.s3_value.d.next = self.rom.read_data.val().get_bits::<8>(8);
-        self.s3_source.d.next = self.rom.read_data.val().get_bits::<2>(24);
-        self.s3_read.d.next = self.rom.read_data.val().get_bits::<8>(16);
-
-        // Stage 3 -> 4: the byte in each of the five words of held fields; the counter
-        // loaded at its byte 0 (the next counter's read starts).
-        // (the held fields' byte: each word's byte now, the word in the next stage)
+        // The step pipeline: each ROM word's byte (a constant, a held field's byte, a
+        // counter byte, a checksum byte or a copy from the buffer) written and summed.
+        self.stages.clock.next = self.clock.val();
+        self.stages.reset.next = self.reset.val();
+        self.stages.restart.next = self.sequencer.starting.val();
+        self.stages.word_valid.next = self.sequencer.word_valid.val();
+        self.stages.word.next = self.sequencer.word.val();
+        self.stages.frame_end.next = self.sizing.frame_end.val();
+        self.stages.buffer_data.next = self.buffer.read_data.val();
+        self.stages.counters_data.next = self.counters_data.val();
+        self.stages.field_byte.next = self.fields.field_byte.val();
+        self.counters_address.next = self.stages.counters_address.val();
+        // (the held fields' byte: each word's byte in stage 3, the word in stage 4)
         self.fields.clock.next = self.clock.val();
-        self.fields.byte_index.next = self.s3_value.q.val().get_bits::<3>(0);
-        self.fields.word_index.next = self.s4_value.q.val().get_bits::<3>(3);
+        self.fields.byte_index.next = self.stages.field_byte_index.val();
+        self.fields.word_index.next = self.stages.field_word_index.val();
         self.fields.destination_mac.next = self.destination_mac.val();
         self.fields.destination_port.next = self.destination_port.val();
         self.fields.destination_ip.next = self.destination_ip.val();
@@ -964,147 +794,29 @@ impl Logic for ReplyBuilder {
         self.fields.result.next = self.result.val();
         self.fields.link_up.next = self.link_up.val();
         self.fields.link_speed.next = self.link_speed.val();
-        self.s4_write.d.next = self.s3_write.q.val();
-        self.s4_address.d.next = self.s3_address.q.val();
-        self.s4_value.d.next = self.s3_value.q.val();
-        self.s4_source.d.next = self.s3_source.q.val();
-        self.s4_sum_ip.d.next = self.s3_sum_ip.q.val();
-        self.s4_sum_udp.d.next = self.s3_sum_udp.q.val();
-        self.s4_from_buffer.d.next = self.s3_from_buffer.q.val();
-        self.counters_address.next = self.counter_address.q.val();
-        if self.s3_write.q.val()
-            & (self.s3_source.q.val() == 2)
-            & (self.s3_value.q.val().get_bits::<2>(0) == 0)
-        {
-            self.counter_word.d.next = self.counters_data.val();
-            self.counter_address.d.next = self.counter_address.q.val() + 1;
-        }
-
-        // Stage 4 -> 5: the byte by its source (a field byte: its word).
-        self.reply_byte.next = self.s4_value.q.val();
-        self.counter_word_shifted.next = self.counter_word.q.val()
-            << (bit_cast::<32, 2>(self.s4_value.q.val().get_bits::<2>(0)) << 3);
-        if self.s4_source.q.val() == 1 {
-            self.reply_byte.next = self.fields.field_byte.val();
-        } else if self.s4_source.q.val() == 2 {
-            self.reply_byte.next = self.counter_word_shifted.val().get_bits::<8>(24);
-        } else if self.s4_source.q.val() == 3 {
-            if self.s4_value.q.val().get_bits::<2>(0) == 0 {
-                self.reply_byte.next = self.checksums.ip_checksum.val().get_bits::<8>(8);
-            } else if self.s4_value.q.val().get_bits::<2>(0) == 1 {
-                self.reply_byte.next = self.checksums.ip_checksum.val().get_bits::<8>(0);
-            } else if self.s4_value.q.val().get_bits::<2>(0) == 2 {
-                self.reply_byte.next = self.checksums.udp_checksum.val().get_bits::<8>(8);
-            } else {
-                self.reply_byte.next = self.checksums.udp_checksum.val().get_bits::<8>(0);
-            }
-        }
-        self.s5_byte.d.next = self.reply_byte.val();
-        self.s5_write.d.next = self.s4_write.q.val();
-        self.s5_address.d.next = self.s4_address.q.val();
-        self.s5_sum_ip.d.next = self.s4_sum_ip.q.val();
-        self.s5_sum_udp.d.next = self.s4_sum_udp.q.val();
-        self.s5_from_buffer.d.next = self.s4_from_buffer.q.val();
-
-        // Stage 5: write and sum (an even frame position is a word's high byte); a copy's
-        // byte is the buffer's, read two clocks ago.
-        self.written.next = self.s5_byte.q.val();
-        if self.s5_from_buffer.q.val() {
-            self.written.next = self.buffer.read_data.val();
-        }
-        self.checksums.clock.next = self.clock.val();
-        self.checksums.reset.next = self.reset.val();
-        self.checksums.written.next = self.written.val();
-        self.checksums.low_byte.next = self.s5_address.q.val().get_bit(0);
-        self.checksums.sum_ip.next = self.s5_sum_ip.q.val();
-        self.checksums.sum_udp.next = self.s5_sum_udp.q.val();
+        // the buffer: the parser's writes unless locked, the steps' writes
         self.buffer.write_enable.next = self.receive_write_enable.val() & !self.locked_now.q.val();
         self.buffer.write_address.next = self.receive_write_address.val();
         self.buffer.write_data.next = self.receive_write_data.val();
-        if self.s5_write.q.val() {
+        if self.stages.write.val() {
             self.buffer.write_enable.next = true;
             self.buffer.write_address.next =
-                bit_cast::<BODY_ADDRESS_BITS, 8>(self.s5_address.q.val());
-            self.buffer.write_data.next = self.written.val();
+                bit_cast::<BODY_ADDRESS_BITS, 8>(self.stages.write_address.val());
+            self.buffer.write_data.next = self.stages.write_data.val();
         }
 
-        // Starts: only when no reply is under way.
-        self.sizing_echo.d.next = false;
-        self.sizing.d.next = false;
-        self.idle.next = !self.running.q.val()
-            & !self.read_2.q.val()
-            & !self.offering.q.val()
-            & !self.reader.busy.val();
-        self.checksums.restart.next =
-            self.idle.val() & (self.start_arp.val() | self.start_echo.val() | self.start_ack.val());
-        if self.idle.val() & (self.start_arp.val() | self.start_echo.val() | self.start_ack.val()) {
-            self.running.d.next = true;
-            self.counter_address.d.next = 0.into();
-            self.is_ack.d.next = self.start_ack.val();
-            self.sizing.d.next = true;
-            self.sizing_echo.d.next = self.start_echo.val();
-            self.frame_end.d.next = self.ip_total_length.val().get_bits::<BODY_ADDRESS_BITS>(0)
-                + self.ethernet_header_len.val();
-            // (the parser's total length is within its frame, at most 1,504: the sum above
-            // does not wrap)
-            self.echo_short.d.next = self.ip_total_length.val() < self.min_ip_total_len.val();
-            self.start_was_arp.d.next = self.start_arp.val();
-            self.start_was_stream_to.d.next = self.accepted_stream_to.val();
-            self.start_was_status_now.d.next = self.accepted_status_now.val();
-            if self.start_arp.val() {
-                self.step.d.next = self.arp_start.val();
-            } else if self.start_echo.val() {
-                self.step.d.next = self.echo_start.val();
-            } else if self.accepted_stream_to.val() {
-                self.step.d.next = self.ack_destination_start.val();
-            } else if self.accepted_status_now.val() {
-                self.step.d.next = self.ack_counters_start.val();
-            } else {
-                self.step.d.next = self.ack_none_start.val();
-            }
-        }
-        // The body length a clock after the start, from the registered kind (no path from
-        // the start's decision into the length register): an echo reply is the request's
-        // length, at least the minimum frame.
-        if self.sizing.q.val() {
-            if self.start_was_arp.q.val() {
-                self.body_len.d.next = self.arp_len.val();
-            } else if self.sizing_echo.q.val() {
-                self.body_len.d.next = self.frame_end.q.val();
-                if self.echo_short.q.val() {
-                    self.body_len.d.next = self.min_frame_len.val();
-                }
-            } else if self.start_was_stream_to.q.val() {
-                self.body_len.d.next = self.ack_destination_len.val();
-            } else if self.start_was_status_now.q.val() {
-                self.body_len.d.next = self.ack_counters_len.val();
-            } else {
-                self.body_len.d.next = self.ack_none_len.val();
-            }
-        }
-
-        // The descriptor; at its take the reader starts and an acknowledgement's patch.
-        self.replies.valid.next = self.offering.q.val();
+        // The descriptor; a clock after its take the reader starts and an
+        // acknowledgement's patch, with the send tick.
+        self.replies.valid.next = self.sequencer.offering.val();
         self.replies.kind.next = self.raw_frame_kind.val();
         self.replies.flags.next = 0.into();
         self.replies.entry_count.next = 0.into();
         self.replies.base_tick.next = 0.into();
-        self.replies.body_len.next = self.body_len.q.val();
+        self.replies.body_len.next = self.sizing.body_len.val();
         self.replies.body_sum.next = 0.into();
-        // (the take is registered first: the arbiter's grant reaches one flip-flop and
-        // nothing else; the offer ends, the reader and the patch start a clock later,
-        // while the arbiter holds the granted body open)
-        self.take.next = self.offering.q.val() & self.replies.ready.val();
-        self.reader.start.next = self.took.q.val();
-        self.reader.length.next = self.body_len.q.val();
-        self.took.d.next = self.take.val();
-        if self.took.q.val() {
-            self.offering.d.next = false;
-        }
-        if self.took.q.val() & self.is_ack.q.val() {
-            self.patching.d.next = true;
-            self.step.d.next = self.patch_start.val();
-            self.running.d.next = true;
+        self.reader.start.next = self.sequencer.took.val();
+        self.reader.length.next = self.sizing.body_len.val();
+        if self.sequencer.patch_starts.val() {
             self.send_tick.d.next = self.tick.val() + self.send_tick_offset.val();
         }
 
@@ -1112,7 +824,8 @@ impl Logic for ReplyBuilder {
         // (the reader reads from the clock after the take on; a build reads before)
         self.buffer.read_address.next = self.reader.read_address.val();
         if !self.reader.busy.val() {
-            self.buffer.read_address.next = bit_cast::<BODY_ADDRESS_BITS, 8>(self.s3_read.q.val());
+            self.buffer.read_address.next =
+                bit_cast::<BODY_ADDRESS_BITS, 8>(self.stages.read_address.val());
         }
         self.reader.read_data.next = self.buffer.read_data.val();
         self.replies.body.valid.next = self.reader.body.valid.val();
@@ -1132,25 +845,8 @@ impl Logic for ReplyBuilder {
         if self.reserve.val() {
             self.locked_now.d.next = true;
         }
-
         if self.reset.val() {
-            self.running.d.next = false;
-            self.read_1.d.next = false;
-            self.read_2.d.next = false;
-            self.offering.d.next = false;
-            self.is_ack.d.next = false;
-            self.patching.d.next = false;
             self.locked_now.d.next = false;
-            self.took.d.next = false;
-            self.sizing_echo.d.next = false;
-            self.sizing.d.next = false;
-            self.s3_write.d.next = false;
-            self.s4_write.d.next = false;
-            self.s4_sum_ip.d.next = false;
-            self.s4_sum_udp.d.next = false;
-            self.s5_write.d.next = false;
-            self.s3_sum_ip.d.next = false;
-            self.s3_sum_udp.d.next = false;
         }
     }
 }
@@ -1357,7 +1053,7 @@ mod tests {
             }
             // while locked only the builder writes
             assert!(
-                !u.buffer.write_enable.val() || u.s5_write.q.val(),
+                !u.buffer.write_enable.val() || u.stages.write.val(),
                 "clock {clock}"
             );
             let beat = u.replies.body.valid.val() && u.replies.body.ready.val();

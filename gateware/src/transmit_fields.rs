@@ -1,0 +1,202 @@
+//! TransmitFields: the frame transmitter's datagram header fields (flags, sequence number,
+//! base tick, entry count) and the box's datagram sequence number.
+//!
+//! While no frame goes out (`load`) the descriptor's flags, base tick and entry count are
+//! held with the next sequence number: 15 bytes, most significant first, and a zero byte (the
+//! first reserved byte) in two 64-bit shift registers (no word over 64 bits to simulate).
+//! A position steps through them one byte per clock: once from the frame's index 2 to 17
+//! for the UDP checksum (all 16 bytes; back at 0 after them), and once from index 57 to 71
+//! to send the 15 field bytes; `field_byte` is a register read from the fields at the
+//! position (no multiplexer between the position and its use), the field byte of frame
+//! index `i` in the clock of index `i`. `advance` (a datagram's last clock) steps the
+//! sequence number. Cost: 128 + 32 bits held, the 4-bit position, the byte register and
+//! the step flag.
+
+use crate::frame_transmitter::{FIELDS_AT, FIELDS_LEN};
+use crate::hdl::*;
+
+/// The header fields, sent one byte per clock.
+#[derive(LogicBlock)]
+pub struct TransmitFields {
+    /// The box clock.
+    pub clock: Signal<In, Clock>,
+    /// Synchronous reset: the sequence number restarts at 0.
+    pub reset: Signal<In, Bit>,
+    /// No frame goes out: hold the descriptor's fields.
+    pub load: Signal<In, Bit>,
+    /// The descriptor's flags.
+    pub flags: Signal<In, Bits<8>>,
+    /// The descriptor's base tick.
+    pub base_tick: Signal<In, Bits<64>>,
+    /// The descriptor's entry count.
+    pub entry_count: Signal<In, Bits<16>>,
+    /// A datagram's last clock: the sequence number steps.
+    pub advance: Signal<In, Bit>,
+    /// The frame goes on after this clock's index.
+    pub frame_goes_on: Signal<In, Bit>,
+    /// The frame's index in this clock.
+    pub index: Signal<In, Bits<11>>,
+    /// The field byte of this clock's index.
+    pub field_byte: Signal<Out, Bits<8>>,
+    // the first field byte and the byte after the fields, each two lower (the field
+    // position steps there)
+    fields_ahead: Constant<Bits<7>>,
+    fields_end_ahead: Constant<Bits<7>>,
+    fields_high: DFF<Bits<64>>,
+    fields_low: DFF<Bits<64>>,
+    next_sequence: DFF<Bits<32>>,
+    // the position of the next clock's field byte
+    next_field_position: DFF<Bits<4>>,
+    // the position steps from the next clock's to the one after it
+    next_field_steps: DFF<Bit>,
+    current_byte: DFF<Bits<8>>,
+    field_word: Signal<Local, Bits<64>>,
+    field_word_shifted: Signal<Local, Bits<64>>,
+}
+
+impl Default for TransmitFields {
+    fn default() -> Self {
+        Self {
+            clock: Default::default(),
+            reset: Default::default(),
+            load: Default::default(),
+            flags: Default::default(),
+            base_tick: Default::default(),
+            entry_count: Default::default(),
+            advance: Default::default(),
+            frame_goes_on: Default::default(),
+            index: Default::default(),
+            field_byte: Default::default(),
+            fields_ahead: constant((FIELDS_AT - 2) as u64),
+            fields_end_ahead: constant((FIELDS_AT + FIELDS_LEN - 2) as u64),
+            fields_high: Default::default(),
+            fields_low: Default::default(),
+            next_sequence: Default::default(),
+            next_field_position: Default::default(),
+            next_field_steps: Default::default(),
+            current_byte: Default::default(),
+            field_word: Default::default(),
+            field_word_shifted: Default::default(),
+        }
+    }
+}
+
+impl Logic for TransmitFields {
+    #[hdl_gen]
+    fn update(&mut self) {
+        dff_setup!(
+            self,
+            clock,
+            fields_high,
+            fields_low,
+            next_sequence,
+            next_field_position,
+            next_field_steps,
+            current_byte
+        );
+        // the field byte of the next clock: byte 0 is the top byte of `fields_high` (the
+        // fields are held from index 0 on; the byte is read from index 2 on)
+        self.field_word.next = self.fields_high.q.val();
+        if self.next_field_position.q.val().get_bit(3) {
+            self.field_word.next = self.fields_low.q.val();
+        }
+        self.field_word_shifted.next = self.field_word.val()
+            << (bit_cast::<64, 3>(self.next_field_position.q.val().get_bits::<3>(0)) << 3);
+        self.current_byte.d.next = self.field_word_shifted.val().get_bits::<8>(56);
+        // (the index after the next is this one + 2 while the frame goes on)
+        self.next_field_steps.d.next = self.frame_goes_on.val()
+            & ((self.index.val() < 16)
+                | ((self.index.val() >= bit_cast::<11, 7>(self.fields_ahead.val()))
+                    & (self.index.val() < bit_cast::<11, 7>(self.fields_end_ahead.val()))));
+        // the position goes once round for the checksum (back at 0 after 16 bytes) and
+        // then through the first 15 bytes to send them; 0 between frames
+        self.next_field_position.d.next = 0.into();
+        if self.frame_goes_on.val() {
+            self.next_field_position.d.next = self.next_field_position.q.val();
+            if self.next_field_steps.q.val() {
+                self.next_field_position.d.next = self.next_field_position.q.val() + 1;
+            }
+        }
+        if self.advance.val() {
+            self.next_sequence.d.next = self.next_sequence.q.val() + 1;
+        }
+        if self.load.val() {
+            self.fields_high.d.next = (bit_cast::<64, 8>(self.flags.val()) << 56)
+                | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
+                | bit_cast::<64, 24>(self.base_tick.val().get_bits::<24>(40));
+            self.fields_low.d.next = (bit_cast::<64, 40>(self.base_tick.val().get_bits::<40>(0))
+                << 24)
+                | (bit_cast::<64, 16>(self.entry_count.val()) << 8);
+        }
+        if self.reset.val() {
+            self.next_field_steps.d.next = false;
+            self.next_field_position.d.next = 0.into();
+            self.next_sequence.d.next = 0.into();
+        }
+        self.field_byte.next = self.current_byte.q.val();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testbench::{Bench, TestRng};
+    use skinbox_protocol::datagram::field;
+
+    /// Frames with random fields, as the transmitter runs them (index 0 to 100): the
+    /// field bytes are the datagram header's (flags, sequence, base tick, entry count,
+    /// a zero) at indices 2 to 17 for the checksum and at their own places, 57 to 71;
+    /// the sequence number counts the frames that advance it.
+    #[test]
+    fn field_bytes_are_the_headers_at_their_indices() {
+        let mut rng = TestRng::new(0xF1E);
+        let mut bench = Bench::new(TransmitFields::default(), |b| &mut b.clock);
+        bench.uut.reset.next = true;
+        bench.cycle();
+        bench.uut.reset.next = false;
+        let mut sequence = 0u32;
+        for round in 0..30 {
+            let flags = rng.byte();
+            let base_tick = rng.next_u64();
+            let entry_count = rng.next_u64() as u16;
+            let advance = rng.chance(0.7);
+            let u = &mut bench.uut;
+            u.load.next = true;
+            u.flags.next = u64::from(flags).into();
+            u.base_tick.next = base_tick.into();
+            u.entry_count.next = u64::from(entry_count).into();
+            u.index.next = 0.into();
+            u.frame_goes_on.next = false;
+            bench.cycle();
+            bench.uut.load.next = false;
+            let mut header = vec![flags];
+            header.extend(sequence.to_be_bytes());
+            header.extend(base_tick.to_be_bytes());
+            header.extend(entry_count.to_be_bytes());
+            header.push(0);
+            assert_eq!(header.len(), field::ENTRY_COUNT.end - field::FLAGS + 1);
+            let mut seen = Vec::new();
+            let last = 100;
+            for i in 0..=last {
+                let u = &mut bench.uut;
+                u.index.next = i.into();
+                u.frame_goes_on.next = i != last;
+                u.advance.next = advance && i == last;
+                bench.settle();
+                seen.push(bench.uut.field_byte.val().to_u64() as u8);
+                bench.cycle();
+            }
+            bench.uut.advance.next = false;
+            assert_eq!(seen[2..18], header[..], "round {round}");
+            let at = FIELDS_AT;
+            assert_eq!(
+                seen[at..at + FIELDS_LEN],
+                header[..FIELDS_LEN],
+                "round {round}"
+            );
+            if advance {
+                sequence += 1;
+            }
+        }
+    }
+}
