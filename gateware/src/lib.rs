@@ -29,6 +29,7 @@
 
 pub mod arp_receiver;
 pub mod async_fifo;
+pub mod batch_close;
 pub mod block_ram;
 pub mod board;
 pub mod body_reader;
@@ -73,11 +74,13 @@ pub mod mdio;
 pub mod ones_complement_sum;
 pub mod packet_store;
 pub mod parser_input;
+pub mod payload_writer;
 pub mod pending_events;
 pub mod port_slots;
 pub mod receive_rules;
 pub mod record_arbiter;
 pub mod record_batcher;
+pub mod record_position;
 pub mod replica_register;
 pub mod reply_builder;
 pub mod reply_checksums;

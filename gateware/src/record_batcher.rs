@@ -13,16 +13,15 @@
 //! close takes no more records: while the other buffer is still being read the input is
 //! not ready and records wait upstream, none is lost here.
 
+use crate::batch_close::BatchClose;
 use crate::block_ram::BlockRam;
 use crate::datagram_offer::DatagramOffer;
 use crate::flush_deadline::FlushDeadline;
 use crate::hdl::*;
+use crate::payload_writer::PayloadWriter;
+use crate::record_position::RecordPosition;
 use crate::stream::{ByteStreamSink, DatagramSource};
-use skinbox_protocol::datagram::{DatagramKind, FLAG_FLUSH_TIMEOUT, MAX_RECORDS};
-use skinbox_protocol::record::{field, RECORD_LEN};
-
-/// Beat of a record (port, flags, tick, cell bytes) that carries the tick's last byte.
-const LAST_TICK_BEAT: usize = field::TICK_OFFSET.end - 1;
+use skinbox_protocol::datagram::{DatagramKind, FLAG_FLUSH_TIMEOUT};
 
 /// Batches records into datagrams.
 #[derive(LogicBlock)]
@@ -49,44 +48,27 @@ pub struct RecordBatcher {
     memory: BlockRam<8, 12>,
     records_kind: Constant<Bits<8>>,
     flush_timeout_flag: Constant<Bits<8>>,
-    last_tick_beat_less_one: Constant<Bits<5>>,
-    record_last_beat_less_one: Constant<Bits<5>>,
-    last_fill_less_one: Constant<Bits<6>>,
     fill_buffer: DFF<Bit>,
-    fill_count: DFF<Bits<6>>,
-    fill_offset: DFF<Bits<11>>,
-    fill_sum: DFF<Bits<32>>,
+    // the beat within the record and the records in the filling datagram, with their tests
+    position: RecordPosition,
+    // the payload's write port, offset and sum
+    payload: PayloadWriter,
     // the base tick and the flush deadline of the filling datagram
     deadline: FlushDeadline,
     // the first record's age (now - its tick, low 32 bits), for the base tick and the
     // deadline, which are set a clock later (off the accept path)
     first_age: DFF<Bits<32>>,
     first_seen: DFF<Bit>,
-    // beat == 0, offset_left == 0, fill_count == max and != 0, kept in registers
-    beat_zero: DFF<Bit>,
-    // the beat is the record's last tick byte, set and cleared as the beat moves
-    beat_at_last_tick: DFF<Bit>,
-    // the beat is the record's last, and fill_count == the last record's index
-    beat_last: DFF<Bit>,
-    fill_at_last: DFF<Bit>,
+    // offset_left == 0, kept in a register
     offset_idle: DFF<Bit>,
-    fill_full: DFF<Bit>,
-    fill_nonzero: DFF<Bit>,
-    beat: DFF<Bits<5>>,
     tick_low: DFF<Bits<32>>,
     offset_bytes: DFF<Bits<32>>,
     offset_left: DFF<Bits<3>>,
     record_tick: Signal<Local, Bits<32>>,
     write: Signal<Local, Bit>,
-    // the payload memory's write port, a clock after the decision (off the accept path)
-    memory_write: DFF<Bit>,
-    memory_write_address: DFF<Bits<12>>,
-    memory_write_data: DFF<Bits<8>>,
     write_data: Signal<Local, Bits<8>>,
-    fill_sum_next: Signal<Local, Bits<32>>,
-    // a datagram is due to close (full, or its time is up) at a record boundary: a
-    // register, its next value from registers (at the end of the kernel)
-    close_due: DFF<Bit>,
+    // a datagram is due to close (full, or its time is up) at a record boundary
+    close: BatchClose,
     can_close: Signal<Local, Bit>,
     accept: Signal<Local, Bit>,
 }
@@ -115,34 +97,19 @@ impl RecordBatcher {
             memory: Default::default(),
             records_kind: Constant::new((DatagramKind::Records as u64).into()),
             flush_timeout_flag: Constant::new(u64::from(FLAG_FLUSH_TIMEOUT).into()),
-            last_tick_beat_less_one: Constant::new((LAST_TICK_BEAT as u64 - 1).into()),
-            record_last_beat_less_one: Constant::new((RECORD_LEN as u64 - 2).into()),
-            last_fill_less_one: Constant::new((MAX_RECORDS as u64 - 2).into()),
             fill_buffer: Default::default(),
-            fill_count: Default::default(),
-            fill_offset: Default::default(),
-            fill_sum: Default::default(),
+            position: Default::default(),
+            payload: Default::default(),
             first_age: Default::default(),
             first_seen: Default::default(),
-            beat_zero: Default::default(),
-            beat_at_last_tick: Default::default(),
-            beat_last: Default::default(),
-            fill_at_last: Default::default(),
             offset_idle: Default::default(),
-            fill_full: Default::default(),
-            fill_nonzero: Default::default(),
-            beat: Default::default(),
             tick_low: Default::default(),
             offset_bytes: Default::default(),
             offset_left: Default::default(),
             record_tick: Default::default(),
             write: Default::default(),
-            memory_write: Default::default(),
-            memory_write_address: Default::default(),
-            memory_write_data: Default::default(),
             write_data: Default::default(),
-            fill_sum_next: Default::default(),
-            close_due: Default::default(),
+            close: Default::default(),
             can_close: Default::default(),
             accept: Default::default(),
         }
@@ -158,26 +125,12 @@ impl Logic for RecordBatcher {
             self,
             clock,
             fill_buffer,
-            close_due,
-            fill_count,
-            fill_offset,
-            fill_sum,
             first_age,
             first_seen,
-            beat_zero,
-            beat_at_last_tick,
-            beat_last,
-            fill_at_last,
             offset_idle,
-            fill_full,
-            fill_nonzero,
-            beat,
             tick_low,
             offset_bytes,
-            offset_left,
-            memory_write,
-            memory_write_address,
-            memory_write_data
+            offset_left
         );
         self.offer.clock.next = self.clock.val();
         self.offer.reset.next = self.reset.val();
@@ -198,10 +151,13 @@ impl Logic for RecordBatcher {
         // would land in the old buffer) and while it waits for the other buffer (a full one
         // and one whose time is up alike). Whether the other buffer is free stays off the
         // input's ready.
-        self.accept.next = self.offset_idle.q.val() & !self.close_due.q.val();
+        self.accept.next = self.offset_idle.q.val() & !self.close.due.val();
         self.records.ready.next = self.accept.val();
 
         // Write one byte per clock: offset bytes while they are pending, else stream beats.
+        self.position.clock.next = self.clock.val();
+        self.position.reset.next = self.reset.val();
+        self.position.advance.next = false;
         self.write.next = false;
         self.write_data.next = self.records.data.val();
         self.record_tick.next =
@@ -213,27 +169,16 @@ impl Logic for RecordBatcher {
             self.offset_left.d.next = self.offset_left.q.val() - 1;
             self.offset_idle.d.next = self.offset_left.q.val() == 1;
         } else if self.records.valid.val() & self.accept.val() {
-            self.beat.d.next = self.beat.q.val() + 1;
-            self.beat_zero.d.next = false;
-            self.beat_at_last_tick.d.next = self.beat.q.val() == self.last_tick_beat_less_one.val();
-            self.beat_last.d.next = self.beat.q.val() == self.record_last_beat_less_one.val();
-            if self.beat_last.q.val() {
-                self.beat.d.next = 0.into();
-                self.beat_zero.d.next = true;
-                self.fill_count.d.next = self.fill_count.q.val() + 1;
-                self.fill_full.d.next = self.fill_at_last.q.val();
-                self.fill_at_last.d.next = self.fill_count.q.val() == self.last_fill_less_one.val();
-                self.fill_nonzero.d.next = true;
-            }
+            self.position.advance.next = true;
             // beats 2..=5 (the tick bytes), from the beat's bits: 0b000_1x or 0b001_0x
-            if (self.beat.q.val().get_bits::<2>(3) == 0)
-                & (self.beat.q.val().get_bit(2) != self.beat.q.val().get_bit(1))
+            if (self.position.beat.val().get_bits::<2>(3) == 0)
+                & (self.position.beat.val().get_bit(2) != self.position.beat.val().get_bit(1))
             {
                 self.tick_low.d.next = self.record_tick.val();
             } else {
                 self.write.next = true;
             }
-            if self.beat_at_last_tick.q.val() {
+            if self.position.beat_at_last_tick.val() {
                 self.offset_left.d.next = 4.into();
                 self.offset_idle.d.next = false;
             }
@@ -248,11 +193,11 @@ impl Logic for RecordBatcher {
         // flip-flop would get a reset net of its own, a LUT level on the path)
         self.first_seen.d.next = self.records.valid.val()
             & self.accept.val()
-            & self.beat_at_last_tick.q.val()
-            & !self.fill_nonzero.q.val()
+            & self.position.beat_at_last_tick.val()
+            & !self.position.fill_nonzero.val()
             & !self.reset.val();
-        if self.offset_idle.q.val() & self.beat_at_last_tick.q.val() {
-            if !self.fill_nonzero.q.val() {
+        if self.offset_idle.q.val() & self.position.beat_at_last_tick.val() {
+            if !self.position.fill_nonzero.val() {
                 self.offset_bytes.d.next = 0.into();
                 self.first_age.d.next = self.tick.val().get_bits::<32>(0) - self.record_tick.val();
             } else {
@@ -260,52 +205,31 @@ impl Logic for RecordBatcher {
                     self.record_tick.val() - self.deadline.base_tick.val().get_bits::<32>(0);
             }
         }
-        // the transmitter reads a buffer only after it closed, many clocks after its last
-        // byte was written, so the write may land a clock late
-        self.memory_write.d.next = self.write.val();
-        self.memory_write_data.d.next = self.write_data.val();
-        self.memory_write_address.d.next = (bit_cast::<12, 1>(self.fill_buffer.q.val().into())
-            << 11)
-            | bit_cast::<12, 11>(self.fill_offset.q.val());
-        self.memory.write_enable.next = self.memory_write.q.val();
-        self.memory.write_data.next = self.memory_write_data.q.val();
-        self.memory.write_address.next = self.memory_write_address.q.val();
-        if self.write.val() {
-            self.fill_offset.d.next = self.fill_offset.q.val() + 1;
-        }
-        // the body's sum grows with the write register's byte (a clock after the decision,
-        // from registers only); a datagram closing now takes the byte still on its way
-        self.fill_sum_next.next = self.fill_sum.q.val();
-        if self.memory_write.q.val() {
-            if self.memory_write_address.q.val().get_bit(0) {
-                self.fill_sum_next.next =
-                    self.fill_sum.q.val() + bit_cast::<32, 8>(self.memory_write_data.q.val());
-            } else {
-                self.fill_sum_next.next = self.fill_sum.q.val()
-                    + (bit_cast::<32, 8>(self.memory_write_data.q.val()) << 8);
-            }
-        }
-        self.fill_sum.d.next = self.fill_sum_next.val();
+        // the byte goes into the filling buffer a clock later, the body's sum with it
+        self.payload.clock.next = self.clock.val();
+        self.payload.reset.next = self.reset.val();
+        self.payload.write.next = self.write.val();
+        self.payload.write_data.next = self.write_data.val();
+        self.payload.buffer.next = self.fill_buffer.q.val();
+        self.payload.clear.next = self.close.due.val() & self.can_close.val();
+        self.memory.write_enable.next = self.payload.memory_write.val();
+        self.memory.write_data.next = self.payload.memory_data.val();
+        self.memory.write_address.next = self.payload.memory_address.val();
 
         // Hand the full buffer over, start filling the other.
-        self.offer.close.next = self.close_due.q.val() & self.can_close.val();
+        self.offer.close.next = self.close.due.val() & self.can_close.val();
         self.offer.kind.next = self.records_kind.val();
-        self.offer.close_entry_count.next = bit_cast::<16, 6>(self.fill_count.q.val());
-        self.offer.close_body_len.next = self.fill_offset.q.val();
-        self.offer.close_body_sum.next = self.fill_sum_next.val();
+        self.offer.close_entry_count.next = bit_cast::<16, 6>(self.position.fill_count.val());
+        self.offer.close_body_len.next = self.payload.offset.val();
+        self.offer.close_body_sum.next = self.payload.body_sum_next.val();
         self.offer.close_base_tick.next = self.deadline.base_tick.val();
         self.offer.close_flags.next = 0.into();
-        if !self.fill_full.q.val() {
+        if !self.position.fill_full.val() {
             self.offer.close_flags.next = self.flush_timeout_flag.val();
         }
-        if self.close_due.q.val() & self.can_close.val() {
+        self.position.clear.next = self.close.due.val() & self.can_close.val();
+        if self.close.due.val() & self.can_close.val() {
             self.fill_buffer.d.next = !self.fill_buffer.q.val();
-            self.fill_count.d.next = 0.into();
-            self.fill_full.d.next = false;
-            self.fill_at_last.d.next = false;
-            self.fill_nonzero.d.next = false;
-            self.fill_offset.d.next = 0.into();
-            self.fill_sum.d.next = 0.into();
         }
 
         // The closed datagram, read from the buffer that is not filling.
@@ -316,41 +240,22 @@ impl Logic for RecordBatcher {
         self.offer.read_data.next = self.memory.read_data.val();
 
         if self.reset.val() {
-            self.memory_write.d.next = false;
             self.fill_buffer.d.next = false;
-            self.fill_count.d.next = 0.into();
-            self.beat_zero.d.next = true;
             self.offset_idle.d.next = true;
-            self.fill_full.d.next = false;
-            self.fill_at_last.d.next = false;
-            self.fill_nonzero.d.next = false;
-            self.fill_offset.d.next = 0.into();
-            self.fill_sum.d.next = 0.into();
-            self.beat.d.next = 0.into();
-            self.beat_at_last_tick.d.next = false;
-            self.beat_last.d.next = false;
             self.offset_left.d.next = 0.into();
         }
-        // The next value of `close_due`, from registers: a datagram due to close stays due
-        // until it closes (nothing moves meanwhile); otherwise it is due at the next record
-        // boundary: at the end of this clock's beat if it is a record's last (full, or its
-        // time up), or now already (at a boundary, full or time up). (Between a record's
-        // beats 6 and 10, `offset_idle` low, no boundary is near.)
-        if self.close_due.q.val() {
-            self.close_due.d.next = !self.can_close.val();
-        } else if self.records.valid.val() {
-            self.close_due.d.next = self.offset_idle.q.val()
-                & self.beat_last.q.val()
-                & (self.fill_at_last.q.val() | self.deadline.passed_next.val());
-        } else {
-            self.close_due.d.next = self.offset_idle.q.val()
-                & self.beat_zero.q.val()
-                & (self.fill_full.q.val()
-                    | (self.fill_nonzero.q.val() & self.deadline.passed_next.val()));
-        }
-        if self.reset.val() {
-            self.close_due.d.next = false;
-        }
+        // whether the filling datagram is due to close, a clock ahead, from registers
+        self.close.clock.next = self.clock.val();
+        self.close.reset.next = self.reset.val();
+        self.close.can_close.next = self.can_close.val();
+        self.close.beat_valid.next = self.records.valid.val();
+        self.close.offset_idle.next = self.offset_idle.q.val();
+        self.close.beat_zero.next = self.position.beat_zero.val();
+        self.close.beat_last.next = self.position.beat_last.val();
+        self.close.fill_at_last.next = self.position.fill_at_last.val();
+        self.close.fill_full.next = self.position.fill_full.val();
+        self.close.fill_nonzero.next = self.position.fill_nonzero.val();
+        self.close.deadline_passed_next.next = self.deadline.passed_next.val();
         self.datagrams_sent.next = self.offer.datagrams_sent.val();
         self.records_sent.next = self.offer.entries_sent.val();
     }
@@ -361,6 +266,8 @@ mod tests {
     use super::*;
     use crate::frame_transmitter::word_sum;
     use crate::testbench::{Bench, TestRng};
+    use skinbox_protocol::datagram::MAX_RECORDS;
+    use skinbox_protocol::record::RECORD_LEN;
     use skinbox_protocol::{DataRepr, RecordRepr};
 
     const TIMEOUT: u64 = 3000;
