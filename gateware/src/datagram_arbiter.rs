@@ -42,6 +42,9 @@ pub struct DatagramArbiter {
     body_open: DFF<Bit>,
     // the source offered, one-hot (chosen in the clock before)
     offered: DFF<Bits<MAX_SOURCES>>,
+    // a source is offered (`offered != 0`, kept in a register: no OR of its bits before
+    // `taken` and the offer's reset)
+    offered_any: DFF<Bit>,
     // source i's bit
     source_bit: Vec<Constant<Bits<MAX_SOURCES>>>,
     waiting: Signal<Local, Bits<MAX_SOURCES>>,
@@ -74,6 +77,7 @@ impl DatagramArbiter {
             after_last_grant: Default::default(),
             body_open: Default::default(),
             offered: Default::default(),
+            offered_any: Default::default(),
             source_bit: (0..sources)
                 .map(|i| Constant::new((1u64 << i).into()))
                 .collect(),
@@ -99,7 +103,8 @@ impl Logic for DatagramArbiter {
             last_grant,
             after_last_grant,
             body_open,
-            offered
+            offered,
+            offered_any
         );
         self.waiting.next = 0.into();
         for i in 0..self.sources.len() {
@@ -131,7 +136,7 @@ impl Logic for DatagramArbiter {
             self.candidate_below.next =
                 self.candidate_below.val() | self.candidates.val().get_bit(i);
         }
-        self.datagrams.valid.next = self.offered.q.val() != 0;
+        self.datagrams.valid.next = self.offered_any.q.val();
         self.datagrams.kind.next = 0.into();
         self.datagrams.flags.next = 0.into();
         self.datagrams.entry_count.next = 0.into();
@@ -164,10 +169,12 @@ impl Logic for DatagramArbiter {
                 self.datagrams.body.error.next = self.sources[i].body.error.val();
             }
         }
-        self.taken.next = self.datagrams.ready.val() & (self.offered.q.val() != 0);
+        self.taken.next = self.datagrams.ready.val() & self.offered_any.q.val();
         self.offered.d.next = self.grant.val();
+        self.offered_any.d.next = self.waiting.val() != 0;
         if self.taken.val() {
             self.offered.d.next = 0.into();
+            self.offered_any.d.next = false;
             self.last_grant.d.next = self.offered.q.val();
             self.after_last_grant.d.next = self.after_offer.val();
             self.body_open.d.next = true;
@@ -191,6 +198,7 @@ impl Logic for DatagramArbiter {
             self.after_last_grant.d.next = 0.into();
             self.body_open.d.next = false;
             self.offered.d.next = 0.into();
+            self.offered_any.d.next = false;
         }
     }
 }

@@ -248,9 +248,11 @@ impl Logic for TransmitSource {
                 | self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
         }
         // the steady sources and the destination byte that is on top after this clock's
-        // shift, ORed a clock ahead from the table's sources of the next byte
+        // shift, ORed a clock ahead from the table's sources of the next byte (read only
+        // under `header_ahead`, so while sending: the shift's `sending` is left out, and
+        // with it the phase's decode from this path)
         self.destination_next_byte.next = self.destination_high.q.val().get_bits::<8>(56);
-        if self.sending.val() & self.byte_source.q.val().get_bit(12) {
+        if self.byte_source.q.val().get_bit(12) {
             self.destination_next_byte.next = self.destination_high.q.val().get_bits::<8>(48);
         }
         self.early_sources.next = 0.into();
