@@ -62,6 +62,8 @@ pub struct CommandUnitConfig {
     pub flush_timeout_ticks: u32,
     /// Status period after reset, ticks.
     pub status_period_ticks: u32,
+    /// Time-sync period after reset, ticks (0: no syncs).
+    pub sync_period_ticks: u32,
 }
 
 /// The decision of steps 17-22 and the run-time configuration.
@@ -121,6 +123,10 @@ pub struct CommandUnit {
     pub status_period_set: Signal<Out, Bit>,
     /// One clock (the `done` clock): a status-now was carried out.
     pub status_now: Signal<Out, Bit>,
+    /// The box's time-sync period, ticks (0: none).
+    pub sync_period_ticks: Signal<Out, Bits<32>>,
+    /// One clock (the `done` clock): a set-sync-period was carried out.
+    pub sync_period_set: Signal<Out, Bit>,
     /// From `done` on, held like `result`: the command was an accepted stream-to (its
     /// acknowledgement carries the destination).
     pub accepted_stream_to: Signal<Out, Bit>,
@@ -204,6 +210,8 @@ impl CommandUnit {
             status_period_ticks: Default::default(),
             status_period_set: Default::default(),
             status_now: Default::default(),
+            sync_period_ticks: Default::default(),
+            sync_period_set: Default::default(),
             accepted_stream_to: Default::default(),
             accepted_status_now: Default::default(),
             fate_replay: constant(BoxCounter::RefusedReplay as u64),
@@ -216,6 +224,7 @@ impl CommandUnit {
                 &link,
                 config.flush_timeout_ticks,
                 config.status_period_ticks,
+                config.sync_period_ticks,
             ),
             checks: CommandChecks::new(config.box_id, config.port_count),
             hosts: Default::default(),
@@ -356,6 +365,7 @@ impl Logic for CommandUnit {
         self.configuration.apply_status_period.next =
             self.newer.val() & self.apply_status_period.q.val();
         self.configuration.apply_status_now.next = self.newer.val() & self.apply_status_now.q.val();
+        self.configuration.apply_sync_period.next = false;
         self.configuration.value.next = self.checks.value.val();
 
         self.done.next = self.done_out.q.val();
@@ -369,6 +379,8 @@ impl Logic for CommandUnit {
         self.status_period_ticks.next = self.configuration.status_period_ticks.val();
         self.status_period_set.next = self.configuration.status_period_set.val();
         self.status_now.next = self.configuration.status_now.val();
+        self.sync_period_ticks.next = self.configuration.sync_period_ticks.val();
+        self.sync_period_set.next = self.configuration.sync_period_set.val();
         self.accepted_stream_to.next = self.accepted_stream_to_out.q.val();
         self.accepted_status_now.next = self.accepted_status_now_out.q.val();
 
@@ -407,6 +419,7 @@ mod tests {
             port_count: PORTS,
             flush_timeout_ticks: FLUSH,
             status_period_ticks: PERIOD,
+            sync_period_ticks: 0,
         }
     }
 
