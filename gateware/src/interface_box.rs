@@ -448,6 +448,7 @@ impl Logic for InterfaceBox {
         self.status.clock.next = self.clock.val();
         self.status.reset.next = self.core_reset.q.val();
         self.status.tick.next = self.timestamp.tick.val();
+        self.status.time_syncs.next = self.downlink.syncs_on.val();
         self.status.datagrams_sent.next = self.batcher.datagrams_sent.val();
         self.status.records_sent.next = self.batcher.records_sent.val();
         self.status.counters_ready.next = self.counters.ready.val();
