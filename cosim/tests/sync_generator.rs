@@ -28,7 +28,7 @@ const MS: u64 = 125_000;
 fn every_port_sends_a_stamped_sync_each_period_and_set_sync_period_stops_and_restarts_them() {
     let config = BoxConfig {
         sync_period_ticks: MS,
-        status_period_ticks: MS / 2,
+        status_period_ticks: MS / 8,
         ..box_config()
     };
     let mut host_sync = cell_packet(1);
@@ -83,12 +83,14 @@ fn every_port_sends_a_stamped_sync_each_period_and_set_sync_period_stops_and_res
         ),
         (
             2300 * US,
-            Request::SetSyncPeriod { ticks: MS - 1 },
+            Request::SetSyncPeriod {
+                ticks: MS as u32 - 1,
+            },
             AckResult::BadArgument,
         ),
         (
             2400 * US,
-            Request::SetSyncPeriod { ticks: MS },
+            Request::SetSyncPeriod { ticks: MS as u32 },
             AckResult::Ok,
         ),
     ];
