@@ -18,6 +18,9 @@ use skinbox_protocol::command::{
 };
 use skinbox_protocol::Field;
 
+// a sync period is 0 or at least the shortest status period: one compare serves both
+const _: () = assert!(MIN_SYNC_PERIOD_TICKS == MIN_STATUS_PERIOD_TICKS);
+
 /// Clocks from steady fields to the verdict (`arguments_ok`, `fate`, `result`); the opcode
 /// flags, `box_ok`, `no_arguments` and `target_ports` are a clock earlier.
 pub const CHECK_CLOCKS: u64 = 2;
@@ -86,7 +89,6 @@ pub struct CommandChecks {
     port_count: Constant<Bits<8>>,
     max_flush_timeout: Constant<Bits<32>>,
     min_status_period: Constant<Bits<32>>,
-    min_sync_period: Constant<Bits<32>>,
     destination_length: Constant<Bits<16>>,
     value_length: Constant<Bits<16>>,
     cell_command_length: Constant<Bits<16>>,
@@ -126,7 +128,7 @@ pub struct CommandChecks {
     destination_ok: DFF<Bit>,
     flush_timeout_ok: DFF<Bit>,
     status_period_ok: DFF<Bit>,
-    sync_period_ok: DFF<Bit>,
+    value_zero: DFF<Bit>,
     cell_port_ok: DFF<Bit>,
     reserved_zero: DFF<Bit>,
     target_ports_held: DFF<Bits<64>>,
@@ -172,7 +174,6 @@ impl CommandChecks {
             port_count: constant(port_count.into()),
             max_flush_timeout: constant(MAX_FLUSH_TIMEOUT_TICKS.into()),
             min_status_period: constant(MIN_STATUS_PERIOD_TICKS.into()),
-            min_sync_period: constant(MIN_SYNC_PERIOD_TICKS.into()),
             destination_length: constant(DESTINATION_LEN as u64),
             value_length: constant(TICKS_LEN as u64),
             cell_command_length: constant(CELL_COMMAND_LEN as u64),
@@ -210,7 +211,7 @@ impl CommandChecks {
             destination_ok: Default::default(),
             flush_timeout_ok: Default::default(),
             status_period_ok: Default::default(),
-            sync_period_ok: Default::default(),
+            value_zero: Default::default(),
             cell_port_ok: Default::default(),
             reserved_zero: Default::default(),
             target_ports_held: Default::default(),
@@ -246,7 +247,7 @@ impl Logic for CommandChecks {
             destination_ok,
             flush_timeout_ok,
             status_period_ok,
-            sync_period_ok,
+            value_zero,
             cell_port_ok,
             reserved_zero,
             target_ports_held,
@@ -292,8 +293,7 @@ impl Logic for CommandChecks {
         self.flush_timeout_ok.d.next = (self.value_field.val() != 0)
             & (self.value_field.val() <= self.max_flush_timeout.val());
         self.status_period_ok.d.next = self.value_field.val() >= self.min_status_period.val();
-        self.sync_period_ok.d.next =
-            (self.value_field.val() == 0) | (self.value_field.val() >= self.min_sync_period.val());
+        self.value_zero.d.next = self.value_field.val() == 0;
         // cell command: the port in byte 0, three reserved bytes
         self.cell_port_field.next = self
             .command_arguments
@@ -317,7 +317,6 @@ impl Logic for CommandChecks {
             == 0;
 
         // Stage 2: the arguments' verdict.
-        self.arguments_good.next = false;
         // (the opcode flags are exclusive: the verdict is an OR of one term per opcode)
         self.arguments_good.next = (self.stream_to_flag.q.val()
             & (self.length_0.q.val()
@@ -325,18 +324,16 @@ impl Logic for CommandChecks {
             | (self.set_flush_timeout_flag.q.val()
                 & self.length_value.q.val()
                 & self.flush_timeout_ok.q.val())
-            | (self.set_status_period_flag.q.val()
-                & self.length_value.q.val()
-                & self.status_period_ok.q.val())
+            | (self.length_value.q.val()
+                & (((self.set_status_period_flag.q.val() | self.set_sync_period_flag.q.val())
+                    & self.status_period_ok.q.val())
+                    | (self.set_sync_period_flag.q.val() & self.value_zero.q.val())))
             | ((self.status_now_flag.q.val() | self.read_tick_flag.q.val())
                 & self.length_0.q.val())
             | (self.cell_command_flag.q.val()
                 & self.length_cell_command.q.val()
                 & self.cell_port_ok.q.val()
-                & self.reserved_zero.q.val())
-            | (self.set_sync_period_flag.q.val()
-                & self.length_value.q.val()
-                & self.sync_period_ok.q.val());
+                & self.reserved_zero.q.val());
         self.opcode_known.next = self.stream_to_flag.q.val()
             | self.set_flush_timeout_flag.q.val()
             | self.set_status_period_flag.q.val()

@@ -51,7 +51,8 @@ pub struct BoxConfig {
     pub flush_timeout_ticks: u64,
     /// Time between status reports.
     pub status_period_ticks: u64,
-    /// Time between the box's own time syncs to every cell (0: none).
+    /// Time between the box's own time syncs to every cell (0: none; 12,500,000 = 0.1 s
+    /// keeps the cells in time).
     pub sync_period_ticks: u64,
     /// Line idle time, in bit times, that truncates a packet.
     pub idle_gap_bits: u64,
@@ -66,8 +67,8 @@ pub struct BoxConfig {
 }
 
 impl Default for BoxConfig {
-    /// 8 ports, 125 MHz, 4 Mbit/s, 100 us flush timeout, 100 ms status period, 100 ms
-    /// sync period.
+    /// 8 ports, 125 MHz, 4 Mbit/s, 100 us flush timeout, 100 ms status period, no time
+    /// syncs of the box's own (the co-simulated scenes and studies plan none yet).
     fn default() -> Self {
         BoxConfig {
             ports: 8,
@@ -75,7 +76,7 @@ impl Default for BoxConfig {
             baud: crate::CELL_BAUD,
             flush_timeout_ticks: 12_500,
             status_period_ticks: 12_500_000,
-            sync_period_ticks: 12_500_000,
+            sync_period_ticks: 0,
             idle_gap_bits: 10,
             link: LinkConfig::DEFAULT,
             box_id: 1,

@@ -40,8 +40,10 @@ pub struct PacketStart {
     pub tick: u64,
     /// The port.
     pub port: usize,
-    /// The packet.
+    /// The packet as it leaves (a time sync stamped).
     pub bytes: [u8; PACKET_LEN],
+    /// It is the box's own sync (the sync generator's), not a queued packet.
+    pub generated: bool,
 }
 
 /// Clocks from the offer to the first copy's commit: the offer register, then 20 copy
@@ -89,6 +91,15 @@ impl SyncGenerator {
             return self.at_origin;
         }
         self.at_origin ^ ((tick - self.origin) / self.period % 2 == 1)
+    }
+
+    /// The first clock after `tick` whose epoch differs from the clock before.
+    fn next_toggle_after(&self, tick: u64) -> Option<u64> {
+        if self.period == 0 {
+            return None;
+        }
+        let n = tick.saturating_sub(self.origin) / self.period + 1;
+        Some(self.origin + n * self.period)
     }
 }
 
@@ -196,6 +207,50 @@ impl DownlinkModel {
             origin: restart + 1,
             at_origin: self.generator.epoch(restart) ^ (ticks != 0),
         };
+    }
+
+    /// The first frame from the current one whose refill scan starts at or after `tick`.
+    fn first_frame_from(&self, tick: u64) -> u64 {
+        // (a galloping search: the frames' starts follow the phase accumulator's rounding)
+        let mut low = self.frame;
+        if self.refill_start(low) >= tick {
+            return low;
+        }
+        let mut step = 1;
+        while self.refill_start(low + step) < tick {
+            low += step;
+            step *= 2;
+        }
+        // refill_start(low) < tick <= refill_start(low + step)
+        let mut high = low + step;
+        while high - low > 1 {
+            let middle = low + (high - low) / 2;
+            if self.refill_start(middle) < tick {
+                low = middle;
+            } else {
+                high = middle;
+            }
+        }
+        high
+    }
+
+    /// With nothing queued: moves on to the first frame before `tick`'s whose refill would
+    /// start a sync, or to the first frame from `tick` (whole periods at a time).
+    fn skip_idle_frames(&mut self, tick: u64) {
+        let scan_clocks = VISIT_TO_EPOCH + self.ports.len() as u64;
+        loop {
+            let target = self.first_frame_from(tick);
+            if self.frame >= target || self.sync_due(self.frame) {
+                return;
+            }
+            // no port's epoch changes before the next toggle
+            let scan = self.refill_start(self.frame);
+            let quiet = match self.generator.next_toggle_after(scan + scan_clocks - 1) {
+                Some(t) => target.min(self.first_frame_from(t.saturating_sub(scan_clocks))),
+                None => target,
+            };
+            self.frame = quiet.max(self.frame + 1);
+        }
     }
 
     /// A port's refill in frame `frame`'s scan would start the generator's sync.
@@ -339,6 +394,7 @@ impl DownlinkModel {
                 tick: start,
                 port: s,
                 bytes: packet,
+                generated: port.generated,
             });
         }
     }
@@ -351,10 +407,7 @@ impl DownlinkModel {
         }
         loop {
             if self.idle() && self.next_port == 0 {
-                // skip the frames whose refill would find nothing
-                while self.refill_start(self.frame) < tick && !self.sync_due(self.frame) {
-                    self.frame += 1;
-                }
+                self.skip_idle_frames(tick);
                 if self.refill_start(self.frame) >= tick {
                     break;
                 }

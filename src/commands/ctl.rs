@@ -119,9 +119,9 @@ pub enum CellsCommand {
         /// Channel names.
         channels: Vec<String>,
     },
-    /// Time sync: the box tick at which the packet leaves the box.
+    /// Time sync: the box writes into it the box tick at which the packet leaves the box.
     Sync {
-        /// Box tick (8 ns).
+        /// Box tick (8 ns); the box overwrites it (send 0).
         tick: u64,
     },
 }
