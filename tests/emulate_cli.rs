@@ -621,14 +621,13 @@ fn emulated_cells_obey_the_cell_commands_the_box_sends_them() {
             );
         }
     }
-    // sync 0: from then on the cells sample when the box's tick is a multiple of the
-    // 8 ms period, counted from the tick the packet left the box (a few us after it
-    // arrived): every record within 500 us after such a grid point (the root's processing,
-    // the hops and the queue on the bus); before it, the cells sampled on their own phases
-    let sync = at[5];
+    // sync 0: the box writes the tick its first start bit leaves at into the packet, so
+    // from then on the cells sample when the box's tick is a multiple of the 8 ms period:
+    // every record within 500 us after such a grid point (the root's processing, the hops
+    // and the queue on the bus); before it, the cells sampled on their own phases
     let on_grid = |p: &[&Heard]| {
         p.iter()
-            .filter(|h| (h.tick - sync).rem_euclid(1_000_000) < 62_500)
+            .filter(|h| h.tick.rem_euclid(1_000_000) < 62_500)
             .count()
     };
     assert!(phases[6].len() > 100, "{}", phases[6].len());

@@ -210,11 +210,14 @@ pub fn plan_downlink(
                 _ => refused += 1,
             }
         }
+        // (the box's own syncs over the whole simulated time, then the queues drained)
+        let end_ns = sim_duration_ns(config, duration_ns).saturating_sub(PORTS_READY_NS);
+        control.downlink.advance_to(end_ns / TICK_NS);
         control.downlink.drain();
         let starts = control.downlink.starts().to_vec();
         if pass == 0 {
             for (p, commands) in queued.iter().enumerate() {
-                let on_port = starts.iter().filter(|s| s.port == p);
+                let on_port = starts.iter().filter(|s| s.port == p && !s.generated);
                 for (&i, start) in commands.iter().zip(on_port) {
                     if window[i].3 {
                         let tick = start.tick.min(sync_tick(&packets[i]).unwrap_or(u64::MAX));

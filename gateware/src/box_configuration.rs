@@ -39,7 +39,9 @@ pub struct BoxConfiguration {
     pub apply_status_period: Signal<In, Bit>,
     /// One clock: an accepted status-now.
     pub apply_status_now: Signal<In, Bit>,
-    /// The ticks of a set-flush-timeout or set-status-period.
+    /// One clock: an accepted set-sync-period, to `value`.
+    pub apply_sync_period: Signal<In, Bit>,
+    /// The ticks of a set-flush-timeout, set-status-period or set-sync-period.
     pub value: Signal<In, Bits<32>>,
     /// Datagrams' destination MAC.
     pub destination_mac: Signal<Out, Bits<48>>,
@@ -55,11 +57,16 @@ pub struct BoxConfiguration {
     pub status_period_set: Signal<Out, Bit>,
     /// One clock: a status-now was carried out.
     pub status_now: Signal<Out, Bit>,
+    /// The box's time-sync period, ticks (0: no syncs).
+    pub sync_period_ticks: Signal<Out, Bits<32>>,
+    /// One clock: the sync period was set (its first clock).
+    pub sync_period_set: Signal<Out, Bit>,
     default_mac: Constant<Bits<48>>,
     default_ip: Constant<Bits<32>>,
     default_port: Constant<Bits<16>>,
     default_flush_timeout: Constant<Bits<32>>,
     default_status_period: Constant<Bits<32>>,
+    default_sync_period: Constant<Bits<32>>,
     mac: DFF<Bits<48>>,
     ip: DFF<Bits<32>>,
     port: DFF<Bits<16>>,
@@ -67,12 +74,19 @@ pub struct BoxConfiguration {
     status_period: DFF<Bits<32>>,
     period_set: DFF<Bit>,
     now: DFF<Bit>,
+    sync_period: DFF<Bits<32>>,
+    sync_set: DFF<Bit>,
 }
 
 impl BoxConfiguration {
     /// The configuration whose reset values are `link`'s host (the destination) and these
     /// ticks.
-    pub fn new(link: &LinkConfig, flush_timeout_ticks: u32, status_period_ticks: u32) -> Self {
+    pub fn new(
+        link: &LinkConfig,
+        flush_timeout_ticks: u32,
+        status_period_ticks: u32,
+        sync_period_ticks: u32,
+    ) -> Self {
         Self {
             clock: Default::default(),
             reset: Default::default(),
@@ -87,6 +101,7 @@ impl BoxConfiguration {
             apply_flush_timeout: Default::default(),
             apply_status_period: Default::default(),
             apply_status_now: Default::default(),
+            apply_sync_period: Default::default(),
             value: Default::default(),
             destination_mac: Default::default(),
             destination_ip: Default::default(),
@@ -95,11 +110,14 @@ impl BoxConfiguration {
             status_period_ticks: Default::default(),
             status_period_set: Default::default(),
             status_now: Default::default(),
+            sync_period_ticks: Default::default(),
+            sync_period_set: Default::default(),
             default_mac: constant(big_endian(&link.host_mac)),
             default_ip: constant(u32::from_be_bytes(link.host_ip).into()),
             default_port: constant(link.host_port.into()),
             default_flush_timeout: constant(flush_timeout_ticks.into()),
             default_status_period: constant(status_period_ticks.into()),
+            default_sync_period: constant(sync_period_ticks.into()),
             mac: Default::default(),
             ip: Default::default(),
             port: Default::default(),
@@ -107,6 +125,8 @@ impl BoxConfiguration {
             status_period: Default::default(),
             period_set: Default::default(),
             now: Default::default(),
+            sync_period: Default::default(),
+            sync_set: Default::default(),
         }
     }
 }
@@ -123,7 +143,9 @@ impl Logic for BoxConfiguration {
             flush_timeout,
             status_period,
             period_set,
-            now
+            now,
+            sync_period,
+            sync_set
         );
         if self.apply_stream_to.val() {
             if self.to_sender.val() {
@@ -144,6 +166,10 @@ impl Logic for BoxConfiguration {
         }
         self.period_set.d.next = self.apply_status_period.val();
         self.now.d.next = self.apply_status_now.val();
+        if self.apply_sync_period.val() {
+            self.sync_period.d.next = self.value.val();
+        }
+        self.sync_set.d.next = self.apply_sync_period.val();
         if self.reset.val() {
             self.mac.d.next = self.default_mac.val();
             self.ip.d.next = self.default_ip.val();
@@ -152,6 +178,8 @@ impl Logic for BoxConfiguration {
             self.status_period.d.next = self.default_status_period.val();
             self.period_set.d.next = false;
             self.now.d.next = false;
+            self.sync_period.d.next = self.default_sync_period.val();
+            self.sync_set.d.next = false;
         }
         self.destination_mac.next = self.mac.q.val();
         self.destination_ip.next = self.ip.q.val();
@@ -160,6 +188,8 @@ impl Logic for BoxConfiguration {
         self.status_period_ticks.next = self.status_period.q.val();
         self.status_period_set.next = self.period_set.q.val();
         self.status_now.next = self.now.q.val();
+        self.sync_period_ticks.next = self.sync_period.q.val();
+        self.sync_period_set.next = self.sync_set.q.val();
     }
 }
 
@@ -168,8 +198,8 @@ mod tests {
     use super::*;
     use crate::testbench::{Bench, TestRng};
 
-    /// (destination MAC, IP, port, flush timeout, status period)
-    type Values = (u64, u32, u16, u32, u32);
+    /// (destination MAC, IP, port, flush timeout, status period, sync period)
+    type Values = (u64, u32, u16, u32, u32, u32);
 
     fn seen(u: &BoxConfiguration) -> Values {
         (
@@ -178,6 +208,7 @@ mod tests {
             u.destination_port.val().to_u64() as u16,
             u.flush_timeout_ticks.val().to_u32(),
             u.status_period_ticks.val().to_u32(),
+            u.sync_period_ticks.val().to_u32(),
         )
     }
 
@@ -190,10 +221,12 @@ mod tests {
             link.host_port,
             12_500,
             125_000_000,
+            12_500_000,
         );
-        let mut bench = Bench::new(BoxConfiguration::new(&link, 12_500, 125_000_000), |b| {
-            &mut b.clock
-        });
+        let mut bench = Bench::new(
+            BoxConfiguration::new(&link, 12_500, 125_000_000, 12_500_000),
+            |b| &mut b.clock,
+        );
         let mut rng = TestRng::new(0xC0F);
         bench.uut.reset.next = true;
         bench.cycle();
@@ -213,18 +246,26 @@ mod tests {
             u.argument_port.next = (argument >> 48).into();
             u.value.next = u64::from(value).into();
             // at most one command per clock, as the command unit applies them
-            let which = r % 6;
+            let which = r % 7;
             u.apply_stream_to.next = which == 0;
             u.to_sender.next = (r >> 8) & 1 == 1;
             u.apply_flush_timeout.next = which == 1;
             u.apply_status_period.next = which == 2;
             u.apply_status_now.next = which == 3;
+            u.apply_sync_period.next = which == 5;
             let reset = which == 4 && (r >> 16).is_multiple_of(10);
             u.reset.next = reset;
             bench.cycle();
             match which {
                 0 if (r >> 8) & 1 == 1 => {
-                    want = (peer >> 16, peer as u32, (peer >> 48) as u16, want.3, want.4)
+                    want = (
+                        peer >> 16,
+                        peer as u32,
+                        (peer >> 48) as u16,
+                        want.3,
+                        want.4,
+                        want.5,
+                    )
                 }
                 0 => {
                     want = (
@@ -233,10 +274,12 @@ mod tests {
                         (argument >> 48) as u16,
                         want.3,
                         want.4,
+                        want.5,
                     )
                 }
                 1 => want.3 = value,
                 2 => want.4 = value,
+                5 => want.5 = value,
                 _ => {}
             }
             if reset {
@@ -250,6 +293,7 @@ mod tests {
                 "step {step}"
             );
             assert_eq!(u.status_now.val(), which == 3 && !reset, "step {step}");
+            assert_eq!(u.sync_period_set.val(), which == 5 && !reset, "step {step}");
         }
     }
 }

@@ -32,9 +32,16 @@
 //!   ([`pin_scan_clocks`] after the bit's end): the bit shifting of every transmitter is
 //!   one shared bit index and a RAM read.
 //!
+//! - Time syncs (cell command 5): every sync packet leaves with bytes 4-11 = the box tick
+//!   of its first start bit on the pin, whoever queued it; and every `sync_period` ticks
+//!   ([`SyncGenerator`]) every port sends a time sync to every cell of its own, before its
+//!   queued packets at its next packet boundary, taking no queue slot (the refill keeps
+//!   what it needs in its position RAM; [`DownlinkSyncBytes`] the frames' start ticks).
+//!
 //! The parts are blocks of their own: [`DownlinkPacketCopy`] (capture and copy),
-//! [`DownlinkFrameTimer`] (the shared bit time and frame), [`DownlinkRefill`] and
-//! [`DownlinkPinScan`]; this block holds the RAMs they share and each port's registers.
+//! [`DownlinkFrameTimer`] (the shared bit time and frame), [`DownlinkRefill`],
+//! [`DownlinkPinScan`] and [`SyncGenerator`]; this block holds the RAMs they share and
+//! each port's registers.
 //!
 //! Latency, a packet committed on an idle port to its first start bit: up to one frame and
 //! a refill (about 2.5 to 5 us). Cost per port: 5 flip-flops (pin, next pin value, queue
@@ -49,9 +56,13 @@ pub use crate::downlink_pin_scan::pin_scan_clocks;
 use crate::downlink_pin_scan::DownlinkPinScan;
 pub use crate::downlink_refill::REFILL_LATENCY;
 use crate::downlink_refill::{ring_bits, DownlinkRefill, RING_BITS};
+#[cfg(doc)]
+use crate::downlink_sync_bytes::DownlinkSyncBytes;
 use crate::geometry::{DOWNLINK_BANK_PORTS, MAX_PORTS};
 use crate::hdl::*;
+use crate::sync_generator::SyncGenerator;
 use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::cell_command::CellCommandFraming;
 
 /// Packets each port can hold.
 pub const QUEUE_PACKETS: u64 = 2;
@@ -86,10 +97,19 @@ pub struct CellDownlink {
     pub accepted: Signal<Out, Bit>,
     /// The port of that copy.
     pub accepted_port: Signal<Out, Bits<8>>,
+    /// The box tick (time syncs are stamped with it).
+    pub tick: Signal<In, Bits<64>>,
+    /// Ticks between the box's own time syncs; 0: none.
+    pub sync_period: Signal<In, Bits<32>>,
+    /// One clock: `sync_period` was just set (the count restarts; a sync at once unless 0).
+    pub sync_restart: Signal<In, Bit>,
+    /// The box sends its own time syncs (`sync_period` is not 0).
+    pub syncs_on: Signal<Out, Bit>,
     copy: DownlinkPacketCopy,
     timer: DownlinkFrameTimer,
     pin_scan: DownlinkPinScan,
     refill: DownlinkRefill,
+    generator: SyncGenerator,
     /// Two packet slots per port: port, slot and byte index form the address.
     queues: BlockRam<8, QUEUE_ADDRESS_BITS>,
     /// Each port's byte of the frame on the pins, written by the refill (0xFF for a port
@@ -117,8 +137,9 @@ pub struct CellDownlink {
 }
 
 impl CellDownlink {
-    /// A downlink of `ports` pins (1 to 64) at `baud` with a `clock_hz` box clock.
-    pub fn new(ports: usize, clock_hz: u64, baud: u64) -> Self {
+    /// A downlink of `ports` pins (1 to 64) at `baud` with a `clock_hz` box clock; its
+    /// own time syncs are framed by `framing`.
+    pub fn new(ports: usize, clock_hz: u64, baud: u64, framing: CellCommandFraming) -> Self {
         assert!(
             (1..=MAX_PORTS).contains(&ports),
             "CellDownlink: {ports} ports (1 to {MAX_PORTS})"
@@ -141,10 +162,15 @@ impl CellDownlink {
             uart_tx: each(ports),
             accepted: Default::default(),
             accepted_port: Default::default(),
+            tick: Default::default(),
+            sync_period: Default::default(),
+            sync_restart: Default::default(),
+            syncs_on: Default::default(),
             copy: DownlinkPacketCopy::new(ports),
             timer: DownlinkFrameTimer::new(ports, clock_hz, baud),
             pin_scan: DownlinkPinScan::new(ports),
-            refill: DownlinkRefill::new(ports),
+            refill: DownlinkRefill::new(ports, framing),
+            generator: Default::default(),
             queues: Default::default(),
             bytes: each(banks),
             port_number: (0..ports)
@@ -188,6 +214,14 @@ impl Logic for CellDownlink {
         self.timer.reset.next = self.reset.val();
         self.pin_scan.reset.next = self.reset.val();
         self.refill.reset.next = self.reset.val();
+        self.generator.clock.next = self.clock.val();
+        self.generator.reset.next = self.reset.val();
+        self.generator.period.next = self.sync_period.val();
+        self.generator.restart.next = self.sync_restart.val();
+        self.syncs_on.next = self.generator.on.val();
+        self.refill.epoch.next = self.generator.epoch.val();
+        self.refill.tick.next = self.tick.val();
+        self.refill.take_start.next = self.timer.take_start.val();
 
         // the packet's capture and its copy into the queue RAM
         self.copy.capture.next = self.capture.val();
@@ -309,7 +343,9 @@ mod tests {
     use super::*;
     use crate::testbench::{bit_period, decode_uart_line, Bench, TestRng};
     use crate::{CELL_BAUD, CLOCK_HZ};
-    use skinbox_protocol::cell_command::COMMAND_HEADER;
+    use skinbox_protocol::cell_command::{
+        CellCommand, CellCommandRepr, CommandCode, ALL_CELLS, COMMAND_HEADER,
+    };
     use skinbox_protocol::command::ALL_PORTS;
 
     struct Run {
@@ -322,13 +358,16 @@ mod tests {
         refused: u64,
         /// The last packet offered.
         last_offered: [u8; 20],
+        /// The box tick of the next clock (0: the first clock out of reset).
+        tick: u64,
     }
 
     impl Run {
         fn new(ports: usize) -> Self {
-            let mut bench = Bench::new(CellDownlink::new(ports, CLOCK_HZ, CELL_BAUD), |b| {
-                &mut b.clock
-            });
+            let mut bench = Bench::new(
+                CellDownlink::new(ports, CLOCK_HZ, CELL_BAUD, CellCommandFraming::DEFAULT),
+                |b| &mut b.clock,
+            );
             bench.uut.reset.next = true;
             bench.cycles(2);
             bench.uut.reset.next = false;
@@ -338,11 +377,19 @@ mod tests {
                 queued: vec![vec![]; ports],
                 refused: 0,
                 last_offered: [0; 20],
+                tick: 0,
             }
         }
 
+        /// `pins[p][i]` is the pin at this tick.
+        fn pin_tick(i: u64) -> u64 {
+            i + 1
+        }
+
         fn cycle(&mut self) {
+            self.bench.uut.tick.next = self.tick.into();
             self.bench.cycle();
+            self.tick += 1;
             let uut = &self.bench.uut;
             for (p, pin) in self.pins.iter_mut().enumerate() {
                 pin.push(uut.uart_tx[p].val());
@@ -409,6 +456,45 @@ mod tests {
             true
         }
 
+        /// With syncs every `period` from tick `set_at` (the epoch's toggles: `set_at` and
+        /// `set_at + n * period`) until `off_at`: each port's pin carries the accepted
+        /// packets in order with one generated sync per toggle, each the first packet to
+        /// start after its toggle (within a packet and a frame), all stamped with their
+        /// measured start ticks.
+        fn check_pins_with_syncs(&self, set_at: u64, period: u64, off_at: u64) {
+            let toggles: Vec<u64> = (0..)
+                .map(|n| set_at + n * period)
+                .take_while(|&t| t < off_at)
+                .collect();
+            let packet_ticks = 20 * frame_bits(self.pins.len()) * 32;
+            for (p, packets) in self.packets_on_pins().iter().enumerate() {
+                let (mut host, mut syncs) = (vec![], vec![]);
+                for &(start, packet) in packets {
+                    if packet == generated_sync(start) {
+                        syncs.push(start);
+                    } else {
+                        host.push(packet);
+                        let sent = self.queued[p][host.len() - 1];
+                        assert_eq!(packet, stamped(sent, start), "port {p}");
+                    }
+                }
+                assert_eq!(host.len(), self.queued[p].len(), "port {p}");
+                assert_eq!(syncs.len(), toggles.len(), "port {p}: {syncs:?}");
+                for (start, toggle) in syncs.iter().zip(&toggles) {
+                    assert!(
+                        (*toggle..toggle + packet_ticks + 400).contains(start),
+                        "port {p}: sync at {start}, toggle {toggle}"
+                    );
+                    // the first packet to start after the toggle
+                    // (one loaded before the toggle may start up to a frame after it)
+                    let before = packets
+                        .iter()
+                        .filter(|(s, _)| *s > toggle + 400 && s < start);
+                    assert_eq!(before.count(), 0, "port {p}: sync at {start}");
+                }
+            }
+        }
+
         fn idle(&mut self, clocks: u64) {
             for _ in 0..clocks {
                 self.cycle();
@@ -429,14 +515,46 @@ mod tests {
             }
         }
 
-        /// Every port's pin, decoded by the line model, equals the packets it accepted, and
-        /// each port's frames follow each other back to back.
+        /// Sets the sync period (a restart: a sync at once unless 0).
+        fn set_sync_period(&mut self, ticks: u64) {
+            self.bench.uut.sync_period.next = ticks.into();
+            self.bench.uut.sync_restart.next = true;
+            self.cycle();
+            self.bench.uut.sync_restart.next = false;
+        }
+
+        /// Each port's packets on its pin: (the tick of the first start bit's falling
+        /// edge, the packet), measured by the line model.
+        fn packets_on_pins(&self) -> Vec<Vec<(u64, [u8; 20])>> {
+            self.pins
+                .iter()
+                .map(|pin| {
+                    decode_uart_line(pin)
+                        .chunks(20)
+                        .map(|frames| {
+                            let mut packet = [0; 20];
+                            frames.iter().zip(&mut packet).for_each(|(f, b)| *b = f.1);
+                            (Self::pin_tick(frames[0].0), packet)
+                        })
+                        .collect()
+                })
+                .collect()
+        }
+
+        /// Every port's pin, decoded by the line model, equals the packets it accepted
+        /// (time syncs stamped with their start ticks on the pin), and each port's frames
+        /// follow each other back to back.
         fn check_pins(&self) {
             let period = bit_period(0.0);
             for (p, pin) in self.pins.iter().enumerate() {
                 let frames = decode_uart_line(pin);
                 let bytes: Vec<u8> = frames.iter().map(|f| f.1).collect();
-                let expected: Vec<u8> = self.queued[p].concat();
+                let starts = frames.chunks(20).map(|f| Self::pin_tick(f[0].0));
+                let expected: Vec<u8> = self.queued[p]
+                    .iter()
+                    .zip(starts)
+                    .flat_map(|(packet, start)| stamped(*packet, start))
+                    .collect();
                 assert_eq!(bytes, expected, "port {p}");
                 assert!(frames.iter().all(|f| f.2), "port {p}: stop bits high");
                 for packet in frames.chunks(20) {
@@ -451,6 +569,23 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `packet` as it leaves at `start`: a time sync's bytes 4-11 are the tick.
+    fn stamped(mut packet: [u8; 20], start: u64) -> [u8; 20] {
+        if packet[3] == CommandCode::TimeSync as u8 {
+            packet[4..12].copy_from_slice(&start.to_be_bytes());
+        }
+        packet
+    }
+
+    /// The box's own sync leaving at `start`.
+    fn generated_sync(start: u64) -> [u8; 20] {
+        CellCommandRepr {
+            cell_id: ALL_CELLS,
+            command: CellCommand::TimeSync { box_tick: start },
+        }
+        .to_bytes()
     }
 
     fn packet(rng: &mut TestRng) -> [u8; 20] {
@@ -538,6 +673,39 @@ mod tests {
         run.check_pins();
     }
 
+    /// With a sync period of 15,000 ticks (a packet takes 6,250) set at tick 100: every port sends the box's sync
+    /// at once and then each period, at its next packet boundary before its queued
+    /// packets (which take no fewer slots: four host packets to one port are all taken),
+    /// every sync (a host's too) carries the tick of its first start bit measured on the
+    /// pin, and period 0 stops them.
+    #[test]
+    fn the_box_sends_syncs_every_period_stamped_as_they_leave() {
+        let mut rng = TestRng::new(8);
+        let mut run = Run::new(4);
+        run.idle(100);
+        let period = 15_000;
+        run.set_sync_period(period);
+        let set_at = run.tick;
+        let mut host_sync = packet(&mut rng);
+        host_sync[3] = CommandCode::TimeSync as u8;
+        assert!(run.send(1, &host_sync, &mut rng));
+        assert!(run.send(ALL_PORTS, &packet(&mut rng), &mut rng));
+        run.idle(period - 5000);
+        for _ in 0..2 {
+            while !run.send(2, &packet(&mut rng), &mut rng) {
+                run.idle(500);
+            }
+        }
+        run.idle(2 * period);
+        run.set_sync_period(0);
+        let off_at = run.tick;
+        run.idle(2 * period);
+        run.drain();
+        run.check_pins_with_syncs(set_at, period, off_at);
+        assert_eq!(run.queued[1][0], host_sync);
+        assert_eq!(run.queued[2].len(), 3);
+    }
+
     #[test]
     fn a_one_port_box_takes_all_ports_packets() {
         let mut rng = TestRng::new(5);
@@ -577,7 +745,8 @@ mod tests {
         run.check_pins();
 
         for ports in [1, 8, 64] {
-            let mut uut = CellDownlink::new(ports, CLOCK_HZ, CELL_BAUD);
+            let mut uut =
+                CellDownlink::new(ports, CLOCK_HZ, CELL_BAUD, CellCommandFraming::DEFAULT);
             uut.connect_all();
             let dir = std::env::temp_dir().join(format!(
                 "skinbox-downlink-lint-{}-{ports}",

@@ -13,9 +13,13 @@ use crate::hdl::*;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::command::{
     cell_command_field, destination_field, ticks_field, AckResult, Opcode, ALL_PORTS, ANY_BOX,
-    CELL_COMMAND_LEN, DESTINATION_LEN, MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS, TICKS_LEN,
+    CELL_COMMAND_LEN, DESTINATION_LEN, MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS,
+    MIN_SYNC_PERIOD_TICKS, TICKS_LEN,
 };
 use skinbox_protocol::Field;
+
+// a sync period is 0 or at least the shortest status period: one compare serves both
+const _: () = assert!(MIN_SYNC_PERIOD_TICKS == MIN_STATUS_PERIOD_TICKS);
 
 /// Clocks from steady fields to the verdict (`arguments_ok`, `fate`, `result`); the opcode
 /// flags, `box_ok`, `no_arguments` and `target_ports` are a clock earlier.
@@ -56,6 +60,8 @@ pub struct CommandChecks {
     pub is_status_now: Signal<Out, Bit>,
     /// The opcode is cell-command.
     pub is_cell_command: Signal<Out, Bit>,
+    /// The opcode is set-sync-period.
+    pub is_set_sync_period: Signal<Out, Bit>,
     /// The command has no argument bytes.
     pub no_arguments: Signal<Out, Bit>,
     /// A cell command's target ports, one bit each (every bit for `ALL_PORTS`).
@@ -66,7 +72,8 @@ pub struct CommandChecks {
     pub fate: Signal<Out, Bits<5>>,
     /// The acknowledgement result that goes with `fate`.
     pub result: Signal<Out, Bits<8>>,
-    /// Set-flush-timeout's and set-status-period's value (wires from the arguments).
+    /// Set-flush-timeout's, set-status-period's and set-sync-period's value (wires from the
+    /// arguments).
     pub value: Signal<Out, Bits<32>>,
     /// A cell command's port (wires from the arguments).
     pub cell_port: Signal<Out, Bits<8>>,
@@ -91,6 +98,7 @@ pub struct CommandChecks {
     opcode_status_now: Constant<Bits<8>>,
     opcode_read_tick: Constant<Bits<8>>,
     opcode_cell_command: Constant<Bits<8>>,
+    opcode_set_sync_period: Constant<Bits<8>>,
     fate_accepted: Constant<Bits<5>>,
     fate_unknown_opcode: Constant<Bits<5>>,
     fate_bad_argument: Constant<Bits<5>>,
@@ -112,6 +120,7 @@ pub struct CommandChecks {
     status_now_flag: DFF<Bit>,
     read_tick_flag: DFF<Bit>,
     cell_command_flag: DFF<Bit>,
+    set_sync_period_flag: DFF<Bit>,
     length_0: DFF<Bit>,
     length_value: DFF<Bit>,
     length_destination: DFF<Bit>,
@@ -119,6 +128,7 @@ pub struct CommandChecks {
     destination_ok: DFF<Bit>,
     flush_timeout_ok: DFF<Bit>,
     status_period_ok: DFF<Bit>,
+    value_zero: DFF<Bit>,
     cell_port_ok: DFF<Bit>,
     reserved_zero: DFF<Bit>,
     target_ports_held: DFF<Bits<64>>,
@@ -147,6 +157,7 @@ impl CommandChecks {
             is_set_status_period: Default::default(),
             is_status_now: Default::default(),
             is_cell_command: Default::default(),
+            is_set_sync_period: Default::default(),
             no_arguments: Default::default(),
             target_ports: Default::default(),
             arguments_ok: Default::default(),
@@ -172,6 +183,7 @@ impl CommandChecks {
             opcode_status_now: constant(Opcode::StatusNow as u64),
             opcode_read_tick: constant(Opcode::ReadTick as u64),
             opcode_cell_command: constant(Opcode::CellCommand as u64),
+            opcode_set_sync_period: constant(Opcode::SetSyncPeriod as u64),
             fate_accepted: constant(BoxCounter::CommandsAccepted as u64),
             fate_unknown_opcode: constant(BoxCounter::RefusedUnknownOpcode as u64),
             fate_bad_argument: constant(BoxCounter::RefusedBadArgument as u64),
@@ -191,6 +203,7 @@ impl CommandChecks {
             status_now_flag: Default::default(),
             read_tick_flag: Default::default(),
             cell_command_flag: Default::default(),
+            set_sync_period_flag: Default::default(),
             length_0: Default::default(),
             length_value: Default::default(),
             length_destination: Default::default(),
@@ -198,6 +211,7 @@ impl CommandChecks {
             destination_ok: Default::default(),
             flush_timeout_ok: Default::default(),
             status_period_ok: Default::default(),
+            value_zero: Default::default(),
             cell_port_ok: Default::default(),
             reserved_zero: Default::default(),
             target_ports_held: Default::default(),
@@ -225,6 +239,7 @@ impl Logic for CommandChecks {
             status_now_flag,
             read_tick_flag,
             cell_command_flag,
+            set_sync_period_flag,
             length_0,
             length_value,
             length_destination,
@@ -232,6 +247,7 @@ impl Logic for CommandChecks {
             destination_ok,
             flush_timeout_ok,
             status_period_ok,
+            value_zero,
             cell_port_ok,
             reserved_zero,
             target_ports_held,
@@ -250,6 +266,8 @@ impl Logic for CommandChecks {
         self.status_now_flag.d.next = self.command_opcode.val() == self.opcode_status_now.val();
         self.read_tick_flag.d.next = self.command_opcode.val() == self.opcode_read_tick.val();
         self.cell_command_flag.d.next = self.command_opcode.val() == self.opcode_cell_command.val();
+        self.set_sync_period_flag.d.next =
+            self.command_opcode.val() == self.opcode_set_sync_period.val();
         self.length_0.d.next = self.command_argument_length.val() == 0;
         self.length_value.d.next = self.command_argument_length.val() == self.value_length.val();
         self.length_destination.d.next =
@@ -275,6 +293,7 @@ impl Logic for CommandChecks {
         self.flush_timeout_ok.d.next = (self.value_field.val() != 0)
             & (self.value_field.val() <= self.max_flush_timeout.val());
         self.status_period_ok.d.next = self.value_field.val() >= self.min_status_period.val();
+        self.value_zero.d.next = self.value_field.val() == 0;
         // cell command: the port in byte 0, three reserved bytes
         self.cell_port_field.next = self
             .command_arguments
@@ -298,7 +317,6 @@ impl Logic for CommandChecks {
             == 0;
 
         // Stage 2: the arguments' verdict.
-        self.arguments_good.next = false;
         // (the opcode flags are exclusive: the verdict is an OR of one term per opcode)
         self.arguments_good.next = (self.stream_to_flag.q.val()
             & (self.length_0.q.val()
@@ -306,9 +324,10 @@ impl Logic for CommandChecks {
             | (self.set_flush_timeout_flag.q.val()
                 & self.length_value.q.val()
                 & self.flush_timeout_ok.q.val())
-            | (self.set_status_period_flag.q.val()
-                & self.length_value.q.val()
-                & self.status_period_ok.q.val())
+            | (self.length_value.q.val()
+                & (((self.set_status_period_flag.q.val() | self.set_sync_period_flag.q.val())
+                    & self.status_period_ok.q.val())
+                    | (self.set_sync_period_flag.q.val() & self.value_zero.q.val())))
             | ((self.status_now_flag.q.val() | self.read_tick_flag.q.val())
                 & self.length_0.q.val())
             | (self.cell_command_flag.q.val()
@@ -320,7 +339,8 @@ impl Logic for CommandChecks {
             | self.set_status_period_flag.q.val()
             | self.status_now_flag.q.val()
             | self.read_tick_flag.q.val()
-            | self.cell_command_flag.q.val();
+            | self.cell_command_flag.q.val()
+            | self.set_sync_period_flag.q.val();
         self.arguments_fate.d.next = self.fate_unknown_opcode.val();
         self.arguments_result.d.next = self.result_unknown_opcode.val();
         if self.opcode_known.val() {
@@ -338,6 +358,7 @@ impl Logic for CommandChecks {
         self.is_set_status_period.next = self.set_status_period_flag.q.val();
         self.is_status_now.next = self.status_now_flag.q.val();
         self.is_cell_command.next = self.cell_command_flag.q.val();
+        self.is_set_sync_period.next = self.set_sync_period_flag.q.val();
         self.no_arguments.next = self.length_0.q.val();
         self.target_ports.next = self.target_ports_held.q.val();
         self.arguments_ok.next = self.arguments_ok_held.q.val();
@@ -403,9 +424,9 @@ mod tests {
         let mut verdicts = std::collections::HashMap::new();
         for _ in 0..3000 {
             let r = rng.next_u64();
-            let opcode = match r % 9 {
+            let opcode = match r % 10 {
                 0 => (r >> 8) as u8,
-                k => (k % 7) as u8,
+                k => (k % 8) as u8,
             };
             let length = match (r >> 16) % 6 {
                 0 => (r >> 24) as usize % 14,
@@ -423,8 +444,13 @@ mod tests {
                 }
                 // a value at or around the limits
                 2 if length >= 4 => args[..4].copy_from_slice(
-                    &[0, 1, MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS - 1]
-                        [(r >> 40) as usize % 4]
+                    &[
+                        0,
+                        1,
+                        MAX_FLUSH_TIMEOUT_TICKS,
+                        MIN_STATUS_PERIOD_TICKS - 1,
+                        MIN_SYNC_PERIOD_TICKS,
+                    ][(r >> 40) as usize % 5]
                         .to_be_bytes(),
                 ),
                 // a destination without an address or a port

@@ -62,6 +62,8 @@ pub struct CommandUnitConfig {
     pub flush_timeout_ticks: u32,
     /// Status period after reset, ticks.
     pub status_period_ticks: u32,
+    /// Time-sync period after reset, ticks (0: no syncs).
+    pub sync_period_ticks: u32,
 }
 
 /// The decision of steps 17-22 and the run-time configuration.
@@ -121,6 +123,10 @@ pub struct CommandUnit {
     pub status_period_set: Signal<Out, Bit>,
     /// One clock (the `done` clock): a status-now was carried out.
     pub status_now: Signal<Out, Bit>,
+    /// The box's time-sync period, ticks (0: none).
+    pub sync_period_ticks: Signal<Out, Bits<32>>,
+    /// One clock (the `done` clock): a set-sync-period was carried out.
+    pub sync_period_set: Signal<Out, Bit>,
     /// From `done` on, held like `result`: the command was an accepted stream-to (its
     /// acknowledgement carries the destination).
     pub accepted_stream_to: Signal<Out, Bit>,
@@ -156,6 +162,7 @@ pub struct CommandUnit {
     apply_status_period: DFF<Bit>,
     apply_status_now: DFF<Bit>,
     apply_cell_command: DFF<Bit>,
+    apply_sync_period: DFF<Bit>,
     // stage 5: the table's take a clock after the decision
     write_table: DFF<Bit>,
     // stage 4: outputs
@@ -204,6 +211,8 @@ impl CommandUnit {
             status_period_ticks: Default::default(),
             status_period_set: Default::default(),
             status_now: Default::default(),
+            sync_period_ticks: Default::default(),
+            sync_period_set: Default::default(),
             accepted_stream_to: Default::default(),
             accepted_status_now: Default::default(),
             fate_replay: constant(BoxCounter::RefusedReplay as u64),
@@ -216,6 +225,7 @@ impl CommandUnit {
                 &link,
                 config.flush_timeout_ticks,
                 config.status_period_ticks,
+                config.sync_period_ticks,
             ),
             checks: CommandChecks::new(config.box_id, config.port_count),
             hosts: Default::default(),
@@ -228,6 +238,7 @@ impl CommandUnit {
             apply_status_period: Default::default(),
             apply_status_now: Default::default(),
             apply_cell_command: Default::default(),
+            apply_sync_period: Default::default(),
             write_table: Default::default(),
             done_out: Default::default(),
             fate_out: Default::default(),
@@ -259,6 +270,7 @@ impl Logic for CommandUnit {
             apply_status_period,
             apply_status_now,
             apply_cell_command,
+            apply_sync_period,
             write_table,
             done_out,
             fate_out,
@@ -304,6 +316,9 @@ impl Logic for CommandUnit {
         self.apply_cell_command.d.next = self.checks.box_ok.val()
             & self.checks.arguments_ok.val()
             & self.checks.is_cell_command.val();
+        self.apply_sync_period.d.next = self.checks.box_ok.val()
+            & self.checks.arguments_ok.val()
+            & self.checks.is_set_sync_period.val();
 
         // Stage 4: the decision, the table and the configuration.
         self.done_out.d.next = self.stage_3.q.val();
@@ -356,6 +371,8 @@ impl Logic for CommandUnit {
         self.configuration.apply_status_period.next =
             self.newer.val() & self.apply_status_period.q.val();
         self.configuration.apply_status_now.next = self.newer.val() & self.apply_status_now.q.val();
+        self.configuration.apply_sync_period.next =
+            self.newer.val() & self.apply_sync_period.q.val();
         self.configuration.value.next = self.checks.value.val();
 
         self.done.next = self.done_out.q.val();
@@ -369,6 +386,8 @@ impl Logic for CommandUnit {
         self.status_period_ticks.next = self.configuration.status_period_ticks.val();
         self.status_period_set.next = self.configuration.status_period_set.val();
         self.status_now.next = self.configuration.status_now.val();
+        self.sync_period_ticks.next = self.configuration.sync_period_ticks.val();
+        self.sync_period_set.next = self.configuration.sync_period_set.val();
         self.accepted_stream_to.next = self.accepted_stream_to_out.q.val();
         self.accepted_status_now.next = self.accepted_status_now_out.q.val();
 
@@ -407,6 +426,7 @@ mod tests {
             port_count: PORTS,
             flush_timeout_ticks: FLUSH,
             status_period_ticks: PERIOD,
+            sync_period_ticks: 0,
         }
     }
 
@@ -445,6 +465,8 @@ mod tests {
         status_period: u32,
         status_period_set: bool,
         status_now: bool,
+        sync_period: u32,
+        sync_period_set: bool,
     }
 
     /// The rules of steps 17-22, written from docs/control.md; the arguments are judged by
@@ -455,6 +477,7 @@ mod tests {
         destination: (u64, u32, u16),
         flush_timeout: u32,
         status_period: u32,
+        sync_period: u32,
     }
 
     impl Model {
@@ -469,6 +492,7 @@ mod tests {
                 ),
                 flush_timeout: FLUSH,
                 status_period: PERIOD,
+                sync_period: 0,
             }
         }
 
@@ -492,6 +516,8 @@ mod tests {
                 status_period: self.status_period,
                 status_period_set: false,
                 status_now: false,
+                sync_period: self.sync_period,
+                sync_period_set: false,
             };
             let refuse = |seen: Seen, fate: BoxCounter, result: AckResult, last: u32| Seen {
                 fate: fate as usize,
@@ -577,6 +603,14 @@ mod tests {
                     ..seen
                 },
                 Ok(Request::ReadTick) => seen,
+                Ok(Request::SetSyncPeriod { ticks }) => {
+                    self.sync_period = ticks;
+                    Seen {
+                        sync_period: ticks,
+                        sync_period_set: true,
+                        ..seen
+                    }
+                }
             }
         }
     }
@@ -617,6 +651,8 @@ mod tests {
                 status_period: u.status_period_ticks.val().to_u32(),
                 status_period_set: u.status_period_set.val(),
                 status_now: u.status_now.val(),
+                sync_period: u.sync_period_ticks.val().to_u32(),
+                sync_period_set: u.sync_period_set.val(),
             }
         }
 
@@ -678,13 +714,14 @@ mod tests {
             let after = self.seen();
             assert!(!self.bench.uut.done.val(), "done lasts one clock");
             assert!(
-                !after.status_period_set && !after.status_now,
+                !after.status_period_set && !after.status_now && !after.sync_period_set,
                 "pulses last one clock"
             );
             assert_eq!(
                 Seen {
                     status_period_set: seen.status_period_set,
                     status_now: seen.status_now,
+                    sync_period_set: seen.sync_period_set,
                     ..after
                 },
                 seen,
@@ -815,7 +852,7 @@ mod tests {
         f.expect(&cmd(HOST, sequence, tick, &[]), Ok, ok);
         sequence += 1;
         f.downlink_full = false;
-        for opcode in std::iter::once(0).chain(7..=255) {
+        for opcode in std::iter::once(0).chain(8..=255) {
             let c = cmd(HOST, sequence, opcode, &[]);
             f.expect(&c, UnknownOpcode, BoxCounter::RefusedUnknownOpcode);
             sequence += 1;
@@ -1016,6 +1053,7 @@ mod tests {
             let opcode = match (r >> 20) % 11 {
                 0 => (r >> 24) as u8,
                 7 | 8 => Opcode::CellCommand as u8,
+                9 => Opcode::SetSyncPeriod as u8,
                 k => (k % 7) as u8,
             };
             let length = match (r >> 28) % 8 {
@@ -1026,7 +1064,7 @@ mod tests {
                 5 => 24,
                 _ => match opcode {
                     1 => 12,
-                    2 | 3 => 4,
+                    2 | 3 | 7 => 4,
                     6 => 24,
                     _ => 0,
                 },

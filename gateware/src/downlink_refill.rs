@@ -12,10 +12,22 @@
 //! last byte it moves to the other slot and `freed` (one clock, at the ring's freeing
 //! bits) frees the slot. After reset the positions are cleared (64 clocks) and every
 //! port's byte is 0xFF (`clearing`).
+//!
+//! Time syncs (cell command 5): a port's position word also says whether the packet on
+//! its line is a time sync (set as byte 3 is loaded, from the queue byte) or the sync
+//! generator's own packet, and the generator's epoch of the port's last generated sync.
+//! Bytes 4 to 11 of every sync, and every byte of a generated one, come from
+//! [`DownlinkSyncBytes`] (stamped with the packet's start tick) instead of the queue. At a
+//! packet boundary (byte index 0) a port whose epoch differs from the generator's `epoch`
+//! sends a generated sync before its queued packets; it takes no queue slot. The new
+//! position is written four clocks after the visit (once the queue byte is known), so no
+//! per-port flip-flop holds any of this.
 
 use crate::block_ram::BlockRam;
 use crate::downlink_packet_copy::QUEUE_ADDRESS_BITS;
+use crate::downlink_sync_bytes::DownlinkSyncBytes;
 use crate::hdl::*;
+use skinbox_protocol::cell_command::{CellCommandFraming, CommandCode};
 
 /// Clocks from a port's refill visit to its byte register: the read position RAM, then
 /// the queue RAM, each two clocks, and the load.
@@ -46,6 +58,12 @@ pub struct DownlinkRefill {
     pub bit_end: Signal<In, Bit>,
     /// ... before the last data bit: the scan starts as the pins take it.
     pub next_is_last_data: Signal<In, Bit>,
+    /// The frame timer's `take_start`: the pins take a start bit at the next edge.
+    pub take_start: Signal<In, Bit>,
+    /// The box tick (the time syncs' stamps).
+    pub tick: Signal<In, Bits<64>>,
+    /// The sync generator's epoch.
+    pub epoch: Signal<In, Bit>,
     /// The one-hot ring (bit `p`: port `p`'s visit; `p + 3` its freeing; `p + 4` its load).
     pub scan_ring: Signal<Out, Bits<RING_BITS>>,
     /// The visited port's queue holds a packet (from the downlink, in the visit's clock).
@@ -59,7 +77,7 @@ pub struct DownlinkRefill {
     /// Load the port whose load bit is set in the ring: its next start bit is low if
     /// `load_nonempty`.
     pub load: Signal<Out, Bit>,
-    /// The loaded port had a packet.
+    /// The loaded port sends a byte (queued or generated).
     pub load_nonempty: Signal<Out, Bit>,
     /// Write `byte_data` at the frame bytes' word of `byte_port`.
     pub byte_write: Signal<Out, Bit>,
@@ -70,10 +88,14 @@ pub struct DownlinkRefill {
     /// After reset: every word of every bank of frame bytes is written 0xFF at word
     /// `byte_port` (no data bit before the first refill).
     pub clearing: Signal<Out, Bit>,
-    /// Per port: the slot its oldest packet is in (bit 5) and the next byte's index.
-    positions: BlockRam<6, 6>,
+    /// Per port: the next byte's index (bits 0-4), the slot of its oldest packet (5), the
+    /// packet on the line is a time sync (6) or a generated one (7), the epoch of its last
+    /// generated sync (8).
+    positions: BlockRam<9, 6>,
+    sync_bytes: DownlinkSyncBytes,
     last_port: Constant<Bits<8>>,
     ring_start: Constant<Bits<RING_BITS>>,
+    sync_command: Constant<Bits<8>>,
     refilling: DFF<Bit>,
     scan: DFF<Bits<6>>,
     ring: DFF<Bits<RING_BITS>>,
@@ -85,27 +107,44 @@ pub struct DownlinkRefill {
     nonempty_2: DFF<Bit>,
     visit_3: DFF<Bit>,
     port_3: DFF<Bits<6>>,
-    nonempty_3: DFF<Bit>,
+    sends_3: DFF<Bit>,
     visit_4: DFF<Bit>,
     port_4: DFF<Bits<6>>,
-    nonempty_4: DFF<Bit>,
-    position_write: DFF<Bit>,
-    position_port: DFF<Bits<6>>,
-    position_next: DFF<Bits<6>>,
+    sends_4: DFF<Bit>,
+    /// The new position, written after the queue byte: byte 3 of a queued packet says
+    /// whether it is a sync.
+    check_sync_3: DFF<Bit>,
+    position_next_3: DFF<Bits<9>>,
+    check_sync_4: DFF<Bit>,
+    position_next_4: DFF<Bits<9>>,
     slot_freed: DFF<Bit>,
     clear: DFF<Bit>,
     clear_address: DFF<Bits<6>>,
-    position: Signal<Local, Bits<6>>,
+    position: Signal<Local, Bits<9>>,
+    index: Signal<Local, Bits<5>>,
+    last_byte: Signal<Local, Bit>,
+    pending: Signal<Local, Bit>,
+    generated: Signal<Local, Bit>,
+    from_queue: Signal<Local, Bit>,
+    next_index: Signal<Local, Bits<5>>,
+    next_epoch: Signal<Local, Bit>,
+    next_generated: Signal<Local, Bit>,
+    next_sync: Signal<Local, Bit>,
+    next_slot: Signal<Local, Bit>,
+    sync_bit: Signal<Local, Bits<9>>,
 }
 
 impl DownlinkRefill {
-    /// The refill of `ports` ports.
-    pub fn new(ports: usize) -> Self {
+    /// The refill of `ports` ports; generated syncs are framed by `framing`.
+    pub fn new(ports: usize, framing: CellCommandFraming) -> Self {
         Self {
             clock: Default::default(),
             reset: Default::default(),
             bit_end: Default::default(),
             next_is_last_data: Default::default(),
+            take_start: Default::default(),
+            tick: Default::default(),
+            epoch: Default::default(),
             scan_ring: Default::default(),
             nonempty: Default::default(),
             queue_read_address: Default::default(),
@@ -118,8 +157,10 @@ impl DownlinkRefill {
             byte_data: Default::default(),
             clearing: Default::default(),
             positions: Default::default(),
+            sync_bytes: DownlinkSyncBytes::new(framing),
             last_port: Constant::new((ports as u64 - 1).into()),
             ring_start: Constant::new(1.into()),
+            sync_command: constant(CommandCode::TimeSync as u64),
             refilling: Default::default(),
             scan: Default::default(),
             ring: Default::default(),
@@ -131,17 +172,29 @@ impl DownlinkRefill {
             nonempty_2: Default::default(),
             visit_3: Default::default(),
             port_3: Default::default(),
-            nonempty_3: Default::default(),
+            sends_3: Default::default(),
             visit_4: Default::default(),
             port_4: Default::default(),
-            nonempty_4: Default::default(),
-            position_write: Default::default(),
-            position_port: Default::default(),
-            position_next: Default::default(),
+            sends_4: Default::default(),
+            check_sync_3: Default::default(),
+            position_next_3: Default::default(),
+            check_sync_4: Default::default(),
+            position_next_4: Default::default(),
             slot_freed: Default::default(),
             clear: Default::default(),
             clear_address: Default::default(),
             position: Default::default(),
+            index: Default::default(),
+            last_byte: Default::default(),
+            pending: Default::default(),
+            generated: Default::default(),
+            from_queue: Default::default(),
+            next_index: Default::default(),
+            next_epoch: Default::default(),
+            next_generated: Default::default(),
+            next_sync: Default::default(),
+            next_slot: Default::default(),
+            sync_bit: Default::default(),
         }
     }
 }
@@ -163,18 +216,23 @@ impl Logic for DownlinkRefill {
             nonempty_2,
             visit_3,
             port_3,
-            nonempty_3,
+            sends_3,
             visit_4,
             port_4,
-            nonempty_4,
-            position_write,
-            position_port,
-            position_next,
+            sends_4,
+            check_sync_3,
+            position_next_3,
+            check_sync_4,
+            position_next_4,
             slot_freed,
             clear,
             clear_address
         );
         self.positions.clock.next = self.clock.val();
+        self.sync_bytes.clock.next = self.clock.val();
+        self.sync_bytes.reset.next = self.reset.val();
+        self.sync_bytes.take_start.next = self.take_start.val();
+        self.sync_bytes.tick.next = self.tick.val();
         // the scan starts as the pins take the last data bit
         if self.refilling.q.val() {
             self.scan.d.next = self.scan.q.val() + 1;
@@ -183,6 +241,7 @@ impl Logic for DownlinkRefill {
             }
         }
         self.ring.d.next = self.ring.q.val() << 1;
+        self.sync_bytes.scan_start.next = self.bit_end.val() & self.next_is_last_data.val();
         if self.bit_end.val() & self.next_is_last_data.val() {
             self.refilling.d.next = true;
             self.scan.d.next = 0.into();
@@ -197,41 +256,76 @@ impl Logic for DownlinkRefill {
         self.visit_2.d.next = self.visit_1.q.val();
         self.port_2.d.next = self.port_1.q.val();
         self.nonempty_2.d.next = self.nonempty_1.q.val() & self.visit_1.q.val();
-        // two clocks later: the byte's address, and the next position
+        // two clocks later: a generated sync (under way, or due at a packet boundary), else
+        // the queue's byte
         self.position.next = self.positions.read_data.val();
+        self.index.next = self.position.val().get_bits::<5>(0);
+        self.last_byte.next = self.index.val() == 19;
+        self.pending.next = !self.position.val().get_bit(7)
+            & (self.index.val() == 0)
+            & (self.position.val().get_bit(8) != self.epoch.val());
+        self.generated.next =
+            self.visit_2.q.val() & (self.position.val().get_bit(7) | self.pending.val());
+        self.from_queue.next = !self.generated.val() & self.nonempty_2.q.val();
         self.queue_read_address.next = (bit_cast::<QUEUE_ADDRESS_BITS, 6>(self.port_2.q.val())
             << 6)
-            | bit_cast::<QUEUE_ADDRESS_BITS, 6>(self.position.val());
-        self.position_write.d.next = self.nonempty_2.q.val();
-        self.position_port.d.next = self.port_2.q.val();
-        self.position_next.d.next = self.position.val() + 1;
-        self.slot_freed.d.next = false;
-        if self.position.val().get_bits::<5>(0) == 19 {
-            // the last byte of the slot: the other slot next, this one is free
-            self.position_next.d.next =
-                bit_cast::<6, 1>((!self.position.val().get_bit(5)).into()) << 5;
-            self.slot_freed.d.next = self.nonempty_2.q.val();
+            | bit_cast::<QUEUE_ADDRESS_BITS, 5>(self.index.val())
+            | (bit_cast::<QUEUE_ADDRESS_BITS, 1>(self.position.val().get_bit(5).into()) << 5);
+        self.sync_bytes.index.next = self.index.val();
+        self.sync_bytes.wanted.next = self.generated.val()
+            | (self.position.val().get_bit(6) & (self.index.val() >= 4) & (self.index.val() <= 11));
+        // the next position: epoch, generated, sync, slot, index
+        self.next_index.next = self.index.val() + 1;
+        self.next_epoch.next = self.position.val().get_bit(8);
+        self.next_generated.next = self.generated.val();
+        self.next_sync.next = self.position.val().get_bit(6);
+        self.next_slot.next = self.position.val().get_bit(5);
+        if self.pending.val() {
+            self.next_epoch.next = self.epoch.val();
         }
+        if self.last_byte.val() {
+            // past the packet: not a sync; a queued packet's slot is free
+            self.next_index.next = 0.into();
+            self.next_generated.next = false;
+            self.next_sync.next = false;
+            self.next_slot.next = self.position.val().get_bit(5) ^ self.from_queue.val();
+        }
+        self.position_next_3.d.next = (bit_cast::<9, 1>(self.next_epoch.val().into()) << 8)
+            | (bit_cast::<9, 1>(self.next_generated.val().into()) << 7)
+            | (bit_cast::<9, 1>(self.next_sync.val().into()) << 6)
+            | (bit_cast::<9, 1>(self.next_slot.val().into()) << 5)
+            | bit_cast::<9, 5>(self.next_index.val());
+        self.check_sync_3.d.next = self.from_queue.val() & (self.index.val() == 3);
+        self.sends_3.d.next = self.generated.val() | self.from_queue.val();
+        self.slot_freed.d.next = self.from_queue.val() & self.last_byte.val();
         self.freed.next = self.slot_freed.q.val();
         self.visit_3.d.next = self.visit_2.q.val();
         self.port_3.d.next = self.port_2.q.val();
-        self.nonempty_3.d.next = self.nonempty_2.q.val();
         self.visit_4.d.next = self.visit_3.q.val();
         self.port_4.d.next = self.port_3.q.val();
-        self.nonempty_4.d.next = self.nonempty_3.q.val();
-        // two clocks after the address: the byte, or 0xFF and no start bit when empty
+        self.sends_4.d.next = self.sends_3.q.val();
+        self.check_sync_4.d.next = self.check_sync_3.q.val();
+        self.position_next_4.d.next = self.position_next_3.q.val();
+        // two clocks after the address: the byte, or 0xFF and no start bit when none
         self.load.next = self.visit_4.q.val();
-        self.load_nonempty.next = self.nonempty_4.q.val();
+        self.load_nonempty.next = self.sends_4.q.val();
         self.byte_write.next = self.visit_4.q.val();
         self.byte_port.next = self.port_4.q.val();
         self.byte_data.next = self.queue_read_data.val();
-        if !self.nonempty_4.q.val() {
+        if self.sync_bytes.replace.val() {
+            self.byte_data.next = self.sync_bytes.sync_byte.val();
+        }
+        if !self.sends_4.q.val() {
             self.byte_data.next = 0xFF.into();
         }
         self.clearing.next = self.clear.q.val();
-        self.positions.write_enable.next = self.position_write.q.val() | self.clear.q.val();
-        self.positions.write_address.next = self.position_port.q.val();
-        self.positions.write_data.next = self.position_next.q.val();
+        self.sync_bit.next = bit_cast::<9, 1>(true.into()) << 6;
+        self.positions.write_enable.next = self.sends_4.q.val() | self.clear.q.val();
+        self.positions.write_address.next = self.port_4.q.val();
+        self.positions.write_data.next = self.position_next_4.q.val();
+        if self.check_sync_4.q.val() & (self.queue_read_data.val() == self.sync_command.val()) {
+            self.positions.write_data.next = self.position_next_4.q.val() | self.sync_bit.val();
+        }
         if self.clear.q.val() {
             // after reset every port reads slot 0 from byte 0, and its byte is 0xFF
             self.byte_write.next = true;
@@ -251,7 +345,8 @@ impl Logic for DownlinkRefill {
             self.nonempty_2.d.next = false;
             self.visit_3.d.next = false;
             self.visit_4.d.next = false;
-            self.position_write.d.next = false;
+            self.sends_3.d.next = false;
+            self.sends_4.d.next = false;
             self.slot_freed.d.next = false;
             self.clear.d.next = true;
             self.clear_address.d.next = 0.into();
@@ -293,7 +388,7 @@ mod tests {
         let mut bench = Bench::new(
             RefillWithQueues {
                 clock: Default::default(),
-                refill: DownlinkRefill::new(ports),
+                refill: DownlinkRefill::new(ports, CellCommandFraming::DEFAULT),
                 queues,
             },
             |b| &mut b.clock,

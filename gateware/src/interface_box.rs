@@ -31,6 +31,7 @@ use crate::stream::{ByteStreamSource, DatagramSource};
 use crate::timestamp::TimestampCounter;
 use crate::uart_rx::{rate_supported, shift_hold_clocks, UartRx, STAMP_BITS};
 const _: () = assert!(STAMP_BITS == 7);
+use skinbox_protocol::cell_command::CellCommandFraming;
 use skinbox_protocol::{CellFraming, LinkConfig};
 
 /// The datagram arbiter's sources, in their order of precedence after reset: records
@@ -50,6 +51,9 @@ pub struct BoxConfig {
     pub flush_timeout_ticks: u64,
     /// Time between status reports.
     pub status_period_ticks: u64,
+    /// Time between the box's own time syncs to every cell (0: none; 12,500,000 = 0.1 s
+    /// keeps the cells in time).
+    pub sync_period_ticks: u64,
     /// Line idle time, in bit times, that truncates a packet.
     pub idle_gap_bits: u64,
     /// Ethernet, IPv4 and UDP addresses.
@@ -63,7 +67,8 @@ pub struct BoxConfig {
 }
 
 impl Default for BoxConfig {
-    /// 8 ports, 125 MHz, 4 Mbit/s, 100 us flush timeout, 100 ms status period.
+    /// 8 ports, 125 MHz, 4 Mbit/s, 100 us flush timeout, 100 ms status period, no time
+    /// syncs of the box's own (the co-simulated scenes and studies plan none yet).
     fn default() -> Self {
         BoxConfig {
             ports: 8,
@@ -71,6 +76,7 @@ impl Default for BoxConfig {
             baud: crate::CELL_BAUD,
             flush_timeout_ticks: 12_500,
             status_period_ticks: 12_500_000,
+            sync_period_ticks: 0,
             idle_gap_bits: 10,
             link: LinkConfig::DEFAULT,
             box_id: 1,
@@ -347,10 +353,16 @@ impl InterfaceBox {
                 port_count: n as u8,
                 flush_timeout_ticks: config.flush_timeout_ticks as u32,
                 status_period_ticks: config.status_period_ticks as u32,
+                sync_period_ticks: config.sync_period_ticks as u32,
             }),
             box_counters: Default::default(),
             replies: ReplyBuilder::new(&config.link, config.box_id, n as u8),
-            downlink: CellDownlink::new(n, config.clock_hz, config.baud),
+            downlink: CellDownlink::new(
+                n,
+                config.clock_hz,
+                config.baud,
+                CellCommandFraming::DEFAULT,
+            ),
             action_none: Constant::new(u64::from(ACTION_NONE).into()),
             action_arp: Constant::new(u64::from(ACTION_ARP).into()),
             action_echo: Constant::new(u64::from(ACTION_ECHO).into()),
@@ -437,6 +449,7 @@ impl Logic for InterfaceBox {
         self.status.clock.next = self.clock.val();
         self.status.reset.next = self.core_reset.q.val();
         self.status.tick.next = self.timestamp.tick.val();
+        self.status.time_syncs.next = self.downlink.syncs_on.val();
         self.status.datagrams_sent.next = self.batcher.datagrams_sent.val();
         self.status.records_sent.next = self.batcher.records_sent.val();
         self.status.counters_ready.next = self.counters.ready.val();
@@ -519,6 +532,9 @@ impl Logic for InterfaceBox {
         self.downlink.offer_port.next = self.commands.downlink_port.val();
         self.commands.downlink_busy.next = self.downlink.busy.val();
         self.commands.downlink_full_ports.next = self.downlink.full_ports.val();
+        self.downlink.tick.next = self.timestamp.tick.val();
+        self.downlink.sync_period.next = self.commands.sync_period_ticks.val();
+        self.downlink.sync_restart.next = self.commands.sync_period_set.val();
         for i in 0..self.uart_tx.len() {
             self.uart_tx[i].next = self.downlink.uart_tx[i].val();
         }

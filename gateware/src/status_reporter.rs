@@ -20,7 +20,7 @@ use crate::body_reader::BodyReader;
 use crate::hdl::*;
 use crate::stream::DatagramSource;
 use skinbox_protocol::box_counters::BOX_COUNTERS_LEN;
-use skinbox_protocol::datagram::{DatagramKind, FLAG_BOX_COUNTERS};
+use skinbox_protocol::datagram::{DatagramKind, FLAG_BOX_COUNTERS, FLAG_TIME_SYNCS};
 
 /// Words of a page before the port counters: boot id, datagrams, records, first port.
 pub const HEADER_WORDS: usize = 4;
@@ -48,6 +48,8 @@ pub struct StatusReporter {
     pub reset: Signal<In, Bit>,
     /// Box time.
     pub tick: Signal<In, Bits<64>>,
+    /// The box sends its own time syncs: a report started now has `FLAG_TIME_SYNCS`.
+    pub time_syncs: Signal<In, Bit>,
     /// Records datagrams sent since reset.
     pub datagrams_sent: Signal<In, Bits<32>>,
     /// Records sent since reset.
@@ -79,6 +81,7 @@ pub struct StatusReporter {
     reader: BodyReader,
     status_kind: Constant<Bits<8>>,
     box_counters_flag: Constant<Bits<8>>,
+    time_syncs_flag: Constant<Bits<8>>,
     // the page's first counter word, and its last word less 8 per port
     first_counter_word: Constant<Bits<9>>,
     last_word_over_ports: Constant<Bits<9>>,
@@ -112,6 +115,7 @@ pub struct StatusReporter {
     offset: DFF<Bits<11>>,
     sum: DFF<Bits<32>>,
     tick_held: DFF<Bits<64>>,
+    syncs_held: DFF<Bit>,
     resets: DFF<Bits<32>>,
     reset_seen: DFF<Bit>,
     // the value of word 0 to 3 for the current word, and whether it is a counter instead
@@ -169,6 +173,7 @@ impl StatusReporter {
             reader: Default::default(),
             status_kind: Constant::new((DatagramKind::Status as u64).into()),
             box_counters_flag: Constant::new(u64::from(FLAG_BOX_COUNTERS).into()),
+            time_syncs_flag: Constant::new(u64::from(FLAG_TIME_SYNCS).into()),
             first_counter_word: Constant::new((HEADER_WORDS as u64).into()),
             last_word_over_ports: Constant::new(
                 ((HEADER_WORDS + BOX_COUNTER_WORDS - 1) as u64).into(),
@@ -196,6 +201,8 @@ impl StatusReporter {
             offset: Default::default(),
             sum: Default::default(),
             tick_held: Default::default(),
+            syncs_held: Default::default(),
+            time_syncs: Default::default(),
             resets: Default::default(),
             reset_seen: Default::default(),
             header_word: Default::default(),
@@ -233,6 +240,7 @@ impl Logic for StatusReporter {
             offset,
             sum,
             tick_held,
+            syncs_held,
             resets,
             reset_seen,
             header_word,
@@ -338,6 +346,7 @@ impl Logic for StatusReporter {
                 self.offset.d.next = 0.into();
                 self.sum.d.next = 0.into();
                 self.tick_held.d.next = self.tick.val();
+                self.syncs_held.d.next = self.time_syncs.val();
                 self.page_ports.d.next = self.ports_per_page.val();
                 if self.remaining.val() < self.ports_per_page.val() {
                     self.page_ports.d.next = self.remaining.val();
@@ -404,6 +413,9 @@ impl Logic for StatusReporter {
         self.datagrams.valid.next = self.requesting.q.val();
         self.datagrams.kind.next = self.status_kind.val();
         self.datagrams.flags.next = self.box_counters_flag.val();
+        if self.syncs_held.q.val() {
+            self.datagrams.flags.next = self.box_counters_flag.val() | self.time_syncs_flag.val();
+        }
         self.datagrams.entry_count.next = bit_cast::<16, 7>(self.page_ports.q.val());
         self.datagrams.base_tick.next = self.tick_held.q.val();
         self.datagrams.body_len.next = self.offset.q.val();

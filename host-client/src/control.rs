@@ -215,8 +215,12 @@ pub fn resolve_ipv4(box_addr: &str) -> io::Result<SocketAddr> {
 }
 
 /// The request of `set PARAMETER VALUE`: `flush-timeout-us` or `status-period-ms`, a
-/// positive value; else why not.
+/// positive value, or `sync-period-ms`, 0 (the box sends no time syncs) or positive; else
+/// why not.
 pub fn set_request(parameter: &str, value: f64) -> Result<Request, String> {
+    if parameter == "sync-period-ms" && value == 0.0 {
+        return Ok(Request::SetSyncPeriod { ticks: 0 });
+    }
     if !(value.is_finite() && value > 0.0) {
         return Err(format!("set {parameter}: {value} must be positive"));
     }
@@ -227,8 +231,12 @@ pub fn set_request(parameter: &str, value: f64) -> Result<Request, String> {
         "status-period-ms" => Ok(Request::SetStatusPeriod {
             ticks: (value * 125_000.0).round().min(f64::from(u32::MAX)) as u32,
         }),
+        "sync-period-ms" => Ok(Request::SetSyncPeriod {
+            ticks: (value * 125_000.0).round().min(f64::from(u32::MAX)) as u32,
+        }),
         other => Err(format!(
-            "set {other}: the parameters are flush-timeout-us and status-period-ms"
+            "set {other}: the parameters are flush-timeout-us, status-period-ms and \
+             sync-period-ms"
         )),
     }
 }

@@ -78,6 +78,8 @@ pub struct ControlConfig {
     pub flush_timeout_ticks: u32,
     /// Status period after reset, ticks.
     pub status_period_ticks: u32,
+    /// Time-sync period after reset, ticks (0: no syncs).
+    pub sync_period_ticks: u32,
     /// The box clock, Hz (the downlink's bit times).
     pub clock_hz: u64,
     /// The cells' UART baud rate (the downlink's).
@@ -93,6 +95,7 @@ impl ControlConfig {
             port_count: config.ports as u8,
             flush_timeout_ticks: config.flush_timeout_ticks as u32,
             status_period_ticks: config.status_period_ticks as u32,
+            sync_period_ticks: config.sync_period_ticks as u32,
             clock_hz: config.clock_hz,
             cell_baud: config.baud,
         }
@@ -110,6 +113,9 @@ pub enum Effect {
     SetStatusPeriod(u32),
     /// A status report now.
     StatusNow,
+    /// The box's time syncs every this many ticks (0: none) from now on; the downlink
+    /// model has it already.
+    SetSyncPeriod(u32),
 }
 
 /// A frame the box sends in answer.
@@ -186,7 +192,8 @@ impl BoxControl {
                 usize::from(config.port_count),
                 config.clock_hz,
                 config.cell_baud,
-            ),
+            )
+            .with_sync_period(config.sync_period_ticks.into()),
             receive_tick: 0,
         }
     }
@@ -511,6 +518,17 @@ impl BoxControl {
                 AckReply::Counters(BoxCounters::default()),
             ),
             Request::ReadTick => (ok, AckResult::Ok, None, AckReply::None),
+            Request::SetSyncPeriod { ticks } => {
+                // applied in the clock a cell command would be offered
+                let apply_tick = self.receive_tick + DOWNLINK_OFFER_AFTER_RECEIVE_TICK;
+                self.downlink.set_sync_period(apply_tick, ticks.into());
+                (
+                    ok,
+                    AckResult::Ok,
+                    Some(Effect::SetSyncPeriod(ticks)),
+                    AckReply::None,
+                )
+            }
             Request::CellCommand { port, packet } => {
                 let offer_tick = self.receive_tick + DOWNLINK_OFFER_AFTER_RECEIVE_TICK;
                 if self.downlink.offer(offer_tick, port, packet) {

@@ -8,10 +8,17 @@
 //! accepted packets into the queues as events at their clocks, and writes each frame's
 //! pins from the byte it loaded; ticks are box ticks (the tick counter and the downlink
 //! leave reset together). An idle downlink costs nothing: frames without a queued packet
-//! are skipped.
+//! or a due time sync are skipped.
+//!
+//! Time syncs: every packet whose command byte is 5 leaves with bytes 4-11 = the tick of
+//! its first start bit ([`PacketStart::tick`]), and the box's sync generator makes every
+//! port send its own sync (cell id every cell) once a sync period, at the port's first
+//! packet boundary whose refill sees the generator's epoch differ from the port's (the
+//! epoch as the refill reads it, two clocks after the visit), before its queued packets.
 
 use crate::timing::{bit_start, frame_bits, DOWNLINK_QUEUE_PACKETS, DOWNLINK_REFILL_LATENCY};
 use skinbox_protocol::cell::PACKET_LEN;
+use skinbox_protocol::cell_command::{CellCommand, CellCommandRepr, CommandCode, ALL_CELLS};
 use skinbox_protocol::command::ALL_PORTS;
 use std::collections::VecDeque;
 
@@ -33,8 +40,10 @@ pub struct PacketStart {
     pub tick: u64,
     /// The port.
     pub port: usize,
-    /// The packet.
+    /// The packet as it leaves (a time sync stamped).
     pub bytes: [u8; PACKET_LEN],
+    /// It is the box's own sync (the sync generator's), not a queued packet.
+    pub generated: bool,
 }
 
 /// Clocks from the offer to the first copy's commit: the offer register, then 20 copy
@@ -43,6 +52,56 @@ const OFFER_TO_COMMIT: u64 = 1 + PACKET_LEN as u64;
 /// Edges from a refill visit to the edge its slot is freed (the count read two clocks
 /// later, registered once more).
 const VISIT_TO_FREE: u64 = 4;
+/// Clocks from a refill visit to the clock it compares the port's epoch with the
+/// generator's (the position RAM's read).
+const VISIT_TO_EPOCH: u64 = 2;
+
+/// `packet` as it leaves with its first start bit at `tick`: a time sync's bytes 4-11 are
+/// the tick, big-endian.
+pub fn stamped(mut packet: [u8; PACKET_LEN], tick: u64) -> [u8; PACKET_LEN] {
+    if packet[3] == CommandCode::TimeSync as u8 {
+        packet[4..12].copy_from_slice(&tick.to_be_bytes());
+    }
+    packet
+}
+
+/// The box's own time sync to every cell, leaving with its first start bit at `tick`.
+pub fn generated_sync(tick: u64) -> [u8; PACKET_LEN] {
+    CellCommandRepr {
+        cell_id: ALL_CELLS,
+        command: CellCommand::TimeSync { box_tick: tick },
+    }
+    .to_bytes()
+}
+
+/// The sync generator: its epoch toggles every `period` clocks from `origin` (the clock
+/// after reset or after the clock a new period is first seen), and once at the origin of
+/// a new period other than 0.
+#[derive(Debug, Clone, Copy)]
+struct SyncGenerator {
+    period: u64,
+    origin: u64,
+    at_origin: bool,
+}
+
+impl SyncGenerator {
+    /// The epoch in clock `tick`.
+    fn epoch(&self, tick: u64) -> bool {
+        if self.period == 0 || tick < self.origin {
+            return self.at_origin;
+        }
+        self.at_origin ^ ((tick - self.origin) / self.period % 2 == 1)
+    }
+
+    /// The first clock after `tick` whose epoch differs from the clock before.
+    fn next_toggle_after(&self, tick: u64) -> Option<u64> {
+        if self.period == 0 {
+            return None;
+        }
+        let n = tick.saturating_sub(self.origin) / self.period + 1;
+        Some(self.origin + n * self.period)
+    }
+}
 
 /// One port's queue.
 #[derive(Debug, Clone, Default)]
@@ -57,6 +116,12 @@ struct Port {
     free_at: Option<u64>,
     /// The pin's level after the last change written.
     pin: bool,
+    /// The packet on the line is the generator's sync (`index` is its next byte).
+    generated: bool,
+    /// The generator's epoch when the port last started its sync.
+    epoch_sent: bool,
+    /// The packet on the line as it leaves (stamped).
+    current: [u8; PACKET_LEN],
 }
 
 /// A copy into the queues under way.
@@ -87,6 +152,7 @@ pub struct DownlinkModel {
     /// The changes of the frame whose refill scan is under way.
     frame_changes: Vec<PinChange>,
     starts: Vec<PacketStart>,
+    generator: SyncGenerator,
 }
 
 impl DownlinkModel {
@@ -111,7 +177,96 @@ impl DownlinkModel {
             changes: Vec::new(),
             frame_changes: Vec::new(),
             starts: Vec::new(),
+            generator: SyncGenerator {
+                period: 0,
+                origin: 0,
+                at_origin: false,
+            },
         }
+    }
+
+    /// The same downlink whose sync period after reset is `ticks` (0: no syncs).
+    pub fn with_sync_period(mut self, ticks: u64) -> DownlinkModel {
+        self.generator.period = ticks;
+        self
+    }
+
+    /// The sync period in effect, ticks (0: none).
+    pub fn sync_period(&self) -> u64 {
+        self.generator.period
+    }
+
+    /// Sets the sync period to `ticks` in clock `tick` (the command unit's clock that
+    /// applies it, the clock before `done`): the generator restarts in the next clock, a
+    /// sync at once unless 0. Ticks must not go back.
+    pub fn set_sync_period(&mut self, tick: u64, ticks: u64) {
+        self.advance_to(tick);
+        let restart = tick + 1;
+        self.generator = SyncGenerator {
+            period: ticks,
+            origin: restart + 1,
+            at_origin: self.generator.epoch(restart) ^ (ticks != 0),
+        };
+    }
+
+    /// The first frame from the current one whose refill scan starts at or after `tick`.
+    fn first_frame_from(&self, tick: u64) -> u64 {
+        // (a galloping search: the frames' starts follow the phase accumulator's rounding)
+        let mut low = self.frame;
+        if self.refill_start(low) >= tick {
+            return low;
+        }
+        let mut step = 1;
+        while self.refill_start(low + step) < tick {
+            low += step;
+            step *= 2;
+        }
+        // refill_start(low) < tick <= refill_start(low + step)
+        let mut high = low + step;
+        while high - low > 1 {
+            let middle = low + (high - low) / 2;
+            if self.refill_start(middle) < tick {
+                low = middle;
+            } else {
+                high = middle;
+            }
+        }
+        high
+    }
+
+    /// With nothing queued: moves on to the first frame before `tick`'s whose refill would
+    /// start a sync, or to the first frame from `tick` (whole periods at a time).
+    fn skip_idle_frames(&mut self, tick: u64) {
+        let scan_clocks = VISIT_TO_EPOCH + self.ports.len() as u64;
+        loop {
+            let target = self.first_frame_from(tick);
+            if self.frame >= target || self.sync_due(self.frame) {
+                return;
+            }
+            // no port's epoch changes before the next toggle
+            let scan = self.refill_start(self.frame);
+            let quiet = match self.generator.next_toggle_after(scan + scan_clocks - 1) {
+                Some(t) => target.min(self.first_frame_from(t.saturating_sub(scan_clocks))),
+                None => target,
+            };
+            self.frame = quiet.max(self.frame + 1);
+        }
+    }
+
+    /// A port's refill in frame `frame`'s scan would start the generator's sync.
+    fn sync_due(&self, frame: u64) -> bool {
+        let scan = self.refill_start(frame) + VISIT_TO_EPOCH;
+        let (first, last) = (
+            self.generator.epoch(scan),
+            self.generator.epoch(scan + self.ports.len() as u64),
+        );
+        if first == last {
+            return self.ports.iter().any(|p| p.epoch_sent != first);
+        }
+        self.ports
+            .iter()
+            .enumerate()
+            .any(|(s, p)| p.epoch_sent != self.generator.epoch(scan + s as u64))
     }
 
     /// Tick from which bit `bit` of the shared frames is on the pins.
@@ -131,7 +286,7 @@ impl DownlinkModel {
             && self
                 .ports
                 .iter()
-                .all(|p| p.count == 0 && p.free_at.is_none())
+                .all(|p| p.count == 0 && p.free_at.is_none() && !p.generated)
     }
 
     /// Applies the copy's commits whose count is in place by edge `edge` (a commit in
@@ -192,18 +347,34 @@ impl DownlinkModel {
         self.commit_until(visit);
         self.free_until(visit);
         let (clock_hz, baud) = (self.clock_hz, self.baud);
+        let epoch = self.generator.epoch(visit + VISIT_TO_EPOCH);
+        let start = bit_start(clock_hz, baud, start_bit);
         let port = &mut self.ports[s];
-        if port.count == 0 {
-            return;
-        }
-        let packet = *port.packets.front().expect("a counted packet is queued");
         let index = port.index;
+        if port.generated {
+            // the generator's sync under way
+        } else if index == 0 && port.epoch_sent != epoch {
+            // the generator's sync goes before the queued packets
+            port.generated = true;
+            port.epoch_sent = epoch;
+            port.current = generated_sync(start);
+        } else if port.count == 0 {
+            return;
+        } else if index == 0 {
+            let packet = *port.packets.front().expect("a counted packet is queued");
+            port.current = stamped(packet, start);
+        }
         port.index += 1;
         if port.index == PACKET_LEN {
             port.index = 0;
-            port.packets.pop_front();
-            port.free_at = Some(visit + VISIT_TO_FREE);
+            if port.generated {
+                port.generated = false;
+            } else {
+                port.packets.pop_front();
+                port.free_at = Some(visit + VISIT_TO_FREE);
+            }
         }
+        let packet = port.current;
         let byte = packet[index];
         let levels = std::iter::once(false)
             .chain((0..8).map(|b| byte >> b & 1 == 1))
@@ -220,9 +391,10 @@ impl DownlinkModel {
         }
         if index == 0 {
             self.starts.push(PacketStart {
-                tick: bit_start(clock_hz, baud, start_bit),
+                tick: start,
                 port: s,
                 bytes: packet,
+                generated: port.generated,
             });
         }
     }
@@ -235,11 +407,10 @@ impl DownlinkModel {
         }
         loop {
             if self.idle() && self.next_port == 0 {
-                // skip the frames whose refill would find nothing
-                while self.refill_start(self.frame) < tick {
-                    self.frame += 1;
+                self.skip_idle_frames(tick);
+                if self.refill_start(self.frame) >= tick {
+                    break;
                 }
-                break;
             }
             if self.next_visit() >= tick {
                 break;

@@ -125,6 +125,7 @@ impl<'a> EmulatedBox<'a> {
                 Effect::SetFlushTimeout(t) => self.reference.set_flush_timeout_ticks(t.into()),
                 Effect::SetStatusPeriod(t) => self.reference.set_status_period_ticks(t.into()),
                 Effect::StatusNow => self.reference.request_status(),
+                Effect::SetSyncPeriod(t) => self.reference.set_sync_period_ticks(t.into()),
             }
         }
         self.run_to(tick, &mut out);
@@ -264,6 +265,7 @@ mod tests {
             port_count: 4,
             flush_timeout_ticks: 12_500,
             status_period_ticks: 12_500_000,
+            sync_period_ticks: 12_500_000,
             clock_hz: skinbox_gateware::CLOCK_HZ,
             cell_baud: skinbox_gateware::CELL_BAUD,
         };

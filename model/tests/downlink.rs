@@ -1,6 +1,6 @@
 //! The downlink model: a command flood to one port is refused and counted, and an idle
 //! downlink starts each packet in the next frame (the RTL's pins are held to this model in
-//! cosim/tests/downlink.rs).
+//! cosim/tests/downlink.rs); the sync generator sends every port a sync each period.
 
 mod support;
 
@@ -81,4 +81,59 @@ fn the_downlink_model_is_idle_cheap_and_starts_each_packet_in_the_next_frame() {
             .unwrap();
         assert_eq!(first.tick, bit((f + 1) * frame), "port {port}");
     }
+}
+
+#[test]
+fn an_idle_downlink_sends_the_generators_syncs_each_period_stamped_and_none_while_off() {
+    // 64 ports at a 1 ms period: each port's sync opens the first frame whose refill sees
+    // the toggle (within two frames), carries its start tick, and a host's sync on the
+    // same downlink is stamped too; period 0 stops them, a new period sends one at once
+    use skinbox_model::downlink::generated_sync;
+    let (clock_hz, baud) = (125_000_000, 4_000_000);
+    let frame_ticks = 11 * 32;
+    let period = 125_000;
+    let mut d = DownlinkModel::new(64, clock_hz, baud).with_sync_period(period);
+    let mut host_sync = cell_packet(9);
+    host_sync[3] = 5;
+    assert!(d.offer(10_000, 7, host_sync));
+    d.advance_to(3 * period + 20_000);
+    let host: Vec<_> = d
+        .starts()
+        .iter()
+        .filter(|s| s.bytes[..4] == host_sync[..4])
+        .collect();
+    assert_eq!(host.len(), 1);
+    assert_eq!(host[0].bytes[4..12], host[0].tick.to_be_bytes());
+    assert_eq!(host[0].bytes[12..], host_sync[12..]);
+    for port in 0..64 {
+        let syncs: Vec<u64> = d
+            .starts()
+            .iter()
+            .filter(|s| s.port == port && s.bytes == generated_sync(s.tick))
+            .map(|s| s.tick)
+            .collect();
+        assert_eq!(syncs.len(), 3, "port {port}");
+        for (k, tick) in syncs.iter().enumerate() {
+            let toggle = (k as u64 + 1) * period;
+            assert!(
+                (toggle..toggle + 2 * frame_ticks).contains(tick),
+                "port {port}: {tick}"
+            );
+        }
+    }
+    let before = d.starts().len();
+    d.set_sync_period(400_000, 0);
+    d.advance_to(1_000_000);
+    assert_eq!(d.starts().len(), before, "no syncs while off");
+    d.set_sync_period(1_000_000, 2 * period);
+    d.advance_to(1_000_000 + 2 * period + 10_000);
+    let after: Vec<u64> = d.starts()[before..].iter().map(|s| s.tick).collect();
+    assert_eq!(after.len(), 2 * 64);
+    assert!(after[..64]
+        .iter()
+        .all(|t| (1_000_002..1_000_002 + 2 * frame_ticks).contains(t)));
+    let again = 1_000_002 + 2 * period;
+    assert!(after[64..]
+        .iter()
+        .all(|t| (again..again + 2 * frame_ticks).contains(t)));
 }

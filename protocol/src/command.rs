@@ -47,6 +47,9 @@ pub const HOST_SLOTS: usize = 4;
 /// Shortest status period a command may set: 1 ms (125,000 ticks), so status reports
 /// never take more than a small share of the link.
 pub const MIN_STATUS_PERIOD_TICKS: u32 = 125_000;
+/// Shortest sync period a command may set other than 0 (off): 1 ms (125,000 ticks), so the
+/// box's time syncs never take more than 5 % of a bus (a packet is 50 us).
+pub const MIN_SYNC_PERIOD_TICKS: u32 = 125_000;
 /// Longest flush timeout a command may set (the box compares 32-bit ticks: 2^31 - 1).
 pub const MAX_FLUSH_TIMEOUT_TICKS: u32 = (1 << 31) - 1;
 
@@ -200,17 +203,20 @@ pub enum Opcode {
     ReadTick = 5,
     /// Pass a cell-network command to one port or all.
     CellCommand = 6,
+    /// Set the period of the box's own time syncs to every cell (u32 ticks, 0: off).
+    SetSyncPeriod = 7,
 }
 
 impl Opcode {
     /// Every opcode, in wire-value order.
-    pub const ALL: [Opcode; 6] = [
+    pub const ALL: [Opcode; 7] = [
         Opcode::StreamTo,
         Opcode::SetFlushTimeout,
         Opcode::SetStatusPeriod,
         Opcode::StatusNow,
         Opcode::ReadTick,
         Opcode::CellCommand,
+        Opcode::SetSyncPeriod,
     ];
 
     /// The opcode of a wire value.
@@ -227,6 +233,7 @@ impl Opcode {
             Opcode::StatusNow => "status_now",
             Opcode::ReadTick => "read_tick",
             Opcode::CellCommand => "cell_command",
+            Opcode::SetSyncPeriod => "set_sync_period",
         }
     }
 }
@@ -305,8 +312,15 @@ pub enum Request {
     CellCommand {
         /// Port, or [`ALL_PORTS`].
         port: u8,
-        /// The cell command packet, passed on unchanged.
+        /// The cell command packet, passed on unchanged (a time sync's bytes 4-11 are
+        /// written by the box as it leaves).
         packet: [u8; PACKET_LEN],
+    },
+    /// Set the period of the box's time syncs: 4 bytes, u32 ticks, 0 (off) or at least
+    /// [`MIN_SYNC_PERIOD_TICKS`].
+    SetSyncPeriod {
+        /// New sync period in ticks.
+        ticks: u32,
     },
 }
 
@@ -320,6 +334,7 @@ impl Request {
             Request::StatusNow => Opcode::StatusNow,
             Request::ReadTick => Opcode::ReadTick,
             Request::CellCommand { .. } => Opcode::CellCommand,
+            Request::SetSyncPeriod { .. } => Opcode::SetSyncPeriod,
         }
     }
 
@@ -328,7 +343,9 @@ impl Request {
         match self {
             Request::StreamTo { to: None } | Request::StatusNow | Request::ReadTick => 0,
             Request::StreamTo { to: Some(_) } => DESTINATION_LEN,
-            Request::SetFlushTimeout { .. } | Request::SetStatusPeriod { .. } => TICKS_LEN,
+            Request::SetFlushTimeout { .. }
+            | Request::SetStatusPeriod { .. }
+            | Request::SetSyncPeriod { .. } => TICKS_LEN,
             Request::CellCommand { .. } => CELL_COMMAND_LEN,
         }
     }
@@ -402,6 +419,16 @@ impl Request {
                 packet.copy_from_slice(&args[cell_command_field::PACKET]);
                 Ok(Request::CellCommand { port, packet })
             }
+            Opcode::SetSyncPeriod => {
+                want(TICKS_LEN, "arguments are 4 bytes (u32 ticks)")?;
+                let ticks = get_u32(args, ticks_field::TICKS);
+                if ticks != 0 && ticks < MIN_SYNC_PERIOD_TICKS {
+                    return Err(bad(
+                        "sync period neither 0 nor at least 125,000 ticks (1 ms)",
+                    ));
+                }
+                Ok(Request::SetSyncPeriod { ticks })
+            }
         }
     }
 
@@ -409,7 +436,9 @@ impl Request {
     pub fn emit_arguments(&self, buffer: &mut [u8]) {
         match self {
             Request::StreamTo { to: Some(d) } => d.emit(buffer),
-            Request::SetFlushTimeout { ticks } | Request::SetStatusPeriod { ticks } => {
+            Request::SetFlushTimeout { ticks }
+            | Request::SetStatusPeriod { ticks }
+            | Request::SetSyncPeriod { ticks } => {
                 buffer[ticks_field::TICKS].copy_from_slice(&ticks.to_be_bytes())
             }
             Request::CellCommand { port, packet } => {

@@ -48,9 +48,10 @@ pub enum CtlCommand {
         #[arg(long, default_value = "ff:ff:ff:ff:ff:ff")]
         mac: String,
     },
-    /// Set a run-time parameter: `flush-timeout-us N` or `status-period-ms N`.
+    /// Set a run-time parameter: `flush-timeout-us N`, `status-period-ms N` or
+    /// `sync-period-ms N` (the box's time syncs to every cell; 0: none).
     Set {
-        /// `flush-timeout-us` or `status-period-ms`.
+        /// `flush-timeout-us`, `status-period-ms` or `sync-period-ms`.
         parameter: String,
         /// The value.
         value: f64,
@@ -118,9 +119,9 @@ pub enum CellsCommand {
         /// Channel names.
         channels: Vec<String>,
     },
-    /// Time sync: the box tick at which the packet leaves the box.
+    /// Time sync: the box writes into it the box tick at which the packet leaves the box.
     Sync {
-        /// Box tick (8 ns).
+        /// Box tick (8 ns); the box overwrites it (send 0).
         tick: u64,
     },
 }

@@ -16,7 +16,9 @@ use crate::timing::{
 use skinbox_protocol::box_counters::{BoxCounter, BoxCounters, BOX_COUNTERS_LEN};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::command::Destination;
-use skinbox_protocol::datagram::{DatagramBody, FLAG_FLUSH_TIMEOUT, HEADER_LEN, MAX_RECORDS};
+use skinbox_protocol::datagram::{
+    DatagramBody, FLAG_FLUSH_TIMEOUT, FLAG_TIME_SYNCS, HEADER_LEN, MAX_RECORDS,
+};
 use skinbox_protocol::link::PREAMBLE_LEN;
 use skinbox_protocol::status::PortCounter;
 use skinbox_protocol::{DatagramRepr, PortCounters, RecordRepr, StatusRepr};
@@ -39,6 +41,8 @@ pub(super) struct BackTiming {
     pub flush_timeout: u64,
     /// Status period in clocks.
     pub status_period: u64,
+    /// Time-sync period after reset, ticks (0: the box sends none).
+    pub sync_period: u64,
     /// Ports per status datagram.
     pub ports_per_status: usize,
     /// Boot id in the status reports.
@@ -235,6 +239,10 @@ pub(super) struct Back<'a> {
     first_port: usize,
     page_ports: usize,
     report_tick: u64,
+    /// The box's sync generator is on (its period is not 0).
+    syncs_on: bool,
+    /// ... when the report being built started (its flag `FLAG_TIME_SYNCS`).
+    report_syncs: bool,
     status_body: Option<StatusRepr>,
     /// Its box counter block, read with it.
     status_block: Option<BoxCounters>,
@@ -257,6 +265,7 @@ impl<'a> Back<'a> {
         destination: Destination,
         receive: Option<ReceiveSide>,
     ) -> Self {
+        let syncs_on = t.sync_period != 0;
         // the engine's steps on each packet, in cycle order
         let mut beats: Vec<FrontBeat> = fronts
             .iter()
@@ -308,6 +317,8 @@ impl<'a> Back<'a> {
             first_port: 0,
             page_ports: 0,
             report_tick: 0,
+            syncs_on,
+            report_syncs: false,
             status_body: None,
             status_block: None,
             status_body_until: 0,
@@ -590,6 +601,11 @@ impl<'a> Back<'a> {
         self.deadline_passed = next_deadline_passed;
     }
 
+    /// The box's sync generator is on from now on (`ticks` not 0).
+    pub(super) fn set_sync_period(&mut self, ticks: u64) {
+        self.syncs_on = ticks != 0;
+    }
+
     /// The receive side's clock: frames decided, the configuration changing in this clock.
     fn step_receive(&mut self, c: u64) {
         let effects = self.receive.as_mut().map_or(vec![], |r| r.step(c));
@@ -599,6 +615,7 @@ impl<'a> Back<'a> {
                 Effect::SetFlushTimeout(t) => self.t.flush_timeout = t.into(),
                 Effect::SetStatusPeriod(t) => self.set_status_period(t.into(), c),
                 Effect::StatusNow => self.due = true,
+                Effect::SetSyncPeriod(t) => self.syncs_on = t != 0,
             }
         }
     }
@@ -717,7 +734,11 @@ impl<'a> Back<'a> {
                 let d = DatagramRepr {
                     box_id: self.t.box_id,
                     port_count: self.t.ports as u8,
-                    flags: 0,
+                    flags: if self.report_syncs {
+                        FLAG_TIME_SYNCS
+                    } else {
+                        0
+                    },
                     sequence: self.sequence,
                     base_tick: self.report_tick,
                     body: DatagramBody::Status(status),
@@ -848,6 +869,7 @@ impl<'a> Back<'a> {
             }
             Report::Start => {
                 self.report_tick = tick;
+                self.report_syncs = self.syncs_on;
                 self.page_ports = self.t.ports_per_status.min(self.t.ports - self.first_port);
                 // words: boot id, datagrams, records, first port, 8 counters per port
                 let words =

@@ -62,6 +62,7 @@ fn timings(config: &BoxConfig) -> (FrontTiming, BackTiming) {
         counters_ready_from,
         flush_timeout: config.flush_timeout_ticks,
         status_period: config.status_period_ticks,
+        sync_period: config.sync_period_ticks,
         ports_per_status: PORTS_PER_STATUS,
         // the boot id counts the reset the run starts with
         boot_id: config.boot_seed.wrapping_add(1),
@@ -200,6 +201,12 @@ impl SlicedReference<'_> {
     /// Status reports every `ticks` from now on: the next one a period from now.
     pub fn set_status_period_ticks(&mut self, ticks: u64) {
         self.back.set_status_period(ticks, self.done);
+    }
+
+    /// The box's time syncs every `ticks` (0: none) from now on (status datagrams say
+    /// whether they are on).
+    pub fn set_sync_period_ticks(&mut self, ticks: u64) {
+        self.back.set_sync_period(ticks);
     }
 
     /// A status report as soon as the reporter is idle.
