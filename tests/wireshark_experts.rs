@@ -152,7 +152,8 @@ fn cases() -> (Vec<Vec<u8>>, Vec<Case>) {
         with(records(5, vec![data()]), 7, 0x04),
         "undefined flag bits",
     ));
-    bad.push((with(status(6, 0), 7, 0x06), "undefined flag bits"));
+    // (bit 1: the box counter block follows; bit 2, the box sends time syncs, is defined)
+    bad.push((with(status(6, 0), 7, 0x0A), "undefined flag bits"));
     bad.push((with(status(7, 0), counters_at, 2), "link_up 2"));
     bad.push((with(status(8, 0), counters_at + 1, 5), "link_speed 5"));
     bad.push((

@@ -7,8 +7,9 @@
 //! generated again with it, and port `p`'s transitions not yet driven are replaced by the
 //! new ones. The cell models are deterministic and causal, so the new stream must equal the
 //! old one up to the command's earliest effect; [`Cells::receive`] checks that (it is what
-//! makes regeneration sound). Without commands in flight nothing is regenerated: a scene
-//! without downlink traffic costs what it did open-loop.
+//! makes regeneration sound). Without host commands and with the box's sync generator
+//! off nothing is regenerated: a scene without downlink traffic costs what it did
+//! open-loop.
 //!
 //! The step is short enough that a command reaches the cells before they act on it
 //! ([`step_cycles`]): a packet is received at its last stop bit's middle, `19 x frame + 9.5`
@@ -122,7 +123,7 @@ impl Cells {
     /// The cells with the commands sent before the window only.
     pub fn new(spec: &ClosedLoopSpec) -> Result<Cells, CosimError> {
         let ports = spec.sim.config.ports;
-        let downlink = downlink_before(&spec.scene, ports, spec.from_ns);
+        let downlink = downlink_before(&spec.scene, &spec.sim.config, spec.from_ns);
         let mut cells = Cells {
             spec: spec.clone(),
             generated: generate(spec, &downlink)?,
@@ -385,8 +386,9 @@ fn run_rtl(
             .map_err(CosimError::HostFrames)?;
     }
     let cycles = cycles(sim);
-    // no command from the host: nothing comes down, the cells run as generated
-    let step = match sim.host_frames.is_empty() {
+    // no command from the host and no sync of the box's own: nothing comes down, the
+    // cells run as generated
+    let step = match sim.host_frames.is_empty() && sim.config.sync_period_ticks == 0 {
         true => PROGRESS_STEP,
         false => step_cycles(&sim.config, &spec.scene, sim.jitter.peak_ns)?,
     };

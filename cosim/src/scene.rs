@@ -6,7 +6,7 @@ use skinbox_cells::bus::DOWNLINK_PACKET_NS;
 use skinbox_cells::scene::{BusDownlink, BusStream, GenerateOptions, Generated, Scene};
 use skinbox_gateware::interface_box::BoxConfig;
 use skinbox_model::control::{udp_frame, BoxControl, ControlConfig};
-use skinbox_model::downlink::{PacketStart, PinChange};
+use skinbox_model::downlink::{generated_sync, PacketStart, PinChange};
 use skinbox_model::timing::RECEIVE_TICK_LAG;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::cell::PACKET_LEN;
@@ -148,10 +148,28 @@ pub fn scene_ns_of_tick(tick: u64, from_ns: u64) -> u64 {
 /// Per bus, `scene`'s cell commands before the window from scene time `from_ns` (when no
 /// box is simulated yet): each at its own time, one after the other on each bus, a time
 /// sync carrying scene time (the simulated box starts counting at the window: the cells take
-/// its time base from its first sync on).
-pub fn downlink_before(scene: &Scene, ports: usize, from_ns: u64) -> Vec<BusDownlink> {
-    let mut per_bus: Vec<BusDownlink> = vec![vec![]; ports];
-    for &(time_ns, port, bytes, sync) in scene.command_packets().iter().filter(|c| c.0 < from_ns) {
+/// its time base from its first sync on). A box of `config` with its sync generator on has
+/// sent its own syncs too, every sync period from scene time 0, so its cells are in time
+/// (their rate learnt) when the window starts.
+pub fn downlink_before(scene: &Scene, config: &BoxConfig, from_ns: u64) -> Vec<BusDownlink> {
+    let mut commands: Vec<(u64, Option<usize>, [u8; PACKET_LEN], bool)> = scene
+        .command_packets()
+        .iter()
+        .filter(|c| c.0 < from_ns)
+        .copied()
+        .collect();
+    let period_ns = config.sync_period_ticks * TICK_NS;
+    if period_ns > 0 {
+        let syncs = (0..from_ns.div_ceil(period_ns)).map(|k| {
+            let time_ns = k * period_ns;
+            (time_ns, None, generated_sync(time_ns / TICK_NS), true)
+        });
+        commands.extend(syncs);
+        // (stable: a sync at a command's time goes after it)
+        commands.sort_by_key(|c| c.0);
+    }
+    let mut per_bus: Vec<BusDownlink> = vec![vec![]; config.ports];
+    for &(time_ns, port, bytes, sync) in &commands {
         for (bus, list) in per_bus.iter_mut().enumerate() {
             if port.is_none_or(|p| p == bus) {
                 let free = list.last().map_or(0, |l| l.0 + DOWNLINK_PACKET_NS);
@@ -182,7 +200,7 @@ pub fn plan_downlink(
 ) -> DownlinkPlan {
     let commands = scene.command_packets();
     let ports = config.ports;
-    let mut per_bus = downlink_before(scene, ports, from_ns);
+    let mut per_bus = downlink_before(scene, config, from_ns);
     let window: Vec<_> = commands
         .iter()
         .filter(|c| (from_ns..from_ns + duration_ns).contains(&c.0))

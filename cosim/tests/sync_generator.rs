@@ -143,7 +143,8 @@ fn every_port_sends_a_stamped_sync_each_period_and_set_sync_period_stops_and_res
 
     // the pins, measured: every sync carries its first start bit's falling edge
     let (off, on) = (receive_tick(&host_frames[5]), receive_tick(&host_frames[7]));
-    let toggles = [MS, 2 * MS, on];
+    // the epoch toggles in the clock after reset's restart, then every period, and at the re-set
+    let toggles = [1, MS + 1, 2 * MS + 1, on];
     let packet_ticks = 20 * 10 * 125 / 4;
     for (port, bytes) in decode_pins(&run.uart_tx, config.ports).iter().enumerate() {
         let (mut hosts, mut syncs) = (vec![], vec![]);

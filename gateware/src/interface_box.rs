@@ -51,8 +51,9 @@ pub struct BoxConfig {
     pub flush_timeout_ticks: u64,
     /// Time between status reports.
     pub status_period_ticks: u64,
-    /// Time between the box's own time syncs to every cell (0: none; 12,500,000 = 0.1 s
-    /// keeps the cells in time).
+    /// Time between the box's own time syncs to every cell (0, the default: none;
+    /// 12,500,000 = 0.1 s keeps the cells in time: docs/time.md). The first goes out at once
+    /// after reset.
     pub sync_period_ticks: u64,
     /// Line idle time, in bit times, that truncates a packet.
     pub idle_gap_bits: u64,

@@ -117,7 +117,7 @@ mod tests {
             let mut body = Vec::new();
             let mut expected_write: Option<(u64, u8)> = None;
             while (body.len() as u64) < len {
-                let write = rng.next_u64() % 3 != 0;
+                let write = !rng.next_u64().is_multiple_of(3);
                 let byte = rng.next_u64() as u8;
                 bench.uut.write.next = write;
                 bench.uut.write_data.next = u64::from(byte).into();

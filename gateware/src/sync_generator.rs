@@ -3,12 +3,11 @@
 //! the port's read position (a RAM word), so a port whose bit differs has a time sync
 //! pending and sends one at its next packet boundary: no flip-flop per port.
 //!
-//! Timing: after reset (or a `restart`, the clock the new `period` is seen) the count
-//! starts at 0 in the next clock; the epoch toggles at the clocks `origin + n * period`
-//! (`n` >= 1, `origin` the clock after reset or the restart), and once more at the
-//! `origin` of a restart to a period other than 0 (a new period sends a sync at once).
-//! Period 0: off (no toggle). Cost: a 32-bit count and its compare, one flip-flop of
-//! epoch.
+//! Timing: the first clock after reset counts as a `restart` (the clock the new `period`
+//! is seen); the count starts at 0 in the clock after it, `origin`; the epoch toggles at
+//! `origin` unless the period is 0 (a box out of reset, or given a new period, sends a
+//! sync at once) and then at the clocks `origin + n * period` (`n` >= 1). Period 0: off
+//! (no toggle). Cost: a 32-bit count and its compare, two flip-flops.
 
 use crate::hdl::*;
 
@@ -29,13 +28,15 @@ pub struct SyncGenerator {
     pub on: Signal<Out, Bit>,
     elapsed: DFF<Bits<32>>,
     epoch_bit: DFF<Bit>,
+    // the first clock after reset
+    fresh: DFF<Bit>,
     running: Signal<Local, Bit>,
 }
 
 impl Logic for SyncGenerator {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, elapsed, epoch_bit);
+        dff_setup!(self, clock, elapsed, epoch_bit, fresh);
         self.running.next = self.period.val() != 0;
         self.elapsed.d.next = self.elapsed.q.val() + 1;
         if !self.running.val() {
@@ -44,13 +45,15 @@ impl Logic for SyncGenerator {
             self.elapsed.d.next = 0.into();
             self.epoch_bit.d.next = !self.epoch_bit.q.val();
         }
-        if self.restart.val() {
+        self.fresh.d.next = false;
+        if self.restart.val() | self.fresh.q.val() {
             self.elapsed.d.next = 0.into();
             self.epoch_bit.d.next = self.epoch_bit.q.val() ^ self.running.val();
         }
         if self.reset.val() {
             self.elapsed.d.next = 0.into();
             self.epoch_bit.d.next = false;
+            self.fresh.d.next = true;
         }
         self.epoch.next = self.epoch_bit.q.val();
         self.on.next = self.running.val();
@@ -84,9 +87,11 @@ mod tests {
         let (mut origin, mut at_origin, mut period) = (bench.cycles, false, 7u64);
         let mut toggles = 0;
         let mut last = false;
+        let mut just_reset = true;
         for step in 0..20_000u64 {
             let r = rng.next_u64();
-            let restart = r.is_multiple_of(400);
+            // (not in the clock after a reset, which restarts the generator itself)
+            let restart = r.is_multiple_of(400) && !just_reset;
             let reset = r % 5000 == 1;
             let new_period = match (r >> 16) % 4 {
                 0 => 0,
@@ -102,10 +107,14 @@ mod tests {
             bench.settle();
             assert_eq!(bench.uut.on.val(), bench.uut.period.val().to_u64() != 0);
             bench.cycle();
+            // the clock after a reset restarts the generator on the period it has
+            let fresh = just_reset;
+            just_reset = reset;
             if reset {
                 (origin, at_origin) = (now + 1, false);
                 period = bench.uut.period.val().to_u64();
-            } else if restart {
+            } else if restart || fresh {
+                let new_period = if restart { new_period } else { period };
                 let before = epoch_at(origin, at_origin, period, now);
                 (origin, at_origin, period) = (now + 1, before ^ (new_period != 0), new_period);
             }

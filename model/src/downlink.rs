@@ -185,9 +185,14 @@ impl DownlinkModel {
         }
     }
 
-    /// The same downlink whose sync period after reset is `ticks` (0: no syncs).
+    /// The same downlink whose sync period after reset is `ticks` (0: no syncs): the first
+    /// clock after reset restarts the generator, so every port sends a sync at once.
     pub fn with_sync_period(mut self, ticks: u64) -> DownlinkModel {
-        self.generator.period = ticks;
+        self.generator = SyncGenerator {
+            period: ticks,
+            origin: 1,
+            at_origin: ticks != 0,
+        };
         self
     }
 

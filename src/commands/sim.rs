@@ -42,6 +42,10 @@ pub struct Args {
     /// Status period of the box, ms (the run ends after a report that counts every packet).
     #[arg(long, default_value_t = 5.0)]
     status_period_ms: f64,
+    /// The box's own time-sync period, ms (0, the default: its sync generator off; 100
+    /// keeps the cells in time, docs/time.md; else at least 1).
+    #[arg(long, default_value_t = 0.0)]
+    sync_period_ms: f64,
     /// Write the frames to this pcap (default: SCENE.pcap in the current directory).
     #[arg(long)]
     pcap: Option<PathBuf>,
@@ -285,10 +289,16 @@ fn scene_and_box(args: &Args) -> anyhow::Result<(Scene, Fidelity, BoxConfig)> {
         (1..=64).contains(&buses),
         "the scene has {buses} buses; the box has 1 to 64 ports, one per bus"
     );
+    anyhow::ensure!(
+        args.sync_period_ms == 0.0 || (1.0..=34_359.0).contains(&args.sync_period_ms),
+        "--sync-period-ms {} must be 0 (off) or 1 to 34359 (32 bits of 8 ns ticks)",
+        args.sync_period_ms
+    );
     let config = BoxConfig {
         ports: buses,
         flush_timeout_ticks: (args.flush_timeout_us * 125.0).round() as u64,
         status_period_ticks: (args.status_period_ms * 125_000.0).round() as u64,
+        sync_period_ticks: (args.sync_period_ms * 125_000.0).round() as u64,
         ..BoxConfig::default()
     };
     Ok((scene, fidelity, config))
@@ -852,7 +862,7 @@ fn print_summary(o: &Output) {
         // the box sent time syncs: the cells sample on its grid, and the host times them so
         Some(c) => {
             println!(
-                "        sample time - true sample time: {} (the box's syncs) p50 {:.2} us, p99 {:.2} us, max {:.2} us, worst cell p99 {:.2} us",
+                "        sample time - true sample time: {} (the box's syncs) p50 {:.3} us, p99 {:.3} us, max {:.3} us, worst cell p99 {:.3} us",
                 c.method, c.p50, c.p99, c.max, c.worst_cell_p99
             );
             println!(

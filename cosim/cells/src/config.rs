@@ -384,8 +384,13 @@ pub struct TimeSyncConfig {
     /// The first one, s from the scene start.
     #[serde(default)]
     pub start_s: f64,
-    /// The cells discipline their rate as well as their phase (the rate servo); `false`,
-    /// the default: phase only.
-    #[serde(default)]
+    /// The cells discipline their rate as well as their phase (the rate servo, the
+    /// default); `false`: phase only.
+    #[serde(default = "rate_servo_default")]
     pub rate: bool,
+}
+
+/// The cells' firmware runs the rate servo (docs/time.md) unless a scene says not.
+fn rate_servo_default() -> bool {
+    true
 }

@@ -1031,7 +1031,8 @@ impl Scene {
             )),
             None if !ctx.sync_schedule.is_empty() => SyncedClock::scheduled(
                 &TimeSync {
-                    rate: c.time_sync.as_ref().is_some_and(|t| t.rate),
+                    // the cells' firmware runs the rate servo unless the scene says not
+                    rate: c.time_sync.as_ref().is_none_or(|t| t.rate),
                     ..TimeSync::every(0.0, &c.bus)
                 },
                 &c.bus,

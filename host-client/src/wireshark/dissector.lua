@@ -601,6 +601,9 @@ local function dissect_status(buf, tree, header, verdict, state)
         add(st, buf, base, "status", name)
     end
     local first_port = uint(buf, base, "status", "first_port")
+    if bit32.band(header.flags, C.flag_time_syncs) ~= 0 then
+        st:append_text(" (the box sends time syncs)")
+    end
     if verdict.reset then
         st:add_proto_expert_info(E.box_reset, string.format(
             "box reset: boot id 0x%08x, was 0x%08x", boot_id, verdict.reset))

@@ -380,6 +380,7 @@ fn tables() -> String {
         ("end_of_packet", END_OF_PACKET.to_string()),
         ("flag_flush_timeout", FLAG_FLUSH_TIMEOUT.to_string()),
         ("flag_box_counters", FLAG_BOX_COUNTERS.to_string()),
+        ("flag_time_syncs", datagram::FLAG_TIME_SYNCS.to_string()),
         ("box_counters_len", BOX_COUNTERS_LEN.to_string()),
         (
             "max_status_ports_with_box_counters",
@@ -399,7 +400,7 @@ fn tables() -> String {
         ("flags_defined_records", FLAG_FLUSH_TIMEOUT.to_string()),
         (
             "flags_defined_status",
-            (FLAG_FLUSH_TIMEOUT | FLAG_BOX_COUNTERS).to_string(),
+            (FLAG_FLUSH_TIMEOUT | FLAG_BOX_COUNTERS | datagram::FLAG_TIME_SYNCS).to_string(),
         ),
         ("record_flags_defined", FLAG_LOSS_BEFORE.to_string()),
         ("max_cell_id", cell::CELL_ID_BROADCAST.to_string()),
