@@ -9,10 +9,12 @@
 //! 32 + scan word + 12 + 32 bits and three flags), a 12-bit subtractor, three 8-bit
 //! compares.
 
-use crate::deframer_decision::STATE_BITS;
 use crate::deframer_scan::SCAN_BITS;
 use crate::hdl::*;
 use skinbox_protocol::cell::CellFraming;
+
+/// Bits of the per-port state word.
+pub const STATE_BITS: usize = 34;
 
 /// The decision's input registers.
 #[derive(LogicBlock)]

@@ -8,7 +8,7 @@
 //! write strobes. Latency 1: the outputs are the decision of the clock before. Cost: the
 //! registers (about 100 bits), the event's priority encoder and the masks.
 
-use crate::deframer_decision::STATE_BITS;
+use crate::decision_inputs::STATE_BITS;
 use crate::hdl::*;
 use crate::pending_events::PendingEvents;
 

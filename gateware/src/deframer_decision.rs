@@ -9,6 +9,7 @@
 //! registers.
 
 use crate::decision_inputs::DecisionInputs;
+pub use crate::decision_inputs::STATE_BITS;
 use crate::decision_outputs::DecisionOutputs;
 use crate::deframer_scan::SCAN_BITS;
 use crate::geometry::TICK_BEATS;
@@ -19,8 +20,6 @@ use skinbox_protocol::PortCounter;
 /// Clocks from a port's visit to the clock of the engine's decision about it.
 pub const DECISION_CLOCKS: u64 = 3;
 
-/// Bits of the per-port state word.
-pub const STATE_BITS: usize = 34;
 // fields of the state word
 const IN_PACKET: usize = 0;
 const INDEX: usize = 1; // 5 bits: bytes of the packet so far

@@ -97,6 +97,7 @@ pub mod sync_generator;
 pub mod timestamp;
 pub mod transmit_fields;
 pub mod transmit_geometry;
+pub mod transmit_layout;
 pub mod transmit_sequence;
 pub mod transmit_source;
 pub mod transport_receiver;

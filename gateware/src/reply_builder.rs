@@ -56,13 +56,12 @@ use crate::hdl::*;
 use crate::reply_checksums::{CHECKSUM_CLOCKS, UDP_SUM_BYTES};
 use crate::reply_field_bytes::{field_byte, ReplyFieldBytes};
 use crate::reply_sequencer::{ProgramStarts, ReplySequencer, ROM_ADDRESS_BITS, START_TO_WORD};
+pub use crate::reply_sizing::AckReplyKind;
 use crate::reply_sizing::ReplySizing;
 use crate::reply_stages::ReplyStages;
 use crate::stream::{DatagramSource, RAW_FRAME_KIND};
-use skinbox_protocol::box_counters::{self, BoxCounter, BOX_COUNTERS_LEN};
-use skinbox_protocol::command::{
-    self, ack_field, destination_field, ACK_FIXED_LEN, DESTINATION_LEN, KIND_ACK,
-};
+use skinbox_protocol::box_counters::{self, BoxCounter};
+use skinbox_protocol::command::{self, ack_field, destination_field, ACK_FIXED_LEN, KIND_ACK};
 use skinbox_protocol::datagram::{MAGIC, VERSION};
 use skinbox_protocol::link::*;
 use skinbox_protocol::wire::{arp, ethernet, icmp, ipv4, udp};
@@ -290,43 +289,6 @@ impl Program {
             end: true,
         });
         self.steps
-    }
-}
-
-/// The reply an acknowledgement carries after its fixed body.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum AckReplyKind {
-    /// Nothing.
-    None,
-    /// Stream-to ok: the destination now in effect.
-    Destination,
-    /// Status-now ok: the box counter block.
-    Counters,
-}
-
-impl AckReplyKind {
-    /// Bytes after the fixed body.
-    pub fn len(self) -> usize {
-        match self {
-            AckReplyKind::None => 0,
-            AckReplyKind::Destination => DESTINATION_LEN,
-            AckReplyKind::Counters => BOX_COUNTERS_LEN,
-        }
-    }
-
-    /// Whether no bytes follow the fixed body.
-    pub fn is_empty(self) -> bool {
-        self == AckReplyKind::None
-    }
-
-    /// UDP payload length of the acknowledgement.
-    pub fn payload_len(self) -> usize {
-        command::HEADER_LEN + ACK_FIXED_LEN + self.len()
-    }
-
-    /// Frame length of the acknowledgement, destination MAC to the last payload byte.
-    pub fn frame_len(self) -> usize {
-        ACK_AT + self.payload_len()
     }
 }
 

@@ -13,8 +13,46 @@
 
 use crate::body_reader::BODY_ADDRESS_BITS;
 use crate::hdl::*;
-use crate::reply_builder::AckReplyKind;
-use skinbox_protocol::link::{ETHERNET_HEADER_LEN, MIN_FRAME_LEN};
+use skinbox_protocol::box_counters::BOX_COUNTERS_LEN;
+use skinbox_protocol::command::{self, ACK_FIXED_LEN, DESTINATION_LEN};
+use skinbox_protocol::link::{ETHERNET_HEADER_LEN, MIN_FRAME_LEN, PAYLOAD_AT};
+
+/// The reply an acknowledgement carries after its fixed body.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AckReplyKind {
+    /// Nothing.
+    None,
+    /// Stream-to ok: the destination now in effect.
+    Destination,
+    /// Status-now ok: the box counter block.
+    Counters,
+}
+
+impl AckReplyKind {
+    /// Bytes after the fixed body.
+    pub fn len(self) -> usize {
+        match self {
+            AckReplyKind::None => 0,
+            AckReplyKind::Destination => DESTINATION_LEN,
+            AckReplyKind::Counters => BOX_COUNTERS_LEN,
+        }
+    }
+
+    /// Whether no bytes follow the fixed body.
+    pub fn is_empty(self) -> bool {
+        self == AckReplyKind::None
+    }
+
+    /// UDP payload length of the acknowledgement.
+    pub fn payload_len(self) -> usize {
+        command::HEADER_LEN + ACK_FIXED_LEN + self.len()
+    }
+
+    /// Frame length of the acknowledgement, destination MAC to the last payload byte.
+    pub fn frame_len(self) -> usize {
+        PAYLOAD_AT + self.payload_len()
+    }
+}
 
 /// Clocks from the start to the final body length.
 pub const SIZING_CLOCKS: u64 = 2;

@@ -12,8 +12,8 @@
 //! sequence number. Cost: 128 + 32 bits held, the 4-bit position, the byte register and
 //! the step flag.
 
-use crate::frame_transmitter::{FIELDS_AT, FIELDS_LEN};
 use crate::hdl::*;
+use crate::transmit_layout::{FIELDS_AT, FIELDS_LEN};
 
 /// The header fields, sent one byte per clock.
 #[derive(LogicBlock)]

@@ -8,9 +8,9 @@
 //! index 1 on, nothing reads it at index 0). Cost: the held 20 bits and the geometry's
 //! registers (3 x 11 + 2 x 16 + 32 bits), one adder each.
 
-use crate::frame_transmitter::{BODY_START, IPV4_AT_ON_WIRE, UDP_AT_ON_WIRE};
 use crate::hdl::*;
 use crate::stream::RAW_FRAME_KIND;
+use crate::transmit_layout::{BODY_START, IPV4_AT_ON_WIRE, UDP_AT_ON_WIRE};
 use skinbox_protocol::link::{FCS_LEN, PREAMBLE_LEN};
 
 /// The held descriptor and the frame geometry.

@@ -21,12 +21,12 @@
 //! destination.
 
 use crate::block_ram::BlockRam;
-use crate::frame_transmitter::{
+use crate::hdl::*;
+use crate::transmit_layout::{
     DESTINATION_IP_AT, DESTINATION_IP_LEN, DESTINATION_MAC_AT, DESTINATION_MAC_LEN,
     DESTINATION_PORT_AT, DESTINATION_PORT_LEN, FIELDS_AT, FIELDS_LEN, IP_CHECKSUM_AT,
     IP_TOTAL_LEN_AT, KIND_AT, UDP_CHECKSUM_AT, UDP_LEN_AT,
 };
-use crate::hdl::*;
 
 /// Address of the header table read between frames: it holds the first byte, which the
 /// first two bytes of a frame are (the preamble), read before the frame's own addresses.
@@ -328,8 +328,8 @@ impl Logic for TransmitSource {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame_transmitter::{template, BODY_START};
     use crate::testbench::{Bench, TestRng};
+    use crate::transmit_layout::{template, BODY_START};
     use skinbox_protocol::link::LinkConfig;
 
     /// Frames with random header values, destinations and body bytes, indexed as the
