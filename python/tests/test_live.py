@@ -127,7 +127,7 @@ def test_box_commands_are_acknowledged(box):
 
 def test_bad_commands_raise_before_sending(box):
     client = skinbox.Box(box.address)
-    with pytest.raises(ValueError, match="flush-timeout-us and status-period-ms"):
+    with pytest.raises(ValueError, match="flush-timeout-us, status-period-ms and sync-period-ms"):
         client.set("speed", 1)
     with pytest.raises(ValueError, match="62.5, 125, 250, 500 or 1000"):
         client.cells_rate(300)
