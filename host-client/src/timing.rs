@@ -468,20 +468,10 @@ impl Timing {
             SampleTimeMode::Estimated => false,
             SampleTimeMode::Auto => self.box_syncs.get(&key) == Some(&true),
         };
-        // bounds only where each cell's path latency is known (its hops to the root)
-        let positions_known = !matches!(
-            self.samples.paths().hops,
-            crate::sample_clock::Positions::Unknown
-        );
-        let (sample, method, sample_bound) = if synced {
+        let (sample, method, bound) = if synced {
             self.method_counts.synced += 1;
             let sample = self.samples.grid_point(cell_id, stamp_ns);
-            let bound = if positions_known {
-                self.synced_bound_ns
-            } else {
-                f64::NAN
-            };
-            (sample, SampleMethod::Synced, bound)
+            (sample, SampleMethod::Synced, self.synced_bound_ns)
         } else {
             self.method_counts.estimated += 1;
             let sample = self.samples.push_for(key, record.port, cell_id, stamp_ns);
@@ -493,8 +483,12 @@ impl Timing {
             let bound = (sample.sample_time_ns - earliest)
                 .abs()
                 .max((latest - sample.sample_time_ns).abs());
-            let bound = if positions_known { bound } else { f64::NAN };
             (sample, SampleMethod::Estimated, bound)
+        };
+        // bounds only where each cell's path latency is known (its hops to the root)
+        let sample_bound = match self.samples.paths().hops {
+            crate::sample_clock::Positions::Unknown => f64::NAN,
+            _ => bound,
         };
         let sample_box_ns = sample.sample_time_ns;
         let (host, source) = match self

@@ -435,25 +435,7 @@ pub fn run(setup: &Setup) -> anyhow::Result<RunResult> {
         cpu_ns_per_packet: cpu,
         ..errors(bus, &b, from_ns)
     });
-    let synced = sc.generate(&GenerateOptions {
-        time_sync: Some(setup.time_sync()),
-        clock_wander: setup.clock_wander(),
-        ..Default::default()
-    });
-    let bus_c = &stamped(&synced)[0];
-    let (c, cpu) = timed(|| {
-        assign_synced(
-            bus_c,
-            setup.rate_hz,
-            sc.config.bus.processing_ns,
-            setup.hop_latency_ns,
-            setup.downlink_hop_latency_ns,
-        )
-    });
-    methods.push(Errors {
-        cpu_ns_per_packet: cpu,
-        ..errors(bus_c, &c, from_ns)
-    });
+    methods.push(synced_errors(&sc, setup, setup.time_sync(), from_ns));
     if setup.compare_servo {
         // the servo against a crystal's wander and temperature steps (docs/time.md), where
         // the others run on steady clocks: its figure is not flattered by a drift it can
@@ -462,28 +444,11 @@ pub fn run(setup: &Setup) -> anyhow::Result<RunResult> {
         if sc.config.oscillator.is_none() {
             sc.config.oscillator = Some(Default::default());
         }
-        let servo = sc.generate(&GenerateOptions {
-            time_sync: Some(TimeSync {
-                rate: true,
-                ..setup.time_sync()
-            }),
-            clock_wander: setup.clock_wander(),
-            ..Default::default()
-        });
-        let bus_s = &stamped(&servo)[0];
-        let (c, cpu) = timed(|| {
-            assign_synced(
-                bus_s,
-                setup.rate_hz,
-                sc.config.bus.processing_ns,
-                setup.hop_latency_ns,
-                setup.downlink_hop_latency_ns,
-            )
-        });
-        methods.push(Errors {
-            cpu_ns_per_packet: cpu,
-            ..errors(bus_s, &c, from_ns)
-        });
+        let servo = TimeSync {
+            rate: true,
+            ..setup.time_sync()
+        };
+        methods.push(synced_errors(&sc, setup, servo, from_ns));
     }
     let stats = &free.buses[0].stats;
     let capacity = (skinbox_cells::bus::UART_BAUD / skinbox_cells::bus::BITS_PER_PACKET) as f64;
@@ -492,6 +457,30 @@ pub fn run(setup: &Setup) -> anyhow::Result<RunResult> {
         load_pct: 100.0 * stats.offered as f64 / setup.duration_s / capacity,
         dropped_pct: 100.0 * stats.dropped as f64 / stats.offered.max(1) as f64,
     })
+}
+
+/// Method (c): `sc` generated again with its cells obeying `sync`, each packet given the
+/// grid point of its stamp less half its cell's round trip, against the truth.
+fn synced_errors(sc: &skinbox_cells::Scene, setup: &Setup, sync: TimeSync, from_ns: u64) -> Errors {
+    let synced = sc.generate(&GenerateOptions {
+        time_sync: Some(sync),
+        clock_wander: setup.clock_wander(),
+        ..Default::default()
+    });
+    let bus = &stamped(&synced)[0];
+    let (assigned, cpu) = timed(|| {
+        assign_synced(
+            bus,
+            setup.rate_hz,
+            sc.config.bus.processing_ns,
+            setup.hop_latency_ns,
+            setup.downlink_hop_latency_ns,
+        )
+    });
+    Errors {
+        cpu_ns_per_packet: cpu,
+        ..errors(bus, &assigned, from_ns)
+    }
 }
 
 /// The extra traffic of (c) (docs/time.md): one sync command down each bus per interval,
