@@ -646,3 +646,52 @@ fn emulated_cells_obey_the_cell_commands_the_box_sends_them() {
         phases[5].len()
     );
 }
+
+/// `emulate --sync-period-ms 100`: the emulated box sends a time sync down each bus at
+/// reset and every 0.1 s, the cells hear every one, and they sample on the box's 8 ms grid
+/// from the first on (every record within 500 us after a grid point).
+#[test]
+fn the_emulated_boxs_own_syncs_keep_its_cells_on_its_grid() {
+    let emulator = Emulator::start(
+        &[
+            "idle",
+            "--cells",
+            "8",
+            "--buses",
+            "2",
+            "--sync-period-ms",
+            "100",
+        ],
+        1500,
+    );
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let to = socket.local_addr().unwrap().to_string();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let reader = {
+        let stop = stop.clone();
+        std::thread::spawn(move || hear_records(socket, stop))
+    };
+    assert_eq!(
+        json(&ctl(&emulator.addr, &["stream-to", "--to", &to]))["result"],
+        "ok"
+    );
+    std::thread::sleep(Duration::from_millis(1000));
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let heard = reader.join().unwrap();
+    let summary = emulator.summary();
+    // one sync per bus at reset and one each 0.1 s after (the last may still be under way)
+    let periods = summary["box_ticks"].as_u64().unwrap() / 12_500_000;
+    let syncs = summary["cell_commands_heard"].as_u64().unwrap();
+    assert!(
+        (2 * periods..=2 * (periods + 1)).contains(&syncs),
+        "{syncs} syncs in {periods} periods: {summary}"
+    );
+    // (the idle scene's 8 cells send about 46 event packets a second)
+    assert!(heard.len() > 20, "{}", heard.len());
+    let off_grid: Vec<i64> = heard
+        .iter()
+        .map(|h| h.tick.rem_euclid(1_000_000))
+        .filter(|&t| t >= 62_500)
+        .collect();
+    assert!(off_grid.is_empty(), "{off_grid:?}");
+}

@@ -452,7 +452,8 @@ fn run_reference(
     // as open-loop, the cells generated ahead are not timed
     let started = Instant::now();
     let cycles = cycles(sim);
-    let pins = match sim.host_frames.is_empty() {
+    // no command from the host and no sync of the box's own: nothing comes down
+    let pins = match sim.host_frames.is_empty() && sim.config.sync_period_ticks == 0 {
         true => vec![],
         false => {
             skinbox_model::reference::predict_with_host_frames(

@@ -145,11 +145,23 @@ pub fn scene_ns_of_tick(tick: u64, from_ns: u64) -> u64 {
     ((tick + TICK_ZERO_CYCLE) * TICK_NS + from_ns).saturating_sub(PORTS_READY_NS)
 }
 
+/// The box tick at scene time `scene_ns` in a simulation of the window from `from_ns`
+/// (the inverse of [`scene_ns_of_tick`], rounded down): negative before the simulated box
+/// counts, where a box that had been running since scene time 0 would have counted on the
+/// same base.
+pub fn box_tick_of_scene_ns(scene_ns: u64, from_ns: u64) -> i64 {
+    (scene_ns as i64 + PORTS_READY_NS as i64 - from_ns as i64).div_euclid(TICK_NS as i64)
+        - TICK_ZERO_CYCLE as i64
+}
+
 /// Per bus, `scene`'s cell commands before the window from scene time `from_ns` (when no
-/// box is simulated yet): each at its own time, one after the other on each bus, a time
-/// sync carrying scene time (the simulated box starts counting at the window: the cells take
-/// its time base from its first sync on). A box of `config` with its sync generator on has
-/// sent its own syncs too, every sync period from scene time 0, so its cells are in time
+/// box is simulated yet): each at its own time, one after the other on each bus. The box
+/// is taken to have run since scene time 0 on the simulated box's time base, so a time
+/// sync carries the tick at which it leaves on that base ([`box_tick_of_scene_ns`],
+/// negative before the window, wrapping as a cell's counter arithmetic does) and the
+/// window's syncs continue the cells' time base instead of restarting it. A box of
+/// `config` with its sync generator on has sent its own syncs too, every sync period back
+/// from the simulated box's first (the clock after its reset), so its cells are in time
 /// (their rate learnt) when the window starts.
 pub fn downlink_before(scene: &Scene, config: &BoxConfig, from_ns: u64) -> Vec<BusDownlink> {
     let mut commands: Vec<(u64, Option<usize>, [u8; PACKET_LEN], bool)> = scene
@@ -158,11 +170,13 @@ pub fn downlink_before(scene: &Scene, config: &BoxConfig, from_ns: u64) -> Vec<B
         .filter(|c| c.0 < from_ns)
         .copied()
         .collect();
+    // the simulated generator's origin, the clock after reset (box tick 1)
+    let origin_ns = scene_ns_of_tick(1, from_ns);
     let period_ns = config.sync_period_ticks * TICK_NS;
-    if period_ns > 0 {
-        let syncs = (0..from_ns.div_ceil(period_ns)).map(|k| {
-            let time_ns = k * period_ns;
-            (time_ns, None, generated_sync(time_ns / TICK_NS), true)
+    if let Some(periods) = origin_ns.checked_div(period_ns) {
+        let syncs = (1..=periods).map(|k| {
+            let time_ns = origin_ns - k * period_ns;
+            (time_ns, None, generated_sync(0), true)
         });
         commands.extend(syncs);
         // (stable: a sync at a command's time goes after it)
@@ -176,7 +190,7 @@ pub fn downlink_before(scene: &Scene, config: &BoxConfig, from_ns: u64) -> Vec<B
                 let leave_ns = time_ns.max(free);
                 let mut bytes = bytes;
                 if sync {
-                    set_sync_tick(&mut bytes, leave_ns / TICK_NS);
+                    set_sync_tick(&mut bytes, box_tick_of_scene_ns(leave_ns, from_ns) as u64);
                 }
                 list.push((leave_ns, bytes));
             }

@@ -261,6 +261,9 @@ fn synthetic_box(config: &SyntheticConfig, ports: u8) -> BoxConfig {
             ticks => ticks,
         },
         flush_timeout_ticks: config.flush_timeout_ticks,
+        // the synthetic cells sample on their own clocks, deaf to syncs: the box sends none
+        // (a box that did would say so, and the host would time the records on its grid)
+        sync_period_ticks: 0,
         ..BoxConfig::default()
     }
 }

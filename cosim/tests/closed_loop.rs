@@ -32,8 +32,11 @@ fn spec() -> ClosedLoopSpec {
              rate_hz = 250.0\n\n[[commands]]\ntime_s = 0.02\nport = 0\ntime_sync = true",
         );
     let scene = Scene::parse(&text, "small_switch.toml").unwrap();
+    // the scene's own sync on bus 0 is the one that moves its cells onto the grid: the
+    // box's syncs off (they have a test of their own, sync_generator.rs)
     let config = BoxConfig {
         ports: 2,
+        sync_period_ticks: 0,
         ..BoxConfig::default()
     };
     ClosedLoopSpec::new(&scene, config, 10_000_000, 70_000_000)

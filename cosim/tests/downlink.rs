@@ -151,8 +151,11 @@ fn scene_commands_sent_by_the_host_switch_the_cells_rate_and_mode_at_rtl() {
             "time_s = 0.06\nmode = \"event\"\n\n[[commands]]\ntime_s = 0.03\nport = 1\nrate_hz = 250.0",
         );
     let scene = Scene::parse(&text, "small_switch.toml").unwrap();
+    // the scene's own sync on bus 0 is the one that moves its cells onto the grid: the
+    // box's syncs off (they have a test of their own, sync_generator.rs)
     let config = BoxConfig {
         ports: 2,
+        sync_period_ticks: 0,
         ..BoxConfig::default()
     };
     let (from_ns, duration_ns) = (10_000_000, 70_000_000);

@@ -36,6 +36,9 @@ pub struct EmulatorSettings {
     pub flush_timeout_us: f64,
     /// Status period after reset, ms.
     pub status_period_ms: f64,
+    /// Sync period after reset, ms (0, the default: the box sends no time syncs of its
+    /// own; the cells are generated again at each sync they hear).
+    pub sync_period_ms: f64,
     /// The host subnet commands are taken from: address and prefix length.
     pub host_subnet: ([u8; 4], u8),
     /// Box id.
@@ -52,6 +55,7 @@ impl Default for EmulatorSettings {
             cells: None,
             flush_timeout_us: 100.0,
             status_period_ms: 100.0,
+            sync_period_ms: 0.0,
             host_subnet: ([127, 0, 0, 0], 8),
             box_id: 1,
         }
@@ -92,6 +96,7 @@ pub fn prepare(
         ports,
         flush_timeout_ticks: (settings.flush_timeout_us * 125.0).round() as u64,
         status_period_ticks: (settings.status_period_ms * 125_000.0).round() as u64,
+        sync_period_ticks: (settings.sync_period_ms * 125_000.0).round() as u64,
         box_id: settings.box_id,
         link: LinkConfig {
             box_ip: listen.ip().octets(),
@@ -299,6 +304,10 @@ pub fn serve(
         if deadline.is_some_and(|d| now >= d) || stop.load(std::sync::atomic::Ordering::Relaxed) {
             break;
         }
+        if !draining {
+            // the box's own syncs that start by now, heard before the uplink runs there
+            emulated.hear_downlink(tick_now(now));
+        }
         cells
             .step(&mut emulated, false)
             .map_err(std::io::Error::other)?;
@@ -323,6 +332,10 @@ pub fn serve(
                     .unwrap_or(read)
                     .max(last_command);
                 last_command = arrival;
+                emulated.hear_downlink(arrival);
+                cells
+                    .step(&mut emulated, false)
+                    .map_err(std::io::Error::other)?;
                 for o in emulated.advance(arrival.min(cells.hold())) {
                     send_errors += send(socket, &o);
                 }

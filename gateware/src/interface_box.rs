@@ -68,8 +68,8 @@ pub struct BoxConfig {
 }
 
 impl Default for BoxConfig {
-    /// 8 ports, 125 MHz, 4 Mbit/s, 100 us flush timeout, 100 ms status period, no time
-    /// syncs of the box's own (the co-simulated scenes and studies plan none yet).
+    /// 8 ports, 125 MHz, 4 Mbit/s, 100 us flush timeout, 100 ms status period, a time sync
+    /// to every port every 100 ms.
     fn default() -> Self {
         BoxConfig {
             ports: 8,
@@ -77,7 +77,7 @@ impl Default for BoxConfig {
             baud: crate::CELL_BAUD,
             flush_timeout_ticks: 12_500,
             status_period_ticks: 12_500_000,
-            sync_period_ticks: 0,
+            sync_period_ticks: 12_500_000,
             idle_gap_bits: 10,
             link: LinkConfig::DEFAULT,
             box_id: 1,
@@ -134,6 +134,14 @@ pub enum ConfigError {
     /// `status_period_ticks` outside 1 to 2^32 - 1.
     #[error("invalid box parameters: status period {ticks} ticks: must be 1 to 2^32 - 1 (34 s)")]
     StatusPeriod {
+        /// The period asked for.
+        ticks: u64,
+    },
+    /// `sync_period_ticks` above 2^32 - 1.
+    #[error(
+        "invalid box parameters: sync period {ticks} ticks: must be 0 (off) to 2^32 - 1 (34 s)"
+    )]
+    SyncPeriod {
         /// The period asked for.
         ticks: u64,
     },
@@ -219,6 +227,11 @@ impl BoxConfig {
         if !(1..1 << 32).contains(&self.status_period_ticks) {
             return Err(ConfigError::StatusPeriod {
                 ticks: self.status_period_ticks,
+            });
+        }
+        if self.sync_period_ticks >= 1 << 32 {
+            return Err(ConfigError::SyncPeriod {
+                ticks: self.sync_period_ticks,
             });
         }
         if !(2..=MAX_IDLE_GAP_BITS).contains(&self.idle_gap_bits) {

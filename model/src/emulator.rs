@@ -15,13 +15,15 @@
 //! A cell command the control model queues goes out on the downlink model's transmit pins,
 //! where the cells' UART receivers ([`crate::cell_uart`]) decode it
 //! ([`EmulatedBox::take_received`]). The downlink's pins depend on the host's commands
-//! alone, so a packet's bits are known once it is queued: the receivers take them at the
-//! command, ahead of the box's time, and whoever plays the cells has them before the cells
-//! can act on them; a port whose cells then send otherwise is given its new pin
-//! ([`EmulatedBox::replace_port`]).
+//! and the box's sync period alone, so a packet's bits are known once it is queued: the
+//! receivers take them at the command, ahead of the box's time, and the box's own syncs
+//! before the uplink runs past their start ([`EmulatedBox::hear_downlink`]); whoever plays
+//! the cells has them before the cells can act on them; a port whose cells then send
+//! otherwise is given its new pin ([`EmulatedBox::replace_port`]).
 
 use crate::cell_uart::{CellUartReceiver, ReceivedPacket};
 use crate::control::{BoxControl, ControlConfig, Effect, Outcome, Reply};
+use crate::downlink::DownlinkModel;
 use crate::pins::Transition;
 use crate::reference::{PreparedReference, SlicedReference};
 use crate::timing::TICK_ZERO_CYCLE;
@@ -76,6 +78,9 @@ pub struct EmulatedBox<'a> {
     claimed: Option<Destination>,
     /// Effects on the uplink not yet applied, with the ticks they apply at, in order.
     effects: std::collections::VecDeque<(u64, Effect)>,
+    /// The downlink run ahead of the commands, to the uplink's tick: the box's own syncs
+    /// (a copy of the control model's, taken again at each command).
+    ahead: DownlinkModel,
     receivers: CellUartReceiver,
     /// Per port, the tick up to which the receivers have the pin (exclusive).
     heard_until: Vec<u64>,
@@ -97,6 +102,7 @@ impl<'a> EmulatedBox<'a> {
         control.counters.link_speed = skinbox_protocol::box_counters::LinkSpeed::Unknown;
         EmulatedBox {
             reference: prepared.start(),
+            ahead: control.downlink.clone(),
             control,
             claimed: None,
             effects: Default::default(),
@@ -174,10 +180,16 @@ impl<'a> EmulatedBox<'a> {
         self.reference.replace_port(port, transitions)
     }
 
-    /// The receivers take the transmit pins of every packet queued so far (a copy of the
-    /// downlink runs them out: later commands only queue behind).
-    fn hear_downlink(&mut self) {
-        let mut ahead = self.control.downlink.clone();
+    /// The receivers take the transmit pins of every packet queued so far and of every
+    /// sync of the box's own that starts before box tick `until` (a copy of the downlink
+    /// runs them out: later commands only queue behind); call it before the uplink runs
+    /// to `until`, so whoever plays the cells has the syncs first. Each command does it. A command taken after that at a
+    /// tick before such a sync's period starts, to a port left idle until then, would
+    /// have gone ahead of it on the pin: the cells hear it after the sync instead.
+    pub fn hear_downlink(&mut self, until: u64) {
+        self.ahead.advance_to(until);
+        let mut ahead = self.ahead.clone();
+        self.ahead.take_changes();
         let end = ahead.drain();
         for c in ahead.changes() {
             if c.tick >= self.heard_until[c.port] {
@@ -205,7 +217,8 @@ impl<'a> EmulatedBox<'a> {
     ) -> Option<Outgoing> {
         self.stats.commands_received += 1;
         let outcome = deliver(&mut self.control, from, payload, tick);
-        self.hear_downlink();
+        self.ahead = self.control.downlink.clone();
+        self.hear_downlink(tick);
         if let Some(effect) = outcome.effect {
             self.effects.push_back((tick, effect));
         }

@@ -30,14 +30,16 @@ struct HostFigures {
     packet_rate_pct: f64,
 }
 
-/// Runs the seed scene `name` from `dir` through the reference model of the box and the
-/// host decoder (told the scene's cells and sample rate).
+/// Runs the seed scene `name` from `dir` through the reference model of the box (the
+/// loop closed: the cells hear its syncs, as in `skinbox sim`) and the host decoder (told
+/// the scene's cells and sample rate).
 fn through_box(
     dir: &std::path::Path,
     name: &str,
     window_s: Option<f64>,
 ) -> anyhow::Result<HostFigures> {
-    use skinbox_cosim::sim::{run_with_progress, Fidelity};
+    use skinbox_cosim::closed_loop::{run_closed_loop, ClosedLoopSpec};
+    use skinbox_cosim::sim::Fidelity;
     let scene = skinbox_cells::scene::Scene::load(&dir.join(format!("{name}.toml")))?;
     let s = &scene.config.scene;
     let window_s = window_s.unwrap_or(s.duration_s - s.warmup_s);
@@ -45,18 +47,17 @@ fn through_box(
         window_s > 0.0 && window_s <= 3600.0,
         "--box-window-s {window_s} must be above 0 and at most 3600"
     );
-    let generated = skinbox_cosim::scene::generate(&scene, s.warmup_s + window_s)?;
     let config = skinbox_gateware::interface_box::BoxConfig {
-        ports: generated.buses.len(),
+        ports: s.buses,
         ..Default::default()
     };
-    let spec = skinbox_cosim::scene::spec(
-        &generated,
+    let spec = ClosedLoopSpec::new(
+        &scene,
         config,
         (s.warmup_s * 1e9) as u64,
         (window_s * 1e9) as u64,
     );
-    let run = run_with_progress(&spec, Fidelity::Reference, &mut |_, _| {})?;
+    let run = run_closed_loop(&spec, Fidelity::Reference, &mut |_, _| {})?.run;
     let mut decoder = skinbox_host::Decoder::new(skinbox_host::DecoderConfig {
         sample_rate_hz: Some(s.sample_rate_hz),
         cells: Some(s.cells as u64),

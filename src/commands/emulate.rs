@@ -36,6 +36,11 @@ pub struct Args {
     /// Status period after reset, ms.
     #[arg(long, default_value_t = 100.0)]
     status_period_ms: f64,
+    /// Sync period after reset, ms: the box's own time syncs to every cell (0, the
+    /// default: none; else at least 1). The emulated cells are generated again over the
+    /// whole scene at each sync they hear: at 100 ms a large scene falls behind real time.
+    #[arg(long, default_value_t = 0.0)]
+    sync_period_ms: f64,
     /// The host subnet commands are taken from (IPv4 address/prefix length).
     #[arg(long, default_value = "127.0.0.0/8")]
     host_subnet: String,
@@ -94,6 +99,11 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         args.duration_ms > 0.0 && args.from_ms >= 0.0,
         "--duration-ms must be positive and --from-ms not negative"
     );
+    anyhow::ensure!(
+        args.sync_period_ms == 0.0 || (1.0..=34_359.0).contains(&args.sync_period_ms),
+        "--sync-period-ms {} must be 0 (off) or 1 to 34359 (32 bits of 8 ns ticks)",
+        args.sync_period_ms
+    );
     let host_subnet = parse_subnet(&args.host_subnet)?;
     let settings = EmulatorSettings {
         scene: args.scene.clone(),
@@ -103,6 +113,7 @@ pub fn run(args: &Args, json: bool) -> anyhow::Result<()> {
         cells: args.cells,
         flush_timeout_us: args.flush_timeout_us,
         status_period_ms: args.status_period_ms,
+        sync_period_ms: args.sync_period_ms,
         host_subnet,
         box_id: args.box_id,
     };

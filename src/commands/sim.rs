@@ -42,9 +42,9 @@ pub struct Args {
     /// Status period of the box, ms (the run ends after a report that counts every packet).
     #[arg(long, default_value_t = 5.0)]
     status_period_ms: f64,
-    /// The box's own time-sync period, ms (0, the default: its sync generator off; 100
-    /// keeps the cells in time, docs/time.md; else at least 1).
-    #[arg(long, default_value_t = 0.0)]
+    /// The box's own time-sync period, ms (0: its sync generator off; else at least 1; the
+    /// default keeps the cells in time, docs/time.md).
+    #[arg(long, default_value_t = 100.0)]
     sync_period_ms: f64,
     /// Write the frames to this pcap (default: SCENE.pcap in the current directory).
     #[arg(long)]

@@ -25,9 +25,10 @@ pub const SCENE: &str = "stroking_arm";
 /// packets per cell per second).
 pub const BUSES: usize = 8;
 
-/// Time after each switch that is not counted, s: the command's way down the longest chain
-/// (65 cells, 3.4 ms), the next sample, and the burst a mode change causes (every channel
-/// sent once).
+/// Time after each switch that is not counted, at least, s: the command's way down the
+/// longest chain (65 cells, 3.4 ms), the next sample, and the burst a mode change causes
+/// (every channel sent once). The rest of the segment is counted to a whole number of the
+/// slowest rate's periods.
 pub const SETTLE_S: f64 = 0.2;
 
 /// The papers' host cost (the original driver, one core of an i7-4770): CPU % =
@@ -157,7 +158,12 @@ pub fn run(quick: bool) -> anyhow::Result<Vec<Segment>> {
     // the datagrams as the host receives them, split by segment on their first record's
     // stamp; each segment's decoded and timed on its own
     let cells = sc.config.scene.cells as f64;
-    let settle_ns = (SETTLE_S * 1e9) as u64;
+    // counted from the settling time on, over a whole number of the slowest rate's periods:
+    // every cell sends as many samples in it whatever its phase (the cells on the box's
+    // grid all have one phase, so a part period would count a sample more or less for all)
+    let slowest_period_ns = (1e9 / RATES_HZ.iter().copied().fold(f64::MAX, f64::min)) as u64;
+    let counted_ns = (seg_ns - (SETTLE_S * 1e9) as u64) / slowest_period_ns * slowest_period_ns;
+    let settle_ns = seg_ns - counted_ns;
     let mut per_segment: Vec<Vec<Vec<u8>>> = vec![Vec::new(); segments().len()];
     let mut counted = vec![0u64; segments().len()];
     for d in &run.datagrams {
@@ -180,7 +186,7 @@ pub fn run(quick: bool) -> anyhow::Result<Vec<Segment>> {
         }
         per_segment[k].push(d.to_bytes());
     }
-    let counted_s = (seg_ns - settle_ns) as f64 * 1e-9;
+    let counted_s = counted_ns as f64 * 1e-9;
     let out = per_segment
         .iter()
         .zip(&counted)

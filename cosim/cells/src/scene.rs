@@ -802,7 +802,8 @@ impl Scene {
                 .filter_map(|((leave_ns, _), c)| match c.as_ref()?.command {
                     CellCommand::TimeSync { box_tick } => Some((
                         *leave_ns as f64 * 1e-9,
-                        (box_tick * skinbox_protocol::TICK_NS) as f64 * 1e-9,
+                        // (a tick before the box's first counts back from 2^64)
+                        (box_tick as i64 * skinbox_protocol::TICK_NS as i64) as f64 * 1e-9,
                     )),
                     _ => None,
                 })

@@ -350,7 +350,9 @@ impl SyncedClock {
 /// its rate correction is `c = (dl - db) * 2^32 / db` (Q32: counter ticks gained per box
 /// tick). It then schedules the sample for grid point `g` at counter
 /// `L + (g - B) + ((g - B) * c >> 32)`. A stretch over 2^32 ns or off by more than
-/// 1/1024 (a box reset, a new time base) leaves `c` as it was.
+/// 1/1024 (a box reset, a new time base) leaves `c` as it was. A sync less than
+/// [`RateServo::MIN_STRETCH_NS`] after the previous one (the box's and a host's back to
+/// back) sets the phase only: the rate is learnt from the earlier to the next.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RateServo {
     /// The previous sync: (counter at its arrival, ns; the box time it set, ns).
@@ -360,11 +362,18 @@ pub struct RateServo {
 }
 
 impl RateServo {
+    /// The shortest stretch a rate is learnt over, ns (2^24, 16.8 ms): over 50 us (two
+    /// syncs one after the other on a bus) a count's rounding alone is 20 ppm.
+    pub const MIN_STRETCH_NS: i64 = 1 << 24;
+
     /// Takes a sync that arrived at counter `local_ns` and set box time `box_ns`.
     pub fn on_sync(&mut self, local_ns: u64, box_ns: i64) {
         if let Some((l, b)) = self.last {
             let dl = local_ns.wrapping_sub(l) as i64;
             let db = box_ns - b;
+            if (0..Self::MIN_STRETCH_NS).contains(&db) {
+                return;
+            }
             if db > 0 && db < 1 << 32 && (dl - db).abs() * 1024 < db {
                 self.correction_q32 = (((dl - db) << 32) / db) as i32;
             }
@@ -607,6 +616,25 @@ mod servo_tests {
         // a stretch 0.2 % off is a reset: the rate stays
         servo.on_sync(1_000 + 200_010_000 + 200_000, 200_000_000);
         assert_eq!(servo.correction_q32, 429_496);
+    }
+
+    #[test]
+    fn a_sync_right_after_another_sets_no_rate() {
+        let mut servo = RateServo::default();
+        servo.on_sync(0, 0);
+        servo.on_sync(100_010_000, 100_000_000);
+        assert_eq!(servo.correction_q32, 429_496);
+        // 50 us later (the next packet on the bus), its count rounded 1 ns the wrong way:
+        // over that stretch, 20 ppm off
+        servo.on_sync(100_010_000 + 50_004, 100_050_000);
+        assert_eq!(servo.correction_q32, 429_496);
+        // the next is learnt from the sync before the close one: 50 ppm over 0.1 s
+        servo.on_sync(100_010_000 + 100_005_000, 200_000_000);
+        assert_eq!(servo.correction_q32, 214_748);
+        // and a stretch just long enough counts
+        let stretch = RateServo::MIN_STRETCH_NS;
+        servo.on_sync(200_015_000 + stretch as u64, 200_000_000 + stretch);
+        assert_eq!(servo.correction_q32, 0);
     }
 
     fn worst_us(rate: bool, noise: Option<OscillatorNoise>, rate_hz: f64, n: u64) -> f64 {

@@ -21,6 +21,7 @@ pub fn box_config() -> BoxConfig {
         link: c.link,
         flush_timeout_ticks: u64::from(c.flush_timeout_ticks),
         status_period_ticks: u64::from(c.status_period_ticks),
+        sync_period_ticks: u64::from(c.sync_period_ticks),
         ..BoxConfig::default()
     }
 }

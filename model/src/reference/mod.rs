@@ -266,7 +266,8 @@ pub fn predict_with_host_frames(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<(Vec<Frame>, Vec<PinChange>), ConfigError> {
     let prepared = prepare(config, lines, end)?;
-    let receive = (!host_frames.is_empty()).then(|| {
+    // the receive side and its downlink: for the host's frames, and for the box's own syncs
+    let receive = (!host_frames.is_empty() || config.sync_period_ticks > 0).then(|| {
         let mut control = BoxControl::new(ControlConfig::of(config));
         control.counters.link_up = LINK_UP;
         control.counters.link_speed = LINK_SPEED;
