@@ -466,7 +466,7 @@ fn wait_for_error_queue(socket: &UdpSocket, wait: Duration) -> bool {
 mod linux {
     //! `recvmsg` with the `SCM_TIMESTAMPING` and `IP_RECVERR` control messages.
     use super::KernelStamp;
-    use crate::live::linux::peer;
+    use crate::sockaddr::peer;
     use std::io;
     use std::net::SocketAddr;
     use std::os::fd::RawFd;

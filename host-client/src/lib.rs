@@ -43,6 +43,8 @@ pub mod report;
 pub mod rows;
 pub mod sample_clock;
 pub mod sequence;
+#[cfg(target_os = "linux")]
+mod sockaddr;
 pub mod timing;
 pub mod wireshark;
 

@@ -349,8 +349,8 @@ pub struct SceneConfig {
 }
 
 /// `[oscillator]`: each cell's oscillator wanders at random
-/// ([`crate::time_sync::OscillatorNoise`]); a key left out takes the realistic default
-/// ([`crate::time_sync::OscillatorNoise::realistic`]).
+/// ([`crate::oscillator::OscillatorNoise`]); a key left out takes the realistic default
+/// ([`crate::oscillator::OscillatorNoise::realistic`]).
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OscillatorConfig {
@@ -364,9 +364,9 @@ pub struct OscillatorConfig {
 
 impl OscillatorConfig {
     /// The wander this table asks for.
-    pub fn noise(&self) -> crate::time_sync::OscillatorNoise {
-        let d = crate::time_sync::OscillatorNoise::realistic();
-        crate::time_sync::OscillatorNoise {
+    pub fn noise(&self) -> crate::oscillator::OscillatorNoise {
+        let d = crate::oscillator::OscillatorNoise::realistic();
+        crate::oscillator::OscillatorNoise {
             random_walk_ppm: self.random_walk_ppm.unwrap_or(d.random_walk_ppm),
             step_ppm: self.step_ppm.unwrap_or(d.step_ppm),
             step_interval_s: self.step_interval_s.unwrap_or(d.step_interval_s),

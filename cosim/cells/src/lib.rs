@@ -36,6 +36,7 @@ pub mod bus;
 pub mod calibration;
 pub mod cell;
 pub mod config;
+pub mod oscillator;
 pub mod rng;
 pub mod scene;
 pub mod signal;
@@ -43,11 +44,12 @@ pub mod time_sync;
 
 pub use bus::{BusPacket, BusStats, RootFifo};
 pub use cell::{Cell, CellConfig, Mode, SendOnDelta, Thresholds};
+pub use oscillator::OscillatorNoise;
 pub use scene::{
     BusStream, CellClock, CellCommandCounts, CellTruth, ClockWander, GenerateOptions, Generated,
     Scene, SceneError, SceneStats,
 };
-pub use time_sync::{OscillatorNoise, RateServo, TimeSync};
+pub use time_sync::{RateServo, TimeSync};
 
 /// Directory of the scene files shipped with the project.
 pub fn scenes_dir() -> std::path::PathBuf {

@@ -23,9 +23,9 @@ pub use crate::config::{
     MotionConfig, NoiseConfig, SceneConfig, SceneTable, StrokeConfig, TemperatureConfig,
     ThresholdConfig, TimeSyncConfig,
 };
+pub use crate::oscillator::ClockWander;
 use crate::rng::Rng;
 use crate::signal::SignalModel;
-pub use crate::time_sync::ClockWander;
 use crate::time_sync::{SyncedClock, TimeSync};
 use skinbox_protocol::cell::PACKET_LEN;
 use skinbox_protocol::cell_command::{
