@@ -9,7 +9,9 @@
 //! `PacketStart::tick`). The other bytes are the box's own sync packet: the command
 //! framing's header, cell id [`ALL_CELLS`], command 5, reserved bytes 0, end byte.
 //! `sync_byte` and `replace` follow `index` and `wanted` by two clocks (the queue RAM's
-//! read latency, so the refill's byte and this one arrive together).
+//! read latency, so the refill's byte and this one arrive together): the first registers
+//! the packet's first frame from `index` (the refill's position RAM output, with nothing
+//! but a 4-bit subtraction behind it), the second reads its start tick from there.
 
 use crate::hdl::*;
 use crate::lut_ram::LutRam;
@@ -47,13 +49,18 @@ pub struct DownlinkSyncBytes {
     /// The pins took the frame's start bit: its tick is the tick now.
     started: DFF<Bit>,
     starts: LutRam<64, 4>,
-    byte_1: DFF<Bits<8>>,
+    // a clock after `index`: the frame its packet started in, which of the start tick's
+    // bytes it is, whether it is one, and the byte when it is not
+    first_frame_1: DFF<Bits<4>>,
+    tick_byte_1: DFF<Bits<3>>,
+    from_tick_1: DFF<Bit>,
+    fixed_1: DFF<Bits<8>>,
     byte_2: DFF<Bits<8>>,
     wanted_1: DFF<Bit>,
     wanted_2: DFF<Bit>,
-    next_byte: Signal<Local, Bits<8>>,
+    fixed: Signal<Local, Bits<8>>,
     stamp: Signal<Local, Bits<64>>,
-    tick_byte: Signal<Local, Bits<3>>,
+    stamp_byte: Signal<Local, Bits<8>>,
 }
 
 impl DownlinkSyncBytes {
@@ -78,13 +85,16 @@ impl DownlinkSyncBytes {
             frame: Default::default(),
             started: Default::default(),
             starts: Default::default(),
-            byte_1: Default::default(),
+            first_frame_1: Default::default(),
+            tick_byte_1: Default::default(),
+            from_tick_1: Default::default(),
+            fixed_1: Default::default(),
             byte_2: Default::default(),
             wanted_1: Default::default(),
             wanted_2: Default::default(),
-            next_byte: Default::default(),
+            fixed: Default::default(),
             stamp: Default::default(),
-            tick_byte: Default::default(),
+            stamp_byte: Default::default(),
         }
     }
 }
@@ -92,7 +102,19 @@ impl DownlinkSyncBytes {
 impl Logic for DownlinkSyncBytes {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, frame, started, byte_1, byte_2, wanted_1, wanted_2);
+        dff_setup!(
+            self,
+            clock,
+            frame,
+            started,
+            first_frame_1,
+            tick_byte_1,
+            from_tick_1,
+            fixed_1,
+            byte_2,
+            wanted_1,
+            wanted_2
+        );
         self.starts.clock.next = self.clock.val();
         if self.scan_start.val() {
             self.frame.d.next = self.frame.q.val() + 1;
@@ -101,55 +123,58 @@ impl Logic for DownlinkSyncBytes {
         self.starts.write_enable.next = self.started.q.val();
         self.starts.write_address.next = self.frame.q.val();
         self.starts.write_data.next = self.tick.val();
-        // the packet's first frame, and its start tick's byte (big-endian from byte 4)
-        self.starts.read_address.next = self.frame.q.val() - self.index.val().get_bits::<4>(0);
-        self.stamp.next = self.starts.read_data.val();
-        self.tick_byte.next = self.index.val().get_bits::<3>(0) - 4;
-        self.next_byte.next = 0.into();
-        if self.tick_byte.val() == 0 {
-            self.next_byte.next = self.stamp.val().get_bits::<8>(56);
-        }
-        if self.tick_byte.val() == 1 {
-            self.next_byte.next = self.stamp.val().get_bits::<8>(48);
-        }
-        if self.tick_byte.val() == 2 {
-            self.next_byte.next = self.stamp.val().get_bits::<8>(40);
-        }
-        if self.tick_byte.val() == 3 {
-            self.next_byte.next = self.stamp.val().get_bits::<8>(32);
-        }
-        if self.tick_byte.val() == 4 {
-            self.next_byte.next = self.stamp.val().get_bits::<8>(24);
-        }
-        if self.tick_byte.val() == 5 {
-            self.next_byte.next = self.stamp.val().get_bits::<8>(16);
-        }
-        if self.tick_byte.val() == 6 {
-            self.next_byte.next = self.stamp.val().get_bits::<8>(8);
-        }
-        if self.tick_byte.val() == 7 {
-            self.next_byte.next = self.stamp.val().get_bits::<8>(0);
-        }
-        if (self.index.val() < 4) | (self.index.val() > 11) {
-            self.next_byte.next = 0.into();
-        }
+        // first clock: the packet's first frame and which byte of its start tick (big-endian
+        // from byte 4) the index is, registered; the bytes that are no tick's
+        self.first_frame_1.d.next = self.frame.q.val() - self.index.val().get_bits::<4>(0);
+        self.tick_byte_1.d.next = self.index.val().get_bits::<3>(0) - 4;
+        self.from_tick_1.d.next = (self.index.val() >= 4) & (self.index.val() <= 11);
+        self.fixed.next = 0.into();
         if self.index.val() == 0 {
-            self.next_byte.next = self.header.val();
+            self.fixed.next = self.header.val();
         }
         if self.index.val() == 1 {
-            self.next_byte.next = self.cell_high.val();
+            self.fixed.next = self.cell_high.val();
         }
         if self.index.val() == 2 {
-            self.next_byte.next = self.cell_low.val();
+            self.fixed.next = self.cell_low.val();
         }
         if self.index.val() == 3 {
-            self.next_byte.next = self.sync_command.val();
+            self.fixed.next = self.sync_command.val();
         }
         if self.index.val() == 19 {
-            self.next_byte.next = self.end_byte.val();
+            self.fixed.next = self.end_byte.val();
         }
-        self.byte_1.d.next = self.next_byte.val();
-        self.byte_2.d.next = self.byte_1.q.val();
+        self.fixed_1.d.next = self.fixed.val();
+        // second clock: the start tick read from registers (frames 4 to 11 back are never
+        // the one written now)
+        self.starts.read_address.next = self.first_frame_1.q.val();
+        self.stamp.next = self.starts.read_data.val();
+        self.stamp_byte.next = self.stamp.val().get_bits::<8>(0);
+        if self.tick_byte_1.q.val() == 0 {
+            self.stamp_byte.next = self.stamp.val().get_bits::<8>(56);
+        }
+        if self.tick_byte_1.q.val() == 1 {
+            self.stamp_byte.next = self.stamp.val().get_bits::<8>(48);
+        }
+        if self.tick_byte_1.q.val() == 2 {
+            self.stamp_byte.next = self.stamp.val().get_bits::<8>(40);
+        }
+        if self.tick_byte_1.q.val() == 3 {
+            self.stamp_byte.next = self.stamp.val().get_bits::<8>(32);
+        }
+        if self.tick_byte_1.q.val() == 4 {
+            self.stamp_byte.next = self.stamp.val().get_bits::<8>(24);
+        }
+        if self.tick_byte_1.q.val() == 5 {
+            self.stamp_byte.next = self.stamp.val().get_bits::<8>(16);
+        }
+        if self.tick_byte_1.q.val() == 6 {
+            self.stamp_byte.next = self.stamp.val().get_bits::<8>(8);
+        }
+        self.byte_2.d.next = self.fixed_1.q.val();
+        if self.from_tick_1.q.val() {
+            self.byte_2.d.next = self.stamp_byte.val();
+        }
         self.wanted_1.d.next = self.wanted.val();
         self.wanted_2.d.next = self.wanted_1.q.val();
         self.sync_byte.next = self.byte_2.q.val();
@@ -197,11 +222,9 @@ mod tests {
             bench.cycle();
             bench.uut.scan_start.next = false;
             tick += 1;
-            for k in 0..20u64 {
-                // (bytes 0 to 3 do not depend on the start tick)
-                let Some(first) = (frame + 1).checked_sub(k.max(1)) else {
-                    continue;
-                };
+            // a new index every clock, as the refill visits its ports
+            let want = |k: u64| {
+                let first = (frame + 1).checked_sub(k.max(1))?;
                 let mut want = [0; 20];
                 CellCommandRepr {
                     cell_id: ALL_CELLS,
@@ -210,16 +233,28 @@ mod tests {
                     },
                 }
                 .emit_with(&mut want, &framing);
+                Some(want[k as usize])
+            };
+            let order: Vec<u64> = (0..20).map(|i| (i * 7 + frame) % 20).collect();
+            for (i, &k) in order.iter().enumerate() {
                 bench.uut.index.next = k.into();
                 bench.uut.wanted.next = k % 2 == 1;
-                bench.cycles(2);
-                tick += 2;
-                assert_eq!(bench.uut.replace.val(), k % 2 == 1);
-                assert_eq!(
-                    bench.uut.sync_byte.val().to_u64(),
-                    u64::from(want[k as usize]),
-                    "frame {frame} byte {k}"
-                );
+                bench.cycle();
+                tick += 1;
+                if i == 0 {
+                    continue;
+                }
+                // the index of the clock before, two clocks after it was given
+                let before = order[i - 1];
+                assert_eq!(bench.uut.replace.val(), before % 2 == 1);
+                // (bytes 0 to 3 do not depend on the start tick)
+                if let Some(want) = want(before) {
+                    assert_eq!(
+                        bench.uut.sync_byte.val().to_u64(),
+                        u64::from(want),
+                        "frame {frame} byte {before}"
+                    );
+                }
             }
             let gap = 20 + rng.next_u64() % 300;
             bench.cycles(gap);
