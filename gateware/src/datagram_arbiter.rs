@@ -12,7 +12,9 @@
 //! the sink's descriptor registers and the sources' `ready` hang off one register, not off
 //! the choice. The choice is made again every clock until the offer is taken (sources keep
 //! `valid` until taken, so the offer never drops; it moves to a source of higher precedence
-//! that starts waiting meanwhile).
+//! that starts waiting meanwhile). From the take until its body's last beat moved, the
+//! granted source's descriptor stays on `datagrams` (`valid` low): a source holds its
+//! descriptor until then, so the sink reads its fields there instead of holding copies.
 
 use crate::hdl::*;
 use crate::stream::{DatagramSink, DatagramSource};
@@ -45,6 +47,9 @@ pub struct DatagramArbiter {
     // a source is offered (`offered != 0`, kept in a register: no OR of its bits before
     // `taken` and the offer's reset)
     offered_any: DFF<Bit>,
+    // the source whose descriptor is on `datagrams`, one-hot: the offered one, then the
+    // granted one while its body is open
+    descriptor_from: DFF<Bits<MAX_SOURCES>>,
     // source i's bit
     source_bit: Vec<Constant<Bits<MAX_SOURCES>>>,
     waiting: Signal<Local, Bits<MAX_SOURCES>>,
@@ -78,6 +83,7 @@ impl DatagramArbiter {
             body_open: Default::default(),
             offered: Default::default(),
             offered_any: Default::default(),
+            descriptor_from: Default::default(),
             source_bit: (0..sources)
                 .map(|i| Constant::new((1u64 << i).into()))
                 .collect(),
@@ -104,7 +110,8 @@ impl Logic for DatagramArbiter {
             after_last_grant,
             body_open,
             offered,
-            offered_any
+            offered_any,
+            descriptor_from
         );
         self.waiting.next = 0.into();
         for i in 0..self.sources.len() {
@@ -150,7 +157,7 @@ impl Logic for DatagramArbiter {
         for i in 0..self.sources.len() {
             self.sources[i].ready.next =
                 self.datagrams.ready.val() & self.offered.q.val().get_bit(i);
-            if self.offered.q.val().get_bit(i) {
+            if self.descriptor_from.q.val().get_bit(i) {
                 self.datagrams.kind.next = self.sources[i].kind.val();
                 self.datagrams.flags.next = self.sources[i].flags.val();
                 self.datagrams.entry_count.next = self.sources[i].entry_count.val();
@@ -172,7 +179,13 @@ impl Logic for DatagramArbiter {
         self.taken.next = self.datagrams.ready.val() & self.offered_any.q.val();
         self.offered.d.next = self.grant.val();
         self.offered_any.d.next = self.waiting.val() != 0;
+        // (no source waits while a body is open: the grant is 0 then)
+        self.descriptor_from.d.next = self.grant.val();
+        if self.body_open.q.val() {
+            self.descriptor_from.d.next = self.descriptor_from.q.val();
+        }
         if self.taken.val() {
+            self.descriptor_from.d.next = self.offered.q.val();
             self.offered.d.next = 0.into();
             self.offered_any.d.next = false;
             self.last_grant.d.next = self.offered.q.val();
@@ -192,6 +205,7 @@ impl Logic for DatagramArbiter {
         }
         if self.body_open.q.val() & self.last_beat_taken.val() & self.datagrams.body.ready.val() {
             self.body_open.d.next = false;
+            self.descriptor_from.d.next = 0.into();
         }
         if self.reset.val() {
             self.last_grant.d.next = 0.into();
@@ -199,6 +213,7 @@ impl Logic for DatagramArbiter {
             self.body_open.d.next = false;
             self.offered.d.next = 0.into();
             self.offered_any.d.next = false;
+            self.descriptor_from.d.next = 0.into();
         }
     }
 }
@@ -293,6 +308,16 @@ mod tests {
             u.datagrams.body.ready.next = take_body;
             bench.settle();
             let u = &bench.uut;
+            if let Some(o) = &open {
+                // the granted source's descriptor stays until its body's last beat
+                assert_eq!(u.datagrams.kind.val().to_u8(), o.kind);
+                assert_eq!(u.datagrams.flags.val().to_u8(), o.flags);
+                assert_eq!(
+                    u.datagrams.entry_count.val().index(),
+                    o.entry_count as usize
+                );
+                assert_eq!(u.datagrams.base_tick.val().to_u64(), o.base_tick);
+            }
             let ready: Vec<bool> = (0..n).map(|s| u.sources[s].ready.val()).collect();
             let body_ready: Vec<bool> = (0..n).map(|s| u.sources[s].body.ready.val()).collect();
             assert!(

@@ -1,15 +1,16 @@
 //! EthernetDemux: the Ethernet II layer of the receive path: whom a frame is for and what
 //! it carries (docs/control.md, steps 3 to 5).
 //!
-//! It listens to the frame parser's beats and takes the destination MAC and the EtherType
-//! with a [`FieldCapture`] each (positions from `protocol::wire::ethernet`). At the first
-//! byte after the EtherType it registers `is_arp` (the ARP layer's fields follow; cleared
-//! at a frame's first beat). Every clock it registers its checks of the captures: the
-//! destination is the box's MAC (`to_box`) or broadcast (`broadcast`), the EtherType is
-//! IPv4 (`ipv4`); they stand from the second clock after the EtherType's last byte was
+//! It listens to the frame parser's beats and compares the destination MAC with the box's
+//! and with broadcast, and the EtherType with ARP's and IPv4's, as they pass
+//! ([`FieldMatch`], no capture; positions from `protocol::wire::ethernet`). At the first
+//! byte after
+//! the EtherType it registers `is_arp` (the ARP layer's fields follow; cleared at a frame's
+//! first beat). Every clock it registers its checks: the destination is the box's MAC
+//! (`to_box`) or broadcast (`broadcast`), the EtherType is IPv4 (`ipv4`); they stand from the second clock after the EtherType's last byte was
 //! registered until the next frame reaches the field.
 
-use crate::field_capture::FieldCapture;
+use crate::field_match::FieldMatch;
 use crate::hdl::*;
 use crate::stream::FrameBeats;
 use skinbox_protocol::wire::ethernet::{self, ETHERTYPE_ARP, ETHERTYPE_IPV4};
@@ -31,12 +32,12 @@ pub struct EthernetDemux {
     pub broadcast: Signal<Out, Bit>,
     /// The EtherType is IPv4.
     pub ipv4: Signal<Out, Bit>,
-    destination: FieldCapture<48>,
-    ethertype: FieldCapture<16>,
-    box_mac: Constant<Bits<48>>,
-    broadcast_mac: Constant<Bits<48>>,
-    ethertype_arp: Constant<Bits<16>>,
-    ethertype_ipv4: Constant<Bits<16>>,
+    // the destination MAC is the box's, is broadcast
+    destination_is_box: FieldMatch,
+    destination_is_broadcast: FieldMatch,
+    // the EtherType is ARP's, is IPv4's
+    ethertype_is_arp: FieldMatch,
+    ethertype_is_ipv4: FieldMatch,
     payload_at: Constant<Bits<11>>,
     at_payload: DFF<Bit>,
     arp: DFF<Bit>,
@@ -56,12 +57,16 @@ impl EthernetDemux {
             to_box: Default::default(),
             broadcast: Default::default(),
             ipv4: Default::default(),
-            destination: FieldCapture::of(ethernet::field::DESTINATION),
-            ethertype: FieldCapture::of(ethernet::field::ETHERTYPE),
-            box_mac: constant(big_endian(&box_mac)),
-            broadcast_mac: constant(big_endian(&[0xFF; 6])),
-            ethertype_arp: constant(u64::from(ETHERTYPE_ARP)),
-            ethertype_ipv4: constant(u64::from(ETHERTYPE_IPV4)),
+            destination_is_box: FieldMatch::of(ethernet::field::DESTINATION, &box_mac),
+            destination_is_broadcast: FieldMatch::of(ethernet::field::DESTINATION, &[0xFF; 6]),
+            ethertype_is_arp: FieldMatch::of(
+                ethernet::field::ETHERTYPE,
+                &ETHERTYPE_ARP.to_be_bytes(),
+            ),
+            ethertype_is_ipv4: FieldMatch::of(
+                ethernet::field::ETHERTYPE,
+                &ETHERTYPE_IPV4.to_be_bytes(),
+            ),
             payload_at: constant(ethernet::HEADER_LEN as u64),
             at_payload: Default::default(),
             arp: Default::default(),
@@ -84,22 +89,26 @@ impl Logic for EthernetDemux {
             broadcast_check,
             ipv4_check
         );
-        self.destination.clock.next = self.clock.val();
-        FrameBeats::link(&mut self.beats, &mut self.destination.beats);
-        self.ethertype.clock.next = self.clock.val();
-        FrameBeats::link(&mut self.beats, &mut self.ethertype.beats);
+        self.destination_is_box.clock.next = self.clock.val();
+        FrameBeats::link(&mut self.beats, &mut self.destination_is_box.beats);
+        self.destination_is_broadcast.clock.next = self.clock.val();
+        FrameBeats::link(&mut self.beats, &mut self.destination_is_broadcast.beats);
+        self.ethertype_is_arp.clock.next = self.clock.val();
+        FrameBeats::link(&mut self.beats, &mut self.ethertype_is_arp.beats);
+        self.ethertype_is_ipv4.clock.next = self.clock.val();
+        FrameBeats::link(&mut self.beats, &mut self.ethertype_is_ipv4.beats);
         if self.beats.next_valid.val() {
             self.at_payload.d.next = self.beats.next_index.val() == self.payload_at.val();
         }
         if self.beats.beat_valid.val() & self.at_payload.q.val() {
-            self.arp.d.next = self.ethertype.value.val() == self.ethertype_arp.val();
+            self.arp.d.next = self.ethertype_is_arp.equals.val();
         }
         if self.beats.beat_valid.val() & self.beat_first.val() {
             self.arp.d.next = false;
         }
-        self.to_box_check.d.next = self.destination.value.val() == self.box_mac.val();
-        self.broadcast_check.d.next = self.destination.value.val() == self.broadcast_mac.val();
-        self.ipv4_check.d.next = self.ethertype.value.val() == self.ethertype_ipv4.val();
+        self.to_box_check.d.next = self.destination_is_box.equals.val();
+        self.broadcast_check.d.next = self.destination_is_broadcast.equals.val();
+        self.ipv4_check.d.next = self.ethertype_is_ipv4.equals.val();
         self.is_arp.next = self.arp.q.val();
         self.to_box.next = self.to_box_check.q.val();
         self.broadcast.next = self.broadcast_check.q.val();

@@ -7,9 +7,9 @@
 //! choose the expected byte from a table of eight (one LUT4 a bit). The incoming beat sets
 //! or clears the "in the field" flag and registers those three bits; the registered beat,
 //! while the flag is set, is compared with its expected byte and clears `equals` when it
-//! differs. `equals` is set again at a frame's first byte (position 0, which a field
-//! never starts at), so after the field's last byte was registered it says whether the
-//! frame's field equals the constant; a frame that ends inside the field leaves the result
+//! differs. `equals` is set again at a frame's first byte (for a field from position 0:
+//! set to that byte's comparison), so after the field's last byte was registered it says
+//! whether the frame's field equals the constant; a frame that ends inside the field leaves the result
 //! of the bytes it had. Cost: 6 flip-flops, against 8 a byte for a capture.
 
 use crate::hdl::*;
@@ -40,7 +40,7 @@ impl FieldMatch {
     /// The match of frame bytes `field` with `bytes` (as many as the field has, at most 8).
     pub fn of(field: Field, bytes: &[u8]) -> Self {
         assert!(
-            field.len() == bytes.len() && (1..=8).contains(&bytes.len()) && field.start > 0,
+            field.len() == bytes.len() && (1..=8).contains(&bytes.len()),
             "field {field:?} cannot be matched with {bytes:?}"
         );
         assert!(field.end < 1 << 11, "field {field:?} lies past 2047");
@@ -76,6 +76,10 @@ impl Logic for FieldMatch {
             self.position.d.next =
                 bit_cast::<6, 3>(self.beats.next_index.val().get_bits::<3>(0)) << 3;
         }
+        // (a frame's first byte sets it, unless the field starts there and the byte differs)
+        if self.beats.beat_valid.val() & self.at_first.q.val() {
+            self.equal.d.next = true;
+        }
         if self.beats.beat_valid.val()
             & self.in_field.q.val()
             & (self.beats.beat_data.val()
@@ -85,9 +89,6 @@ impl Logic for FieldMatch {
                     .get_bits::<8>(self.position.q.val().index()))
         {
             self.equal.d.next = false;
-        }
-        if self.beats.beat_valid.val() & self.at_first.q.val() {
-            self.equal.d.next = true;
         }
         self.equals.next = self.equal.q.val();
     }
@@ -106,6 +107,7 @@ mod tests {
         for (field, bytes) in [
             (14..22, &[0u8, 1, 8, 0, 6, 4, 0, 1][..]),
             (43..46, &[0xAB, 0, 0x5C]),
+            (0..6, &[0x02, 0x11, 0x22, 0x33, 0x44, 0x55]),
         ] {
             let mut rng = TestRng::new(23);
             let mut bench = Bench::new(FieldMatch::of(field.clone(), bytes), |m| &mut m.clock);
@@ -118,7 +120,9 @@ mod tests {
                         frame[field.start + rng.next_u64() as usize % bytes.len()] ^=
                             1 << (rng.next_u64() % 8)
                     }
-                    1 => frame.truncate(field.start + rng.next_u64() as usize % (bytes.len() + 1)),
+                    1 => frame.truncate(
+                        (field.start + rng.next_u64() as usize % (bytes.len() + 1)).max(1),
+                    ),
                     _ => {}
                 }
                 send_frame_beats(

@@ -6,7 +6,11 @@
 //! its checksum, UDP header with its checksum, the 24-byte datagram header with the next
 //! sequence number, the body from the datagram's body stream, the FCS, and then at least
 //! 12 idle clocks. (The headers alone exceed the 60-byte minimum frame: no padding is
-//! needed.)
+//! needed.) The descriptor's source holds it from the take until its body's last beat (the
+//! [`DatagramArbiter`](crate::datagram_arbiter::DatagramArbiter) keeps the granted
+//! source's descriptor on `datagrams` until then): the kind and the header fields are read
+//! there as the header goes out, not copied; the body length, the body sum and the
+//! destination are taken at the take.
 //!
 //! A descriptor of kind [`RAW_FRAME_KIND`](crate::stream::RAW_FRAME_KIND) is a raw frame: its body is the frame itself
 //! from the destination MAC on, sent right after the SFD (its source pads it to the 60-byte
@@ -92,7 +96,7 @@ pub struct FrameTransmitter {
     pub destination_port: Signal<In, Bits<16>>,
     // the phases (idle, sending, gap) and the byte index
     frame_steps: TransmitSequence,
-    // the held descriptor (kind, body length, raw) and the frame's lengths and positions
+    // the held descriptor (body length, raw) and the frame's lengths and positions
     geometry: TransmitGeometry,
     // the header fields (flags, sequence, base tick, entry count) and the sequence number
     header_fields: TransmitFields,
@@ -121,6 +125,9 @@ pub struct FrameTransmitter {
     term_is_kind: DFF<Bit>,
     term_is_udp_len: DFF<Bit>,
     term_is_destination: DFF<Bit>,
+    // the header sums are final (from index 5: index 4 or more a clock before): keep them
+    // while the destination shifts
+    sums_kept: DFF<Bit>,
     // this clock's index, and a frame goes out
     index: Signal<Local, Bits<11>>,
     sending: Signal<Local, Bit>,
@@ -166,6 +173,7 @@ impl FrameTransmitter {
             term_is_kind: Default::default(),
             term_is_udp_len: Default::default(),
             term_is_destination: Default::default(),
+            sums_kept: Default::default(),
             index: Default::default(),
             sending: Default::default(),
         }
@@ -190,7 +198,8 @@ impl Logic for FrameTransmitter {
             checksum_adds,
             term_is_kind,
             term_is_udp_len,
-            term_is_destination
+            term_is_destination,
+            sums_kept
         );
         // The phases: a descriptor is taken while `ready` (idle, the gap over); the index
         // counts the frame's bytes up to its last one, then the gap follows.
@@ -211,7 +220,6 @@ impl Logic for FrameTransmitter {
         self.geometry.body_len.next = self.datagrams.body_len.val();
         self.header_fields.clock.next = self.clock.val();
         self.header_fields.reset.next = self.reset.val();
-        self.header_fields.load.next = !self.sending.val();
         self.header_fields.flags.next = self.datagrams.flags.val();
         self.header_fields.base_tick.next = self.datagrams.base_tick.val();
         self.header_fields.entry_count.next = self.datagrams.entry_count.val();
@@ -225,10 +233,10 @@ impl Logic for FrameTransmitter {
         // on), the UDP checksum's variable words one per clock from byte 0: the kind, the
         // UDP length term, the 16 field bytes, then the destination's sum.
         self.header_sums.clock.next = self.clock.val();
-        self.header_sums.load.next = !self.sending.val();
-        self.header_sums.destination_ip.next = self.destination_ip.val();
-        self.header_sums.destination_port.next = self.destination_port.val();
+        self.header_sums.destination_ip.next = self.source.destination_ip_held.val();
+        self.header_sums.destination_port.next = self.source.destination_port_held.val();
         self.header_sums.total_len.next = self.geometry.total_len.val();
+        self.header_sums.hold.next = self.sums_kept.q.val();
         self.udp_sum.clock.next = self.clock.val();
         self.udp_sum.load.next = !self.sending.val();
         self.udp_sum.body_sum.next = self.datagrams.body_sum.val();
@@ -239,7 +247,7 @@ impl Logic for FrameTransmitter {
         self.udp_sum.term_is_destination.next = self.term_is_destination.q.val();
         self.udp_sum.term_from_fields.next = self.term_from_fields.q.val();
         self.udp_sum.high_byte.next = self.index.val().get_bit(0);
-        self.udp_sum.kind.next = self.geometry.kind.val();
+        self.udp_sum.kind.next = self.datagrams.kind.val();
         self.udp_sum.udp_term.next = self.geometry.udp_term.val();
         self.udp_sum.destination_sum.next = self.header_sums.destination_sum.val();
         self.udp_sum.field_byte.next = self.header_fields.field_byte.val();
@@ -255,7 +263,7 @@ impl Logic for FrameTransmitter {
         self.source.ip_checksum.next = self.header_sums.ip_checksum.val();
         self.source.udp_len.next = self.geometry.udp_len.val();
         self.source.udp_checksum.next = self.udp_sum.udp_checksum.val();
-        self.source.kind.next = self.geometry.kind.val();
+        self.source.kind.next = self.datagrams.kind.val();
         self.source.field_byte.next = self.header_fields.field_byte.val();
         self.source.body_data.next = self.datagrams.body.data.val();
         self.source.destination_mac.next = self.destination_mac.val();
@@ -288,12 +296,14 @@ impl Logic for FrameTransmitter {
             self.sending.val() & (self.index.val() >= 1) & (self.index.val() < 17);
         self.term_is_destination.d.next = self.sending.val() & (self.index.val() == 17);
         self.checksum_adds.d.next = self.sending.val() & (self.index.val() < 19);
+        self.sums_kept.d.next = self.sending.val() & (self.index.val().get_bits::<9>(2) != 0);
         // the next index is 0 unless the frame goes on, 1 after 0
         self.term_is_kind.d.next = !self.frame_steps.frame_goes_on.val();
         self.term_is_udp_len.d.next =
             self.frame_steps.frame_goes_on.val() & self.term_is_kind.q.val();
         if self.reset.val() {
             self.term_is_destination.d.next = false;
+            self.sums_kept.d.next = false;
             self.crc_starts.d.next = false;
             self.term_from_fields.d.next = false;
             self.checksum_adds.d.next = false;
@@ -354,6 +364,16 @@ mod tests {
         );
     }
 
+    /// The descriptor's fields when the source holds none (no descriptor offered, the last
+    /// body's last beat taken): noise that changes every clock.
+    fn descriptor_noise(u: &mut FrameTransmitter, clock: u64) {
+        let noise = clock.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        u.datagrams.kind.next = (noise >> 56).into();
+        u.datagrams.flags.next = (noise & 0xFF).into();
+        u.datagrams.entry_count.next = (noise >> 8 & 0xFFFF).into();
+        u.datagrams.base_tick.next = noise.rotate_left(17).into();
+    }
+
     fn body_sum(body: &[u8]) -> u64 {
         word_sum(body)
     }
@@ -401,6 +421,9 @@ mod tests {
             u.datagrams.body.last.next = body.len() == 1;
             u.datagrams.body.error.next = false;
             u.datagrams.valid.next = false;
+            if body.is_empty() {
+                descriptor_noise(u, clock);
+            }
             if let Some(d) = datagrams.get(next).filter(|_| body.is_empty()) {
                 let bytes = d.to_bytes();
                 let b = &bytes[HEADER_LEN..];
@@ -637,6 +660,9 @@ mod tests {
             u.datagrams.body.last.next = body.len() == 1;
             u.datagrams.body.error.next = false;
             u.datagrams.valid.next = false;
+            if body.is_empty() {
+                descriptor_noise(u, clock);
+            }
             drive_destination(u, DECOY);
             let offered = items.get(next).filter(|_| body.is_empty());
             let mut destination = None;

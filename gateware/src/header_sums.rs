@@ -1,8 +1,10 @@
 //! HeaderSums: the frame transmitter's IPv4 header checksum, the IPv4 layer's transmit
 //! half, and the sum of the destination's words the UDP checksum adds.
 //!
-//! While no frame goes out (`load`) the destination's IPv4 address and UDP port are held.
-//! A clock after the take the address's two words are summed, a clock later with the port
+//! The destination's IPv4 address and UDP port are read where the transmitter holds them
+//! (steady from the take for [`IP_CHECKSUM_CLOCKS`] clocks; its shift register moves them
+//! later), and the sums are kept from then on (`hold`). A clock after the take the
+//! address's two words are summed, a clock later with the port
 //! (`destination_sum`, for the UDP checksum) and with the total length (the IPv4 header's
 //! variable words; the constant words' sum is a build-time constant), which is folded once
 //! into a register and once more, complemented, into `ip_checksum`: final
@@ -19,21 +21,20 @@ pub const IP_CHECKSUM_CLOCKS: u64 = 4;
 pub struct HeaderSums {
     /// The box clock.
     pub clock: Signal<In, Clock>,
-    /// No frame goes out: hold the destination.
-    pub load: Signal<In, Bit>,
-    /// The destination's IPv4 address.
+    /// The destination's IPv4 address (steady for [`IP_CHECKSUM_CLOCKS`] clocks from the
+    /// take).
     pub destination_ip: Signal<In, Bits<32>>,
-    /// The destination's UDP port.
+    /// The destination's UDP port (steady like `destination_ip`).
     pub destination_port: Signal<In, Bits<16>>,
-    /// The IPv4 total length.
+    /// The IPv4 total length (steady from a clock after the take).
     pub total_len: Signal<In, Bits<16>>,
+    /// Keep the sums (from [`IP_CHECKSUM_CLOCKS`] clocks after the take to the frame's end).
+    pub hold: Signal<In, Bit>,
     /// The sum of the destination address's and port's words (not folded).
     pub destination_sum: Signal<Out, Bits<18>>,
     /// The IPv4 header checksum.
     pub ip_checksum: Signal<Out, Bits<16>>,
     ip_constant_sum: Constant<Bits<32>>,
-    ip_held: DFF<Bits<32>>,
-    port_held: DFF<Bits<16>>,
     ip_words: DFF<Bits<17>>,
     with_port: DFF<Bits<18>>,
     ip_variable: DFF<Bits<18>>,
@@ -48,15 +49,13 @@ impl HeaderSums {
     pub fn new(ip_constant_sum: u64) -> Self {
         Self {
             clock: Default::default(),
-            load: Default::default(),
             destination_ip: Default::default(),
             destination_port: Default::default(),
             total_len: Default::default(),
+            hold: Default::default(),
             destination_sum: Default::default(),
             ip_checksum: Default::default(),
             ip_constant_sum: constant(ip_constant_sum),
-            ip_held: Default::default(),
-            port_held: Default::default(),
             ip_words: Default::default(),
             with_port: Default::default(),
             ip_variable: Default::default(),
@@ -73,29 +72,25 @@ impl Logic for HeaderSums {
         dff_setup!(
             self,
             clock,
-            ip_held,
-            port_held,
             ip_words,
             with_port,
             ip_variable,
             ip_fold,
             checksum
         );
-        if self.load.val() {
-            self.ip_held.d.next = self.destination_ip.val();
-            self.port_held.d.next = self.destination_port.val();
-        }
-        self.ip_words.d.next = bit_cast::<17, 16>(self.ip_held.q.val().get_bits::<16>(16))
-            + bit_cast::<17, 16>(self.ip_held.q.val().get_bits::<16>(0));
-        self.with_port.d.next =
-            bit_cast::<18, 17>(self.ip_words.q.val()) + bit_cast::<18, 16>(self.port_held.q.val());
-        self.ip_variable.d.next =
-            bit_cast::<18, 16>(self.total_len.val()) + bit_cast::<18, 17>(self.ip_words.q.val());
         self.ip_sum.next =
             self.ip_constant_sum.val() + bit_cast::<32, 18>(self.ip_variable.q.val());
-        self.ip_fold.d.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
-        self.checksum.d.next =
-            !bit_cast::<16, 32>((self.ip_fold.q.val() & 0xFFFF) + (self.ip_fold.q.val() >> 16));
+        if !self.hold.val() {
+            self.ip_words.d.next = bit_cast::<17, 16>(self.destination_ip.val().get_bits::<16>(16))
+                + bit_cast::<17, 16>(self.destination_ip.val().get_bits::<16>(0));
+            self.with_port.d.next = bit_cast::<18, 17>(self.ip_words.q.val())
+                + bit_cast::<18, 16>(self.destination_port.val());
+            self.ip_variable.d.next = bit_cast::<18, 16>(self.total_len.val())
+                + bit_cast::<18, 17>(self.ip_words.q.val());
+            self.ip_fold.d.next = (self.ip_sum.val() & 0xFFFF) + (self.ip_sum.val() >> 16);
+            self.checksum.d.next =
+                !bit_cast::<16, 32>((self.ip_fold.q.val() & 0xFFFF) + (self.ip_fold.q.val() >> 16));
+        }
         self.destination_sum.next = self.with_port.q.val();
         self.ip_checksum.next = self.checksum.q.val();
     }
@@ -124,19 +119,25 @@ mod tests {
             let port = rng.next_u64() as u16;
             let total_len = 28 + rng.next_u64() as u16 % 1473;
             let u = &mut bench.uut;
-            u.load.next = true;
+            u.destination_ip.next = (rng.next_u64() & 0xFFFF_FFFF).into();
+            u.destination_port.next = (rng.next_u64() & 0xFFFF).into();
+            bench.cycle();
+            // the take: the destination is steady from here on; the total length follows
+            // a clock later
+            let u = &mut bench.uut;
             u.destination_ip.next = u64::from(ip).into();
             u.destination_port.next = u64::from(port).into();
             bench.cycle();
-            // the take: the destination holds while the frame goes out; the total length
-            // follows a clock later
-            let u = &mut bench.uut;
-            u.load.next = false;
-            u.destination_ip.next = 0.into();
-            u.destination_port.next = 0.into();
-            bench.cycle();
             bench.uut.total_len.next = u64::from(total_len).into();
             bench.cycles(IP_CHECKSUM_CLOCKS - 1);
+            // the sums are kept while the destination and the total length move on
+            let u = &mut bench.uut;
+            u.hold.next = true;
+            u.destination_ip.next = (rng.next_u64() & 0xFFFF_FFFF).into();
+            u.destination_port.next = (rng.next_u64() & 0xFFFF).into();
+            u.total_len.next = (rng.next_u64() & 0xFFFF).into();
+            bench.cycles(1 + rng.next_u64() % 5);
+            bench.uut.hold.next = false;
             let want = checksum(&[&constant, &total_len.to_be_bytes(), &ip.to_be_bytes()]);
             let u = &bench.uut;
             assert_eq!(u.ip_checksum.val().to_u64() as u16, want, "round {round}");

@@ -50,7 +50,9 @@ pub const RAW_FRAME_KIND: u8 = 0;
 ///
 /// The descriptor carries what the frame's headers need before the body goes out: the
 /// datagram header's kind, flags, entry count and base tick, the body's length and the
-/// sum of its big-endian 16-bit words (not folded) for the UDP checksum.
+/// sum of its big-endian 16-bit words (not folded) for the UDP checksum. The source holds
+/// the descriptor from the take until its body's last beat moved: the transmitter reads
+/// the kind and the header fields while the header goes out.
 #[derive(LogicInterface, Default)]
 #[join = "DatagramSink"]
 pub struct DatagramSource {

@@ -1,16 +1,17 @@
 //! TransmitFields: the frame transmitter's datagram header fields (flags, sequence number,
 //! base tick, entry count) and the box's datagram sequence number.
 //!
-//! While no frame goes out (`load`) the descriptor's flags, base tick and entry count are
-//! held with the next sequence number: 15 bytes, most significant first, and a zero byte (the
-//! first reserved byte) in two 64-bit shift registers (no word over 64 bits to simulate).
-//! A position steps through them one byte per clock: once from the frame's index 2 to 17
-//! for the UDP checksum (all 16 bytes; back at 0 after them), and once from index 57 to 71
-//! to send the 15 field bytes; `field_byte` is a register read from the fields at the
-//! position (no multiplexer between the position and its use), the field byte of frame
-//! index `i` in the clock of index `i`. `advance` (a datagram's last clock) steps the
-//! sequence number. Cost: 128 + 32 bits held, the 4-bit position, the byte register and
-//! the step flag.
+//! The descriptor's flags, base tick and entry count are read where the datagram's source
+//! holds them (on the arbiter's descriptor, from the take until the body's last beat; the
+//! header's field bytes are read before the body), with the sequence number: 15 bytes,
+//! most significant first, and a zero byte (the first reserved byte) as two 64-bit words
+//! (no word over 64 bits to simulate), no copy held. A position steps through them one
+//! byte per clock: once from the frame's index 2 to 17 for the UDP checksum (all 16 bytes;
+//! back at 0 after them), and once from index 57 to 71 to send the 15 field bytes;
+//! `field_byte` is a register read from the fields at the position (no multiplexer between
+//! the position and its use), the field byte of frame index `i` in the clock of index `i`.
+//! `advance` (a datagram's last clock) steps the sequence number. Cost: the 32-bit
+//! sequence number, the 4-bit position, the byte register and the step flag.
 
 use crate::hdl::*;
 use crate::transmit_layout::{FIELDS_AT, FIELDS_LEN};
@@ -22,13 +23,11 @@ pub struct TransmitFields {
     pub clock: Signal<In, Clock>,
     /// Synchronous reset: the sequence number restarts at 0.
     pub reset: Signal<In, Bit>,
-    /// No frame goes out: hold the descriptor's fields.
-    pub load: Signal<In, Bit>,
-    /// The descriptor's flags.
+    /// The descriptor's flags (steady from the take until the frame's index 72).
     pub flags: Signal<In, Bits<8>>,
-    /// The descriptor's base tick.
+    /// The descriptor's base tick (steady like `flags`).
     pub base_tick: Signal<In, Bits<64>>,
-    /// The descriptor's entry count.
+    /// The descriptor's entry count (steady like `flags`).
     pub entry_count: Signal<In, Bits<16>>,
     /// A datagram's last clock: the sequence number steps.
     pub advance: Signal<In, Bit>,
@@ -42,14 +41,15 @@ pub struct TransmitFields {
     // position steps there)
     fields_ahead: Constant<Bits<7>>,
     fields_end_ahead: Constant<Bits<7>>,
-    fields_high: DFF<Bits<64>>,
-    fields_low: DFF<Bits<64>>,
     next_sequence: DFF<Bits<32>>,
     // the position of the next clock's field byte
     next_field_position: DFF<Bits<4>>,
     // the position steps from the next clock's to the one after it
     next_field_steps: DFF<Bit>,
     current_byte: DFF<Bits<8>>,
+    // the 16 bytes in two words, most significant first
+    fields_high: Signal<Local, Bits<64>>,
+    fields_low: Signal<Local, Bits<64>>,
     field_word: Signal<Local, Bits<64>>,
     field_word_shifted: Signal<Local, Bits<64>>,
 }
@@ -59,7 +59,6 @@ impl Default for TransmitFields {
         Self {
             clock: Default::default(),
             reset: Default::default(),
-            load: Default::default(),
             flags: Default::default(),
             base_tick: Default::default(),
             entry_count: Default::default(),
@@ -69,12 +68,12 @@ impl Default for TransmitFields {
             field_byte: Default::default(),
             fields_ahead: constant((FIELDS_AT - 2) as u64),
             fields_end_ahead: constant((FIELDS_AT + FIELDS_LEN - 2) as u64),
-            fields_high: Default::default(),
-            fields_low: Default::default(),
             next_sequence: Default::default(),
             next_field_position: Default::default(),
             next_field_steps: Default::default(),
             current_byte: Default::default(),
+            fields_high: Default::default(),
+            fields_low: Default::default(),
             field_word: Default::default(),
             field_word_shifted: Default::default(),
         }
@@ -87,18 +86,21 @@ impl Logic for TransmitFields {
         dff_setup!(
             self,
             clock,
-            fields_high,
-            fields_low,
             next_sequence,
             next_field_position,
             next_field_steps,
             current_byte
         );
         // the field byte of the next clock: byte 0 is the top byte of `fields_high` (the
-        // fields are held from index 0 on; the byte is read from index 2 on)
-        self.field_word.next = self.fields_high.q.val();
+        // descriptor is steady from index 0 on; the byte is read from index 1 on)
+        self.fields_high.next = (bit_cast::<64, 8>(self.flags.val()) << 56)
+            | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
+            | bit_cast::<64, 24>(self.base_tick.val().get_bits::<24>(40));
+        self.fields_low.next = (bit_cast::<64, 40>(self.base_tick.val().get_bits::<40>(0)) << 24)
+            | (bit_cast::<64, 16>(self.entry_count.val()) << 8);
+        self.field_word.next = self.fields_high.val();
         if self.next_field_position.q.val().get_bit(3) {
-            self.field_word.next = self.fields_low.q.val();
+            self.field_word.next = self.fields_low.val();
         }
         self.field_word_shifted.next = self.field_word.val()
             << (bit_cast::<64, 3>(self.next_field_position.q.val().get_bits::<3>(0)) << 3);
@@ -120,14 +122,6 @@ impl Logic for TransmitFields {
         if self.advance.val() {
             self.next_sequence.d.next = self.next_sequence.q.val() + 1;
         }
-        if self.load.val() {
-            self.fields_high.d.next = (bit_cast::<64, 8>(self.flags.val()) << 56)
-                | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
-                | bit_cast::<64, 24>(self.base_tick.val().get_bits::<24>(40));
-            self.fields_low.d.next = (bit_cast::<64, 40>(self.base_tick.val().get_bits::<40>(0))
-                << 24)
-                | (bit_cast::<64, 16>(self.entry_count.val()) << 8);
-        }
         if self.reset.val() {
             self.next_field_steps.d.next = false;
             self.next_field_position.d.next = 0.into();
@@ -141,12 +135,14 @@ impl Logic for TransmitFields {
 mod tests {
     use super::*;
     use crate::testbench::{Bench, TestRng};
+    use crate::transmit_layout::BODY_START;
     use skinbox_protocol::datagram::field;
 
-    /// Frames with random fields, as the transmitter runs them (index 0 to 100): the
-    /// field bytes are the datagram header's (flags, sequence, base tick, entry count,
-    /// a zero) at indices 2 to 17 for the checksum and at their own places, 57 to 71;
-    /// the sequence number counts the frames that advance it.
+    /// Frames with random fields, as the transmitter runs them (index 0 to 100), the
+    /// descriptor steady from index 0 to the body (index 74), noise before and after: the
+    /// field bytes are the datagram header's (flags, sequence, base tick, entry count, a
+    /// zero) at indices 2 to 17 for the checksum and at their own places, 57 to 71; the
+    /// sequence number counts the frames that advance it.
     #[test]
     fn field_bytes_are_the_headers_at_their_indices() {
         let mut rng = TestRng::new(0xF1E);
@@ -160,15 +156,21 @@ mod tests {
             let base_tick = rng.next_u64();
             let entry_count = rng.next_u64() as u16;
             let advance = rng.chance(0.7);
-            let u = &mut bench.uut;
-            u.load.next = true;
-            u.flags.next = u64::from(flags).into();
-            u.base_tick.next = base_tick.into();
-            u.entry_count.next = u64::from(entry_count).into();
-            u.index.next = 0.into();
-            u.frame_goes_on.next = false;
+            let drive = |u: &mut TransmitFields, flags: u8, base_tick: u64, entry_count: u16| {
+                u.flags.next = u64::from(flags).into();
+                u.base_tick.next = base_tick.into();
+                u.entry_count.next = u64::from(entry_count).into();
+            };
+            // the take clock: no frame yet
+            drive(
+                &mut bench.uut,
+                rng.byte(),
+                rng.next_u64(),
+                rng.byte().into(),
+            );
+            bench.uut.index.next = 0.into();
+            bench.uut.frame_goes_on.next = false;
             bench.cycle();
-            bench.uut.load.next = false;
             let mut header = vec![flags];
             header.extend(sequence.to_be_bytes());
             header.extend(base_tick.to_be_bytes());
@@ -176,12 +178,17 @@ mod tests {
             header.push(0);
             assert_eq!(header.len(), field::ENTRY_COUNT.end - field::FLAGS + 1);
             let mut seen = Vec::new();
-            let last = 100;
+            let last = 100u64;
             for i in 0..=last {
                 let u = &mut bench.uut;
                 u.index.next = i.into();
                 u.frame_goes_on.next = i != last;
                 u.advance.next = advance && i == last;
+                if i < BODY_START as u64 {
+                    drive(u, flags, base_tick, entry_count);
+                } else {
+                    drive(u, rng.byte(), rng.next_u64(), rng.byte().into());
+                }
                 bench.settle();
                 seen.push(bench.uut.field_byte.val().to_u64() as u8);
                 bench.cycle();

@@ -1,11 +1,12 @@
-//! TransmitGeometry: the frame transmitter's held descriptor (kind, body length, raw or
-//! not) and the frame's geometry computed from it: where the body ends, the frame's last
+//! TransmitGeometry: the frame transmitter's held descriptor (body length, raw or not)
+//! and the frame's geometry computed from it: where the body ends, the frame's last
 //! index, the IPv4 total length, the UDP length and the UDP checksum's length term.
 //!
-//! While no frame goes out (`load`) the descriptor's kind and body length are held, and
-//! whether it is a raw frame's ([`RAW_FRAME_KIND`]: its body follows the SFD). The geometry
+//! While no frame goes out (`load`) the descriptor's body length is held, and whether it
+//! is a raw frame's ([`RAW_FRAME_KIND`]: its body follows the SFD). The geometry
 //! follows the held values a clock later (latency 1 from the take: valid from the frame's
-//! index 1 on, nothing reads it at index 0). Cost: the held 20 bits and the geometry's
+//! index 1 on, nothing reads it at index 0). (The kind is read from the descriptor, which
+//! its source holds until the body's last beat.) Cost: the held 12 bits and the geometry's
 //! registers (3 x 11 + 2 x 16 + 32 bits), one adder each.
 
 use crate::hdl::*;
@@ -24,8 +25,6 @@ pub struct TransmitGeometry {
     pub descriptor_kind: Signal<In, Bits<8>>,
     /// The descriptor's body length.
     pub body_len: Signal<In, Bits<11>>,
-    /// The held kind.
-    pub kind: Signal<Out, Bits<8>>,
     /// The held descriptor is a raw frame's.
     pub raw: Signal<Out, Bit>,
     /// The index of the first byte after the body (the first FCS byte).
@@ -52,7 +51,6 @@ pub struct TransmitGeometry {
     ip_len_over_body: Constant<Bits<16>>,
     udp_len_over_body: Constant<Bits<16>>,
     udp_term_constant: Constant<Bits<32>>,
-    kind_held: DFF<Bits<8>>,
     body_len_held: DFF<Bits<11>>,
     raw_held: DFF<Bit>,
     body_end_at: DFF<Bits<11>>,
@@ -61,7 +59,7 @@ pub struct TransmitGeometry {
     total_len_value: DFF<Bits<16>>,
     udp_len_value: DFF<Bits<16>>,
     udp_term_value: DFF<Bits<32>>,
-    // the body's first byte and the frame's end over the body, of the held kind
+    // the body's first byte and the frame's end over the body, datagram or raw frame
     geometry_start: Signal<Local, Bits<11>>,
     geometry_end_over_body: Signal<Local, Bits<11>>,
 }
@@ -75,7 +73,6 @@ impl TransmitGeometry {
             load: Default::default(),
             descriptor_kind: Default::default(),
             body_len: Default::default(),
-            kind: Default::default(),
             raw: Default::default(),
             body_end: Default::default(),
             body_end_less_one: Default::default(),
@@ -91,7 +88,6 @@ impl TransmitGeometry {
             ip_len_over_body: constant((BODY_START - IPV4_AT_ON_WIRE) as u64),
             udp_len_over_body: constant((BODY_START - UDP_AT_ON_WIRE) as u64),
             udp_term_constant: constant(udp_constant + 2 * (BODY_START - UDP_AT_ON_WIRE) as u64),
-            kind_held: Default::default(),
             body_len_held: Default::default(),
             raw_held: Default::default(),
             body_end_at: Default::default(),
@@ -112,7 +108,6 @@ impl Logic for TransmitGeometry {
         dff_setup!(
             self,
             clock,
-            kind_held,
             body_len_held,
             raw_held,
             body_end_at,
@@ -140,11 +135,9 @@ impl Logic for TransmitGeometry {
         self.udp_term_value.d.next =
             (bit_cast::<32, 11>(self.body_len_held.q.val()) << 1) + self.udp_term_constant.val();
         if self.load.val() {
-            self.kind_held.d.next = self.descriptor_kind.val();
             self.body_len_held.d.next = self.body_len.val();
             self.raw_held.d.next = self.descriptor_kind.val() == self.raw_kind.val();
         }
-        self.kind.next = self.kind_held.q.val();
         self.raw.next = self.raw_held.q.val();
         self.body_end.next = self.body_end_at.q.val();
         self.body_end_less_one.next = self.body_end_less_one_at.q.val();
@@ -189,7 +182,6 @@ mod tests {
             u.body_len.next = 0.into();
             bench.cycle();
             let u = &bench.uut;
-            assert_eq!(u.kind.val().to_u64(), u64::from(kind), "round {round}");
             assert_eq!(u.raw.val(), raw, "round {round}");
             let start = if raw {
                 8

@@ -13,7 +13,8 @@
 //! destination are ORed a clock ahead into `header_early`: only the template byte (a block
 //! RAM output) and the field byte (stepped each clock) pass the OR in the byte's own
 //! clock. The destination's 12 bytes (MAC, IPv4 address, UDP port) are loaded into a
-//! shift register while no frame goes out and shifted a byte up as each goes out.
+//! shift register while no frame goes out and shifted a byte up as each goes out (from
+//! index 8 on: until then the header sums read its address and port there).
 //!
 //! Latency: `frame_byte` is the byte of this clock's `index` (no register between it and
 //! the output stage; the body's data passes one multiplexer). Cost: one DP16KD (128 x 21
@@ -134,6 +135,10 @@ pub struct TransmitSource {
     pub frame_byte: Signal<Out, Bits<8>>,
     /// The next index's byte is a body byte.
     pub next_is_body: Signal<Out, Bit>,
+    /// The destination IPv4 address taken (from the take until index 8, the first shift).
+    pub destination_ip_held: Signal<Out, Bits<32>>,
+    /// The destination UDP port taken (like `destination_ip_held`).
+    pub destination_port_held: Signal<Out, Bits<16>>,
     template: BlockRam<HEADER_ENTRY_BITS, 7>,
     template_idle: Constant<Bits<7>>,
     // the byte sources, one bit each (see `byte_source`)
@@ -182,6 +187,8 @@ impl TransmitSource {
             destination_port: Default::default(),
             frame_byte: Default::default(),
             next_is_body: Default::default(),
+            destination_ip_held: Default::default(),
+            destination_port_held: Default::default(),
             template: BlockRam::with_contents(&header_table(template)),
             template_idle: constant(TEMPLATE_IDLE as u64),
             source_template: Constant::new(SOURCE_TEMPLATE.into()),
@@ -317,6 +324,10 @@ impl Logic for TransmitSource {
                 | bit_cast::<64, 8>(self.destination_low.q.val().get_bits::<8>(24));
             self.destination_low.d.next = self.destination_low.q.val() << 8;
         }
+        self.destination_ip_held.next =
+            (bit_cast::<32, 16>(self.destination_high.q.val().get_bits::<16>(0)) << 16)
+                | bit_cast::<32, 16>(self.destination_low.q.val().get_bits::<16>(16));
+        self.destination_port_held.next = self.destination_low.q.val().get_bits::<16>(0);
         if self.reset.val() {
             self.header_ahead.d.next = false;
             self.body_ahead.d.next = false;
@@ -394,6 +405,14 @@ mod tests {
                 u.body_data.next = u64::from(body).into();
                 bench.settle();
                 sent.push(bench.uut.frame_byte.val().to_u64() as u8);
+                if i < DESTINATION_MAC_AT {
+                    // the address and port for the header sums, before the first shift
+                    let u = &bench.uut;
+                    let ip = big_endian(&destination[6..10]);
+                    assert_eq!(u.destination_ip_held.val().to_u64(), ip);
+                    let port = big_endian(&destination[10..]);
+                    assert_eq!(u.destination_port_held.val().to_u64(), port);
+                }
                 // the body's beats are taken from its first byte on
                 assert_eq!(
                     bench.uut.next_is_body.val(),
