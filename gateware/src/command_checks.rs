@@ -8,15 +8,13 @@
 //! an acknowledgement result. The argument fields the accepted commands use are wires from
 //! the held bytes.
 
-use crate::command_decoder::HELD_ARGUMENT_BYTES;
+use crate::command_arguments::{CommandArguments, HELD_ARGUMENT_BITS};
 use crate::hdl::*;
 use skinbox_protocol::box_counters::BoxCounter;
 use skinbox_protocol::command::{
-    cell_command_field, destination_field, ticks_field, AckResult, Opcode, ALL_PORTS, ANY_BOX,
-    CELL_COMMAND_LEN, DESTINATION_LEN, MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS,
-    MIN_SYNC_PERIOD_TICKS, TICKS_LEN,
+    AckResult, Opcode, ALL_PORTS, ANY_BOX, CELL_COMMAND_LEN, DESTINATION_LEN,
+    MAX_FLUSH_TIMEOUT_TICKS, MIN_STATUS_PERIOD_TICKS, MIN_SYNC_PERIOD_TICKS, TICKS_LEN,
 };
-use skinbox_protocol::Field;
 
 // a sync period is 0 or at least the shortest status period: one compare serves both
 const _: () = assert!(MIN_SYNC_PERIOD_TICKS == MIN_STATUS_PERIOD_TICKS);
@@ -24,16 +22,6 @@ const _: () = assert!(MIN_SYNC_PERIOD_TICKS == MIN_STATUS_PERIOD_TICKS);
 /// Clocks from steady fields to the verdict (`arguments_ok`, `fate`, `result`); the opcode
 /// flags, `box_ok`, `no_arguments` and `target_ports` are a clock earlier.
 pub const CHECK_CLOCKS: u64 = 2;
-
-/// The lowest bit in `command_arguments` of the argument bytes `field` (the first
-/// argument byte is the top byte).
-fn argument_bit(field: Field) -> Constant<Bits<7>> {
-    assert!(
-        field.end <= HELD_ARGUMENT_BYTES,
-        "argument bytes {field:?} not held"
-    );
-    constant((8 * (HELD_ARGUMENT_BYTES - field.end)) as u64)
-}
 
 /// The box id, opcode and argument checks.
 #[derive(LogicBlock)]
@@ -47,7 +35,7 @@ pub struct CommandChecks {
     /// The command's argument length, bytes.
     pub command_argument_length: Signal<In, Bits<16>>,
     /// The first 12 argument bytes, the first in bits 95..88, bytes past the arguments 0.
-    pub command_arguments: Signal<In, Bits<96>>,
+    pub command_arguments: Signal<In, Bits<HELD_ARGUMENT_BITS>>,
     /// The box id is the box's or `ANY_BOX`.
     pub box_ok: Signal<Out, Bit>,
     /// The opcode is stream-to.
@@ -106,12 +94,6 @@ pub struct CommandChecks {
     result_unknown_opcode: Constant<Bits<8>>,
     result_bad_argument: Constant<Bits<8>>,
     // argument positions in `command_arguments`
-    destination_mac_bit: Constant<Bits<7>>,
-    destination_ip_bit: Constant<Bits<7>>,
-    destination_port_bit: Constant<Bits<7>>,
-    ticks_bit: Constant<Bits<7>>,
-    cell_port_bit: Constant<Bits<7>>,
-    cell_reserved_bit: Constant<Bits<7>>,
     // stage 1
     box_ok_flag: DFF<Bit>,
     stream_to_flag: DFF<Bit>,
@@ -136,8 +118,7 @@ pub struct CommandChecks {
     arguments_ok_held: DFF<Bit>,
     arguments_fate: DFF<Bits<5>>,
     arguments_result: DFF<Bits<8>>,
-    value_field: Signal<Local, Bits<32>>,
-    cell_port_field: Signal<Local, Bits<8>>,
+    fields: CommandArguments,
     arguments_good: Signal<Local, Bit>,
     opcode_known: Signal<Local, Bit>,
 }
@@ -190,12 +171,6 @@ impl CommandChecks {
             result_ok: constant(AckResult::Ok as u64),
             result_unknown_opcode: constant(AckResult::UnknownOpcode as u64),
             result_bad_argument: constant(AckResult::BadArgument as u64),
-            destination_mac_bit: argument_bit(destination_field::MAC),
-            destination_ip_bit: argument_bit(destination_field::IP),
-            destination_port_bit: argument_bit(destination_field::PORT),
-            ticks_bit: argument_bit(ticks_field::TICKS),
-            cell_port_bit: argument_bit(cell_command_field::PORT..cell_command_field::PORT + 1),
-            cell_reserved_bit: argument_bit(cell_command_field::RESERVED),
             box_ok_flag: Default::default(),
             stream_to_flag: Default::default(),
             set_flush_timeout_flag: Default::default(),
@@ -218,8 +193,7 @@ impl CommandChecks {
             arguments_ok_held: Default::default(),
             arguments_fate: Default::default(),
             arguments_result: Default::default(),
-            value_field: Default::default(),
-            cell_port_field: Default::default(),
+            fields: Default::default(),
             arguments_good: Default::default(),
             opcode_known: Default::default(),
         }
@@ -274,47 +248,24 @@ impl Logic for CommandChecks {
             self.command_argument_length.val() == self.destination_length.val();
         self.length_cell_command.d.next =
             self.command_argument_length.val() == self.cell_command_length.val();
-        // stream-to: MAC in bytes 0..6, IP 6..10, port 10..12
-        self.destination_ok.d.next = (self
-            .command_arguments
-            .val()
-            .get_bits::<32>(self.destination_ip_bit.val().index())
-            != 0)
-            & (self
-                .command_arguments
-                .val()
-                .get_bits::<16>(self.destination_port_bit.val().index())
-                != 0);
-        // set-flush-timeout and set-status-period: a u32 in bytes 0..4
-        self.value_field.next = self
-            .command_arguments
-            .val()
-            .get_bits::<32>(self.ticks_bit.val().index());
-        self.flush_timeout_ok.d.next = (self.value_field.val() != 0)
-            & (self.value_field.val() <= self.max_flush_timeout.val());
-        self.status_period_ok.d.next = self.value_field.val() >= self.min_status_period.val();
-        self.value_zero.d.next = self.value_field.val() == 0;
-        // cell command: the port in byte 0, three reserved bytes
-        self.cell_port_field.next = self
-            .command_arguments
-            .val()
-            .get_bits::<8>(self.cell_port_bit.val().index());
-        self.cell_port_ok.d.next = (self.cell_port_field.val() == self.all_ports.val())
-            | (self.cell_port_field.val() < self.port_count.val());
+        self.fields.arguments.next = self.command_arguments.val();
+        self.destination_ok.d.next = (self.fields.ip.val() != 0) & (self.fields.port.val() != 0);
+        self.flush_timeout_ok.d.next = (self.fields.ticks.val() != 0)
+            & (self.fields.ticks.val() <= self.max_flush_timeout.val());
+        self.status_period_ok.d.next = self.fields.ticks.val() >= self.min_status_period.val();
+        self.value_zero.d.next = self.fields.ticks.val() == 0;
+        self.cell_port_ok.d.next = (self.fields.cell_port.val() == self.all_ports.val())
+            | (self.fields.cell_port.val() < self.port_count.val());
         // (ports from 64 on target nothing, as a cell command's port never is one)
         self.target_ports_held.d.next = 0.into();
-        if self.cell_port_field.val().get_bits::<2>(6) == 0 {
+        if self.fields.cell_port.val().get_bits::<2>(6) == 0 {
             self.target_ports_held.d.next = bit_cast::<64, 1>(true.into())
-                << bit_cast::<64, 6>(self.cell_port_field.val().get_bits::<6>(0));
+                << bit_cast::<64, 6>(self.fields.cell_port.val().get_bits::<6>(0));
         }
-        if self.cell_port_field.val() == self.all_ports.val() {
+        if self.fields.cell_port.val() == self.all_ports.val() {
             self.target_ports_held.d.next = 0xFFFF_FFFF_FFFF_FFFF_u64.into();
         }
-        self.reserved_zero.d.next = self
-            .command_arguments
-            .val()
-            .get_bits::<24>(self.cell_reserved_bit.val().index())
-            == 0;
+        self.reserved_zero.d.next = self.fields.cell_reserved.val() == 0;
 
         // Stage 2: the arguments' verdict.
         // (the opcode flags are exclusive: the verdict is an OR of one term per opcode)
@@ -364,26 +315,18 @@ impl Logic for CommandChecks {
         self.arguments_ok.next = self.arguments_ok_held.q.val();
         self.fate.next = self.arguments_fate.q.val();
         self.result.next = self.arguments_result.q.val();
-        self.value.next = self.value_field.val();
-        self.cell_port.next = self.cell_port_field.val();
-        self.argument_mac.next = self
-            .command_arguments
-            .val()
-            .get_bits::<48>(self.destination_mac_bit.val().index());
-        self.argument_ip.next = self
-            .command_arguments
-            .val()
-            .get_bits::<32>(self.destination_ip_bit.val().index());
-        self.argument_port.next = self
-            .command_arguments
-            .val()
-            .get_bits::<16>(self.destination_port_bit.val().index());
+        self.value.next = self.fields.ticks.val();
+        self.cell_port.next = self.fields.cell_port.val();
+        self.argument_mac.next = self.fields.mac.val();
+        self.argument_ip.next = self.fields.ip.val();
+        self.argument_port.next = self.fields.port.val();
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::command_decoder::HELD_ARGUMENT_BYTES;
     use crate::testbench::{Bench, TestRng};
     use skinbox_protocol::command::Request;
     use skinbox_protocol::Error;
