@@ -51,6 +51,7 @@ pub mod decision_outputs;
 pub mod deframer_decision;
 pub mod deframer_scan;
 pub mod downlink_frame_timer;
+pub mod downlink_next_position;
 pub mod downlink_packet_copy;
 pub mod downlink_pin_scan;
 pub mod downlink_refill;
