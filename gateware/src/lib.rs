@@ -37,6 +37,7 @@ pub mod box_configuration;
 pub mod box_counter_file;
 pub mod cell_deframer;
 pub mod cell_downlink;
+pub mod cell_uplink;
 pub mod command_checks;
 pub mod command_decoder;
 pub mod command_unit;
