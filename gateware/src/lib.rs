@@ -15,6 +15,8 @@
 //!    [`status_reporter::StatusReporter`]'s datagrams, whole datagrams round robin;
 //! 6. [`frame_transmitter::FrameTransmitter`]: sends each as an Ethernet frame on GMII.
 //!
+//! [`cell_uplink::CellUplink`] holds 1 to 3 and the ports' counters.
+//!
 //! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
 //! over the interfaces of [`stream`]: bytes, and datagrams (a descriptor, then bytes).
 //!
