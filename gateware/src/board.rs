@@ -270,33 +270,30 @@ impl Pll {
     }
 }
 
-/// The board top module around the box's `top`.
+/// The board top module around the box's `top`: its ports, then each part of the board.
 fn board_top(board: Board, ports: usize, oscillator_hz: u64, pll: &Pll) -> String {
-    let mut uart = String::new();
-    for i in 0..ports {
-        write!(uart, "\n        .uart_rx${i}(uart_rx[{i}]),").unwrap();
-        write!(uart, "\n        .uart_tx${i}(uart_tx[{i}]),").unwrap();
-    }
-    let nibbles: String = (0..4)
-        .map(|i| {
-            format!(
-                "    ODDRX1F tx_data_{i} (.SCLK(clk125), .RST(1'b0), .D0(gmii_txd[{i}]), \
-                 .D1(gmii_txd[{hi}]), .Q(eth_tx_data[{i}]));\n",
-                hi = i + 4
-            )
-        })
-        .collect();
-    let rx_nibbles: String = (0..4)
-        .map(|i| {
-            format!(
-                "    DELAYG #(.DEL_MODE(\"SCLK_ALIGNED\"), .DEL_VALUE({RX_DELAY_TAPS})) \
-                 rx_data_delay_{i} (.A(eth_rx_data[{i}]), .Z(rx_data_delayed[{i}]));\n\
-                 \x20   IDDRX1F rx_data_{i} (.SCLK(eth_rx_clk), .RST(1'b0), \
-                 .D(rx_data_delayed[{i}]), .Q0(rx_data_rise[{i}]), .Q1(rx_data_fall[{i}]));\n"
-            )
-        })
-        .collect();
-    let reset_bits = PHY_RESET_CLOCKS.trailing_zeros() + 1;
+    [
+        module_header(board, ports, oscillator_hz, pll),
+        pll_instance(oscillator_hz, pll),
+        phy_reset(),
+        box_instance(ports),
+        mdio_instance(),
+        rgmii_receive(),
+        rgmii_transmit(),
+        status_led(),
+        "endmodule\n".to_string(),
+    ]
+    .concat()
+}
+
+/// The board top's opening comment (board, clock and PLL dividers) and its module ports.
+fn module_header(board: Board, ports: usize, oscillator_hz: u64, pll: &Pll) -> String {
+    let (name, part, top) = (board.name(), board.part(), board.top_module());
+    let clock_mhz = pll_mhz(oscillator_hz / pll.clki_div * pll.clkfb_div);
+    let osc_mhz = pll_mhz(oscillator_hz);
+    let vco_mhz = pll_mhz(pll.vco_hz(oscillator_hz));
+    let (clki, clkfb, clkop) = (pll.clki_div, pll.clkfb_div, pll.clkop_div);
+    let last_port = ports - 1;
     format!(
         r#"// Board top for the {name} ({part}), written by skinbox (gateware/src/board.rs).
 // Box clock {clock_mhz} MHz from the {osc_mhz} MHz oscillator: EHXPLLL CLKI_DIV {clki},
@@ -316,7 +313,18 @@ module {top} (
     inout  wire eth_mdio,
     output wire led_n
 );
-    wire clk125;
+"#
+    )
+}
+
+/// The ECP5 PLL (`EHXPLLL`) from the board oscillator to the box clock `clk125`.
+fn pll_instance(oscillator_hz: u64, pll: &Pll) -> String {
+    let clock_mhz = pll_mhz(oscillator_hz / pll.clki_div * pll.clkfb_div);
+    let osc_mhz = pll_mhz(oscillator_hz);
+    let (clki, clkfb, clkop, cphase) =
+        (pll.clki_div, pll.clkfb_div, pll.clkop_div, pll.clkop_cphase);
+    format!(
+        r#"    wire clk125;
     wire pll_locked;
 
     (* FREQUENCY_PIN_CLKI="{osc_mhz}" *)
@@ -354,7 +362,16 @@ module {top} (
         .LOCK(pll_locked)
     );
 
-    // PLL lock into the clock domain, then the PHY reset count.
+"#
+    )
+}
+
+/// The PHY reset: `eth_rst_n` (and `released`, the box's reset) low until the PLL has been
+/// locked for [`PHY_RESET_CLOCKS`] clocks.
+fn phy_reset() -> String {
+    let reset_top = PHY_RESET_CLOCKS.trailing_zeros();
+    format!(
+        r#"    // PLL lock into the clock domain, then the PHY reset count.
     reg [1:0] locked_sync = 2'b00;
     reg [{reset_top}:0] reset_count = 0;
     wire released = reset_count[{reset_top}];
@@ -367,7 +384,19 @@ module {top} (
     end
     assign eth_rst_n = released;
 
-    wire [7:0] gmii_txd;
+"#
+    )
+}
+
+/// The box's `top` with its UART pins, link inputs and GMII wires.
+fn box_instance(ports: usize) -> String {
+    let mut uart = String::new();
+    for i in 0..ports {
+        write!(uart, "\n        .uart_rx${i}(uart_rx[{i}]),").unwrap();
+        write!(uart, "\n        .uart_tx${i}(uart_tx[{i}]),").unwrap();
+    }
+    format!(
+        r#"    wire [7:0] gmii_txd;
     wire gmii_tx_en;
     wire gmii_tx_er;
     // the received bytes in the box clock, from the receive clock crossing below
@@ -389,11 +418,18 @@ module {top} (
         .gmii_tx_er(gmii_tx_er)
     );
 
-    // MDIO: Gigabit-only advertisement after the PHY reset, then link polls; link_up and
+"#
+    )
+}
+
+/// The MDIO master on the shared MDC/MDIO pins, its link state into the box.
+fn mdio_instance() -> String {
+    format!(
+        r#"    // MDIO: Gigabit-only advertisement after the PHY reset, then link polls; link_up and
     // link_speed go into the box's status datagrams.
     wire mdio_out;
     wire mdio_oe;
-    {mdio_module} mdio (
+    {MDIO_MODULE} mdio (
         .clock(clk125),
         .reset(!released),
         .mdio_in(eth_mdio),
@@ -405,7 +441,25 @@ module {top} (
     );
     assign eth_mdio = mdio_oe ? mdio_out : 1'bz;
 
-    // RGMII receive: each pin delayed by {rx_delay_taps} taps of 25 ps, then sampled on both edges
+"#
+    )
+}
+
+/// RGMII receive: each pin through a `DELAYG` into an `IDDRX1F`, then the receive clock
+/// crossing into the box clock.
+fn rgmii_receive() -> String {
+    let rx_nibbles: String = (0..4)
+        .map(|i| {
+            format!(
+                "    DELAYG #(.DEL_MODE(\"SCLK_ALIGNED\"), .DEL_VALUE({RX_DELAY_TAPS})) \
+                 rx_data_delay_{i} (.A(eth_rx_data[{i}]), .Z(rx_data_delayed[{i}]));\n\
+                 \x20   IDDRX1F rx_data_{i} (.SCLK(eth_rx_clk), .RST(1'b0), \
+                 .D(rx_data_delayed[{i}]), .Q0(rx_data_rise[{i}]), .Q1(rx_data_fall[{i}]));\n"
+            )
+        })
+        .collect();
+    format!(
+        r#"    // RGMII receive: each pin delayed by {RX_DELAY_TAPS} taps of 25 ps, then sampled on both edges
     // of the PHY's receive clock: Q0 (rising edge) RXD[3:0] and rx_dv, Q1 (falling edge)
     // RXD[7:4] and rx_dv ^ rx_er.
     wire rx_ctl_delayed;
@@ -414,11 +468,11 @@ module {top} (
     wire rx_ctl_fall;
     wire [3:0] rx_data_rise;
     wire [3:0] rx_data_fall;
-    DELAYG #(.DEL_MODE("SCLK_ALIGNED"), .DEL_VALUE({rx_delay_taps})) rx_ctl_delay (.A(eth_rx_ctl), .Z(rx_ctl_delayed));
+    DELAYG #(.DEL_MODE("SCLK_ALIGNED"), .DEL_VALUE({RX_DELAY_TAPS})) rx_ctl_delay (.A(eth_rx_ctl), .Z(rx_ctl_delayed));
     IDDRX1F rx_ctl (.SCLK(eth_rx_clk), .RST(1'b0), .D(rx_ctl_delayed), .Q0(rx_ctl_rise), .Q1(rx_ctl_fall));
 {rx_nibbles}
     // The receive bytes into the box clock: the box's receive inputs (top instance above).
-    {rx_crossing_module} rx_crossing (
+    {RX_CROSSING_MODULE} rx_crossing (
         .rx_clock(eth_rx_clk),
         .rx_data({{rx_data_fall, rx_data_rise}}),
         .rx_dv(rx_ctl_rise),
@@ -430,11 +484,33 @@ module {top} (
         .gmii_rx_er(gmii_rx_er)
     );
 
-    // RGMII: D0 leaves with the rising edge of the forwarded clock, D1 with the falling edge.
+"#
+    )
+}
+
+/// RGMII transmit: the forwarded clock, TX_CTL and the data nibbles through `ODDRX1F`s.
+fn rgmii_transmit() -> String {
+    let nibbles: String = (0..4)
+        .map(|i| {
+            format!(
+                "    ODDRX1F tx_data_{i} (.SCLK(clk125), .RST(1'b0), .D0(gmii_txd[{i}]), \
+                 .D1(gmii_txd[{hi}]), .Q(eth_tx_data[{i}]));\n",
+                hi = i + 4
+            )
+        })
+        .collect();
+    format!(
+        r#"    // RGMII: D0 leaves with the rising edge of the forwarded clock, D1 with the falling edge.
     ODDRX1F tx_clk (.SCLK(clk125), .RST(1'b0), .D0(1'b1), .D1(1'b0), .Q(eth_tx_clk));
     ODDRX1F tx_ctl (.SCLK(clk125), .RST(1'b0), .D0(gmii_tx_en), .D1(gmii_tx_en ^ gmii_tx_er), .Q(eth_tx_ctl));
 {nibbles}
-    // LED: heartbeat, inverted for a moment at each frame start, sent or received.
+"#
+    )
+}
+
+/// The status LED: a heartbeat, inverted for a moment at each frame start.
+fn status_led() -> String {
+    r#"    // LED: heartbeat, inverted for a moment at each frame start, sent or received.
     reg [26:0] heartbeat = 0;
     reg [18:0] activity = 0;
     reg tx_en_before = 1'b0;
@@ -449,24 +525,8 @@ module {top} (
             activity <= activity - 1'b1;
     end
     assign led_n = !(released && (heartbeat[26] ^ (activity != 0)));
-endmodule
-"#,
-        name = board.name(),
-        part = board.part(),
-        top = board.top_module(),
-        clock_mhz = pll_mhz(oscillator_hz / pll.clki_div * pll.clkfb_div),
-        osc_mhz = pll_mhz(oscillator_hz),
-        vco_mhz = pll_mhz(pll.vco_hz(oscillator_hz)),
-        clki = pll.clki_div,
-        clkfb = pll.clkfb_div,
-        clkop = pll.clkop_div,
-        cphase = pll.clkop_cphase,
-        last_port = ports - 1,
-        reset_top = reset_bits - 1,
-        mdio_module = MDIO_MODULE,
-        rx_crossing_module = RX_CROSSING_MODULE,
-        rx_delay_taps = RX_DELAY_TAPS,
-    )
+"#
+    .to_string()
 }
 
 /// A frequency in MHz as the PLL attributes write it: "125", or "12.5".

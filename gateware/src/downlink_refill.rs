@@ -22,8 +22,12 @@
 //! sends a generated sync before its queued packets; it takes no queue slot. The new
 //! position is written four clocks after the visit (once the queue byte is known), so no
 //! per-port flip-flop holds any of this.
+//!
+//! What a visited port sends and its position after the byte are the
+//! [`DownlinkNextPosition`] block's, from the position word as read.
 
 use crate::block_ram::BlockRam;
+use crate::downlink_next_position::DownlinkNextPosition;
 use crate::downlink_packet_copy::QUEUE_ADDRESS_BITS;
 use crate::downlink_sync_bytes::DownlinkSyncBytes;
 use crate::hdl::*;
@@ -92,6 +96,8 @@ pub struct DownlinkRefill {
     /// packet on the line is a time sync (6) or a generated one (7), the epoch of its last
     /// generated sync (8).
     positions: BlockRam<9, 6>,
+    /// The visited port's byte source and next position, from its position word.
+    position_step: DownlinkNextPosition,
     sync_bytes: DownlinkSyncBytes,
     last_port: Constant<Bits<8>>,
     ring_start: Constant<Bits<RING_BITS>>,
@@ -107,30 +113,15 @@ pub struct DownlinkRefill {
     nonempty_2: DFF<Bit>,
     visit_3: DFF<Bit>,
     port_3: DFF<Bits<6>>,
-    sends_3: DFF<Bit>,
     visit_4: DFF<Bit>,
     port_4: DFF<Bits<6>>,
     sends_4: DFF<Bit>,
     /// The new position, written after the queue byte: byte 3 of a queued packet says
     /// whether it is a sync.
-    check_sync_3: DFF<Bit>,
-    position_next_3: DFF<Bits<9>>,
     check_sync_4: DFF<Bit>,
     position_next_4: DFF<Bits<9>>,
-    slot_freed: DFF<Bit>,
     clear: DFF<Bit>,
     clear_address: DFF<Bits<6>>,
-    position: Signal<Local, Bits<9>>,
-    index: Signal<Local, Bits<5>>,
-    last_byte: Signal<Local, Bit>,
-    pending: Signal<Local, Bit>,
-    generated: Signal<Local, Bit>,
-    from_queue: Signal<Local, Bit>,
-    next_index: Signal<Local, Bits<5>>,
-    next_epoch: Signal<Local, Bit>,
-    next_generated: Signal<Local, Bit>,
-    next_sync: Signal<Local, Bit>,
-    next_slot: Signal<Local, Bit>,
     sync_bit: Signal<Local, Bits<9>>,
 }
 
@@ -157,6 +148,7 @@ impl DownlinkRefill {
             byte_data: Default::default(),
             clearing: Default::default(),
             positions: Default::default(),
+            position_step: Default::default(),
             sync_bytes: DownlinkSyncBytes::new(framing),
             last_port: Constant::new((ports as u64 - 1).into()),
             ring_start: Constant::new(1.into()),
@@ -172,28 +164,13 @@ impl DownlinkRefill {
             nonempty_2: Default::default(),
             visit_3: Default::default(),
             port_3: Default::default(),
-            sends_3: Default::default(),
             visit_4: Default::default(),
             port_4: Default::default(),
             sends_4: Default::default(),
-            check_sync_3: Default::default(),
-            position_next_3: Default::default(),
             check_sync_4: Default::default(),
             position_next_4: Default::default(),
-            slot_freed: Default::default(),
             clear: Default::default(),
             clear_address: Default::default(),
-            position: Default::default(),
-            index: Default::default(),
-            last_byte: Default::default(),
-            pending: Default::default(),
-            generated: Default::default(),
-            from_queue: Default::default(),
-            next_index: Default::default(),
-            next_epoch: Default::default(),
-            next_generated: Default::default(),
-            next_sync: Default::default(),
-            next_slot: Default::default(),
             sync_bit: Default::default(),
         }
     }
@@ -216,15 +193,11 @@ impl Logic for DownlinkRefill {
             nonempty_2,
             visit_3,
             port_3,
-            sends_3,
             visit_4,
             port_4,
             sends_4,
-            check_sync_3,
-            position_next_3,
             check_sync_4,
             position_next_4,
-            slot_freed,
             clear,
             clear_address
         );
@@ -258,54 +231,26 @@ impl Logic for DownlinkRefill {
         self.nonempty_2.d.next = self.nonempty_1.q.val() & self.visit_1.q.val();
         // two clocks later: a generated sync (under way, or due at a packet boundary), else
         // the queue's byte
-        self.position.next = self.positions.read_data.val();
-        self.index.next = self.position.val().get_bits::<5>(0);
-        self.last_byte.next = self.index.val() == 19;
-        self.pending.next = !self.position.val().get_bit(7)
-            & (self.index.val() == 0)
-            & (self.position.val().get_bit(8) != self.epoch.val());
-        self.generated.next =
-            self.visit_2.q.val() & (self.position.val().get_bit(7) | self.pending.val());
-        self.from_queue.next = !self.generated.val() & self.nonempty_2.q.val();
+        self.position_step.clock.next = self.clock.val();
+        self.position_step.reset.next = self.reset.val();
+        self.position_step.visit.next = self.visit_2.q.val();
+        self.position_step.position.next = self.positions.read_data.val();
+        self.position_step.nonempty.next = self.nonempty_2.q.val();
+        self.position_step.epoch.next = self.epoch.val();
         self.queue_read_address.next = (bit_cast::<QUEUE_ADDRESS_BITS, 6>(self.port_2.q.val())
             << 6)
-            | bit_cast::<QUEUE_ADDRESS_BITS, 5>(self.index.val())
-            | (bit_cast::<QUEUE_ADDRESS_BITS, 1>(self.position.val().get_bit(5).into()) << 5);
-        self.sync_bytes.index.next = self.index.val();
-        self.sync_bytes.wanted.next = self.generated.val()
-            | (self.position.val().get_bit(6) & (self.index.val() >= 4) & (self.index.val() <= 11));
-        // the next position: epoch, generated, sync, slot, index
-        self.next_index.next = self.index.val() + 1;
-        self.next_epoch.next = self.position.val().get_bit(8);
-        self.next_generated.next = self.generated.val();
-        self.next_sync.next = self.position.val().get_bit(6);
-        self.next_slot.next = self.position.val().get_bit(5);
-        if self.pending.val() {
-            self.next_epoch.next = self.epoch.val();
-        }
-        if self.last_byte.val() {
-            // past the packet: not a sync; a queued packet's slot is free
-            self.next_index.next = 0.into();
-            self.next_generated.next = false;
-            self.next_sync.next = false;
-            self.next_slot.next = self.position.val().get_bit(5) ^ self.from_queue.val();
-        }
-        self.position_next_3.d.next = (bit_cast::<9, 1>(self.next_epoch.val().into()) << 8)
-            | (bit_cast::<9, 1>(self.next_generated.val().into()) << 7)
-            | (bit_cast::<9, 1>(self.next_sync.val().into()) << 6)
-            | (bit_cast::<9, 1>(self.next_slot.val().into()) << 5)
-            | bit_cast::<9, 5>(self.next_index.val());
-        self.check_sync_3.d.next = self.from_queue.val() & (self.index.val() == 3);
-        self.sends_3.d.next = self.generated.val() | self.from_queue.val();
-        self.slot_freed.d.next = self.from_queue.val() & self.last_byte.val();
-        self.freed.next = self.slot_freed.q.val();
+            | bit_cast::<QUEUE_ADDRESS_BITS, 5>(self.position_step.index.val())
+            | (bit_cast::<QUEUE_ADDRESS_BITS, 1>(self.position_step.slot.val().into()) << 5);
+        self.sync_bytes.index.next = self.position_step.index.val();
+        self.sync_bytes.wanted.next = self.position_step.sync_byte.val();
+        self.freed.next = self.position_step.freed.val();
         self.visit_3.d.next = self.visit_2.q.val();
         self.port_3.d.next = self.port_2.q.val();
         self.visit_4.d.next = self.visit_3.q.val();
         self.port_4.d.next = self.port_3.q.val();
-        self.sends_4.d.next = self.sends_3.q.val();
-        self.check_sync_4.d.next = self.check_sync_3.q.val();
-        self.position_next_4.d.next = self.position_next_3.q.val();
+        self.sends_4.d.next = self.position_step.sends.val();
+        self.check_sync_4.d.next = self.position_step.check_sync.val();
+        self.position_next_4.d.next = self.position_step.next_position.val();
         // two clocks after the address: the byte, or 0xFF and no start bit when none
         self.load.next = self.visit_4.q.val();
         self.load_nonempty.next = self.sends_4.q.val();
@@ -345,9 +290,7 @@ impl Logic for DownlinkRefill {
             self.nonempty_2.d.next = false;
             self.visit_3.d.next = false;
             self.visit_4.d.next = false;
-            self.sends_3.d.next = false;
             self.sends_4.d.next = false;
-            self.slot_freed.d.next = false;
             self.clear.d.next = true;
             self.clear_address.d.next = 0.into();
         }

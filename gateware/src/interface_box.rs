@@ -1,35 +1,34 @@
 //! InterfaceBox: the whole box for simulation, N UART pins in, GMII out.
 //!
-//! Per port only a bit-level [`UartRx`]; one [`CellDeframer`] engine serves every port in
-//! turn and writes their packets into the [`PacketStore`], which holds them in shared block
-//! RAM and merges them, one whole record at a time, into the [`RecordBatcher`]. The batcher's records datagrams and the [`StatusReporter`]'s status
-//! datagrams meet in the [`DatagramArbiter`], whose output the [`FrameTransmitter`] sends
-//! on GMII. The [`CounterFile`] counts every port's events. The ports stay in reset until
-//! the counters are cleared (about 4 us after reset), so no event goes uncounted.
+//! The [`CellUplink`] takes the ports' UART pins to whole, stamped records (per port a
+//! bit-level receiver, one deframing engine for every port, the packet store) and counts
+//! every port's events; the [`RecordBatcher`] batches the records. The batcher's records
+//! datagrams and the [`StatusReporter`]'s status datagrams meet in the
+//! [`DatagramArbiter`], whose output the [`FrameTransmitter`] sends on GMII. The ports stay
+//! in reset until the counters are cleared (about 4 us after reset), so no event goes
+//! uncounted.
 //!
 //! Timestamps: a record's tick is the tick of the first clock edge that sampled its
 //! packet's first start bit low at the pin (the true falling edge lies in the tick before).
 
 use crate::box_counter_file::BoxCounterFile;
-use crate::cell_deframer::{scan_period, CellDeframer, MAX_IDLE_GAP_BITS};
+use crate::cell_deframer::{scan_period, MAX_IDLE_GAP_BITS};
 use crate::cell_downlink::{frame_bits, pin_scan_clocks, CellDownlink, REFILL_LATENCY};
+use crate::cell_uplink::CellUplink;
 use crate::command_unit::{CommandUnit, CommandUnitConfig};
-use crate::counter_file::{counter_file, CounterFile};
 use crate::datagram_arbiter::DatagramArbiter;
 use crate::frame_parser::FrameParser;
 use crate::frame_transmitter::FrameTransmitter;
-use crate::geometry::{group_onehot, GROUP_PORTS, MAX_PORTS};
+use crate::geometry::MAX_PORTS;
 use crate::hdl::*;
 use crate::mac_receiver::MacReceiver;
-use crate::packet_store::PacketStore;
 use crate::receive_rules::{ACTION_ARP, ACTION_COMMAND, ACTION_ECHO, ACTION_NONE};
 use crate::record_batcher::RecordBatcher;
-use crate::replica_register::ReplicaRegister;
 use crate::reply_builder::ReplyBuilder;
 use crate::status_reporter::StatusReporter;
 use crate::stream::{ByteStreamSource, DatagramSource};
 use crate::timestamp::TimestampCounter;
-use crate::uart_rx::{rate_supported, shift_hold_clocks, UartRx, STAMP_BITS};
+use crate::uart_rx::{rate_supported, STAMP_BITS};
 const _: () = assert!(STAMP_BITS == 7);
 use skinbox_protocol::cell_command::CellCommandFraming;
 use skinbox_protocol::{CellFraming, LinkConfig};
@@ -285,10 +284,7 @@ pub struct InterfaceBox {
     /// GMII transmit error.
     pub gmii_tx_er: Signal<Out, Bit>,
     timestamp: TimestampCounter,
-    uarts: Vec<UartRx>,
-    deframer: CellDeframer,
-    store: PacketStore,
-    counters: CounterFile,
+    uplink: CellUplink,
     status: StatusReporter,
     batcher: RecordBatcher,
     arbiter: DatagramArbiter,
@@ -305,15 +301,6 @@ pub struct InterfaceBox {
     action_echo: Constant<Bits<2>>,
     action_command: Constant<Bits<2>>,
     core_reset: DFF<Bit>,
-    /// The ports' reset before its copies.
-    port_reset: Signal<Local, Bit>,
-    /// The ports' reset, one register per group of [`GROUP_PORTS`] ports (one net across
-    /// the chip to every port's flip-flops would be the slowest path at 64 ports).
-    group_resets: Vec<ReplicaRegister>,
-    /// The ports' reset for the packet store's per-port state.
-    store_port_reset: ReplicaRegister,
-    /// Port i's group, one-hot.
-    port_group: Vec<Constant<Bits<8>>>,
 }
 
 impl InterfaceBox {
@@ -335,26 +322,13 @@ impl InterfaceBox {
             gmii_tx_en: Default::default(),
             gmii_tx_er: Default::default(),
             timestamp: Default::default(),
-            uarts: (0..n)
-                .map(|_| {
-                    // a byte waits in the receiver's shift register for the engine's
-                    // visit, or in a hold register when visits are further apart
-                    if scan_period(n) as u64 > shift_hold_clocks(config.clock_hz, config.baud) {
-                        UartRx::with_hold_register(config.clock_hz, config.baud)
-                    } else {
-                        UartRx::new(config.clock_hz, config.baud)
-                    }
-                })
-                .collect(),
-            deframer: CellDeframer::new(
+            uplink: CellUplink::new(
                 n,
                 config.clock_hz,
                 config.baud,
                 config.framing,
                 config.idle_gap_bits,
             ),
-            store: PacketStore::new(n),
-            counters: counter_file(),
             status: StatusReporter::new(n, config.boot_seed),
             batcher: RecordBatcher::new(),
             arbiter: DatagramArbiter::new(DATAGRAM_SOURCES),
@@ -382,12 +356,6 @@ impl InterfaceBox {
             action_echo: Constant::new(u64::from(ACTION_ECHO).into()),
             action_command: Constant::new(u64::from(ACTION_COMMAND).into()),
             core_reset: Default::default(),
-            port_reset: Default::default(),
-            group_resets: (0..n.div_ceil(GROUP_PORTS))
-                .map(|_| Default::default())
-                .collect(),
-            store_port_reset: Default::default(),
-            port_group: (0..n).map(group_onehot).collect(),
         })
     }
 
@@ -406,51 +374,16 @@ impl Logic for InterfaceBox {
         // the reset pin drives one register, which drives the blocks: no combinational
         // path from a pin into the core
         self.core_reset.d.next = self.reset.val();
-        self.port_reset.next = self.core_reset.q.val() | !self.counters.ready.val();
-        for g in 0..self.group_resets.len() {
-            self.group_resets[g].clock.next = self.clock.val();
-            self.group_resets[g].d.next = self.port_reset.val();
-        }
-        self.store_port_reset.clock.next = self.clock.val();
-        self.store_port_reset.d.next = self.port_reset.val();
         self.timestamp.clock.next = self.clock.val();
         self.timestamp.reset.next = self.core_reset.q.val();
-        for i in 0..self.uarts.len() {
-            // pin -> UART, held bytes -> the deframing engine
-            self.uarts[i].clock.next = self.clock.val();
-            self.uarts[i].reset.next = false;
-            for g in 0..self.group_resets.len() {
-                if self.port_group[i].val().get_bit(g) {
-                    self.uarts[i].reset.next = self.group_resets[g].q.val();
-                }
-            }
-            self.uarts[i].rx.next = self.uart_rx[i].val();
-            self.uarts[i].tick_low.next = self.timestamp.tick.val().get_bits::<7>(0);
-            self.uarts[i].visit.next = self.deframer.visit[i].val();
-            self.deframer.held[i].next = self.uarts[i].held.val();
-            self.deframer.data[i].next = self.uarts[i].data.val();
-            self.deframer.framing_error[i].next = self.uarts[i].framing_error.val();
-            self.deframer.stamp[i].next = self.uarts[i].stamp.val();
+        // pins -> UARTs -> the deframing engine -> the packet store, events counted
+        self.uplink.clock.next = self.clock.val();
+        self.uplink.reset.next = self.core_reset.q.val();
+        self.uplink.tick.next = self.timestamp.tick.val();
+        for i in 0..self.uart_rx.len() {
+            self.uplink.uart_rx[i].next = self.uart_rx[i].val();
         }
-        self.deframer.clock.next = self.clock.val();
-        self.deframer.reset.next = self.core_reset.q.val();
-        self.deframer.port_reset.next = self.store_port_reset.q.val();
-        self.deframer.tick.next = self.timestamp.tick.val();
-        self.deframer.full_ports.next = self.store.full_ports.val();
-        self.store.write.next = self.deframer.write.val();
-        self.store.write_port.next = self.deframer.write_port.val();
-        self.store.write_slot.next = self.deframer.write_slot.val();
-        self.store.write_word.next = self.deframer.write_word.val();
-        self.store.write_data.next = self.deframer.write_data.val();
-        self.store.commit_ports.next = self.deframer.commit_ports.val();
-        self.counters.increment.next = self.deframer.increment.val();
-        self.counters.increment_address.next = self.deframer.increment_address.val();
-        self.store.clock.next = self.clock.val();
-        self.store.reset.next = self.core_reset.q.val();
-        self.store.port_reset.next = self.store_port_reset.q.val();
-        self.counters.clock.next = self.clock.val();
-        self.counters.reset.next = self.core_reset.q.val();
-        self.counters.read_address[0].next = self.status.counter_address.val();
+        self.uplink.counter_address.next = self.status.counter_address.val();
 
         // store -> batcher: the store's output FIFO holds every beat in flight, so the
         // batcher's ready reaches its FIFO registers only
@@ -458,7 +391,7 @@ impl Logic for InterfaceBox {
         self.batcher.reset.next = self.core_reset.q.val();
         self.batcher.tick.next = self.timestamp.tick.val();
         self.batcher.flush_timeout_ticks.next = self.commands.flush_timeout_ticks.val();
-        ByteStreamSource::join(&mut self.store.records, &mut self.batcher.records);
+        ByteStreamSource::join(&mut self.uplink.records, &mut self.batcher.records);
 
         self.status.clock.next = self.clock.val();
         self.status.reset.next = self.core_reset.q.val();
@@ -466,8 +399,8 @@ impl Logic for InterfaceBox {
         self.status.time_syncs.next = self.downlink.syncs_on.val();
         self.status.datagrams_sent.next = self.batcher.datagrams_sent.val();
         self.status.records_sent.next = self.batcher.records_sent.val();
-        self.status.counters_ready.next = self.counters.ready.val();
-        self.status.counter_data.next = self.counters.read_data[0].val();
+        self.status.counters_ready.next = self.uplink.counters_ready.val();
+        self.status.counter_data.next = self.uplink.counter_data.val();
         self.status.link_up.next = self.link_up.val();
         self.status.link_speed.next = self.link_speed.val();
         self.status.status_period_ticks.next = self.commands.status_period_ticks.val();

@@ -15,6 +15,8 @@
 //!    [`status_reporter::StatusReporter`]'s datagrams, whole datagrams round robin;
 //! 6. [`frame_transmitter::FrameTransmitter`]: sends each as an Ethernet frame on GMII.
 //!
+//! [`cell_uplink::CellUplink`] holds 1 to 3 and the ports' counters.
+//!
 //! [`timestamp::TimestampCounter`] gives every block the box time. Blocks exchange packets
 //! over the interfaces of [`stream`]: bytes, and datagrams (a descriptor, then bytes).
 //!
@@ -37,6 +39,7 @@ pub mod box_configuration;
 pub mod box_counter_file;
 pub mod cell_deframer;
 pub mod cell_downlink;
+pub mod cell_uplink;
 pub mod command_arguments;
 pub mod command_checks;
 pub mod command_decoder;
@@ -52,6 +55,7 @@ pub mod decision_outputs;
 pub mod deframer_decision;
 pub mod deframer_scan;
 pub mod downlink_frame_timer;
+pub mod downlink_next_position;
 pub mod downlink_packet_copy;
 pub mod downlink_pin_scan;
 pub mod downlink_refill;
@@ -90,8 +94,12 @@ pub mod reply_field_bytes;
 pub mod reply_sequencer;
 pub mod reply_sizing;
 pub mod reply_stages;
+pub mod report_timer;
 pub mod rx_clock_crossing;
+pub mod status_page_writer;
+pub mod status_pages;
 pub mod status_reporter;
+pub mod status_words;
 pub mod stream;
 pub mod stream_fifo;
 pub mod sync_generator;

@@ -11,6 +11,12 @@
 //! ports or waits for the next period. Building a page of 32 ports takes 1,960 clocks
 //! (seven per word: the counter memory's output is registered twice before it is summed).
 //!
+//! Its parts are blocks of their own: when a report is due ([`ReportTimer`]), the ports of
+//! the page ([`StatusPages`]: the ports left are a register beside the first port, so the
+//! page's port count is chosen from registers only), the value of each word
+//! ([`StatusWords`]) and the page's write into the memory with its sum
+//! ([`StatusPageWriter`]); the reporter's `ReportState` sequences them.
+//!
 //! The boot id is a seed parameter plus the number of resets since configuration, so
 //! each reset is visible; a power cycle restarts the count (the host also sees the
 //! sequence number restart at 0).
@@ -18,26 +24,21 @@
 use crate::block_ram::BlockRam;
 use crate::body_reader::BodyReader;
 use crate::hdl::*;
+use crate::report_timer::ReportTimer;
+use crate::status_page_writer::StatusPageWriter;
+use crate::status_pages::StatusPages;
+use crate::status_words::StatusWords;
 use crate::stream::DatagramSource;
-use skinbox_protocol::box_counters::BOX_COUNTERS_LEN;
 use skinbox_protocol::datagram::{DatagramKind, FLAG_BOX_COUNTERS, FLAG_TIME_SYNCS};
 
-/// Words of a page before the port counters: boot id, datagrams, records, first port.
-pub const HEADER_WORDS: usize = 4;
-/// Words of the box counter block after the port counters.
-pub const BOX_COUNTER_WORDS: usize = BOX_COUNTERS_LEN / 4;
-
-/// Clocks per 32-bit word of the status body: the address, the memory read, its register,
-/// the word into the shift register, four bytes out.
-pub const CLOCKS_PER_WORD: u64 = 7;
+pub use crate::status_page_writer::CLOCKS_PER_WORD;
+pub use crate::status_pages::PORTS_PER_STATUS;
+pub use crate::status_words::{BOX_COUNTER_WORDS, HEADER_WORDS};
 
 /// Clock of a word (from its first) in which the batcher's counts are taken (into a register
 /// the word's value is loaded from a clock later); counters come from the memory, read at
 /// the address of the word's first clock.
 pub const WORD_VALUE_CLOCK: u64 = 1;
-
-/// Ports per status datagram.
-pub const PORTS_PER_STATUS: usize = 32;
 
 /// Periodic status datagram builder.
 #[derive(LogicBlock)]
@@ -79,54 +80,25 @@ pub struct StatusReporter {
     pub datagrams: DatagramSource,
     memory: BlockRam<8, 11>,
     reader: BodyReader,
+    report_timer: ReportTimer,
+    pages: StatusPages,
+    words: StatusWords,
+    writer: StatusPageWriter,
     status_kind: Constant<Bits<8>>,
     box_counters_flag: Constant<Bits<8>>,
     time_syncs_flag: Constant<Bits<8>>,
-    // the page's first counter word, and its last word less 8 per port
-    first_counter_word: Constant<Bits<9>>,
-    last_word_over_ports: Constant<Bits<9>>,
-    // the box counter block's first word; the word is in the block, at its first word
-    block_start: DFF<Bits<9>>,
-    in_block: DFF<Bit>,
-    at_block: DFF<Bit>,
-    // the box counter of the block's next counter word, stepped with `word` in the block
-    box_counter_word: DFF<Bits<5>>,
-    word_from_box_counters: DFF<Bit>,
-    ports: Constant<Bits<7>>,
-    ports_per_page: Constant<Bits<7>>,
     boot_seed: Constant<Bits<32>>,
-    timer: DFF<Bits<32>>,
-    // timer == 0, kept in a register
-    timer_zero: DFF<Bit>,
-    due: DFF<Bit>,
     state: DFF<ReportState>,
     // state == Request, kept in a register (the descriptor's `valid`)
     requesting: DFF<Bit>,
-    first_port: DFF<Bits<7>>,
-    page_ports: DFF<Bits<7>>,
     word: DFF<Bits<9>>,
-    // `word` is the page's last (registered: a word holds for seven clocks)
-    last_word: DFF<Bit>,
     // the counter of word `word` (from word 4 on): first_port * 8 + word - 4, stepped with
     // `word` (no adder in front of the memory's address)
     counter_word: DFF<Bits<9>>,
-    phase: DFF<Bits<3>>,
-    shift: DFF<Bits<32>>,
-    offset: DFF<Bits<11>>,
-    sum: DFF<Bits<32>>,
     tick_held: DFF<Bits<64>>,
     syncs_held: DFF<Bit>,
     resets: DFF<Bits<32>>,
     reset_seen: DFF<Bit>,
-    // the value of word 0 to 3 for the current word, and whether it is a counter instead
-    // (both registered: the shift register loads from registers only)
-    header_word: DFF<Bits<32>>,
-    word_from_memory: DFF<Bit>,
-    remaining: Signal<Local, Bits<7>>,
-    word_value: Signal<Local, Bits<32>>,
-    tx_byte: Signal<Local, Bits<8>>,
-    // a byte of the page is written (Build, phases 3 to 6), registered a clock ahead
-    write: DFF<Bit>,
 }
 
 /// What the reporter is doing.
@@ -171,46 +143,23 @@ impl StatusReporter {
             datagrams: Default::default(),
             memory: Default::default(),
             reader: Default::default(),
+            report_timer: Default::default(),
+            pages: StatusPages::new(ports),
+            words: Default::default(),
+            writer: Default::default(),
             status_kind: Constant::new((DatagramKind::Status as u64).into()),
             box_counters_flag: Constant::new(u64::from(FLAG_BOX_COUNTERS).into()),
             time_syncs_flag: Constant::new(u64::from(FLAG_TIME_SYNCS).into()),
-            first_counter_word: Constant::new((HEADER_WORDS as u64).into()),
-            last_word_over_ports: Constant::new(
-                ((HEADER_WORDS + BOX_COUNTER_WORDS - 1) as u64).into(),
-            ),
-            block_start: Default::default(),
-            in_block: Default::default(),
-            at_block: Default::default(),
-            box_counter_word: Default::default(),
-            word_from_box_counters: Default::default(),
-            ports: Constant::new((ports as u64).into()),
-            ports_per_page: Constant::new((PORTS_PER_STATUS as u64).into()),
             boot_seed: Constant::new(u64::from(boot_seed).into()),
-            timer: Default::default(),
-            timer_zero: Default::default(),
-            due: Default::default(),
             state: Default::default(),
             requesting: Default::default(),
-            first_port: Default::default(),
-            page_ports: Default::default(),
             word: Default::default(),
-            last_word: Default::default(),
             counter_word: Default::default(),
-            phase: Default::default(),
-            shift: Default::default(),
-            offset: Default::default(),
-            sum: Default::default(),
             tick_held: Default::default(),
             syncs_held: Default::default(),
             time_syncs: Default::default(),
             resets: Default::default(),
             reset_seen: Default::default(),
-            header_word: Default::default(),
-            word_from_memory: Default::default(),
-            remaining: Default::default(),
-            word_value: Default::default(),
-            tx_byte: Default::default(),
-            write: Default::default(),
         }
     }
 }
@@ -224,32 +173,14 @@ impl Logic for StatusReporter {
         dff_setup!(
             self,
             clock,
-            timer,
-            write,
-            timer_zero,
-            due,
             state,
             requesting,
-            first_port,
-            page_ports,
             word,
-            last_word,
             counter_word,
-            phase,
-            shift,
-            offset,
-            sum,
             tick_held,
             syncs_held,
             resets,
-            reset_seen,
-            header_word,
-            word_from_memory,
-            block_start,
-            in_block,
-            at_block,
-            box_counter_word,
-            word_from_box_counters
+            reset_seen
         );
         self.memory.clock.next = self.clock.val();
         self.reader.clock.next = self.clock.val();
@@ -260,7 +191,7 @@ impl Logic for StatusReporter {
         if self.requesting.q.val() & self.datagrams.ready.val() {
             self.requesting.d.next = false;
         }
-        self.reader.length.next = self.offset.q.val();
+        self.reader.length.next = self.writer.length.val();
         self.datagrams.body.valid.next = self.reader.body.valid.val();
         self.datagrams.body.data.next = self.reader.body.data.val();
         self.datagrams.body.last.next = self.reader.body.last.val();
@@ -268,105 +199,64 @@ impl Logic for StatusReporter {
         self.reader.body.ready.next = self.datagrams.body.ready.val();
 
         // A report is due every period, counted from report start to report start; one
-        // that comes due while the previous is still going starts right after it.
-        if self.timer_zero.q.val() {
-            self.timer.d.next = self.status_period_ticks.val() - 1;
-            self.timer_zero.d.next = self.status_period_ticks.val() == 1;
-            self.due.d.next = true;
-        } else {
-            self.timer.d.next = self.timer.q.val() - 1;
-            self.timer_zero.d.next = self.timer.q.val() == 1;
-        }
-        // a new period counts from its change; a report asked for now is due now
-        if self.restart_period.val() {
-            self.timer.d.next = self.status_period_ticks.val() - 1;
-            self.timer_zero.d.next = self.status_period_ticks.val() == 1;
-        }
+        // that comes due while the previous is still going starts right after it; a new
+        // period counts from its change; a report asked for now is due now.
+        self.report_timer.clock.next = self.clock.val();
+        self.report_timer.reset.next = self.reset.val();
+        self.report_timer.period_ticks.next = self.status_period_ticks.val();
+        self.report_timer.restart.next = self.restart_period.val();
+        self.report_timer.now.next = self.report_now.val();
+        self.report_timer.taken.next = false;
 
-        self.remaining.next = self.ports.val() - self.first_port.q.val();
-        // (in Build the phase steps from 2..=5 to 3..=6 and the state stays)
-        self.write.d.next = (self.state.q.val() == ReportState::Build)
-            & (self.phase.q.val().get_bit(2) != self.phase.q.val().get_bit(1));
+        self.pages.clock.next = self.clock.val();
+        self.pages.rewind.next = false;
+        self.pages.load.next = self.state.q.val() == ReportState::Start;
+        self.pages.advance.next = false;
         self.counter_address.next = self.counter_word.q.val();
         // the counter memory answers two clocks after the address (its output register)
-        // (by the word's low two bits alone: from word 4 on the counter is taken instead)
-        self.header_word.d.next = bit_cast::<32, 7>(self.first_port.q.val()) << 24;
-        if self.word.q.val().get_bits::<2>(0) == 0 {
-            self.header_word.d.next = self.boot_seed.val() + self.resets.q.val();
-        } else if self.word.q.val().get_bits::<2>(0) == 1 {
-            self.header_word.d.next = self.datagrams_sent.val();
-        } else if self.word.q.val().get_bits::<2>(0) == 2 {
-            self.header_word.d.next = self.records_sent.val();
-        }
-        // the box counter block after the port blocks: the link word, then the receive
-        // side's counters (from the box counter file)
-        self.block_start.d.next =
-            (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + self.first_counter_word.val();
-        // (the word's tests against the block are registered: a word holds for seven
-        // clocks and its value is taken from its second on)
-        self.in_block.d.next = self.word.q.val() >= self.block_start.q.val();
-        self.at_block.d.next = self.word.q.val() == self.block_start.q.val();
-        if self.in_block.q.val() {
-            self.header_word.d.next = 0.into();
-            if self.at_block.q.val() {
-                self.header_word.d.next = (bit_cast::<32, 1>(self.link_up.val().into()) << 24)
-                    | (bit_cast::<32, 2>(self.link_speed.val()) << 16);
-            }
-        }
-        self.word_from_memory.d.next =
-            (self.word.q.val() >= self.first_counter_word.val()) & !self.in_block.q.val();
-        // the block's counters come from the box counter file, read like the port counters
-        self.word_from_box_counters.d.next = self.in_block.q.val() & !self.at_block.q.val();
-        self.box_counter_address.next = self.box_counter_word.q.val();
-        self.last_word.d.next = self.word.q.val()
-            == (bit_cast::<9, 7>(self.page_ports.q.val()) << 3) + self.last_word_over_ports.val();
-        self.word_value.next = self.header_word.q.val();
-        if self.word_from_memory.q.val() {
-            self.word_value.next = self.counter_data.val();
-        }
-        if self.word_from_box_counters.q.val() {
-            self.word_value.next = self.box_counter_data.val();
-        }
-        self.tx_byte.next = self.shift.q.val().get_bits::<8>(24);
+        self.words.clock.next = self.clock.val();
+        self.words.start.next = self.state.q.val() == ReportState::Start;
+        self.words.next_word.next = self.writer.word_done.val();
+        self.words.word.next = self.word.q.val();
+        self.words.first_port.next = self.pages.first_port.val();
+        self.words.page_ports.next = self.pages.page_ports.val();
+        self.words.boot_id.next = self.boot_seed.val() + self.resets.q.val();
+        self.words.datagrams_sent.next = self.datagrams_sent.val();
+        self.words.records_sent.next = self.records_sent.val();
+        self.words.counter_data.next = self.counter_data.val();
+        self.words.link_up.next = self.link_up.val();
+        self.words.link_speed.next = self.link_speed.val();
+        self.box_counter_address.next = self.words.box_counter_address.val();
+        self.words.box_counter_data.next = self.box_counter_data.val();
+        self.writer.clock.next = self.clock.val();
+        self.writer.reset.next = self.reset.val();
+        self.writer.start.next = self.state.q.val() == ReportState::Start;
+        self.writer.build.next = self.state.q.val() == ReportState::Build;
+        self.writer.value.next = self.words.value.val();
+        self.memory.write_enable.next = self.writer.memory_write.val();
+        self.memory.write_address.next = self.writer.memory_address.val();
+        self.memory.write_data.next = self.writer.memory_data.val();
 
         match self.state.q.val() {
             ReportState::Wait => {
-                if self.due.q.val() & self.counters_ready.val() {
-                    self.due.d.next = false;
-                    self.first_port.d.next = 0.into();
+                if self.report_timer.due.val() & self.counters_ready.val() {
+                    self.report_timer.taken.next = true;
+                    self.pages.rewind.next = true;
                     self.state.d.next = ReportState::Start;
                 }
             }
             ReportState::Start => {
                 self.state.d.next = ReportState::Build;
                 self.word.d.next = 0.into();
-                self.counter_word.d.next = (bit_cast::<9, 7>(self.first_port.q.val()) << 3) - 4;
-                self.box_counter_word.d.next = 0.into();
-                self.phase.d.next = 0.into();
-                self.offset.d.next = 0.into();
-                self.sum.d.next = 0.into();
+                self.counter_word.d.next = (bit_cast::<9, 7>(self.pages.first_port.val()) << 3) - 4;
                 self.tick_held.d.next = self.tick.val();
                 self.syncs_held.d.next = self.time_syncs.val();
-                self.page_ports.d.next = self.ports_per_page.val();
-                if self.remaining.val() < self.ports_per_page.val() {
-                    self.page_ports.d.next = self.remaining.val();
-                }
             }
             ReportState::Build => {
-                self.phase.d.next = self.phase.q.val() + 1;
-                if self.phase.q.val() == 2 {
-                    self.shift.d.next = self.word_value.val();
-                } else if self.phase.q.val() >= 3 {
-                    self.shift.d.next = self.shift.q.val() << 8;
-                }
-                if self.phase.q.val() == 6 {
-                    self.phase.d.next = 0.into();
+                if self.writer.word_done.val() {
                     self.word.d.next = self.word.q.val() + 1;
                     self.counter_word.d.next = self.counter_word.q.val() + 1;
-                    if self.in_block.q.val() & !self.at_block.q.val() {
-                        self.box_counter_word.d.next = self.box_counter_word.q.val() + 1;
-                    }
-                    if self.last_word.q.val() {
+                    if self.words.last_word.val() {
                         self.state.d.next = ReportState::Request;
                         self.requesting.d.next = true;
                     }
@@ -382,31 +272,13 @@ impl Logic for StatusReporter {
             ReportState::Sending => {
                 // the page was sent: next ports, or wait for the next period
                 if !self.reader.busy.val() {
-                    self.first_port.d.next = self.first_port.q.val() + self.page_ports.q.val();
-                    if self.first_port.q.val() + self.page_ports.q.val() == self.ports.val() {
+                    self.pages.advance.next = true;
+                    if self.pages.last_page.val() {
                         self.state.d.next = ReportState::Wait;
                     } else {
                         self.state.d.next = ReportState::Start;
                     }
                 }
-            }
-        }
-
-        // (after the state machine: a report asked for in the clock Wait takes the last due
-        // one is due again)
-        if self.report_now.val() {
-            self.due.d.next = true;
-        }
-
-        self.memory.write_enable.next = self.write.q.val();
-        self.memory.write_address.next = self.offset.q.val();
-        self.memory.write_data.next = self.tx_byte.val();
-        if self.write.q.val() {
-            self.offset.d.next = self.offset.q.val() + 1;
-            if self.offset.q.val().get_bit(0) {
-                self.sum.d.next = self.sum.q.val() + bit_cast::<32, 8>(self.tx_byte.val());
-            } else {
-                self.sum.d.next = self.sum.q.val() + (bit_cast::<32, 8>(self.tx_byte.val()) << 8);
             }
         }
 
@@ -416,19 +288,15 @@ impl Logic for StatusReporter {
         if self.syncs_held.q.val() {
             self.datagrams.flags.next = self.box_counters_flag.val() | self.time_syncs_flag.val();
         }
-        self.datagrams.entry_count.next = bit_cast::<16, 7>(self.page_ports.q.val());
+        self.datagrams.entry_count.next = bit_cast::<16, 7>(self.pages.page_ports.val());
         self.datagrams.base_tick.next = self.tick_held.q.val();
-        self.datagrams.body_len.next = self.offset.q.val();
-        self.datagrams.body_sum.next = self.sum.q.val();
+        self.datagrams.body_len.next = self.writer.length.val();
+        self.datagrams.body_sum.next = self.writer.body_sum.val();
 
         self.reset_seen.d.next = self.reset.val();
         if self.reset.val() {
             self.state.d.next = ReportState::Wait;
             self.requesting.d.next = false;
-            self.write.d.next = false;
-            self.timer.d.next = 0.into();
-            self.timer_zero.d.next = true;
-            self.due.d.next = false;
             if !self.reset_seen.q.val() {
                 self.resets.d.next = self.resets.q.val() + 1;
             }
@@ -644,5 +512,22 @@ mod tests {
                 "report ticks {ticks:?}, expected about {expected:?}"
             );
         }
+    }
+
+    /// The reporter's Verilog, with its blocks, passes Verilator's lint with the box's
+    /// waivers.
+    #[test]
+    fn verilog_lints_clean() {
+        let mut uut = StatusReporter::new(40, 0x1000);
+        uut.connect_all();
+        let text = generate_verilog(&uut);
+        let dir = std::env::temp_dir().join(format!(
+            "skinbox-lint-status-reporter-{}",
+            std::process::id()
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        let report = crate::verilog::lint(&text, &dir).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::remove_dir_all(&dir).ok();
+        assert!(report.clean, "{}", report.output);
     }
 }
