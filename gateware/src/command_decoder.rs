@@ -22,9 +22,10 @@ use crate::field_capture::FieldCapture;
 use crate::field_match::FieldMatch;
 use crate::hdl::*;
 use crate::stream::FrameBeats;
+use skinbox_protocol::command::ARGUMENTS_AT;
 use skinbox_protocol::command::{self, field, HEADER_LEN, KIND_COMMAND};
 use skinbox_protocol::datagram::{MAGIC, VERSION};
-use skinbox_protocol::link::{ARGUMENTS_AT, IPV4_AT, PAYLOAD_AT, UDP_HEADER_LEN};
+use skinbox_protocol::link::{IPV4_AT, PAYLOAD_AT, UDP_HEADER_LEN};
 use skinbox_protocol::wire::ipv4;
 use skinbox_protocol::Field;
 

@@ -9,7 +9,8 @@
 //! flip-flops and two 16-bit compares.
 
 use crate::hdl::*;
-use skinbox_protocol::link::{ARGUMENTS_AT, IPV4_AT, PAYLOAD_AT};
+use skinbox_protocol::command::ARGUMENTS_AT;
+use skinbox_protocol::link::{IPV4_AT, PAYLOAD_AT};
 
 /// Clocks from the registered last beat to `check`.
 pub const CHECK_LATENCY: u64 = 2;

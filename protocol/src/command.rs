@@ -105,6 +105,10 @@ pub mod ticks_field {
 
 /// Length of the command and acknowledgement headers.
 pub const HEADER_LEN: usize = field::RESERVED.end;
+
+/// Frame position of a command's arguments (an acknowledgement's body): after the
+/// Ethernet, IPv4 and UDP headers and the command header.
+pub const ARGUMENTS_AT: usize = crate::link::PAYLOAD_AT + HEADER_LEN;
 /// Length of the acknowledgement body before its reply.
 pub const ACK_FIXED_LEN: usize = ack_field::SEND_TICK.end;
 /// Length of a stream-to destination.
@@ -927,6 +931,12 @@ impl fmt::Display for AckRepr {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_arguments_follow_the_three_headers_and_the_command_header() {
+        // Ethernet 14, IPv4 20, UDP 8, command header 24
+        assert_eq!((HEADER_LEN, ARGUMENTS_AT), (24, 66));
+    }
 
     /// A set-flush-timeout command written byte by byte from the table above.
     const SET_FLUSH: [u8; 28] = [

@@ -91,8 +91,6 @@ pub const ICMP_AT: usize = IPV4_AT + IPV4_HEADER_LEN;
 pub const UDP_AT: usize = IPV4_AT + IPV4_HEADER_LEN;
 /// Frame position of the UDP payload: the box datagram, command or acknowledgement header.
 pub const PAYLOAD_AT: usize = UDP_AT + UDP_HEADER_LEN;
-/// Frame position of a command's arguments (an acknowledgement's body).
-pub const ARGUMENTS_AT: usize = PAYLOAD_AT + crate::command::HEADER_LEN;
 /// Preamble and start-of-frame delimiter on the wire.
 pub const PREAMBLE_LEN: usize = 8;
 /// Frame check sequence length.
@@ -143,7 +141,7 @@ mod tests {
     #[test]
     fn frame_positions() {
         assert_eq!((ARP_AT, IPV4_AT, ICMP_AT, UDP_AT), (14, 14, 34, 34));
-        assert_eq!((PAYLOAD_AT, ARGUMENTS_AT), (42, 66));
+        assert_eq!(PAYLOAD_AT, 42);
     }
 
     #[test]
