@@ -7,7 +7,7 @@
 //! is seen); the count starts at 0 in the clock after it, `origin`; the epoch toggles at
 //! `origin` unless the period is 0 (a box out of reset, or given a new period, sends a
 //! sync at once) and then at the clocks `origin + n * period` (`n` >= 1). Period 0: off
-//! (no toggle). Cost: a 32-bit count and its compare, two flip-flops.
+//! (no toggle). Cost: a 32-bit down count and its zero test, two flip-flops.
 
 use crate::hdl::*;
 
@@ -26,7 +26,9 @@ pub struct SyncGenerator {
     pub epoch: Signal<Out, Bit>,
     /// The period is not 0: the box sends syncs.
     pub on: Signal<Out, Bit>,
-    elapsed: DFF<Bits<32>>,
+    /// Clocks left in the period after this one (loaded with `period - 1`; the period
+    /// only changes with a restart): its zero test is the wrap, no adder before it.
+    remaining: DFF<Bits<32>>,
     epoch_bit: DFF<Bit>,
     // the first clock after reset
     fresh: DFF<Bit>,
@@ -36,22 +38,20 @@ pub struct SyncGenerator {
 impl Logic for SyncGenerator {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, elapsed, epoch_bit, fresh);
+        dff_setup!(self, clock, remaining, epoch_bit, fresh);
         self.running.next = self.period.val() != 0;
-        self.elapsed.d.next = self.elapsed.q.val() + 1;
-        if !self.running.val() {
-            self.elapsed.d.next = 0.into();
-        } else if (self.elapsed.q.val() + 1) == self.period.val() {
-            self.elapsed.d.next = 0.into();
-            self.epoch_bit.d.next = !self.epoch_bit.q.val();
+        self.remaining.d.next = self.remaining.q.val() - 1;
+        if self.remaining.q.val() == 0 {
+            self.remaining.d.next = self.period.val() - 1;
+            self.epoch_bit.d.next = self.epoch_bit.q.val() ^ self.running.val();
         }
         self.fresh.d.next = false;
         if self.restart.val() | self.fresh.q.val() {
-            self.elapsed.d.next = 0.into();
+            self.remaining.d.next = self.period.val() - 1;
             self.epoch_bit.d.next = self.epoch_bit.q.val() ^ self.running.val();
         }
         if self.reset.val() {
-            self.elapsed.d.next = 0.into();
+            self.remaining.d.next = 0.into();
             self.epoch_bit.d.next = false;
             self.fresh.d.next = true;
         }
