@@ -149,7 +149,7 @@ impl DownlinkRefill {
             clearing: Default::default(),
             positions: Default::default(),
             position_step: Default::default(),
-            sync_bytes: DownlinkSyncBytes::new(framing, ports),
+            sync_bytes: DownlinkSyncBytes::new(framing),
             last_port: Constant::new((ports as u64 - 1).into()),
             ring_start: Constant::new(1.into()),
             sync_command: constant(CommandCode::TimeSync as u64),
