@@ -119,6 +119,10 @@ pub struct DownlinkRefill {
     /// The new position, written after the queue byte: byte 3 of a queued packet says
     /// whether it is a sync.
     check_sync_4: DFF<Bit>,
+    // the position RAM's write, a clock after the queue byte it depends on
+    write_5: DFF<Bit>,
+    write_port_5: DFF<Bits<6>>,
+    write_position_5: DFF<Bits<9>>,
     position_next_4: DFF<Bits<9>>,
     clear: DFF<Bit>,
     clear_address: DFF<Bits<6>>,
@@ -149,7 +153,7 @@ impl DownlinkRefill {
             clearing: Default::default(),
             positions: Default::default(),
             position_step: Default::default(),
-            sync_bytes: DownlinkSyncBytes::new(framing),
+            sync_bytes: DownlinkSyncBytes::new(framing, ports),
             last_port: Constant::new((ports as u64 - 1).into()),
             ring_start: Constant::new(1.into()),
             sync_command: constant(CommandCode::TimeSync as u64),
@@ -168,6 +172,9 @@ impl DownlinkRefill {
             port_4: Default::default(),
             sends_4: Default::default(),
             check_sync_4: Default::default(),
+            write_5: Default::default(),
+            write_port_5: Default::default(),
+            write_position_5: Default::default(),
             position_next_4: Default::default(),
             clear: Default::default(),
             clear_address: Default::default(),
@@ -197,6 +204,9 @@ impl Logic for DownlinkRefill {
             port_4,
             sends_4,
             check_sync_4,
+            write_5,
+            write_port_5,
+            write_position_5,
             position_next_4,
             clear,
             clear_address
@@ -265,24 +275,27 @@ impl Logic for DownlinkRefill {
         }
         self.clearing.next = self.clear.q.val();
         self.sync_bit.next = bit_cast::<9, 1>(true.into()) << 6;
-        self.positions.write_enable.next = self.sends_4.q.val() | self.clear.q.val();
-        self.positions.write_address.next = self.port_4.q.val();
-        self.positions.write_data.next = self.position_next_4.q.val();
+        self.write_5.d.next = self.sends_4.q.val() | self.clear.q.val();
+        self.write_port_5.d.next = self.port_4.q.val();
+        self.write_position_5.d.next = self.position_next_4.q.val();
         if self.check_sync_4.q.val() & (self.queue_read_data.val() == self.sync_command.val()) {
-            self.positions.write_data.next = self.position_next_4.q.val() | self.sync_bit.val();
+            self.write_position_5.d.next = self.position_next_4.q.val() | self.sync_bit.val();
         }
         if self.clear.q.val() {
             // after reset every port reads slot 0 from byte 0, and its byte is 0xFF
             self.byte_write.next = true;
             self.byte_port.next = self.clear_address.q.val();
             self.byte_data.next = 0xFF.into();
-            self.positions.write_address.next = self.clear_address.q.val();
-            self.positions.write_data.next = 0.into();
+            self.write_port_5.d.next = self.clear_address.q.val();
+            self.write_position_5.d.next = 0.into();
             self.clear_address.d.next = self.clear_address.q.val() + 1;
             if self.clear_address.q.val() == 63 {
                 self.clear.d.next = false;
             }
         }
+        self.positions.write_enable.next = self.write_5.q.val();
+        self.positions.write_address.next = self.write_port_5.q.val();
+        self.positions.write_data.next = self.write_position_5.q.val();
         if self.reset.val() {
             self.refilling.d.next = false;
             self.visit_1.d.next = false;
@@ -293,6 +306,7 @@ impl Logic for DownlinkRefill {
             self.sends_4.d.next = false;
             self.clear.d.next = true;
             self.clear_address.d.next = 0.into();
+            self.write_5.d.next = false;
         }
     }
 }

@@ -6,13 +6,17 @@
 //! belongs to a packet that started in frame `f - k`. The start tick of each of the last
 //! 16 frames is kept in a [`LutRam`] (16 x 64 bits of distributed RAM) at the frame number
 //! mod 16, written the clock its start bit is on the pins (the tick then is the model's
-//! `PacketStart::tick`). The other bytes are the box's own sync packet: the command
-//! framing's header, cell id [`ALL_CELLS`], command 5, reserved bytes 0, end byte.
-//! `sync_byte` and `replace` follow `index` and `wanted` by two clocks (the queue RAM's
-//! read latency, so the refill's byte and this one arrive together): the first registers
-//! the packet's first frame from `index` (the refill's position RAM output, with nothing
-//! but a 4-bit subtraction behind it), the second reads its start tick from there.
+//! `PacketStart::tick`). Between scans the block reads, one a clock, the eight bytes the
+//! next frame's loads can want (byte `k - 4` of the start tick of frame `f + 1 - k`, `k` =
+//! 4 to 11) into a table of eight registers; during a scan (the `ports` visits and the
+//! refill's latency after `scan_start`) the table holds still, and a load picks its byte
+//! from it: no RAM read behind any load. The validated downlink timing leaves at least
+//! eight bit times between scans (`BoxConfig::validate`). The other bytes are the box's own
+//! sync packet: the command framing's header, cell id [`ALL_CELLS`], command 5, reserved
+//! bytes 0, end byte. `sync_byte` and `replace` follow `index` and `wanted` by two clocks
+//! (the queue RAM's read latency, so the refill's byte and this one arrive together).
 
+use crate::downlink_refill::REFILL_LATENCY;
 use crate::hdl::*;
 use crate::lut_ram::LutRam;
 use skinbox_protocol::cell_command::{CellCommandFraming, CommandCode, ALL_CELLS};
@@ -49,9 +53,15 @@ pub struct DownlinkSyncBytes {
     /// The pins took the frame's start bit: its tick is the tick now.
     started: DFF<Bit>,
     starts: LutRam<64, 4>,
-    // a clock after `index`: the frame its packet started in, which of the start tick's
-    // bytes it is, whether it is one, and the byte when it is not
-    first_frame_1: DFF<Bits<4>>,
+    /// Clocks of the scan still to come: the table holds still.
+    scanning: DFF<Bits<7>>,
+    scan_clocks: Constant<Bits<7>>,
+    /// The table entry read this clock (byte index `lane + 4`).
+    lane: DFF<Bits<3>>,
+    /// The next frame's start-tick bytes, by byte index 4 to 11.
+    table: [DFF<Bits<8>>; 8],
+    // a clock after `index`: which of the start tick's bytes it is, whether it is one, and
+    // the byte when it is not
     tick_byte_1: DFF<Bits<3>>,
     from_tick_1: DFF<Bit>,
     fixed_1: DFF<Bits<8>>,
@@ -60,12 +70,13 @@ pub struct DownlinkSyncBytes {
     wanted_2: DFF<Bit>,
     fixed: Signal<Local, Bits<8>>,
     stamp: Signal<Local, Bits<64>>,
-    stamp_byte: Signal<Local, Bits<8>>,
+    table_byte: Signal<Local, Bits<8>>,
 }
 
 impl DownlinkSyncBytes {
-    /// The sync packet of a box whose cell commands are framed by `framing`.
-    pub fn new(framing: CellCommandFraming) -> Self {
+    /// The sync packet of a box of `ports` ports whose cell commands are framed by
+    /// `framing`.
+    pub fn new(framing: CellCommandFraming, ports: usize) -> Self {
         let [cell_high, cell_low] = ALL_CELLS.to_be_bytes();
         Self {
             clock: Default::default(),
@@ -85,7 +96,11 @@ impl DownlinkSyncBytes {
             frame: Default::default(),
             started: Default::default(),
             starts: Default::default(),
-            first_frame_1: Default::default(),
+            scanning: Default::default(),
+            // the visits, the refill's latency after them, and a clock to spare
+            scan_clocks: constant(ports as u64 + REFILL_LATENCY + 1),
+            lane: Default::default(),
+            table: Default::default(),
             tick_byte_1: Default::default(),
             from_tick_1: Default::default(),
             fixed_1: Default::default(),
@@ -94,7 +109,7 @@ impl DownlinkSyncBytes {
             wanted_2: Default::default(),
             fixed: Default::default(),
             stamp: Default::default(),
-            stamp_byte: Default::default(),
+            table_byte: Default::default(),
         }
     }
 }
@@ -107,7 +122,8 @@ impl Logic for DownlinkSyncBytes {
             clock,
             frame,
             started,
-            first_frame_1,
+            scanning,
+            lane,
             tick_byte_1,
             from_tick_1,
             fixed_1,
@@ -115,6 +131,10 @@ impl Logic for DownlinkSyncBytes {
             wanted_1,
             wanted_2
         );
+        for k in 0..8 {
+            self.table[k].clock.next = self.clock.val();
+            self.table[k].d.next = self.table[k].q.val();
+        }
         self.starts.clock.next = self.clock.val();
         if self.scan_start.val() {
             self.frame.d.next = self.frame.q.val() + 1;
@@ -123,9 +143,44 @@ impl Logic for DownlinkSyncBytes {
         self.starts.write_enable.next = self.started.q.val();
         self.starts.write_address.next = self.frame.q.val();
         self.starts.write_data.next = self.tick.val();
-        // first clock: the packet's first frame and which byte of its start tick (big-endian
-        // from byte 4) the index is, registered; the bytes that are no tick's
-        self.first_frame_1.d.next = self.frame.q.val() - self.index.val().get_bits::<4>(0);
+        // between scans: table entry `lane` (byte index lane + 4) for the next frame
+        self.starts.read_address.next =
+            self.frame.q.val() + 1 - 4 - bit_cast::<4, 3>(self.lane.q.val());
+        self.stamp.next = self.starts.read_data.val();
+        if self.scanning.q.val() == 0 {
+            self.lane.d.next = self.lane.q.val() + 1;
+            if self.lane.q.val() == 0 {
+                self.table[0].d.next = self.stamp.val().get_bits::<8>(56);
+            }
+            if self.lane.q.val() == 1 {
+                self.table[1].d.next = self.stamp.val().get_bits::<8>(48);
+            }
+            if self.lane.q.val() == 2 {
+                self.table[2].d.next = self.stamp.val().get_bits::<8>(40);
+            }
+            if self.lane.q.val() == 3 {
+                self.table[3].d.next = self.stamp.val().get_bits::<8>(32);
+            }
+            if self.lane.q.val() == 4 {
+                self.table[4].d.next = self.stamp.val().get_bits::<8>(24);
+            }
+            if self.lane.q.val() == 5 {
+                self.table[5].d.next = self.stamp.val().get_bits::<8>(16);
+            }
+            if self.lane.q.val() == 6 {
+                self.table[6].d.next = self.stamp.val().get_bits::<8>(8);
+            }
+            if self.lane.q.val() == 7 {
+                self.table[7].d.next = self.stamp.val().get_bits::<8>(0);
+            }
+        } else {
+            self.scanning.d.next = self.scanning.q.val() - 1;
+        }
+        if self.scan_start.val() {
+            self.scanning.d.next = self.scan_clocks.val();
+        }
+        // first clock: which byte of the start tick the index is, and the bytes that are
+        // no tick's
         self.tick_byte_1.d.next = self.index.val().get_bits::<3>(0) - 4;
         self.from_tick_1.d.next = (self.index.val() >= 4) & (self.index.val() <= 11);
         self.fixed.next = 0.into();
@@ -145,35 +200,32 @@ impl Logic for DownlinkSyncBytes {
             self.fixed.next = self.end_byte.val();
         }
         self.fixed_1.d.next = self.fixed.val();
-        // second clock: the start tick read from registers (frames 4 to 11 back are never
-        // the one written now)
-        self.starts.read_address.next = self.first_frame_1.q.val();
-        self.stamp.next = self.starts.read_data.val();
-        self.stamp_byte.next = self.stamp.val().get_bits::<8>(0);
-        if self.tick_byte_1.q.val() == 0 {
-            self.stamp_byte.next = self.stamp.val().get_bits::<8>(56);
-        }
+        // second clock: the byte from the table
+        self.table_byte.next = self.table[0].q.val();
         if self.tick_byte_1.q.val() == 1 {
-            self.stamp_byte.next = self.stamp.val().get_bits::<8>(48);
+            self.table_byte.next = self.table[1].q.val();
         }
         if self.tick_byte_1.q.val() == 2 {
-            self.stamp_byte.next = self.stamp.val().get_bits::<8>(40);
+            self.table_byte.next = self.table[2].q.val();
         }
         if self.tick_byte_1.q.val() == 3 {
-            self.stamp_byte.next = self.stamp.val().get_bits::<8>(32);
+            self.table_byte.next = self.table[3].q.val();
         }
         if self.tick_byte_1.q.val() == 4 {
-            self.stamp_byte.next = self.stamp.val().get_bits::<8>(24);
+            self.table_byte.next = self.table[4].q.val();
         }
         if self.tick_byte_1.q.val() == 5 {
-            self.stamp_byte.next = self.stamp.val().get_bits::<8>(16);
+            self.table_byte.next = self.table[5].q.val();
         }
         if self.tick_byte_1.q.val() == 6 {
-            self.stamp_byte.next = self.stamp.val().get_bits::<8>(8);
+            self.table_byte.next = self.table[6].q.val();
+        }
+        if self.tick_byte_1.q.val() == 7 {
+            self.table_byte.next = self.table[7].q.val();
         }
         self.byte_2.d.next = self.fixed_1.q.val();
         if self.from_tick_1.q.val() {
-            self.byte_2.d.next = self.stamp_byte.val();
+            self.byte_2.d.next = self.table_byte.val();
         }
         self.wanted_1.d.next = self.wanted.val();
         self.wanted_2.d.next = self.wanted_1.q.val();
@@ -182,6 +234,7 @@ impl Logic for DownlinkSyncBytes {
         if self.reset.val() {
             self.frame.d.next = 0.into();
             self.started.d.next = false;
+            self.scanning.d.next = 0.into();
         }
     }
 }
@@ -198,7 +251,7 @@ mod tests {
     #[test]
     fn a_packet_reads_the_sync_of_its_first_frames_start_tick() {
         let framing = CellCommandFraming::DEFAULT;
-        let mut bench = Bench::new(DownlinkSyncBytes::new(framing), |b| &mut b.clock);
+        let mut bench = Bench::new(DownlinkSyncBytes::new(framing, 64), |b| &mut b.clock);
         let mut rng = crate::testbench::TestRng::new(0x57);
         bench.uut.reset.next = true;
         bench.cycle();
@@ -214,7 +267,7 @@ mod tests {
             tick += 1;
             starts.push(tick);
             bench.uut.tick.next = tick.into();
-            let gap = 20 + rng.next_u64() % 300;
+            let gap = 150 + rng.next_u64() % 300;
             bench.cycles(gap);
             tick += gap;
             // the scan loading frame + 1
@@ -256,7 +309,7 @@ mod tests {
                     );
                 }
             }
-            let gap = 20 + rng.next_u64() % 300;
+            let gap = 150 + rng.next_u64() % 300;
             bench.cycles(gap);
             tick += gap;
         }
