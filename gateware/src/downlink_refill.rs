@@ -20,7 +20,7 @@
 //! [`DownlinkSyncBytes`] (stamped with the packet's start tick) instead of the queue. At a
 //! packet boundary (byte index 0) a port whose epoch differs from the generator's `epoch`
 //! sends a generated sync before its queued packets; it takes no queue slot. The new
-//! position is written four clocks after the visit (once the queue byte is known), so no
+//! position is written five clocks after the visit (a clock after the queue byte), so no
 //! per-port flip-flop holds any of this.
 //!
 //! What a visited port sends and its position after the byte are the
