@@ -153,7 +153,8 @@ impl DownlinkRefill {
             clearing: Default::default(),
             positions: Default::default(),
             position_step: Default::default(),
-            sync_bytes: DownlinkSyncBytes::new(framing, ports),
+            // the visits, the latency after them, and a clock to spare
+            sync_bytes: DownlinkSyncBytes::new(framing, ports as u64 + REFILL_LATENCY + 1),
             last_port: Constant::new((ports as u64 - 1).into()),
             ring_start: Constant::new(1.into()),
             sync_command: constant(CommandCode::TimeSync as u64),

@@ -16,7 +16,6 @@
 //! bytes 0, end byte. `sync_byte` and `replace` follow `index` and `wanted` by two clocks
 //! (the queue RAM's read latency, so the refill's byte and this one arrive together).
 
-use crate::downlink_refill::REFILL_LATENCY;
 use crate::hdl::*;
 use crate::lut_ram::LutRam;
 use skinbox_protocol::cell_command::{CellCommandFraming, CommandCode, ALL_CELLS};
@@ -74,9 +73,10 @@ pub struct DownlinkSyncBytes {
 }
 
 impl DownlinkSyncBytes {
-    /// The sync packet of a box of `ports` ports whose cell commands are framed by
-    /// `framing`.
-    pub fn new(framing: CellCommandFraming, ports: usize) -> Self {
+    /// The sync packet of a box whose cell commands are framed by `framing` and whose
+    /// refill scan lasts `scan_clocks` clocks from `scan_start` (its visits and its
+    /// latency after them; at most 127).
+    pub fn new(framing: CellCommandFraming, scan_clocks: u64) -> Self {
         let [cell_high, cell_low] = ALL_CELLS.to_be_bytes();
         Self {
             clock: Default::default(),
@@ -97,8 +97,7 @@ impl DownlinkSyncBytes {
             started: Default::default(),
             starts: Default::default(),
             scanning: Default::default(),
-            // the visits, the refill's latency after them, and a clock to spare
-            scan_clocks: constant(ports as u64 + REFILL_LATENCY + 1),
+            scan_clocks: constant(scan_clocks),
             lane: Default::default(),
             table: Default::default(),
             tick_byte_1: Default::default(),
@@ -251,7 +250,7 @@ mod tests {
     #[test]
     fn a_packet_reads_the_sync_of_its_first_frames_start_tick() {
         let framing = CellCommandFraming::DEFAULT;
-        let mut bench = Bench::new(DownlinkSyncBytes::new(framing, 64), |b| &mut b.clock);
+        let mut bench = Bench::new(DownlinkSyncBytes::new(framing, 64 + 6), |b| &mut b.clock);
         let mut rng = crate::testbench::TestRng::new(0x57);
         bench.uut.reset.next = true;
         bench.cycle();
