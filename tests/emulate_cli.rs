@@ -448,6 +448,28 @@ struct Heard {
     packet: skinbox_protocol::CellRepr,
 }
 
+/// Claims the stream of the emulator at `addr` for a new socket and reads its records
+/// datagrams there until the returned flag is set.
+fn claim_and_hear(
+    addr: &str,
+) -> (
+    std::sync::Arc<std::sync::atomic::AtomicBool>,
+    std::thread::JoinHandle<Vec<Heard>>,
+) {
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let to = socket.local_addr().unwrap().to_string();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let reader = {
+        let stop = stop.clone();
+        std::thread::spawn(move || hear_records(socket, stop))
+    };
+    assert_eq!(
+        json(&ctl(addr, &["stream-to", "--to", &to]))["result"],
+        "ok"
+    );
+    (stop, reader)
+}
+
 /// Reads the box's records datagrams on `socket` until `stop` is set.
 fn hear_records(
     socket: UdpSocket,
@@ -507,17 +529,7 @@ fn emulated_cells_obey_the_cell_commands_the_box_sends_them() {
     let emulator = Emulator::start(&["idle", "--cells", "8", "--buses", "2"], 3500);
     let started = std::time::Instant::now();
     let addr = emulator.addr.clone();
-    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let to = socket.local_addr().unwrap().to_string();
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let reader = {
-        let stop = stop.clone();
-        std::thread::spawn(move || hear_records(socket, stop))
-    };
-    assert_eq!(
-        json(&ctl(&addr, &["stream-to", "--to", &to]))["result"],
-        "ok"
-    );
+    let (stop, reader) = claim_and_hear(&addr);
     std::thread::sleep(PHASE);
     let commands: [&[&str]; 6] = [
         &["cells", "thresholds", "--accel-g", "0.001"],
@@ -664,17 +676,7 @@ fn the_emulated_boxs_own_syncs_keep_its_cells_on_its_grid() {
         ],
         1500,
     );
-    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let to = socket.local_addr().unwrap().to_string();
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let reader = {
-        let stop = stop.clone();
-        std::thread::spawn(move || hear_records(socket, stop))
-    };
-    assert_eq!(
-        json(&ctl(&emulator.addr, &["stream-to", "--to", &to]))["result"],
-        "ok"
-    );
+    let (stop, reader) = claim_and_hear(&emulator.addr);
     std::thread::sleep(Duration::from_millis(1000));
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let heard = reader.join().unwrap();
