@@ -1,9 +1,10 @@
 //! AsyncFifo: a 16-word FIFO between two unrelated clocks, words of `D` bits.
 //!
-//! The words sit in a dual-clock RAM (written at the write clock, read at the read clock:
-//! distributed RAM on the ECP5). Each side counts its pointer in binary with one bit more
-//! than the address (so full and empty differ) and keeps its Gray code in a register; the
-//! other side takes that Gray code through two flip-flops (a two-flop synchroniser: a
+//! The words sit in a distributed RAM (`LutRam`), written at the write clock and read
+//! without a clock: the read side's word is the one at its pointer register, so no path
+//! runs from the empty test and the pointer's step through the RAM. Each side counts its
+//! pointer in binary with one bit more than the address (so full and empty differ) and
+//! keeps its Gray code in a register; the other side takes that Gray code through two flip-flops (a two-flop synchroniser: a
 //! Gray code changes one bit per step, so a sample caught mid-change is either the old or
 //! the new pointer, never a third value). Full and empty are therefore seen late, which
 //! is safe: the writer sees room only after the reader freed it, and the reader sees a
@@ -19,7 +20,7 @@
 //! `full` is high is dropped (the writer must look at `full`).
 
 use crate::hdl::*;
-use rust_hdl_widgets::prelude::RAM;
+use crate::lut_ram::LutRam;
 
 /// Address bits of the RAM.
 pub const ADDRESS_BITS: usize = 4;
@@ -54,7 +55,7 @@ pub struct AsyncFifo<const D: usize> {
     pub empty: Signal<Out, Bit>,
     /// Words the read side saw a clock earlier (see the module documentation).
     pub read_level: Signal<Out, Pointer>,
-    ram: RAM<Bits<D>, ADDRESS_BITS>,
+    ram: LutRam<D, ADDRESS_BITS>,
     write_pointer: DFF<Pointer>,
     write_gray: DFF<Pointer>,
     read_gray_meta: DFF<Pointer>,
@@ -134,7 +135,7 @@ impl<const D: usize> Logic for AsyncFifo<D> {
         // full: the Gray codes differ in their top two bits only
         self.full_pattern.next = self.read_gray_sync.q.val() ^ self.top_bits.val();
         self.full.next = self.write_gray.q.val() == self.full_pattern.val();
-        self.ram.write_clock.next = self.write_clock.val();
+        self.ram.clock.next = self.write_clock.val();
         self.ram.write_address.next = self.write_pointer.q.val().get_bits::<4>(0);
         self.ram.write_data.next = self.write_data.val();
         self.write_now.next =
@@ -172,9 +173,8 @@ impl<const D: usize> Logic for AsyncFifo<D> {
             self.read_pointer.d.next = 0.into();
             self.read_gray.d.next = 0.into();
         }
-        // the RAM reads the next oldest word at every edge: first word fall-through
-        self.ram.read_clock.next = self.read_clock.val();
-        self.ram.read_address.next = self.read_next.val().get_bits::<4>(0);
+        // the oldest word, at the read pointer: first word fall-through
+        self.ram.read_address.next = self.read_pointer.q.val().get_bits::<4>(0);
         self.read_data.next = self.ram.read_data.val();
     }
 }

@@ -1,7 +1,9 @@
 //! BodyReader: streams a datagram body out of a block RAM.
 //!
 //! On `start` it takes `length` (a clock later, so `start` drives two flip-flops and
-//! nothing else: `length` must hold for that clock) and reads the RAM from address 0 on, one read per clock
+//! nothing else: `length` must hold from `start`'s clock to the next; its tests for 0
+//! and 1 are registered from `start`'s clock, so no path runs from the owner's length
+//! through them) and reads the RAM from address 0 on, one read per clock
 //! while its [`StreamFifo`] has room for every read in flight (a read takes
 //! [`READ_LATENCY`] clocks), so the body stream's `ready` reaches the FIFO only and a
 //! consumer that takes one beat per clock is never starved once the first beats arrived
@@ -51,6 +53,9 @@ pub struct BodyReader {
     left: DFF<Bits<BODY_ADDRESS_BITS>>,
     left_nonzero: DFF<Bit>,
     left_one: DFF<Bit>,
+    // `length` a clock ago was not 0, was 1
+    length_nonzero: DFF<Bit>,
+    length_one: DFF<Bit>,
     // reads in flight, and whether each is the body's last byte
     read_1: DFF<Bit>,
     read_1_last: DFF<Bit>,
@@ -78,6 +83,8 @@ impl Default for BodyReader {
             left: Default::default(),
             left_nonzero: Default::default(),
             left_one: Default::default(),
+            length_nonzero: Default::default(),
+            length_one: Default::default(),
             read_1: Default::default(),
             read_1_last: Default::default(),
             read_2: Default::default(),
@@ -97,6 +104,8 @@ impl Logic for BodyReader {
             left,
             left_nonzero,
             left_one,
+            length_nonzero,
+            length_one,
             read_1,
             read_1_last,
             read_2,
@@ -119,11 +128,13 @@ impl Logic for BodyReader {
             self.left_one.d.next = self.left.q.val() == 2;
         }
         self.starting.d.next = self.start.val();
+        self.length_nonzero.d.next = self.length.val() != 0;
+        self.length_one.d.next = self.length.val() == 1;
         if self.starting.q.val() {
             self.address.d.next = 0.into();
             self.left.d.next = self.length.val();
-            self.left_nonzero.d.next = self.length.val() != 0;
-            self.left_one.d.next = self.length.val() == 1;
+            self.left_nonzero.d.next = self.length_nonzero.q.val();
+            self.left_one.d.next = self.length_one.q.val();
         }
         self.read_1.d.next = self.issue.val();
         self.read_1_last.d.next = self.left_one.q.val();

@@ -15,6 +15,11 @@
 //! that starts waiting meanwhile). From the take until its body's last beat moved, the
 //! granted source's descriptor stays on `datagrams` (`valid` low): a source holds its
 //! descriptor until then, so the sink reads its fields there instead of holding copies.
+//! The header fields (flags, entry count, base tick) follow a clock behind the rest of the
+//! descriptor ([`FIELDS_LATENCY`]): the granted source's from the clock after the take until
+//! a clock after its body's last beat. They are selected by a copy of `descriptor_from`
+//! registered from it alone, which the placer may put beside the fields' reader (the
+//! frame transmitter reads them from its frame's index 0, the clock after the take).
 
 use crate::hdl::*;
 use crate::stream::{DatagramSink, DatagramSource};
@@ -24,6 +29,9 @@ pub const MAX_SOURCES: usize = 8;
 
 /// Clocks from a source's `valid` to the arbiter offering its descriptor.
 pub const OFFER_LATENCY: u64 = 1;
+
+/// Clocks from the take to the granted source's header fields on `datagrams`.
+pub const FIELDS_LATENCY: u64 = 1;
 
 /// Round-robin, packet-atomic merge of datagram sources.
 #[derive(LogicBlock)]
@@ -50,6 +58,8 @@ pub struct DatagramArbiter {
     // the source whose descriptor is on `datagrams`, one-hot: the offered one, then the
     // granted one while its body is open
     descriptor_from: DFF<Bits<MAX_SOURCES>>,
+    // the source whose header fields are on `datagrams`: `descriptor_from` a clock later
+    fields_from: DFF<Bits<MAX_SOURCES>>,
     // source i's bit
     source_bit: Vec<Constant<Bits<MAX_SOURCES>>>,
     waiting: Signal<Local, Bits<MAX_SOURCES>>,
@@ -84,6 +94,7 @@ impl DatagramArbiter {
             offered: Default::default(),
             offered_any: Default::default(),
             descriptor_from: Default::default(),
+            fields_from: Default::default(),
             source_bit: (0..sources)
                 .map(|i| Constant::new((1u64 << i).into()))
                 .collect(),
@@ -111,7 +122,8 @@ impl Logic for DatagramArbiter {
             body_open,
             offered,
             offered_any,
-            descriptor_from
+            descriptor_from,
+            fields_from
         );
         self.waiting.next = 0.into();
         for i in 0..self.sources.len() {
@@ -159,11 +171,13 @@ impl Logic for DatagramArbiter {
                 self.datagrams.ready.val() & self.offered.q.val().get_bit(i);
             if self.descriptor_from.q.val().get_bit(i) {
                 self.datagrams.kind.next = self.sources[i].kind.val();
+                self.datagrams.body_len.next = self.sources[i].body_len.val();
+                self.datagrams.body_sum.next = self.sources[i].body_sum.val();
+            }
+            if self.fields_from.q.val().get_bit(i) {
                 self.datagrams.flags.next = self.sources[i].flags.val();
                 self.datagrams.entry_count.next = self.sources[i].entry_count.val();
                 self.datagrams.base_tick.next = self.sources[i].base_tick.val();
-                self.datagrams.body_len.next = self.sources[i].body_len.val();
-                self.datagrams.body_sum.next = self.sources[i].body_sum.val();
             }
             // the body of the source granted last, while it is open
             self.sources[i].body.ready.next = self.datagrams.body.ready.val()
@@ -181,6 +195,7 @@ impl Logic for DatagramArbiter {
         self.offered_any.d.next = self.waiting.val() != 0;
         // (no source waits while a body is open: the grant is 0 then)
         self.descriptor_from.d.next = self.grant.val();
+        self.fields_from.d.next = self.descriptor_from.q.val();
         if self.body_open.q.val() {
             self.descriptor_from.d.next = self.descriptor_from.q.val();
         }
@@ -214,6 +229,7 @@ impl Logic for DatagramArbiter {
             self.offered.d.next = 0.into();
             self.offered_any.d.next = false;
             self.descriptor_from.d.next = 0.into();
+            self.fields_from.d.next = 0.into();
         }
     }
 }
@@ -309,7 +325,8 @@ mod tests {
             bench.settle();
             let u = &bench.uut;
             if let Some(o) = &open {
-                // the granted source's descriptor stays until its body's last beat
+                // the granted source's descriptor stays until its body's last beat (the
+                // header fields from the clock after the take)
                 assert_eq!(u.datagrams.kind.val().to_u8(), o.kind);
                 assert_eq!(u.datagrams.flags.val().to_u8(), o.flags);
                 assert_eq!(
@@ -332,12 +349,6 @@ mod tests {
                     .expect("the granted source is told");
                 let d = &queues[s][0];
                 assert_eq!(u.datagrams.kind.val().to_u8(), d.kind);
-                assert_eq!(u.datagrams.flags.val().to_u8(), d.flags);
-                assert_eq!(
-                    u.datagrams.entry_count.val().index(),
-                    d.entry_count as usize
-                );
-                assert_eq!(u.datagrams.base_tick.val().to_u64(), d.base_tick);
                 assert_eq!(u.datagrams.body_len.val().index(), d.body.len());
                 assert_eq!(u.datagrams.body_sum.val().to_u64(), u64::from(d.body_sum));
                 waiting_at_grant.push((0..n).filter(|&w| offering[w]).collect());

@@ -287,7 +287,9 @@ impl Logic for FrameTransmitter {
         self.fcs_stage.fcs.next = self.index.val() >= self.geometry.body_end.val();
         self.fcs_stage.beat_missing.next = self.in_body.q.val() & !self.datagrams.body.valid.val();
         // index 7: the SFD is in the output stage now: the CRC starts with the next byte
-        self.fcs_stage.crc_start.next = self.sending.val() & self.crc_starts.q.val();
+        // (`crc_starts` is set only in a clock after index 6 of a frame, which goes on: no
+        // gate from the phase into the CRC)
+        self.fcs_stage.crc_start.next = self.crc_starts.q.val();
 
         // the index tests of the next clock, from this clock's index (it counts up by one
         // while sending)

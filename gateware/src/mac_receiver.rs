@@ -83,6 +83,8 @@ pub struct MacReceiver {
     held: DFF<Bits<8>>,
     // frame bytes so far, up to MAX_RECEIVE_LEN
     count: DFF<Bits<11>>,
+    // `count` is MAX_RECEIVE_LEN (kept beside it: no compare of the count before its step)
+    count_at_max: DFF<Bit>,
     // more than MAX_RECEIVE_LEN bytes: no more beats
     giant: DFF<Bit>,
     error_seen: DFF<Bit>,
@@ -99,7 +101,7 @@ pub struct MacReceiver {
     residue: Constant<Bits<32>>,
     crc_start: Constant<Bits<32>>,
     min_len: Constant<Bits<11>>,
-    max_len: Constant<Bits<11>>,
+    max_len_less_one: Constant<Bits<11>>,
 }
 
 impl Default for MacReceiver {
@@ -118,6 +120,7 @@ impl Default for MacReceiver {
             state: Default::default(),
             held: Default::default(),
             count: Default::default(),
+            count_at_max: Default::default(),
             giant: Default::default(),
             error_seen: Default::default(),
             crc: Default::default(),
@@ -133,7 +136,7 @@ impl Default for MacReceiver {
             residue: Constant::new(u64::from(CRC_RESIDUE).into()),
             crc_start: Constant::new(0xFFFF_FFFF_u64.into()),
             min_len: Constant::new((MIN_RECEIVE_LEN as u64).into()),
-            max_len: Constant::new((MAX_RECEIVE_LEN as u64).into()),
+            max_len_less_one: Constant::new((MAX_RECEIVE_LEN as u64 - 1).into()),
         }
     }
 }
@@ -150,6 +153,7 @@ impl Logic for MacReceiver {
             state,
             held,
             count,
+            count_at_max,
             giant,
             error_seen,
             crc,
@@ -179,6 +183,7 @@ impl Logic for MacReceiver {
             MacState::Idle => {
                 self.crc.d.next = self.crc_start.val();
                 self.count.d.next = 0.into();
+                self.count_at_max.d.next = false;
                 self.giant.d.next = false;
                 self.error_seen.d.next = self.rx_er.q.val();
                 if self.rx_dv.q.val() {
@@ -215,10 +220,12 @@ impl Logic for MacReceiver {
                         // the held byte was not the last: a beat
                         self.beat_valid.d.next = self.count.q.val().any();
                         self.held.d.next = self.rx_byte.q.val();
-                        if self.count.q.val() == self.max_len.val() {
+                        if self.count_at_max.q.val() {
                             self.giant.d.next = true;
                         } else {
                             self.count.d.next = self.count.q.val() + 1;
+                            self.count_at_max.d.next =
+                                self.count.q.val() == self.max_len_less_one.val();
                         }
                     }
                 } else {

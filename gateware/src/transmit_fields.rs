@@ -2,16 +2,20 @@
 //! base tick, entry count) and the box's datagram sequence number.
 //!
 //! The descriptor's flags, base tick and entry count are read where the datagram's source
-//! holds them (on the arbiter's descriptor, from the take until the body's last beat; the
-//! header's field bytes are read before the body), with the sequence number: 15 bytes,
+//! holds them (on the arbiter's descriptor, from the frame's index 0, the clock after the
+//! take, until the body's last beat; the header's field bytes are read before the body),
+//! with the sequence number: 15 bytes,
 //! most significant first, and a zero byte (the first reserved byte) as two 64-bit words
 //! (no word over 64 bits to simulate), no copy held. A position steps through them one
 //! byte per clock: once from the frame's index 2 to 17 for the UDP checksum (all 16 bytes;
 //! back at 0 after them), and once from index 57 to 71 to send the 15 field bytes;
 //! `field_byte` is a register read from the fields at the position (no multiplexer between
 //! the position and its use), the field byte of frame index `i` in the clock of index `i`.
-//! `advance` (a datagram's last clock) steps the sequence number. Cost: the 32-bit
-//! sequence number, the 4-bit position, the byte register and the step flag.
+//! The read takes two clocks: the four-byte group holding the byte is registered first
+//! (from the position two clocks ahead), then the byte from it, so that neither the
+//! arbiter's choice of source nor the position runs through a 16-byte multiplexer in one
+//! clock. `advance` (a datagram's last clock) steps the sequence number. Cost: the 32-bit
+//! sequence number, two 4-bit positions, the 32-bit group and the byte register.
 
 use crate::hdl::*;
 use crate::transmit_layout::{FIELDS_AT, FIELDS_LEN};
@@ -44,14 +48,18 @@ pub struct TransmitFields {
     next_sequence: DFF<Bits<32>>,
     // the position of the next clock's field byte
     next_field_position: DFF<Bits<4>>,
-    // the position steps from the next clock's to the one after it
-    next_field_steps: DFF<Bit>,
+    // the position of the field byte two clocks on
+    later_field_position: DFF<Bits<4>>,
+    // the position steps from two clocks on to three
+    later_field_steps: Signal<Local, Bit>,
+    // the four bytes holding the next clock's field byte
+    next_group: DFF<Bits<32>>,
     current_byte: DFF<Bits<8>>,
     // the 16 bytes in two words, most significant first
     fields_high: Signal<Local, Bits<64>>,
     fields_low: Signal<Local, Bits<64>>,
     field_word: Signal<Local, Bits<64>>,
-    field_word_shifted: Signal<Local, Bits<64>>,
+    next_group_shifted: Signal<Local, Bits<32>>,
 }
 
 impl Default for TransmitFields {
@@ -70,12 +78,14 @@ impl Default for TransmitFields {
             fields_end_ahead: constant((FIELDS_AT + FIELDS_LEN - 2) as u64),
             next_sequence: Default::default(),
             next_field_position: Default::default(),
-            next_field_steps: Default::default(),
+            later_field_position: Default::default(),
+            later_field_steps: Default::default(),
+            next_group: Default::default(),
             current_byte: Default::default(),
             fields_high: Default::default(),
             fields_low: Default::default(),
             field_word: Default::default(),
-            field_word_shifted: Default::default(),
+            next_group_shifted: Default::default(),
         }
     }
 }
@@ -88,43 +98,51 @@ impl Logic for TransmitFields {
             clock,
             next_sequence,
             next_field_position,
-            next_field_steps,
+            later_field_position,
+            next_group,
             current_byte
         );
-        // the field byte of the next clock: byte 0 is the top byte of `fields_high` (the
-        // descriptor is steady from index 0 on; the byte is read from index 1 on)
+        // the group of the field byte two clocks on: byte 0 is the top byte of
+        // `fields_high` (the descriptor is steady from index 0 on; the first group is read
+        // at index 0)
         self.fields_high.next = (bit_cast::<64, 8>(self.flags.val()) << 56)
             | (bit_cast::<64, 32>(self.next_sequence.q.val()) << 24)
             | bit_cast::<64, 24>(self.base_tick.val().get_bits::<24>(40));
         self.fields_low.next = (bit_cast::<64, 40>(self.base_tick.val().get_bits::<40>(0)) << 24)
             | (bit_cast::<64, 16>(self.entry_count.val()) << 8);
         self.field_word.next = self.fields_high.val();
-        if self.next_field_position.q.val().get_bit(3) {
+        if self.later_field_position.q.val().get_bit(3) {
             self.field_word.next = self.fields_low.val();
         }
-        self.field_word_shifted.next = self.field_word.val()
-            << (bit_cast::<64, 3>(self.next_field_position.q.val().get_bits::<3>(0)) << 3);
-        self.current_byte.d.next = self.field_word_shifted.val().get_bits::<8>(56);
-        // (the index after the next is this one + 2 while the frame goes on)
-        self.next_field_steps.d.next = self.frame_goes_on.val()
-            & ((self.index.val() < 16)
-                | ((self.index.val() >= bit_cast::<11, 7>(self.fields_ahead.val()))
-                    & (self.index.val() < bit_cast::<11, 7>(self.fields_end_ahead.val()))));
+        self.next_group.d.next = self.field_word.val().get_bits::<32>(32);
+        if self.later_field_position.q.val().get_bit(2) {
+            self.next_group.d.next = self.field_word.val().get_bits::<32>(0);
+        }
+        // the field byte of the next clock, from its group
+        self.next_group_shifted.next = self.next_group.q.val()
+            << (bit_cast::<32, 2>(self.next_field_position.q.val().get_bits::<2>(0)) << 3);
+        self.current_byte.d.next = self.next_group_shifted.val().get_bits::<8>(24);
+        // (two clocks on is index + 2 while the frame goes on)
+        self.later_field_steps.next = (self.index.val() < 16)
+            | ((self.index.val() >= bit_cast::<11, 7>(self.fields_ahead.val()))
+                & (self.index.val() < bit_cast::<11, 7>(self.fields_end_ahead.val())));
         // the position goes once round for the checksum (back at 0 after 16 bytes) and
         // then through the first 15 bytes to send them; 0 between frames
         self.next_field_position.d.next = 0.into();
+        self.later_field_position.d.next = 0.into();
         if self.frame_goes_on.val() {
-            self.next_field_position.d.next = self.next_field_position.q.val();
-            if self.next_field_steps.q.val() {
-                self.next_field_position.d.next = self.next_field_position.q.val() + 1;
+            self.next_field_position.d.next = self.later_field_position.q.val();
+            self.later_field_position.d.next = self.later_field_position.q.val();
+            if self.later_field_steps.val() {
+                self.later_field_position.d.next = self.later_field_position.q.val() + 1;
             }
         }
         if self.advance.val() {
             self.next_sequence.d.next = self.next_sequence.q.val() + 1;
         }
         if self.reset.val() {
-            self.next_field_steps.d.next = false;
             self.next_field_position.d.next = 0.into();
+            self.later_field_position.d.next = 0.into();
             self.next_sequence.d.next = 0.into();
         }
         self.field_byte.next = self.current_byte.q.val();

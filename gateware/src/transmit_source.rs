@@ -6,7 +6,8 @@
 //! byte i + 2 and, above it, the sources of byte i + 3 ([`header_sources`], one bit each);
 //! it is read two clocks ahead (at [`TEMPLATE_IDLE`] between frames: the first byte and
 //! the sources of byte 2). The byte at `index` comes from a multiplexer whose select is a
-//! register (`byte_source`), chosen a clock ahead from the table's sources and two flags
+//! register (`byte_source`), chosen a clock ahead from the table's sources (registered
+//! once after the block RAM, so no path runs from its output into a choice) and two flags
 //! (a header byte, a body byte follows). The header's sources are ORed (each is 0 unless
 //! chosen), the body beside them (it passes one multiplexer, not the header's OR). The
 //! sources that are steady through the header (lengths, checksums, kind) and the
@@ -18,7 +19,7 @@
 //!
 //! Latency: `frame_byte` is the byte of this clock's `index` (no register between it and
 //! the output stage; the body's data passes one multiplexer). Cost: one DP16KD (128 x 21
-//! bits), the 13-bit source register, two flags, the early byte and the 96-bit
+//! bits), two 13-bit source registers, two flags, the early byte and the 96-bit
 //! destination.
 
 use crate::block_ram::BlockRam;
@@ -81,8 +82,9 @@ pub fn header_sources(at: usize) -> u64 {
 }
 
 /// The transmitter's header table, read two clocks ahead: at address i the template's byte
-/// i + 2 and, above it, the sources of byte i + 3 (registered once more before they choose
-/// the byte); at [`TEMPLATE_IDLE`] the first byte and the sources of byte 2.
+/// i + 2 and, above it, the sources of byte i + 4 (registered twice more before they choose
+/// the byte); at [`TEMPLATE_IDLE`] the first byte and the sources of bytes 2 and 3 (the
+/// preamble's: none).
 pub fn header_table(t: &[u8]) -> Vec<u64> {
     assert_eq!(t[0], t[1], "the frame starts with two equal bytes");
     assert!(
@@ -90,8 +92,13 @@ pub fn header_table(t: &[u8]) -> Vec<u64> {
         "the template fits below the idle address"
     );
     let mut table: Vec<u64> = (0..TEMPLATE_IDLE)
-        .map(|a| u64::from(*t.get(a + 2).unwrap_or(&0)) | header_sources(a + 3) << 8)
+        .map(|a| u64::from(*t.get(a + 2).unwrap_or(&0)) | header_sources(a + 4) << 8)
         .collect();
+    assert_eq!(
+        header_sources(2),
+        header_sources(3),
+        "bytes 2 and 3 share the idle entry"
+    );
     table.push(u64::from(t[0]) | header_sources(2) << 8);
     table
 }
@@ -159,7 +166,8 @@ pub struct TransmitSource {
     // the index is 72 or more: the next index's following byte is in the body
     body_follows: Signal<Local, Bit>,
     // the sources `header_early` is chosen by, and the destination's next byte
-    early_sources: Signal<Local, Bits<SOURCE_BITS>>,
+    // the table's sources of the byte after the next, under `header_ahead` (0 otherwise)
+    early_sources: DFF<Bits<SOURCE_BITS>>,
     early_byte: Signal<Local, Bits<8>>,
     destination_next_byte: Signal<Local, Bits<8>>,
     header_byte: Signal<Local, Bits<8>>,
@@ -217,6 +225,7 @@ impl Logic for TransmitSource {
             clock,
             byte_source,
             header_ahead,
+            early_sources,
             body_ahead,
             header_early,
             destination_high,
@@ -251,8 +260,7 @@ impl Logic for TransmitSource {
         if self.body_ahead.q.val() {
             self.byte_source.d.next = self.source_body.val();
         } else if self.header_ahead.q.val() {
-            self.byte_source.d.next = self.source_template.val()
-                | self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
+            self.byte_source.d.next = self.source_template.val() | self.early_sources.q.val();
         }
         // the steady sources and the destination byte that is on top after this clock's
         // shift, ORed a clock ahead from the table's sources of the next byte (read only
@@ -262,39 +270,39 @@ impl Logic for TransmitSource {
         if self.byte_source.q.val().get_bit(12) {
             self.destination_next_byte.next = self.destination_high.q.val().get_bits::<8>(48);
         }
-        self.early_sources.next = 0.into();
-        if self.header_ahead.q.val() {
-            self.early_sources.next = self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
+        self.early_sources.d.next = 0.into();
+        if self.header_ahead.d.val() {
+            self.early_sources.d.next = self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
         }
         self.early_byte.next = 0.into();
-        if self.early_sources.val().get_bit(1) {
+        if self.early_sources.q.val().get_bit(1) {
             self.early_byte.next = self.total_len.val().get_bits::<8>(8);
         }
-        if self.early_sources.val().get_bit(2) {
+        if self.early_sources.q.val().get_bit(2) {
             self.early_byte.next = self.early_byte.val() | self.total_len.val().get_bits::<8>(0);
         }
-        if self.early_sources.val().get_bit(3) {
+        if self.early_sources.q.val().get_bit(3) {
             self.early_byte.next = self.early_byte.val() | self.ip_checksum.val().get_bits::<8>(8);
         }
-        if self.early_sources.val().get_bit(4) {
+        if self.early_sources.q.val().get_bit(4) {
             self.early_byte.next = self.early_byte.val() | self.ip_checksum.val().get_bits::<8>(0);
         }
-        if self.early_sources.val().get_bit(5) {
+        if self.early_sources.q.val().get_bit(5) {
             self.early_byte.next = self.early_byte.val() | self.udp_len.val().get_bits::<8>(8);
         }
-        if self.early_sources.val().get_bit(6) {
+        if self.early_sources.q.val().get_bit(6) {
             self.early_byte.next = self.early_byte.val() | self.udp_len.val().get_bits::<8>(0);
         }
-        if self.early_sources.val().get_bit(7) {
+        if self.early_sources.q.val().get_bit(7) {
             self.early_byte.next = self.early_byte.val() | self.udp_checksum.val().get_bits::<8>(8);
         }
-        if self.early_sources.val().get_bit(8) {
+        if self.early_sources.q.val().get_bit(8) {
             self.early_byte.next = self.early_byte.val() | self.udp_checksum.val().get_bits::<8>(0);
         }
-        if self.early_sources.val().get_bit(9) {
+        if self.early_sources.q.val().get_bit(9) {
             self.early_byte.next = self.early_byte.val() | self.kind.val();
         }
-        if self.early_sources.val().get_bit(12) {
+        if self.early_sources.q.val().get_bit(12) {
             self.early_byte.next = self.early_byte.val() | self.destination_next_byte.val();
         }
         self.header_early.d.next = self.early_byte.val();
@@ -330,6 +338,7 @@ impl Logic for TransmitSource {
         self.destination_port_held.next = self.destination_low.q.val().get_bits::<16>(0);
         if self.reset.val() {
             self.header_ahead.d.next = false;
+            self.early_sources.d.next = 0.into();
             self.body_ahead.d.next = false;
         }
         self.next_is_body.next = self.body_ahead.q.val();
