@@ -154,6 +154,10 @@ pub struct CommandUnit {
     stage_2: DFF<Bit>,
     // stage 3: the matched host's sequence is not older than the command's
     stage_3: DFF<Bit>,
+    // the command's sequence number equals the host's last, is behind it (serial numbers):
+    // registered a clock before `not_newer`, so no carry chain runs into the decision
+    sequence_equal: DFF<Bit>,
+    sequence_behind: DFF<Bit>,
     not_newer: DFF<Bit>,
     // what the command does if its sequence number is newer: the box id and arguments are
     // right and it is this opcode (so the decision gates one flag with the serial test)
@@ -169,6 +173,9 @@ pub struct CommandUnit {
     done_out: DFF<Bit>,
     fate_out: DFF<Bits<5>>,
     result_out: DFF<Bits<8>>,
+    // the decision refused a cell command for a full queue: `fate` and `result` say so
+    // (chosen after the registers, so the queues' state reaches one flip-flop)
+    downlink_refused: DFF<Bit>,
     last_accepted_out: DFF<Bits<32>>,
     accepted_stream_to_out: DFF<Bit>,
     accepted_status_now_out: DFF<Bit>,
@@ -232,6 +239,8 @@ impl CommandUnit {
             stage_1: Default::default(),
             stage_2: Default::default(),
             stage_3: Default::default(),
+            sequence_equal: Default::default(),
+            sequence_behind: Default::default(),
             not_newer: Default::default(),
             apply_stream_to: Default::default(),
             apply_flush_timeout: Default::default(),
@@ -243,6 +252,7 @@ impl CommandUnit {
             done_out: Default::default(),
             fate_out: Default::default(),
             result_out: Default::default(),
+            downlink_refused: Default::default(),
             last_accepted_out: Default::default(),
             accepted_stream_to_out: Default::default(),
             accepted_status_now_out: Default::default(),
@@ -264,6 +274,8 @@ impl Logic for CommandUnit {
             stage_1,
             stage_2,
             stage_3,
+            sequence_equal,
+            sequence_behind,
             not_newer,
             apply_stream_to,
             apply_flush_timeout,
@@ -275,6 +287,7 @@ impl Logic for CommandUnit {
             done_out,
             fate_out,
             result_out,
+            downlink_refused,
             last_accepted_out,
             accepted_stream_to_out,
             accepted_status_now_out
@@ -298,9 +311,10 @@ impl Logic for CommandUnit {
         // (the host table looked the sender up while the frame arrived; it holds the answer
         // until the take)
         self.difference.next = self.command_sequence.val() - self.hosts.last_sequence.val();
-        self.not_newer.d.next = self.hosts.known.val()
-            & ((self.command_sequence.val() == self.hosts.last_sequence.val())
-                | self.difference.val().get_bit(31));
+        self.sequence_equal.d.next = self.command_sequence.val() == self.hosts.last_sequence.val();
+        self.sequence_behind.d.next = self.difference.val().get_bit(31);
+        self.not_newer.d.next =
+            self.hosts.known.val() & (self.sequence_equal.q.val() | self.sequence_behind.q.val());
         self.apply_stream_to.d.next = self.checks.box_ok.val()
             & self.checks.arguments_ok.val()
             & self.checks.is_stream_to.val();
@@ -330,6 +344,10 @@ impl Logic for CommandUnit {
             & ((self.downlink_full_ports.val() & self.checks.target_ports.val()) == 0);
         self.downlink_offer.next = self.cell_command_taken.val() & self.downlink_room.val();
         if self.stage_3.q.val() {
+            self.downlink_refused.d.next = self.checks.box_ok.val()
+                & !self.not_newer.q.val()
+                & self.cell_command_taken.val()
+                & !self.downlink_room.val();
             self.accepted_stream_to_out.d.next = self.newer.val() & self.apply_stream_to.q.val();
             self.accepted_status_now_out.d.next = self.newer.val() & self.apply_status_now.q.val();
             if !self.checks.box_ok.val() {
@@ -344,10 +362,6 @@ impl Logic for CommandUnit {
                 self.fate_out.d.next = self.checks.fate.val();
                 self.result_out.d.next = self.checks.result.val();
                 self.last_accepted_out.d.next = self.command_sequence.val();
-                if self.cell_command_taken.val() & !self.downlink_room.val() {
-                    self.fate_out.d.next = self.fate_downlink_full.val();
-                    self.result_out.d.next = self.result_downlink_full.val();
-                }
             }
         }
         // Stage 5: the table's take, from the registered decision (the parser still holds
@@ -378,6 +392,10 @@ impl Logic for CommandUnit {
         self.done.next = self.done_out.q.val();
         self.fate.next = self.fate_out.q.val();
         self.result.next = self.result_out.q.val();
+        if self.downlink_refused.q.val() {
+            self.fate.next = self.fate_downlink_full.val();
+            self.result.next = self.result_downlink_full.val();
+        }
         self.last_accepted.next = self.last_accepted_out.q.val();
         self.destination_mac.next = self.configuration.destination_mac.val();
         self.destination_ip.next = self.configuration.destination_ip.val();
@@ -399,6 +417,7 @@ impl Logic for CommandUnit {
             self.done_out.d.next = false;
             self.fate_out.d.next = 0.into();
             self.result_out.d.next = 0.into();
+            self.downlink_refused.d.next = false;
             self.last_accepted_out.d.next = 0.into();
             self.accepted_stream_to_out.d.next = false;
             self.accepted_status_now_out.d.next = false;

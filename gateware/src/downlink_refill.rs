@@ -3,9 +3,10 @@
 //!
 //! The scan visits one port a clock (`scan_ring`: a one-hot ring moving up a place a clock
 //! from the scan's start, so a port's visit, slot freeing and load are bits `p`, `p + 3`
-//! and `p + 4` of it: no decoder, no compare a port). At a visit it reads the port's read
-//! position (the slot of its oldest packet and the byte index, a RAM of its own) and two
-//! clocks later that byte from the queue RAM, and [`REFILL_LATENCY`] clocks after the
+//! and `p + 4` of it: no decoder, no compare a port). It reads the port's read position
+//! (the slot of its oldest packet and the byte index, a RAM of its own) a clock before the
+//! visit (port 0's between scans) into a register, which holds it two clocks after the
+//! visit (no path from the RAM's output into logic), then that byte from the queue RAM, and [`REFILL_LATENCY`] clocks after the
 //! visit loads it into the port's word of the frame bytes (`byte_write`), or 0xFF when
 //! the port's queue was empty at the visit (`nonempty`, which the downlink ORs from the
 //! ports' counts at the ring's visit bits). The position moves on by a byte; past a slot's
@@ -96,6 +97,8 @@ pub struct DownlinkRefill {
     /// packet on the line is a time sync (6) or a generated one (7), the epoch of its last
     /// generated sync (8).
     positions: BlockRam<9, 6>,
+    // the visited port's position word, two clocks after the visit
+    position_2: DFF<Bits<9>>,
     /// The visited port's byte source and next position, from its position word.
     position_step: DownlinkNextPosition,
     sync_bytes: DownlinkSyncBytes,
@@ -152,6 +155,7 @@ impl DownlinkRefill {
             byte_data: Default::default(),
             clearing: Default::default(),
             positions: Default::default(),
+            position_2: Default::default(),
             position_step: Default::default(),
             // the visits, the latency after them, and a clock to spare
             sync_bytes: DownlinkSyncBytes::new(framing, ports as u64 + REFILL_LATENCY + 1),
@@ -194,6 +198,7 @@ impl Logic for DownlinkRefill {
             scan,
             ring,
             visit_1,
+            position_2,
             port_1,
             nonempty_1,
             visit_2,
@@ -232,8 +237,13 @@ impl Logic for DownlinkRefill {
             self.ring.d.next = self.ring_start.val();
         }
         self.scan_ring.next = self.ring.q.val();
-        // visit: the port's position read from RAM
-        self.positions.read_address.next = self.scan.q.val();
+        // the position of the port visited in the next clock, read from RAM (port 0 between
+        // scans)
+        self.positions.read_address.next = 0.into();
+        if self.refilling.q.val() {
+            self.positions.read_address.next = self.scan.q.val() + 1;
+        }
+        self.position_2.d.next = self.positions.read_data.val();
         self.visit_1.d.next = self.refilling.q.val();
         self.port_1.d.next = self.scan.q.val();
         self.nonempty_1.d.next = self.nonempty.val();
@@ -245,7 +255,7 @@ impl Logic for DownlinkRefill {
         self.position_step.clock.next = self.clock.val();
         self.position_step.reset.next = self.reset.val();
         self.position_step.visit.next = self.visit_2.q.val();
-        self.position_step.position.next = self.positions.read_data.val();
+        self.position_step.position.next = self.position_2.q.val();
         self.position_step.nonempty.next = self.nonempty_2.q.val();
         self.position_step.epoch.next = self.epoch.val();
         self.queue_read_address.next = (bit_cast::<QUEUE_ADDRESS_BITS, 6>(self.port_2.q.val())

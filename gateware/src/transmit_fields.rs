@@ -15,7 +15,8 @@
 //! (from the position two clocks ahead), then the byte from it, so that neither the
 //! arbiter's choice of source nor the position runs through a 16-byte multiplexer in one
 //! clock. `advance` (a datagram's last clock) steps the sequence number. Cost: the 32-bit
-//! sequence number, two 4-bit positions, the 32-bit group and the byte register.
+//! sequence number, two 4-bit positions, the step flag, the 32-bit group and the byte
+//! register.
 
 use crate::hdl::*;
 use crate::transmit_layout::{FIELDS_AT, FIELDS_LEN};
@@ -41,8 +42,8 @@ pub struct TransmitFields {
     pub index: Signal<In, Bits<11>>,
     /// The field byte of this clock's index.
     pub field_byte: Signal<Out, Bits<8>>,
-    // the first field byte and the byte after the fields, each two lower (the field
-    // position steps there)
+    // the first field byte and the byte after the fields, each three lower (the field
+    // position steps there, tested a clock ahead)
     fields_ahead: Constant<Bits<7>>,
     fields_end_ahead: Constant<Bits<7>>,
     next_sequence: DFF<Bits<32>>,
@@ -50,8 +51,9 @@ pub struct TransmitFields {
     next_field_position: DFF<Bits<4>>,
     // the position of the field byte two clocks on
     later_field_position: DFF<Bits<4>>,
-    // the position steps from two clocks on to three
-    later_field_steps: Signal<Local, Bit>,
+    // the position steps from two clocks on to three (registered from the index a clock
+    // before: between frames the index is 0, whose test is index 0's)
+    later_field_steps: DFF<Bit>,
     // the four bytes holding the next clock's field byte
     next_group: DFF<Bits<32>>,
     current_byte: DFF<Bits<8>>,
@@ -74,8 +76,8 @@ impl Default for TransmitFields {
             frame_goes_on: Default::default(),
             index: Default::default(),
             field_byte: Default::default(),
-            fields_ahead: constant((FIELDS_AT - 2) as u64),
-            fields_end_ahead: constant((FIELDS_AT + FIELDS_LEN - 2) as u64),
+            fields_ahead: constant((FIELDS_AT - 3) as u64),
+            fields_end_ahead: constant((FIELDS_AT + FIELDS_LEN - 3) as u64),
             next_sequence: Default::default(),
             next_field_position: Default::default(),
             later_field_position: Default::default(),
@@ -99,6 +101,7 @@ impl Logic for TransmitFields {
             next_sequence,
             next_field_position,
             later_field_position,
+            later_field_steps,
             next_group,
             current_byte
         );
@@ -122,8 +125,8 @@ impl Logic for TransmitFields {
         self.next_group_shifted.next = self.next_group.q.val()
             << (bit_cast::<32, 2>(self.next_field_position.q.val().get_bits::<2>(0)) << 3);
         self.current_byte.d.next = self.next_group_shifted.val().get_bits::<8>(24);
-        // (two clocks on is index + 2 while the frame goes on)
-        self.later_field_steps.next = (self.index.val() < 16)
+        // (two clocks on from the next clock is index + 3 while the frame goes on)
+        self.later_field_steps.d.next = (self.index.val() < 15)
             | ((self.index.val() >= bit_cast::<11, 7>(self.fields_ahead.val()))
                 & (self.index.val() < bit_cast::<11, 7>(self.fields_end_ahead.val())));
         // the position goes once round for the checksum (back at 0 after 16 bytes) and
@@ -133,7 +136,7 @@ impl Logic for TransmitFields {
         if self.frame_goes_on.val() {
             self.next_field_position.d.next = self.later_field_position.q.val();
             self.later_field_position.d.next = self.later_field_position.q.val();
-            if self.later_field_steps.val() {
+            if self.later_field_steps.q.val() {
                 self.later_field_position.d.next = self.later_field_position.q.val() + 1;
             }
         }

@@ -166,8 +166,10 @@ pub struct TransmitSource {
     // the index is 72 or more: the next index's following byte is in the body
     body_follows: Signal<Local, Bit>,
     // the sources `header_early` is chosen by, and the destination's next byte
-    // the table's sources of the byte after the next, under `header_ahead` (0 otherwise)
-    early_sources: DFF<Bits<SOURCE_BITS>>,
+    // the table's sources of the byte after the next, as read
+    table_sources: DFF<Bits<SOURCE_BITS>>,
+    // those sources under `header_ahead` (0 otherwise)
+    early_sources: Signal<Local, Bits<SOURCE_BITS>>,
     early_byte: Signal<Local, Bits<8>>,
     destination_next_byte: Signal<Local, Bits<8>>,
     header_byte: Signal<Local, Bits<8>>,
@@ -209,6 +211,7 @@ impl TransmitSource {
             destination_low: Default::default(),
             header_index: Default::default(),
             body_follows: Default::default(),
+            table_sources: Default::default(),
             early_sources: Default::default(),
             early_byte: Default::default(),
             destination_next_byte: Default::default(),
@@ -225,7 +228,7 @@ impl Logic for TransmitSource {
             clock,
             byte_source,
             header_ahead,
-            early_sources,
+            table_sources,
             body_ahead,
             header_early,
             destination_high,
@@ -260,7 +263,7 @@ impl Logic for TransmitSource {
         if self.body_ahead.q.val() {
             self.byte_source.d.next = self.source_body.val();
         } else if self.header_ahead.q.val() {
-            self.byte_source.d.next = self.source_template.val() | self.early_sources.q.val();
+            self.byte_source.d.next = self.source_template.val() | self.table_sources.q.val();
         }
         // the steady sources and the destination byte that is on top after this clock's
         // shift, ORed a clock ahead from the table's sources of the next byte (read only
@@ -270,39 +273,40 @@ impl Logic for TransmitSource {
         if self.byte_source.q.val().get_bit(12) {
             self.destination_next_byte.next = self.destination_high.q.val().get_bits::<8>(48);
         }
-        self.early_sources.d.next = 0.into();
-        if self.header_ahead.d.val() {
-            self.early_sources.d.next = self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
+        self.table_sources.d.next = self.template.read_data.val().get_bits::<SOURCE_BITS>(8);
+        self.early_sources.next = 0.into();
+        if self.header_ahead.q.val() {
+            self.early_sources.next = self.table_sources.q.val();
         }
         self.early_byte.next = 0.into();
-        if self.early_sources.q.val().get_bit(1) {
+        if self.early_sources.val().get_bit(1) {
             self.early_byte.next = self.total_len.val().get_bits::<8>(8);
         }
-        if self.early_sources.q.val().get_bit(2) {
+        if self.early_sources.val().get_bit(2) {
             self.early_byte.next = self.early_byte.val() | self.total_len.val().get_bits::<8>(0);
         }
-        if self.early_sources.q.val().get_bit(3) {
+        if self.early_sources.val().get_bit(3) {
             self.early_byte.next = self.early_byte.val() | self.ip_checksum.val().get_bits::<8>(8);
         }
-        if self.early_sources.q.val().get_bit(4) {
+        if self.early_sources.val().get_bit(4) {
             self.early_byte.next = self.early_byte.val() | self.ip_checksum.val().get_bits::<8>(0);
         }
-        if self.early_sources.q.val().get_bit(5) {
+        if self.early_sources.val().get_bit(5) {
             self.early_byte.next = self.early_byte.val() | self.udp_len.val().get_bits::<8>(8);
         }
-        if self.early_sources.q.val().get_bit(6) {
+        if self.early_sources.val().get_bit(6) {
             self.early_byte.next = self.early_byte.val() | self.udp_len.val().get_bits::<8>(0);
         }
-        if self.early_sources.q.val().get_bit(7) {
+        if self.early_sources.val().get_bit(7) {
             self.early_byte.next = self.early_byte.val() | self.udp_checksum.val().get_bits::<8>(8);
         }
-        if self.early_sources.q.val().get_bit(8) {
+        if self.early_sources.val().get_bit(8) {
             self.early_byte.next = self.early_byte.val() | self.udp_checksum.val().get_bits::<8>(0);
         }
-        if self.early_sources.q.val().get_bit(9) {
+        if self.early_sources.val().get_bit(9) {
             self.early_byte.next = self.early_byte.val() | self.kind.val();
         }
-        if self.early_sources.q.val().get_bit(12) {
+        if self.early_sources.val().get_bit(12) {
             self.early_byte.next = self.early_byte.val() | self.destination_next_byte.val();
         }
         self.header_early.d.next = self.early_byte.val();
@@ -338,7 +342,6 @@ impl Logic for TransmitSource {
         self.destination_port_held.next = self.destination_low.q.val().get_bits::<16>(0);
         if self.reset.val() {
             self.header_ahead.d.next = false;
-            self.early_sources.d.next = 0.into();
             self.body_ahead.d.next = false;
         }
         self.next_is_body.next = self.body_ahead.q.val();
