@@ -97,6 +97,8 @@ pub struct DownlinkRefill {
     /// packet on the line is a time sync (6) or a generated one (7), the epoch of its last
     /// generated sync (8).
     positions: BlockRam<9, 6>,
+    // the position RAM's read address: the port visited in the next clock (0 between scans)
+    position_read: DFF<Bits<6>>,
     // the visited port's position word, two clocks after the visit
     position_2: DFF<Bits<9>>,
     /// The visited port's byte source and next position, from its position word.
@@ -155,6 +157,7 @@ impl DownlinkRefill {
             byte_data: Default::default(),
             clearing: Default::default(),
             positions: Default::default(),
+            position_read: Default::default(),
             position_2: Default::default(),
             position_step: Default::default(),
             // the visits, the latency after them, and a clock to spare
@@ -198,6 +201,7 @@ impl Logic for DownlinkRefill {
             scan,
             ring,
             visit_1,
+            position_read,
             position_2,
             port_1,
             nonempty_1,
@@ -239,10 +243,7 @@ impl Logic for DownlinkRefill {
         self.scan_ring.next = self.ring.q.val();
         // the position of the port visited in the next clock, read from RAM (port 0 between
         // scans)
-        self.positions.read_address.next = 0.into();
-        if self.refilling.q.val() {
-            self.positions.read_address.next = self.scan.q.val() + 1;
-        }
+        self.positions.read_address.next = self.position_read.q.val();
         self.position_2.d.next = self.positions.read_data.val();
         self.visit_1.d.next = self.refilling.q.val();
         self.port_1.d.next = self.scan.q.val();
@@ -307,7 +308,13 @@ impl Logic for DownlinkRefill {
         self.positions.write_enable.next = self.write_5.q.val();
         self.positions.write_address.next = self.write_port_5.q.val();
         self.positions.write_data.next = self.write_position_5.q.val();
+        // (from the scan's next state: the port after the next clock's, 0 when it ends)
+        self.position_read.d.next = 0.into();
+        if self.refilling.d.val() {
+            self.position_read.d.next = self.scan.d.val() + 1;
+        }
         if self.reset.val() {
+            self.position_read.d.next = 0.into();
             self.refilling.d.next = false;
             self.visit_1.d.next = false;
             self.visit_2.d.next = false;

@@ -215,7 +215,6 @@ impl Logic for StatusReporter {
         self.counter_address.next = self.counter_word.q.val();
         // the counter memory answers two clocks after the address (its output register)
         self.words.clock.next = self.clock.val();
-        self.words.start.next = self.state.q.val() == ReportState::Start;
         self.words.next_word.next = self.writer.word_done.val();
         self.words.word.next = self.word.q.val();
         self.words.first_port.next = self.pages.first_port.val();

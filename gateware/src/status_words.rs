@@ -5,7 +5,7 @@
 //! per port, from the counter file: `counter_data`), then the box counter block of
 //! [`BOX_COUNTER_WORDS`] words: the link word (`link_up` in bit 24, `link_speed` in bits
 //! 16-17), then the box counters (from the box counter file: `box_counter_data`, read at
-//! `box_counter_address`, which steps with the words of the block). A word holds for
+//! `box_counter_address`, which steps with the words of the block from 0 at the link word). A word holds for
 //! several clocks (`next_word` moves on): the tests of the word against the page's layout
 //! are registered a clock after the word, the header value and the source a clock after
 //! them, so `value` is the word's from its third clock on (the counters' as the memories
@@ -24,8 +24,6 @@ pub const BOX_COUNTER_WORDS: usize = BOX_COUNTERS_LEN / 4;
 pub struct StatusWords {
     /// The box clock.
     pub clock: Signal<In, Clock>,
-    /// A page starts: the box counters from the first.
-    pub start: Signal<In, Bit>,
     /// The word's last clock: the next word follows.
     pub next_word: Signal<In, Bit>,
     /// The word of the page.
@@ -76,7 +74,6 @@ impl Default for StatusWords {
     fn default() -> Self {
         Self {
             clock: Default::default(),
-            start: Default::default(),
             next_word: Default::default(),
             word: Default::default(),
             first_port: Default::default(),
@@ -148,7 +145,8 @@ impl Logic for StatusWords {
             (self.word.val() >= self.first_counter_word.val()) & !self.in_block.q.val();
         // the block's counters come from the box counter file, read like the port counters
         self.word_from_box_counters.d.next = self.in_block.q.val() & !self.at_block.q.val();
-        if self.start.val() {
+        // (back at the first counter during the link word: no path from the page's start)
+        if self.at_block.q.val() {
             self.box_counter_word.d.next = 0.into();
         }
         if self.next_word.val() & self.in_block.q.val() & !self.at_block.q.val() {
@@ -198,9 +196,7 @@ mod tests {
             u.link_speed.next = 2.into();
             u.word.next = 0.into();
             u.next_word.next = false;
-            u.start.next = true;
             bench.cycle();
-            bench.uut.start.next = false;
             let words = HEADER_WORDS as u64 + 8 * page_ports + BOX_COUNTER_WORDS as u64;
             let block = HEADER_WORDS as u64 + 8 * page_ports;
             // the box counter addresses of the last two clocks: the file answers two late
