@@ -49,7 +49,7 @@ pub struct ReplyStages {
     /// The held field byte's place in its word.
     pub field_byte_index: Signal<Out, Bits<3>>,
     /// The held field byte's word, a clock after its place.
-    pub field_word_index: Signal<Out, Bits<3>>,
+    pub field_word_index: Signal<Out, Bits<2>>,
     /// The buffer address a copy reads.
     pub read_address: Signal<Out, Bits<8>>,
     /// A byte is written.
@@ -137,7 +137,7 @@ impl Logic for ReplyStages {
         // Stage 3 -> 4: the held field's byte in each word (the word in the next stage);
         // the counter loaded at its byte 0 (the next counter's read starts).
         self.field_byte_index.next = self.s3_value.q.val().get_bits::<3>(0);
-        self.field_word_index.next = self.s4_value.q.val().get_bits::<3>(3);
+        self.field_word_index.next = self.s4_value.q.val().get_bits::<2>(3);
         self.s4_write.d.next = self.s3_write.q.val();
         self.s4_address.d.next = self.s3_address.q.val();
         self.s4_value.d.next = self.s3_value.q.val();
