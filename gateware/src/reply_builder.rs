@@ -26,8 +26,8 @@
 //!
 //! The builder is a sequencer stepping through a program in a ROM (one step per clock:
 //! a frame position, and a constant byte, a held-field byte, a counter byte, a checksum
-//! byte or a byte of the buffer); a byte goes through four registers (the ROM's output,
-//! the ROM word's parts, the byte in each field word, the written byte) and is summed into
+//! byte or a byte of the buffer); a byte goes through three registers (the ROM's output,
+//! the ROM word's parts or the byte in each field word, the written byte) and is summed into
 //! the IPv4 or UDP checksum as it is written (a running sum with an end-around carry); the
 //! checksums are complemented into a register and written last. Build
 //! durations: [`build_clocks`] (64 clocks for ARP, 60 for an echo of any length, 93, 105
@@ -89,8 +89,8 @@ const REPLY_AT: usize = ACK_BODY_AT + ACK_FIXED_LEN;
 const START_TO_STEP: u64 = START_TO_WORD;
 
 /// Steps from the last step summed into a checksum to a step that writes it: the byte is
-/// summed after stage 5, folded twice and complemented; the checksum byte is taken in
-/// stage 4.
+/// summed after stage 5 and the checksum is final [`CHECKSUM_CLOCKS`] clocks later (at
+/// most); the checksum byte is taken in stage 4.
 const CHECKSUM_DISTANCE: usize = CHECKSUM_CLOCKS as usize + 1;
 
 /// Where a step's byte comes from.
@@ -516,13 +516,13 @@ fn program(kind: ReplyKind) -> Vec<Step> {
 
 /// Clocks from `start_echo` (high in clock s) to the last clock in which the echo reply's
 /// fields from the parser are read: `ip_total_length` in clock s, `icmp_rest_sum` from
-/// clock s + 1 to s + this (a field step's byte is chosen a clock after its ROM word).
+/// clock s + 1 to s + this (a field step's byte is chosen in the clock of its ROM word).
 pub fn echo_fields_read() -> u64 {
     let last_field = echo_program(&LinkConfig::DEFAULT)
         .iter()
         .rposition(|s| s.source == Source::Field && !s.from_buffer)
         .expect("the ICMP checksum");
-    START_TO_STEP + last_field as u64 + 1
+    START_TO_STEP + last_field as u64
 }
 
 /// Clocks from the clock the reply's last body beat is taken to the first clock `locked`
@@ -537,9 +537,9 @@ pub fn build_clocks(kind: ReplyKind) -> u64 {
 
 /// Clocks from the take (clock T) to the patch's last write (the UDP checksum's low byte
 /// is written at the edge ending clock T + this): the registered take, a step's ROM word,
-/// then three registers, for every step but the end marker.
+/// then two registers, for every step but the end marker.
 pub fn patch_clocks() -> u64 {
-    START_TO_STEP + patch_program().len() as u64 + 2
+    START_TO_STEP + patch_program().len() as u64 + 1
 }
 
 /// The earliest clock (counted from the take's) in which the body reader puts the first
@@ -1322,7 +1322,7 @@ mod tests {
         ]
         .map(build_clocks);
         assert_eq!(clocks, [64, 60, 93, 105, 177]);
-        assert_eq!((patch_clocks(), patch_margin_clocks()), (21, 21));
+        assert_eq!((patch_clocks(), patch_margin_clocks()), (20, 22));
     }
 
     #[test]
