@@ -396,6 +396,16 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
     let mut p = Program::default();
     let udp_len = (UDP_HEADER_LEN + reply.payload_len()) as u16;
     use command::field;
+    // the command unit's fields first: its last accepted sequence number holds for
+    // `LAST_ACCEPTED_HOLDS` clocks from `start_ack` ([`ack_fields_read`])
+    p.fields(
+        ACK_BODY_AT + ack_field::RESULT,
+        field_byte::RESULT,
+        1,
+        Sum::Udp,
+    );
+    let last_accepted = ACK_BODY_AT + ack_field::LAST_ACCEPTED.start;
+    p.fields(last_accepted, field_byte::LAST_ACCEPTED, 4, Sum::Udp);
     // the request's fields kept: its sender, source port and opcode are copied, its
     // sequence number and host time stay where they are (the same place in the ack)
     copy_addresses(&mut p, Sum::Both);
@@ -439,15 +449,7 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
         Sum::Udp,
     );
     p.constants(ACK_AT + field::RESERVED.start, &[0, 0], Sum::Udp);
-    p.fields(
-        ACK_BODY_AT + ack_field::RESULT,
-        field_byte::RESULT,
-        1,
-        Sum::Udp,
-    );
     p.constants(ACK_BODY_AT + ack_field::RESERVED.start, &[0, 0], Sum::Udp);
-    let last_accepted = ACK_BODY_AT + ack_field::LAST_ACCEPTED.start;
-    p.fields(last_accepted, field_byte::LAST_ACCEPTED, 4, Sum::Udp);
     let receive_tick = ACK_BODY_AT + ack_field::RECEIVE_TICK.start;
     p.fields(receive_tick, field_byte::RECEIVE_TICK, 8, Sum::Udp);
     match reply {
@@ -522,6 +524,21 @@ pub fn echo_fields_read() -> u64 {
         .iter()
         .rposition(|s| s.source == Source::Field && !s.from_buffer)
         .expect("the ICMP checksum");
+    START_TO_STEP + last_field as u64
+}
+
+/// Clocks from `start_ack` (high in clock s) to the last clock in which an
+/// acknowledgement reads `last_accepted` (from clock s + 1 on): the same for every
+/// acknowledgement.
+pub fn ack_fields_read() -> u64 {
+    let link = LinkConfig::DEFAULT;
+    let last_field = ack_program(&link, 0, 1, AckReplyKind::None)
+        .iter()
+        .rposition(|s| {
+            s.source == Source::Field
+                && (field_byte::LAST_ACCEPTED..field_byte::LAST_ACCEPTED + 4).contains(&s.value)
+        })
+        .expect("the last accepted sequence number");
     START_TO_STEP + last_field as u64
 }
 
@@ -930,7 +947,8 @@ mod tests {
     /// starts; takes the descriptor after a random delay (none with `fastest`) and reads
     /// the body with random `ready` (always with `fastest`). Meanwhile the receive port
     /// writes garbage (the buffer is locked), the echo fields change after
-    /// [`echo_fields_read`] clocks, and `locked` is checked clock by clock.
+    /// [`echo_fields_read`] clocks and the last accepted sequence number after
+    /// [`ack_fields_read`], and `locked` is checked clock by clock.
     fn run(kind: ReplyKind, request: &[u8], held: &Held, seed: u64, fastest: bool) -> Run {
         let link = LinkConfig::DEFAULT;
         let mut rng = TestRng::new(seed);
@@ -1005,10 +1023,14 @@ mod tests {
             let clock = bench.cycles;
             let u = &mut bench.uut;
             u.tick.next = (tick_base + clock).into();
-            // the parser's echo fields change with the next frame
+            // the parser's echo fields change with the next frame, the last accepted
+            // sequence number with the next command's sender
             if clock > start + echo_fields_read() {
                 u.ip_total_length.next = u64::from(rng.next_u64() as u16).into();
                 u.icmp_rest_sum.next = u64::from(rng.next_u64() as u16).into();
+            }
+            if clock > start + ack_fields_read() {
+                u.last_accepted.next = u64::from(rng.next_u64() as u32).into();
             }
             u.counters_data.next = u64::from(held.counters.counts[counter_addresses[0]]).into();
             // the parser keeps writing: the lock must keep it out
@@ -1308,6 +1330,18 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The command unit's last accepted sequence number holds while an acknowledgement
+    /// reads it.
+    #[test]
+    fn the_last_accepted_sequence_number_holds_while_it_is_read() {
+        use crate::command_unit::LAST_ACCEPTED_HOLDS;
+        assert!(
+            ack_fields_read() < LAST_ACCEPTED_HOLDS,
+            "{}",
+            ack_fields_read()
+        );
     }
 
     #[test]
