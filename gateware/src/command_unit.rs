@@ -36,7 +36,8 @@
 //! command: the command's own when it was taken, else the one it holds (0 for a host
 //! not in the table, which only a command for another box can leave there). It is no
 //! register of its own: a flag says whether the command was taken, and `last_accepted`
-//! is then the parser's sequence number, else the table's answer for the sender; both hold
+//! is then the parser's sequence number, else the table's answer for the sender (0 when
+//! the table does not know it); both hold
 //! until the next frame reaches the parser's fields (its IPv4 source, byte 26, at least 20
 //! + 27 clocks after the last beat: more than [`LAST_ACCEPTED_HOLDS`] after `done`).
 
@@ -387,7 +388,7 @@ impl Logic for CommandUnit {
         self.done.next = self.done_out.q.val();
         self.fate.next = self.fate_out.q.val();
         self.result.next = self.result_out.q.val();
-        self.last_accepted.next = self.hosts.last_sequence.val();
+        self.last_accepted.next = self.hosts.known_sequence.val();
         if self.took_sequence.q.val() {
             self.last_accepted.next = self.command_sequence.val();
         }
