@@ -16,8 +16,8 @@
 //!   protocol and the sender's subnet, steps 6-10 and 15, and the payload's extent) and
 //!   the command layer ([`CommandDecoder`]: the command header's fields, the first
 //!   argument bytes and the header's form for step 16);
-//! - the sender's MAC (Ethernet source, for the command unit) and the transport header
-//!   (bytes 34..42) captured;
+//! - the sender's MAC (Ethernet source, for the command unit) captured (the transport
+//!   layer captures the UDP source port and compares the rest of its header as it passes);
 //! - two ones'-complement sums, one byte per clock with an end-around carry: the transport
 //!   message (ICMP, or UDP with its pseudo header) and the ICMP message from its byte 4
 //!   (the echo reply's checksum is its complement). They stop at the IPv4 payload's end
@@ -38,7 +38,7 @@
 //! `ip_total_length` until its byte 16, `icmp_rest_sum` until the clock after its first
 //! beat was registered (at least [`DECISION_LATENCY`] + 2 clocks after the last beat),
 //! which covers the reply builder's reads after `start_echo`
-//! ([`crate::reply_builder::ECHO_FIELDS_READ`]). The reply builder holds the receive tick
+//! ([`crate::reply_builder::echo_fields_read`]). The reply builder holds the receive tick
 //! itself: `receive_tick_now` says a stored frame's last beat is on `frame`.
 //!
 //! Frames must be at least [`DECISION_LATENCY`] clocks apart (last beat to next first beat),
