@@ -6,9 +6,10 @@
 //! into it through the receive write port, which is shut while `locked`. `reserve` locks
 //! it (a reply will follow, the request must stay); `start_arp`, `start_echo` or
 //! `start_ack` then builds the reply in place, one byte per clock, from the request
-//! itself, the parser's and the command unit's held fields and constants. The request's
-//! own fields are not taken from the parser: the sender's MAC, IPv4 address and UDP port
-//! and the command's opcode are copied inside the buffer (read two clocks before they are
+//! itself, the parser's and the command unit's fields (those that change with the next
+//! frame read first in a program), the receive or send tick it holds and constants. The
+//! request's own fields are not taken from the parser: the sender's MAC, IPv4 address and
+//! UDP port and the command's opcode are copied inside the buffer (read two clocks before they are
 //! written), the command's sequence number and host time and the echo request's total
 //! length stay where they are (at the same place in the reply) and are read to be summed.
 //! So the peer_* and command_sequence/host_time fields of the parser need not reach this
