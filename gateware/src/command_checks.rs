@@ -4,9 +4,10 @@
 //!
 //! Two register stages on the parser's held fields, every clock: the first registers the box
 //! id's test, one flag per opcode, the argument length's tests, each argument's rule and a
-//! cell command's target ports; the second the verdict, as a fate (a `BoxCounter` index) and
-//! an acknowledgement result. The argument fields the accepted commands use are wires from
-//! the held bytes.
+//! cell command's target (its port, or every port); the second the verdict, as a fate (a
+//! `BoxCounter` index) and an acknowledgement result. Whether a target port's queue is
+//! full is chosen from `downlink_full_ports` by the registered target (a wire). The
+//! argument fields the accepted commands use are wires from the held bytes.
 
 use crate::command_arguments::{CommandArguments, HELD_ARGUMENT_BITS};
 use crate::hdl::*;
@@ -20,7 +21,7 @@ use skinbox_protocol::command::{
 const _: () = assert!(MIN_SYNC_PERIOD_TICKS == MIN_STATUS_PERIOD_TICKS);
 
 /// Clocks from steady fields to the verdict (`arguments_ok`, `fate`, `result`); the opcode
-/// flags, `box_ok`, `no_arguments` and `target_ports` are a clock earlier.
+/// flags, `box_ok`, `no_arguments` and the target of `target_full` are a clock earlier.
 pub const CHECK_CLOCKS: u64 = 2;
 
 /// The box id, opcode and argument checks.
@@ -36,6 +37,8 @@ pub struct CommandChecks {
     pub command_argument_length: Signal<In, Bits<16>>,
     /// The first 12 argument bytes, the first in bits 95..88, bytes past the arguments 0.
     pub command_arguments: Signal<In, Bits<HELD_ARGUMENT_BITS>>,
+    /// The downlink's ports whose queues are full, one bit each.
+    pub downlink_full_ports: Signal<In, Bits<64>>,
     /// The box id is the box's or `ANY_BOX`.
     pub box_ok: Signal<Out, Bit>,
     /// The opcode is stream-to.
@@ -52,8 +55,9 @@ pub struct CommandChecks {
     pub is_set_sync_period: Signal<Out, Bit>,
     /// The command has no argument bytes.
     pub no_arguments: Signal<Out, Bit>,
-    /// A cell command's target ports, one bit each (every bit for `ALL_PORTS`).
-    pub target_ports: Signal<Out, Bits<64>>,
+    /// A cell command's target port's queue is full (any port's for `ALL_PORTS`; a wire
+    /// from `downlink_full_ports`).
+    pub target_full: Signal<Out, Bit>,
     /// The opcode is known and its arguments are right.
     pub arguments_ok: Signal<Out, Bit>,
     /// The fate by opcode and arguments alone: accepted, unknown opcode or bad argument.
@@ -113,7 +117,10 @@ pub struct CommandChecks {
     value_zero: DFF<Bit>,
     cell_port_ok: DFF<Bit>,
     reserved_zero: DFF<Bit>,
-    target_ports_held: DFF<Bits<64>>,
+    // a cell command's target: a port below 64 (its number), or every port
+    target_port: DFF<Bits<6>>,
+    target_one: DFF<Bit>,
+    target_all: DFF<Bit>,
     // stage 2
     arguments_ok_held: DFF<Bit>,
     arguments_fate: DFF<Bits<5>>,
@@ -132,6 +139,7 @@ impl CommandChecks {
             command_opcode: Default::default(),
             command_argument_length: Default::default(),
             command_arguments: Default::default(),
+            downlink_full_ports: Default::default(),
             box_ok: Default::default(),
             is_stream_to: Default::default(),
             is_set_flush_timeout: Default::default(),
@@ -140,7 +148,7 @@ impl CommandChecks {
             is_cell_command: Default::default(),
             is_set_sync_period: Default::default(),
             no_arguments: Default::default(),
-            target_ports: Default::default(),
+            target_full: Default::default(),
             arguments_ok: Default::default(),
             fate: Default::default(),
             result: Default::default(),
@@ -189,7 +197,9 @@ impl CommandChecks {
             value_zero: Default::default(),
             cell_port_ok: Default::default(),
             reserved_zero: Default::default(),
-            target_ports_held: Default::default(),
+            target_port: Default::default(),
+            target_one: Default::default(),
+            target_all: Default::default(),
             arguments_ok_held: Default::default(),
             arguments_fate: Default::default(),
             arguments_result: Default::default(),
@@ -224,7 +234,9 @@ impl Logic for CommandChecks {
             value_zero,
             cell_port_ok,
             reserved_zero,
-            target_ports_held,
+            target_port,
+            target_one,
+            target_all,
             arguments_ok_held,
             arguments_fate,
             arguments_result
@@ -257,14 +269,9 @@ impl Logic for CommandChecks {
         self.cell_port_ok.d.next = (self.fields.cell_port.val() == self.all_ports.val())
             | (self.fields.cell_port.val() < self.port_count.val());
         // (ports from 64 on target nothing, as a cell command's port never is one)
-        self.target_ports_held.d.next = 0.into();
-        if self.fields.cell_port.val().get_bits::<2>(6) == 0 {
-            self.target_ports_held.d.next = bit_cast::<64, 1>(true.into())
-                << bit_cast::<64, 6>(self.fields.cell_port.val().get_bits::<6>(0));
-        }
-        if self.fields.cell_port.val() == self.all_ports.val() {
-            self.target_ports_held.d.next = 0xFFFF_FFFF_FFFF_FFFF_u64.into();
-        }
+        self.target_port.d.next = self.fields.cell_port.val().get_bits::<6>(0);
+        self.target_one.d.next = self.fields.cell_port.val().get_bits::<2>(6) == 0;
+        self.target_all.d.next = self.fields.cell_port.val() == self.all_ports.val();
         self.reserved_zero.d.next = self.fields.cell_reserved.val() == 0;
 
         // Stage 2: the arguments' verdict.
@@ -311,7 +318,12 @@ impl Logic for CommandChecks {
         self.is_cell_command.next = self.cell_command_flag.q.val();
         self.is_set_sync_period.next = self.set_sync_period_flag.q.val();
         self.no_arguments.next = self.length_0.q.val();
-        self.target_ports.next = self.target_ports_held.q.val();
+        self.target_full.next = (self.target_all.q.val() & (self.downlink_full_ports.val() != 0))
+            | (self.target_one.q.val()
+                & self
+                    .downlink_full_ports
+                    .val()
+                    .get_bit(self.target_port.q.val().index()));
         self.arguments_ok.next = self.arguments_ok_held.q.val();
         self.fate.next = self.arguments_fate.q.val();
         self.result.next = self.arguments_result.q.val();
@@ -411,6 +423,12 @@ mod tests {
             u.command_opcode.next = u64::from(opcode).into();
             u.command_argument_length.next = (args.len() as u64).into();
             u.command_arguments.next = (high << 32) | low;
+            let full_ports = match (r >> 56) % 3 {
+                0 => 0,
+                1 => 1 << ((r >> 58) % 8),
+                _ => rng.next_u64(),
+            };
+            u.downlink_full_ports.next = full_ports.into();
             bench.cycles(CHECK_CLOCKS);
             let (ok, fate, result, ports) = verdict(opcode, &args);
             let u = &bench.uut;
@@ -420,7 +438,8 @@ mod tests {
             assert_eq!(u.result.val().to_u64(), result as u64, "{at}");
             assert_eq!(u.box_ok.val(), box_id != BOX_ID ^ 0x10, "{at}");
             if ok && opcode == Opcode::CellCommand as u8 {
-                assert_eq!(u.target_ports.val().to_u64(), ports, "{at}");
+                let full = full_ports & ports != 0;
+                assert_eq!(u.target_full.val(), full, "{at}, full {full_ports:x}");
             }
             assert_eq!(u.no_arguments.val(), args.is_empty(), "{at}");
             *verdicts.entry(result as u8).or_insert(0) += 1;

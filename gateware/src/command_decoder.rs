@@ -8,8 +8,9 @@
 //! opcode, sequence number, argument length), one [`FieldMatch`] per field it only
 //! compares with constants (start, flags, reserved), one slot register per
 //! argument byte (cleared at the header's last byte; bytes after the IPv4 packet's end are
-//! taken as 0, as are bytes a short frame never reached), and the argument length the IPv4
-//! payload length leaves (`payload_length` less the UDP and command headers).
+//! taken as 0, as are bytes a short frame never reached). The argument length is compared
+//! with the one the IPv4 payload length leaves (`payload_length`, which the IPv4 layer
+//! holds, less the UDP and command headers) when the checks are registered.
 //!
 //! In the clock after a frame's last beat was registered the checks are registered (the
 //! parser's stage 1): `well_formed` is high when the header starts with the command magic,
@@ -25,8 +26,7 @@ use crate::stream::FrameBeats;
 use skinbox_protocol::command::ARGUMENTS_AT;
 use skinbox_protocol::command::{self, field, HEADER_LEN, KIND_COMMAND};
 use skinbox_protocol::datagram::{MAGIC, VERSION};
-use skinbox_protocol::link::{IPV4_AT, PAYLOAD_AT, UDP_HEADER_LEN};
-use skinbox_protocol::wire::ipv4;
+use skinbox_protocol::link::{PAYLOAD_AT, UDP_HEADER_LEN};
 use skinbox_protocol::Field;
 
 /// Argument bytes taken from a command (the longest arguments the box accepts).
@@ -45,10 +45,6 @@ const fn byte_in_frame(at: usize) -> Field {
 /// The command start: magic, version and kind.
 const START: Field = in_frame(field::MAGIC.start..field::KIND + 1);
 const _: () = assert!(field::MAGIC.end == field::VERSION && field::VERSION + 1 == field::KIND);
-/// The frame position after which the IPv4 payload length is known (the total length's
-/// last byte is registered there).
-const PAYLOAD_LENGTH_KNOWN_AT: usize = IPV4_AT + ipv4::field::TOTAL_LEN.end + 1;
-const _: () = assert!(PAYLOAD_LENGTH_KNOWN_AT < ARGUMENTS_AT);
 
 /// The command layer of the receive path; see the module documentation.
 #[derive(LogicBlock)]
@@ -82,11 +78,9 @@ pub struct CommandDecoder {
     sequence_field: FieldCapture<32>,
     length_field: FieldCapture<16>,
     reserved: FieldMatch,
-    payload_length_known_at: Constant<Bits<11>>,
     header_last_at: Constant<Bits<11>>,
     udp_and_command_header_len: Constant<Bits<16>>,
     // the argument slots: slot k takes the byte in the clock its bit 11 - k is set
-    at_payload_length_known: DFF<Bit>,
     at_header_last: DFF<Bit>,
     argument_slot: DFF<Bits<12>>,
     argument_byte: Signal<Local, Bits<8>>,
@@ -102,7 +96,6 @@ pub struct CommandDecoder {
     argument_9: DFF<Bits<8>>,
     argument_10: DFF<Bits<8>>,
     argument_11: DFF<Bits<8>>,
-    arguments_expected: DFF<Bits<16>>,
     // the checks, registered
     start_ok: DFF<Bit>,
     zeros_ok: DFF<Bit>,
@@ -131,10 +124,8 @@ impl Default for CommandDecoder {
             sequence_field: FieldCapture::of(in_frame(field::SEQUENCE)),
             length_field: FieldCapture::of(in_frame(field::LENGTH)),
             reserved: FieldMatch::of(in_frame(field::RESERVED), &[0, 0]),
-            payload_length_known_at: constant(PAYLOAD_LENGTH_KNOWN_AT as u64),
             header_last_at: constant(ARGUMENTS_AT as u64 - 1),
             udp_and_command_header_len: constant((UDP_HEADER_LEN + HEADER_LEN) as u64),
-            at_payload_length_known: Default::default(),
             at_header_last: Default::default(),
             argument_slot: Default::default(),
             argument_byte: Default::default(),
@@ -150,7 +141,6 @@ impl Default for CommandDecoder {
             argument_9: Default::default(),
             argument_10: Default::default(),
             argument_11: Default::default(),
-            arguments_expected: Default::default(),
             start_ok: Default::default(),
             zeros_ok: Default::default(),
             length_ok: Default::default(),
@@ -166,7 +156,6 @@ impl Logic for CommandDecoder {
         dff_setup!(
             self,
             clock,
-            at_payload_length_known,
             at_header_last,
             argument_slot,
             argument_0,
@@ -181,7 +170,6 @@ impl Logic for CommandDecoder {
             argument_9,
             argument_10,
             argument_11,
-            arguments_expected,
             start_ok,
             zeros_ok,
             length_ok
@@ -204,17 +192,11 @@ impl Logic for CommandDecoder {
 
         // the argument bytes: one slot per byte after the header, inside the IPv4 packet
         if self.beats.next_valid.val() {
-            self.at_payload_length_known.d.next =
-                self.beats.next_index.val() == self.payload_length_known_at.val();
             self.at_header_last.d.next = self.beats.next_index.val() == self.header_last_at.val();
         }
         self.argument_byte.next = 0.into();
         if self.beat_in_packet.val() {
             self.argument_byte.next = self.beats.beat_data.val();
-        }
-        if self.beats.beat_valid.val() & self.at_payload_length_known.q.val() {
-            self.arguments_expected.d.next =
-                self.payload_length.val() - self.udp_and_command_header_len.val();
         }
         // (a frame's first beat only stops the slots a short frame left running: the bytes
         // change no earlier than the next command header's end)
@@ -280,7 +262,8 @@ impl Logic for CommandDecoder {
         // the checks (registered every clock; read a clock after the last beat)
         self.start_ok.d.next = self.start.equals.val();
         self.zeros_ok.d.next = self.flags.equals.val() & self.reserved.equals.val();
-        self.length_ok.d.next = self.length_field.value.val() == self.arguments_expected.q.val();
+        self.length_ok.d.next = self.length_field.value.val()
+            == self.payload_length.val() - self.udp_and_command_header_len.val();
         self.well_formed.next =
             self.start_ok.q.val() & self.zeros_ok.q.val() & self.length_ok.q.val();
 
@@ -308,7 +291,8 @@ mod tests {
     use super::*;
     use crate::testbench::{send_frame_beats, Bench, TestRng};
     use skinbox_protocol::command::{Command, CommandRepr, Request};
-    use skinbox_protocol::link::IPV4_HEADER_LEN;
+    use skinbox_protocol::link::{IPV4_AT, IPV4_HEADER_LEN};
+    use skinbox_protocol::wire::ipv4;
 
     /// Random command frames, good and with a header byte, the argument length or the IPv4
     /// length changed: `well_formed` is the protocol's `Command::new_checked` of the UDP

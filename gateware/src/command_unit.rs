@@ -19,8 +19,9 @@
 //! work is a pipeline of registers, one stage per clock: the argument checks; the result of
 //! the arguments; the serial-number test against the table's answer (newer or not,
 //! registered); the decision. `done`
-//! is high in the clock [`COMMAND_LATENCY`] clocks after `command`, with `fate`, `result`
-//! and `last_accepted` (held until the next `done`). The configuration registers change at
+//! is high in the clock [`COMMAND_LATENCY`] clocks after `command`, with `fate` and
+//! `result` (held until the next `done`) and `last_accepted` (for
+//! [`LAST_ACCEPTED_HOLDS`] clocks from `done` on). The configuration registers change at
 //! the same edge: in the `done` clock they already hold the new values, and
 //! `status_period_set` / `status_now` are high in that clock only. The table takes the
 //! sequence number a clock later, from a register. `peer_ip` must be steady for
@@ -33,7 +34,12 @@
 //!
 //! `last_accepted` is the sequence number the table holds for the sender after the
 //! command: the command's own when it was taken, else the one it holds (0 for a host
-//! not in the table, which only a command for another box can leave there).
+//! not in the table, which only a command for another box can leave there). It is no
+//! register of its own: a flag says whether the command was taken, and `last_accepted`
+//! is then the parser's sequence number, else the table's answer for the sender (0 when
+//! the table does not know it); both hold
+//! until the next frame reaches the parser's fields (its IPv4 source, byte 26, at least 20
+//! + 27 clocks after the last beat: more than [`LAST_ACCEPTED_HOLDS`] after `done`).
 
 use crate::box_configuration::BoxConfiguration;
 use crate::command_checks::CommandChecks;
@@ -45,6 +51,9 @@ use skinbox_protocol::link::LinkConfig;
 
 /// Clocks from `command` to `done`.
 pub const COMMAND_LATENCY: u64 = 4;
+
+/// Clocks from `done` (its clock counted) during which `last_accepted` holds.
+pub const LAST_ACCEPTED_HOLDS: u64 = 30;
 
 /// Clocks from `command` to `downlink_offer`: the clock before `done`.
 pub const DOWNLINK_OFFER_AFTER_COMMAND: u64 = COMMAND_LATENCY - 1;
@@ -107,7 +116,8 @@ pub struct CommandUnit {
     pub fate: Signal<Out, Bits<5>>,
     /// The acknowledgement's result: an `AckResult` (held until the next `done`).
     pub result: Signal<Out, Bits<8>>,
-    /// The acknowledgement's last accepted sequence number (held until the next `done`).
+    /// The acknowledgement's last accepted sequence number (from `done` for
+    /// [`LAST_ACCEPTED_HOLDS`] clocks).
     pub last_accepted: Signal<Out, Bits<32>>,
     /// Datagrams' destination MAC.
     pub destination_mac: Signal<Out, Bits<48>>,
@@ -176,7 +186,8 @@ pub struct CommandUnit {
     // the decision refused a cell command for a full queue: `fate` and `result` say so
     // (chosen after the registers, so the queues' state reaches one flip-flop)
     downlink_refused: DFF<Bit>,
-    last_accepted_out: DFF<Bits<32>>,
+    // the command was taken: `last_accepted` is its sequence number
+    took_sequence: DFF<Bit>,
     accepted_stream_to_out: DFF<Bit>,
     accepted_status_now_out: DFF<Bit>,
     // decision signals
@@ -253,7 +264,7 @@ impl CommandUnit {
             fate_out: Default::default(),
             result_out: Default::default(),
             downlink_refused: Default::default(),
-            last_accepted_out: Default::default(),
+            took_sequence: Default::default(),
             accepted_stream_to_out: Default::default(),
             accepted_status_now_out: Default::default(),
             difference: Default::default(),
@@ -288,7 +299,7 @@ impl Logic for CommandUnit {
             fate_out,
             result_out,
             downlink_refused,
-            last_accepted_out,
+            took_sequence,
             accepted_stream_to_out,
             accepted_status_now_out
         );
@@ -305,6 +316,7 @@ impl Logic for CommandUnit {
         self.checks.command_opcode.next = self.command_opcode.val();
         self.checks.command_argument_length.next = self.command_argument_length.val();
         self.checks.command_arguments.next = self.command_arguments.val();
+        self.checks.downlink_full_ports.next = self.downlink_full_ports.val();
 
         // Stage 3: the serial-number difference to the host's last accepted sequence.
         self.stage_3.d.next = self.stage_2.q.val();
@@ -340,8 +352,7 @@ impl Logic for CommandUnit {
         self.taken.next = self.newer.val() & self.checks.box_ok.val();
         self.cell_command_taken.next = self.newer.val() & self.apply_cell_command.q.val();
         self.downlink_port.next = self.checks.cell_port.val();
-        self.downlink_room.next = !self.downlink_busy.val()
-            & ((self.downlink_full_ports.val() & self.checks.target_ports.val()) == 0);
+        self.downlink_room.next = !self.downlink_busy.val() & !self.checks.target_full.val();
         self.downlink_offer.next = self.cell_command_taken.val() & self.downlink_room.val();
         if self.stage_3.q.val() {
             self.downlink_refused.d.next = self.checks.box_ok.val()
@@ -353,19 +364,18 @@ impl Logic for CommandUnit {
             if !self.checks.box_ok.val() {
                 self.fate_out.d.next = self.fate_other_box.val();
                 self.result_out.d.next = self.result_other_box.val();
-                self.last_accepted_out.d.next = self.hosts.last_sequence.val();
+                self.took_sequence.d.next = false;
             } else if self.not_newer.q.val() {
                 self.fate_out.d.next = self.fate_replay.val();
                 self.result_out.d.next = self.result_replay.val();
-                self.last_accepted_out.d.next = self.hosts.last_sequence.val();
+                self.took_sequence.d.next = false;
             } else {
                 self.fate_out.d.next = self.checks.fate.val();
                 self.result_out.d.next = self.checks.result.val();
-                self.last_accepted_out.d.next = self.command_sequence.val();
+                self.took_sequence.d.next = true;
             }
         }
-        // Stage 5: the table's take, from the registered decision (the parser still holds
-        // the sender and the sequence number)
+        // Stage 5: the table's take from the registered decision (the parser holds the fields)
         self.write_table.d.next = self.taken.val();
         self.hosts.take.next = self.write_table.q.val();
         self.hosts.take_sequence.next = self.command_sequence.val();
@@ -396,7 +406,10 @@ impl Logic for CommandUnit {
             self.fate.next = self.fate_downlink_full.val();
             self.result.next = self.result_downlink_full.val();
         }
-        self.last_accepted.next = self.last_accepted_out.q.val();
+        self.last_accepted.next = self.hosts.known_sequence.val();
+        if self.took_sequence.q.val() {
+            self.last_accepted.next = self.command_sequence.val();
+        }
         self.destination_mac.next = self.configuration.destination_mac.val();
         self.destination_ip.next = self.configuration.destination_ip.val();
         self.destination_port.next = self.configuration.destination_port.val();
@@ -418,7 +431,7 @@ impl Logic for CommandUnit {
             self.fate_out.d.next = 0.into();
             self.result_out.d.next = 0.into();
             self.downlink_refused.d.next = false;
-            self.last_accepted_out.d.next = 0.into();
+            self.took_sequence.d.next = false;
             self.accepted_stream_to_out.d.next = false;
             self.accepted_status_now_out.d.next = false;
         }

@@ -2,11 +2,11 @@
 //!
 //! At the registered last beat (`beat_valid & beat_last`) its error flags, whether the frame
 //! was stored and whether the IPv4 packet fit the frame (the IPv4 layer's `fits`) are
-//! held; a clock later they are registered once more with the two compares of the IPv4
-//! total length (at least the IPv4 and transport headers, at least up to the command's
+//! held (they are the outputs); a clock later the two compares of the IPv4 total length
+//! are registered (at least the IPv4 and transport headers, at least up to the command's
 //! arguments), and `check` is high for that one clock: [`CHECK_LATENCY`] clocks after the
-//! registered last beat. The flags hold until the next frame's end. Cost: eleven
-//! flip-flops and two 16-bit compares.
+//! registered last beat. The flags hold until the next frame's end, the compares until
+//! the next frame's total length. Cost: eight flip-flops and two 16-bit compares.
 
 use crate::hdl::*;
 use skinbox_protocol::command::ARGUMENTS_AT;
@@ -60,11 +60,8 @@ pub struct FrameEndChecks {
     // stage 1: compares
     p1: DFF<Bit>,
     p2: DFF<Bit>,
-    s1_length_error: DFF<Bit>,
-    s1_error: DFF<Bit>,
     s1_total_from_28: DFF<Bit>,
     s1_total_from_52: DFF<Bit>,
-    s1_fits: DFF<Bit>,
 }
 
 impl Default for FrameEndChecks {
@@ -94,11 +91,8 @@ impl Default for FrameEndChecks {
             end_fits: Default::default(),
             p1: Default::default(),
             p2: Default::default(),
-            s1_length_error: Default::default(),
-            s1_error: Default::default(),
             s1_total_from_28: Default::default(),
             s1_total_from_52: Default::default(),
-            s1_fits: Default::default(),
         }
     }
 }
@@ -115,11 +109,8 @@ impl Logic for FrameEndChecks {
             end_fits,
             p1,
             p2,
-            s1_length_error,
-            s1_error,
             s1_total_from_28,
-            s1_total_from_52,
-            s1_fits
+            s1_total_from_52
         );
         if self.beat_valid.val() & self.beat_last.val() {
             self.end_length_error.d.next = self.beat_length_error.val();
@@ -129,23 +120,19 @@ impl Logic for FrameEndChecks {
         }
         // stage 1 (the clock after the last beat was registered): compares
         self.p1.d.next = self.beat_valid.val() & self.beat_last.val();
-        // (the checks of the frame's end, `s1_fits` and the errors, stand a clock later)
         self.p2.d.next = self.p1.q.val();
-        self.s1_length_error.d.next = self.end_length_error.q.val();
-        self.s1_error.d.next = self.end_error.q.val();
         self.s1_total_from_28.d.next =
             self.total_length.val() >= self.ip_and_transport_header_len.val();
         self.s1_total_from_52.d.next = self.total_length.val() >= self.ip_to_arguments_len.val();
-        self.s1_fits.d.next = self.end_fits.q.val();
         if self.reset.val() {
             self.p1.d.next = false;
             self.p2.d.next = false;
         }
         self.check.next = self.p2.q.val();
-        self.bad_length.next = self.s1_length_error.q.val();
-        self.bad_fcs.next = self.s1_error.q.val();
+        self.bad_length.next = self.end_length_error.q.val();
+        self.bad_fcs.next = self.end_error.q.val();
         self.end_stored.next = self.stored_at_end.q.val();
-        self.packet_fits.next = self.s1_fits.q.val();
+        self.packet_fits.next = self.end_fits.q.val();
         self.total_from_28.next = self.s1_total_from_28.q.val();
         self.total_from_52.next = self.s1_total_from_52.q.val();
     }

@@ -16,8 +16,8 @@
 //!   protocol and the sender's subnet, steps 6-10 and 15, and the payload's extent) and
 //!   the command layer ([`CommandDecoder`]: the command header's fields, the first
 //!   argument bytes and the header's form for step 16);
-//! - the sender's MAC (Ethernet source, for the command unit) and the transport header
-//!   (bytes 34..42) captured;
+//! - the sender's MAC (Ethernet source, for the command unit) captured (the transport
+//!   layer captures the UDP source port and compares the rest of its header as it passes);
 //! - two ones'-complement sums, one byte per clock with an end-around carry: the transport
 //!   message (ICMP, or UDP with its pseudo header) and the ICMP message from its byte 4
 //!   (the echo reply's checksum is its complement). They stop at the IPv4 payload's end
@@ -30,17 +30,21 @@
 //! `fate`, exactly [`DECISION_LATENCY`] clocks after the last beat was on `frame`. A frame
 //! that passed steps 1-16 but was not stored gets action NONE and fate `ReplyBusy`.
 //!
-//! The reply builder's fields change only with a stored frame (`receive_tick` at its last
-//! beat, `ip_total_length` and `icmp_rest_sum` at its `decided`) and hold until the next
-//! one (a reply is built while later frames go by). The command unit's (`peer_*`,
-//! `command_*`) are the captures themselves, with no second copy: they show the last
-//! frame's fields from the clock before `decided` until the next frame reaches them (its
-//! byte 6 registered: at least [`DECISION_LATENCY`] + 7 clocks after the last beat), which
-//! covers the command unit's `command` to `done`.
+//! The outputs for the reply builder and the command unit are the captures themselves,
+//! with no second copy: they show the last frame's fields from the clock before `decided`
+//! until the next frame reaches them. The command unit's (`peer_*`, `command_*`) hold until
+//! the next frame's byte 6 is registered (at least [`DECISION_LATENCY`] + 7 clocks after
+//! the last beat), which covers the command unit's `command` to `done`;
+//! `ip_total_length` until its byte 16, `icmp_rest_sum` until the clock after its first
+//! beat was registered (at least [`DECISION_LATENCY`] + 2 clocks after the last beat),
+//! which covers the reply builder's reads after `start_echo`
+//! ([`crate::reply_builder::echo_fields_read`]). The reply builder holds the receive tick
+//! itself: `receive_tick_now` says a stored frame's last beat is on `frame`.
 //!
-//! Frames must be at least [`DECISION_LATENCY`] clocks apart (last beat to next first beat;
-//! the MAC's are at least 20: preamble, SFD and the inter-frame gap). `ready` is always
-//! high.
+//! Frames must be at least [`DECISION_LATENCY`] clocks apart (last beat to next first beat),
+//! and [`DECISION_LATENCY`] + [`crate::reply_builder::echo_fields_read`] - 1 for the echo
+//! reply's ICMP sum (the MAC's are at least 20: preamble, SFD and the inter-frame gap).
+//! `ready` is always high.
 
 use crate::arp_receiver::ArpReceiver;
 use crate::command_decoder::CommandDecoder;
@@ -76,8 +80,6 @@ pub struct FrameParser {
     pub frame: ByteStreamSink,
     /// With the last beat: the frame's length was outside 64..=1518 bytes.
     pub length_error: Signal<In, Bit>,
-    /// The box tick.
-    pub tick: Signal<In, Bits<64>>,
     /// The frame buffer holds a reply: a frame whose first beat comes now is not written.
     pub buffer_locked: Signal<In, Bit>,
     /// Write a stored frame's byte into the frame buffer.
@@ -99,8 +101,9 @@ pub struct FrameParser {
     pub peer_ip: Signal<Out, Bits<32>>,
     /// The UDP source port.
     pub peer_port: Signal<Out, Bits<16>>,
-    /// `tick` in the clock of the frame's last beat.
-    pub receive_tick: Signal<Out, Bits<64>>,
+    /// A stored frame's last beat is on `frame` (combinational from `frame` and
+    /// `buffer_locked`): the box tick of this clock is its receive tick.
+    pub receive_tick_now: Signal<Out, Bit>,
     /// The IPv4 total length.
     pub ip_total_length: Signal<Out, Bits<16>>,
     /// Folded ones'-complement sum of the ICMP message from its byte 4 (odd length padded).
@@ -116,8 +119,7 @@ pub struct FrameParser {
     /// The first 12 argument bytes, the first in bits 95..88; bytes past the arguments 0.
     pub command_arguments: Signal<Out, Bits<96>>,
 
-    // the registered beat, its position and flags, the stored flag, the sender's MAC and
-    // the stored frame's tick
+    // the registered beat, its position and flags, the stored flag and the sender's MAC
     beats_in: ParserInput,
     // the layers, and the IPv4 header's fields
     ethernet: EthernetDemux,
@@ -129,9 +131,6 @@ pub struct FrameParser {
     rules: ReceiveRules,
     // the checks of the frame's end, staged for the rule table
     end_checks: FrameEndChecks,
-    // outputs
-    held_total_length: DFF<Bits<16>>,
-    held_rest_sum: DFF<Bits<16>>,
 }
 
 impl FrameParser {
@@ -143,7 +142,6 @@ impl FrameParser {
             reset: Default::default(),
             frame: Default::default(),
             length_error: Default::default(),
-            tick: Default::default(),
             buffer_locked: Default::default(),
             buffer_write_enable: Default::default(),
             buffer_write_address: Default::default(),
@@ -154,7 +152,7 @@ impl FrameParser {
             peer_mac: Default::default(),
             peer_ip: Default::default(),
             peer_port: Default::default(),
-            receive_tick: Default::default(),
+            receive_tick_now: Default::default(),
             ip_total_length: Default::default(),
             icmp_rest_sum: Default::default(),
             command_box_id: Default::default(),
@@ -170,8 +168,6 @@ impl FrameParser {
             command: Default::default(),
             rules: Default::default(),
             end_checks: Default::default(),
-            held_total_length: Default::default(),
-            held_rest_sum: Default::default(),
         }
     }
 }
@@ -185,7 +181,6 @@ impl Default for FrameParser {
 impl Logic for FrameParser {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, held_total_length, held_rest_sum);
         self.frame.ready.next = true;
 
         // ---- input side: the beat registered with its position, the lock sampled at the
@@ -198,7 +193,6 @@ impl Logic for FrameParser {
         self.beats_in.frame_data.next = self.frame.data.val();
         self.beats_in.length_error.next = self.length_error.val();
         self.beats_in.buffer_locked.next = self.buffer_locked.val();
-        self.beats_in.tick.next = self.tick.val();
 
         // ---- the registered beat: buffer write ----
         self.buffer_write_enable.next = self.beats_in.beat_valid.val() & self.beats_in.stored.val();
@@ -289,19 +283,15 @@ impl Logic for FrameParser {
         self.rules.malformed.next =
             !(self.end_checks.total_from_52.val() & self.command.well_formed.val());
         self.rules.stored.next = self.end_checks.end_stored.val();
-        if self.rules.deciding.val() & self.end_checks.end_stored.val() {
-            self.held_total_length.d.next = self.ipv4.total_length.val();
-            self.held_rest_sum.d.next = self.transport.icmp_rest_sum.val();
-        }
         self.decided.next = self.rules.decided.val();
         self.action.next = self.rules.action.val();
         self.fate.next = self.rules.fate.val();
         self.peer_mac.next = self.beats_in.source_mac.val();
         self.peer_ip.next = self.ipv4.source.val();
         self.peer_port.next = self.transport.source_port.val();
-        self.receive_tick.next = self.beats_in.receive_tick.val();
-        self.ip_total_length.next = self.held_total_length.q.val();
-        self.icmp_rest_sum.next = self.held_rest_sum.q.val();
+        self.receive_tick_now.next = self.beats_in.stored_last.val();
+        self.ip_total_length.next = self.ipv4.total_length.val();
+        self.icmp_rest_sum.next = self.transport.icmp_rest_sum.val();
         self.command_box_id.next = self.command.box_id.val();
         self.command_opcode.next = self.command.opcode.val();
         self.command_sequence.next = self.command.sequence_number.val();
@@ -341,6 +331,17 @@ mod tests {
         fn numeric_no_zero(&self) -> u16 {
             u16::from_be_bytes(self.to_ones_complement_with_no_zero().to_ne_bytes())
         }
+    }
+
+    /// The MAC's frames are at least this many clocks apart (last beat to next first beat).
+    const MAC_FRAME_GAP: u64 = 20;
+
+    /// The reply builder reads an echo request's ICMP sum before the next frame restarts it
+    /// (in the clock after its first beat was registered).
+    #[test]
+    fn the_echo_fields_hold_until_the_reply_builder_reads_them() {
+        let read = crate::reply_builder::echo_fields_read();
+        assert!(DECISION_LATENCY + read <= MAC_FRAME_GAP + 1, "{read}");
     }
 
     /// A change to a command's bytes.
@@ -433,7 +434,8 @@ mod tests {
         peer_mac: u64,
         peer_ip: u32,
         peer_port: u16,
-        receive_tick: u64,
+        /// The tick of the clock with `receive_tick_now`.
+        receive_tick: Option<u64>,
         total_length: u16,
         icmp_rest_sum: u16,
         box_id: u16,
@@ -460,9 +462,7 @@ mod tests {
         }
 
         fn drive_tick(&mut self) -> u64 {
-            let t = TICK_BASE + self.bench.cycles * 3;
-            self.bench.uut.tick.next = t.into();
-            t
+            TICK_BASE + self.bench.cycles * 3
         }
 
         fn collect(&self, writes: &mut Vec<(usize, u8)>) {
@@ -493,6 +493,7 @@ mod tests {
         ) -> Seen {
             let mut writes = vec![];
             let mut last_tick = 0;
+            let mut receive_tick = None;
             for (i, &b) in frame.iter().enumerate() {
                 let last = i + 1 == frame.len();
                 let t = self.drive_tick();
@@ -509,6 +510,10 @@ mod tests {
                 if last {
                     last_tick = t;
                 }
+                if self.bench.uut.receive_tick_now.val() {
+                    assert!(receive_tick.is_none(), "one receive tick");
+                    receive_tick = Some(t);
+                }
                 self.bench.cycle();
                 self.collect(&mut writes);
             }
@@ -522,6 +527,7 @@ mod tests {
                 self.drive_tick();
                 self.bench.settle();
                 let u = &self.bench.uut;
+                assert!(!u.receive_tick_now.val(), "a receive tick between frames");
                 if u.decided.val() {
                     assert_eq!(
                         k, DECISION_LATENCY,
@@ -539,7 +545,7 @@ mod tests {
                         peer_mac: u.peer_mac.val().to_u64(),
                         peer_ip: u.peer_ip.val().to_u32(),
                         peer_port: u.peer_port.val().to_u16(),
-                        receive_tick: u.receive_tick.val().to_u64(),
+                        receive_tick,
                         total_length: u.ip_total_length.val().to_u16(),
                         icmp_rest_sum: u.icmp_rest_sum.val().to_u16(),
                         box_id: u.command_box_id.val().to_u16(),
@@ -682,11 +688,16 @@ mod tests {
                 seen.writes.is_empty(),
                 "{what}: a frame arriving while locked is written"
             );
+            assert_eq!(seen.receive_tick, None, "{what}: receive tick");
             return;
         }
         let expected: Vec<(usize, u8)> = frame.iter().copied().enumerate().collect();
         assert_eq!(seen.writes, expected, "{what}: buffer writes");
-        assert_eq!(seen.receive_tick, seen.last_tick, "{what}: receive tick");
+        assert_eq!(
+            seen.receive_tick,
+            Some(seen.last_tick),
+            "{what}: receive tick"
+        );
         if frame.len() >= 64 {
             // the sender as the command unit reads it (an ARP reply takes the sender's
             // addresses from the request in the buffer)
@@ -1092,12 +1103,13 @@ mod tests {
     }
 
     /// Frames arriving while the buffer is locked are not written; those to be answered
-    /// get ReplyBusy; the held fields keep the last stored frame's values.
+    /// get ReplyBusy and no receive tick (the reply builder keeps the last stored frame's).
     #[test]
     fn a_locked_buffer_is_not_written_and_replies_are_busy() {
         use BoxCounter::*;
         let mut h = Harness::new();
         let stored = run(&mut h, &good_echo(), false, "stored echo");
+        assert!(stored.receive_tick.is_some());
         let requester = ([0x02, 0x11, 0x22, 0x33, 0x44, 0x55], [192, 0, 2, 99]);
         for (frame, what, fate) in [
             (arp([0xFF; 6], 1, requester, LINK.box_ip), "ARP", ReplyBusy),
@@ -1115,14 +1127,9 @@ mod tests {
                 (ACTION_NONE, fate as usize),
                 "{what}"
             );
-            // the reply builder's fields hold; the command unit's follow the frame (they
-            // are read between a stored command's decision and the next frame only)
-            let held = |s: &Seen| (s.receive_tick, s.total_length, s.icmp_rest_sum);
-            assert_eq!(
-                held(&seen),
-                held(&stored),
-                "{what}: held fields changed by an unstored frame"
-            );
+            // (the other fields follow the frame: they are read between a stored frame's
+            // decision and the next frame only)
+            assert_eq!(seen.receive_tick, None, "{what}: receive tick");
         }
         // the lock counts at the first beat only: raised after it, the frame is stored
         let f = good_command();

@@ -1,15 +1,16 @@
 //! HostTable: the command unit's table of the hosts whose commands it took, each with the
 //! last sequence number accepted from it (docs/control.md, step 18).
 //!
-//! `HOST_SLOTS` slots, each an IPv4 address and a sequence number in a [`LutRam`] (one
-//! word per slot), a valid bit and an age rank in registers (rank 0: taken last,
+//! `HOST_SLOTS` slots, each an IPv4 address and a sequence number in two [`LutRam`]s (one
+//! word per slot in each), a valid bit and an age rank in registers (rank 0: taken last,
 //! `HOST_SLOTS - 1`: taken longest ago; the empty slots are always the oldest). The table
-//! looks `peer_ip` up by scanning its slots, one per clock, all the time: a slot's word is
-//! read, its address's bytes compared with `peer_ip`'s into registers, and a clock later the
-//! slot's match bit is set or cleared and a match's sequence number taken. So `known`,
-//! `last_sequence` and the slot a take would write (`peer_ip`'s slot if known, else the
-//! oldest) are right [`LOOKUP_CLOCKS`] clocks after `peer_ip` last changed or the table was
-//! last written, and stay so while neither happens. The sender of a command is steady long
+//! looks `peer_ip` up by scanning its slots' addresses, one per clock, all the time: a
+//! slot's address is read, its bytes compared with `peer_ip`'s into registers, and a clock
+//! later the slot's match bit is set or cleared. The slot a take would write (`peer_ip`'s
+//! slot if known, else the oldest) is registered, and the sequence RAM is read there:
+//! `last_sequence` is a wire from it. So `known`, `last_sequence` and the target slot are
+//! right [`LOOKUP_CLOCKS`] clocks after `peer_ip` last changed or the table was last
+//! written, and stay so while neither happens. The sender of a command is steady long
 //! before the command is decided (from its IPv4 header to the frame's end, at least 30
 //! clocks), so a scan costs the command no clock, and one 32-bit compare and one read port
 //! replace a compare per slot and a flip-flop per stored bit.
@@ -46,10 +47,14 @@ pub struct HostTable {
     pub take_sequence: Signal<In, Bits<32>>,
     /// `peer_ip` is in the table.
     pub known: Signal<Out, Bit>,
-    /// The last sequence number taken from `peer_ip`; 0 when it is not known.
+    /// The last sequence number taken from `peer_ip` when it is `known` (else a slot's
+    /// word: not defined).
     pub last_sequence: Signal<Out, Bits<32>>,
-    // slot i's word: its address above its sequence number
-    entries: LutRam<64, SLOT_BITS>,
+    /// `last_sequence` when `peer_ip` is known, else 0.
+    pub known_sequence: Signal<Out, Bits<32>>,
+    // slot i's address, and its sequence number
+    addresses: LutRam<32, SLOT_BITS>,
+    sequences: LutRam<32, SLOT_BITS>,
     valid: DFF<Bits<HOST_SLOTS>>,
     ranks: Vec<DFF<Bits<SLOT_BITS>>>,
     initial_ranks: Vec<Constant<Bits<SLOT_BITS>>>,
@@ -66,10 +71,8 @@ pub struct HostTable {
     byte_2_equal: DFF<Bit>,
     byte_1_equal: DFF<Bit>,
     byte_0_equal: DFF<Bit>,
-    compared_sequence: DFF<Bits<32>>,
     // slot i holds `peer_ip`
     holds_peer: DFF<Bits<HOST_SLOTS>>,
-    peer_sequence: DFF<Bits<32>>,
     // the slot a take writes (one-hot, and its number) and its rank
     target: DFF<Bits<HOST_SLOTS>>,
     target_number: DFF<Bits<SLOT_BITS>>,
@@ -90,7 +93,9 @@ impl Default for HostTable {
             take_sequence: Default::default(),
             known: Default::default(),
             last_sequence: Default::default(),
-            entries: Default::default(),
+            known_sequence: Default::default(),
+            addresses: Default::default(),
+            sequences: Default::default(),
             valid: Default::default(),
             ranks: each(HOST_SLOTS),
             initial_ranks: (0..HOST_SLOTS)
@@ -105,9 +110,7 @@ impl Default for HostTable {
             byte_2_equal: Default::default(),
             byte_1_equal: Default::default(),
             byte_0_equal: Default::default(),
-            compared_sequence: Default::default(),
             holds_peer: Default::default(),
-            peer_sequence: Default::default(),
             target: Default::default(),
             target_number: Default::default(),
             target_rank: Default::default(),
@@ -132,9 +135,7 @@ impl Logic for HostTable {
             byte_2_equal,
             byte_1_equal,
             byte_0_equal,
-            compared_sequence,
             holds_peer,
-            peer_sequence,
             target,
             target_number,
             target_rank
@@ -145,23 +146,22 @@ impl Logic for HostTable {
         }
         // The scan: read a slot and compare its address, then set or clear its match bit.
         self.scan.d.next = self.scan.q.val() + 1;
-        self.entries.clock.next = self.clock.val();
-        self.entries.read_address.next = self.scan.q.val();
+        self.addresses.clock.next = self.clock.val();
+        self.addresses.read_address.next = self.scan.q.val();
         self.compared.d.next = 0.into();
         for i in 0..self.slot_bit.len() {
             if self.scan.q.val() == self.slot_number[i].val() {
                 self.compared.d.next = self.slot_bit[i].val();
             }
         }
-        self.byte_3_equal.d.next =
-            self.entries.read_data.val().get_bits::<8>(56) == self.peer_ip.val().get_bits::<8>(24);
-        self.byte_2_equal.d.next =
-            self.entries.read_data.val().get_bits::<8>(48) == self.peer_ip.val().get_bits::<8>(16);
+        self.byte_3_equal.d.next = self.addresses.read_data.val().get_bits::<8>(24)
+            == self.peer_ip.val().get_bits::<8>(24);
+        self.byte_2_equal.d.next = self.addresses.read_data.val().get_bits::<8>(16)
+            == self.peer_ip.val().get_bits::<8>(16);
         self.byte_1_equal.d.next =
-            self.entries.read_data.val().get_bits::<8>(40) == self.peer_ip.val().get_bits::<8>(8);
+            self.addresses.read_data.val().get_bits::<8>(8) == self.peer_ip.val().get_bits::<8>(8);
         self.byte_0_equal.d.next =
-            self.entries.read_data.val().get_bits::<8>(32) == self.peer_ip.val().get_bits::<8>(0);
-        self.compared_sequence.d.next = self.entries.read_data.val().get_bits::<32>(0);
+            self.addresses.read_data.val().get_bits::<8>(0) == self.peer_ip.val().get_bits::<8>(0);
         self.compared_matches.next = self.byte_3_equal.q.val()
             & self.byte_2_equal.q.val()
             & self.byte_1_equal.q.val()
@@ -169,18 +169,18 @@ impl Logic for HostTable {
             & ((self.valid.q.val() & self.compared.q.val()) != 0);
         if self.compared_matches.val() {
             self.holds_peer.d.next = self.holds_peer.q.val() | self.compared.q.val();
-            self.peer_sequence.d.next = self.compared_sequence.q.val();
         } else {
             self.holds_peer.d.next = self.holds_peer.q.val() & !self.compared.q.val();
-            // (the only slot that matched no longer does: no slot holds the sender)
-            if ((self.holds_peer.q.val() & self.compared.q.val()) != 0)
-                & ((self.holds_peer.q.val() & !self.compared.q.val()) == 0)
-            {
-                self.peer_sequence.d.next = 0.into();
-            }
         }
         self.known.next = self.holds_peer.q.val() != 0;
-        self.last_sequence.next = self.peer_sequence.q.val();
+        // (the target is the sender's slot when it is known)
+        self.sequences.clock.next = self.clock.val();
+        self.sequences.read_address.next = self.target_number.q.val();
+        self.last_sequence.next = self.sequences.read_data.val();
+        self.known_sequence.next = 0.into();
+        if self.holds_peer.q.val() != 0 {
+            self.known_sequence.next = self.sequences.read_data.val();
+        }
 
         // The slot a take writes: the sender's, else the oldest; registered.
         self.next_target.next = self.holds_peer.q.val();
@@ -203,11 +203,13 @@ impl Logic for HostTable {
         self.target_number.d.next = self.next_target_number.val();
         self.target_rank.d.next = self.next_target_rank.val();
 
-        // The take: the word, the valid bit, the ranks.
-        self.entries.write_enable.next = self.take.val();
-        self.entries.write_address.next = self.target_number.q.val();
-        self.entries.write_data.next = (bit_cast::<64, 32>(self.peer_ip.val()) << 32)
-            | bit_cast::<64, 32>(self.take_sequence.val());
+        // The take: the words, the valid bit, the ranks.
+        self.addresses.write_enable.next = self.take.val();
+        self.addresses.write_address.next = self.target_number.q.val();
+        self.addresses.write_data.next = self.peer_ip.val();
+        self.sequences.write_enable.next = self.take.val();
+        self.sequences.write_address.next = self.target_number.q.val();
+        self.sequences.write_data.next = self.take_sequence.val();
         if self.take.val() {
             self.valid.d.next = self.valid.q.val() | self.target.q.val();
             for i in 0..self.ranks.len() {
@@ -221,7 +223,6 @@ impl Logic for HostTable {
         if self.reset.val() {
             self.valid.d.next = 0.into();
             self.holds_peer.d.next = 0.into();
-            self.peer_sequence.d.next = 0.into();
             for i in 0..self.ranks.len() {
                 self.ranks[i].d.next = self.initial_ranks[i].val();
             }
@@ -259,10 +260,17 @@ mod tests {
     fn check(bench: &Bench<HostTable>, model: &Model, ip: u32, at: &str) {
         let want = model.lookup(ip);
         assert_eq!(bench.uut.known.val(), want.is_some(), "{ip:#x} known, {at}");
+        if let Some(sequence) = want {
+            assert_eq!(
+                bench.uut.last_sequence.val().to_u32(),
+                sequence,
+                "{ip:#x} last sequence, {at}"
+            );
+        }
         assert_eq!(
-            bench.uut.last_sequence.val().to_u32(),
+            bench.uut.known_sequence.val().to_u32(),
             want.unwrap_or(0),
-            "{ip:#x} last sequence, {at}"
+            "{ip:#x} known sequence, {at}"
         );
     }
 

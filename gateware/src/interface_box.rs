@@ -420,7 +420,6 @@ impl Logic for InterfaceBox {
         self.parser.reset.next = self.core_reset.q.val();
         ByteStreamSource::join(&mut self.mac.frame, &mut self.parser.frame);
         self.parser.length_error.next = self.mac.length_error.val();
-        self.parser.tick.next = self.timestamp.tick.val();
         self.parser.buffer_locked.next = self.replies.locked.val();
         self.commands.clock.next = self.clock.val();
         self.commands.reset.next = self.core_reset.q.val();
@@ -456,7 +455,7 @@ impl Logic for InterfaceBox {
         self.replies.start_echo.next =
             self.parser.decided.val() & (self.parser.action.val() == self.action_echo.val());
         self.replies.start_ack.next = self.commands.done.val();
-        self.replies.receive_tick.next = self.parser.receive_tick.val();
+        self.replies.receive_tick_now.next = self.parser.receive_tick_now.val();
         self.replies.ip_total_length.next = self.parser.ip_total_length.val();
         self.replies.icmp_rest_sum.next = self.parser.icmp_rest_sum.val();
         self.replies.result.next = self.commands.result.val();

@@ -3,12 +3,14 @@
 //! destination, protocol and the sender's subnet, and the extent of the packet's payload.
 //!
 //! It listens to the frame parser's beats ([`FrameBeats`], positions from
-//! `protocol::wire::ipv4` after the Ethernet header). The fields it uses are captured
-//! ([`FieldCapture`]) or, for the destination, compared with the box's address as they pass
-//! ([`FieldMatch`]); the header's 16-bit words go through a ones'-complement sum. From
-//! the captures it registers its checks every clock: they stand two clocks after a frame's
-//! last beat was registered (when the parser's rule table reads them) and hold until the
-//! next frame reaches the fields.
+//! `protocol::wire::ipv4` after the Ethernet header). The total length and the source are
+//! captured ([`FieldCapture`]); the destination is compared with the box's address as it
+//! passes ([`FieldMatch`]); the version and header length, the fragment fields and the
+//! protocol are checked as their bytes pass, each into a flag registered with the byte (a
+//! decode of its position); the header's 16-bit words go through a ones'-complement sum.
+//! The checks of the sum and the source are registered every clock. All stand two clocks
+//! after a frame's last beat was registered (when the parser's rule table reads them) and
+//! hold until the next frame reaches the fields.
 //!
 //! The payload's extent is counted down from the total length: `in_payload` says whether
 //! the registered beat (from the first byte after the header) is inside the packet, so the
@@ -27,6 +29,9 @@ use skinbox_protocol::Field;
 const fn in_frame(f: Field) -> Field {
     IPV4_AT + f.start..IPV4_AT + f.end
 }
+
+// the more-fragments flag is in the flags and fragment offset's high byte
+const _: () = assert!(ipv4::FLAG_MORE_FRAGMENTS >= 0x100);
 
 /// Frame position of the byte after the IPv4 header.
 const PAYLOAD_AT: usize = IPV4_AT + IPV4_HEADER_LEN;
@@ -75,22 +80,27 @@ pub struct Ipv4Receiver {
     host_mask: Constant<Bits<32>>,
     protocol_icmp: Constant<Bits<8>>,
     protocol_udp: Constant<Bits<8>>,
-    more_fragments_bit: Constant<Bits<4>>,
+    more_fragments_bit: Constant<Bits<3>>,
     header_len: Constant<Bits<16>>,
     header_at: Constant<Bits<11>>,
+    fragment_at: Constant<Bits<11>>,
+    fragment_low_at: Constant<Bits<11>>,
+    protocol_at: Constant<Bits<11>>,
     total_len_end: Constant<Bits<11>>,
     header_last: Constant<Bits<11>>,
     payload_at: Constant<Bits<11>>,
-    version_ihl: FieldCapture<8>,
-    flags_fragment: FieldCapture<16>,
     total_len: FieldCapture<16>,
-    protocol: FieldCapture<8>,
     source_address: FieldCapture<32>,
     destination: FieldMatch,
     header_sum: OnesComplementSum,
-    // where the registered beat is: in the header, the byte after the total length, the
-    // header's last byte
+    // where the registered beat is: in the header, its first byte (version and header
+    // length), the flags and fragment offset's bytes, the protocol, the byte after the
+    // total length, the header's last byte
     at_header: DFF<Bit>,
+    at_version: DFF<Bit>,
+    at_fragment: DFF<Bit>,
+    at_fragment_low: DFF<Bit>,
+    at_protocol: DFF<Bit>,
     at_total_len_end: DFF<Bit>,
     at_header_last: DFF<Bit>,
     // the payload's bytes after the registered one, whether it is in the payload, and
@@ -99,14 +109,15 @@ pub struct Ipv4Receiver {
     in_packet: DFF<Bit>,
     in_packet_history: DFF<Bits<3>>,
     payload_len: DFF<Bits<16>>,
+    // the checks of the bytes as they pass
+    bad_version_flag: DFF<Bit>,
+    options_flag: DFF<Bit>,
+    fragment_flag: DFF<Bit>,
+    icmp_flag: DFF<Bit>,
+    udp_flag: DFF<Bit>,
     // the registered checks
-    bad_version_check: DFF<Bit>,
-    options_check: DFF<Bit>,
     bad_header_check: DFF<Bit>,
-    fragment_check: DFF<Bit>,
     subnet_check: DFF<Bit>,
-    icmp_check: DFF<Bit>,
-    udp_check: DFF<Bit>,
 }
 
 impl Ipv4Receiver {
@@ -116,7 +127,7 @@ impl Ipv4Receiver {
         let prefix = u32::from(prefix_len.min(32));
         let mask = u32::MAX.checked_shl(32 - prefix).unwrap_or(0);
         let subnet = u32::from_be_bytes(host_subnet) & mask;
-        let version_ihl = ipv4::field::VERSION_IHL;
+        let fragment_at = in_frame(ipv4::field::FLAGS_FRAGMENT_OFFSET).start;
         Self {
             clock: Default::default(),
             beats: Default::default(),
@@ -140,33 +151,37 @@ impl Ipv4Receiver {
             host_mask: constant(u64::from(mask)),
             protocol_icmp: constant(u64::from(IP_PROTOCOL_ICMP)),
             protocol_udp: constant(u64::from(IP_PROTOCOL_UDP)),
-            more_fragments_bit: constant(u64::from(ipv4::FLAG_MORE_FRAGMENTS.trailing_zeros())),
+            more_fragments_bit: constant(u64::from(ipv4::FLAG_MORE_FRAGMENTS.trailing_zeros() - 8)),
             header_len: constant(IPV4_HEADER_LEN as u64),
             header_at: constant(IPV4_AT as u64),
+            fragment_at: constant(fragment_at as u64),
+            fragment_low_at: constant(fragment_at as u64 + 1),
+            protocol_at: constant((IPV4_AT + ipv4::field::PROTOCOL) as u64),
             total_len_end: constant(in_frame(ipv4::field::TOTAL_LEN).end as u64),
             header_last: constant(PAYLOAD_AT as u64 - 1),
             payload_at: constant(PAYLOAD_AT as u64),
-            version_ihl: FieldCapture::of(in_frame(version_ihl..version_ihl + 1)),
-            flags_fragment: FieldCapture::of(in_frame(ipv4::field::FLAGS_FRAGMENT_OFFSET)),
             total_len: FieldCapture::of(in_frame(ipv4::field::TOTAL_LEN)),
-            protocol: FieldCapture::of(in_frame(ipv4::field::PROTOCOL..ipv4::field::PROTOCOL + 1)),
             source_address: FieldCapture::of(in_frame(ipv4::field::SOURCE)),
             destination: FieldMatch::of(in_frame(ipv4::field::DESTINATION), &box_ip),
             header_sum: Default::default(),
             at_header: Default::default(),
+            at_version: Default::default(),
+            at_fragment: Default::default(),
+            at_fragment_low: Default::default(),
+            at_protocol: Default::default(),
             at_total_len_end: Default::default(),
             at_header_last: Default::default(),
             payload_left: Default::default(),
             in_packet: Default::default(),
             in_packet_history: Default::default(),
             payload_len: Default::default(),
-            bad_version_check: Default::default(),
-            options_check: Default::default(),
+            bad_version_flag: Default::default(),
+            options_flag: Default::default(),
+            fragment_flag: Default::default(),
+            icmp_flag: Default::default(),
+            udp_flag: Default::default(),
             bad_header_check: Default::default(),
-            fragment_check: Default::default(),
             subnet_check: Default::default(),
-            icmp_check: Default::default(),
-            udp_check: Default::default(),
         }
     }
 }
@@ -178,28 +193,26 @@ impl Logic for Ipv4Receiver {
             self,
             clock,
             at_header,
+            at_version,
+            at_fragment,
+            at_fragment_low,
+            at_protocol,
             at_total_len_end,
             at_header_last,
             payload_left,
             in_packet,
             in_packet_history,
             payload_len,
-            bad_version_check,
-            options_check,
+            bad_version_flag,
+            options_flag,
+            fragment_flag,
+            icmp_flag,
+            udp_flag,
             bad_header_check,
-            fragment_check,
-            subnet_check,
-            icmp_check,
-            udp_check
+            subnet_check
         );
-        self.version_ihl.clock.next = self.clock.val();
-        FrameBeats::link(&mut self.beats, &mut self.version_ihl.beats);
-        self.flags_fragment.clock.next = self.clock.val();
-        FrameBeats::link(&mut self.beats, &mut self.flags_fragment.beats);
         self.total_len.clock.next = self.clock.val();
         FrameBeats::link(&mut self.beats, &mut self.total_len.beats);
-        self.protocol.clock.next = self.clock.val();
-        FrameBeats::link(&mut self.beats, &mut self.protocol.beats);
         self.source_address.clock.next = self.clock.val();
         FrameBeats::link(&mut self.beats, &mut self.source_address.beats);
         self.destination.clock.next = self.clock.val();
@@ -211,6 +224,10 @@ impl Logic for Ipv4Receiver {
                 | (self.at_header.q.val()
                     & (self.beats.next_index.val() != self.payload_at.val())
                     & self.beats.in_frame.val());
+            self.at_version.d.next = self.beats.next_index.val() == self.header_at.val();
+            self.at_fragment.d.next = self.beats.next_index.val() == self.fragment_at.val();
+            self.at_fragment_low.d.next = self.beats.next_index.val() == self.fragment_low_at.val();
+            self.at_protocol.d.next = self.beats.next_index.val() == self.protocol_at.val();
             self.at_total_len_end.d.next = self.beats.next_index.val() == self.total_len_end.val();
             self.at_header_last.d.next = self.beats.next_index.val() == self.header_last.val();
         }
@@ -242,32 +259,46 @@ impl Logic for Ipv4Receiver {
             }
         }
 
-        // the checks, registered from the captures
-        self.bad_version_check.d.next = (self.version_ihl.value.val().get_bits::<4>(4) != 4)
-            | (self.version_ihl.value.val().get_bits::<4>(0) < 5);
-        self.options_check.d.next = self.version_ihl.value.val().get_bits::<4>(0) > 5;
+        // the checks of the bytes as they pass: version and header length, the flags and
+        // fragment offset (more fragments, or an offset), the protocol
+        if self.beats.beat_valid.val() & self.at_version.q.val() {
+            self.bad_version_flag.d.next = (self.beats.beat_data.val().get_bits::<4>(4) != 4)
+                | (self.beats.beat_data.val().get_bits::<4>(0) < 5);
+            self.options_flag.d.next = self.beats.beat_data.val().get_bits::<4>(0) > 5;
+        }
+        if self.beats.beat_valid.val() & self.at_fragment.q.val() {
+            self.fragment_flag.d.next = self
+                .beats
+                .beat_data
+                .val()
+                .get_bit(self.more_fragments_bit.val().index())
+                | (self.beats.beat_data.val().get_bits::<5>(0) != 0);
+        }
+        if self.beats.beat_valid.val()
+            & self.at_fragment_low.q.val()
+            & (self.beats.beat_data.val() != 0)
+        {
+            self.fragment_flag.d.next = true;
+        }
+        if self.beats.beat_valid.val() & self.at_protocol.q.val() {
+            self.icmp_flag.d.next = self.beats.beat_data.val() == self.protocol_icmp.val();
+            self.udp_flag.d.next = self.beats.beat_data.val() == self.protocol_udp.val();
+        }
+        // the checks, registered from the sum and the captures
         self.bad_header_check.d.next =
             !self.header_sum.verifies.val() | (self.total_len.value.val() < self.header_len.val());
-        self.fragment_check.d.next = self
-            .flags_fragment
-            .value
-            .val()
-            .get_bit(self.more_fragments_bit.val().index())
-            | (self.flags_fragment.value.val().get_bits::<13>(0) != 0);
         self.subnet_check.d.next =
             (self.source_address.value.val() & self.host_mask.val()) == self.host_subnet.val();
-        self.icmp_check.d.next = self.protocol.value.val() == self.protocol_icmp.val();
-        self.udp_check.d.next = self.protocol.value.val() == self.protocol_udp.val();
 
-        self.bad_version.next = self.bad_version_check.q.val();
-        self.options.next = self.options_check.q.val();
+        self.bad_version.next = self.bad_version_flag.q.val();
+        self.options.next = self.options_flag.q.val();
         self.bad_header.next = self.bad_header_check.q.val();
-        self.fragment.next = self.fragment_check.q.val();
+        self.fragment.next = self.fragment_flag.q.val();
         self.to_box.next = self.destination.equals.val();
         self.from_subnet.next = self.subnet_check.q.val();
-        self.icmp.next = self.icmp_check.q.val();
-        self.udp.next = self.udp_check.q.val();
-        self.carries_udp.next = self.protocol.value.val() == self.protocol_udp.val();
+        self.icmp.next = self.icmp_flag.q.val();
+        self.udp.next = self.udp_flag.q.val();
+        self.carries_udp.next = self.udp_flag.q.val();
         self.total_length.next = self.total_len.value.val();
         self.payload_length.next = self.payload_len.q.val();
         self.source.next = self.source_address.value.val();

@@ -1,7 +1,7 @@
 //! ParserInput: the frame parser's input side: each arriving beat registered with its
 //! frame position, its 16-bit checksum word and where it lies (the first byte, the
-//! Ethernet source), whether the frame is stored, the sender's MAC and the stored frame's
-//! tick.
+//! Ethernet source), whether the frame is stored, the sender's MAC and the arrival of a
+//! stored frame's last beat.
 //!
 //! The arriving beat's position is the next-index register itself (`index_in`, 0 between
 //! frames: a frame's last beat and the reset set it back), so the listeners' decodes take
@@ -9,9 +9,9 @@
 //! high bytes) and its flags are registered (latency 1: the `beat_*` outputs are the beat
 //! that was on the input in the clock before). A frame is stored when the buffer was not
 //! locked in the clock its first beat arrived. The Ethernet source (bytes 6..12) is shifted
-//! into `source_mac` from the registered beats; the tick of a stored frame's last beat is
-//! held until the next stored frame's. Cost: the registered beat (about 40 bits), the
-//! 11-bit position, the 48-bit source and the 64-bit tick.
+//! into `source_mac` from the registered beats. `stored_last` says a stored frame's last
+//! beat is arriving (the reply builder holds the tick of that clock). Cost: the registered
+//! beat (about 40 bits), the 11-bit position and the 48-bit source.
 
 use crate::hdl::*;
 use skinbox_protocol::wire::ethernet;
@@ -35,8 +35,6 @@ pub struct ParserInput {
     pub length_error: Signal<In, Bit>,
     /// The buffer holds a reply: a frame starting now is not stored.
     pub buffer_locked: Signal<In, Bit>,
-    /// Box time.
-    pub tick: Signal<In, Bits<64>>,
     /// The arriving beat's position (0 between frames).
     pub index_in: Signal<Out, Bits<11>>,
     /// The arriving beat as a 16-bit word.
@@ -63,8 +61,8 @@ pub struct ParserInput {
     pub beat_word: Signal<Out, Bits<16>>,
     /// The last frame's Ethernet source.
     pub source_mac: Signal<Out, Bits<48>>,
-    /// The tick of the last stored frame's last beat.
-    pub receive_tick: Signal<Out, Bits<64>>,
+    /// The arriving beat is a stored frame's last (combinational from the inputs).
+    pub stored_last: Signal<Out, Bit>,
     source_mac_at: Constant<Bits<11>>,
     ethertype_at: Constant<Bits<11>>,
     framing: DFF<Bit>,
@@ -80,7 +78,6 @@ pub struct ParserInput {
     at_source: DFF<Bit>,
     word_held: DFF<Bits<16>>,
     source: DFF<Bits<48>>,
-    tick_held: DFF<Bits<64>>,
     word: Signal<Local, Bits<16>>,
 }
 
@@ -95,7 +92,6 @@ impl Default for ParserInput {
             frame_data: Default::default(),
             length_error: Default::default(),
             buffer_locked: Default::default(),
-            tick: Default::default(),
             index_in: Default::default(),
             word_in: Default::default(),
             in_frame: Default::default(),
@@ -109,7 +105,7 @@ impl Default for ParserInput {
             beat_first: Default::default(),
             beat_word: Default::default(),
             source_mac: Default::default(),
-            receive_tick: Default::default(),
+            stored_last: Default::default(),
             source_mac_at: constant(ethernet::field::SOURCE.start as u64),
             ethertype_at: constant(ethernet::field::ETHERTYPE.start as u64),
             framing: Default::default(),
@@ -125,7 +121,6 @@ impl Default for ParserInput {
             at_source: Default::default(),
             word_held: Default::default(),
             source: Default::default(),
-            tick_held: Default::default(),
             word: Default::default(),
         }
     }
@@ -149,8 +144,7 @@ impl Logic for ParserInput {
             at_first,
             at_source,
             word_held,
-            source,
-            tick_held
+            source
         );
         self.valid_held.d.next = self.frame_valid.val();
         self.last_held.d.next = self.frame_valid.val() & self.frame_last.val();
@@ -174,6 +168,12 @@ impl Logic for ParserInput {
             self.word.next = bit_cast::<16, 8>(self.frame_data.val());
         }
         self.word_held.d.next = self.word.val();
+        // a stored frame's last beat (only a stored frame is answered, and none is stored
+        // while a reply holds the buffer)
+        self.stored_last.next = self.frame_valid.val()
+            & self.frame_last.val()
+            & ((self.framing.q.val() & self.storing.q.val())
+                | (!self.framing.q.val() & !self.buffer_locked.val()));
         if self.frame_valid.val() {
             self.index_held.d.next = self.next_index.q.val();
             self.next_index.d.next = self.next_index.q.val() + 1;
@@ -184,15 +184,6 @@ impl Logic for ParserInput {
                 self.storing.d.next = !self.buffer_locked.val();
             }
             self.framing.d.next = !self.frame_last.val();
-            // the tick of a stored frame's last beat, held until the next stored frame's
-            // (only a stored frame is answered, and none is stored while a reply holds the
-            // buffer)
-            if self.frame_last.val()
-                & ((self.framing.q.val() & self.storing.q.val())
-                    | (!self.framing.q.val() & !self.buffer_locked.val()))
-            {
-                self.tick_held.d.next = self.tick.val();
-            }
         }
         if self.valid_held.q.val() & self.at_source.q.val() {
             self.source.d.next =
@@ -216,7 +207,6 @@ impl Logic for ParserInput {
         self.beat_first.next = self.at_first.q.val();
         self.beat_word.next = self.word_held.q.val();
         self.source_mac.next = self.source.q.val();
-        self.receive_tick.next = self.tick_held.q.val();
     }
 }
 
@@ -227,8 +217,8 @@ mod tests {
 
     /// Frames of random bytes with gaps, some arriving while the buffer is locked: each
     /// beat comes out a clock later with its position, word and flags; a frame is stored
-    /// when the buffer was free at its first beat, and its source MAC and (stored) last
-    /// beat's tick are held.
+    /// when the buffer was free at its first beat (`stored_last` with its last beat), and
+    /// its source MAC is held.
     #[test]
     fn beats_are_registered_with_their_positions() {
         let mut rng = TestRng::new(0x1A9);
@@ -236,22 +226,21 @@ mod tests {
         bench.uut.reset.next = true;
         bench.cycle();
         bench.uut.reset.next = false;
-        let mut stored_tick = 0;
         for round in 0..40 {
             let frame: Vec<u8> = (0..60 + rng.next_u64() % 40).map(|_| rng.byte()).collect();
             let locked = rng.chance(0.3);
             let mut previous: Option<(usize, u8)> = None;
             for clock in 0..frame.len() + 3 {
                 let at = clock;
-                let tick = 1000 * round + clock as u64;
                 let u = &mut bench.uut;
                 u.frame_valid.next = at < frame.len();
                 u.frame_last.next = at + 1 == frame.len();
                 u.frame_data.next = u64::from(*frame.get(at).unwrap_or(&0)).into();
                 u.buffer_locked.next = locked && at == 0;
-                u.tick.next = tick.into();
                 bench.settle();
                 let u = &bench.uut;
+                let stored_last = at + 1 == frame.len() && !locked;
+                assert_eq!(u.stored_last.val(), stored_last, "round {round}");
                 if at < frame.len() {
                     assert_eq!(u.index_in.val().to_u64(), at as u64, "round {round}");
                 }
@@ -269,15 +258,11 @@ mod tests {
                     assert_eq!(u.beat_last.val(), i + 1 == frame.len());
                     assert_eq!(u.stored.val(), !locked, "round {round}");
                 }
-                if at + 1 == frame.len() && !locked {
-                    stored_tick = tick;
-                }
                 previous = frame.get(at).map(|&b| (at, b));
                 bench.cycle();
             }
             let u = &bench.uut;
             assert_eq!(u.source_mac.val().to_u64(), big_endian(&frame[6..12]));
-            assert_eq!(u.receive_tick.val().to_u64(), stored_tick, "round {round}");
             assert!(!u.in_frame.val());
         }
     }

@@ -4,9 +4,10 @@
 //! The receive layers register their checks of a frame's fields after its last beat; when
 //! they all stand, the frame parser raises `check` for one clock with the table's
 //! conditions on the inputs (each high when its step fails, or for the protocol steps when
-//! the frame is of that kind). The rules register them (the inputs may change after that
-//! clock), resolve the Ethernet steps 1-5 and the IPv4 steps 6-16 each in their order (one
-//! clock), choose between the two and drive `decided` for one clock with `action` and
+//! the frame is of that kind), which hold for the next clock too (the layers hold their
+//! checks until the next frame reaches the fields). In that next clock the rules resolve
+//! the Ethernet steps 1-5 and the IPv4 steps 6-16 each in their order from the inputs
+//! (no copy of them), register the two, choose between them and drive `decided` for one clock with `action` and
 //! `fate`, [`RULES_LATENCY`] clocks after `check`. An answer (ARP reply, echo reply, command) of a frame that was not `stored`
 //! becomes action NONE with fate `ReplyBusy` (step 16a).
 
@@ -35,7 +36,7 @@ pub struct ReceiveRules {
     pub clock: Signal<In, Clock>,
     /// Synchronous reset.
     pub reset: Signal<In, Bit>,
-    /// One clock: the conditions below are a frame's.
+    /// One clock: the conditions below are a frame's (they hold for the next clock too).
     pub check: Signal<In, Bit>,
     /// Step 1 fails: the MAC's length error.
     pub bad_length: Signal<In, Bit>,
@@ -104,27 +105,8 @@ pub struct ReceiveRules {
     fate_refused_foreign_subnet: Constant<Bits<5>>,
     fate_refused_malformed: Constant<Bits<5>>,
     fate_reply_busy: Constant<Bits<5>>,
-    // the conditions, registered
+    // the clock after `check`: the conditions are resolved
     registered: DFF<Bit>,
-    was_bad_length: DFF<Bit>,
-    was_bad_fcs: DFF<Bit>,
-    was_not_to_box: DFF<Bit>,
-    was_arp: DFF<Bit>,
-    was_arp_for_box: DFF<Bit>,
-    was_ipv4: DFF<Bit>,
-    was_bad_version: DFF<Bit>,
-    was_options: DFF<Bit>,
-    was_bad_header: DFF<Bit>,
-    was_fragment: DFF<Bit>,
-    was_ip_not_to_box: DFF<Bit>,
-    was_icmp: DFF<Bit>,
-    was_icmp_bad: DFF<Bit>,
-    was_echo_request: DFF<Bit>,
-    was_udp: DFF<Bit>,
-    was_udp_bad: DFF<Bit>,
-    was_other_port: DFF<Bit>,
-    was_foreign: DFF<Bit>,
-    was_malformed: DFF<Bit>,
     // the two levels resolved
     resolved: DFF<Bit>,
     use_ip: DFF<Bit>,
@@ -188,25 +170,6 @@ impl Default for ReceiveRules {
             fate_refused_malformed: fate_constant(BoxCounter::RefusedMalformed),
             fate_reply_busy: fate_constant(BoxCounter::ReplyBusy),
             registered: Default::default(),
-            was_bad_length: Default::default(),
-            was_bad_fcs: Default::default(),
-            was_not_to_box: Default::default(),
-            was_arp: Default::default(),
-            was_arp_for_box: Default::default(),
-            was_ipv4: Default::default(),
-            was_bad_version: Default::default(),
-            was_options: Default::default(),
-            was_bad_header: Default::default(),
-            was_fragment: Default::default(),
-            was_ip_not_to_box: Default::default(),
-            was_icmp: Default::default(),
-            was_icmp_bad: Default::default(),
-            was_echo_request: Default::default(),
-            was_udp: Default::default(),
-            was_udp_bad: Default::default(),
-            was_other_port: Default::default(),
-            was_foreign: Default::default(),
-            was_malformed: Default::default(),
             resolved: Default::default(),
             use_ip: Default::default(),
             frame_fate: Default::default(),
@@ -229,25 +192,6 @@ impl Logic for ReceiveRules {
             self,
             clock,
             registered,
-            was_bad_length,
-            was_bad_fcs,
-            was_not_to_box,
-            was_arp,
-            was_arp_for_box,
-            was_ipv4,
-            was_bad_version,
-            was_options,
-            was_bad_header,
-            was_fragment,
-            was_ip_not_to_box,
-            was_icmp,
-            was_icmp_bad,
-            was_echo_request,
-            was_udp,
-            was_udp_bad,
-            was_other_port,
-            was_foreign,
-            was_malformed,
             resolved,
             use_ip,
             frame_fate,
@@ -259,27 +203,6 @@ impl Logic for ReceiveRules {
             fate_out
         );
         self.registered.d.next = self.check.val();
-        if self.check.val() {
-            self.was_bad_length.d.next = self.bad_length.val();
-            self.was_bad_fcs.d.next = self.bad_fcs.val();
-            self.was_not_to_box.d.next = self.not_to_box.val();
-            self.was_arp.d.next = self.arp.val();
-            self.was_arp_for_box.d.next = self.arp_for_box.val();
-            self.was_ipv4.d.next = self.ipv4.val();
-            self.was_bad_version.d.next = self.bad_version.val();
-            self.was_options.d.next = self.options.val();
-            self.was_bad_header.d.next = self.bad_header.val();
-            self.was_fragment.d.next = self.fragment.val();
-            self.was_ip_not_to_box.d.next = self.ip_not_to_box.val();
-            self.was_icmp.d.next = self.icmp.val();
-            self.was_icmp_bad.d.next = self.icmp_bad.val();
-            self.was_echo_request.d.next = self.echo_request.val();
-            self.was_udp.d.next = self.udp.val();
-            self.was_udp_bad.d.next = self.udp_bad.val();
-            self.was_other_port.d.next = self.other_port.val();
-            self.was_foreign.d.next = self.foreign.val();
-            self.was_malformed.d.next = self.malformed.val();
-        }
 
         // steps 1-5 and steps 6-16, each in the model's order
         self.resolved.d.next = self.registered.q.val();
@@ -287,47 +210,47 @@ impl Logic for ReceiveRules {
             self.use_ip.d.next = false;
             self.frame_action.d.next = self.action_none.val();
             self.frame_fate.d.next = self.fate_not_for_us.val();
-            if self.was_bad_length.q.val() {
+            if self.bad_length.val() {
                 self.frame_fate.d.next = self.fate_bad_length.val();
-            } else if self.was_bad_fcs.q.val() {
+            } else if self.bad_fcs.val() {
                 self.frame_fate.d.next = self.fate_bad_fcs.val();
-            } else if self.was_not_to_box.q.val() {
+            } else if self.not_to_box.val() {
                 self.frame_fate.d.next = self.fate_not_for_us.val();
-            } else if self.was_arp.q.val() {
-                if self.was_arp_for_box.q.val() {
+            } else if self.arp.val() {
+                if self.arp_for_box.val() {
                     self.frame_fate.d.next = self.fate_arp_answered.val();
                     self.frame_action.d.next = self.action_arp.val();
                 }
-            } else if self.was_ipv4.q.val() {
+            } else if self.ipv4.val() {
                 self.use_ip.d.next = true;
             }
             self.ip_action.d.next = self.action_none.val();
             self.ip_fate.d.next = self.fate_not_for_us.val();
-            if self.was_bad_version.q.val() {
+            if self.bad_version.val() {
                 self.ip_fate.d.next = self.fate_ipv4_bad_header.val();
-            } else if self.was_options.q.val() {
+            } else if self.options.val() {
                 self.ip_fate.d.next = self.fate_ipv4_options.val();
-            } else if self.was_bad_header.q.val() {
+            } else if self.bad_header.val() {
                 self.ip_fate.d.next = self.fate_ipv4_bad_header.val();
-            } else if self.was_fragment.q.val() {
+            } else if self.fragment.val() {
                 self.ip_fate.d.next = self.fate_ipv4_fragment.val();
-            } else if self.was_ip_not_to_box.q.val() {
+            } else if self.ip_not_to_box.val() {
                 self.ip_fate.d.next = self.fate_not_for_us.val();
-            } else if self.was_icmp.q.val() {
-                if self.was_icmp_bad.q.val() {
+            } else if self.icmp.val() {
+                if self.icmp_bad.val() {
                     self.ip_fate.d.next = self.fate_bad_transport.val();
-                } else if self.was_echo_request.q.val() {
+                } else if self.echo_request.val() {
                     self.ip_fate.d.next = self.fate_pings_answered.val();
                     self.ip_action.d.next = self.action_echo.val();
                 }
-            } else if self.was_udp.q.val() {
-                if self.was_udp_bad.q.val() {
+            } else if self.udp.val() {
+                if self.udp_bad.val() {
                     self.ip_fate.d.next = self.fate_bad_transport.val();
-                } else if self.was_other_port.q.val() {
+                } else if self.other_port.val() {
                     self.ip_fate.d.next = self.fate_unknown_udp_port.val();
-                } else if self.was_foreign.q.val() {
+                } else if self.foreign.val() {
                     self.ip_fate.d.next = self.fate_refused_foreign_subnet.val();
-                } else if self.was_malformed.q.val() {
+                } else if self.malformed.val() {
                     self.ip_fate.d.next = self.fate_refused_malformed.val();
                 } else {
                     self.ip_fate.d.next = 0.into();
@@ -495,8 +418,6 @@ mod tests {
             bench.uut.check.next = true;
             bench.cycle();
             bench.uut.check.next = false;
-            // the next frame's conditions may already be on the inputs
-            drive(&mut bench.uut, [true; CONDITIONS]);
             for k in 1..=RULES_LATENCY + 1 {
                 bench.uut.stored.next = stored;
                 bench.settle();
@@ -520,6 +441,11 @@ mod tests {
                     );
                 }
                 bench.cycle();
+                // (the conditions hold for a clock after `check`); then the next frame's
+                // may be on the inputs
+                if k == 1 {
+                    drive(&mut bench.uut, [true; CONDITIONS]);
+                }
             }
         }
         assert!(seen.len() >= 14, "rows reached: {seen:?}");

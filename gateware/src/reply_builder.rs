@@ -6,9 +6,10 @@
 //! into it through the receive write port, which is shut while `locked`. `reserve` locks
 //! it (a reply will follow, the request must stay); `start_arp`, `start_echo` or
 //! `start_ack` then builds the reply in place, one byte per clock, from the request
-//! itself, the parser's and the command unit's held fields and constants. The request's
-//! own fields are not taken from the parser: the sender's MAC, IPv4 address and UDP port
-//! and the command's opcode are copied inside the buffer (read two clocks before they are
+//! itself, the parser's and the command unit's fields (those that change with the next
+//! frame read first in a program), the receive or send tick it holds and constants. The
+//! request's own fields are not taken from the parser: the sender's MAC, IPv4 address and
+//! UDP port and the command's opcode are copied inside the buffer (read two clocks before they are
 //! written), the command's sequence number and host time and the echo request's total
 //! length stay where they are (at the same place in the reply) and are read to be summed.
 //! So the peer_* and command_sequence/host_time fields of the parser need not reach this
@@ -26,9 +27,10 @@
 //!
 //! The builder is a sequencer stepping through a program in a ROM (one step per clock:
 //! a frame position, and a constant byte, a held-field byte, a counter byte, a checksum
-//! byte or a byte of the buffer); a byte goes through four registers (the ROM's output,
-//! the ROM word's parts, the byte in each field word, the written byte) and is summed into the IPv4 or UDP checksum as it is
-//! written; the checksums are folded in three more registers and written last. Build
+//! byte or a byte of the buffer); a byte goes through three registers (the ROM's output,
+//! the ROM word's parts or the byte in each field word, the written byte) and is summed into
+//! the IPv4 or UDP checksum as it is written (a running sum with an end-around carry); the
+//! checksums are complemented into a register and written last. Build
 //! durations: [`build_clocks`] (64 clocks for ARP, 60 for an echo of any length, 93, 105
 //! and 177 for acknowledgements without a reply, with a destination, with the counters).
 //! The counters are read one per four clocks from `counters_address` 0 on (a read's data
@@ -88,8 +90,8 @@ const REPLY_AT: usize = ACK_BODY_AT + ACK_FIXED_LEN;
 const START_TO_STEP: u64 = START_TO_WORD;
 
 /// Steps from the last step summed into a checksum to a step that writes it: the byte is
-/// summed after stage 5, folded twice and complemented; the checksum byte is taken in
-/// stage 4.
+/// summed after stage 5 and the checksum is final [`CHECKSUM_CLOCKS`] clocks later (at
+/// most); the checksum byte is taken in stage 4.
 const CHECKSUM_DISTANCE: usize = CHECKSUM_CLOCKS as usize + 1;
 
 /// Where a step's byte comes from.
@@ -372,13 +374,15 @@ fn ethernet_header(p: &mut Program, link: &LinkConfig, ethertype: u16) {
 
 fn echo_program(link: &LinkConfig) -> Vec<Step> {
     let mut p = Program::default();
+    // the ICMP checksum first: the parser's sum is read before the next frame restarts it
+    // ([`echo_fields_read`])
+    let checksum_at = ICMP_AT + icmp::field::CHECKSUM.start;
+    p.fields(checksum_at, field_byte::ICMP_CHECKSUM, 2, Sum::None);
     copy_addresses(&mut p, Sum::Ip);
     ethernet_header(&mut p, link, ETHERTYPE_IPV4);
     ipv4_header(&mut p, link, IP_PROTOCOL_ICMP, None, Sum::Ip);
-    // type and code, the checksum; the identifier, sequence number and data stay
+    // type and code; the identifier, sequence number and data stay
     p.constants(ICMP_AT, &[ICMP_ECHO_REPLY, 0], Sum::None);
-    let checksum_at = ICMP_AT + icmp::field::CHECKSUM.start;
-    p.fields(checksum_at, field_byte::ICMP_CHECKSUM, 2, Sum::None);
     // zero padding to the minimum frame, written where the request ended before it
     let shortest_end = ICMP_AT + icmp::HEADER_LEN;
     for at in shortest_end..MIN_FRAME_LEN {
@@ -393,6 +397,16 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
     let mut p = Program::default();
     let udp_len = (UDP_HEADER_LEN + reply.payload_len()) as u16;
     use command::field;
+    // the command unit's fields first: its last accepted sequence number holds for
+    // `LAST_ACCEPTED_HOLDS` clocks from `start_ack` ([`ack_fields_read`])
+    p.fields(
+        ACK_BODY_AT + ack_field::RESULT,
+        field_byte::RESULT,
+        1,
+        Sum::Udp,
+    );
+    let last_accepted = ACK_BODY_AT + ack_field::LAST_ACCEPTED.start;
+    p.fields(last_accepted, field_byte::LAST_ACCEPTED, 4, Sum::Udp);
     // the request's fields kept: its sender, source port and opcode are copied, its
     // sequence number and host time stay where they are (the same place in the ack)
     copy_addresses(&mut p, Sum::Both);
@@ -436,15 +450,7 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
         Sum::Udp,
     );
     p.constants(ACK_AT + field::RESERVED.start, &[0, 0], Sum::Udp);
-    p.fields(
-        ACK_BODY_AT + ack_field::RESULT,
-        field_byte::RESULT,
-        1,
-        Sum::Udp,
-    );
     p.constants(ACK_BODY_AT + ack_field::RESERVED.start, &[0, 0], Sum::Udp);
-    let last_accepted = ACK_BODY_AT + ack_field::LAST_ACCEPTED.start;
-    p.fields(last_accepted, field_byte::LAST_ACCEPTED, 4, Sum::Udp);
     let receive_tick = ACK_BODY_AT + ack_field::RECEIVE_TICK.start;
     p.fields(receive_tick, field_byte::RECEIVE_TICK, 8, Sum::Udp);
     match reply {
@@ -511,6 +517,32 @@ fn program(kind: ReplyKind) -> Vec<Step> {
     }
 }
 
+/// Clocks from `start_echo` (high in clock s) to the last clock in which the echo reply's
+/// fields from the parser are read: `ip_total_length` in clock s, `icmp_rest_sum` from
+/// clock s + 1 to s + this (a field step's byte is chosen in the clock of its ROM word).
+pub fn echo_fields_read() -> u64 {
+    let last_field = echo_program(&LinkConfig::DEFAULT)
+        .iter()
+        .rposition(|s| s.source == Source::Field && !s.from_buffer)
+        .expect("the ICMP checksum");
+    START_TO_STEP + last_field as u64
+}
+
+/// Clocks from `start_ack` (high in clock s) to the last clock in which an
+/// acknowledgement reads `last_accepted` (from clock s + 1 on): the same for every
+/// acknowledgement.
+pub fn ack_fields_read() -> u64 {
+    let link = LinkConfig::DEFAULT;
+    let last_field = ack_program(&link, 0, 1, AckReplyKind::None)
+        .iter()
+        .rposition(|s| {
+            s.source == Source::Field
+                && (field_byte::LAST_ACCEPTED..field_byte::LAST_ACCEPTED + 4).contains(&s.value)
+        })
+        .expect("the last accepted sequence number");
+    START_TO_STEP + last_field as u64
+}
+
 /// Clocks from the clock the reply's last body beat is taken to the first clock `locked`
 /// is low (the clock after).
 pub const UNLOCK_AFTER_LAST_TAKE: u64 = 1;
@@ -523,9 +555,9 @@ pub fn build_clocks(kind: ReplyKind) -> u64 {
 
 /// Clocks from the take (clock T) to the patch's last write (the UDP checksum's low byte
 /// is written at the edge ending clock T + this): the registered take, a step's ROM word,
-/// then three registers, for every step but the end marker.
+/// then two registers, for every step but the end marker.
 pub fn patch_clocks() -> u64 {
-    START_TO_STEP + patch_program().len() as u64 + 2
+    START_TO_STEP + patch_program().len() as u64 + 1
 }
 
 /// The earliest clock (counted from the take's) in which the body reader puts the first
@@ -601,11 +633,13 @@ pub struct ReplyBuilder {
     pub start_echo: Signal<In, Bit>,
     /// One clock: build a command acknowledgement.
     pub start_ack: Signal<In, Bit>,
-    /// Tick of the request's last byte.
-    pub receive_tick: Signal<In, Bits<64>>,
-    /// The echo request's IPv4 total length.
+    /// A stored request's last byte arrives: `tick` is its receive tick (held until an
+    /// acknowledgement's take; never high from a `reserve` until `locked` falls).
+    pub receive_tick_now: Signal<In, Bit>,
+    /// The echo request's IPv4 total length (read with `start_echo`).
     pub ip_total_length: Signal<In, Bits<16>>,
-    /// Folded ones'-complement sum of the echo request's ICMP message from byte 4.
+    /// Folded ones'-complement sum of the echo request's ICMP message from byte 4 (read
+    /// up to [`echo_fields_read`] clocks after `start_echo`).
     pub icmp_rest_sum: Signal<In, Bits<16>>,
     /// The command's result (`AckResult`).
     pub result: Signal<In, Bits<8>>,
@@ -646,8 +680,9 @@ pub struct ReplyBuilder {
     send_tick_offset: Constant<Bits<64>>,
     raw_frame_kind: Constant<Bits<8>>,
     locked_now: DFF<Bit>,
-    // the send tick, set a clock after the take
-    send_tick: DFF<Bits<64>>,
+    // the request's receive tick, set at its last byte; then the send tick, set a clock
+    // after the take
+    field_tick: DFF<Bits<64>>,
 }
 
 impl ReplyBuilder {
@@ -669,7 +704,7 @@ impl ReplyBuilder {
             start_arp: Default::default(),
             start_echo: Default::default(),
             start_ack: Default::default(),
-            receive_tick: Default::default(),
+            receive_tick_now: Default::default(),
             ip_total_length: Default::default(),
             icmp_rest_sum: Default::default(),
             result: Default::default(),
@@ -695,7 +730,7 @@ impl ReplyBuilder {
             send_tick_offset: constant((TAKE_TO_FIRST_BYTE as usize - 1) as u64),
             raw_frame_kind: constant((usize::from(RAW_FRAME_KIND)) as u64),
             locked_now: Default::default(),
-            send_tick: Default::default(),
+            field_tick: Default::default(),
         }
     }
 }
@@ -703,7 +738,7 @@ impl ReplyBuilder {
 impl Logic for ReplyBuilder {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, locked_now, send_tick);
+        dff_setup!(self, clock, locked_now, field_tick);
         self.buffer.clock.next = self.clock.val();
         self.reader.clock.next = self.clock.val();
         self.reader.reset.next = self.reset.val();
@@ -750,8 +785,7 @@ impl Logic for ReplyBuilder {
         self.fields.destination_port.next = self.destination_port.val();
         self.fields.destination_ip.next = self.destination_ip.val();
         self.fields.last_accepted.next = self.last_accepted.val();
-        self.fields.receive_tick.next = self.receive_tick.val();
-        self.fields.send_tick.next = self.send_tick.q.val();
+        self.fields.tick.next = self.field_tick.q.val();
         self.fields.icmp_rest_sum.next = self.icmp_rest_sum.val();
         self.fields.result.next = self.result.val();
         self.fields.link_up.next = self.link_up.val();
@@ -778,8 +812,11 @@ impl Logic for ReplyBuilder {
         self.replies.body_sum.next = 0.into();
         self.reader.start.next = self.sequencer.took.val();
         self.reader.length.next = self.sizing.body_len.val();
+        if self.receive_tick_now.val() {
+            self.field_tick.d.next = self.tick.val();
+        }
         if self.sequencer.patch_starts.val() {
-            self.send_tick.d.next = self.tick.val() + self.send_tick_offset.val();
+            self.field_tick.d.next = self.tick.val() + self.send_tick_offset.val();
         }
 
         // The body, straight from the reader.
@@ -910,7 +947,9 @@ mod tests {
     /// Writes `request` through the receive port, sets the held fields, reserves and
     /// starts; takes the descriptor after a random delay (none with `fastest`) and reads
     /// the body with random `ready` (always with `fastest`). Meanwhile the receive port
-    /// writes garbage (the buffer is locked), and `locked` is checked clock by clock.
+    /// writes garbage (the buffer is locked), the echo fields change after
+    /// [`echo_fields_read`] clocks and the last accepted sequence number after
+    /// [`ack_fields_read`], and `locked` is checked clock by clock.
     fn run(kind: ReplyKind, request: &[u8], held: &Held, seed: u64, fastest: bool) -> Run {
         let link = LinkConfig::DEFAULT;
         let mut rng = TestRng::new(seed);
@@ -920,15 +959,24 @@ mod tests {
         bench.cycle();
         bench.uut.reset.next = false;
         for (a, &b) in request.iter().enumerate() {
+            let last = a + 1 == request.len();
             bench.uut.receive_write_enable.next = true;
             bench.uut.receive_write_address.next = (a as u64).into();
             bench.uut.receive_write_data.next = u64::from(b).into();
+            // (the parser's signal comes with the byte before it is written)
+            bench.uut.receive_tick_now.next = last;
+            bench.uut.tick.next = if last {
+                held.receive_tick
+            } else {
+                rng.next_u64()
+            }
+            .into();
             bench.cycle();
             assert!(!bench.uut.locked.val());
         }
         bench.uut.receive_write_enable.next = false;
+        bench.uut.receive_tick_now.next = false;
         let u = &mut bench.uut;
-        u.receive_tick.next = held.receive_tick.into();
         u.ip_total_length.next = u64::from(held.ip_total_length).into();
         u.icmp_rest_sum.next = u64::from(held.icmp_rest_sum).into();
         u.result.next = u64::from(held.result as u8).into();
@@ -976,6 +1024,15 @@ mod tests {
             let clock = bench.cycles;
             let u = &mut bench.uut;
             u.tick.next = (tick_base + clock).into();
+            // the parser's echo fields change with the next frame, the last accepted
+            // sequence number with the next command's sender
+            if clock > start + echo_fields_read() {
+                u.ip_total_length.next = u64::from(rng.next_u64() as u16).into();
+                u.icmp_rest_sum.next = u64::from(rng.next_u64() as u16).into();
+            }
+            if clock > start + ack_fields_read() {
+                u.last_accepted.next = u64::from(rng.next_u64() as u32).into();
+            }
             u.counters_data.next = u64::from(held.counters.counts[counter_addresses[0]]).into();
             // the parser keeps writing: the lock must keep it out
             u.receive_write_enable.next = rng.chance(0.5);
@@ -1276,6 +1333,18 @@ mod tests {
         }
     }
 
+    /// The command unit's last accepted sequence number holds while an acknowledgement
+    /// reads it.
+    #[test]
+    fn the_last_accepted_sequence_number_holds_while_it_is_read() {
+        use crate::command_unit::LAST_ACCEPTED_HOLDS;
+        assert!(
+            ack_fields_read() < LAST_ACCEPTED_HOLDS,
+            "{}",
+            ack_fields_read()
+        );
+    }
+
     #[test]
     fn build_durations_and_margin() {
         // the figures of the module doc
@@ -1288,7 +1357,7 @@ mod tests {
         ]
         .map(build_clocks);
         assert_eq!(clocks, [64, 60, 93, 105, 177]);
-        assert_eq!((patch_clocks(), patch_margin_clocks()), (21, 21));
+        assert_eq!((patch_clocks(), patch_margin_clocks()), (20, 22));
     }
 
     #[test]

@@ -2,20 +2,26 @@
 //! bytes it writes.
 //!
 //! A byte to sum (`sum_ip`, `sum_udp`) is its 16-bit word's high byte at an even frame
-//! position (`low_byte` low) and its low byte at an odd one. It is registered first (the
-//! buffer's output, which a copied byte comes from, feeds no adder), then added; the sums
-//! are folded twice, a register each, and complemented into the checksums, which are final
-//! [`CHECKSUM_CLOCKS`] clocks after the last byte summed. A UDP checksum computed as 0 is
-//! 0xFFFF (RFC 768). `restart` clears both sums. The IPv4 sum holds 16 words (a header
-//! is 10), the UDP sum 256 ([`UDP_SUM_BYTES`]).
+//! position (`low_byte` low) and its low byte at an odd one. The word is registered first,
+//! once for each sum (0 for a sum the byte is not summed into; the buffer's output, which
+//! a copied byte comes from, feeds no adder), then added into a running sum with an
+//! end-around carry ([`OnesComplementSum`], one each) every clock, so a clock without a
+//! byte adds the carry left over: two clocks after the last byte was added the carry is 0
+//! and the sum is folded. The checksums are the sums' complements (wires): they include a
+//! byte three clocks after it was summed; the programs wait [`CHECKSUM_CLOCKS`]. A UDP
+//! checksum computed as 0 is 0xFFFF (RFC 768). `restart` clears both sums. A sum holds any
+//! number of bytes. Cost: the two registered words and the two sums (17 bits each).
 
 use crate::hdl::*;
+use crate::ones_complement_sum::OnesComplementSum;
 
-/// Clocks from a summed byte to the checksums that include it: the byte's register, the
-/// sum, two folds, the complement.
+/// Clocks from a summed byte to the clock its checksum byte may be taken (the programs'
+/// wait): the words' register, the sum, the last carry (three clocks), and two to spare,
+/// where the sums were once folded in registers (the replies' timing).
 pub const CHECKSUM_CLOCKS: u64 = 5;
 
-/// Bytes the UDP sum holds without overflowing (256 words of 0xFFFF in 24 bits).
+/// Bytes the UDP sum of a reply may hold (the longest reply's UDP part and pseudo header
+/// fit; the running sum itself has no limit).
 pub const UDP_SUM_BYTES: usize = 512;
 
 /// The reply's checksums.
@@ -35,71 +41,56 @@ pub struct ReplyChecksums {
     pub sum_ip: Signal<In, Bit>,
     /// Sum the byte into the UDP checksum.
     pub sum_udp: Signal<In, Bit>,
-    /// The IPv4 header checksum.
+    /// The IPv4 header checksum ([`CHECKSUM_CLOCKS`] after the last byte summed).
     pub ip_checksum: Signal<Out, Bits<16>>,
-    /// The UDP checksum.
+    /// The UDP checksum (as `ip_checksum`).
     pub udp_checksum: Signal<Out, Bits<16>>,
-    s6_summand: DFF<Bits<16>>,
-    s6_sum_ip: DFF<Bit>,
-    s6_sum_udp: DFF<Bit>,
-    ip_sum: DFF<Bits<20>>,
-    udp_sum: DFF<Bits<24>>,
-    ip_fold: DFF<Bits<17>>,
-    ip_folded: DFF<Bits<16>>,
-    udp_fold: DFF<Bits<17>>,
-    udp_folded: DFF<Bits<16>>,
-    ip_result: DFF<Bits<16>>,
-    udp_result: DFF<Bits<16>>,
+    ip_sum: OnesComplementSum,
+    udp_sum: OnesComplementSum,
+    // the byte as its word, for each sum (0 when not summed into it)
+    ip_word: DFF<Bits<16>>,
+    udp_word: DFF<Bits<16>>,
     summand: Signal<Local, Bits<16>>,
 }
 
 impl Logic for ReplyChecksums {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(
-            self, clock, s6_summand, s6_sum_ip, s6_sum_udp, ip_sum, udp_sum, ip_fold, ip_folded,
-            udp_fold, udp_folded, ip_result, udp_result
-        );
+        dff_setup!(self, clock, ip_word, udp_word);
         self.summand.next = bit_cast::<16, 8>(self.written.val());
         if !self.low_byte.val() {
             self.summand.next = bit_cast::<16, 8>(self.written.val()) << 8;
         }
         // (summed a clock later, from a register: the buffer's output feeds no adder)
-        self.s6_summand.d.next = self.summand.val();
-        self.s6_sum_ip.d.next = self.sum_ip.val();
-        self.s6_sum_udp.d.next = self.sum_udp.val();
-        if self.s6_sum_ip.q.val() {
-            self.ip_sum.d.next = self.ip_sum.q.val() + bit_cast::<20, 16>(self.s6_summand.q.val());
+        self.ip_word.d.next = 0.into();
+        if self.sum_ip.val() {
+            self.ip_word.d.next = self.summand.val();
         }
-        if self.s6_sum_udp.q.val() {
-            self.udp_sum.d.next =
-                self.udp_sum.q.val() + bit_cast::<24, 16>(self.s6_summand.q.val());
-        }
-        self.ip_fold.d.next = bit_cast::<17, 16>(self.ip_sum.q.val().get_bits::<16>(0))
-            + bit_cast::<17, 4>(self.ip_sum.q.val().get_bits::<4>(16));
-        // (at most 0x1000E: adding its carry bit cannot carry again)
-        self.ip_folded.d.next = self.ip_fold.q.val().get_bits::<16>(0)
-            + bit_cast::<16, 1>(self.ip_fold.q.val().get_bits::<1>(16));
-        self.ip_result.d.next = !self.ip_folded.q.val();
-        self.udp_fold.d.next = bit_cast::<17, 16>(self.udp_sum.q.val().get_bits::<16>(0))
-            + bit_cast::<17, 8>(self.udp_sum.q.val().get_bits::<8>(16));
-        self.udp_folded.d.next = self.udp_fold.q.val().get_bits::<16>(0)
-            + bit_cast::<16, 1>(self.udp_fold.q.val().get_bits::<1>(16));
-        self.udp_result.d.next = !self.udp_folded.q.val();
-        if self.udp_folded.q.val() == 0xFFFF {
-            // a computed 0 is sent as 0xFFFF (RFC 768)
-            self.udp_result.d.next = 0xFFFF.into();
-        }
-        if self.restart.val() {
-            self.ip_sum.d.next = 0.into();
-            self.udp_sum.d.next = 0.into();
+        self.udp_word.d.next = 0.into();
+        if self.sum_udp.val() {
+            self.udp_word.d.next = self.summand.val();
         }
         if self.reset.val() {
-            self.s6_sum_ip.d.next = false;
-            self.s6_sum_udp.d.next = false;
+            self.ip_word.d.next = 0.into();
+            self.udp_word.d.next = 0.into();
         }
-        self.ip_checksum.next = self.ip_result.q.val();
-        self.udp_checksum.next = self.udp_result.q.val();
+        // (every clock: a word of 0 adds the last carry)
+        self.ip_sum.clock.next = self.clock.val();
+        self.ip_sum.add.next = true;
+        self.ip_sum.word.next = self.ip_word.q.val();
+        self.ip_sum.restart.next = self.restart.val();
+        self.ip_sum.start.next = 0.into();
+        self.udp_sum.clock.next = self.clock.val();
+        self.udp_sum.add.next = true;
+        self.udp_sum.word.next = self.udp_word.q.val();
+        self.udp_sum.restart.next = self.restart.val();
+        self.udp_sum.start.next = 0.into();
+        self.ip_checksum.next = !self.ip_sum.sum.val();
+        self.udp_checksum.next = !self.udp_sum.sum.val();
+        if self.udp_sum.verifies.val() {
+            // a computed 0 is sent as 0xFFFF (RFC 768)
+            self.udp_checksum.next = 0xFFFF.into();
+        }
     }
 }
 

@@ -1,16 +1,19 @@
 //! ReplyFieldBytes: the reply builder's held-field bytes, one chosen per clock.
 //!
 //! The fields a reply takes from outside the request (the destination now in effect, the
-//! last accepted sequence number, the receive and send ticks, the echo reply's ICMP
-//! checksum, the result and the link state) are five 64-bit words, most significant byte
-//! first ([`field_byte`]'s positions: byte `8 w + b` is byte `b` of word `w`). In one clock `byte_index` (b) chooses each word's byte into a register; in the
-//! next, `word_index` (w) chooses among those five registers: balanced trees of two-way
-//! multiplexers, byte in the word first, which map onto the LUTs and the slices'
-//! PFUMX/L6MUX, with a register between the two halves.
+//! last accepted sequence number, the receive or send tick, the echo reply's ICMP
+//! checksum, the result and the link state) are four 64-bit words, most significant byte
+//! first ([`field_byte`]'s positions: byte `8 w + b` is byte `b` of word `w`). The receive
+//! and the send tick are one word: the reply builder holds the request's receive tick
+//! until an acknowledgement's take and the send tick from then on. In one clock
+//! `byte_index` (b) chooses each word's byte into a register; in the next, `word_index`
+//! (w) chooses among those four registers: balanced trees of two-way multiplexers, byte in
+//! the word first, which map onto the LUTs and the slices' PFUMX/L6MUX, with a register
+//! between the two halves.
 
 use crate::hdl::*;
 
-/// Byte positions of the held fields (five 64-bit words, most significant byte first). The
+/// Byte positions of the held fields (four 64-bit words, most significant byte first). The
 /// request's own fields (addresses, port, sequence number, host time, opcode) are not
 /// among them: the reply builder copies them in the buffer or leaves them where they are.
 pub mod field_byte {
@@ -22,18 +25,18 @@ pub mod field_byte {
     pub const DESTINATION_IP: u8 = 8;
     /// The last accepted sequence number (4 bytes).
     pub const LAST_ACCEPTED: u8 = 12;
-    /// The request's receive tick (8 bytes).
+    /// The request's receive tick (8 bytes), read before an acknowledgement's take.
     pub const RECEIVE_TICK: u8 = 16;
-    /// The acknowledgement's send tick (8 bytes).
-    pub const SEND_TICK: u8 = 24;
+    /// The acknowledgement's send tick (8 bytes): the same word, read after the take.
+    pub const SEND_TICK: u8 = RECEIVE_TICK;
     /// The echo reply's ICMP checksum (2 bytes).
-    pub const ICMP_CHECKSUM: u8 = 32;
+    pub const ICMP_CHECKSUM: u8 = 24;
     /// The command's result (1 byte).
-    pub const RESULT: u8 = 34;
+    pub const RESULT: u8 = 26;
     /// Link up, 0 or 1 (1 byte).
-    pub const LINK_UP: u8 = 35;
+    pub const LINK_UP: u8 = 27;
     /// The link speed (1 byte).
-    pub const LINK_SPEED: u8 = 36;
+    pub const LINK_SPEED: u8 = 28;
 }
 
 /// The held fields' byte multiplexer.
@@ -43,8 +46,8 @@ pub struct ReplyFieldBytes {
     pub clock: Signal<In, Clock>,
     /// The byte in each word (0: most significant), registered this clock.
     pub byte_index: Signal<In, Bits<3>>,
-    /// The word, a clock after its `byte_index` (words 5 to 7 read as word 4).
-    pub word_index: Signal<In, Bits<3>>,
+    /// The word, a clock after its `byte_index`.
+    pub word_index: Signal<In, Bits<2>>,
     /// Word 0: the destination MAC, then its UDP port.
     pub destination_mac: Signal<In, Bits<48>>,
     /// See `destination_mac`.
@@ -53,11 +56,9 @@ pub struct ReplyFieldBytes {
     pub destination_ip: Signal<In, Bits<32>>,
     /// See `destination_ip`.
     pub last_accepted: Signal<In, Bits<32>>,
-    /// Word 2: the request's receive tick.
-    pub receive_tick: Signal<In, Bits<64>>,
-    /// Word 3: the acknowledgement's send tick.
-    pub send_tick: Signal<In, Bits<64>>,
-    /// Word 4: the ICMP checksum (the complement of this sum), the result, link up and
+    /// Word 2: the request's receive tick or the acknowledgement's send tick.
+    pub tick: Signal<In, Bits<64>>,
+    /// Word 3: the ICMP checksum (the complement of this sum), the result, link up and
     /// link speed, then zeros.
     pub icmp_rest_sum: Signal<In, Bits<16>>,
     /// See `icmp_rest_sum`.
@@ -74,7 +75,6 @@ pub struct ReplyFieldBytes {
     word_bytes_1: DFF<Bits<8>>,
     word_bytes_2: DFF<Bits<8>>,
     word_bytes_3: DFF<Bits<8>>,
-    word_bytes_4: DFF<Bits<8>>,
 }
 
 impl Logic for ReplyFieldBytes {
@@ -86,8 +86,7 @@ impl Logic for ReplyFieldBytes {
             word_bytes_0,
             word_bytes_1,
             word_bytes_2,
-            word_bytes_3,
-            word_bytes_4
+            word_bytes_3
         );
         // (byte in the word first, then the word: balanced trees of two-way multiplexers,
         // which map onto the LUTs and the slices' PFUMX/L6MUX)
@@ -98,29 +97,25 @@ impl Logic for ReplyFieldBytes {
                 if self.field_byte_index.val().get_bit(0) {
                     self.word_bytes_0.d.next = self.destination_port.val().get_bits::<8>(0);
                     self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(0);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(0);
-                    self.word_bytes_3.d.next = self.send_tick.val().get_bits::<8>(0);
-                    self.word_bytes_4.d.next = 0.into();
+                    self.word_bytes_2.d.next = self.tick.val().get_bits::<8>(0);
+                    self.word_bytes_3.d.next = 0.into();
                 } else {
                     self.word_bytes_0.d.next = self.destination_port.val().get_bits::<8>(8);
                     self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(8);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(8);
-                    self.word_bytes_3.d.next = self.send_tick.val().get_bits::<8>(8);
-                    self.word_bytes_4.d.next = 0.into();
+                    self.word_bytes_2.d.next = self.tick.val().get_bits::<8>(8);
+                    self.word_bytes_3.d.next = 0.into();
                 }
             } else {
                 if self.field_byte_index.val().get_bit(0) {
                     self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(0);
                     self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(16);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(16);
-                    self.word_bytes_3.d.next = self.send_tick.val().get_bits::<8>(16);
-                    self.word_bytes_4.d.next = 0.into();
+                    self.word_bytes_2.d.next = self.tick.val().get_bits::<8>(16);
+                    self.word_bytes_3.d.next = 0.into();
                 } else {
                     self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(8);
                     self.word_bytes_1.d.next = self.last_accepted.val().get_bits::<8>(24);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(24);
-                    self.word_bytes_3.d.next = self.send_tick.val().get_bits::<8>(24);
-                    self.word_bytes_4.d.next = bit_cast::<8, 2>(self.link_speed.val());
+                    self.word_bytes_2.d.next = self.tick.val().get_bits::<8>(24);
+                    self.word_bytes_3.d.next = bit_cast::<8, 2>(self.link_speed.val());
                 }
             }
         } else {
@@ -128,36 +123,29 @@ impl Logic for ReplyFieldBytes {
                 if self.field_byte_index.val().get_bit(0) {
                     self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(16);
                     self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(0);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(32);
-                    self.word_bytes_3.d.next = self.send_tick.val().get_bits::<8>(32);
-                    self.word_bytes_4.d.next = bit_cast::<8, 1>(self.link_up.val().into());
+                    self.word_bytes_2.d.next = self.tick.val().get_bits::<8>(32);
+                    self.word_bytes_3.d.next = bit_cast::<8, 1>(self.link_up.val().into());
                 } else {
                     self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(24);
                     self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(8);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(40);
-                    self.word_bytes_3.d.next = self.send_tick.val().get_bits::<8>(40);
-                    self.word_bytes_4.d.next = self.result.val();
+                    self.word_bytes_2.d.next = self.tick.val().get_bits::<8>(40);
+                    self.word_bytes_3.d.next = self.result.val();
                 }
             } else {
                 if self.field_byte_index.val().get_bit(0) {
                     self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(32);
                     self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(16);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(48);
-                    self.word_bytes_3.d.next = self.send_tick.val().get_bits::<8>(48);
-                    self.word_bytes_4.d.next = self.icmp_checksum.val().get_bits::<8>(0);
+                    self.word_bytes_2.d.next = self.tick.val().get_bits::<8>(48);
+                    self.word_bytes_3.d.next = self.icmp_checksum.val().get_bits::<8>(0);
                 } else {
                     self.word_bytes_0.d.next = self.destination_mac.val().get_bits::<8>(40);
                     self.word_bytes_1.d.next = self.destination_ip.val().get_bits::<8>(24);
-                    self.word_bytes_2.d.next = self.receive_tick.val().get_bits::<8>(56);
-                    self.word_bytes_3.d.next = self.send_tick.val().get_bits::<8>(56);
-                    self.word_bytes_4.d.next = self.icmp_checksum.val().get_bits::<8>(8);
+                    self.word_bytes_2.d.next = self.tick.val().get_bits::<8>(56);
+                    self.word_bytes_3.d.next = self.icmp_checksum.val().get_bits::<8>(8);
                 }
             }
         }
-        // (words 5 to 7 do not exist)
-        if self.word_index.val().get_bit(2) {
-            self.field_byte.next = self.word_bytes_4.q.val();
-        } else if self.word_index.val().get_bit(1) {
+        if self.word_index.val().get_bit(1) {
             if self.word_index.val().get_bit(0) {
                 self.field_byte.next = self.word_bytes_3.q.val();
             } else {
@@ -185,30 +173,28 @@ mod tests {
             let port = rng.next_u64() as u16;
             let ip = rng.next_u64() as u32;
             let last = rng.next_u64() as u32;
-            let receive = rng.next_u64();
-            let send = rng.next_u64();
+            let tick = rng.next_u64();
             let rest = rng.next_u64() as u16;
             let result = rng.byte();
             let up = rng.chance(0.5);
             let speed = rng.next_u64() % 4;
-            // the five words as the reply builder's `field_byte` positions lay them out
+            // the four words as the reply builder's `field_byte` positions lay them out
             let mut bytes = Vec::new();
             bytes.extend(&mac.to_be_bytes()[2..]);
             bytes.extend(port.to_be_bytes());
             bytes.extend(ip.to_be_bytes());
             bytes.extend(last.to_be_bytes());
-            bytes.extend(receive.to_be_bytes());
-            bytes.extend(send.to_be_bytes());
+            bytes.extend(tick.to_be_bytes());
             bytes.extend((!rest).to_be_bytes());
             bytes.extend([result, u8::from(up), speed as u8, 0, 0, 0]);
-            assert_eq!(bytes.len(), 40);
+            assert_eq!(bytes.len(), 32);
             // the positions the reply builder's programs name
             let at = |p: u8| bytes[usize::from(p)];
             assert_eq!(at(field_byte::DESTINATION_PORT), (port >> 8) as u8);
             assert_eq!(at(field_byte::DESTINATION_IP), (ip >> 24) as u8);
             assert_eq!(at(field_byte::LAST_ACCEPTED), (last >> 24) as u8);
-            assert_eq!(at(field_byte::RECEIVE_TICK), (receive >> 56) as u8);
-            assert_eq!(at(field_byte::SEND_TICK), (send >> 56) as u8);
+            assert_eq!(at(field_byte::RECEIVE_TICK), (tick >> 56) as u8);
+            assert_eq!(at(field_byte::SEND_TICK), (tick >> 56) as u8);
             assert_eq!(at(field_byte::ICMP_CHECKSUM), (!rest >> 8) as u8);
             assert_eq!(at(field_byte::RESULT), result);
             assert_eq!(at(field_byte::LINK_UP), u8::from(up));
@@ -219,13 +205,12 @@ mod tests {
             u.destination_port.next = u64::from(port).into();
             u.destination_ip.next = u64::from(ip).into();
             u.last_accepted.next = u64::from(last).into();
-            u.receive_tick.next = receive.into();
-            u.send_tick.next = send.into();
+            u.tick.next = tick.into();
             u.icmp_rest_sum.next = u64::from(rest).into();
             u.result.next = u64::from(result).into();
             u.link_up.next = up;
             u.link_speed.next = speed.into();
-            for position in 0..40u64 {
+            for position in 0..32u64 {
                 bench.uut.byte_index.next = (position % 8).into();
                 bench.cycle();
                 bench.uut.word_index.next = (position / 8).into();

@@ -1,27 +1,28 @@
 //! ReplyStages: the reply builder's step pipeline, from a program's ROM word to the byte
 //! written into the frame buffer and summed into the reply's checksums.
 //!
-//! Stage 3 registers the word's parts (frame address, value, buffer address read, source,
-//! write, sums; a padding step writes only from the request's end on); the buffer read of
-//! a copy is issued from them (`read_address`). Stage 4 takes the held field's byte
-//! (`field_byte_index` now, `field_word_index` in the next stage: a
-//! [`crate::reply_field_bytes::ReplyFieldBytes`] answers in between) and loads the counter
-//! at its byte 0 (the next counter's read starts: `counters_address` counts from 0 at
-//! `restart`, a read's data taken four clocks after its address). Stage 5 chooses the
+//! The ROM word comes from the block RAM's output register, so its parts are taken from it
+//! directly (no register of their own): the buffer read of a copy is issued from it
+//! (`read_address`), the held field's byte is chosen (`field_byte_index` now,
+//! `field_word_index` in the next stage: a [`crate::reply_field_bytes::ReplyFieldBytes`]
+//! answers in between), the counter is loaded at its byte 0 (the next counter's read
+//! starts: `counters_address` counts from 0 at `restart`, a read's data taken four clocks
+//! after its address), and stage 4 registers the parts (frame address, value, source,
+//! write, sums; a padding step writes only from the request's end on). Stage 5 chooses the
 //! byte by its source (the value, the field byte, a counter byte, a checksum byte) into a
 //! register; a copy's byte is the buffer's (`buffer_data`, read two clocks before). The
 //! byte is written (`write`, `write_address`, `write_data`) and summed into the IPv4 or
 //! UDP checksum ([`ReplyChecksums`], an even frame position a word's high byte).
 //!
-//! Latency: a word's byte is written 3 clocks after the word (`word_valid`). Cost: the
-//! stage registers (3 x about 30 bits), the counter word and address, and the checksums.
+//! Latency: a word's byte is written 2 clocks after the word (`word_valid`). Cost: the
+//! stage registers (2 x about 20 bits), the counter word and address, and the checksums.
 
 use crate::hdl::*;
 use crate::reply_checksums::ReplyChecksums;
 use crate::reply_sequencer::STEP_BITS;
 
 /// Clocks from a valid ROM word to the clock its byte is written.
-pub const WORD_TO_WRITE: u64 = 3;
+pub const WORD_TO_WRITE: u64 = 2;
 
 /// The builder's step pipeline.
 #[derive(LogicBlock, Default)]
@@ -49,7 +50,7 @@ pub struct ReplyStages {
     /// The held field byte's place in its word.
     pub field_byte_index: Signal<Out, Bits<3>>,
     /// The held field byte's word, a clock after its place.
-    pub field_word_index: Signal<Out, Bits<3>>,
+    pub field_word_index: Signal<Out, Bits<2>>,
     /// The buffer address a copy reads.
     pub read_address: Signal<Out, Bits<8>>,
     /// A byte is written.
@@ -62,15 +63,7 @@ pub struct ReplyStages {
     checksums: ReplyChecksums,
     counter_address: DFF<Bits<5>>,
     counter_word: DFF<Bits<32>>,
-    // stage 3: the ROM word's parts, registered
-    s3_write: DFF<Bit>,
-    s3_address: DFF<Bits<8>>,
-    s3_value: DFF<Bits<8>>,
-    s3_source: DFF<Bits<2>>,
-    s3_sum_ip: DFF<Bit>,
-    s3_sum_udp: DFF<Bit>,
-    s3_read: DFF<Bits<8>>,
-    s3_from_buffer: DFF<Bit>,
+    // stage 4: the ROM word's parts, registered
     s4_write: DFF<Bit>,
     s4_address: DFF<Bits<8>>,
     s4_value: DFF<Bits<8>>,
@@ -98,14 +91,6 @@ impl Logic for ReplyStages {
             clock,
             counter_address,
             counter_word,
-            s3_write,
-            s3_address,
-            s3_value,
-            s3_source,
-            s3_sum_ip,
-            s3_sum_udp,
-            s3_read,
-            s3_from_buffer,
             s4_write,
             s4_address,
             s4_value,
@@ -120,35 +105,28 @@ impl Logic for ReplyStages {
             s5_sum_ip,
             s5_sum_udp
         );
-        // Stage 2 -> 3: the ROM word's parts, registered (the buffer read of a copy is
-        // issued from them: its byte is there in stage 5).
-        self.s3_write.d.next = self.word_valid.val()
+        // The ROM word (stage 3, from the block RAM's output register): the buffer read of
+        // a copy (its byte is there in stage 5), the held field's byte in each word (the
+        // word in the next stage), the counter loaded at its byte 0 (the next counter's
+        // read starts); its parts registered.
+        self.read_address.next = self.word.val().get_bits::<8>(16);
+        self.field_byte_index.next = self.word.val().get_bits::<3>(8);
+        self.field_word_index.next = self.s4_value.q.val().get_bits::<2>(3);
+        self.s4_write.d.next = self.word_valid.val()
             & self.word.val().get_bit(26)
             & (!self.word.val().get_bit(29)
                 | (bit_cast::<11, 8>(self.word.val().get_bits::<8>(0)) >= self.frame_end.val()));
-        self.s3_sum_ip.d.next = self.word_valid.val() & self.word.val().get_bit(27);
-        self.s3_sum_udp.d.next = self.word_valid.val() & self.word.val().get_bit(28);
-        self.s3_from_buffer.d.next = self.word.val().get_bit(31);
-        self.s3_address.d.next = self.word.val().get_bits::<8>(0);
-        self.s3_value.d.next = self.word.val().get_bits::<8>(8);
-        self.s3_source.d.next = self.word.val().get_bits::<2>(24);
-        self.s3_read.d.next = self.word.val().get_bits::<8>(16);
-
-        // Stage 3 -> 4: the held field's byte in each word (the word in the next stage);
-        // the counter loaded at its byte 0 (the next counter's read starts).
-        self.field_byte_index.next = self.s3_value.q.val().get_bits::<3>(0);
-        self.field_word_index.next = self.s4_value.q.val().get_bits::<3>(3);
-        self.s4_write.d.next = self.s3_write.q.val();
-        self.s4_address.d.next = self.s3_address.q.val();
-        self.s4_value.d.next = self.s3_value.q.val();
-        self.s4_source.d.next = self.s3_source.q.val();
-        self.s4_sum_ip.d.next = self.s3_sum_ip.q.val();
-        self.s4_sum_udp.d.next = self.s3_sum_udp.q.val();
-        self.s4_from_buffer.d.next = self.s3_from_buffer.q.val();
+        self.s4_sum_ip.d.next = self.word_valid.val() & self.word.val().get_bit(27);
+        self.s4_sum_udp.d.next = self.word_valid.val() & self.word.val().get_bit(28);
+        self.s4_from_buffer.d.next = self.word.val().get_bit(31);
+        self.s4_address.d.next = self.word.val().get_bits::<8>(0);
+        self.s4_value.d.next = self.word.val().get_bits::<8>(8);
+        self.s4_source.d.next = self.word.val().get_bits::<2>(24);
         self.counters_address.next = self.counter_address.q.val();
-        if self.s3_write.q.val()
-            & (self.s3_source.q.val() == 2)
-            & (self.s3_value.q.val().get_bits::<2>(0) == 0)
+        if self.word_valid.val()
+            & self.word.val().get_bit(26)
+            & (self.word.val().get_bits::<2>(24) == 2)
+            & (self.word.val().get_bits::<2>(8) == 0)
         {
             self.counter_word.d.next = self.counters_data.val();
             self.counter_address.d.next = self.counter_address.q.val() + 1;
@@ -197,15 +175,11 @@ impl Logic for ReplyStages {
             self.counter_address.d.next = 0.into();
         }
         if self.reset.val() {
-            self.s3_write.d.next = false;
             self.s4_write.d.next = false;
             self.s4_sum_ip.d.next = false;
             self.s4_sum_udp.d.next = false;
             self.s5_write.d.next = false;
-            self.s3_sum_ip.d.next = false;
-            self.s3_sum_udp.d.next = false;
         }
-        self.read_address.next = self.s3_read.q.val();
         self.write.next = self.s5_write.q.val();
         self.write_address.next = self.s5_address.q.val();
         self.write_data.next = self.written.val();

@@ -6,14 +6,19 @@
 //! It listens to the frame parser's beats ([`FrameBeats`]; positions from
 //! `protocol::wire::{ipv4, icmp, udp}` after the Ethernet header) beside the IPv4 layer,
 //! whose `carries_udp`, `in_payload` and `payload_length` say whether and how far the
-//! transport message goes. ICMP and UDP share their header's first eight bytes (one
-//! capture) and one ones'-complement sum: from the IPv4 protocol byte on it adds UDP's
+//! transport message goes. ICMP and UDP share their header's first eight bytes, which are
+//! compared as they pass, with no capture but the UDP source port's: each byte with its
+//! expected byte (the echo request's type and code, the box's port, the IPv4 payload's
+//! length, a zero checksum; one table by the byte's position), a flag per check cleared
+//! when a byte differs and set again at a frame's first beat. They share one
+//! ones'-complement sum: from the IPv4 protocol byte on it adds UDP's
 //! pseudo header (the protocol word, the payload length in the place of the IPv4 checksum,
 //! the addresses) when the protocol is UDP, then the message up to the payload's end.
 //! Words enter the sum from a register of the arriving beat's word (`next_word`), so the
 //! pseudo header's length takes the checksum's place without a multiplexer behind the
-//! register. The checks are registered every clock from the captures: they stand two
-//! clocks after a frame's last beat was registered, with the IPv4 layer's.
+//! register. The checks stand from the clock after the header's last byte was registered
+//! (the sum's two clocks after a frame's last beat was registered, with the IPv4 layer's)
+//! until the next frame's first beat is registered.
 use crate::field_capture::FieldCapture;
 use crate::hdl::*;
 use crate::ones_complement_sum::OnesComplementSum;
@@ -24,17 +29,40 @@ use skinbox_protocol::link::{
 use skinbox_protocol::wire::{icmp, ipv4, udp};
 use skinbox_protocol::Field;
 
-/// Captured: the transport header's first eight bytes (ICMP or UDP).
+/// Compared as they pass: the transport header's first eight bytes (ICMP or UDP).
 const TRANSPORT: Field = UDP_AT..PAYLOAD_AT;
+/// Captured: the UDP source port.
+const SOURCE_PORT: Field =
+    UDP_AT + udp::field::SOURCE_PORT.start..UDP_AT + udp::field::SOURCE_PORT.end;
 const _: () = assert!(ICMP_AT == UDP_AT && TRANSPORT.end == ICMP_AT + icmp::HEADER_LEN);
 /// The ICMP message from its identifier: what the echo reply's checksum sums.
 const ICMP_REST_AT: usize = ICMP_AT + icmp::field::IDENTIFIER.start;
 const IP_PROTOCOL_AT: usize = IPV4_AT + ipv4::field::PROTOCOL;
 const IP_CHECKSUM_AT: usize = IPV4_AT + ipv4::field::CHECKSUM.start;
 
-/// The lowest bit of the UDP header's field `f` in the capture (the last byte is low).
-fn udp_bit(f: Field) -> Constant<Bits<6>> {
-    constant((8 * (TRANSPORT.end - (UDP_AT + f.end))) as u64)
+// the header's fields by the low three bits of their frame positions (the checks' groups
+// are bits 2..1 of those, 5..4 of the position times 8: ICMP type and code 01, UDP destination port 10, length 11,
+// checksum 00)
+const _: () = assert!(
+    TRANSPORT.start % 8 == 2
+        && icmp::field::TYPE == 0
+        && icmp::field::CODE == 1
+        && udp::field::DESTINATION_PORT.start == 2
+        && udp::field::LENGTH.start == 4
+        && udp::field::CHECKSUM.start == 6
+);
+
+/// The expected header bytes by the low three bits of their frame positions, position 0
+/// lowest (the UDP length's two bytes are the payload length's instead).
+fn expected_header(box_port: u16) -> u64 {
+    let mut header = [0u8; 8];
+    header[..2].copy_from_slice(&[ICMP_ECHO_REQUEST, 0]);
+    header[udp::field::DESTINATION_PORT].copy_from_slice(&box_port.to_be_bytes());
+    header
+        .iter()
+        .enumerate()
+        .map(|(i, &b)| u64::from(b) << (8 * ((TRANSPORT.start + i) % 8)))
+        .sum()
 }
 
 /// The receive half of the ICMP and UDP layers; see the module documentation.
@@ -69,20 +97,16 @@ pub struct TransportReceiver {
     pub source_port: Signal<Out, Bits<16>>,
     /// The folded sum of the ICMP message from its identifier (odd length padded).
     pub icmp_rest_sum: Signal<Out, Bits<16>>,
-    box_port: Constant<Bits<16>>,
     protocol_udp: Constant<Bits<8>>,
-    icmp_echo_request: Constant<Bits<16>>,
+    // the expected header bytes by position mod 8
+    expected: Constant<Bits<64>>,
     ip_protocol_at: Constant<Bits<11>>,
     ip_checksum_at: Constant<Bits<11>>,
     ip_checksum_low_at: Constant<Bits<11>>,
     transport_at: Constant<Bits<11>>,
+    transport_end: Constant<Bits<11>>,
     icmp_rest_at: Constant<Bits<11>>,
-    icmp_type_code_bit: Constant<Bits<6>>,
-    source_port_bit: Constant<Bits<6>>,
-    destination_port_bit: Constant<Bits<6>>,
-    length_bit: Constant<Bits<6>>,
-    checksum_bit: Constant<Bits<6>>,
-    header: FieldCapture<64>,
+    source_port_field: FieldCapture<16>,
     message_sum: OnesComplementSum,
     rest_sum: OnesComplementSum,
     // the word the sum adds: the registered beat's, or the pseudo header's length
@@ -94,18 +118,22 @@ pub struct TransportReceiver {
     at_pseudo_header: DFF<Bit>,
     at_from_transport: DFF<Bit>,
     at_from_icmp_rest: DFF<Bit>,
-    // the registered checks
-    echo_request_check: DFF<Bit>,
+    // the registered beat is in the transport header, and its position mod 8, times 8
+    at_header: DFF<Bit>,
+    header_position: DFF<Bits<6>>,
+    // the checks: the header's bytes so far are the expected ones; the sum's, registered
+    echo_request_flag: DFF<Bit>,
+    port_flag: DFF<Bit>,
+    length_flag: DFF<Bit>,
+    no_checksum_flag: DFF<Bit>,
     sum_check: DFF<Bit>,
-    length_check: DFF<Bit>,
-    no_checksum_check: DFF<Bit>,
-    port_check: DFF<Bit>,
+    expected_byte: Signal<Local, Bits<8>>,
+    byte_differs: Signal<Local, Bit>,
 }
 
 impl TransportReceiver {
     /// The layers of a box listening on UDP port `box_port`.
     pub fn new(box_port: u16) -> Self {
-        let echo_request = u64::from(u16::from_be_bytes([ICMP_ECHO_REQUEST, 0]));
         Self {
             clock: Default::default(),
             beats: Default::default(),
@@ -121,20 +149,15 @@ impl TransportReceiver {
             to_box_port: Default::default(),
             source_port: Default::default(),
             icmp_rest_sum: Default::default(),
-            box_port: constant(u64::from(box_port)),
             protocol_udp: constant(u64::from(IP_PROTOCOL_UDP)),
-            icmp_echo_request: constant(echo_request),
+            expected: Constant::new(expected_header(box_port).into()),
             ip_protocol_at: constant(IP_PROTOCOL_AT as u64),
             ip_checksum_at: constant(IP_CHECKSUM_AT as u64),
             ip_checksum_low_at: constant(IP_CHECKSUM_AT as u64 + 1),
             transport_at: constant(TRANSPORT.start as u64),
+            transport_end: constant(TRANSPORT.end as u64),
             icmp_rest_at: constant(ICMP_REST_AT as u64),
-            icmp_type_code_bit: udp_bit(icmp::field::TYPE..icmp::field::CODE + 1),
-            source_port_bit: udp_bit(udp::field::SOURCE_PORT),
-            destination_port_bit: udp_bit(udp::field::DESTINATION_PORT),
-            length_bit: udp_bit(udp::field::LENGTH),
-            checksum_bit: udp_bit(udp::field::CHECKSUM),
-            header: FieldCapture::of(TRANSPORT),
+            source_port_field: FieldCapture::of(SOURCE_PORT),
             message_sum: Default::default(),
             rest_sum: Default::default(),
             sum_word: Default::default(),
@@ -142,11 +165,15 @@ impl TransportReceiver {
             at_pseudo_header: Default::default(),
             at_from_transport: Default::default(),
             at_from_icmp_rest: Default::default(),
-            echo_request_check: Default::default(),
+            at_header: Default::default(),
+            header_position: Default::default(),
+            echo_request_flag: Default::default(),
+            port_flag: Default::default(),
+            length_flag: Default::default(),
+            no_checksum_flag: Default::default(),
             sum_check: Default::default(),
-            length_check: Default::default(),
-            no_checksum_check: Default::default(),
-            port_check: Default::default(),
+            expected_byte: Default::default(),
+            byte_differs: Default::default(),
         }
     }
 }
@@ -162,14 +189,16 @@ impl Logic for TransportReceiver {
             at_pseudo_header,
             at_from_transport,
             at_from_icmp_rest,
-            echo_request_check,
-            sum_check,
-            length_check,
-            no_checksum_check,
-            port_check
+            at_header,
+            header_position,
+            echo_request_flag,
+            port_flag,
+            length_flag,
+            no_checksum_flag,
+            sum_check
         );
-        self.header.clock.next = self.clock.val();
-        FrameBeats::link(&mut self.beats, &mut self.header.beats);
+        self.source_port_field.clock.next = self.clock.val();
+        FrameBeats::link(&mut self.beats, &mut self.source_port_field.beats);
         // positions of the next registered beat: equality decodes only
         if self.beats.next_valid.val() {
             self.at_protocol.d.next = self.beats.next_index.val() == self.ip_protocol_at.val();
@@ -184,6 +213,12 @@ impl Logic for TransportReceiver {
             self.at_from_icmp_rest.d.next = (self.beats.next_index.val()
                 == self.icmp_rest_at.val())
                 | (self.at_from_icmp_rest.q.val() & self.beats.in_frame.val());
+            self.at_header.d.next = (self.beats.next_index.val() == self.transport_at.val())
+                | (self.at_header.q.val()
+                    & (self.beats.next_index.val() != self.transport_end.val())
+                    & self.beats.in_frame.val());
+            self.header_position.d.next =
+                bit_cast::<6, 3>(self.beats.next_index.val().get_bits::<3>(0)) << 3;
         }
         // UDP's pseudo header: the payload length in the clock of the IPv4 checksum's
         // high byte, nothing in that of its low byte, then the addresses
@@ -215,42 +250,47 @@ impl Logic for TransportReceiver {
         self.rest_sum.restart.next = self.beats.beat_valid.val() & self.beat_first.val();
         self.rest_sum.start.next = 0.into();
 
-        // the checks, registered from the captures
-        self.echo_request_check.d.next = self
-            .header
-            .value
+        // the header's bytes compared as they pass (a frame's first beat sets the flags)
+        self.expected_byte.next = self
+            .expected
             .val()
-            .get_bits::<16>(self.icmp_type_code_bit.val().index())
-            == self.icmp_echo_request.val();
+            .get_bits::<8>(self.header_position.q.val().index());
+        if self.header_position.q.val() == 48 {
+            self.expected_byte.next = self.payload_length.val().get_bits::<8>(8);
+        }
+        if self.header_position.q.val() == 56 {
+            self.expected_byte.next = self.payload_length.val().get_bits::<8>(0);
+        }
+        self.byte_differs.next = self.beats.beat_valid.val()
+            & self.at_header.q.val()
+            & (self.beats.beat_data.val() != self.expected_byte.val());
+        if self.beats.beat_valid.val() & self.beat_first.val() {
+            self.echo_request_flag.d.next = true;
+            self.port_flag.d.next = true;
+            self.length_flag.d.next = true;
+            self.no_checksum_flag.d.next = true;
+        }
+        if self.byte_differs.val() {
+            if self.header_position.q.val().get_bits::<2>(4) == 1 {
+                self.echo_request_flag.d.next = false;
+            }
+            if self.header_position.q.val().get_bits::<2>(4) == 2 {
+                self.port_flag.d.next = false;
+            }
+            if self.header_position.q.val().get_bits::<2>(4) == 3 {
+                self.length_flag.d.next = false;
+            }
+            if self.header_position.q.val().get_bits::<2>(4) == 0 {
+                self.no_checksum_flag.d.next = false;
+            }
+        }
         self.sum_check.d.next = self.message_sum.verifies.val();
-        self.length_check.d.next = self
-            .header
-            .value
-            .val()
-            .get_bits::<16>(self.length_bit.val().index())
-            == self.payload_length.val();
-        self.no_checksum_check.d.next = self
-            .header
-            .value
-            .val()
-            .get_bits::<16>(self.checksum_bit.val().index())
-            == 0;
-        self.port_check.d.next = self
-            .header
-            .value
-            .val()
-            .get_bits::<16>(self.destination_port_bit.val().index())
-            == self.box_port.val();
-        self.echo_request.next = self.echo_request_check.q.val();
+        self.echo_request.next = self.echo_request_flag.q.val();
         self.sum_ok.next = self.sum_check.q.val();
-        self.udp_length_ok.next = self.length_check.q.val();
-        self.udp_no_checksum.next = self.no_checksum_check.q.val();
-        self.to_box_port.next = self.port_check.q.val();
-        self.source_port.next = self
-            .header
-            .value
-            .val()
-            .get_bits::<16>(self.source_port_bit.val().index());
+        self.udp_length_ok.next = self.length_flag.q.val();
+        self.udp_no_checksum.next = self.no_checksum_flag.q.val();
+        self.to_box_port.next = self.port_flag.q.val();
+        self.source_port.next = self.source_port_field.value.val();
         self.icmp_rest_sum.next = self.rest_sum.folded.val();
     }
 }
