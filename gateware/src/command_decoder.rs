@@ -100,6 +100,9 @@ pub struct CommandDecoder {
     start_ok: DFF<Bit>,
     zeros_ok: DFF<Bit>,
     length_ok: DFF<Bit>,
+    // the argument length the IPv4 payload leaves, registered a clock before its compare
+    // (the payload length is steady from the IPv4 header on)
+    arguments_left: DFF<Bits<16>>,
 }
 
 impl Default for CommandDecoder {
@@ -144,6 +147,7 @@ impl Default for CommandDecoder {
             start_ok: Default::default(),
             zeros_ok: Default::default(),
             length_ok: Default::default(),
+            arguments_left: Default::default(),
         }
     }
 }
@@ -172,7 +176,8 @@ impl Logic for CommandDecoder {
             argument_11,
             start_ok,
             zeros_ok,
-            length_ok
+            length_ok,
+            arguments_left
         );
         // the captures
         self.start.clock.next = self.clock.val();
@@ -262,8 +267,9 @@ impl Logic for CommandDecoder {
         // the checks (registered every clock; read a clock after the last beat)
         self.start_ok.d.next = self.start.equals.val();
         self.zeros_ok.d.next = self.flags.equals.val() & self.reserved.equals.val();
-        self.length_ok.d.next = self.length_field.value.val()
-            == self.payload_length.val() - self.udp_and_command_header_len.val();
+        self.arguments_left.d.next =
+            self.payload_length.val() - self.udp_and_command_header_len.val();
+        self.length_ok.d.next = self.length_field.value.val() == self.arguments_left.q.val();
         self.well_formed.next =
             self.start_ok.q.val() & self.zeros_ok.q.val() & self.length_ok.q.val();
 

@@ -167,6 +167,9 @@ pub struct CommandUnit {
     // the command's sequence number equals the host's last, is behind it (serial numbers):
     // registered a clock before `not_newer`, so no carry chain runs into the decision
     sequence_equal: DFF<Bit>,
+    // the table's last sequence number of the sender, registered (the target slot is
+    // steady from the lookup on): no path from the distributed RAM into the compare
+    table_sequence: DFF<Bits<32>>,
     sequence_behind: DFF<Bit>,
     not_newer: DFF<Bit>,
     // what the command does if its sequence number is newer: the box id and arguments are
@@ -251,6 +254,7 @@ impl CommandUnit {
             stage_2: Default::default(),
             stage_3: Default::default(),
             sequence_equal: Default::default(),
+            table_sequence: Default::default(),
             sequence_behind: Default::default(),
             not_newer: Default::default(),
             apply_stream_to: Default::default(),
@@ -286,6 +290,7 @@ impl Logic for CommandUnit {
             stage_2,
             stage_3,
             sequence_equal,
+            table_sequence,
             sequence_behind,
             not_newer,
             apply_stream_to,
@@ -322,8 +327,9 @@ impl Logic for CommandUnit {
         self.stage_3.d.next = self.stage_2.q.val();
         // (the host table looked the sender up while the frame arrived; it holds the answer
         // until the take)
-        self.difference.next = self.command_sequence.val() - self.hosts.last_sequence.val();
-        self.sequence_equal.d.next = self.command_sequence.val() == self.hosts.last_sequence.val();
+        self.table_sequence.d.next = self.hosts.last_sequence.val();
+        self.difference.next = self.command_sequence.val() - self.table_sequence.q.val();
+        self.sequence_equal.d.next = self.command_sequence.val() == self.table_sequence.q.val();
         self.sequence_behind.d.next = self.difference.val().get_bit(31);
         self.not_newer.d.next =
             self.hosts.known.val() & (self.sequence_equal.q.val() | self.sequence_behind.q.val());
