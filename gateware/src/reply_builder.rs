@@ -683,9 +683,6 @@ pub struct ReplyBuilder {
     // the request's receive tick, set at its last byte; then the send tick, set a clock
     // after the take
     field_tick: DFF<Bits<64>>,
-    // added to the tick as `field_tick` takes it: the send tick's offset, or 0 for the
-    // receive tick (chosen before the adder: the register's enable picks the clock)
-    tick_addend: Signal<Local, Bits<64>>,
 }
 
 impl ReplyBuilder {
@@ -734,7 +731,6 @@ impl ReplyBuilder {
             raw_frame_kind: constant((usize::from(RAW_FRAME_KIND)) as u64),
             locked_now: Default::default(),
             field_tick: Default::default(),
-            tick_addend: Default::default(),
         }
     }
 }
@@ -816,12 +812,11 @@ impl Logic for ReplyBuilder {
         self.replies.body_sum.next = 0.into();
         self.reader.start.next = self.sequencer.took.val();
         self.reader.length.next = self.sizing.body_len.val();
-        self.tick_addend.next = 0.into();
-        if self.sequencer.patch_starts.val() {
-            self.tick_addend.next = self.send_tick_offset.val();
+        if self.receive_tick_now.val() {
+            self.field_tick.d.next = self.tick.val();
         }
-        if self.receive_tick_now.val() | self.sequencer.patch_starts.val() {
-            self.field_tick.d.next = self.tick.val() + self.tick_addend.val();
+        if self.sequencer.patch_starts.val() {
+            self.field_tick.d.next = self.tick.val() + self.send_tick_offset.val();
         }
 
         // The body, straight from the reader.
