@@ -167,8 +167,9 @@ pub struct CommandUnit {
     // the command's sequence number equals the host's last, is behind it (serial numbers):
     // registered a clock before `not_newer`, so no carry chain runs into the decision
     sequence_equal: DFF<Bit>,
-    // the table's last sequence number of the sender, registered (the target slot is
-    // steady from the lookup on): no path from the distributed RAM into the compare
+    // the table's last sequence number of the sender, registered (the table looked the
+    // sender up while the frame arrived and holds the answer until the take): no path
+    // from the distributed RAM into the compare
     table_sequence: DFF<Bits<32>>,
     sequence_behind: DFF<Bit>,
     not_newer: DFF<Bit>,
@@ -195,6 +196,8 @@ pub struct CommandUnit {
     accepted_status_now_out: DFF<Bit>,
     // decision signals
     difference: Signal<Local, Bits<32>>,
+    // the box id and the arguments are right
+    checks_pass: Signal<Local, Bit>,
     taken: Signal<Local, Bit>,
     newer: Signal<Local, Bit>,
     cell_command_taken: Signal<Local, Bit>,
@@ -272,6 +275,7 @@ impl CommandUnit {
             accepted_stream_to_out: Default::default(),
             accepted_status_now_out: Default::default(),
             difference: Default::default(),
+            checks_pass: Default::default(),
             taken: Default::default(),
             newer: Default::default(),
             cell_command_taken: Default::default(),
@@ -325,33 +329,22 @@ impl Logic for CommandUnit {
 
         // Stage 3: the serial-number difference to the host's last accepted sequence.
         self.stage_3.d.next = self.stage_2.q.val();
-        // (the host table looked the sender up while the frame arrived; it holds the answer
-        // until the take)
         self.table_sequence.d.next = self.hosts.last_sequence.val();
         self.difference.next = self.command_sequence.val() - self.table_sequence.q.val();
         self.sequence_equal.d.next = self.command_sequence.val() == self.table_sequence.q.val();
         self.sequence_behind.d.next = self.difference.val().get_bit(31);
         self.not_newer.d.next =
             self.hosts.known.val() & (self.sequence_equal.q.val() | self.sequence_behind.q.val());
-        self.apply_stream_to.d.next = self.checks.box_ok.val()
-            & self.checks.arguments_ok.val()
-            & self.checks.is_stream_to.val();
-        self.apply_flush_timeout.d.next = self.checks.box_ok.val()
-            & self.checks.arguments_ok.val()
-            & self.checks.is_set_flush_timeout.val();
-        self.apply_status_period.d.next = self.checks.box_ok.val()
-            & self.checks.arguments_ok.val()
-            & self.checks.is_set_status_period.val();
-        self.apply_status_now.d.next = self.checks.box_ok.val()
-            & self.checks.arguments_ok.val()
-            & self.checks.is_status_now.val();
-        self.apply_cell_command.d.next = self.checks.box_ok.val()
-            & self.checks.arguments_ok.val()
-            & self.checks.is_cell_command.val();
-        self.apply_sync_period.d.next = self.checks.box_ok.val()
-            & self.checks.arguments_ok.val()
-            & self.checks.is_set_sync_period.val();
-
+        self.checks_pass.next = self.checks.box_ok.val() & self.checks.arguments_ok.val();
+        self.apply_stream_to.d.next = self.checks_pass.val() & self.checks.is_stream_to.val();
+        self.apply_flush_timeout.d.next =
+            self.checks_pass.val() & self.checks.is_set_flush_timeout.val();
+        self.apply_status_period.d.next =
+            self.checks_pass.val() & self.checks.is_set_status_period.val();
+        self.apply_status_now.d.next = self.checks_pass.val() & self.checks.is_status_now.val();
+        self.apply_cell_command.d.next = self.checks_pass.val() & self.checks.is_cell_command.val();
+        self.apply_sync_period.d.next =
+            self.checks_pass.val() & self.checks.is_set_sync_period.val();
         // Stage 4: the decision, the table and the configuration.
         self.done_out.d.next = self.stage_3.q.val();
         self.newer.next = self.stage_3.q.val() & !self.not_newer.q.val();
@@ -404,7 +397,6 @@ impl Logic for CommandUnit {
         self.configuration.apply_sync_period.next =
             self.newer.val() & self.apply_sync_period.q.val();
         self.configuration.value.next = self.checks.value.val();
-
         self.done.next = self.done_out.q.val();
         self.fate.next = self.fate_out.q.val();
         self.result.next = self.result_out.q.val();
