@@ -4,12 +4,12 @@
 //! without a clock: the read side's word is the one at its pointer register, so no path
 //! runs from the empty test and the pointer's step through the RAM. Each side counts its
 //! pointer in binary with one bit more than the address (so full and empty differ) and
-//! keeps its Gray code in a register; the other side takes that Gray code through two flip-flops (a two-flop synchroniser: a
-//! Gray code changes one bit per step, so a sample caught mid-change is either the old or
-//! the new pointer, never a third value). Full and empty are therefore seen late, which
-//! is safe: the writer sees room only after the reader freed it, and the reader sees a
-//! word only after it was written (two read clocks after its Gray code changed, by then
-//! the RAM holds it).
+//! keeps its Gray code in a register; the other side takes that Gray code through two
+//! flip-flops (a two-flop synchroniser: a Gray code changes one bit per step, so a sample
+//! caught mid-change is either the old or the new pointer, never a third value). Full and
+//! empty are therefore seen late, which is safe: the writer sees room only after the reader
+//! freed it, and the reader sees a word only after it was written (two read clocks after
+//! its Gray code changed, by then the RAM holds it).
 //!
 //! The read side is first-word-fall-through: while `empty` is low, `read_data` is the
 //! oldest word, and `read_enable` takes it. `read_level` is the number of words the read

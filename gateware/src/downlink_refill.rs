@@ -6,13 +6,13 @@
 //! and `p + 4` of it: no decoder, no compare a port). It reads the port's read position
 //! (the slot of its oldest packet and the byte index, a RAM of its own) a clock before the
 //! visit (port 0's between scans) into a register, which holds it two clocks after the
-//! visit (no path from the RAM's output into logic), then that byte from the queue RAM, and [`REFILL_LATENCY`] clocks after the
-//! visit loads it into the port's word of the frame bytes (`byte_write`), or 0xFF when
-//! the port's queue was empty at the visit (`nonempty`, which the downlink ORs from the
-//! ports' counts at the ring's visit bits). The position moves on by a byte; past a slot's
-//! last byte it moves to the other slot and `freed` (one clock, at the ring's freeing
-//! bits) frees the slot. After reset the positions are cleared (64 clocks) and every
-//! port's byte is 0xFF (`clearing`).
+//! visit (no path from the RAM's output into logic), then that byte from the queue RAM, and
+//! [`REFILL_LATENCY`] clocks after the visit loads it into the port's word of the frame
+//! bytes (`byte_write`), or 0xFF when the port's queue was empty at the visit (`nonempty`,
+//! which the downlink ORs from the ports' counts at the ring's visit bits). The position
+//! moves on by a byte; past a slot's last byte it moves to the other slot and `freed` (one
+//! clock, at the ring's freeing bits) frees the slot. After reset the positions are cleared
+//! (64 clocks) and every port's byte is 0xFF (`clearing`).
 //!
 //! Time syncs (cell command 5): a port's position word also says whether the packet on
 //! its line is a time sync (set as byte 3 is loaded, from the queue byte) or the sync

@@ -1,15 +1,15 @@
 //! StatusWords: the value of each 32-bit word of a status page, and which word is its last.
 //!
 //! Words of a page: 0 the boot id, 1 records datagrams sent, 2 records sent, 3 the first
-//! port (top byte) and reserved bits, from [`HEADER_WORDS`] on the port counters (eight
-//! per port, from the counter file: `counter_data`), then the box counter block of
+//! port (top byte) and reserved bits, from [`HEADER_WORDS`] on the port counters (eight per
+//! port, from the counter file: `counter_data`), then the box counter block of
 //! [`BOX_COUNTER_WORDS`] words: the link word (`link_up` in bit 24, `link_speed` in bits
 //! 16-17), then the box counters (from the box counter file: `box_counter_data`, read at
-//! `box_counter_address`, which steps with the words of the block from 0 at the link word). A word holds for
-//! several clocks (`next_word` moves on): the tests of the word against the page's layout
-//! are registered a clock after the word, the header value and the source a clock after
-//! them, so `value` is the word's from its third clock on (the counters' as the memories
-//! answer their address). Cost: 32 + 9 + 5 + 5 flip-flops.
+//! `box_counter_address`, which steps with the words of the block from 0 at the link word).
+//! A word holds for several clocks (`next_word` moves on): the tests of the word against
+//! the page's layout are registered a clock after the word, the header value and the source
+//! a clock after them, so `value` is the word's from its third clock on (the counters' as
+//! the memories answer their address). Cost: 32 + 9 + 5 + 5 flip-flops.
 
 use crate::hdl::*;
 use skinbox_protocol::box_counters::BOX_COUNTERS_LEN;
