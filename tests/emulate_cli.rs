@@ -191,10 +191,12 @@ fn ctl_and_capture_against_the_emulator() {
     // a shorter flush timeout shows in the datagrams flushed from then on
     let set = json(&ctl(&addr, &["set", "flush-timeout-us", "10"]));
     assert_eq!(set["result"], "ok");
-    // only datagrams opened after the box took the command: one opened before it, with
-    // the old timeout, may still be sent after the capture starts when the emulator runs
-    // behind (it sends what one step of the uplink made at the end of the step)
-    let set_tick = set["box_receive_tick"].as_u64().unwrap();
+    // only datagrams opened after the acknowledgement left: the emulator applies the
+    // command where its uplink had run to (at or after the command's arrival, at or
+    // before the acknowledgement), and one opened before, with the old timeout, may still
+    // be sent after the capture starts when the emulator runs behind (it sends what one
+    // step of the uplink made at the end of the step)
+    let set_tick = set["box_send_tick"].as_u64().unwrap();
     let (_, mut after) = capture(port, 700, "after.pcap");
     after.retain(|d| d.base_tick > set_tick);
     let (n_before, spread_before) = flushed_spread_ticks(&before);
