@@ -31,8 +31,8 @@
 //! the ROM word's parts or the byte in each field word, the written byte) and is summed into
 //! the IPv4 or UDP checksum as it is written (a running sum with an end-around carry); the
 //! checksums are complemented into a register and written last. Build
-//! durations: [`build_clocks`] (64 clocks for ARP, 60 for an echo of any length, 93, 105
-//! and 177 for acknowledgements without a reply, with a destination, with the counters).
+//! durations: [`build_clocks`] (64 clocks for ARP, 60 for an echo of any length, 90, 102
+//! and 174 for acknowledgements without a reply, with a destination, with the counters).
 //! The counters are read one per four clocks from `counters_address` 0 on (a read's data
 //! is taken four clocks after its address: a counter file with the block RAM's two-clock
 //! latency fits).
@@ -427,11 +427,14 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
         Some(IPV4_HEADER_LEN as u16 + udp_len),
         Sum::Both,
     );
-    // the rest of the pseudo header: zero, protocol, UDP length
-    p.udp_sum_only(0, 0);
-    p.udp_sum_only(1, IP_PROTOCOL_UDP);
-    p.udp_sum_only(0, (udp_len >> 8) as u8);
-    p.udp_sum_only(1, udp_len as u8);
+    // the rest of the pseudo header (zero, protocol, UDP length) is the one word
+    // protocol + UDP length; a zero byte adds nothing and takes no step
+    let pseudo = u16::from(IP_PROTOCOL_UDP) + udp_len;
+    for (at, byte) in pseudo.to_be_bytes().into_iter().enumerate() {
+        if byte != 0 {
+            p.udp_sum_only(at, byte);
+        }
+    }
     p.constants(source_port, &link.box_port.to_be_bytes(), Sum::Udp);
     p.constants(UDP_AT + UDP_LEN.start, &udp_len.to_be_bytes(), Sum::Udp);
     // (the UDP checksum and the send tick are written at the take)
@@ -1356,7 +1359,7 @@ mod tests {
             ReplyKind::Ack(AckReplyKind::Counters),
         ]
         .map(build_clocks);
-        assert_eq!(clocks, [64, 60, 93, 105, 177]);
+        assert_eq!(clocks, [64, 60, 90, 102, 174]);
         assert_eq!((patch_clocks(), patch_margin_clocks()), (20, 22));
     }
 

@@ -133,7 +133,7 @@ pub const BUILD_ECHO_CLOCKS: u64 = 60;
 
 /// As [`BUILD_ARP_CLOCKS`], for a command acknowledgement carrying nothing after its fixed
 /// body, a destination (stream-to) and the box counter block (status-now), in that order.
-pub const BUILD_ACK_CLOCKS: [u64; 3] = [93, 105, 177];
+pub const BUILD_ACK_CLOCKS: [u64; 3] = [90, 102, 174];
 
 /// Clocks from the clock the transmitter takes a reply's last body beat to the first clock
 /// the reply builder is unlocked (`reply_builder::UNLOCK_AFTER_LAST_TAKE`).
