@@ -81,6 +81,10 @@ const UDP_CHECKSUM_AT: usize = UDP_AT + UDP_CHECKSUM.start;
 /// The acknowledgement's header: the UDP payload.
 const ACK_AT: usize = PAYLOAD_AT;
 const ACK_BODY_AT: usize = ACK_AT + command::HEADER_LEN;
+// The send tick is the tick loaded by `send_tick_now`: the patch starts a clock after the
+// take, and two registers later the tick is that of the clock `TAKE_TO_FIRST_BYTE` after it.
+const _: () = assert!(TAKE_TO_FIRST_BYTE == 3);
+
 /// Frame position of an acknowledgement's send tick.
 pub const SEND_TICK_AT: usize = ACK_BODY_AT + ack_field::SEND_TICK.start;
 const REPLY_AT: usize = ACK_BODY_AT + ACK_FIXED_LEN;
@@ -680,11 +684,13 @@ pub struct ReplyBuilder {
     stages: ReplyStages,
     // the held fields' byte multiplexer
     fields: ReplyFieldBytes,
-    send_tick_offset: Constant<Bits<64>>,
     raw_frame_kind: Constant<Bits<8>>,
     locked_now: DFF<Bit>,
-    // the request's receive tick, set at its last byte; then the send tick, set a clock
-    // after the take
+    // the patch started a clock ago; two clocks ago: the tick is the send tick now
+    patch_started: DFF<Bit>,
+    send_tick_now: DFF<Bit>,
+    // the request's receive tick, set at its last byte; then the send tick, the tick of
+    // the clock `TAKE_TO_FIRST_BYTE` after the take (loaded then: no adder on the tick)
     field_tick: DFF<Bits<64>>,
 }
 
@@ -729,10 +735,10 @@ impl ReplyBuilder {
             sizing: Default::default(),
             stages: Default::default(),
             fields: Default::default(),
-            // (the tick of the clock after the take)
-            send_tick_offset: constant((TAKE_TO_FIRST_BYTE as usize - 1) as u64),
             raw_frame_kind: constant((usize::from(RAW_FRAME_KIND)) as u64),
             locked_now: Default::default(),
+            patch_started: Default::default(),
+            send_tick_now: Default::default(),
             field_tick: Default::default(),
         }
     }
@@ -741,7 +747,7 @@ impl ReplyBuilder {
 impl Logic for ReplyBuilder {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, locked_now, field_tick);
+        dff_setup!(self, clock, locked_now, patch_started, send_tick_now, field_tick);
         self.buffer.clock.next = self.clock.val();
         self.reader.clock.next = self.clock.val();
         self.reader.reset.next = self.reset.val();
@@ -815,11 +821,11 @@ impl Logic for ReplyBuilder {
         self.replies.body_sum.next = 0.into();
         self.reader.start.next = self.sequencer.took.val();
         self.reader.length.next = self.sizing.body_len.val();
-        if self.receive_tick_now.val() {
+        // (the patch starts a clock after the take: the send tick is two clocks later)
+        self.patch_started.d.next = self.sequencer.patch_starts.val();
+        self.send_tick_now.d.next = self.patch_started.q.val();
+        if self.receive_tick_now.val() | self.send_tick_now.q.val() {
             self.field_tick.d.next = self.tick.val();
-        }
-        if self.sequencer.patch_starts.val() {
-            self.field_tick.d.next = self.tick.val() + self.send_tick_offset.val();
         }
 
         // The body, straight from the reader.
