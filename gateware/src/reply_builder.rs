@@ -130,9 +130,9 @@ struct Step {
     end: bool,
 }
 
-/// The parts of a ROM word (`reply_sequencer::STEP_BITS`, 32 bits): address 0..8, value
+/// The parts of a ROM word (`reply_sequencer::STEP_BITS`, 35 bits): address 0..8, value
 /// 8..16, read 16..24, source 24..26, write 26, sum_ip 27, sum_udp 28, pad 29, end 30,
-/// from_buffer 31.
+/// from_buffer 31, and the next step's held-field byte index 32..35 ([`link_steps`]).
 const READ_AT: usize = 16;
 const SOURCE_AT: usize = 24;
 const WRITE_BIT: usize = 26;
@@ -141,9 +141,11 @@ const SUM_UDP_BIT: usize = 28;
 const PAD_BIT: usize = 29;
 const END_BIT: usize = 30;
 const FROM_BUFFER_BIT: usize = 31;
+const NEXT_FIELD_BYTE_AT: usize = 32;
 // (the sequencer's and the stages' logic spells these bit numbers out)
 const _: () = assert!(
-    crate::reply_sequencer::STEP_BITS == 32
+    crate::reply_sequencer::STEP_BITS == 35
+        && NEXT_FIELD_BYTE_AT == 32
         && READ_AT == 16
         && SOURCE_AT == 24
         && WRITE_BIT == 26
@@ -155,6 +157,11 @@ const _: () = assert!(
 );
 
 impl Step {
+    /// The byte's place in its held-field word, for a held-field step.
+    fn field_byte_index(&self) -> Option<u8> {
+        (self.source == Source::Field && !self.from_buffer).then_some(self.value % 8)
+    }
+
     fn word(&self) -> u64 {
         assert!(self.address < 256, "step address {}", self.address);
         assert!(self.read < 256, "step read address {}", self.read);
@@ -401,8 +408,11 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
     let mut p = Program::default();
     let udp_len = (UDP_HEADER_LEN + reply.payload_len()) as u16;
     use command::field;
-    // the command unit's fields first: its last accepted sequence number holds for
-    // `LAST_ACCEPTED_HOLDS` clocks from `start_ack` ([`ack_fields_read`])
+    // the opcode first (a program's first held field must be at byte 0 of its word:
+    // [`link_steps`]), then the command unit's fields: its last accepted sequence number
+    // holds for `LAST_ACCEPTED_HOLDS` clocks from `start_ack` ([`ack_fields_read`])
+    let opcode_at = ACK_BODY_AT + ack_field::OPCODE;
+    p.copy(opcode_at, ACK_AT + field::OPCODE, 1, Sum::Udp, true);
     p.fields(
         ACK_BODY_AT + ack_field::RESULT,
         field_byte::RESULT,
@@ -417,8 +427,6 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
     let destination_port = UDP_AT + udp::field::DESTINATION_PORT.start;
     let source_port = UDP_AT + udp::field::SOURCE_PORT.start;
     p.copy(destination_port, source_port, 2, Sum::Udp, true);
-    let opcode_at = ACK_BODY_AT + ack_field::OPCODE;
-    p.copy(opcode_at, ACK_AT + field::OPCODE, 1, Sum::Udp, true);
     let sequence_at = ACK_AT + field::SEQUENCE.start;
     p.copy(sequence_at, sequence_at, 4, Sum::Udp, false);
     let host_time_at = ACK_AT + field::HOST_TIME.start;
@@ -585,11 +593,31 @@ struct Rom {
     starts: ProgramStarts,
 }
 
+/// The ROM words of a program: each step's word carries the held-field byte index of the
+/// step after it, which the stages register while the step's word is out, so the field
+/// multiplexer's select comes from a register, not from the block RAM. Before a
+/// program's first word that register is 0: a program that starts with a held field
+/// starts at byte 0 of its word.
+fn link_steps(steps: &[Step]) -> Vec<u64> {
+    assert!(
+        steps[0].field_byte_index().unwrap_or(0) == 0,
+        "a program's first held-field byte is not at byte 0 of its word"
+    );
+    steps
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let next = steps.get(i + 1).and_then(Step::field_byte_index);
+            s.word() | u64::from(next.unwrap_or(0)) << NEXT_FIELD_BYTE_AT
+        })
+        .collect()
+}
+
 fn rom(link: &LinkConfig, box_id: u16, port_count: u8) -> Rom {
     let mut words = vec![];
     let mut add = |steps: Vec<Step>| {
         let at = words.len();
-        words.extend(steps.iter().map(Step::word));
+        words.extend(link_steps(&steps));
         at
     };
     let arp = add(arp_program(link));

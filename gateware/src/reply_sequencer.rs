@@ -19,7 +19,7 @@ use crate::block_ram::{BlockRam, READ_LATENCY};
 use crate::hdl::*;
 
 /// Bits of a ROM word (a step of a program).
-pub const STEP_BITS: usize = 32;
+pub const STEP_BITS: usize = 35;
 /// Address bits of the program ROM.
 pub const ROM_ADDRESS_BITS: usize = 10;
 

@@ -3,9 +3,11 @@
 //!
 //! The ROM word comes from the block RAM's output register, so its parts are taken from it
 //! directly (no register of their own): the buffer read of a copy is issued from it
-//! (`read_address`), the held field's byte is chosen (`field_byte_index` now,
-//! `field_word_index` in the next stage: a [`crate::reply_field_bytes::ReplyFieldBytes`]
-//! answers in between), the counter is loaded at its byte 0 (the next counter's read
+//! (`read_address`), the held field's byte is chosen (`field_byte_index` now, from a
+//! register the previous word loaded: each word carries the next step's byte index in
+//! bits 32..35, 0 between programs, so the 32 byte multiplexers are not driven from the
+//! block RAM; `field_word_index` in the next stage: a
+//! [`crate::reply_field_bytes::ReplyFieldBytes`] answers in between), the counter is loaded at its byte 0 (the next counter's read
 //! starts: `counters_address` counts from 0 at `restart`, a read's data taken four clocks
 //! after its address), and stage 4 registers the parts (frame address, value, source,
 //! write, sums; a padding step writes only from the request's end on). Stage 5 chooses the
@@ -63,6 +65,8 @@ pub struct ReplyStages {
     checksums: ReplyChecksums,
     counter_address: DFF<Bits<5>>,
     counter_word: DFF<Bits<32>>,
+    // the held-field byte index of the next word's step (its word's bits 32..35)
+    field_byte_ahead: DFF<Bits<3>>,
     // stage 4: the ROM word's parts, registered
     s4_write: DFF<Bit>,
     s4_address: DFF<Bits<8>>,
@@ -91,6 +95,7 @@ impl Logic for ReplyStages {
             clock,
             counter_address,
             counter_word,
+            field_byte_ahead,
             s4_write,
             s4_address,
             s4_value,
@@ -110,7 +115,11 @@ impl Logic for ReplyStages {
         // word in the next stage), the counter loaded at its byte 0 (the next counter's
         // read starts); its parts registered.
         self.read_address.next = self.word.val().get_bits::<8>(16);
-        self.field_byte_index.next = self.word.val().get_bits::<3>(8);
+        self.field_byte_ahead.d.next = 0.into();
+        if self.word_valid.val() {
+            self.field_byte_ahead.d.next = self.word.val().get_bits::<3>(32);
+        }
+        self.field_byte_index.next = self.field_byte_ahead.q.val();
         self.field_word_index.next = self.s4_value.q.val().get_bits::<2>(3);
         self.s4_write.d.next = self.word_valid.val()
             & self.word.val().get_bit(26)
