@@ -775,7 +775,14 @@ impl ReplyBuilder {
 impl Logic for ReplyBuilder {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, locked_now, patch_started, send_tick_now, field_tick);
+        dff_setup!(
+            self,
+            clock,
+            locked_now,
+            patch_started,
+            send_tick_now,
+            field_tick
+        );
         self.buffer.clock.next = self.clock.val();
         self.reader.clock.next = self.clock.val();
         self.reader.reset.next = self.reset.val();
