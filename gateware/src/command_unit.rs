@@ -20,8 +20,8 @@
 //! the arguments; the serial-number test against the table's answer (newer or not,
 //! registered); the decision. `done`
 //! is high in the clock [`COMMAND_LATENCY`] clocks after `command`, with `fate` and
-//! `result` (held until the next `done`) and `last_accepted` (for
-//! [`LAST_ACCEPTED_HOLDS`] clocks from `done` on). The configuration registers change at
+//! `result` (held until the next `done`) and `last_accepted` (from
+//! [`LAST_ACCEPTED_AFTER_DONE`] to [`LAST_ACCEPTED_HOLDS`] clocks after `done`). The configuration registers change at
 //! the same edge: in the `done` clock they already hold the new values, and
 //! `status_period_set` / `status_now` are high in that clock only. The table takes the
 //! sequence number a clock later, from a register. `peer_ip` must be steady for
@@ -34,10 +34,11 @@
 //!
 //! `last_accepted` is the sequence number the table holds for the sender after the
 //! command: the command's own when it was taken, else the one it holds (0 for a host
-//! not in the table, which only a command for another box can leave there). It is no
-//! register of its own: a flag says whether the command was taken, and `last_accepted`
-//! is then the parser's sequence number, else the table's answer for the sender (0 when
-//! the table does not know it); both hold
+//! not in the table, which only a command for another box can leave there). A flag says
+//! whether the command was taken, and `last_accepted` is then the parser's sequence
+//! number, else the table's answer for the sender (0 when the table does not know it),
+//! registered (a clock after `done`: the table's distributed RAM read and the choice
+//! would otherwise run on into the reply builder's field multiplexer); both hold
 //! until the next frame reaches the parser's fields (its IPv4 source, byte 26, at least 20
 //! + 27 clocks after the last beat: more than [`LAST_ACCEPTED_HOLDS`] after `done`).
 
@@ -52,7 +53,10 @@ use skinbox_protocol::link::LinkConfig;
 /// Clocks from `command` to `done`.
 pub const COMMAND_LATENCY: u64 = 4;
 
-/// Clocks from `done` (its clock counted) during which `last_accepted` holds.
+/// Clocks from `done` to the first clock in which `last_accepted` is right.
+pub const LAST_ACCEPTED_AFTER_DONE: u64 = 1;
+
+/// Clocks from `done` (its clock counted) to the last clock in which `last_accepted` holds.
 pub const LAST_ACCEPTED_HOLDS: u64 = 30;
 
 /// Clocks from `command` to `downlink_offer`: the clock before `done`.
@@ -116,8 +120,8 @@ pub struct CommandUnit {
     pub fate: Signal<Out, Bits<5>>,
     /// The acknowledgement's result: an `AckResult` (held until the next `done`).
     pub result: Signal<Out, Bits<8>>,
-    /// The acknowledgement's last accepted sequence number (from `done` for
-    /// [`LAST_ACCEPTED_HOLDS`] clocks).
+    /// The acknowledgement's last accepted sequence number (from
+    /// [`LAST_ACCEPTED_AFTER_DONE`] to [`LAST_ACCEPTED_HOLDS`] clocks after `done`).
     pub last_accepted: Signal<Out, Bits<32>>,
     /// Datagrams' destination MAC.
     pub destination_mac: Signal<Out, Bits<48>>,
@@ -192,6 +196,9 @@ pub struct CommandUnit {
     downlink_refused: DFF<Bit>,
     // the command was taken: `last_accepted` is its sequence number
     took_sequence: DFF<Bit>,
+    // `last_accepted`, a clock late: the table's read and the choice reach a register,
+    // not the reply builder's field multiplexer
+    last_accepted_held: DFF<Bits<32>>,
     accepted_stream_to_out: DFF<Bit>,
     accepted_status_now_out: DFF<Bit>,
     // decision signals
@@ -272,6 +279,7 @@ impl CommandUnit {
             result_out: Default::default(),
             downlink_refused: Default::default(),
             took_sequence: Default::default(),
+            last_accepted_held: Default::default(),
             accepted_stream_to_out: Default::default(),
             accepted_status_now_out: Default::default(),
             difference: Default::default(),
@@ -309,6 +317,7 @@ impl Logic for CommandUnit {
             result_out,
             downlink_refused,
             took_sequence,
+            last_accepted_held,
             accepted_stream_to_out,
             accepted_status_now_out
         );
@@ -404,10 +413,11 @@ impl Logic for CommandUnit {
             self.fate.next = self.fate_downlink_full.val();
             self.result.next = self.result_downlink_full.val();
         }
-        self.last_accepted.next = self.hosts.known_sequence.val();
+        self.last_accepted_held.d.next = self.hosts.known_sequence.val();
         if self.took_sequence.q.val() {
-            self.last_accepted.next = self.command_sequence.val();
+            self.last_accepted_held.d.next = self.command_sequence.val();
         }
+        self.last_accepted.next = self.last_accepted_held.q.val();
         self.destination_mac.next = self.configuration.destination_mac.val();
         self.destination_ip.next = self.configuration.destination_ip.val();
         self.destination_port.next = self.configuration.destination_port.val();
@@ -731,7 +741,12 @@ mod tests {
                 self.bench.cycle();
             }
             assert!(self.bench.uut.done.val(), "no done for {c:?}");
-            let seen = self.seen();
+            let mut seen = self.seen();
+            // hold the fields a while, as the parser does until the next frame
+            self.bench.cycle();
+            let after = self.seen();
+            // (`last_accepted` from `LAST_ACCEPTED_AFTER_DONE` clocks after `done`)
+            seen.last_accepted = after.last_accepted;
             let (want, offer) = self.model.apply(c, self.downlink_full);
             assert_eq!(seen, want, "for {c:?}");
             let want_offers: Vec<(u64, u8)> = offer
@@ -739,9 +754,6 @@ mod tests {
                 .into_iter()
                 .collect();
             assert_eq!(offers, want_offers, "offers for {c:?}");
-            // hold the fields a while, as the parser does until the next frame
-            self.bench.cycle();
-            let after = self.seen();
             assert!(!self.bench.uut.done.val(), "done lasts one clock");
             assert!(
                 !after.status_period_set && !after.status_now && !after.sync_period_set,

@@ -410,7 +410,8 @@ fn ack_program(link: &LinkConfig, box_id: u16, port_count: u8, reply: AckReplyKi
     use command::field;
     // the opcode first (a program's first held field must be at byte 0 of its word:
     // [`link_steps`]), then the command unit's fields: its last accepted sequence number
-    // holds for `LAST_ACCEPTED_HOLDS` clocks from `start_ack` ([`ack_fields_read`])
+    // holds from `LAST_ACCEPTED_AFTER_DONE` to `LAST_ACCEPTED_HOLDS` clocks after
+    // `start_ack` ([`ack_fields_read`])
     let opcode_at = ACK_BODY_AT + ack_field::OPCODE;
     p.copy(opcode_at, ACK_AT + field::OPCODE, 1, Sum::Udp, true);
     p.fields(
@@ -543,19 +544,19 @@ pub fn echo_fields_read() -> u64 {
     START_TO_STEP + last_field as u64
 }
 
-/// Clocks from `start_ack` (high in clock s) to the last clock in which an
-/// acknowledgement reads `last_accepted` (from clock s + 1 on): the same for every
-/// acknowledgement.
-pub fn ack_fields_read() -> u64 {
+/// Clocks from `start_ack` (high in clock s) to the first and the last clock in which
+/// an acknowledgement reads `last_accepted`: the same for every acknowledgement.
+pub fn ack_fields_read() -> (u64, u64) {
     let link = LinkConfig::DEFAULT;
-    let last_field = ack_program(&link, 0, 1, AckReplyKind::None)
-        .iter()
-        .rposition(|s| {
-            s.source == Source::Field
-                && (field_byte::LAST_ACCEPTED..field_byte::LAST_ACCEPTED + 4).contains(&s.value)
-        })
-        .expect("the last accepted sequence number");
-    START_TO_STEP + last_field as u64
+    let program = ack_program(&link, 0, 1, AckReplyKind::None);
+    let reads = |s: &Step| {
+        s.source == Source::Field
+            && (field_byte::LAST_ACCEPTED..field_byte::LAST_ACCEPTED + 4).contains(&s.value)
+    };
+    let first = program.iter().position(reads);
+    let last = program.iter().rposition(reads);
+    let (first, last) = first.zip(last).expect("the last accepted sequence number");
+    (START_TO_STEP + first as u64, START_TO_STEP + last as u64)
 }
 
 /// Clocks from the clock the reply's last body beat is taken to the first clock `locked`
@@ -1069,13 +1070,17 @@ mod tests {
             let u = &mut bench.uut;
             u.tick.next = (tick_base + clock).into();
             // the parser's echo fields change with the next frame, the last accepted
-            // sequence number with the next command's sender
+            // sequence number with the next command's sender, and it is right only from
+            // a clock after `start_ack` (the command unit's `done`)
             if clock > start + echo_fields_read() {
                 u.ip_total_length.next = u64::from(rng.next_u64() as u16).into();
                 u.icmp_rest_sum.next = u64::from(rng.next_u64() as u16).into();
             }
-            if clock > start + ack_fields_read() {
+            let (first_read, last_read) = ack_fields_read();
+            if clock > start + last_read || (start..start + first_read).contains(&clock) {
                 u.last_accepted.next = u64::from(rng.next_u64() as u32).into();
+            } else {
+                u.last_accepted.next = u64::from(held.last_accepted).into();
             }
             u.counters_data.next = u64::from(held.counters.counts[counter_addresses[0]]).into();
             // the parser keeps writing: the lock must keep it out
@@ -1381,11 +1386,11 @@ mod tests {
     /// reads it.
     #[test]
     fn the_last_accepted_sequence_number_holds_while_it_is_read() {
-        use crate::command_unit::LAST_ACCEPTED_HOLDS;
+        use crate::command_unit::{LAST_ACCEPTED_AFTER_DONE, LAST_ACCEPTED_HOLDS};
+        let (first, last) = ack_fields_read();
         assert!(
-            ack_fields_read() < LAST_ACCEPTED_HOLDS,
-            "{}",
-            ack_fields_read()
+            first >= LAST_ACCEPTED_AFTER_DONE && last < LAST_ACCEPTED_HOLDS,
+            "{first} {last}"
         );
     }
 
