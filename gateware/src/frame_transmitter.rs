@@ -20,14 +20,15 @@
 //! A datagram goes to the destination (MAC, IPv4 address, UDP port) on the
 //! `destination_*` inputs at the clock its descriptor is taken: the 12 bytes are loaded
 //! into a shift register then and sent from it, the IPv4 checksum adds the address's words
-//! to the total length, and the UDP checksum adds the address's and the port's words as its
-//! last term (index 18).
+//! to the total length, and the UDP checksum adds the address's and the port's words among
+//! its last terms.
 //!
-//! The checksums are finished long before they are sent: the UDP sum starts from the
-//! constant words (addresses, ports, magic, box id) plus the body sum, and adds the UDP
-//! length, the kind and then the 16 bytes of the header fields (flags, sequence, base tick,
-//! entry count, a zero) one per clock, each at its place in its word (a byte multiplexer
-//! stepped by a counter, no word multiplexer); the sum is folded by byte 21. The body is
+//! The checksums are finished long before they are sent: the UDP sum
+//! ([`DatagramChecksum`]) starts from the constant words (addresses, ports, magic, box id)
+//! and adds the 16 bytes of the header fields (flags, sequence, base tick, entry count, a
+//! zero) one per clock from index 2, each at its place in its word (a byte multiplexer
+//! stepped by a counter, no word multiplexer), then from index 18 the kind, the UDP length
+//! twice, the body sum and the destination's sum; it is final at index 27. The body is
 //! taken one beat per clock from byte 74 on (`ready` is a register): a source must have
 //! its beats ready by then (a [`crate::body_reader::BodyReader`] has them three clocks
 //! after its start). A body beat missing when due is sent as it is with `gmii_tx_er` set,
@@ -104,7 +105,7 @@ pub struct FrameTransmitter {
     source: TransmitSource,
     // the IPv4 header checksum and the destination's sum
     header_sums: HeaderSums,
-    // the UDP checksum (final long before byte 48: the sum is done by byte 21)
+    // the UDP checksum (final long before byte 48: at byte 27)
     udp_sum: DatagramChecksum,
     // the output stage with the FCS
     fcs_stage: FcsOutput,
@@ -115,16 +116,10 @@ pub struct FrameTransmitter {
     in_body: DFF<Bit>,
     // registered index tests, true at index 7 (the CRC starts)
     crc_starts: DFF<Bit>,
-    // registered index ranges, like `crc_starts`: the checksum's term is a field byte
-    // (2..18), the checksum adds its term (1..=18)
+    // registered index tests, like `crc_starts`: the checksum's term is a field byte
+    // (2..18), its steady terms start (index 18)
     term_from_fields: DFF<Bit>,
-    checksum_adds: DFF<Bit>,
-    // the checksum's term at this index: the kind (index 0), the UDP length words with the
-    // constant words (index 1), the destination's sum (index 18), registered a clock ahead
-    // like `term_from_fields`
-    term_is_kind: DFF<Bit>,
-    term_is_udp_len: DFF<Bit>,
-    term_is_destination: DFF<Bit>,
+    checksum_tail_starts: DFF<Bit>,
     // the header sums are final (from index 5: index 4 or more a clock before): keep them
     // while the destination shifts
     sums_kept: DFF<Bit>,
@@ -158,21 +153,18 @@ impl FrameTransmitter {
             destination_ip: Default::default(),
             destination_port: Default::default(),
             frame_steps: TransmitSequence::new((INTER_FRAME_GAP - 1) as u64),
-            geometry: TransmitGeometry::new(udp_constant),
+            geometry: TransmitGeometry::default(),
             header_fields: Default::default(),
             source: TransmitSource::new(&t),
             header_sums: HeaderSums::new(ip_constant),
-            udp_sum: Default::default(),
+            udp_sum: DatagramChecksum::new(udp_constant),
             fcs_stage: Default::default(),
             sfd_ahead: position(PREAMBLE_LEN - 2),
             crc_from: position(PREAMBLE_LEN),
             in_body: Default::default(),
             crc_starts: Default::default(),
             term_from_fields: Default::default(),
-            checksum_adds: Default::default(),
-            term_is_kind: Default::default(),
-            term_is_udp_len: Default::default(),
-            term_is_destination: Default::default(),
+            checksum_tail_starts: Default::default(),
             sums_kept: Default::default(),
             index: Default::default(),
             sending: Default::default(),
@@ -195,10 +187,7 @@ impl Logic for FrameTransmitter {
             in_body,
             crc_starts,
             term_from_fields,
-            checksum_adds,
-            term_is_kind,
-            term_is_udp_len,
-            term_is_destination,
+            checksum_tail_starts,
             sums_kept
         );
         // The phases: a descriptor is taken while `ready` (idle, the gap over); the index
@@ -238,17 +227,13 @@ impl Logic for FrameTransmitter {
         self.header_sums.total_len.next = self.geometry.total_len.val();
         self.header_sums.hold.next = self.sums_kept.q.val();
         self.udp_sum.clock.next = self.clock.val();
-        self.udp_sum.load.next = !self.sending.val();
-        self.udp_sum.body_sum.next = self.datagrams.body_sum.val();
-        // the word chosen at byte i is added at byte i + 1 (from a register)
-        self.udp_sum.add.next = self.sending.val() & self.checksum_adds.q.val();
-        self.udp_sum.term_is_kind.next = self.term_is_kind.q.val();
-        self.udp_sum.term_is_udp_len.next = self.term_is_udp_len.q.val();
-        self.udp_sum.term_is_destination.next = self.term_is_destination.q.val();
+        self.udp_sum.restart.next = !self.sending.val();
         self.udp_sum.term_from_fields.next = self.term_from_fields.q.val();
         self.udp_sum.high_byte.next = self.index.val().get_bit(0);
+        self.udp_sum.tail_start.next = self.checksum_tail_starts.q.val();
         self.udp_sum.kind.next = self.datagrams.kind.val();
-        self.udp_sum.udp_term.next = self.geometry.udp_term.val();
+        self.udp_sum.udp_len.next = self.geometry.udp_len.val();
+        self.udp_sum.body_sum.next = self.datagrams.body_sum.val();
         self.udp_sum.destination_sum.next = self.header_sums.destination_sum.val();
         self.udp_sum.field_byte.next = self.header_fields.field_byte.val();
 
@@ -296,21 +281,13 @@ impl Logic for FrameTransmitter {
         self.crc_starts.d.next = self.sending.val() & (self.index.val() == self.sfd_ahead.val());
         self.term_from_fields.d.next =
             self.sending.val() & (self.index.val() >= 1) & (self.index.val() < 17);
-        self.term_is_destination.d.next = self.sending.val() & (self.index.val() == 17);
-        self.checksum_adds.d.next = self.sending.val() & (self.index.val() < 19);
+        self.checksum_tail_starts.d.next = self.sending.val() & (self.index.val() == 17);
         self.sums_kept.d.next = self.sending.val() & (self.index.val().get_bits::<9>(2) != 0);
-        // the next index is 0 unless the frame goes on, 1 after 0
-        self.term_is_kind.d.next = !self.frame_steps.frame_goes_on.val();
-        self.term_is_udp_len.d.next =
-            self.frame_steps.frame_goes_on.val() & self.term_is_kind.q.val();
         if self.reset.val() {
-            self.term_is_destination.d.next = false;
+            self.checksum_tail_starts.d.next = false;
             self.sums_kept.d.next = false;
             self.crc_starts.d.next = false;
             self.term_from_fields.d.next = false;
-            self.checksum_adds.d.next = false;
-            self.term_is_kind.d.next = true;
-            self.term_is_udp_len.d.next = false;
             self.in_body.d.next = false;
         }
         self.gmii_txd.next = self.fcs_stage.gmii_txd.val();

@@ -1,13 +1,13 @@
 //! TransmitGeometry: the frame transmitter's held descriptor (body length, raw or not)
 //! and the frame's geometry computed from it: where the body ends, the frame's last
-//! index, the IPv4 total length, the UDP length and the UDP checksum's length term.
+//! index, the IPv4 total length and the UDP length.
 //!
 //! While no frame goes out (`load`) the descriptor's body length is held, and whether it
 //! is a raw frame's ([`RAW_FRAME_KIND`]: its body follows the SFD). The geometry
 //! follows the held values a clock later (latency 1 from the take: valid from the frame's
 //! index 1 on, nothing reads it at index 0). (The kind is read from the descriptor, which
 //! its source holds until the body's last beat.) Cost: the held 12 bits and the geometry's
-//! registers (3 x 11 + 2 x 16 + 32 bits), one adder each.
+//! registers (3 x 11 + 2 x 16 bits), one adder each.
 
 use crate::hdl::*;
 use crate::stream::RAW_FRAME_KIND;
@@ -37,9 +37,6 @@ pub struct TransmitGeometry {
     pub total_len: Signal<Out, Bits<16>>,
     /// The UDP length.
     pub udp_len: Signal<Out, Bits<16>>,
-    /// The UDP checksum's length term: twice the UDP length (header and pseudo header)
-    /// plus the checksum's constant words.
-    pub udp_term: Signal<Out, Bits<32>>,
     // the body's first byte and the frame's last byte minus one, less the body length,
     // of a datagram and of a raw frame
     body_start: Constant<Bits<11>>,
@@ -50,7 +47,6 @@ pub struct TransmitGeometry {
     // IPv4 total length and UDP length minus the body length
     ip_len_over_body: Constant<Bits<16>>,
     udp_len_over_body: Constant<Bits<16>>,
-    udp_term_constant: Constant<Bits<32>>,
     body_len_held: DFF<Bits<11>>,
     raw_held: DFF<Bit>,
     body_end_at: DFF<Bits<11>>,
@@ -58,16 +54,13 @@ pub struct TransmitGeometry {
     end_minus_one_at: DFF<Bits<11>>,
     total_len_value: DFF<Bits<16>>,
     udp_len_value: DFF<Bits<16>>,
-    udp_term_value: DFF<Bits<32>>,
     // the body's first byte and the frame's end over the body, datagram or raw frame
     geometry_start: Signal<Local, Bits<11>>,
     geometry_end_over_body: Signal<Local, Bits<11>>,
 }
 
-impl TransmitGeometry {
-    /// The geometry of the transmitter's frames; `udp_constant` is the sum of the UDP
-    /// checksum's constant words.
-    pub fn new(udp_constant: u64) -> Self {
+impl Default for TransmitGeometry {
+    fn default() -> Self {
         Self {
             clock: Default::default(),
             load: Default::default(),
@@ -79,7 +72,6 @@ impl TransmitGeometry {
             end_minus_one: Default::default(),
             total_len: Default::default(),
             udp_len: Default::default(),
-            udp_term: Default::default(),
             body_start: constant(BODY_START as u64),
             frame_end_over_body: constant((BODY_START + FCS_LEN - 2) as u64),
             raw_body_start: constant(PREAMBLE_LEN as u64),
@@ -87,7 +79,6 @@ impl TransmitGeometry {
             raw_kind: constant(u64::from(RAW_FRAME_KIND)),
             ip_len_over_body: constant((BODY_START - IPV4_AT_ON_WIRE) as u64),
             udp_len_over_body: constant((BODY_START - UDP_AT_ON_WIRE) as u64),
-            udp_term_constant: constant(udp_constant + 2 * (BODY_START - UDP_AT_ON_WIRE) as u64),
             body_len_held: Default::default(),
             raw_held: Default::default(),
             body_end_at: Default::default(),
@@ -95,7 +86,6 @@ impl TransmitGeometry {
             end_minus_one_at: Default::default(),
             total_len_value: Default::default(),
             udp_len_value: Default::default(),
-            udp_term_value: Default::default(),
             geometry_start: Default::default(),
             geometry_end_over_body: Default::default(),
         }
@@ -114,8 +104,7 @@ impl Logic for TransmitGeometry {
             body_end_less_one_at,
             end_minus_one_at,
             total_len_value,
-            udp_len_value,
-            udp_term_value
+            udp_len_value
         );
         self.geometry_start.next = self.body_start.val();
         self.geometry_end_over_body.next = self.frame_end_over_body.val();
@@ -132,8 +121,6 @@ impl Logic for TransmitGeometry {
             bit_cast::<16, 11>(self.body_len_held.q.val()) + self.ip_len_over_body.val();
         self.udp_len_value.d.next =
             bit_cast::<16, 11>(self.body_len_held.q.val()) + self.udp_len_over_body.val();
-        self.udp_term_value.d.next =
-            (bit_cast::<32, 11>(self.body_len_held.q.val()) << 1) + self.udp_term_constant.val();
         if self.load.val() {
             self.body_len_held.d.next = self.body_len.val();
             self.raw_held.d.next = self.descriptor_kind.val() == self.raw_kind.val();
@@ -144,7 +131,6 @@ impl Logic for TransmitGeometry {
         self.end_minus_one.next = self.end_minus_one_at.q.val();
         self.total_len.next = self.total_len_value.q.val();
         self.udp_len.next = self.udp_len_value.q.val();
-        self.udp_term.next = self.udp_term_value.q.val();
     }
 }
 
@@ -160,8 +146,7 @@ mod tests {
     #[test]
     fn the_geometry_is_the_frames() {
         let mut rng = TestRng::new(0x6E0);
-        let constant_words = 0x1_2345;
-        let mut bench = Bench::new(TransmitGeometry::new(constant_words), |b| &mut b.clock);
+        let mut bench = Bench::new(TransmitGeometry::default(), |b| &mut b.clock);
         for round in 0..200 {
             let raw = round % 3 == 0;
             let kind = if raw {
@@ -196,7 +181,6 @@ mod tests {
             if !raw {
                 assert_eq!(u.total_len.val().to_u64(), 20 + udp_len, "round {round}");
                 assert_eq!(u.udp_len.val().to_u64(), udp_len, "round {round}");
-                assert_eq!(u.udp_term.val().to_u64(), 2 * udp_len + constant_words);
             }
         }
     }
