@@ -1,7 +1,9 @@
 //! StreamFifo: a four-entry byte-stream FIFO whose output leaves registers.
 //!
 //! A shift register with the head in entry 0: a pop moves every entry down one, a push
-//! goes behind the last kept entry, both in one clock. `beats_in.ready` is "fewer than four
+//! goes behind the last kept entry, both in one clock. Which entries are held is kept as a
+//! thermometer code beside the count, so each entry's next value is chosen by registers
+//! and the pop alone (one multiplexer after the consumer's `ready`). `beats_in.ready` is "fewer than four
 //! entries"; `count` lets a producer with a read latency reserve room for the beats it has
 //! in flight (it issues a read only while `count` plus its beats in flight is below
 //! [`FIFO_DEPTH`], and then pushes without looking at `ready`), so the consumer's `ready`
@@ -32,67 +34,91 @@ pub struct StreamFifo {
     entry_2: DFF<Bits<10>>,
     entry_3: DFF<Bits<10>>,
     held: DFF<Bits<3>>,
-    // held != 0 and held == 4, as registers of their own (`valid` and `ready` start at a
-    // flip-flop; both 0 at power-up, as `held`)
+    // which entries are held, as a thermometer code (entry k is held while held > k):
+    // `not_empty` is entry 0's, `full` entry 3's (`valid` and `ready` start at a
+    // flip-flop; all 0 at power-up, as `held`)
     not_empty: DFF<Bit>,
+    holds_1: DFF<Bit>,
+    holds_2: DFF<Bit>,
     full: DFF<Bit>,
     push: Signal<Local, Bit>,
     pop: Signal<Local, Bit>,
-    // the entry the pushed beat goes to
-    slot: Signal<Local, Bits<3>>,
     beat: Signal<Local, Bits<10>>,
 }
 
 impl Logic for StreamFifo {
     #[hdl_gen]
     fn update(&mut self) {
-        dff_setup!(self, clock, entry_0, entry_1, entry_2, entry_3, held, not_empty, full);
+        dff_setup!(
+            self, clock, entry_0, entry_1, entry_2, entry_3, held, not_empty, holds_1, holds_2,
+            full
+        );
         self.count.next = self.held.q.val();
         self.beats_in.ready.next = !self.full.q.val();
         self.beats_out.valid.next = self.not_empty.q.val();
         self.beats_out.data.next = self.entry_0.q.val().get_bits::<8>(0);
         self.beats_out.last.next = self.entry_0.q.val().get_bit(8);
         self.beats_out.error.next = self.entry_0.q.val().get_bit(9);
-        // (from the count, not from the outputs: Verilator orders the statements apart
+        // (from the registers, not from the outputs: Verilator orders the statements apart
         // only when no assigned output is read back)
         self.push.next = self.beats_in.valid.val() & !self.full.q.val();
         self.pop.next = self.not_empty.q.val() & self.beats_out.ready.val();
         self.beat.next = bit_cast::<10, 8>(self.beats_in.data.val())
             | (bit_cast::<10, 1>(self.beats_in.last.val().into()) << 8)
             | (bit_cast::<10, 1>(self.beats_in.error.val().into()) << 9);
-        self.slot.next = self.held.q.val();
-        if self.pop.val() {
-            self.entry_0.d.next = self.entry_1.q.val();
-            self.entry_1.d.next = self.entry_2.q.val();
-            self.entry_2.d.next = self.entry_3.q.val();
-            self.slot.next = self.held.q.val() - 1;
+        // Each entry keeps its beat (or after a pop takes the next entry's) while that is
+        // held, and takes the arriving beat otherwise: an entry not held is free, so what
+        // it takes matters only when the push goes to it. The pop, which comes from the
+        // consumer's `ready`, only chooses between two choices made from registers.
+        self.entry_0.d.next = self.beat.val();
+        if self.not_empty.q.val() {
+            self.entry_0.d.next = self.entry_0.q.val();
         }
-        if self.push.val() {
-            if self.slot.val() == 0 {
-                self.entry_0.d.next = self.beat.val();
+        self.entry_1.d.next = self.beat.val();
+        if self.holds_1.q.val() {
+            self.entry_1.d.next = self.entry_1.q.val();
+        }
+        self.entry_2.d.next = self.beat.val();
+        if self.holds_2.q.val() {
+            self.entry_2.d.next = self.entry_2.q.val();
+        }
+        self.entry_3.d.next = self.beat.val();
+        if self.full.q.val() {
+            self.entry_3.d.next = self.entry_3.q.val();
+        }
+        if self.pop.val() {
+            self.entry_0.d.next = self.beat.val();
+            if self.holds_1.q.val() {
+                self.entry_0.d.next = self.entry_1.q.val();
             }
-            if self.slot.val() == 1 {
-                self.entry_1.d.next = self.beat.val();
+            self.entry_1.d.next = self.beat.val();
+            if self.holds_2.q.val() {
+                self.entry_1.d.next = self.entry_2.q.val();
             }
-            if self.slot.val() == 2 {
-                self.entry_2.d.next = self.beat.val();
+            self.entry_2.d.next = self.beat.val();
+            if self.full.q.val() {
+                self.entry_2.d.next = self.entry_3.q.val();
             }
-            if self.slot.val() == 3 {
-                self.entry_3.d.next = self.beat.val();
-            }
+            self.entry_3.d.next = self.beat.val();
         }
         if self.push.val() & !self.pop.val() {
             self.held.d.next = self.held.q.val() + 1;
             self.not_empty.d.next = true;
-            self.full.d.next = self.held.q.val() == 3;
+            self.holds_1.d.next = self.not_empty.q.val();
+            self.holds_2.d.next = self.holds_1.q.val();
+            self.full.d.next = self.holds_2.q.val();
         } else if !self.push.val() & self.pop.val() {
             self.held.d.next = self.held.q.val() - 1;
-            self.not_empty.d.next = self.held.q.val() != 1;
+            self.not_empty.d.next = self.holds_1.q.val();
+            self.holds_1.d.next = self.holds_2.q.val();
+            self.holds_2.d.next = self.full.q.val();
             self.full.d.next = false;
         }
         if self.reset.val() {
             self.held.d.next = 0.into();
             self.not_empty.d.next = false;
+            self.holds_1.d.next = false;
+            self.holds_2.d.next = false;
             self.full.d.next = false;
         }
     }
