@@ -260,7 +260,7 @@ mod tests {
             flags: k as u8,
             entry_count: (k * 3 + source) as u16,
             base_tick: rng.next_u64(),
-            body_sum: rng.next_u64() as u32,
+            body_sum: rng.next_u64() as u32 & 0x1_FFFF,
             body: (0..len).map(|_| rng.byte()).collect(),
         }
     }

@@ -10,7 +10,7 @@
 //! complemented, or 0 (which only folds the carry in), and the summer adds it the clock
 //! after: the 16 field bytes (`term_from_fields`, `high_byte`: the byte is its word's high
 //! byte), then from `tail_start` on seven terms from steady inputs, one a clock: the kind,
-//! the UDP length twice (header and pseudo header), the body sum's low and high halves,
+//! the UDP length twice (header and pseudo header), the body sum's 16 bits and its carry,
 //! the destination's sum's low 16 bits and its carries. The checksum
 //! ([`DatagramChecksum::udp_checksum`], the summer's register) is final [`FOLD_CLOCKS`]
 //! clock after the last term was added: the zero term after it folds the last carry in.
@@ -18,6 +18,7 @@
 
 use crate::hdl::*;
 use crate::ones_complement_sum::OnesComplementSum;
+use crate::stream::BODY_SUM_BITS;
 
 /// Clocks from the last term's addition to the final checksum: the fold of its carry.
 pub const FOLD_CLOCKS: u64 = 1;
@@ -44,8 +45,8 @@ pub struct DatagramChecksum {
     pub kind: Signal<In, Bits<8>>,
     /// The UDP length (steady like `kind`).
     pub udp_len: Signal<In, Bits<16>>,
-    /// The sum of the body's 16-bit words, not folded (steady like `kind`).
-    pub body_sum: Signal<In, Bits<32>>,
+    /// The body's sum ([`BODY_SUM_BITS`], steady like `kind`).
+    pub body_sum: Signal<In, Bits<BODY_SUM_BITS>>,
     /// The sum of the destination's IPv4 address and port words (steady like `kind`).
     pub destination_sum: Signal<In, Bits<18>>,
     /// The checksum.
@@ -114,7 +115,8 @@ impl Logic for DatagramChecksum {
             self.any_term.next = true;
         }
         if self.tail_step.q.val() == 5 {
-            self.word.next = self.word.val() | self.body_sum.val().get_bits::<16>(16);
+            self.word.next =
+                self.word.val() | bit_cast::<16, 1>(self.body_sum.val().get_bit(16).into());
             self.any_term.next = true;
         }
         if self.tail_step.q.val() == 6 {
@@ -154,7 +156,7 @@ impl Logic for DatagramChecksum {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testbench::{Bench, TestRng};
+    use crate::testbench::{body_sum_of, Bench, TestRng};
     use skinbox_protocol::wire::checksum::checksum;
 
     fn word_sum(bytes: &[u8]) -> u64 {
@@ -221,7 +223,7 @@ mod tests {
                 u.tail_start.next = true;
                 u.kind.next = u64::from(kind).into();
                 u.udp_len.next = u64::from(udp_len).into();
-                u.body_sum.next = word_sum(&body).into();
+                u.body_sum.next = body_sum_of(&body).into();
                 u.destination_sum.next = destination_sum.into();
                 bench.cycle();
                 bench.uut.tail_start.next = false;

@@ -10,7 +10,7 @@
 
 use crate::body_reader::{BodyReader, BODY_ADDRESS_BITS};
 use crate::hdl::*;
-use crate::stream::DatagramSource;
+use crate::stream::{DatagramSource, BODY_SUM_BITS};
 
 /// A datagram's descriptor offered, then its body read.
 #[derive(LogicBlock, Default)]
@@ -31,8 +31,8 @@ pub struct DatagramOffer {
     pub close_base_tick: Signal<In, Bits<64>>,
     /// The closing datagram's body length, bytes.
     pub close_body_len: Signal<In, Bits<BODY_ADDRESS_BITS>>,
-    /// The sum of the closing datagram's body words, not folded.
-    pub close_body_sum: Signal<In, Bits<32>>,
+    /// The closing datagram's body sum ([`BODY_SUM_BITS`]).
+    pub close_body_sum: Signal<In, Bits<BODY_SUM_BITS>>,
     /// The datagram: its descriptor, then its body.
     pub datagrams: DatagramSource,
     /// The body's address in the buffer.
@@ -51,7 +51,7 @@ pub struct DatagramOffer {
     entry_count: DFF<Bits<16>>,
     base_tick: DFF<Bits<64>>,
     body_len: DFF<Bits<BODY_ADDRESS_BITS>>,
-    body_sum: DFF<Bits<32>>,
+    body_sum: DFF<Bits<BODY_SUM_BITS>>,
     // the descriptor was taken a clock ago
     counting: DFF<Bit>,
     datagram_count: DFF<Bits<32>>,
@@ -151,7 +151,7 @@ mod tests {
             assert!(bench.uut.free.val(), "free before round {round}");
             let len = 1 + rng.next_u64() % 300;
             let count = rng.next_u64() % 60;
-            let (flags, tick, sum) = (rng.byte(), rng.next_u64(), rng.next_u64() as u32);
+            let (flags, tick, sum) = (rng.byte(), rng.next_u64(), rng.next_u64() as u32 & 0x1_FFFF);
             let u = &mut bench.uut;
             u.close.next = true;
             u.close_flags.next = u64::from(flags).into();

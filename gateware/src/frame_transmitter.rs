@@ -300,7 +300,7 @@ impl Logic for FrameTransmitter {
 mod tests {
     use super::*;
     use crate::stream::RAW_FRAME_KIND;
-    use crate::testbench::{check_frame, Bench, GmiiCapture, TestRng};
+    use crate::testbench::{body_sum_of, check_frame, Bench, GmiiCapture, TestRng};
     use skinbox_protocol::datagram::{DatagramBody, HEADER_LEN};
     use skinbox_protocol::{DataRepr, DatagramRepr, PortCounters, RecordRepr, StatusRepr};
     use std::collections::VecDeque;
@@ -354,7 +354,7 @@ mod tests {
     }
 
     fn body_sum(body: &[u8]) -> u64 {
-        word_sum(body)
+        body_sum_of(body)
     }
 
     /// Sends the datagrams (their sequence numbers are ignored: the transmitter numbers
@@ -670,7 +670,7 @@ mod tests {
             if offered.is_some() {
                 u.datagrams.valid.next = true;
                 u.datagrams.body_len.next = (offered_body.len() as u64).into();
-                u.datagrams.body_sum.next = word_sum(&offered_body).into();
+                u.datagrams.body_sum.next = body_sum_of(&offered_body).into();
             }
             bench.settle();
             let taken = bench.uut.datagrams.valid.val() && bench.uut.datagrams.ready.val();

@@ -7,6 +7,12 @@
 
 use crate::hdl::*;
 
+/// Bits of a datagram's body sum: the ones'-complement running sum of its 16-bit words, 16
+/// bits and, in bit 16, the last addition's carry, which the next addition folds in (as
+/// [`OnesComplementSum`](crate::ones_complement_sum::OnesComplementSum) keeps it). Its
+/// value is the words' sum modulo 0xFFFF.
+pub const BODY_SUM_BITS: usize = 17;
+
 /// The sending side of a byte stream.
 #[derive(LogicInterface, Default)]
 #[join = "ByteStreamSink"]
@@ -70,8 +76,9 @@ pub struct DatagramSource {
     pub base_tick: Signal<Out, Bits<64>>,
     /// Body length in bytes, 1 to 2047.
     pub body_len: Signal<Out, Bits<11>>,
-    /// Sum of the body's big-endian 16-bit words, not folded.
-    pub body_sum: Signal<Out, Bits<32>>,
+    /// Ones'-complement running sum of the body's big-endian 16-bit words
+    /// ([`BODY_SUM_BITS`]: the last carry not yet folded in).
+    pub body_sum: Signal<Out, Bits<BODY_SUM_BITS>>,
     /// The body, after the descriptor was taken.
     pub body: ByteStreamSource,
 }
@@ -94,8 +101,9 @@ pub struct DatagramSink {
     pub base_tick: Signal<In, Bits<64>>,
     /// Body length in bytes.
     pub body_len: Signal<In, Bits<11>>,
-    /// Sum of the body's big-endian 16-bit words, not folded.
-    pub body_sum: Signal<In, Bits<32>>,
+    /// Ones'-complement running sum of the body's big-endian 16-bit words
+    /// ([`BODY_SUM_BITS`]).
+    pub body_sum: Signal<In, Bits<BODY_SUM_BITS>>,
     /// The body.
     pub body: ByteStreamSink,
 }

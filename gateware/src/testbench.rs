@@ -177,6 +177,24 @@ pub fn check_frame(frame: &[u8]) -> Result<Vec<u8>, String> {
         .map_err(|e| e.to_string())
 }
 
+/// A body sum ([`BODY_SUM_BITS`](crate::stream::BODY_SUM_BITS) bits) of `bytes`' 16-bit
+/// words, as a datagram source may give it: their sum folded until it fits.
+pub fn body_sum_of(bytes: &[u8]) -> u64 {
+    let mut sum = crate::frame_transmitter::word_sum(bytes);
+    while sum >= 1 << crate::stream::BODY_SUM_BITS {
+        sum = (sum & 0xFFFF) + (sum >> 16);
+    }
+    sum
+}
+
+/// `body_sum` is a body sum of `bytes`: it fits in
+/// [`BODY_SUM_BITS`](crate::stream::BODY_SUM_BITS) and equals their words' sum modulo
+/// 0xFFFF (a ones'-complement sum's value).
+pub fn is_body_sum_of(body_sum: u64, bytes: &[u8]) -> bool {
+    body_sum < 1 << crate::stream::BODY_SUM_BITS
+        && body_sum % 0xFFFF == crate::frame_transmitter::word_sum(bytes) % 0xFFFF
+}
+
 /// A small seeded random source for valid/ready patterns (xorshift64*): fixed seeds make
 /// every run of a test the same.
 pub struct TestRng(u64);
