@@ -7,9 +7,12 @@
 //! a copied byte comes from, feeds no adder), then added into a running sum with an
 //! end-around carry ([`OnesComplementSum`], one each) every clock, so a clock without a
 //! byte adds the carry left over: two clocks after the last byte was added the carry is 0
-//! and the sum is folded. The checksums are the sums' complements (wires): they include a
-//! byte three clocks after it was summed; the programs wait [`CHECKSUM_CLOCKS`]. A UDP
-//! checksum computed as 0 is 0xFFFF (RFC 768). `restart` clears both sums. A sum holds any
+//! and the sum is folded. The IPv4 checksum is its sum's complement (a wire). The UDP sum
+//! adds the words' complements, so that it is the checksum itself, with no compare after
+//! it: a ones'-complement sum with an end-around carry never becomes 0x0000 from terms that
+//! are not all 0 (a summed byte's complemented word never is), so a checksum computed as 0
+//! comes out as 0xFFFF, as RFC 768 sends it. The checksums include a byte three clocks
+//! after it was summed; the programs wait [`CHECKSUM_CLOCKS`]. `restart` clears both sums. A sum holds any
 //! number of bytes. Cost: the two registered words and the two sums (17 bits each).
 
 use crate::hdl::*;
@@ -66,9 +69,10 @@ impl Logic for ReplyChecksums {
         if self.sum_ip.val() {
             self.ip_word.d.next = self.summand.val();
         }
+        // (the UDP sum adds the words' complements: its sum is the checksum itself)
         self.udp_word.d.next = 0.into();
         if self.sum_udp.val() {
-            self.udp_word.d.next = self.summand.val();
+            self.udp_word.d.next = !self.summand.val();
         }
         if self.reset.val() {
             self.ip_word.d.next = 0.into();
@@ -86,11 +90,7 @@ impl Logic for ReplyChecksums {
         self.udp_sum.restart.next = self.restart.val();
         self.udp_sum.start.next = 0.into();
         self.ip_checksum.next = !self.ip_sum.sum.val();
-        self.udp_checksum.next = !self.udp_sum.sum.val();
-        if self.udp_sum.verifies.val() {
-            // a computed 0 is sent as 0xFFFF (RFC 768)
-            self.udp_checksum.next = 0xFFFF.into();
-        }
+        self.udp_checksum.next = self.udp_sum.sum.val();
     }
 }
 
