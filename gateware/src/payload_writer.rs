@@ -8,7 +8,7 @@
 //! running sum ([`BODY_SUM_BITS`]: each byte added at its place in its word with the last
 //! carry, end-around): a byte at an even offset is a word's high byte. `body_sum_next` includes the byte on its way to the buffer, so a
 //! datagram that closes now carries it. `clear` (the datagram closes) starts the offset
-//! and the sum again. Cost: 17 + 11 + 21 flip-flops, one 17-bit adder.
+//! and the sum again. Cost: 17 + 11 + 29 flip-flops, one 17-bit adder.
 
 use crate::hdl::*;
 use crate::stream::BODY_SUM_BITS;
@@ -43,11 +43,11 @@ pub struct PayloadWriter {
     pub body_sum_next: Signal<Out, Bits<BODY_SUM_BITS>>,
     pending: DFF<Bit>,
     pending_address: DFF<Bits<12>>,
-    pending_data: DFF<Bits<8>>,
+    // the byte at its place in its word (0 when nothing is written)
+    pending_word: DFF<Bits<16>>,
     fill_offset: DFF<Bits<OFFSET_BITS>>,
     sum: DFF<Bits<BODY_SUM_BITS>>,
     sum_next: Signal<Local, Bits<BODY_SUM_BITS>>,
-    word: Signal<Local, Bits<16>>,
 }
 
 impl Logic for PayloadWriter {
@@ -58,28 +58,28 @@ impl Logic for PayloadWriter {
             clock,
             pending,
             pending_address,
-            pending_data,
+            pending_word,
             fill_offset,
             sum
         );
         self.pending.d.next = self.write.val();
-        self.pending_data.d.next = self.write_data.val();
+        self.pending_word.d.next = 0.into();
+        if self.write.val() {
+            self.pending_word.d.next = bit_cast::<16, 8>(self.write_data.val()) << 8;
+            if self.fill_offset.q.val().get_bit(0) {
+                self.pending_word.d.next = bit_cast::<16, 8>(self.write_data.val());
+            }
+        }
         self.pending_address.d.next = (bit_cast::<12, 1>(self.buffer.val().into()) << 11)
             | bit_cast::<12, 11>(self.fill_offset.q.val());
         if self.write.val() {
             self.fill_offset.d.next = self.fill_offset.q.val() + 1;
         }
-        // the byte at its place in its word, added with the last carry (end-around)
-        self.word.next = bit_cast::<16, 8>(self.pending_data.q.val()) << 8;
-        if self.pending_address.q.val().get_bit(0) {
-            self.word.next = bit_cast::<16, 8>(self.pending_data.q.val());
-        }
-        self.sum_next.next = self.sum.q.val();
-        if self.pending.q.val() {
-            self.sum_next.next = bit_cast::<17, 16>(self.sum.q.val().get_bits::<16>(0))
-                + bit_cast::<17, 16>(self.word.val())
-                + bit_cast::<17, 1>(self.sum.q.val().get_bit(16).into());
-        }
+        // the word added with the last carry (end-around) in every clock: a word of 0
+        // folds the carry in; no multiplexer between the registers and the adder
+        self.sum_next.next = bit_cast::<17, 16>(self.sum.q.val().get_bits::<16>(0))
+            + bit_cast::<17, 16>(self.pending_word.q.val())
+            + bit_cast::<17, 1>(self.sum.q.val().get_bit(16).into());
         self.sum.d.next = self.sum_next.val();
         if self.clear.val() {
             self.fill_offset.d.next = 0.into();
@@ -92,7 +92,9 @@ impl Logic for PayloadWriter {
         }
         self.memory_write.next = self.pending.q.val();
         self.memory_address.next = self.pending_address.q.val();
-        self.memory_data.next = self.pending_data.q.val();
+        // (one of the word's bytes is 0)
+        self.memory_data.next =
+            self.pending_word.q.val().get_bits::<8>(8) | self.pending_word.q.val().get_bits::<8>(0);
         self.offset.next = self.fill_offset.q.val();
         self.body_sum_next.next = self.sum_next.val();
     }
