@@ -120,7 +120,8 @@ pub struct FrameTransmitter {
     // (2..18), its steady terms start (index 18)
     term_from_fields: DFF<Bit>,
     checksum_tail_starts: DFF<Bit>,
-    // the header sums are final (from index 5: index 4 or more a clock before): keep them
+    // the destination's sum is final (from index 2; kept from index 5: index 4 or more a
+    // clock before, the IPv4 checksum final at index 5 needs no hold): keep it
     // while the destination shifts
     sums_kept: DFF<Bit>,
     // this clock's index, and a frame goes out
@@ -222,6 +223,7 @@ impl Logic for FrameTransmitter {
         // on), the UDP checksum's variable words one per clock from byte 0: the kind, the
         // UDP length term, the 16 field bytes, then the destination's sum.
         self.header_sums.clock.next = self.clock.val();
+        self.header_sums.restart.next = !self.sending.val();
         self.header_sums.destination_ip.next = self.source.destination_ip_held.val();
         self.header_sums.destination_port.next = self.source.destination_port_held.val();
         self.header_sums.total_len.next = self.geometry.total_len.val();
