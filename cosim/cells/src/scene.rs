@@ -795,15 +795,21 @@ impl Scene {
                 .iter()
                 .map(|(_, bytes)| CellCommandRepr::parse(bytes).ok())
                 .collect();
-            // the time syncs on this bus: (scene time it left the box, s; box time it carries)
+            // the time syncs on this bus as the cells' clocks take them: (scene time the
+            // packet is complete at the root, [`DOWNLINK_PACKET_NS`] after its first start
+            // bit left the box, s; the box time it carries, that of its first start bit,
+            // plus the packet's duration, which a cell knows from the baud rate, s), so a
+            // sync acts no earlier than any other command (the closed loop checks that)
+            let packet_s = DOWNLINK_PACKET_NS as f64 * 1e-9;
             let sync_schedule: Vec<(f64, f64)> = downlink
                 .iter()
                 .zip(&commands)
                 .filter_map(|((leave_ns, _), c)| match c.as_ref()?.command {
                     CellCommand::TimeSync { box_tick } => Some((
-                        *leave_ns as f64 * 1e-9,
+                        *leave_ns as f64 * 1e-9 + packet_s,
                         // (a tick before the box's first counts back from 2^64)
-                        (box_tick as i64 * skinbox_protocol::TICK_NS as i64) as f64 * 1e-9,
+                        (box_tick as i64 * skinbox_protocol::TICK_NS as i64) as f64 * 1e-9
+                            + packet_s,
                     )),
                     _ => None,
                 })

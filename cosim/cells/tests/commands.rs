@@ -345,3 +345,67 @@ fn a_time_sync_table_puts_every_cell_on_the_box_grid() {
         .to_string();
     assert!(err.contains("interval_s") && err.contains("0.001"), "{err}");
 }
+
+/// A time sync acts no earlier than the packet is whole at the root and processed, as
+/// every other command (what the closed loop's regeneration asserts): the idle scene's
+/// stream with one sync down bus 0 equals the stream without it up to that point, for
+/// syncs leaving 15 to 65 us before one of the root cell's samples (the sample falls while
+/// the packet is on the wire, or just after).
+#[test]
+fn a_time_sync_changes_nothing_before_it_is_whole_at_the_root() {
+    use skinbox_cells::bus::DOWNLINK_PACKET_NS;
+    use skinbox_protocol::cell_command::ALL_CELLS;
+    let scene = load("idle");
+    let buses = scene.config.scene.buses;
+    let before = scene.generate(&GenerateOptions {
+        downlink: Some(vec![vec![]; buses]),
+        ..Default::default()
+    });
+    let processing_ns = scene.config.bus.processing_ns;
+    let root = before.buses[0].cell_ids[0];
+    let root_samples: Vec<u64> = before.buses[0]
+        .packets
+        .iter()
+        .filter(|p| p.cell_id == root && p.sample_time_ns > 300_000_000)
+        .map(|p| p.sample_time_ns)
+        .take(6)
+        .collect();
+    assert_eq!(root_samples.len(), 6);
+    let mut changed = 0;
+    for sample_ns in root_samples {
+        for ahead_us in [15, 25, 35, 45, 55, 65] {
+            let leave_ns = sample_ns - ahead_us * 1000;
+            let sync = CellCommandRepr {
+                cell_id: ALL_CELLS,
+                command: CellCommand::TimeSync {
+                    box_tick: leave_ns / skinbox_protocol::TICK_NS,
+                },
+            };
+            let mut downlink = vec![vec![]; buses];
+            downlink[0].push((leave_ns, sync.to_bytes()));
+            let after = scene.generate(&GenerateOptions {
+                downlink: Some(downlink),
+                ..Default::default()
+            });
+            let (old, new) = (&before.buses[0].packets, &after.buses[0].packets);
+            let Some(first) = (0..old.len().max(new.len())).find(|&i| old.get(i) != new.get(i))
+            else {
+                continue;
+            };
+            changed += 1;
+            let at_ps = [old.get(first), new.get(first)]
+                .into_iter()
+                .flatten()
+                .map(|p| p.pin_edge_ps)
+                .min()
+                .unwrap();
+            let earliest_ps = (leave_ns + DOWNLINK_PACKET_NS + processing_ns) * 1000;
+            assert!(
+                at_ps >= earliest_ps,
+                "sync leaving {ahead_us} us before a root sample: packet {first} changed at \
+                 {at_ps} ps, before {earliest_ps} ps"
+            );
+        }
+    }
+    assert_eq!(changed, 36, "every sync changes the stream");
+}
