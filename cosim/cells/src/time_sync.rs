@@ -3,7 +3,9 @@
 //!
 //! The box broadcasts a sync command down every bus every [`TimeSync::interval_s`], carrying
 //! its send time `T`. It reaches the cell at position `h` (0 = the root) after
-//! `processing + h * downlink_hop` ns. The cell learnt its one-way path latency from a round
+//! `processing + h * downlink_hop` ns. (`T` is when the packet is whole at the root: a
+//! box's syncs are scheduled at their first start bit plus the packet's 50 us, with their
+//! carried time advanced as much, as the cell firmware adds the packet's duration.) The cell learnt its one-way path latency from a round
 //! trip through the box (the best of several, so no queueing in it) and takes half of it:
 //! `(down + up) / 2`, exact only when the downlink's hops are as slow as the uplink's. On
 //! receipt it sets its clock to `T + half round trip`, then lets the clock run at its own
