@@ -19,6 +19,7 @@
 use crate::hdl::*;
 use crate::ones_complement_sum::OnesComplementSum;
 use crate::stream::BODY_SUM_BITS;
+use skinbox_protocol::wire::checksum::fold;
 
 /// Clocks from the last term's addition to the final checksum: the fold of its carry.
 pub const FOLD_CLOCKS: u64 = 1;
@@ -64,10 +65,6 @@ pub struct DatagramChecksum {
 impl DatagramChecksum {
     /// The checksum of datagrams whose constant words sum to `constant_sum` (not folded).
     pub fn new(constant_sum: u64) -> Self {
-        let mut folded = constant_sum;
-        while folded > 0xFFFF {
-            folded = (folded & 0xFFFF) + (folded >> 16);
-        }
         Self {
             clock: Default::default(),
             restart: Default::default(),
@@ -81,7 +78,7 @@ impl DatagramChecksum {
             destination_sum: Default::default(),
             udp_checksum: Default::default(),
             summer: Default::default(),
-            start: constant(!folded & 0xFFFF),
+            start: constant(u64::from(!fold(constant_sum))),
             term: Default::default(),
             tail_step: Default::default(),
             word: Default::default(),
@@ -95,7 +92,9 @@ impl Logic for DatagramChecksum {
     fn update(&mut self) {
         dff_setup!(self, clock, term, tail_step);
         self.word.next = 0.into();
-        self.any_term.next = self.term_from_fields.val() | self.tail_start.val();
+        // (every tail step is a term)
+        self.any_term.next =
+            self.term_from_fields.val() | self.tail_start.val() | (self.tail_step.q.val() != 0);
         if self.term_from_fields.val() {
             if self.high_byte.val() {
                 self.word.next = bit_cast::<16, 8>(self.field_byte.val()) << 8;
@@ -108,25 +107,20 @@ impl Logic for DatagramChecksum {
         }
         if (self.tail_step.q.val() == 2) | (self.tail_step.q.val() == 3) {
             self.word.next = self.word.val() | self.udp_len.val();
-            self.any_term.next = true;
         }
         if self.tail_step.q.val() == 4 {
             self.word.next = self.word.val() | self.body_sum.val().get_bits::<16>(0);
-            self.any_term.next = true;
         }
         if self.tail_step.q.val() == 5 {
             self.word.next =
                 self.word.val() | bit_cast::<16, 1>(self.body_sum.val().get_bit(16).into());
-            self.any_term.next = true;
         }
         if self.tail_step.q.val() == 6 {
             self.word.next = self.word.val() | self.destination_sum.val().get_bits::<16>(0);
-            self.any_term.next = true;
         }
         if self.tail_step.q.val() == 7 {
             self.word.next =
                 self.word.val() | bit_cast::<16, 2>(self.destination_sum.val().get_bits::<2>(16));
-            self.any_term.next = true;
         }
         // a term goes in complemented; no term is 0, which folds the carry in
         self.term.d.next = 0.into();
@@ -156,15 +150,9 @@ impl Logic for DatagramChecksum {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frame_transmitter::word_sum;
     use crate::testbench::{body_sum_of, Bench, TestRng};
     use skinbox_protocol::wire::checksum::checksum;
-
-    fn word_sum(bytes: &[u8]) -> u64 {
-        bytes
-            .chunks(2)
-            .map(|w| u64::from(u16::from_be_bytes([w[0], w[1]])))
-            .sum()
-    }
 
     /// Random constant words, bodies, lengths, fields and destinations, with idle clocks
     /// between the field bytes and the tail: the checksum is the protocol's over the same

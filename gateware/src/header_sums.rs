@@ -16,6 +16,7 @@
 
 use crate::hdl::*;
 use crate::ones_complement_sum::OnesComplementSum;
+use skinbox_protocol::wire::checksum::fold;
 
 /// Clocks from the take (the last `restart`) to a final `ip_checksum`: three words
 /// registered and added, one clock to fold the last carry.
@@ -56,10 +57,6 @@ impl HeaderSums {
     /// The sums of a header whose constant words (all but the total length and the
     /// destination) sum to `ip_constant_sum` (not folded).
     pub fn new(ip_constant_sum: u64) -> Self {
-        let mut folded = ip_constant_sum;
-        while folded > 0xFFFF {
-            folded = (folded & 0xFFFF) + (folded >> 16);
-        }
         Self {
             clock: Default::default(),
             restart: Default::default(),
@@ -70,7 +67,7 @@ impl HeaderSums {
             destination_sum: Default::default(),
             ip_checksum: Default::default(),
             ip_summer: Default::default(),
-            ip_start: constant(folded),
+            ip_start: constant(u64::from(fold(ip_constant_sum))),
             ip_term: Default::default(),
             ip_step: Default::default(),
             ip_words: Default::default(),

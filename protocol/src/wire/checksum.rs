@@ -5,21 +5,27 @@
 /// bytes whose checksum field is right, the value to write over bytes whose field is 0. An
 /// odd part is padded with a zero byte (only the last part may be odd).
 pub fn checksum(parts: &[&[u8]]) -> u16 {
-    let mut sum: u32 = 0;
+    let mut sum: u64 = 0;
     for part in parts {
         for pair in part.chunks(2) {
-            sum += u32::from(u16::from_be_bytes([
+            sum += u64::from(u16::from_be_bytes([
                 pair[0],
                 pair.get(1).copied().unwrap_or(0),
             ]));
         }
         // fold as we go so that no length of input overflows
-        sum = (sum & 0xFFFF) + (sum >> 16);
+        sum = u64::from(fold(sum));
     }
+    !fold(sum)
+}
+
+/// A plain sum of 16-bit words folded to 16 bits, each carry added back in (end-around):
+/// their one's complement sum.
+pub fn fold(mut sum: u64) -> u16 {
     while sum > 0xFFFF {
         sum = (sum & 0xFFFF) + (sum >> 16);
     }
-    !(sum as u16)
+    sum as u16
 }
 
 /// The IPv4 pseudo header of a transport message (RFC 768): source, destination, zero,
