@@ -6,9 +6,9 @@
 //! path): the buffer is read only after its datagram closed, many clocks after its last
 //! byte was written. The sum is the body's 16-bit big-endian words' ones'-complement
 //! running sum ([`BODY_SUM_BITS`]: each byte added at its place in its word with the last
-//! carry, end-around): a byte at an even offset is a word's high byte. `body_sum_next` includes the byte on its way to the buffer, so a
-//! datagram that closes now carries it. `clear` (the datagram closes) starts the offset
-//! and the sum again. Cost: 17 + 11 + 29 flip-flops, one 17-bit adder.
+//! carry, end-around): a byte at an even offset is a word's high byte. `body_sum_next`
+//! includes the byte on its way to the buffer, so a datagram that closes now carries it.
+//! `clear` (the datagram closes) starts the offset and the sum again. Cost: 17 + 11 + 29 flip-flops, one 17-bit adder.
 
 use crate::hdl::*;
 use crate::stream::BODY_SUM_BITS;

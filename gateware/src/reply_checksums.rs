@@ -12,8 +12,9 @@
 //! it: a ones'-complement sum with an end-around carry never becomes 0x0000 from terms that
 //! are not all 0 (a summed byte's complemented word never is), so a checksum computed as 0
 //! comes out as 0xFFFF, as RFC 768 sends it. The checksums include a byte three clocks
-//! after it was summed; the programs wait [`CHECKSUM_CLOCKS`]. `restart` clears both sums. A sum holds any
-//! number of bytes. Cost: the two registered words and the two sums (17 bits each).
+//! after it was summed; the programs wait [`CHECKSUM_CLOCKS`]. `restart` clears both sums.
+//! A sum holds any number of bytes. Cost: the two registered words and the two sums (17
+//! bits each).
 
 use crate::hdl::*;
 use crate::ones_complement_sum::OnesComplementSum;

@@ -2,9 +2,9 @@
 //!
 //! A shift register with the head in entry 0: a pop moves every entry down one, a push
 //! goes behind the last kept entry, both in one clock. Which entries are held is kept as a
-//! thermometer code beside the count, so each entry's next value is chosen by registers
-//! and the pop alone (one multiplexer after the consumer's `ready`). `beats_in.ready` is "fewer than four
-//! entries"; `count` lets a producer with a read latency reserve room for the beats it has
+//! thermometer code, so each entry's next value is chosen by registers and the pop alone
+//! (one multiplexer after the consumer's `ready`), and the count is decoded from it.
+//! `beats_in.ready` is "fewer than four entries"; `count` lets a producer with a read latency reserve room for the beats it has
 //! in flight (it issues a read only while `count` plus its beats in flight is below
 //! [`FIFO_DEPTH`], and then pushes without looking at `ready`), so the consumer's `ready`
 //! reaches nothing but this FIFO's registers.
@@ -33,10 +33,9 @@ pub struct StreamFifo {
     entry_1: DFF<Bits<10>>,
     entry_2: DFF<Bits<10>>,
     entry_3: DFF<Bits<10>>,
-    held: DFF<Bits<3>>,
-    // which entries are held, as a thermometer code (entry k is held while held > k):
-    // `not_empty` is entry 0's, `full` entry 3's (`valid` and `ready` start at a
-    // flip-flop; all 0 at power-up, as `held`)
+    // which entries are held, as a thermometer code (entry k is held while more than k
+    // are): `not_empty` is entry 0's, `full` entry 3's (`valid` and `ready` start at a
+    // flip-flop; all 0 at power-up)
     not_empty: DFF<Bit>,
     holds_1: DFF<Bit>,
     holds_2: DFF<Bit>,
@@ -44,16 +43,23 @@ pub struct StreamFifo {
     push: Signal<Local, Bit>,
     pop: Signal<Local, Bit>,
     beat: Signal<Local, Bits<10>>,
+    // the count's bits 1 and 0, from the thermometer code
+    count_two: Signal<Local, Bit>,
+    count_odd: Signal<Local, Bit>,
 }
 
 impl Logic for StreamFifo {
     #[hdl_gen]
     fn update(&mut self) {
         dff_setup!(
-            self, clock, entry_0, entry_1, entry_2, entry_3, held, not_empty, holds_1, holds_2,
-            full
+            self, clock, entry_0, entry_1, entry_2, entry_3, not_empty, holds_1, holds_2, full
         );
-        self.count.next = self.held.q.val();
+        self.count_two.next = self.holds_1.q.val() & !self.full.q.val();
+        self.count_odd.next = (self.not_empty.q.val() & !self.holds_1.q.val())
+            | (self.holds_2.q.val() & !self.full.q.val());
+        self.count.next = (bit_cast::<3, 1>(self.full.q.val().into()) << 2)
+            | (bit_cast::<3, 1>(self.count_two.val().into()) << 1)
+            | bit_cast::<3, 1>(self.count_odd.val().into());
         self.beats_in.ready.next = !self.full.q.val();
         self.beats_out.valid.next = self.not_empty.q.val();
         self.beats_out.data.next = self.entry_0.q.val().get_bits::<8>(0);
@@ -102,20 +108,17 @@ impl Logic for StreamFifo {
             self.entry_3.d.next = self.beat.val();
         }
         if self.push.val() & !self.pop.val() {
-            self.held.d.next = self.held.q.val() + 1;
             self.not_empty.d.next = true;
             self.holds_1.d.next = self.not_empty.q.val();
             self.holds_2.d.next = self.holds_1.q.val();
             self.full.d.next = self.holds_2.q.val();
         } else if !self.push.val() & self.pop.val() {
-            self.held.d.next = self.held.q.val() - 1;
             self.not_empty.d.next = self.holds_1.q.val();
             self.holds_1.d.next = self.holds_2.q.val();
             self.holds_2.d.next = self.full.q.val();
             self.full.d.next = false;
         }
         if self.reset.val() {
-            self.held.d.next = 0.into();
             self.not_empty.d.next = false;
             self.holds_1.d.next = false;
             self.holds_2.d.next = false;
